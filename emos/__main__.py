@@ -1,0 +1,5 @@
+import sys
+
+from emos.supervisor.cli import main
+
+sys.exit(main())

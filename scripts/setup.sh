@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs EMOS and everything it needs on a fresh Debian machine with Python 3.11.
+#   scripts/setup.sh          the runtime and every extra (what the main job needs)
+#   scripts/setup.sh --test   the same plus the test tools and the system packages tests use
+# Safe to run again: installed pieces are skipped quickly.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+want_test=0
+[ "${1:-}" = "--test" ] && want_test=1
+
+PY=${PYTHON:-python3}
+export PIP_DISABLE_PIP_VERSION_CHECK=1
+
+# System packages: espeak-ng for local text to speech, chromium for browser tests.
+apt_pkgs=(espeak-ng)
+[ $want_test = 1 ] && apt_pkgs+=(chromium chromium-driver)
+missing=()
+for p in "${apt_pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    echo "setup: installing system packages: ${missing[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "setup: warning: system packages missing and cannot install them here: ${missing[*]}" >&2
+  fi
+fi
+
+# torch first, pinned: the CPU build is on local disk; an unpinned torch pulls CUDA wheels.
+$PY -m pip install -q "torch==2.13.0"
+extras="all"
+[ $want_test = 1 ] && extras="all,test"
+$PY -m pip install -q -e ".[${extras}]"
+echo "setup: done ($($PY -c 'import emos, sys; print("emos", emos.__version__, "on python", sys.version.split()[0])'))"
