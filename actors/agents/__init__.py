@@ -1,0 +1,48 @@
+"""EMOS intelligence core (EmbodiedAgents without ROS): model specs, clients and their types.
+
+Submodules are imported lazily so ``import emos.actors.agents`` stays cheap: heavy parts
+(sentence-transformers, chromadb, torch) load only when something asks for them.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from .errors import (
+    MalformedResponseError,
+    ModelClientError,
+    ModelConnectionError,
+    ModelServerError,
+    ModelTimeoutError,
+)
+from .types import (
+    ChatChunk,
+    ChatMessage,
+    ChatRequest,
+    ChatResponse,
+    EmbeddingRequest,
+    EmbeddingResponse,
+    ImageData,
+    SpeechRequest,
+    SpeechResponse,
+    ToolCall,
+    ToolSpec,
+    TranscriptionRequest,
+    TranscriptionResponse,
+)
+
+# public name -> submodule that defines it; resolved on first attribute access (PEP 562).
+_LAZY: dict[str, str] = {}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'emos.actors.agents' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
