@@ -1,0 +1,113 @@
+"""geometry_msgs."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from emos.msgs import fields as F
+from emos.msgs.registry import message_type
+from emos.msgs.std import Header
+
+
+@message_type("geometry_msgs")
+class Vector3:
+    x: float = F.float64()
+    y: float = F.float64()
+    z: float = F.float64()
+
+
+@message_type("geometry_msgs")
+class Point:
+    x: float = F.float64()
+    y: float = F.float64()
+    z: float = F.float64()
+
+
+@message_type("geometry_msgs")
+class Quaternion:
+    x: float = F.float64()
+    y: float = F.float64()
+    z: float = F.float64()
+    w: float = F.float64(1.0)
+
+    @classmethod
+    def from_yaw(cls, yaw: float) -> "Quaternion":
+        return cls(z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+    def yaw(self) -> float:
+        """Heading about z, the angle a planar robot cares about."""
+        return math.atan2(2.0 * (self.w * self.z + self.x * self.y), 1.0 - 2.0 * (self.y * self.y + self.z * self.z))
+
+
+@message_type("geometry_msgs")
+class Pose:
+    position: Point = F.message(Point)
+    orientation: Quaternion = F.message(Quaternion)
+
+
+@message_type("geometry_msgs")
+class Pose2D:
+    x: float = F.float64()
+    y: float = F.float64()
+    theta: float = F.float64()
+
+
+@message_type("geometry_msgs")
+class PoseStamped:
+    header: Header = F.message(Header)
+    pose: Pose = F.message(Pose)
+
+
+@message_type("geometry_msgs")
+class PoseWithCovariance:
+    pose: Pose = F.message(Pose)
+    covariance: object = F.array(dtype="float64", shape=(36,))
+
+
+@message_type("geometry_msgs")
+class PoseWithCovarianceStamped:
+    header: Header = F.message(Header)
+    pose: PoseWithCovariance = F.message(PoseWithCovariance)
+
+
+@message_type("geometry_msgs")
+class PointStamped:
+    header: Header = F.message(Header)
+    point: Point = F.message(Point)
+
+
+@message_type("geometry_msgs")
+class Twist:
+    linear: Vector3 = F.message(Vector3)
+    angular: Vector3 = F.message(Vector3)
+
+
+@message_type("geometry_msgs")
+class TwistStamped:
+    header: Header = F.message(Header)
+    twist: Twist = F.message(Twist)
+
+
+@message_type("geometry_msgs")
+class TwistWithCovariance:
+    twist: Twist = F.message(Twist)
+    covariance: object = F.array(dtype="float64", shape=(36,))
+
+
+@message_type("geometry_msgs")
+class Transform:
+    translation: Vector3 = F.message(Vector3)
+    rotation: Quaternion = F.message(Quaternion)
+
+
+@message_type("geometry_msgs")
+class TransformStamped:
+    header: Header = F.message(Header)
+    child_frame_id: str = F.string()
+    transform: Transform = F.message(Transform)
+
+
+def pose_xy_yaw(pose: Pose) -> np.ndarray:
+    """(x, y, yaw) of a pose, the planar state navigation works with."""
+    return np.array([pose.position.x, pose.position.y, pose.orientation.yaw()])
