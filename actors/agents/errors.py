@@ -16,6 +16,7 @@ __all__ = [
     "ModelTimeoutError",
     "ModelServerError",
     "MalformedResponseError",
+    "ModelNotFoundError",
 ]
 
 
@@ -116,3 +117,7 @@ class MalformedResponseError(ModelClientError):
 
 def _rebuild_malformed(expected, got, client, model, url):
     return MalformedResponseError(expected, got, client=client, model=model, url=url)
+
+
+class ModelNotFoundError(ModelClientError):
+    """The server is up but does not serve (and could not load) the requested model."""
