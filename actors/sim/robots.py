@@ -1,0 +1,146 @@
+"""Robot models: dimensions, drive type and command limits, plus pure kinematics.
+
+Choice: robots are **kinematic** bases. Each tick the commanded velocity is limited (speed and
+acceleration), optionally perturbed (slip, actuation noise) and integrated exactly; the body is
+then posed in pybullet, which only answers collision, ray and render queries. Wheel-contact
+physics would cost ~10x more per tick, make results depend on friction tuning, and is not what
+navigation benchmarks (BARN included) measure; a collision is detected from contact queries and
+stops the robot where it touched.
+"""
+from __future__ import annotations
+
+import enum
+import math
+
+import attrs
+import numpy as np
+
+
+class DriveType(str, enum.Enum):
+    DIFFERENTIAL = "differential"
+    ACKERMANN = "ackermann"
+    OMNI = "omni"
+
+
+def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"RobotSpec.{attribute.name} must be a finite number >= 0, got {value!r}")
+
+
+def _pos(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"RobotSpec.{attribute.name} must be a finite number > 0, got {value!r}")
+
+
+@attrs.define(frozen=True)
+class RobotSpec:
+    """What a simulated robot is: footprint box, drive and limits (SI units)."""
+
+    name: str
+    drive: DriveType = attrs.field(converter=DriveType)
+    length: float = attrs.field(converter=float, validator=_pos)
+    width: float = attrs.field(converter=float, validator=_pos)
+    height: float = attrs.field(converter=float, validator=_pos)
+    max_vx: float = attrs.field(converter=float, validator=_pos)
+    max_omega: float = attrs.field(converter=float, validator=_pos)
+    max_acc_x: float = attrs.field(converter=float, validator=_pos)
+    max_acc_omega: float = attrs.field(converter=float, validator=_pos)
+    max_vy: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    max_acc_y: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    # Ackermann only: axle distance and steering limit.
+    wheelbase: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    max_steer: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    # Offset of the footprint centre ahead of the base frame origin (racecar: rear axle).
+    center_offset: float = attrs.field(default=0.0, converter=float)
+    urdf: str | None = None  # pybullet_data-relative visual model, if any
+    lidar_height: float = attrs.field(default=0.3, converter=float, validator=_pos)
+    color: tuple[float, float, float, float] = (0.15, 0.3, 0.8, 1.0)
+
+    def __attrs_post_init__(self) -> None:
+        if self.drive is DriveType.OMNI and not (self.max_vy > 0 and self.max_acc_y > 0):
+            raise ValueError(f"RobotSpec {self.name!r}: an omni robot needs max_vy and max_acc_y > 0")
+        if self.drive is DriveType.ACKERMANN and not (self.wheelbase > 0 and self.max_steer > 0):
+            raise ValueError(f"RobotSpec {self.name!r}: an Ackermann robot needs wheelbase and max_steer > 0")
+
+    @property
+    def circumscribed_radius(self) -> float:
+        return math.hypot(self.length / 2, self.width / 2)
+
+    def footprint(self) -> np.ndarray:
+        """Footprint corners (4, 2) in the base frame."""
+        hx, hy, c = self.length / 2, self.width / 2, self.center_offset
+        return np.array([[c + hx, hy], [c - hx, hy], [c - hx, -hy], [c + hx, -hy]])
+
+
+# Clearpath Jackal as used by BARN: 0.508 x 0.430 m, 2.0 m/s; speed and acceleration limits
+# of its stock diff-drive controller (jackal_control: 2 m/s, 4 rad/s, 20 m/s^2, 25 rad/s^2).
+JACKAL = RobotSpec(
+    name="jackal", drive="differential", length=0.508, width=0.430, height=0.25,
+    max_vx=2.0, max_omega=4.0, max_acc_x=20.0, max_acc_omega=25.0, lidar_height=0.3,
+)
+# TurtleBot3 Burger: 138 x 178 mm, 0.22 m/s, 2.84 rad/s.
+TURTLEBOT3 = RobotSpec(
+    name="turtlebot3", drive="differential", length=0.138, width=0.178, height=0.19,
+    max_vx=0.22, max_omega=2.84, max_acc_x=2.5, max_acc_omega=3.2, lidar_height=0.2,
+    color=(0.2, 0.2, 0.2, 1.0),
+)
+# pybullet_data's MIT racecar (1:10): base frame on the rear axle, wheelbase 0.325 m.
+RACECAR = RobotSpec(
+    name="racecar", drive="ackermann", length=0.45, width=0.30, height=0.12,
+    max_vx=3.0, max_omega=6.0, max_acc_x=4.0, max_acc_omega=20.0, wheelbase=0.325, max_steer=0.5,
+    center_offset=0.16, urdf="racecar/racecar.urdf", lidar_height=0.2, color=(0.8, 0.2, 0.2, 1.0),
+)
+HOLONOMIC = RobotSpec(
+    name="holonomic", drive="omni", length=0.5, width=0.5, height=0.25,
+    max_vx=1.0, max_vy=1.0, max_omega=2.0, max_acc_x=2.0, max_acc_y=2.0, max_acc_omega=4.0,
+    color=(0.2, 0.6, 0.3, 1.0),
+)
+PRESETS: dict[str, RobotSpec] = {s.name: s for s in (JACKAL, TURTLEBOT3, RACECAR, HOLONOMIC)}
+
+
+def robot_spec(name_or_spec: str | RobotSpec) -> RobotSpec:
+    if isinstance(name_or_spec, RobotSpec):
+        return name_or_spec
+    try:
+        return PRESETS[name_or_spec]
+    except KeyError:
+        raise ValueError(f"unknown robot {name_or_spec!r}; expected one of {sorted(PRESETS)}") from None
+
+
+def feasible_command(spec: RobotSpec, vx: float, vy: float, omega: float) -> np.ndarray:
+    """The commanded body twist clipped to what the drive can do (no acceleration limit)."""
+    vx = float(np.clip(vx, -spec.max_vx, spec.max_vx))
+    omega = float(np.clip(omega, -spec.max_omega, spec.max_omega))
+    if spec.drive is DriveType.OMNI:
+        vy = float(np.clip(vy, -spec.max_vy, spec.max_vy))
+    else:
+        vy = 0.0
+    if spec.drive is DriveType.ACKERMANN:
+        # A car turns only while moving: the curvature is bounded by the steering limit.
+        max_curv = math.tan(spec.max_steer) / spec.wheelbase
+        omega = float(np.clip(omega, -abs(vx) * max_curv, abs(vx) * max_curv))
+    return np.array([vx, vy, omega])
+
+
+def accelerate(spec: RobotSpec, current: np.ndarray, target: np.ndarray, dt: float) -> np.ndarray:
+    """Move ``current`` (vx, vy, omega) toward ``target`` within the acceleration limits."""
+    limits = np.array([spec.max_acc_x, spec.max_acc_y, spec.max_acc_omega]) * dt
+    out = current + np.clip(target - current, -limits, limits)
+    if spec.drive is DriveType.ACKERMANN:
+        out = feasible_command(spec, *out)  # keep curvature feasible while the speed ramps
+    return out
+
+
+def integrate(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
+    """Exact constant-twist integration of (x, y, yaw) over ``dt`` (arcs, not straight steps)."""
+    x, y, yaw = pose
+    vx, vy, w = twist
+    if abs(w) < 1e-9:
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([x + (vx * c - vy * s) * dt, y + (vx * s + vy * c) * dt, yaw])
+    yaw1 = yaw + w * dt
+    # Integral of R(yaw(t)) @ (vx, vy) dt in closed form.
+    s0, c0, s1, c1 = math.sin(yaw), math.cos(yaw), math.sin(yaw1), math.cos(yaw1)
+    dx = (vx * (s1 - s0) + vy * (c1 - c0)) / w
+    dy = (vx * (c0 - c1) + vy * (s1 - s0)) / w
+    return np.array([x + dx, y + dy, math.atan2(math.sin(yaw1), math.cos(yaw1))])

@@ -1,0 +1,140 @@
+"""2D lidar by pybullet ray batches."""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import attrs
+import numpy as np
+
+from .base import Sensor, check_rate
+
+if TYPE_CHECKING:
+    from ..body import SimRobot
+
+
+def _finite_pos(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"LidarConfig.{attribute.name} must be a finite number > 0, got {value!r}")
+
+
+@attrs.define(frozen=True)
+class LidarConfig:
+    """Defaults model BARN's Hokuyo UST-10LX: 270 deg, 0.25 deg steps, 10 m range."""
+
+    fov_deg: float = attrs.field(default=270.0, converter=float, validator=_finite_pos)
+    beams: int = attrs.field(default=1081, converter=int)
+    range_min: float = attrs.field(default=0.06, converter=float, validator=_finite_pos)
+    range_max: float = attrs.field(default=10.0, converter=float, validator=_finite_pos)
+    noise_std: float = attrs.field(default=0.0, converter=float)
+    rate_hz: float = attrs.field(default=20.0, converter=float)
+    # Mount on the robot: x, y (m) in the base frame, z (m; None = the robot's lidar height), yaw.
+    mount_xy: tuple[float, float] = attrs.field(default=(0.0, 0.0), converter=lambda v: (float(v[0]), float(v[1])))
+    mount_z: float | None = None
+    mount_yaw: float = attrs.field(default=0.0, converter=float)
+    frame_id: str = "laser"
+
+    def __attrs_post_init__(self) -> None:
+        if not 0 < self.fov_deg <= 360:
+            raise ValueError(f"LidarConfig.fov_deg must be in (0, 360], got {self.fov_deg!r}")
+        if self.beams < 2:
+            raise ValueError(f"LidarConfig.beams must be >= 2, got {self.beams!r}")
+        if self.range_min >= self.range_max:
+            raise ValueError(f"LidarConfig.range_min ({self.range_min}) must be < range_max ({self.range_max})")
+        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
+            raise ValueError(f"LidarConfig.noise_std must be >= 0, got {self.noise_std!r}")
+        check_rate("LidarConfig", self.rate_hz)
+
+    @property
+    def angle_min(self) -> float:
+        return -math.radians(self.fov_deg) / 2
+
+    @property
+    def angle_increment(self) -> float:
+        # A full circle must not sample the same direction twice.
+        span = math.radians(self.fov_deg)
+        return span / self.beams if self.fov_deg == 360 else span / (self.beams - 1)
+
+    @property
+    def angle_max(self) -> float:
+        return self.angle_min + self.angle_increment * (self.beams - 1)
+
+    def angles(self) -> np.ndarray:
+        return self.angle_min + self.angle_increment * np.arange(self.beams)
+
+
+@attrs.define(frozen=True, eq=False)
+class ScanReading:
+    """One sweep, LaserScan-shaped. ``ranges`` are float32 metres; no return is +inf."""
+
+    stamp: float
+    frame_id: str
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    scan_time: float
+    ranges: np.ndarray
+    sensor_pose: tuple[float, float, float]  # (x, y, yaw) of the lidar in the world when taken
+
+    def points(self) -> np.ndarray:
+        """Hit points (N, 2) in the sensor frame."""
+        a = self.angle_min + self.angle_increment * np.arange(len(self.ranges))
+        ok = np.isfinite(self.ranges)
+        r = self.ranges[ok].astype(float)
+        return np.c_[r * np.cos(a[ok]), r * np.sin(a[ok])]
+
+    def world_points(self) -> np.ndarray:
+        """Hit points (N, 2) in the world frame."""
+        x, y, yaw = self.sensor_pose
+        p = self.points()
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.c_[x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]]
+
+    def to_msg(self) -> Any:
+        from ..msgs import scan_to_msg
+
+        return scan_to_msg(self)
+
+
+class Lidar(Sensor):
+    def __init__(self, robot: "SimRobot", config: LidarConfig | None = None, name: str = "lidar") -> None:
+        super().__init__(robot, name)
+        self.config = config or LidarConfig()
+        self.rate_hz = self.config.rate_hz
+        self._local_angles = self.config.angles() + self.config.mount_yaw
+        self._z = self.config.mount_z if self.config.mount_z is not None else robot.spec.lidar_height
+
+    def sensor_pose(self) -> tuple[float, float, float]:
+        x, y, yaw = self.robot.pose
+        mx, my = self.config.mount_xy
+        c, s = math.cos(yaw), math.sin(yaw)
+        return x + c * mx - s * my, y + s * mx + c * my, yaw + self.config.mount_yaw
+
+    def read(self, stamp: float) -> ScanReading:
+        cfg = self.config
+        sx, sy, _ = self.sensor_pose()
+        angles = self._local_angles + self.robot.pose[2]
+        d = np.c_[np.cos(angles), np.sin(angles)]
+        n = len(angles)
+        start = np.empty((n, 3))
+        end = np.empty((n, 3))
+        start[:, :2] = (sx, sy) + d * cfg.range_min
+        end[:, :2] = (sx, sy) + d * cfg.range_max
+        start[:, 2] = end[:, 2] = self._z
+        client = self.world.client  # type: ignore[union-attr]
+        results = client.rayTestBatch(start.tolist(), end.tolist(), numThreads=1)
+        hit = np.fromiter((r[0] for r in results), dtype=np.int64, count=n) >= 0
+        frac = np.fromiter((r[2] for r in results), dtype=float, count=n)
+        ranges = cfg.range_min + frac * (cfg.range_max - cfg.range_min)
+        if cfg.noise_std > 0:
+            ranges = ranges + self.rng.normal(0.0, cfg.noise_std, n)
+            ranges = np.maximum(ranges, cfg.range_min)
+        ranges = np.where(hit & (ranges <= cfg.range_max), ranges, np.inf).astype(np.float32)
+        return ScanReading(
+            stamp=stamp, frame_id=cfg.frame_id, angle_min=cfg.angle_min, angle_max=cfg.angle_max,
+            angle_increment=cfg.angle_increment, range_min=cfg.range_min, range_max=cfg.range_max,
+            scan_time=1.0 / cfg.rate_hz, ranges=ranges,
+            sensor_pose=(sx, sy, float(self.robot.pose[2] + cfg.mount_yaw)),
+        )

@@ -1,0 +1,238 @@
+"""The World: one pybullet physics client holding obstacles, robots and sensors, and a clock.
+
+Several Worlds can coexist in one process: each owns its own ``BulletClient`` and passes
+it everywhere, so nothing touches pybullet's implicit default client.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+from typing import Any, Iterable
+
+import numpy as np
+
+from . import _deps
+from .body import SimRobot
+from .clock import ClockMode, SimClock
+from .moving import MovingObstacle
+from .primitives import Box, Cylinder, Shape, Wall, shapes_to_mesh
+from .robots import RobotSpec, robot_spec
+from .sensors.base import Sensor
+
+log = logging.getLogger(__name__)
+
+
+class World:
+    """A headless (DIRECT) pybullet world; ``gui=True`` opens a window when a display exists.
+
+    Static obstacles added with :meth:`add` are baked into one triangle mesh at the next tick
+    (fast ray casts); moving obstacles, robots and sensors are updated every tick of ``clock``.
+    ``seed`` fixes every random stream (noise of sensors and actuation), so two worlds built
+    the same way with the same seed produce identical trajectories and readings.
+    """
+
+    def __init__(self, *, clock: SimClock | None = None, seed: int = 0, gui: bool = False,
+                 ground: bool = True, name: str = "world") -> None:
+        pb = _deps.pybullet()
+        mode = pb.DIRECT
+        if gui:
+            if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+                mode = pb.GUI
+            else:
+                log.warning("World(gui=True) but no display is available: running headless (DIRECT)")
+        self.client = _deps.bullet_client()(connection_mode=mode)
+        self.gui = mode == pb.GUI
+        self.clock = clock if clock is not None else SimClock()
+        self.seed = int(seed)
+        self.name = name
+        self.shapes: list[Shape] = []
+        self.movers: list[MovingObstacle] = []
+        self.robots: list[SimRobot] = []
+        self.sensors: list[Sensor] = []
+        self._pending: list[Shape] = []
+        self._mover_bodies: list[int] = []
+        self._body_names: dict[int, str] = {}
+        self._next_due: list[float] = []
+        self._streams = 0
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.RLock()
+        self.ground_id: int | None = None
+        if ground:
+            self.client.setAdditionalSearchPath(_deps.pybullet_data_path())
+            self.ground_id = self.client.loadURDF("plane.urdf")
+            self._body_names[self.ground_id] = "ground"
+
+    # -- randomness --------------------------------------------------------------------------
+    def rng(self) -> np.random.Generator:
+        """A fresh generator, determined by the world seed and how many were handed out before."""
+        self._streams += 1
+        return np.random.default_rng([self.seed, self._streams])
+
+    # -- building ----------------------------------------------------------------------------
+    def add(self, item: Shape | MovingObstacle | Iterable[Shape]) -> None:
+        """Add a static shape (Box, Cylinder, Wall), several, or a MovingObstacle."""
+        if isinstance(item, MovingObstacle):
+            self._add_mover(item)
+        elif isinstance(item, (Box, Cylinder, Wall)):
+            self.shapes.append(item)
+            self._pending.append(item)
+        elif isinstance(item, Iterable):
+            for x in item:
+                if not isinstance(x, (Box, Cylinder, Wall)):
+                    raise TypeError(f"World.add expected Box, Cylinder or Wall items, got {type(x).__name__}")
+                self.add(x)
+        else:
+            raise TypeError(f"World.add expected a Box, Cylinder, Wall, MovingObstacle or a list, got {type(item).__name__}")
+
+    def add_box(self, center: tuple[float, float], size: tuple[float, float], height: float = 1.0, yaw: float = 0.0) -> Box:
+        box = Box(center, size, height, yaw)
+        self.add(box)
+        return box
+
+    def add_cylinder(self, center: tuple[float, float], radius: float, height: float = 1.0) -> Cylinder:
+        cyl = Cylinder(center, radius, height)
+        self.add(cyl)
+        return cyl
+
+    def add_wall(self, start: tuple[float, float], end: tuple[float, float], thickness: float = 0.1, height: float = 1.0) -> Wall:
+        wall = Wall(start, end, thickness, height)
+        self.add(wall)
+        return wall
+
+    def _add_mover(self, mover: MovingObstacle) -> None:
+        pb, c, shape = _deps.pybullet(), self.client, mover.shape
+        if isinstance(shape, Box):
+            half = [shape.size[0] / 2, shape.size[1] / 2, shape.height / 2]
+            col = c.createCollisionShape(pb.GEOM_BOX, halfExtents=half)
+            vis = c.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(shape.color))
+        else:
+            col = c.createCollisionShape(pb.GEOM_CYLINDER, radius=shape.radius, height=shape.height)
+            vis = c.createVisualShape(pb.GEOM_CYLINDER, radius=shape.radius, length=shape.height, rgbaColor=list(shape.color))
+        body = c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
+        self.movers.append(mover)
+        self._mover_bodies.append(body)
+        self._body_names[body] = mover.name
+        self._place_movers()
+
+    def _bake(self) -> None:
+        """Turn pending static shapes into one mesh body per colour."""
+        pb, c = _deps.pybullet(), self.client
+        by_color: dict[tuple, list[Shape]] = {}
+        for shape in self._pending:
+            by_color.setdefault(shape.color, []).append(shape)
+        for color, shapes in by_color.items():
+            vertices, indices = shapes_to_mesh(shapes)
+            v, i = vertices.tolist(), indices.reshape(-1).tolist()
+            col = c.createCollisionShape(pb.GEOM_MESH, vertices=v, indices=i, flags=pb.GEOM_FORCE_CONCAVE_TRIMESH)
+            vis = c.createVisualShape(pb.GEOM_MESH, vertices=v, indices=i, rgbaColor=list(color))
+            body = c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
+            self._body_names[body] = "static"
+        self._pending = []
+
+    def add_robot(self, spec: str | RobotSpec = "jackal", pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                  name: str | None = None, slip: float = 0.0, actuation_noise: float = 0.0) -> SimRobot:
+        spec = robot_spec(spec)
+        name = name or (spec.name if not any(r.name == spec.name for r in self.robots) else f"{spec.name}{len(self.robots)}")
+        robot = SimRobot(self, spec, name, pose, slip=slip, actuation_noise=actuation_noise, rng=self.rng())
+        self.robots.append(robot)
+        self._body_names[robot.body_id] = name
+        return robot
+
+    def add_sensor(self, sensor: Sensor) -> Sensor:
+        """Attach ``sensor``; its first reading is taken at the next tick."""
+        if sensor.robot not in self.robots:
+            raise ValueError(f"sensor {sensor.name!r} rides on a robot that is not in this world")
+        sensor.bind(self, self.rng())
+        self.sensors.append(sensor)
+        self._next_due.append(self.clock.now())
+        return sensor
+
+    # -- stepping ----------------------------------------------------------------------------
+    def _place_movers(self) -> None:
+        t = self.clock.now()
+        for mover, body in zip(self.movers, self._mover_bodies):
+            x, y, heading = mover.pose_at(t)
+            self.client.resetBasePositionAndOrientation(
+                body, [x, y, mover.shape.height / 2], [0, 0, math.sin(heading / 2), math.cos(heading / 2)])
+
+    def step(self, n: int = 1) -> list[tuple[Sensor, Any]]:
+        """Advance ``n`` ticks; returns the (sensor, reading) pairs produced on the way."""
+        out: list[tuple[Sensor, Any]] = []
+        with self._lock:
+            for _ in range(n):
+                out.extend(self._tick())
+        return out
+
+    def _tick(self) -> list[tuple[Sensor, Any]]:
+        if self._pending:
+            self._bake()
+        dt = self.clock.dt
+        for robot in self.robots:
+            robot.advance(dt)
+        stamp = self.clock.tick()
+        self._place_movers()
+        if self.robots:
+            self.client.performCollisionDetection()
+            for robot in self.robots:
+                robot.resolve_contacts(stamp, self.client.getContactPoints(bodyA=robot.body_id), self._body_names)
+        out = []
+        for i, sensor in enumerate(self.sensors):
+            sensor.on_tick(stamp)
+            if stamp >= self._next_due[i] - 1e-9:
+                out.append((sensor, sensor.publish(stamp)))
+                period = 1.0 / sensor.rate_hz
+                # Keep a fixed schedule (no drift) but never fall behind by more than a period.
+                self._next_due[i] = max(self._next_due[i] + period, stamp + period - dt / 2)
+        return out
+
+    def run_for(self, seconds: float) -> list[tuple[Sensor, Any]]:
+        """Step for ``seconds`` of simulated time, paced according to the clock mode."""
+        return self.step(int(round(seconds / self.clock.dt)))
+
+    def start(self) -> None:
+        """Step in a background thread until :meth:`stop` (realtime or fast clocks only)."""
+        if self.clock.mode is ClockMode.LOCKSTEP:
+            raise RuntimeError("World.start(): a lockstep clock only advances when the caller calls step()")
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._loop, name=f"{self.name}-stepper", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self.step()
+
+    def stop(self) -> None:
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            self._thread = None
+
+    def close(self) -> None:
+        self.stop()
+        try:
+            self.client.disconnect()
+        except Exception:  # already disconnected
+            pass
+
+    def __enter__(self) -> "World":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- queries -----------------------------------------------------------------------------
+    def bounds(self, margin: float = 0.5) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) around obstacles and robots."""
+        pts = [s.footprint() for s in self.shapes]
+        pts += [np.asarray(m.waypoints) for m in self.movers]
+        pts += [np.asarray(r.trail) for r in self.robots]
+        if not pts:
+            return (-5.0, -5.0, 5.0, 5.0)
+        allp = np.concatenate(pts)
+        lo, hi = allp.min(axis=0) - margin, allp.max(axis=0) + margin
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
