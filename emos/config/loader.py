@@ -1,0 +1,165 @@
+"""Config files (YAML, TOML, JSON) into attrs configs, with errors that name file, key and type.
+
+A file holds a common section ``"/**"`` applied to every component, then one section per
+component name; the component's own section wins over the common one. ``inputs`` and
+``outputs`` sub-sections describe topics and are returned separately.
+"""
+from __future__ import annotations
+
+import json
+import typing
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+
+COMMON_SECTION = "/**"
+TOPIC_SECTIONS = ("inputs", "outputs")
+
+
+class ConfigError(ValueError):
+    """A config file or mapping that does not fit the config class."""
+
+
+def read_config_file(path: str | Path) -> dict[str, Any]:
+    """Parse a YAML, TOML or JSON file into a mapping (format chosen by extension)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {path} does not exist")
+    text = path.read_text()
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        elif suffix == ".toml":
+            import tomllib
+
+            data = tomllib.loads(text)
+        elif suffix == ".json":
+            data = json.loads(text)
+        else:
+            raise ConfigError(f"config file {path}: unknown format {suffix!r}; use .yaml, .yml, .toml or .json")
+    except ConfigError:
+        raise
+    except Exception as exc:  # each parser has its own error type; all mean "malformed"
+        raise ConfigError(f"config file {path} is not valid {suffix[1:].upper()}: {exc}") from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path}: top level must be a mapping of sections, got {type(data).__name__}")
+    return data
+
+
+def component_section(data: dict[str, Any], component_name: str) -> dict[str, Any]:
+    """The merged ``/**`` + ``component_name`` section."""
+    merged: dict[str, Any] = {}
+    for key in (COMMON_SECTION, component_name, "/" + component_name):
+        section = data.get(key)
+        if section is None:
+            continue
+        if not isinstance(section, dict):
+            raise ConfigError(f"section {key!r} must be a mapping, got {type(section).__name__}")
+        _deep_merge(merged, section)
+    return merged
+
+
+def _deep_merge(into: dict[str, Any], other: dict[str, Any]) -> None:
+    for key, value in other.items():
+        if isinstance(value, dict) and isinstance(into.get(key), dict):
+            _deep_merge(into[key], value)
+        else:
+            into[key] = value
+
+
+def apply_mapping(config: Any, data: dict[str, Any], source: str, path: str = "", ignore_unknown: bool = False) -> None:
+    """Set ``config``'s fields from ``data`` recursively; every value goes through validators.
+
+    ``ignore_unknown`` lets the common ``/**`` section carry keys only some components have.
+    """
+    cls = type(config)
+    attrs.resolve_types(cls)
+    fields = {f.name.lstrip("_") if f.alias is None else f.alias: f for f in attrs.fields(cls)}
+    for key, value in data.items():
+        where = f"{path}.{key}" if path else key
+        fld = fields.get(key)
+        if fld is None:
+            if ignore_unknown:
+                continue
+            raise ConfigError(f"{source}: unknown parameter {where!r} for {cls.__name__}; known: {', '.join(sorted(fields))}")
+        current = getattr(config, fld.name)
+        if attrs.has(type(current)) and isinstance(value, dict):
+            apply_mapping(current, value, source, where, ignore_unknown)
+            continue
+        target = _target_type(fld.type)
+        if target is not None and attrs.has(target) and isinstance(value, dict):
+            inner = target() if current is None else current
+            apply_mapping(inner, value, source, where, ignore_unknown)
+            value = inner
+        else:
+            value = _coerce(value, target, source, where)
+        try:
+            setattr(config, fld.name, value)
+        except Exception as exc:
+            raise ConfigError(f"{source}: {where}: {exc} (expected {_type_name(fld.type)}, got {value!r})") from exc
+
+
+def _target_type(tp: Any) -> Any:
+    if tp is None:
+        return None
+    origin = typing.get_origin(tp)
+    if origin is typing.Union or str(origin) == "<class 'types.UnionType'>":
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return args[0] if len(args) == 1 else None
+    return tp
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", None) or str(tp)
+
+
+def _coerce(value: Any, target: Any, source: str, where: str) -> Any:
+    """Turn file values into what the field expects where the conversion is unambiguous."""
+    if target is None or not isinstance(target, type):
+        if target is not None and typing.get_origin(target) in (list, tuple) and isinstance(value, list):
+            return value
+        return value
+    if issubclass(target, Enum) and isinstance(value, (str, int)):
+        for member in target:
+            if value == member.value or (isinstance(value, str) and value.lower() in (member.name.lower(), str(member.value).lower())):
+                return member
+        raise ConfigError(f"{source}: {where}: expected one of {[m.name for m in target]}, got {value!r}")
+    if target is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if target is float and not isinstance(value, (int, float)) or target is float and isinstance(value, bool):
+        raise ConfigError(f"{source}: {where}: expected float, got {type(value).__name__} {value!r}")
+    if target is int and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ConfigError(f"{source}: {where}: expected int, got {type(value).__name__} {value!r}")
+    if target is bool and not isinstance(value, bool):
+        raise ConfigError(f"{source}: {where}: expected bool, got {type(value).__name__} {value!r}")
+    if target is str and not isinstance(value, str):
+        raise ConfigError(f"{source}: {where}: expected str, got {type(value).__name__} {value!r}")
+    if target is np.ndarray and isinstance(value, list):
+        return np.asarray(value, dtype=float)
+    return value
+
+
+def load_into(config: Any, config_file: str | Path, component_name: str) -> dict[str, Any]:
+    """Apply a file's sections to ``config``; returns its ``inputs``/``outputs`` topic sections."""
+    data = read_config_file(config_file)
+    common = data.get(COMMON_SECTION) or {}
+    own = {}
+    for key in (component_name, "/" + component_name):
+        if isinstance(data.get(key), dict):
+            own = data[key]
+    topics = {k: own.get(k, common.get(k)) for k in TOPIC_SECTIONS if own.get(k, common.get(k)) is not None}
+    common = {k: v for k, v in common.items() if k not in TOPIC_SECTIONS}
+    own = {k: v for k, v in own.items() if k not in TOPIC_SECTIONS}
+    if not isinstance(common, dict):
+        raise ConfigError(f"{config_file}: section '/**' must be a mapping")
+    apply_mapping(config, common, str(config_file), ignore_unknown=True)
+    apply_mapping(config, own, str(config_file), path=component_name)
+    return topics

@@ -1,0 +1,80 @@
+"""``Topic``: the name, message type, QoS and freshness of one stream of data."""
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from attrs import define, field
+
+from emos.config.base import BaseAttrs
+from emos.config.qos import QoSConfig
+from emos.msgs.registry import canonical_name, resolve
+
+_NAME_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_~{}]*(/[A-Za-z_{][A-Za-z0-9_{}]*)*$")
+
+
+def normalize_topic_name(name: str) -> str:
+    """ROS semantics: ``scan`` and ``/scan`` are the same topic; names are validated here."""
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"Topic name must be a non-empty string, got {name!r}")
+    name = name.strip()
+    if not _NAME_RE.match(name):
+        raise ValueError(
+            f"Topic name {name!r} is invalid: use letters, digits and '_', separated by '/', "
+            "not starting with a digit and without '//' or a trailing '/'"
+        )
+    return name if name.startswith("/") else "/" + name
+
+
+def _qos(value: Any) -> QoSConfig:
+    if value is None:
+        return QoSConfig()
+    if isinstance(value, QoSConfig):
+        return value
+    if isinstance(value, dict):
+        return QoSConfig(**value)
+    raise TypeError(f"Topic qos_profile must be a QoSConfig, got {type(value).__name__}")
+
+
+def _msg_type(value: Any) -> type:
+    return resolve(value)  # raises UnknownMessageType listing close matches
+
+
+@define(kw_only=True, eq=False)
+class Topic(BaseAttrs):
+    """``Topic(name="scan", msg_type="LaserScan", qos_profile=QoSConfig(...), data_timeout=0.5)``.
+
+    ``msg_type`` is a message class or its name; an unknown name fails here, at definition.
+    ``data_timeout`` (seconds, 0 = never stale) is how old the last message may be before the
+    topic's data counts as stale for events and input checks.
+    """
+
+    name: str = field(converter=normalize_topic_name)
+    msg_type: type = field(converter=_msg_type)
+    qos_profile: QoSConfig = field(factory=QoSConfig, converter=_qos)
+    data_timeout: float = field(default=0.0)
+
+    @data_timeout.validator
+    def _check_timeout(self, attribute: Any, value: Any) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+            raise ValueError(f"Topic {self.name!r}: data_timeout must be a number of seconds >= 0, got {value!r}")
+
+    @property
+    def type_name(self) -> str:
+        return canonical_name(self.msg_type)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Topic) and (self.name, self.msg_type) == (other.name, other.msg_type)
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.msg_type))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "msg_type": self.type_name, "qos_profile": self.qos_profile.asdict(), "data_timeout": self.data_timeout}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "Topic":
+        return cls(**data)
+
+    def __repr__(self) -> str:
+        return f"Topic(name={self.name!r}, msg_type={self.type_name!r})"

@@ -1,0 +1,220 @@
+"""Where a running system keeps its shared state, and how stale state of dead runs is swept.
+
+A *run* is one supervised system (or one stand-alone process using topics). It owns:
+
+- shared-memory segments ``/dev/shm/emos.<run_id>.<...>`` (mode 0600), one per ring;
+- a private directory ``<runtime>/emos-<uid>/<run_id>/`` (mode 0700) holding Unix sockets,
+  wake-up FIFOs and per-topic subscriber lists.
+
+``run_id`` is ``<owner pid>-<owner start time>``: a later run can tell a dead owner from a live
+one even if the pid was reused, and removes what the dead one left behind.
+"""
+from __future__ import annotations
+
+import atexit
+import os
+import re
+import shutil
+import threading
+from pathlib import Path
+from typing import Iterator
+
+import psutil
+
+SHM_DIR = Path("/dev/shm")
+SHM_PREFIX = "emos."
+ENV_RUN_DIR = "EMOS_RUN_DIR"
+ENV_RUN_ID = "EMOS_RUN_ID"
+_RUN_ID_RE = re.compile(r"^(\d+)-(\d+)$")
+
+
+def runtime_root() -> Path:
+    """``$XDG_RUNTIME_DIR/emos`` when it exists (per-user tmpfs), else ``/tmp/emos-<uid>``."""
+    xdg = os.environ.get("XDG_RUNTIME_DIR")
+    root = Path(xdg) / "emos" if xdg and Path(xdg).is_dir() else Path(f"/tmp/emos-{os.getuid()}")
+    root.mkdir(mode=0o700, parents=True, exist_ok=True)
+    st = root.stat()
+    if st.st_uid != os.getuid() or st.st_mode & 0o077:
+        # Another user must not be able to plant sockets or FIFOs where we will connect.
+        raise PermissionError(f"{root} must be owned by uid {os.getuid()} with mode 0700 (is {oct(st.st_mode & 0o777)})")
+    return root
+
+
+def _start_token(pid: int) -> int | None:
+    try:
+        return int(psutil.Process(pid).create_time() * 100)
+    except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
+        return None
+
+
+def make_run_id(pid: int | None = None) -> str:
+    pid = os.getpid() if pid is None else pid
+    token = _start_token(pid)
+    if token is None:
+        raise RuntimeError(f"cannot read the start time of pid {pid}")
+    return f"{pid}-{token}"
+
+
+def run_is_alive(run_id: str) -> bool:
+    m = _RUN_ID_RE.match(run_id)
+    if not m:
+        return False
+    pid, token = int(m.group(1)), int(m.group(2))
+    return _start_token(pid) == token
+
+
+class RunContext:
+    """The run this process belongs to. Children of a launcher inherit it through the environment."""
+
+    def __init__(self, run_id: str, run_dir: Path, owner: bool):
+        self.run_id = run_id
+        self.run_dir = run_dir
+        # Ownership is tied to the pid: a forked child inherits this object (and atexit
+        # handlers) but must never delete the run it merely belongs to.
+        self._owner_pid = os.getpid() if owner else -1
+        self.shm_prefix = f"{SHM_PREFIX}{run_id}."
+        for sub in ("wake", "subs", "ctl", "srv"):
+            (run_dir / sub).mkdir(mode=0o700, parents=True, exist_ok=True)
+
+    @property
+    def owner(self) -> bool:
+        return self._owner_pid == os.getpid()
+
+    # -- construction ------------------------------------------------------------------------
+    @classmethod
+    def create(cls) -> "RunContext":
+        """A new run owned by this process; sweeps what dead runs left behind first."""
+        sweep_stale_runs()
+        run_id = make_run_id()
+        run_dir = runtime_root() / run_id
+        run_dir.mkdir(mode=0o700, exist_ok=True)
+        ctx = cls(run_id, run_dir, owner=True)
+        atexit.register(ctx.remove_everything)
+        return ctx
+
+    @classmethod
+    def from_env(cls) -> "RunContext | None":
+        run_dir = os.environ.get(ENV_RUN_DIR)
+        run_id = os.environ.get(ENV_RUN_ID)
+        if not run_dir or not run_id:
+            return None
+        return cls(run_id, Path(run_dir), owner=False)
+
+    def export_env(self) -> None:
+        """Make processes started from here join this run."""
+        os.environ[ENV_RUN_DIR] = str(self.run_dir)
+        os.environ[ENV_RUN_ID] = self.run_id
+
+    # -- names ---------------------------------------------------------------------------------
+    def segment_name(self, topic: str, publisher_id: str, generation: int) -> str:
+        return f"{self.shm_prefix}{encode_name(topic)}.{encode_name(publisher_id)}.g{generation}"
+
+    def topic_segments(self, topic: str) -> list[str]:
+        prefix = f"{self.shm_prefix}{encode_name(topic)}."
+        return sorted(n for n in _list_shm() if n.startswith(prefix))
+
+    def all_segments(self) -> list[str]:
+        return sorted(n for n in _list_shm() if n.startswith(self.shm_prefix))
+
+    def subscriber_dir(self, topic: str) -> Path:
+        path = self.run_dir / "subs" / encode_name(topic)
+        path.mkdir(mode=0o700, exist_ok=True)
+        return path
+
+    # -- clean-up ------------------------------------------------------------------------------
+    def remove_everything(self) -> int:
+        """Unlink every segment and the run directory; returns how many segments were removed."""
+        if not self.owner:
+            return 0
+        removed = remove_segments(self.shm_prefix)
+        shutil.rmtree(self.run_dir, ignore_errors=True)
+        return removed
+
+
+def encode_name(name: str) -> str:
+    """A topic or publisher name as a file-name-safe token (reversible)."""
+    out = []
+    for ch in name.strip("/") or "_":
+        if ch.isalnum() or ch in "_-":
+            out.append(ch)
+        elif ch == "/":
+            out.append("~")
+        else:
+            out.append(f"%{ord(ch):02X}")
+    return "".join(out)
+
+
+def decode_name(token: str) -> str:
+    out, i = [], 0
+    while i < len(token):
+        ch = token[i]
+        if ch == "~":
+            out.append("/")
+        elif ch == "%":
+            out.append(chr(int(token[i + 1 : i + 3], 16)))
+            i += 2
+        else:
+            out.append(ch)
+        i += 1
+    return "/" + "".join(out)
+
+
+def _list_shm() -> Iterator[str]:
+    try:
+        return iter(os.listdir(SHM_DIR))
+    except FileNotFoundError:
+        return iter(())
+
+
+def remove_segments(prefix: str) -> int:
+    removed = 0
+    for name in _list_shm():
+        if name.startswith(prefix):
+            try:
+                os.unlink(SHM_DIR / name)
+                removed += 1
+            except FileNotFoundError:
+                pass
+    return removed
+
+
+def sweep_stale_runs() -> list[str]:
+    """Remove segments and run directories of runs whose owner process is gone."""
+    dead: set[str] = set()
+    for name in _list_shm():
+        if name.startswith(SHM_PREFIX):
+            run_id = name[len(SHM_PREFIX) :].split(".", 1)[0]
+            if not run_is_alive(run_id):
+                dead.add(run_id)
+    try:
+        root = runtime_root()
+        for entry in root.iterdir():
+            if _RUN_ID_RE.match(entry.name) and not run_is_alive(entry.name):
+                dead.add(entry.name)
+    except OSError:
+        root = None
+    for run_id in sorted(dead):
+        remove_segments(f"{SHM_PREFIX}{run_id}.")
+        if root is not None:
+            shutil.rmtree(root / run_id, ignore_errors=True)
+    return sorted(dead)
+
+
+_default: RunContext | None = None
+_default_lock = threading.Lock()
+
+
+def current() -> RunContext:
+    """The run of this process: inherited from a launcher, or created (and owned) on first use."""
+    global _default
+    with _default_lock:
+        if _default is None or (_default.owner and not _default.run_dir.exists()):
+            _default = RunContext.from_env() or RunContext.create()
+        return _default
+
+
+def set_current(ctx: RunContext | None) -> None:
+    global _default
+    with _default_lock:
+        _default = ctx
+
