@@ -65,6 +65,25 @@ class World:
             self.ground_id = self.client.loadURDF("plane.urdf")
             self._body_names[self.ground_id] = "ground"
 
+    # -- ready-made worlds (see builders.py) -----------------------------------------------
+    @classmethod
+    def demo_house(cls, **kwargs: Any) -> "World":
+        from .builders import demo_house
+
+        return demo_house(**kwargs)
+
+    @classmethod
+    def from_map(cls, yaml_path: str, **kwargs: Any) -> "World":
+        from .builders import from_map
+
+        return from_map(yaml_path, **kwargs)
+
+    @classmethod
+    def from_barn(cls, world: Any, worlds_file: str | None = None, **kwargs: Any) -> "World":
+        from .builders import from_barn
+
+        return from_barn(world, worlds_file, **kwargs)
+
     # -- randomness --------------------------------------------------------------------------
     def rng(self) -> np.random.Generator:
         """A fresh generator, determined by the world seed and how many were handed out before."""
