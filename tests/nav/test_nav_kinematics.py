@@ -27,7 +27,7 @@ def robot(model, **kw):
 def test_rollout_straight_and_circle_closed_form():
     cmds = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 0.5, 0.0]])
     poses = rollout([0.0, 0.0, 0.0], cmds, dt=0.1, steps=int(round(2 * math.pi / 0.1)))
-    assert poses.shape == (3, 63, 3)
+    assert poses.shape == (3, 64, 3)
     np.testing.assert_allclose(poses[0, 10], [1.0, 0.0, 0.0], atol=1e-12)
     # unit-speed circle of radius 1 centred at (0, 1): every pose on the circle
     r = np.hypot(poses[1, :, 0], poses[1, :, 1] - 1.0)
