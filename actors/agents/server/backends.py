@@ -1,0 +1,120 @@
+"""The local models behind the server: chat responders, embeddings, TTS, STT and detection.
+
+Heavy models load on first use (the server must start fast: the chaos suite restarts it), and
+each sits behind a lock because the server runs blocking calls in a thread pool.
+"""
+from __future__ import annotations
+
+import importlib
+import threading
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..types import ChatChunk, ChatRequest, ChatResponse
+from .responder import ScriptedResponder
+
+__all__ = ["LocalModels", "BackendUnavailable", "ChatBackend", "EMBEDDING_NAMES"]
+
+#: names the packaged sentence embedder answers to (OpenAI/HF style and Ollama style).
+EMBEDDING_NAMES = ("all-minilm-l6-v2", "all-MiniLM-L6-v2", "sentence-transformers/all-MiniLM-L6-v2", "all-minilm")
+TTS_NAME = "espeak-ng"
+# OpenAI voice names have no espeak equivalent; they all map to the default English voice.
+OPENAI_VOICES = {"alloy", "ash", "ballad", "coral", "echo", "fable", "nova", "onyx", "sage", "shimmer", "verse"}
+
+
+class BackendUnavailable(RuntimeError):
+    """A capability this server cannot provide here (answered with HTTP 501)."""
+
+
+class ChatBackend(Protocol):
+    def respond(self, request: ChatRequest, model: str) -> ChatResponse: ...
+    def stream(self, request: ChatRequest, model: str): ...
+
+
+class LocalModels:
+    def __init__(self, script: Any = None, gguf: str | None = None, extra_models: tuple[str, ...] = ()) -> None:
+        scripted = ScriptedResponder(script)
+        self.default_chat = scripted.name
+        self.chat: dict[str, ChatBackend] = {scripted.name: scripted}
+        for alias in (*scripted.aliases, *extra_models):
+            self.chat[alias] = scripted
+        if gguf:
+            from .llama_backend import LlamaCppResponder
+
+            llama = LlamaCppResponder(gguf)
+            self.chat[llama.name] = llama
+            self.default_chat = llama.name
+        self._lock = threading.Lock()
+        self._embedder: Any = None
+        self._tts: Any = None
+        self._detector: Any = None
+
+    # ------------------------------------------------------------------ registry
+    def chat_backend(self, name: str) -> ChatBackend | None:
+        return self.chat.get(name or self.default_chat)
+
+    def all_names(self) -> list[str]:
+        return [*self.chat, EMBEDDING_NAMES[0], TTS_NAME]
+
+    def has(self, name: str) -> bool:
+        return name in self.chat or name in EMBEDDING_NAMES or name == TTS_NAME
+
+    # ------------------------------------------------------------------ embeddings
+    def embed(self, texts: list[str]) -> np.ndarray:
+        with self._lock:
+            if self._embedder is None:
+                try:
+                    from ..local.embeddings import SentenceEmbedder
+                except ImportError as exc:
+                    raise BackendUnavailable(f"no local embedding model: {exc}") from None
+                self._embedder = SentenceEmbedder()
+        return self._embedder.embed(texts)
+
+    # ------------------------------------------------------------------ speech
+    def synthesize(self, text: str, voice: str | None = None, speed: float | None = None) -> bytes:
+        with self._lock:
+            if self._tts is None:
+                try:
+                    from ..local.tts import EspeakTTS
+
+                    self._tts = EspeakTTS()
+                except (ImportError, FileNotFoundError) as exc:
+                    raise BackendUnavailable(f"no local text-to-speech: {exc}") from None
+        espeak_voice = None if (voice is None or voice in OPENAI_VOICES) else voice
+        wpm = int(round(175 * speed)) if speed else None  # espeak's normal rate is 175 words/min
+        return self._tts.synthesize(text, voice=espeak_voice, speed_wpm=wpm)
+
+    def transcribe(self, audio: bytes, language: str | None = None) -> str:
+        try:
+            stt = importlib.import_module("emos.actors.agents.local.stt")
+        except ImportError:
+            raise BackendUnavailable(
+                "no packaged speech-to-text model is installed on this machine, so transcription is unavailable"
+            ) from None
+        transcribe = getattr(stt, "transcribe", None)
+        if not callable(transcribe):
+            raise BackendUnavailable("emos.actors.agents.local.stt has no transcribe(audio, language) function")
+        return str(transcribe(audio, language=language))
+
+    # ------------------------------------------------------------------ detection
+    def detect(self, image: np.ndarray, threshold: float) -> dict[str, Any]:
+        """People detection with OpenCV's built-in HOG+SVM detector (weights ship in OpenCV)."""
+        with self._lock:
+            if self._detector is None:
+                try:
+                    import cv2
+                except ImportError:
+                    raise BackendUnavailable("object detection needs OpenCV: pip install 'emos[agents]'") from None
+                hog = cv2.HOGDescriptor()
+                hog.setSVMDetector(cv2.HOGDescriptor_getDefaultPeopleDetector())
+                self._detector = hog
+            rects, weights = self._detector.detectMultiScale(image, winStride=(8, 8), padding=(8, 8), scale=1.05)
+        rects = np.asarray(rects, dtype=np.float64).reshape(-1, 4)
+        scores = np.asarray(weights, dtype=np.float64).reshape(-1)
+        # SVM margins are unbounded; squash to 0..1 so `threshold` means what it does elsewhere.
+        scores = 1.0 / (1.0 + np.exp(-scores))
+        keep = scores >= threshold
+        boxes = rects[keep].copy()
+        boxes[:, 2:] += boxes[:, :2]  # x, y, w, h -> x1, y1, x2, y2
+        return {"bboxes": boxes.tolist(), "labels": ["person"] * int(keep.sum()), "scores": scores[keep].tolist()}

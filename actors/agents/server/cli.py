@@ -1,0 +1,39 @@
+"""``emos serve models``: run the local OpenAI-, Ollama- and RoboML-compatible model server."""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import sys
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: local only)")
+    parser.add_argument("--port", type=int, default=8000, help="HTTP/WebSocket port (default 8000; 0 = any free port)")
+    parser.add_argument("--resp-port", type=int, default=None,
+                        help="also serve RoboML's RESP protocol on this port (default: off)")
+    parser.add_argument("--script", default=None, help="YAML/JSON file of scripted chat replies")
+    parser.add_argument("--model", action="append", default=[], metavar="NAME",
+                        help="extra chat model name answered by the scripted responder (repeatable)")
+    parser.add_argument("--gguf", default=None, help="GGUF file to serve with llama.cpp (needs llama-cpp-python)")
+    parser.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"])
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    from .app import serve
+    from .backends import LocalModels
+
+    try:
+        models = LocalModels(script=args.script, gguf=args.gguf, extra_models=tuple(args.model))
+    except (FileNotFoundError, ValueError, ImportError) as exc:
+        print(f"emos serve models: {exc}", file=sys.stderr)
+        return 2
+    try:
+        asyncio.run(serve(models, args.host, args.port, args.resp_port))
+    except OSError as exc:  # port in use, bad interface
+        print(f"emos serve models: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        return 1
+    return 0
