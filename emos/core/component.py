@@ -1,0 +1,257 @@
+"""``BaseComponent``: the unit of execution recipes declare and the supervisor runs.
+
+The object a recipe builds is a *description*: name, inputs, outputs, config, run type. Nothing
+heavy happens in ``__init__``. When the component runs (in its own process, or in a thread in
+threaded mode) a :class:`~emos.core.node.Node` attaches to it, opens topics, and drives the
+lifecycle hooks below. Subclasses override:
+
+- ``_execution_step()``: the main step (Timed: every 1/loop_rate s; Event: on each trigger
+  message; Server: ``_main_srv_callback``; ActionServer: ``_main_action_callback``);
+- ``custom_on_configure / custom_on_activate / custom_on_deactivate / custom_on_shutdown``:
+  open and release resources; return nothing, raise to fail the transition.
+"""
+from __future__ import annotations
+
+import inspect
+import logging
+from typing import TYPE_CHECKING, Any, Sequence
+
+from emos.config.base import BaseComponentConfig, ComponentRunType
+from emos.config.loader import load_into
+from emos.core.health import Status
+from emos.core.lifecycle import LifecycleState
+from emos.io.topic import Topic
+
+if TYPE_CHECKING:
+    from emos.core.node import Node
+
+_COMPONENT_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_")
+
+
+class ComponentError(RuntimeError):
+    """A component used in a way its state does not allow."""
+
+
+def _check_topics(component: str, role: str, topics: Sequence[Topic] | None) -> list[Topic]:
+    if topics is None:
+        return []
+    if isinstance(topics, Topic):
+        topics = [topics]
+    out = []
+    for t in topics:
+        if not isinstance(t, Topic):
+            raise TypeError(f"component {component!r}: {role} must be Topic objects, got {type(t).__name__} {t!r}")
+        out.append(t)
+    names = [t.name for t in out]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise ValueError(f"component {component!r}: {role} list {', '.join(dupes)} more than once")
+    return out
+
+
+class BaseComponent:
+    """A lifecycle-managed, health-reporting component."""
+
+    # Subclasses with Server / ActionServer run types declare their interface types here.
+    main_srv_type: tuple[Any, Any] | None = None  # (request type, response type)
+    main_action_type: tuple[Any, Any, Any] | None = None  # (goal, feedback, result)
+
+    def __init__(
+        self,
+        component_name: str,
+        inputs: Sequence[Topic] | None = None,
+        outputs: Sequence[Topic] | None = None,
+        config: BaseComponentConfig | None = None,
+        config_file: str | None = None,
+        trigger: Topic | Sequence[Topic] | float | None = None,
+        run_type: ComponentRunType | str | None = None,
+        main_srv_name: str | None = None,
+        main_action_name: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if not isinstance(component_name, str) or not component_name or not set(component_name) <= _COMPONENT_NAME_CHARS or component_name[0].isdigit():
+            raise ValueError(f"component_name must be letters, digits and '_', not starting with a digit; got {component_name!r}")
+        if kwargs:
+            raise TypeError(f"component {component_name!r}: unexpected argument(s) {', '.join(sorted(kwargs))}")
+        self.component_name = component_name
+        self.node_name = component_name
+        if config is not None and not isinstance(config, BaseComponentConfig):
+            raise TypeError(f"component {component_name!r}: config must be a BaseComponentConfig, got {type(config).__name__}")
+        self.config: BaseComponentConfig = config if config is not None else getattr(self, "config", None) or BaseComponentConfig()
+        self.in_topics = _check_topics(component_name, "inputs", inputs)
+        self.out_topics = _check_topics(component_name, "outputs", outputs)
+        self.config_file = config_file
+        if config_file:
+            self._apply_config_file(config_file)
+        self.health_status = Status()
+        self.status_topic = Topic(name=f"{component_name}/status", msg_type="ComponentStatus")
+        self.main_srv_name = main_srv_name or f"{component_name}/service"
+        self.main_action_name = main_action_name or f"{component_name}/action"
+        self._run_type = ComponentRunType.TIMED
+        self._trigger: list[Topic] = []
+        self.trigger = trigger
+        if run_type is not None:
+            self.run_type = run_type
+        self._node: Node | None = None
+        self._logger = logging.getLogger(f"emos.{component_name}")
+
+    # -- configuration --------------------------------------------------------------------------
+    def _apply_config_file(self, path: str) -> None:
+        topics = load_into(self.config, path, self.component_name)
+        for section, attr in (("inputs", "in_topics"), ("outputs", "out_topics")):
+            spec = topics.get(section)
+            if not spec:
+                continue
+            if not isinstance(spec, dict):
+                raise ValueError(f"{path}: {self.component_name}.{section} must map keys to topics")
+            current = {t.name: t for t in getattr(self, attr)}
+            for key, tdef in spec.items():
+                if not isinstance(tdef, dict):
+                    raise ValueError(f"{path}: {self.component_name}.{section}.{key} must be a mapping with name and msg_type")
+                try:
+                    topic = Topic(**tdef)
+                except Exception as exc:
+                    raise ValueError(f"{path}: {self.component_name}.{section}.{key}: {exc}") from exc
+                current[topic.name] = topic
+            setattr(self, attr, list(current.values()))
+
+    def configure(self, config_file: str) -> None:
+        """Reload parameters from a YAML, TOML or JSON file (the ``/**`` section and our own)."""
+        self.config_file = config_file
+        self._apply_config_file(config_file)
+
+    # -- run type and trigger -------------------------------------------------------------------
+    @property
+    def run_type(self) -> ComponentRunType:
+        return self._run_type
+
+    @run_type.setter
+    def run_type(self, value: ComponentRunType | str) -> None:
+        run_type = ComponentRunType.parse(value)
+        if run_type == ComponentRunType.SERVER and self.main_srv_type is None:
+            raise ValueError(f"component {self.component_name!r} ({type(self).__name__}) has no main_srv_type, so it cannot be a Server")
+        if run_type == ComponentRunType.ACTION_SERVER and self.main_action_type is None:
+            raise ValueError(f"component {self.component_name!r} ({type(self).__name__}) has no main_action_type, so it cannot be an ActionServer")
+        self._run_type = run_type
+
+    @property
+    def trigger(self) -> list[Topic] | float | None:
+        if self._run_type == ComponentRunType.EVENT:
+            return self._trigger
+        return 1.0 / self.config.loop_rate if self._run_type == ComponentRunType.TIMED else None
+
+    @trigger.setter
+    def trigger(self, value: Topic | Sequence[Topic] | float | None) -> None:
+        if value is None:
+            return
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if value <= 0:
+                raise ValueError(f"component {self.component_name!r}: a timed trigger is a period in seconds > 0, got {value}")
+            self.config.loop_rate = 1.0 / float(value)
+            self._run_type = ComponentRunType.TIMED
+            return
+        topics = [value] if isinstance(value, Topic) else list(value)
+        for t in topics:
+            if not isinstance(t, Topic):
+                raise TypeError(f"component {self.component_name!r}: trigger must be a Topic, a list of Topics or a period in seconds, got {type(t).__name__}")
+            if t not in self.in_topics:
+                self.in_topics.append(t)
+        self._trigger = topics
+        self._run_type = ComponentRunType.EVENT
+
+    # -- inside a running component ---------------------------------------------------------------
+    @property
+    def node(self) -> "Node":
+        if self._node is None:
+            raise ComponentError(f"component {self.component_name!r} is not running; this is only available once it has been brought up")
+        return self._node
+
+    def get_logger(self) -> logging.Logger:
+        return self._logger
+
+    @property
+    def lifecycle_state(self) -> LifecycleState:
+        return self._node.state if self._node is not None else LifecycleState.UNCONFIGURED
+
+    def get_input(self, topic: Topic | str) -> Any | None:
+        """The latest message received on an input topic (``None`` before the first one)."""
+        return self.node.latest(topic)
+
+    def input_age(self, topic: Topic | str) -> float | None:
+        """Seconds since the last message on an input, ``None`` if none arrived."""
+        return self.node.age(topic)
+
+    def stale_inputs(self) -> list[str]:
+        """Inputs with no message, or one older than their ``data_timeout``."""
+        return self.node.stale_inputs()
+
+    def publish(self, topic: Topic | str, msg: Any) -> None:
+        self.node.publish(topic, msg)
+
+    def create_timer(self, period: float, callback: Any) -> Any:
+        return self.node.create_timer(period, callback)
+
+    def create_service(self, name: str, request_type: Any, response_type: Any, callback: Any) -> None:
+        self.node.add_service(name, request_type, response_type, callback)
+
+    def create_action_server(self, name: str, goal_type: Any, feedback_type: Any, result_type: Any, callback: Any) -> None:
+        self.node.add_action_server(name, goal_type, feedback_type, result_type, callback)
+
+    def update_parameter(self, param_name: str, new_value: Any, keep_alive: bool = True) -> bool:
+        """Set one config parameter (validated); returns whether it was applied."""
+        try:
+            self.config.update(**{param_name: new_value})
+        except Exception as exc:
+            self._logger.error("[%s] cannot set %s=%r: %s", self.component_name, param_name, new_value, exc)
+            return False
+        if self._node is not None:
+            self._node.on_config_changed()
+        return True
+
+    def update_parameters(self, params_names: list[str], new_values: list[Any], keep_alive: bool = True) -> bool:
+        try:
+            self.config.update(**dict(zip(params_names, new_values, strict=True)))
+        except Exception as exc:
+            self._logger.error("[%s] cannot set %s: %s", self.component_name, params_names, exc)
+            return False
+        if self._node is not None:
+            self._node.on_config_changed()
+        return True
+
+    # -- hooks for subclasses ----------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        pass
+
+    def custom_on_activate(self) -> None:
+        pass
+
+    def custom_on_deactivate(self) -> None:
+        pass
+
+    def custom_on_cleanup(self) -> None:
+        pass
+
+    def custom_on_shutdown(self) -> None:
+        pass
+
+    def custom_on_error(self) -> bool:
+        """Called when a transition failed; return True to go back to Unconfigured, False to finalize."""
+        return True
+
+    def _execution_step(self, **kwargs: Any) -> None:
+        """The main step; the base marks the component healthy."""
+        self.health_status.set_healthy()
+
+    def _main_srv_callback(self, request: Any) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} declares main_srv_type but does not implement _main_srv_callback")
+
+    def _main_action_callback(self, goal_handle: Any) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} declares main_action_type but does not implement _main_action_callback")
+
+    # -- introspection -----------------------------------------------------------------------------
+    def _step_accepts_kwargs(self) -> bool:
+        params = inspect.signature(self._execution_step).parameters.values()
+        return any(p.kind in (p.VAR_KEYWORD, p.KEYWORD_ONLY) or p.default is not p.empty for p in params)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(component_name={self.component_name!r}, run_type={self.run_type.value!r})"

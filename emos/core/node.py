@@ -1,0 +1,439 @@
+"""The runtime of one component: its event loop, topics, status heartbeat and lifecycle.
+
+A Node runs the same way in its own process and in a thread of the launcher (threaded mode):
+one uvloop event loop, one wake-up FIFO for all its subscriptions, a control socket
+``<run>/ctl/<component>.sock`` for lifecycle and parameter requests, and a status publisher on
+``<component>/status`` that is both the health report and the supervisor's heartbeat.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from emos.config.base import ComponentRunType
+from emos.config.loader import ConfigError
+from emos.core import lifecycle as L
+from emos.core.component import BaseComponent
+from emos.core.rpc import AsyncRpcClient, RpcServer
+from emos.core.services import ActionServer, ServiceServer
+from emos.io.topic import Topic, normalize_topic_name
+from emos.msgs import codec
+from emos.msgs.status import ComponentStatus
+from emos.transport.context import RunContext, current, encode_name
+from emos.transport.pubsub import Publisher, Subscriber
+from emos.transport.waker import Waker
+
+ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
+
+
+def control_socket(ctx: RunContext, component_name: str) -> Path:
+    return ctx.run_dir / "ctl" / f"{encode_name(component_name)}.sock"
+
+
+class _Input:
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns")
+
+    def __init__(self, topic: Topic, sub: Subscriber):
+        self.topic, self.sub = topic, sub
+        self.raw: bytearray | None = None
+        self.stamp_ns = 0
+        self.received_ns = 0
+        self.decoded: Any = None
+
+
+class Node:
+    def __init__(self, component: BaseComponent, ctx: RunContext | None = None, supervisor_socket: str | None = None):
+        self.component = component
+        self.name = component.component_name
+        self.ctx = ctx or current()
+        self.supervisor_socket = supervisor_socket if supervisor_socket is not None else os.environ.get(ENV_SUPERVISOR_SOCKET)
+        self.state = L.LifecycleState.UNCONFIGURED
+        self.log = logging.getLogger(f"emos.{self.name}")
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.exit_code = 0
+        self._stop: asyncio.Event | None = None
+        self._waker: Waker | None = None
+        self._inputs: dict[str, _Input] = {}
+        self._publishers: dict[str, tuple[Publisher, threading.Lock]] = {}
+        self._status_pub: Publisher | None = None
+        self._status_lock = threading.Lock()
+        self._last_status_ns = 0
+        self._main_timer: asyncio.TimerHandle | None = None
+        self._timers: list["_Timer"] = []
+        self._servers: list[ServiceServer | ActionServer] = []
+        self._extra_servers: list[tuple[str, tuple]] = []
+        self._control: RpcServer | None = None
+        self._supervisor: AsyncRpcClient | None = None
+        self._step_kwargs = component._step_accepts_kwargs()
+        self.steps = 0
+
+    # ============================================================================ running
+    def run(self, install_signal_handlers: bool = True) -> int:
+        """Run until told to exit; returns the exit code. Blocks the calling thread."""
+        import uvloop
+
+        self.loop = uvloop.new_event_loop()
+        asyncio.set_event_loop(self.loop)
+        try:
+            self.loop.run_until_complete(self._main(install_signal_handlers))
+        finally:
+            self.loop.close()
+        return self.exit_code
+
+    async def _main(self, install_signal_handlers: bool) -> None:
+        self._stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        if install_signal_handlers:
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                loop.add_signal_handler(sig, self._on_signal, sig)
+        self.component._node = self
+        self._waker = Waker(self.ctx)
+        loop.add_reader(self._waker.fd, self._on_wake)
+        self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
+        self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name)
+        await self._control.start()
+        self._heartbeat = _Timer(loop, 1.0 / self.component.config.heartbeat_rate, self._heartbeat_tick)
+        self.publish_status()
+        try:
+            await self._hello()
+            await self._stop.wait()
+        finally:
+            await self._teardown()
+
+    async def _hello(self) -> None:
+        """Tell the supervisor we are up; it then drives our lifecycle through the control socket."""
+        if not self.supervisor_socket:
+            return
+        self._supervisor = AsyncRpcClient(self.supervisor_socket)
+        await self._supervisor.call("hello", component=self.name, pid=os.getpid(), timeout=10.0)
+
+    def _on_signal(self, sig: int) -> None:
+        self.log.info("[%s] %s received: shutting down", self.name, signal.Signals(sig).name)
+        asyncio.ensure_future(self._graceful_exit())
+
+    async def _graceful_exit(self, code: int = 0) -> None:
+        if self.state != L.LifecycleState.FINALIZED:
+            await self.transition(L.Transition.SHUTDOWN)
+        self.exit_code = code
+        assert self._stop is not None
+        self._stop.set()
+
+    def request_exit(self, code: int = 0) -> None:
+        """Thread-safe: finalize and leave the loop."""
+        if self.loop is not None and not self.loop.is_closed():
+            self.loop.call_soon_threadsafe(lambda: asyncio.ensure_future(self._graceful_exit(code)))
+
+    async def _teardown(self) -> None:
+        self._heartbeat.cancel()
+        if self.state != L.LifecycleState.FINALIZED:
+            await self.transition(L.Transition.SHUTDOWN)
+        self.publish_status()
+        if self._supervisor is not None:
+            await self._supervisor.close()
+        if self._control is not None:
+            await self._control.close()
+        if self.loop is not None and self._waker is not None:
+            self.loop.remove_reader(self._waker.fd)
+            self._waker.close()
+        if self._status_pub is not None:
+            self._status_pub.close()
+        self.component._node = None
+
+    # ============================================================================ lifecycle
+    async def transition(self, transition: L.Transition | str) -> L.LifecycleState:
+        transition = L.Transition(transition)
+        if transition == L.Transition.SHUTDOWN and self.state == L.LifecycleState.FINALIZED:
+            return self.state
+        target = L.next_state(self.state, transition)
+        hook = {
+            L.Transition.CONFIGURE: self._on_configure,
+            L.Transition.ACTIVATE: self._on_activate,
+            L.Transition.DEACTIVATE: self._on_deactivate,
+            L.Transition.CLEANUP: self._on_cleanup,
+            L.Transition.SHUTDOWN: self._on_shutdown,
+        }[transition]
+        try:
+            await hook()
+        except Exception as exc:
+            self.log.exception("[%s] %s failed: %s", self.name, transition.value, exc)
+            self.component.health_status.set_fail_component(component_names=[self.name], message=f"{transition.value} failed: {exc}")
+            await self._release_all()
+            recovered = False
+            try:
+                recovered = bool(self.component.custom_on_error())
+            except Exception:
+                self.log.exception("[%s] custom_on_error raised", self.name)
+            self.state = L.LifecycleState.UNCONFIGURED if recovered and transition != L.Transition.SHUTDOWN else L.LifecycleState.FINALIZED
+            self.publish_status()
+            raise L.InvalidTransition(f"component {self.name!r}: {transition.value} failed: {exc}") from exc
+        self.state = target
+        self.log.debug("[%s] %s -> %s", self.name, transition.value, target.value)
+        self.publish_status()
+        return target
+
+    async def _on_configure(self) -> None:
+        for topic in self.component.out_topics:
+            pub = Publisher(self.ctx, topic.name, topic.msg_type, publisher_id=self.name, depth=topic.qos_profile.queue_size)
+            self._publishers[topic.name] = (pub, threading.Lock())
+        for topic in self.component.in_topics:
+            sub = Subscriber(self.ctx, topic.name, topic.msg_type, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
+            self._inputs[topic.name] = _Input(topic, sub)
+        self.component.custom_on_configure()
+
+    async def _on_activate(self) -> None:
+        comp = self.component
+        comp.custom_on_activate()
+        run_type = comp.run_type
+        if run_type == ComponentRunType.TIMED:
+            self._main_timer = _Timer(self.loop, 1.0 / comp.config.loop_rate, self._run_step)  # type: ignore[assignment]
+        elif run_type == ComponentRunType.SERVER:
+            req, resp = comp.main_srv_type  # type: ignore[misc]
+            await self._start_server(ServiceServer(self.ctx, comp.main_srv_name, req, resp, self._serve_main, owner=self.name))
+        elif run_type == ComponentRunType.ACTION_SERVER:
+            goal, fb, res = comp.main_action_type  # type: ignore[misc]
+            await self._start_server(ActionServer(self.ctx, comp.main_action_name, goal, fb, res, comp._main_action_callback, owner=self.name))
+        for kind, args in self._extra_servers:
+            cls = ServiceServer if kind == "service" else ActionServer
+            await self._start_server(cls(self.ctx, *args, owner=self.name))
+        self._on_wake()  # messages that arrived while inactive may trigger a first step
+
+    async def _start_server(self, server: ServiceServer | ActionServer) -> None:
+        await server.start()
+        self._servers.append(server)
+
+    async def _on_deactivate(self) -> None:
+        await self._stop_activity()
+        self.component.custom_on_deactivate()
+
+    async def _stop_activity(self) -> None:
+        if self._main_timer is not None:
+            self._main_timer.cancel()
+            self._main_timer = None
+        for timer in self._timers:
+            timer.cancel()
+        self._timers.clear()
+        for server in self._servers:
+            await server.close()
+        self._servers.clear()
+
+    async def _on_cleanup(self) -> None:
+        self._close_topics()
+        self.component.custom_on_cleanup()
+
+    async def _on_shutdown(self) -> None:
+        was = self.state
+        await self._stop_activity()
+        if was == L.LifecycleState.ACTIVE:
+            self.component.custom_on_deactivate()
+        self.component.custom_on_shutdown()
+        self._close_topics()
+
+    async def _release_all(self) -> None:
+        await self._stop_activity()
+        self._close_topics()
+
+    def _close_topics(self) -> None:
+        for pub, _ in self._publishers.values():
+            pub.close()
+        self._publishers.clear()
+        for inp in self._inputs.values():
+            inp.sub.close()
+        self._inputs.clear()
+
+    # ============================================================================ steps and data
+    def _run_step(self, **kwargs: Any) -> None:
+        comp = self.component
+        try:
+            if self._step_kwargs:
+                comp._execution_step(**kwargs)
+            else:
+                comp._execution_step()
+        except Exception as exc:
+            # Catch, don't crash: the process lives on, reports COMPONENT_FAILURE, and fallbacks
+            # (or the supervisor, if it never recovers) decide what happens next.
+            self.log.exception("[%s] execution step raised: %s", self.name, exc)
+            comp.health_status.set_fail_component(component_names=[self.name], message=f"{type(exc).__name__}: {exc}")
+        self.steps += 1
+        self.publish_status()
+
+    def _serve_main(self, request: Any) -> Any:
+        response = self.component._main_srv_callback(request)
+        self.steps += 1
+        self.publish_status()
+        return response
+
+    def _on_wake(self) -> None:
+        if self._waker is not None:
+            self._waker.drain()
+        now = time.time_ns()
+        active = self.state == L.LifecycleState.ACTIVE
+        triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
+        for name, inp in list(self._inputs.items()):
+            items = inp.sub.take_raw()
+            if not items:
+                continue
+            stamp, raw, _ = items[-1]
+            inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
+            if active and inp.topic in triggers:
+                for stamp_i, raw_i, _ in items:
+                    msg = codec.decode(inp.topic.msg_type, raw_i)
+                    inp.decoded = msg if raw_i is inp.raw else inp.decoded
+                    self._run_step(msg=msg, topic=inp.topic)
+
+    def _input(self, topic: Topic | str) -> _Input:
+        name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
+        try:
+            return self._inputs[name]
+        except KeyError:
+            raise KeyError(f"component {self.name!r} has no input {name!r}; inputs: {sorted(self._inputs)}") from None
+
+    def latest(self, topic: Topic | str) -> Any | None:
+        inp = self._input(topic)
+        if inp.raw is None:
+            # Nothing seen through wake-ups yet (e.g. a transient-local message from before we
+            # configured): look once.
+            item = inp.sub.latest_raw()
+            if item is None:
+                return None
+            inp.stamp_ns, inp.raw, _ = item
+            inp.received_ns = time.time_ns()
+        if inp.decoded is None:
+            inp.decoded = codec.decode(inp.topic.msg_type, inp.raw)
+        return inp.decoded
+
+    def age(self, topic: Topic | str) -> float | None:
+        inp = self._input(topic)
+        return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
+
+    def stale_inputs(self) -> list[str]:
+        stale = []
+        for name, inp in self._inputs.items():
+            if inp.raw is None:
+                stale.append(name)
+            elif inp.topic.data_timeout and (time.time_ns() - inp.stamp_ns) / 1e9 > inp.topic.data_timeout:
+                stale.append(name)
+        return stale
+
+    def publish(self, topic: Topic | str, msg: Any) -> None:
+        name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
+        try:
+            pub, lock = self._publishers[name]
+        except KeyError:
+            if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
+                raise RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}") from None
+            raise KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}") from None
+        with lock:  # rings are single-writer; action threads and the loop may both publish
+            pub.publish(msg)
+
+    def publish_status(self) -> None:
+        if self._status_pub is None:
+            return
+        msg = self.component.health_status.to_msg(self.state.value)
+        with self._status_lock:
+            if self._status_pub.ring is not None:
+                self._status_pub.publish(msg)
+                self._last_status_ns = time.monotonic_ns()
+
+    def _heartbeat_tick(self) -> None:
+        period_ns = 1e9 / self.component.config.heartbeat_rate
+        if time.monotonic_ns() - self._last_status_ns >= 0.9 * period_ns:
+            self.publish_status()
+
+    # ============================================================================ timers and servers
+    def create_timer(self, period: float, callback: Callable[[], Any]) -> "_Timer":
+        if self.loop is None:
+            raise RuntimeError(f"component {self.name!r}: timers can only be created while running")
+        timer = _Timer(self.loop, period, callback)
+        self._timers.append(timer)
+        return timer
+
+    def add_service(self, name: str, request_type: Any, response_type: Any, callback: Any) -> None:
+        self._extra_servers.append(("service", (name, request_type, response_type, callback)))
+
+    def add_action_server(self, name: str, goal_type: Any, feedback_type: Any, result_type: Any, callback: Any) -> None:
+        self._extra_servers.append(("action", (name, goal_type, feedback_type, result_type, callback)))
+
+    def on_config_changed(self) -> None:
+        """Re-arm the main timer and heartbeat after a rate parameter changed."""
+        if self._main_timer is not None and self.loop is not None:
+            self._main_timer.period = 1.0 / self.component.config.loop_rate
+        self._heartbeat.period = 1.0 / self.component.config.heartbeat_rate
+
+    # ============================================================================ control socket
+    def _control_ops(self) -> dict[str, Callable]:
+        async def get_state(req: dict, stream: Any) -> dict:
+            h = self.component.health_status
+            return {"state": self.state.value, "health": h.level.name, "pid": os.getpid(), "steps": self.steps, "run_type": self.component.run_type.value}
+
+        async def transition(req: dict, stream: Any) -> str:
+            return (await self.transition(req["transition"])).value
+
+        async def update_config(req: dict, stream: Any) -> dict:
+            values = req.get("values") or {}
+            if not isinstance(values, dict):
+                raise ConfigError("update_config expects 'values': a map of parameter names to values")
+            self.component.config.update(**values)
+            self.on_config_changed()
+            return self.component.config.asdict()
+
+        async def configure_from_file(req: dict, stream: Any) -> dict:
+            self.component.configure(str(req["path"]))
+            self.on_config_changed()
+            return self.component.config.asdict()
+
+        async def execute_method(req: dict, stream: Any) -> Any:
+            name = req.get("method", "")
+            if not isinstance(name, str) or name.startswith("_") or not callable(getattr(self.component, name, None)):
+                raise AttributeError(f"component {self.name!r} has no public method {name!r}")
+            result = getattr(self.component, name)(*req.get("args", []), **req.get("kwargs", {}))
+            return result if isinstance(result, (type(None), bool, int, float, str, list, dict)) else repr(result)
+
+        async def exit_(req: dict, stream: Any) -> bool:
+            asyncio.get_running_loop().call_soon(lambda: asyncio.ensure_future(self._graceful_exit(int(req.get("code", 0)))))
+            return True
+
+        async def info(req: dict, stream: Any) -> dict:
+            return {
+                "component": self.name, "type": type(self.component).__name__, "state": self.state.value,
+                "inputs": {t.name: t.type_name for t in self.component.in_topics},
+                "outputs": {t.name: t.type_name for t in self.component.out_topics},
+                "config": self.component.config.asdict(),
+            }
+
+        return {"get_state": get_state, "transition": transition, "update_config": update_config,
+                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info}
+
+
+class _Timer:
+    """A drift-free periodic callback on an event loop; missed ticks are skipped, not queued."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, period: float, callback: Callable[[], Any]):
+        if period <= 0:
+            raise ValueError(f"timer period must be > 0 s, got {period}")
+        self.loop, self.period, self.callback = loop, period, callback
+        self._next = loop.time() + period
+        self._handle: asyncio.TimerHandle | None = loop.call_at(self._next, self._tick)
+
+    def _tick(self) -> None:
+        if self._handle is None:
+            return
+        try:
+            self.callback()
+        finally:
+            if self._handle is not None:
+                now = self.loop.time()
+                self._next += self.period
+                if self._next < now:  # overran: skip to the next slot in the future
+                    self._next = now + self.period - ((now - self._next) % self.period)
+                self._handle = self.loop.call_at(self._next, self._tick)
+
+    def cancel(self) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None

@@ -1,0 +1,284 @@
+"""Request/response and streaming over Unix stream sockets: msgpack frames, never pickle.
+
+Frame: ``u32 length | msgpack map``. A request is ``{"id": n, "op": str, ...}``; its answer is
+``{"id": n, "ok": true, "result": ...}`` or ``{"id": n, "ok": false, "error": str}``. A handler
+may stream ``{"id": n, "stream": ...}`` frames before the answer (action feedback). Sockets are
+created with mode 0600 inside the run's 0700 directory: only the user running the system can
+connect. Message payloads travel as ``bin`` (the topic frame format), decoded by the receiver into
+the type it expects, so nothing that arrives can make us construct arbitrary objects.
+"""
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import os
+import socket
+import struct
+from pathlib import Path
+from typing import Any, Awaitable, Callable
+
+import msgpack
+
+log = logging.getLogger("emos.rpc")
+
+_LEN = struct.Struct("<I")
+MAX_FRAME = 1 << 30
+
+Handler = Callable[[dict, "StreamWriter"], Awaitable[Any]]
+
+
+class RpcError(RuntimeError):
+    """The remote side answered with an error."""
+
+
+class RpcConnectionError(ConnectionError):
+    """No connection, or the connection broke before an answer came."""
+
+
+def pack_frame(obj: Any) -> bytes:
+    body = msgpack.packb(obj, use_bin_type=True)
+    return _LEN.pack(len(body)) + body
+
+
+def _unpack(body: bytes) -> Any:
+    return msgpack.unpackb(body, raw=False, strict_map_key=False)
+
+
+async def read_frame(reader: asyncio.StreamReader) -> Any:
+    head = await reader.readexactly(4)
+    (n,) = _LEN.unpack(head)
+    if n > MAX_FRAME:
+        raise RpcConnectionError(f"frame of {n} B exceeds the limit of {MAX_FRAME} B")
+    return _unpack(await reader.readexactly(n))
+
+
+class StreamWriter:
+    """Lets a handler stream intermediate frames for the request it serves."""
+
+    def __init__(self, writer: asyncio.StreamWriter, request_id: Any):
+        self._writer = writer
+        self._id = request_id
+
+    async def send(self, payload: Any) -> None:
+        self._writer.write(pack_frame({"id": self._id, "stream": payload}))
+        await self._writer.drain()
+
+
+class RpcServer:
+    """Serves ops on a Unix socket; ``handlers[op](request, stream)`` returns the result."""
+
+    def __init__(self, path: Path, handlers: dict[str, Handler], name: str = "rpc"):
+        self.path = Path(path)
+        self.handlers = handlers
+        self.name = name
+        self._server: asyncio.base_events.Server | None = None
+        self._tasks: set[asyncio.Task] = set()
+        self._connections: set[asyncio.Task] = set()
+
+    async def start(self) -> None:
+        if self.path.exists() or self.path.is_symlink():
+            self.path.unlink()
+        old = os.umask(0o177)  # the socket file is created 0600, with no window at a wider mode
+        try:
+            self._server = await asyncio.start_unix_server(self._serve, path=str(self.path))
+        finally:
+            os.umask(old)
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        me = asyncio.current_task()
+        if me is not None:
+            self._connections.add(me)
+        try:
+            while True:
+                try:
+                    req = await read_frame(reader)
+                except (asyncio.IncompleteReadError, ConnectionError):
+                    return
+                if not isinstance(req, dict) or "op" not in req:
+                    writer.write(pack_frame({"id": None, "ok": False, "error": "malformed request: expected a map with 'op'"}))
+                    continue
+                task = asyncio.ensure_future(self._answer(req, writer))
+                self._tasks.add(task)
+                task.add_done_callback(self._tasks.discard)
+        except asyncio.CancelledError:
+            pass
+        finally:
+            if me is not None:
+                self._connections.discard(me)
+            writer.close()
+
+    async def _answer(self, req: dict, writer: asyncio.StreamWriter) -> None:
+        rid = req.get("id")
+        handler = self.handlers.get(req["op"])
+        if handler is None:
+            reply = {"id": rid, "ok": False, "error": f"{self.name}: unknown op {req['op']!r}; known: {sorted(self.handlers)}"}
+        else:
+            try:
+                reply = {"id": rid, "ok": True, "result": await handler(req, StreamWriter(writer, rid))}
+            except Exception as exc:  # reported to the caller, and logged here with the op named
+                log.warning("%s: op %r failed: %s", self.name, req["op"], exc)
+                reply = {"id": rid, "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        try:
+            writer.write(pack_frame(reply))
+            await writer.drain()
+        except (ConnectionError, RuntimeError):
+            pass  # the caller went away; nothing to answer
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            pending = list(self._tasks) + list(self._connections)
+            for task in pending:
+                task.cancel()
+            if pending:
+                await asyncio.gather(*pending, return_exceptions=True)
+            self._server = None
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
+
+
+class RpcClient:
+    """Blocking client, for the CLI, tests and code outside an event loop."""
+
+    def __init__(self, path: Path | str, timeout: float = 5.0):
+        self.path = str(path)
+        self.timeout = timeout
+        self._ids = itertools.count(1)
+        self._sock: socket.socket | None = None
+
+    def _connect(self) -> socket.socket:
+        if self._sock is None:
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            sock.settimeout(self.timeout)
+            try:
+                sock.connect(self.path)
+            except OSError as exc:
+                sock.close()
+                raise RpcConnectionError(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
+            self._sock = sock
+        return self._sock
+
+    def _recv_exact(self, n: int) -> bytes:
+        assert self._sock is not None
+        chunks, got = [], 0
+        while got < n:
+            chunk = self._sock.recv(min(n - got, 1 << 20))
+            if not chunk:
+                raise RpcConnectionError(f"{self.path}: connection closed before the answer")
+            chunks.append(chunk)
+            got += len(chunk)
+        return b"".join(chunks)
+
+    def call(self, op: str, on_stream: Callable[[Any], None] | None = None, timeout: float | None = None, **payload: Any) -> Any:
+        sock = self._connect()
+        if timeout is not None:
+            sock.settimeout(timeout)
+        rid = next(self._ids)
+        try:
+            sock.sendall(pack_frame({"id": rid, "op": op, **payload}))
+            while True:
+                (n,) = _LEN.unpack(self._recv_exact(4))
+                frame = _unpack(self._recv_exact(n))
+                if frame.get("id") != rid:
+                    continue
+                if "stream" in frame:
+                    if on_stream is not None:
+                        on_stream(frame["stream"])
+                    continue
+                if frame.get("ok"):
+                    return frame.get("result")
+                raise RpcError(frame.get("error", "unknown error"))
+        except (socket.timeout, TimeoutError) as exc:
+            self.close()
+            raise TimeoutError(f"{self.path}: no answer to {op!r} within {sock.gettimeout()} s") from exc
+        except OSError as exc:
+            self.close()
+            raise RpcConnectionError(f"{self.path}: {op!r} failed: {exc}") from exc
+        finally:
+            if timeout is not None and self._sock is not None:
+                self._sock.settimeout(self.timeout)
+
+    def close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> "RpcClient":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class AsyncRpcClient:
+    """Client for use inside an event loop; many requests may be in flight on one connection."""
+
+    def __init__(self, path: Path | str):
+        self.path = str(path)
+        self._ids = itertools.count(1)
+        self._reader: asyncio.StreamReader | None = None
+        self._writer: asyncio.StreamWriter | None = None
+        self._pending: dict[int, tuple[asyncio.Future, Callable[[Any], None] | None]] = {}
+        self._pump: asyncio.Task | None = None
+
+    async def connect(self) -> None:
+        try:
+            self._reader, self._writer = await asyncio.open_unix_connection(self.path)
+        except OSError as exc:
+            raise RpcConnectionError(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
+        self._pump = asyncio.ensure_future(self._read_loop())
+
+    async def _read_loop(self) -> None:
+        assert self._reader is not None
+        try:
+            while True:
+                frame = await read_frame(self._reader)
+                entry = self._pending.get(frame.get("id"))
+                if entry is None:
+                    continue
+                fut, on_stream = entry
+                if "stream" in frame:
+                    if on_stream is not None:
+                        on_stream(frame["stream"])
+                elif not fut.done():
+                    if frame.get("ok"):
+                        fut.set_result(frame.get("result"))
+                    else:
+                        fut.set_exception(RpcError(frame.get("error", "unknown error")))
+        except (asyncio.IncompleteReadError, ConnectionError, OSError) as exc:
+            err = RpcConnectionError(f"{self.path}: connection lost ({exc.__class__.__name__})")
+        except asyncio.CancelledError:
+            err = RpcConnectionError(f"{self.path}: client closed")
+        for fut, _ in self._pending.values():
+            if not fut.done():
+                fut.set_exception(err)
+        self._pending.clear()
+
+    async def call(self, op: str, timeout: float | None = 10.0, on_stream: Callable[[Any], None] | None = None, **payload: Any) -> Any:
+        if self._writer is None:
+            await self.connect()
+        assert self._writer is not None
+        rid = next(self._ids)
+        fut: asyncio.Future = asyncio.get_running_loop().create_future()
+        self._pending[rid] = (fut, on_stream)
+        try:
+            self._writer.write(pack_frame({"id": rid, "op": op, **payload}))
+            await self._writer.drain()
+            return await asyncio.wait_for(fut, timeout)
+        except asyncio.TimeoutError:
+            raise TimeoutError(f"{self.path}: no answer to {op!r} within {timeout} s") from None
+        except (ConnectionError, OSError) as exc:
+            raise RpcConnectionError(f"{self.path}: {op!r} failed: {exc}") from exc
+        finally:
+            self._pending.pop(rid, None)
+
+    async def close(self) -> None:
+        if self._pump is not None:
+            self._pump.cancel()
+            self._pump = None
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
