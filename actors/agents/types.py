@@ -35,6 +35,9 @@ __all__ = [
     "SpeechResponse",
     "TranscriptionRequest",
     "TranscriptionResponse",
+    "DetectionRequest",
+    "Detection2D",
+    "DetectionResponse",
     "decode_tool_arguments",
     "sniff_image_mime",
     "encode_png",
@@ -390,3 +393,44 @@ class TranscriptionRequest:
 class TranscriptionResponse:
     text: str
     language: str | None = None
+
+
+# --------------------------------------------------------------------------- detection
+
+
+def _threshold(instance, attribute, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+        raise ValueError(f"DetectionRequest.threshold: expected a number in [0, 1], got {value!r}")
+
+
+@attrs.define
+class DetectionRequest:
+    """Images to run a detector on; one :class:`Detection2D` per image comes back."""
+
+    images: list[ImageData] = attrs.field(converter=_images)
+    threshold: float = attrs.field(default=0.5, validator=_threshold)
+    labels_to_track: list[str] | None = None
+
+    def __attrs_post_init__(self) -> None:
+        if not self.images:
+            raise ValueError("DetectionRequest.images: expected at least one image")
+
+
+@attrs.define
+class Detection2D:
+    """Detections in one image: ``boxes`` is N x 4 (x1, y1, x2, y2) pixels, ``scores`` N."""
+
+    boxes: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.float64).reshape(-1, 4))
+    labels: list[str] = attrs.field(factory=list, converter=lambda v: [str(x) for x in v])
+    scores: np.ndarray = attrs.field(factory=lambda: np.zeros(0), converter=lambda v: np.asarray(v, dtype=np.float64).reshape(-1))
+
+    def __attrs_post_init__(self) -> None:
+        if not (len(self.boxes) == len(self.labels) == len(self.scores)):
+            raise ValueError(
+                f"Detection2D: boxes ({len(self.boxes)}), labels ({len(self.labels)}) and scores ({len(self.scores)}) differ in length"
+            )
+
+
+@attrs.define
+class DetectionResponse:
+    detections: list[Detection2D]

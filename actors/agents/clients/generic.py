@@ -20,7 +20,7 @@ from ..types import (
 )
 from . import openai_codec
 from .base import ModelClient
-from .http import HTTPTransport
+from .http_transport import HTTPTransport
 from .sse import iter_sse_data
 
 __all__ = ["GenericHTTPClient"]

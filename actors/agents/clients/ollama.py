@@ -8,7 +8,7 @@ from ..errors import MalformedResponseError, ModelNotFoundError, ModelServerErro
 from ..types import ChatChunk, ChatRequest, ChatResponse, EmbeddingRequest, EmbeddingResponse
 from . import ollama_codec
 from .base import ModelClient
-from .http import HTTPTransport
+from .http_transport import HTTPTransport
 
 __all__ = ["OllamaClient"]
 

@@ -35,7 +35,7 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
                 ready: Any = None) -> None:
     """Serve until SIGTERM/SIGINT, then close listeners and in-flight connections cleanly."""
     app, nodes = build_app(models)
-    runner = web.AppRunner(app, handle_signals=False, access_log=None)
+    runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=2.0)
     await runner.setup()
     site = web.TCPSite(runner, host, port, reuse_address=True)
     await site.start()
@@ -48,7 +48,7 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
         except (NotImplementedError, RuntimeError):  # not the main thread (tests run it in one)
             pass
     bound = [s.getsockname()[1] for s in site._server.sockets]  # port 0 -> the real port
-    resp_bound = resp.sockets[0].getsockname()[1] if resp else None
+    resp_bound = resp.port if resp else None
     log.info("serving on http://%s:%s (RESP %s)", host, bound[0], resp_bound)
     # One parseable line so supervisors and tests know when (and where) the server listens.
     print(f"emos-model-server ready http={host}:{bound[0]} resp={resp_bound or '-'}", flush=True)
@@ -58,6 +58,5 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
         await stop.wait()
     finally:
         if resp is not None:
-            resp.close()
-            await resp.wait_closed()
+            await resp.close()
         await runner.cleanup()

@@ -5,7 +5,6 @@ each sits behind a lock because the server runs blocking calls in a thread pool.
 """
 from __future__ import annotations
 
-import importlib
 import threading
 from typing import Any, Protocol
 
@@ -48,6 +47,7 @@ class LocalModels:
         self._lock = threading.Lock()
         self._embedder: Any = None
         self._tts: Any = None
+        self._stt: Any = None
         self._detector: Any = None
 
     # ------------------------------------------------------------------ registry
@@ -86,16 +86,20 @@ class LocalModels:
         return self._tts.synthesize(text, voice=espeak_voice, speed_wpm=wpm)
 
     def transcribe(self, audio: bytes, language: str | None = None) -> str:
-        try:
-            stt = importlib.import_module("emos.actors.agents.local.stt")
-        except ImportError:
-            raise BackendUnavailable(
-                "no packaged speech-to-text model is installed on this machine, so transcription is unavailable"
-            ) from None
-        transcribe = getattr(stt, "transcribe", None)
-        if not callable(transcribe):
-            raise BackendUnavailable("emos.actors.agents.local.stt has no transcribe(audio, language) function")
-        return str(transcribe(audio, language=language))
+        if language and not language.lower().startswith("en"):
+            raise BackendUnavailable(f"the local speech-to-text model is English only; language {language!r} is unavailable")
+        with self._lock:
+            if self._stt is None:
+                try:
+                    from ..local.stt import PocketSphinxSTT
+
+                    self._stt = PocketSphinxSTT()
+                except ImportError as exc:
+                    raise BackendUnavailable(f"no packaged speech-to-text model is installed here ({exc})") from None
+            try:
+                return str(self._stt.transcribe(audio))
+            except (ValueError, TypeError) as exc:
+                raise ValueError(f"audio could not be decoded: {exc}") from None
 
     # ------------------------------------------------------------------ detection
     def detect(self, image: np.ndarray, threshold: float) -> dict[str, Any]:

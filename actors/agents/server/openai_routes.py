@@ -124,6 +124,8 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
             text = await in_thread(models.transcribe, audio, language)
         except BackendUnavailable as exc:
             return _error(501, str(exc), "server_error")
+        except ValueError as exc:
+            return _error(400, str(exc))
         return web.json_response({"text": text})
 
     app.router.add_get("/v1/models", list_models)

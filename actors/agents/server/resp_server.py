@@ -80,8 +80,23 @@ async def _dispatch(nodes: RoboMLNodes, args: list[bytes]) -> bytes:
     raise NodeError(400, f"unknown command {command!r}")
 
 
-async def start_resp_server(nodes: RoboMLNodes, host: str, port: int) -> asyncio.base_events.Server:
-    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+class RespServer:
+    """The RESP listener plus its live connections, so shutdown can end them cleanly."""
+
+    def __init__(self, nodes: RoboMLNodes) -> None:
+        self.nodes = nodes
+        self.server: asyncio.base_events.Server | None = None
+        self.connections: set[asyncio.Task] = set()
+        self.writers: set[asyncio.StreamWriter] = set()
+
+    @property
+    def port(self) -> int:
+        return self.server.sockets[0].getsockname()[1]
+
+    async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        self.connections.add(task)
+        self.writers.add(writer)
         try:
             while True:
                 try:
@@ -92,7 +107,7 @@ async def start_resp_server(nodes: RoboMLNodes, host: str, port: int) -> asyncio
                     writer.write(encode_reply(ProtocolError(f"protocol error: {exc}")))
                     break
                 try:
-                    reply = await _dispatch(nodes, args)
+                    reply = await _dispatch(self.nodes, args)
                 except NodeError as exc:
                     reply = encode_reply(exc)
                 writer.write(reply)
@@ -100,6 +115,20 @@ async def start_resp_server(nodes: RoboMLNodes, host: str, port: int) -> asyncio
         except ConnectionError:
             pass
         finally:
+            self.connections.discard(task)
+            self.writers.discard(writer)
             writer.close()
 
-    return await asyncio.start_server(handle, host, port, limit=1024 * 1024)
+    async def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+        for writer in list(self.writers):
+            writer.close()  # the handler's pending read then ends with IncompleteReadError
+        if self.connections:
+            await asyncio.wait(list(self.connections), timeout=2.0)
+
+
+async def start_resp_server(nodes: RoboMLNodes, host: str, port: int) -> RespServer:
+    resp = RespServer(nodes)
+    resp.server = await asyncio.start_server(resp.handle, host, port, limit=1024 * 1024)
+    return resp

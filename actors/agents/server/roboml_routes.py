@@ -2,8 +2,10 @@
 ``/{node}/initialize``, ``/{node}/inference``, ``/{node}/get_status``, ``/{node}/ws_inference``."""
 from __future__ import annotations
 
+import weakref
+
 import msgpack
-from aiohttp import WSMsgType, web
+from aiohttp import WSMsgType, WSCloseCode, web
 
 from .common import in_thread, iterate_in_thread, read_json
 from .roboml_nodes import STREAM_END, NodeError, RoboMLNodes
@@ -16,6 +18,14 @@ def _error(exc: NodeError) -> web.Response:
 
 
 def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
+    sockets: weakref.WeakSet[web.WebSocketResponse] = weakref.WeakSet()
+
+    async def close_sockets(_app: web.Application) -> None:
+        # Open websockets would otherwise hold shutdown until the runner's timeout.
+        for ws in list(sockets):
+            await ws.close(code=WSCloseCode.GOING_AWAY, message=b"server shutdown")
+
+    app.on_shutdown.append(close_sockets)
     async def about(_request: web.Request) -> web.Response:
         return web.json_response({"title": "emos local model server (RoboML-compatible)", "apps_served": list(nodes.nodes)})
 
@@ -68,6 +78,7 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
     async def ws_inference(request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(max_msg_size=64 * 1024 * 1024)
         await ws.prepare(request)
+        sockets.add(ws)
         name = request.match_info["node"]
         async for message in ws:
             if message.type != WSMsgType.BINARY:
