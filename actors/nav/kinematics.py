@@ -21,6 +21,8 @@ __all__ = [
     "rollout",
     "to_robot_frame",
     "to_world_frame",
+    "ramp_commands",
+    "integrate_sequence",
 ]
 
 
@@ -154,3 +156,39 @@ def to_world_frame(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.stack(
         [pose[0] + c * p[..., 0] - s * p[..., 1], pose[1] + s * p[..., 0] + c * p[..., 1]], axis=-1
     )
+
+
+def ramp_commands(robot: RobotConfig, velocity: np.ndarray, targets: np.ndarray, dt: float,
+                  steps: int) -> np.ndarray:
+    """Commands (N, steps, 3) moving from ``velocity`` towards each target (N, 3) per step.
+
+    Each step changes each axis by at most ``max_acc * dt`` while |v| grows and by at most
+    ``max_decel * dt`` while it shrinks. The loop runs over steps (a handful), never samples.
+    """
+    tgt = feasible_commands(robot, np.asarray(targets, dtype=np.float64).reshape(-1, 3))
+    lim = (robot.ctrl_vx_limits, robot.ctrl_vy_limits, robot.ctrl_omega_limits)
+    acc = np.array([l.max_acc for l in lim]) * dt
+    dec = np.array([l.max_decel for l in lim]) * dt
+    v = np.broadcast_to(np.asarray(velocity, dtype=np.float64).reshape(1, 3), tgt.shape).copy()
+    out = np.empty((tgt.shape[0], steps, 3))
+    for k in range(steps):
+        delta = tgt - v
+        # Moving away from zero (same sign as v, or from rest) is acceleration; else braking.
+        speeding = (v * delta > 0) | (v == 0)
+        step = np.where(speeding, acc, dec)
+        v = v + np.clip(delta, -step, step)
+        out[:, k] = v
+    return feasible_commands(robot, out)
+
+
+def integrate_sequence(pose: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
+    """Poses (N, K + 1, 3) from applying command sequences (N, K, 3) for ``dt`` each."""
+    cmds = np.asarray(commands, dtype=np.float64)
+    if cmds.ndim == 2:
+        cmds = cmds[None]
+    n, k, _ = cmds.shape
+    out = np.empty((n, k + 1, 3))
+    out[:, 0] = np.asarray(pose, dtype=np.float64).reshape(3)
+    for i in range(k):
+        out[:, i + 1] = integrate(out[:, i], cmds[:, i], dt)
+    return out

@@ -1,0 +1,15 @@
+"""Local controllers: path followers (Pure Pursuit, Stanley, DWA, DVZ) and vision followers."""
+from .base import ControllersID, ControlResult, ControlStatus
+from .pure_pursuit import PurePursuit, PurePursuitConfig
+from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
+
+__all__ = [
+    "ControllersID",
+    "ControlResult",
+    "ControlStatus",
+    "LaserScan2D",
+    "OccupancyGrid2D",
+    "PurePursuit",
+    "PurePursuitConfig",
+    "obstacle_points",
+]

@@ -1,0 +1,79 @@
+"""Footprint clearance of many poses against obstacle points (vectorized, no FCL needed).
+
+For the planar footprints the controllers use (circle, rectangle, ellipse) the signed distance
+is computed in closed form, which is exact and far cheaper per pose than building FCL objects
+for thousands of rollout poses. Circles need one centre distance; rectangles and ellipses are
+refined only for obstacle points inside their bounding circle (plus margin).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..robot import RobotConfig, RobotGeometry
+
+__all__ = ["pose_clearance", "trajectory_clearance", "nearby_obstacles"]
+
+_ROUND = (RobotGeometry.Type.CYLINDER, RobotGeometry.Type.SPHERE, RobotGeometry.Type.CAPSULE,
+          RobotGeometry.Type.CONE)
+
+
+def nearby_obstacles(obstacles: np.ndarray, center: np.ndarray, reach: float) -> np.ndarray:
+    """Obstacles within ``reach`` of ``center``: rollouts cannot touch anything farther."""
+    obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+    if obs.shape[0] == 0:
+        return obs
+    d2 = (obs[:, 0] - center[0]) ** 2 + (obs[:, 1] - center[1]) ** 2
+    return obs[d2 <= reach * reach]
+
+
+def pose_clearance(robot: RobotConfig, poses: np.ndarray, obstacles: np.ndarray,
+                   chunk_pairs: int = 1 << 20) -> np.ndarray:
+    """Signed distance from each footprint (poses (..., 3), world) to the nearest obstacle.
+
+    ``inf`` when there are no obstacles; negative when an obstacle is inside the footprint.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    lead = poses.shape[:-1]
+    flat = poses.reshape(-1, 3)
+    obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+    out = np.full(flat.shape[0], np.inf)
+    if obs.shape[0] == 0 or flat.shape[0] == 0:
+        return out.reshape(lead)
+    obs32 = obs.astype(np.float32)
+    round_shape = robot.geometry_type in _ROUND
+    r_out = robot.radius
+    r_in = robot.inner_radius
+    rows = max(1, chunk_pairs // obs.shape[0])
+    for s in range(0, flat.shape[0], rows):
+        q = flat[s:s + rows]
+        dx = q[:, 0:1].astype(np.float32) - obs32[None, :, 0]
+        dy = q[:, 1:2].astype(np.float32) - obs32[None, :, 1]
+        d2 = dx * dx + dy * dy
+        dmin = np.sqrt(d2.min(axis=1)).astype(np.float64)
+        if round_shape:
+            out[s:s + rows] = dmin - r_out
+            continue
+        # Lower bound from the bounding circle; refine only pairs that could be closer.
+        res = dmin - r_out
+        # An obstacle at centre distance d is at least d - r_out from the footprint, and the
+        # nearest one is at most dmin - r_in away: only d <= dmin + r_out - r_in can win.
+        bound = (dmin + (r_out - r_in) + 1e-6).astype(np.float32)
+        near_pose, near_obs = np.nonzero(d2 <= (bound * bound)[:, None])
+        if near_pose.size:
+            qp = q[near_pose]
+            c, sn = np.cos(qp[:, 2]), np.sin(qp[:, 2])
+            wx = obs[near_obs, 0] - qp[:, 0]
+            wy = obs[near_obs, 1] - qp[:, 1]
+            local = np.stack([c * wx + sn * wy, -sn * wx + c * wy], axis=-1)
+            fd = robot.footprint_distance(local)
+            exact = np.full(q.shape[0], np.inf)
+            np.minimum.at(exact, near_pose, fd)
+            res = np.where(np.isfinite(exact), exact, res)
+        out[s:s + rows] = res
+    return out.reshape(lead)
+
+
+def trajectory_clearance(robot: RobotConfig, trajectories: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+    """Smallest footprint clearance along each trajectory (T, P, 3) -> (T,)."""
+    clear = pose_clearance(robot, trajectories, obstacles)
+    return clear.min(axis=-1)

@@ -1,0 +1,92 @@
+"""Base class of the path-following controllers: path, progress, goal and speed profile."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kinematics import integrate_sequence, ramp_commands, wrap_angle
+from ..robot import RobotConfig, RobotType
+from .base import ControlResult, ControlStatus, FollowerConfig
+from .clearance import nearby_obstacles, pose_clearance
+from .path import PathProgress, ReferencePath
+from .sensors import ObstacleInput, obstacle_points
+
+__all__ = ["PathFollower"]
+
+
+class PathFollower:
+    """Holds the reference path and the robot; subclasses implement :meth:`compute`."""
+
+    config: FollowerConfig
+
+    def __init__(self, robot: RobotConfig, config: FollowerConfig) -> None:
+        if not isinstance(robot, RobotConfig):
+            raise TypeError(f"robot: expected a RobotConfig, got {type(robot).__name__}")
+        self.robot = robot
+        self.config = config
+        self.path: ReferencePath | None = None
+        self.progress: PathProgress | None = None
+        self.sensor_pose = (0.0, 0.0, 0.0)
+
+    # -- path -------------------------------------------------------------------------
+    def set_path(self, path: np.ndarray) -> None:
+        """Start tracking a new world-frame path (R, 2) or (R, 3)."""
+        self.path = ReferencePath(path, spacing=self.config.path_resolution)
+        reach = max(1.0, 4.0 * self.robot.ctrl_vx_limits.max_vel * 1.0)
+        self.progress = PathProgress(self.path, search_ahead=reach)
+
+    def goal_reached(self, pose: np.ndarray) -> bool:
+        return self.progress is not None and self.progress.goal_reached(pose, self.config.goal_dist_tolerance)
+
+    # -- helpers ----------------------------------------------------------------------
+    def world_obstacles(self, pose: np.ndarray, obstacles: ObstacleInput) -> np.ndarray:
+        """Obstacle input (robot frame) -> (M, 2) world points."""
+        pts = obstacle_points(obstacles, self.sensor_pose)
+        if pts.shape[0] == 0:
+            return pts
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return np.stack([pose[0] + c * pts[:, 0] - s * pts[:, 1], pose[1] + s * pts[:, 0] + c * pts[:, 1]], axis=-1)
+
+    def desired_speed(self) -> float:
+        """Cruise speed, reduced near the goal so that braking at half max_decel stops on it."""
+        assert self.progress is not None
+        vmax = self.robot.ctrl_vx_limits.max_vel
+        remaining = max(self.progress.remaining, 0.0)
+        return min(vmax, math.sqrt(2.0 * 0.5 * self.robot.ctrl_vx_limits.max_decel * remaining) + 0.05)
+
+    def rotate_command(self, heading_error: float) -> np.ndarray:
+        """In-place rotation that removes ``heading_error`` (rad) without overshoot."""
+        lim = self.robot.ctrl_omega_limits
+        # The largest speed from which braking still stops within the remaining angle.
+        w = min(lim.max_vel, math.sqrt(2.0 * lim.max_decel * abs(heading_error)))
+        return np.array([0.0, 0.0, -math.copysign(w, heading_error)])
+
+    def needs_rotation(self, heading_error: float) -> bool:
+        return self.robot.model_type is not RobotType.ACKERMANN and abs(heading_error) > self.config.rotate_in_place_angle
+
+    def plan(self, pose: np.ndarray, velocity: np.ndarray, targets: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """Ramped command sequences (N, steps, 3) towards targets and their poses."""
+        cmds = ramp_commands(self.robot, velocity, targets, self.config.control_time_step, steps)
+        return cmds, integrate_sequence(pose, cmds, self.config.control_time_step)
+
+    def clearances(self, poses: np.ndarray, obstacles_world: np.ndarray) -> np.ndarray:
+        """Minimum footprint clearance per candidate trajectory (N,)."""
+        if obstacles_world.shape[0] == 0:
+            return np.full(poses.shape[0], np.inf)
+        reach = float(np.max(np.hypot(poses[..., 0] - poses[0, 0, 0], poses[..., 1] - poses[0, 0, 1]))) + self.robot.radius + 0.5
+        near = nearby_obstacles(obstacles_world, poses[0, 0, :2], reach)
+        if near.shape[0] == 0:
+            return np.full(poses.shape[0], np.inf)
+        # The start pose is where the robot already is: judge only where it is going.
+        return pose_clearance(self.robot, poses[:, 1:], near).min(axis=-1)
+
+    def _no_path(self, pose: np.ndarray) -> ControlResult:
+        return ControlResult.stop(pose, ControlStatus.NO_PATH)
+
+    def _done(self, pose: np.ndarray) -> ControlResult:
+        return ControlResult.stop(pose, ControlStatus.GOAL_REACHED)
+
+    @staticmethod
+    def heading_error(yaw: float, target_yaw: float) -> float:
+        return float(wrap_angle(yaw - target_yaw))

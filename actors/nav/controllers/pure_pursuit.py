@@ -1,0 +1,138 @@
+"""Pure Pursuit path tracking with a simple-search collision avoidance layer.
+
+Each step: find the lookahead point at ``L = max(lookahead_gain_forward * |v|,
+min_lookahead_distance)`` ahead along the path, steer on the arc through it, predict the
+motion over ``prediction_horizon`` steps and, if that prediction hits an obstacle, try angular
+velocity offsets of ``path_search_step`` (alternating sides, smallest first, up to
+``max_search_candidates`` per side) and keep the first collision-free one.
+"""
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from ..kinematics import to_robot_frame
+from ..robot import RobotConfig, RobotType
+from .base import ControlResult, ControlStatus, FollowerConfig, field
+from .follower import PathFollower
+from .sensors import ObstacleInput
+
+__all__ = ["PurePursuitConfig", "PurePursuit"]
+
+
+@attrs.define
+class PurePursuitConfig(FollowerConfig):
+    """Spec parameters plus ``min_lookahead_distance`` (m), the lookahead at standstill."""
+
+    lookahead_gain_forward: float = field(0.8, 0.0, 1e2)
+    prediction_horizon: int = field(10, 1, 1000, int)
+    path_search_step: float = field(0.2, 1e-3, 1e2)
+    max_search_candidates: int = field(10, 1, 1000, int)
+    min_lookahead_distance: float = field(0.3, 1e-3, 1e2)
+
+
+class PurePursuit(PathFollower):
+    config: PurePursuitConfig
+
+    def __init__(self, robot: RobotConfig, config: PurePursuitConfig | None = None) -> None:
+        super().__init__(robot, config or PurePursuitConfig())
+        # Detour memory: the side (+1/-1) of the last detour and how many steps it stays
+        # preferred. Without it a robot beside an obstacle alternates between "rotate back
+        # towards the path" and "turn away", and never passes.
+        self._side = 0.0
+        self._commit = 0
+
+    def nominal_command(self, pose: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Pure pursuit command towards the lookahead point; also whether it rotates in place."""
+        assert self.progress is not None and self.path is not None
+        cfg = self.config
+        speed = float(np.hypot(velocity[0], velocity[1]))
+        lookahead = max(cfg.lookahead_gain_forward * speed, cfg.min_lookahead_distance)
+        idx = self.progress.point_ahead(lookahead)
+        target = self.path.points[idx]
+        local = to_robot_frame(pose, target)
+        xt, yt = float(local[0]), float(local[1])
+        dist2 = max(xt * xt + yt * yt, 1e-9)
+        v = self.desired_speed()
+        robot = self.robot
+        if robot.model_type is RobotType.OMNI:
+            heading = self.heading_error(pose[2], float(self.path.yaw[self.progress.index]))
+            if self._commit == 0 and self.needs_rotation(heading):
+                return self.rotate_command(heading), True
+            scale = v / math.sqrt(dist2)
+            w = -2.0 * heading / max(cfg.control_time_step * cfg.prediction_horizon, 1e-3)
+            return np.array([xt * scale, yt * scale, w]), False
+        alpha = math.atan2(yt, xt)
+        if self._commit == 0 and self.needs_rotation(-alpha):
+            return self.rotate_command(-alpha), True
+        curvature = 2.0 * yt / dist2
+        if robot.model_type is RobotType.ACKERMANN:
+            curvature = float(np.clip(curvature, -robot.max_curvature, robot.max_curvature))
+        w_max = robot.ctrl_omega_limits.max_vel
+        if abs(v * curvature) > w_max:  # keep the arc, slow down to the angular limit
+            v = w_max / abs(curvature)
+        return np.array([v, 0.0, v * curvature]), False
+
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+        """One control step from the current world ``pose`` and body ``velocity``."""
+        pose = np.asarray(pose, dtype=np.float64)
+        velocity = np.asarray(velocity, dtype=np.float64)
+        if self.progress is None:
+            return self._no_path(pose)
+        self.progress.update(pose)
+        if self.goal_reached(pose):
+            return self._done(pose)
+        cfg = self.config
+        nominal, rotating = self.nominal_command(pose, velocity)
+        obs = self.world_obstacles(pose, obstacles)
+        steps = cfg.prediction_horizon
+        targets = self.candidates(nominal)
+        cmds, poses = self.plan(pose, velocity, targets, steps)
+        clear = self.clearances(poses, obs)
+        here = self.clearances(np.repeat(pose[None, None], 2, axis=1), obs)[0]
+        # Keep the safety margin; if already inside it, at least do not get closer.
+        ok = np.nonzero(clear > min(cfg.safety_margin, here - 1e-3))[0]
+        if ok.size == 0:
+            brake, plan = self.plan(pose, velocity, np.zeros((1, 3)), steps)
+            return ControlResult(brake[0], plan[0], ControlStatus.BLOCKED, {"clearance": float(clear.max())})
+        best = int(ok[0])
+        chosen = targets[best] - targets[0]
+        offset = chosen[1] if self.robot.model_type is RobotType.OMNI else chosen[2]
+        if best > 0 and offset != 0.0:
+            self._side, self._commit = math.copysign(1.0, offset), steps
+        else:
+            self._commit = max(0, self._commit - 1)
+        status = ControlStatus.ROTATING if rotating and best == 0 else (
+            ControlStatus.RUNNING if best == 0 else ControlStatus.AVOIDING)
+        return ControlResult(cmds[best], poses[best], status,
+                             {"clearance": float(clear[best]), "tracked_index": self.progress.index})
+
+    def candidates(self, nominal: np.ndarray) -> np.ndarray:
+        """Nominal command first, then detours in order of growing offset.
+
+        The offset (``path_search_step`` per candidate, alternating sides) applies to the
+        angular velocity, or to the lateral velocity of an omni robot. Each offset is tried at
+        full then half speed; differential robots finally try turning in place.
+        """
+        cfg = self.config
+        robot = self.robot
+        k = np.arange(1, cfg.max_search_candidates + 1) * cfg.path_search_step
+        side = self._side if self._commit > 0 else 1.0
+        deltas = np.concatenate([[0.0], side * k, -side * k] if self._commit > 0 else
+                                [[0.0], np.stack([k, -k], axis=1).reshape(-1)])
+        axis = 1 if robot.model_type is RobotType.OMNI else 2
+        full = np.repeat(nominal[None], deltas.size, axis=0)
+        if robot.model_type is RobotType.ACKERMANN:
+            # A car changes its heading only while moving: keep detours moving.
+            full[1:, 0] = max(nominal[0], 0.5 * robot.ctrl_vx_limits.max_vel)
+        full[:, axis] += deltas
+        half = full.copy()
+        half[:, :2] *= 0.5
+        out = np.stack([full, half], axis=1).reshape(-1, 3)
+        if robot.model_type is RobotType.DIFFERENTIAL_DRIVE:
+            spin = np.zeros((2 * k.size, 3))
+            spin[:, 2] = deltas[1:]
+            out = np.vstack([out, spin])
+        return out
