@@ -5,7 +5,11 @@ Pillow and scipy are only imported by the functions that need them.
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from types import ModuleType
+from typing import Iterator
 
 _EXTRA_HINT = "install the simulation extra: pip install 'emos[sim]'"
 
@@ -64,3 +68,22 @@ def scipy_ndimage() -> ModuleType:
     except ImportError as exc:  # pragma: no cover
         raise ImportError(f"the built-in navigator needs scipy; {_EXTRA_HINT}") from exc
     return ndimage
+
+
+@contextlib.contextmanager
+def c_stdout_silenced() -> Iterator[None]:
+    """Silence writes to file descriptor 1 from C code (pybullet prints ``argv[0]=`` on
+    connect), which would otherwise corrupt machine-readable output such as ``--json``."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no usable fd 1 (embedded interpreters): nothing to protect
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)

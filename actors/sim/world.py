@@ -42,7 +42,8 @@ class World:
                 mode = pb.GUI
             else:
                 log.warning("World(gui=True) but no display is available: running headless (DIRECT)")
-        self.client = _deps.bullet_client()(connection_mode=mode)
+        with _deps.c_stdout_silenced():
+            self.client = _deps.bullet_client()(connection_mode=mode)
         self.gui = mode == pb.GUI
         self.clock = clock if clock is not None else SimClock()
         self.seed = int(seed)

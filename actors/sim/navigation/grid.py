@@ -1,0 +1,60 @@
+"""An occupancy memory built from lidar hits, for a navigator that has no map."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class HitGrid:
+    """Cells of ``resolution`` metres over a fixed window; a cell is occupied once a lidar
+    beam has ended in it. Each cell also keeps the exact last hit point, so collision checks
+    are not blurred by the grid. Static worlds only: cells are never cleared.
+    """
+
+    def __init__(self, bounds: tuple[float, float, float, float], resolution: float = 0.05) -> None:
+        xmin, ymin, xmax, ymax = bounds
+        if not (xmax > xmin and ymax > ymin and resolution > 0):
+            raise ValueError(f"HitGrid needs a non-empty window and resolution > 0, got {bounds!r}, {resolution!r}")
+        self.origin = np.array([xmin, ymin])
+        self.resolution = float(resolution)
+        self.shape = (int(math.ceil((ymax - ymin) / resolution)), int(math.ceil((xmax - xmin) / resolution)))
+        self.occupied = np.zeros(self.shape, dtype=bool)
+        self.hit_xy = np.zeros(self.shape + (2,), dtype=float)
+        self.version = 0  # bumps when new cells become occupied
+
+    def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, inside) for world points (N, 2)."""
+        ij = np.floor((np.asarray(xy, dtype=float) - self.origin) / self.resolution).astype(int)
+        rows, cols = ij[:, 1], ij[:, 0]
+        inside = (rows >= 0) & (rows < self.shape[0]) & (cols >= 0) & (cols < self.shape[1])
+        return rows, cols, inside
+
+    def center_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return self.origin + (np.c_[cols, rows] + 0.5) * self.resolution
+
+    def insert(self, points: np.ndarray) -> int:
+        """Mark world hit points (N, 2); returns how many cells became occupied."""
+        if len(points) == 0:
+            return 0
+        rows, cols, inside = self.cell_of(points)
+        rows, cols, pts = rows[inside], cols[inside], np.asarray(points)[inside]
+        new = int(np.count_nonzero(~self.occupied[rows, cols]))
+        self.occupied[rows, cols] = True
+        self.hit_xy[rows, cols] = pts
+        if new:
+            self.version += 1
+        return new
+
+    def points_near(self, xy: tuple[float, float], radius: float) -> np.ndarray:
+        """Exact hit points of occupied cells within ``radius`` of ``xy``."""
+        r = int(math.ceil(radius / self.resolution))
+        (row,), (col,), _ = self.cell_of(np.array([xy]))
+        r0, r1 = max(row - r, 0), min(row + r + 1, self.shape[0])
+        c0, c1 = max(col - r, 0), min(col + r + 1, self.shape[1])
+        if r0 >= r1 or c0 >= c1:
+            return np.zeros((0, 2))
+        window = self.occupied[r0:r1, c0:c1]
+        pts = self.hit_xy[r0:r1, c0:c1][window]
+        d2 = np.sum((pts - np.asarray(xy)) ** 2, axis=1)
+        return pts[d2 <= radius * radius]
