@@ -6,3 +6,28 @@ Recipes import from here (``from emos import Launcher, Topic, BaseComponent``) a
 from __future__ import annotations
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    "Launcher": "emos.launcher",
+    "BaseComponent": "emos.core.component",
+    "Topic": "emos.io.topic",
+    "QoSConfig": "emos.config.qos",
+    "BaseComponentConfig": "emos.config.base",
+    "ComponentRunType": "emos.config.base",
+    "base_validators": "emos.config",
+    "ServiceClient": "emos.core.services",
+    "ActionClient": "emos.core.services",
+    "msgs": "emos.msgs",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'emos' has no attribute {name!r}")
+    import importlib
+
+    mod = importlib.import_module(module)
+    return mod if name == "msgs" else getattr(mod, name)

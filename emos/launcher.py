@@ -1,0 +1,144 @@
+"""``Launcher``: bring a recipe's components up under supervision and keep them up.
+
+    launcher = Launcher(multi_processing=True)
+    launcher.add_pkg(components=[camera, detector], activate_all_components_on_start=True)
+    launcher.bringup()   # blocks until SIGINT/SIGTERM, then stops everything in reverse order
+
+Each ``add_pkg`` call becomes one supervised group (its own supervisor under the root). The
+supervisor lives in ``emos.supervisor`` and is imported only when ``bringup`` runs.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from typing import Any, Sequence
+
+from emos.core.component import BaseComponent
+
+log = logging.getLogger("emos.launcher")
+
+# Set by `emos run --duration`: recipes stop by themselves after that many seconds.
+_RUN_DURATION: float | None = None
+
+
+class Launcher:
+    def __init__(
+        self,
+        config_file: str | None = None,
+        multi_processing: bool = False,
+        activate_all_components_on_start: bool = True,
+        enable_monitoring: bool = True,
+        heartbeat_timeout: float = 2.0,
+        max_restarts: int = 5,
+        max_seconds: float = 10.0,
+        strategy: str = "one_for_one",
+        **kwargs: Any,
+    ) -> None:
+        if kwargs:
+            raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
+        self.config_file = config_file
+        self.multi_processing = bool(multi_processing)
+        self.activate_all_components_on_start = activate_all_components_on_start
+        self.enable_monitoring = enable_monitoring
+        self.heartbeat_timeout = heartbeat_timeout
+        self.default_policy = dict(strategy=strategy, max_restarts=max_restarts, max_seconds=max_seconds)
+        self._packages: list[Any] = []
+        self._events_actions: list[dict] = []
+        self._fallback_policies: dict[str, Any] = {}
+        self.fallback_rate: float | None = None
+        self.exit_code: int | None = None
+        self.exit_reason = ""
+        self.system: Any = None
+
+    def add_pkg(
+        self,
+        components: Sequence[BaseComponent],
+        package_name: str | None = None,
+        executable_entry_point: str | None = None,
+        events_actions: dict | None = None,
+        multiprocessing: bool | None = None,
+        activate_all_components_on_start: bool | None = None,
+        ros_log_level: str | None = None,
+        strategy: str | None = None,
+        max_restarts: int | None = None,
+        max_seconds: float | None = None,
+        restart: str = "permanent",
+    ) -> None:
+        """Add a group of components. ``package_name`` and ``executable_entry_point`` are accepted
+        so ROS recipes port unchanged; EMOS needs no entry point to run a component in a process."""
+        from emos.supervisor.system import Package, SupervisionPolicy
+
+        components = list(components)
+        if not components:
+            raise ValueError("add_pkg: components must not be empty")
+        for c in components:
+            if not isinstance(c, BaseComponent):
+                raise TypeError(f"add_pkg: components must be BaseComponent instances, got {type(c).__name__} {c!r}")
+        known = {c.component_name for p in self._packages for c in p.components}
+        dupes = sorted(known & {c.component_name for c in components})
+        if dupes:
+            raise ValueError(f"add_pkg: component name(s) already added: {', '.join(dupes)}")
+        if self.config_file:
+            for c in components:
+                c.configure(self.config_file)
+        if events_actions:
+            self._events_actions.append(events_actions)
+        if ros_log_level:
+            level = getattr(logging, ros_log_level.upper(), None)
+            if not isinstance(level, int):
+                raise ValueError(f"add_pkg: ros_log_level must be debug, info, warn, error or fatal; got {ros_log_level!r}")
+            for c in components:
+                c.get_logger().setLevel(level)
+        policy = SupervisionPolicy(
+            strategy=strategy or self.default_policy["strategy"],
+            max_restarts=self.default_policy["max_restarts"] if max_restarts is None else max_restarts,
+            max_seconds=self.default_policy["max_seconds"] if max_seconds is None else max_seconds,
+            restart=restart,
+        )
+        self._packages.append(Package(
+            components=components,
+            multiprocessing=self.multi_processing if multiprocessing is None else bool(multiprocessing),
+            activate=self.activate_all_components_on_start if activate_all_components_on_start is None else activate_all_components_on_start,
+            policy=policy,
+            name=package_name or f"group{len(self._packages)}",
+        ))
+
+    # Launcher-wide fallback policies. Events, actions and fallback ladders arrive with their own
+    # issue; the policy is recorded here so recipes that set it keep running meanwhile, and the
+    # supervisor's restart semantics already bring crashed components back.
+    def on_fail(self, action_name: str, max_retries: int | None = None) -> None:
+        self._fallback_policies["on_fail"] = (action_name, max_retries)
+
+    def on_component_fail(self, action_name: str, max_retries: int | None = None) -> None:
+        self._fallback_policies["on_component_fail"] = (action_name, max_retries)
+
+    def on_algorithm_fail(self, action_name: str, max_retries: int | None = None) -> None:
+        self._fallback_policies["on_algorithm_fail"] = (action_name, max_retries)
+
+    def on_system_fail(self, action_name: str, max_retries: int | None = None) -> None:
+        self._fallback_policies["on_system_fail"] = (action_name, max_retries)
+
+    def bringup(self, duration: float | None = None) -> int:
+        """Run until SIGINT/SIGTERM (or ``duration`` seconds); stop in order; return the exit code.
+
+        A non-zero code (the supervisor gave up, or a component failed to start) also ends the
+        script with that code when it runs as ``python recipe.py``.
+        """
+        from emos.supervisor.system import System, SystemOptions
+
+        if not self._packages:
+            raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
+        if self._events_actions or self._fallback_policies:
+            log.warning("events, actions and launcher-wide fallbacks are recorded but not executed yet "
+                        "(supervisor restarts are active)")
+        if not logging.getLogger().handlers:
+            logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+        options = SystemOptions(heartbeat_timeout=self.heartbeat_timeout, duration=duration or _RUN_DURATION)
+        self.system = System(self._packages, options)
+        code = self.system.run()
+        self.exit_code, self.exit_reason = code, self.system.exit_reason
+        log.info("bringup ended (exit code %d): %s", code, self.exit_reason)
+        if code != 0 and os.environ.get("EMOS_RUN_CLI") != "1":
+            raise SystemExit(code)
+        return code

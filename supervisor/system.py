@@ -1,0 +1,251 @@
+"""A running system: the run context, the zygote, the supervision tree and its control socket.
+
+``System.run()`` is what ``Launcher.bringup()`` calls. Exit codes say how it ended:
+0 stopped on request (signal, duration or ``emos`` stop), 3 the root supervisor gave up
+(restart intensity breached at the top), 4 a component failed to start.
+"""
+from __future__ import annotations
+
+import asyncio
+import collections
+import logging
+import os
+import shutil
+import signal
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from attrs import define, field
+
+from emos.core.component import BaseComponent
+from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
+from emos.core.rpc import RpcServer
+from emos.supervisor.heartbeat import HeartbeatMonitor
+from emos.supervisor.spawn import Zygote, become_subreaper
+from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
+from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
+from emos.transport.context import RunContext, remove_segments, set_current
+
+log = logging.getLogger("emos.supervisor")
+
+EXIT_OK, EXIT_GAVE_UP, EXIT_START_FAILED = 0, 3, 4
+
+
+@define(kw_only=True)
+class SupervisionPolicy:
+    """How one group of components (one ``add_pkg``) is supervised."""
+
+    strategy: Strategy = field(default=Strategy.ONE_FOR_ONE, converter=Strategy)
+    max_restarts: int = 5
+    max_seconds: float = 10.0
+    restart: RestartType = field(default=RestartType.PERMANENT, converter=RestartType)
+
+
+@define(kw_only=True)
+class Package:
+    components: list[BaseComponent]
+    multiprocessing: bool
+    activate: bool = True
+    policy: SupervisionPolicy = field(factory=SupervisionPolicy)
+    name: str = ""
+
+
+@define(kw_only=True)
+class SystemOptions:
+    heartbeat_timeout: float = 2.0
+    start_timeout: float = 30.0
+    stop_timeout: float = 5.0
+    max_restarts: int = 3  # of whole groups, at the root
+    max_seconds: float = 30.0
+    duration: float | None = None  # stop by itself after this many seconds
+
+
+class System:
+    def __init__(self, packages: list[Package], options: SystemOptions | None = None):
+        self.packages = packages
+        self.options = options or SystemOptions()
+        self.components: list[BaseComponent] = [c for p in packages for c in p.components]
+        names = [c.component_name for c in self.components]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"component names must be unique in a system; repeated: {', '.join(dupes)}")
+        self._pristine: dict[int, BaseComponent] = {}
+        self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=2000)
+        self.exit_code = EXIT_OK
+        self.exit_reason = ""
+        self.zygote: Zygote | None = None
+        self._hellos: dict[str, asyncio.Future[int]] = {}
+        self._stop_requested: asyncio.Event | None = None
+        self.root: Supervisor | None = None
+
+    # ------------------------------------------------------------------ entry point
+    def run(self) -> int:
+        import uvloop
+
+        self.ctx = RunContext.create()
+        self.ctx.export_env()
+        set_current(self.ctx)
+        self.control_path = self.ctx.run_dir / "supervisor.sock"
+        os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
+        become_subreaper()
+        try:
+            process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
+            if process_indices:
+                # Forked first, while this process still has one thread and no event loop.
+                prefix, run_dir = self.ctx.shm_prefix, self.ctx.run_dir
+                self.zygote = Zygote(
+                    [self._process_target(i) for i in range(len(self.components))],
+                    [c.component_name for c in self.components],
+                    janitor=lambda: (remove_segments(prefix), shutil.rmtree(run_dir, ignore_errors=True)),
+                )
+                self.zygote.start()
+            for i, c in enumerate(self.components):
+                if self._mode(i) == "thread":
+                    self._pristine[i] = pristine_copy(c)
+            loop = uvloop.new_event_loop()
+            asyncio.set_event_loop(loop)
+            try:
+                loop.run_until_complete(self._main())
+            finally:
+                loop.close()
+        finally:
+            if self.zygote is not None:
+                self.zygote.stop()
+            removed = self.ctx.remove_everything()
+            log.debug("removed %d shared-memory segments", removed)
+            set_current(None)
+        return self.exit_code
+
+    def _mode(self, index: int) -> str:
+        i = index
+        for pkg in self.packages:
+            if i < len(pkg.components):
+                return "process" if pkg.multiprocessing else "thread"
+            i -= len(pkg.components)
+        raise IndexError(index)
+
+    def _process_target(self, index: int) -> Callable[[], int]:
+        component = self.components[index]
+
+        def target() -> int:
+            return Node(component, ctx=self.ctx, supervisor_socket=str(self.control_path)).run()
+
+        return target
+
+    def fresh_component(self, index: int) -> BaseComponent:
+        original = self._pristine.get(index, self.components[index])
+        return pristine_copy(original)
+
+    # ------------------------------------------------------------------ main coroutine
+    async def _main(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._stop_requested = asyncio.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, self._on_signal, sig)
+        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor")
+        await self.control.start()
+        self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
+        self.root = self._build_root()
+        try:
+            try:
+                await self.root.start()
+            except StartFailed as exc:
+                self.exit_code, self.exit_reason = EXIT_START_FAILED, str(exc)
+                log.error("start-up failed: %s", exc)
+                return
+            log.info("system up: %d components (run %s)", len(self.components), self.ctx.run_id)
+            waiters = [asyncio.ensure_future(self._stop_requested.wait()), self.root.exited]
+            if self.options.duration:
+                waiters.append(asyncio.ensure_future(asyncio.sleep(self.options.duration)))
+            done, pending = await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+            for p in pending:
+                if p is not self.root.exited:
+                    p.cancel()
+            assert self.root.exited is not None
+            if self.root.exited.done():
+                result = self.root.exited.result()
+                self.exit_code, self.exit_reason = EXIT_GAVE_UP, result.detail
+                log.error("supervision gave up: %s", result.detail)
+            else:
+                self.exit_reason = self.exit_reason or "stopped on request"
+                await self.root.stop()
+        finally:
+            self.heartbeats.close()
+            await self.control.close()
+
+    def _on_signal(self, sig: int) -> None:
+        log.info("%s received: stopping", signal.Signals(sig).name)
+        self.exit_reason = f"{signal.Signals(sig).name} received"
+        assert self._stop_requested is not None
+        self._stop_requested.set()
+
+    def request_stop(self, reason: str = "stopped on request") -> None:
+        self.exit_reason = reason
+        if self._stop_requested is not None:
+            self._stop_requested.set()
+
+    # ------------------------------------------------------------------ tree
+    def _build_root(self) -> Supervisor:
+        children = []
+        offset = 0
+        for k, pkg in enumerate(self.packages):
+            name = pkg.name or f"group{k}"
+            children.append(supervisor_spec(self._group_factory(pkg, offset, name), name))
+            offset += len(pkg.components)
+        return Supervisor("root", children, Strategy.ONE_FOR_ONE, self.options.max_restarts, self.options.max_seconds, on_event=self._record)
+
+    def _group_factory(self, pkg: Package, offset: int, name: str) -> Callable[[], Supervisor]:
+        def make() -> Supervisor:
+            specs = [self._component_spec(pkg, offset + i) for i in range(len(pkg.components))]
+            p = pkg.policy
+            return Supervisor(name, specs, p.strategy, p.max_restarts, p.max_seconds, on_event=self._record)
+
+        return make
+
+    def _component_spec(self, pkg: Package, index: int) -> ChildSpec:
+        component = self.components[index]
+        worker_cls = ProcessWorker if pkg.multiprocessing else ThreadWorker
+
+        async def start() -> Any:
+            return await worker_cls(self, index, component, pkg.activate).start()
+
+        return ChildSpec(id=component.component_name, start=start, restart=pkg.policy.restart, shutdown=self.options.stop_timeout)
+
+    def _record(self, event: dict[str, Any]) -> None:
+        self.events.append(event)
+
+    # ------------------------------------------------------------------ control socket
+    def expect_hello(self, name: str) -> "asyncio.Future[int]":
+        fut = asyncio.get_running_loop().create_future()
+        self._hellos[name] = fut
+        return fut
+
+    def _control_ops(self) -> dict[str, Callable]:
+        async def hello(req: dict, stream: Any) -> bool:
+            fut = self._hellos.pop(str(req.get("component")), None)
+            if fut is not None and not fut.done():
+                fut.set_result(int(req.get("pid", 0)))
+            return True
+
+        async def tree(req: dict, stream: Any) -> dict:
+            assert self.root is not None
+            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.root.tree()}
+
+        async def events(req: dict, stream: Any) -> list:
+            since = float(req.get("since", 0.0))
+            return [e for e in self.events if e["t"] >= since]
+
+        async def stop(req: dict, stream: Any) -> bool:
+            self.request_stop(str(req.get("reason", "stopped through the control socket")))
+            return True
+
+        return {"hello": hello, "tree": tree, "events": events, "stop": stop}
+
+
+def find_runs() -> list[Path]:
+    """Run directories of live systems of this user (newest first)."""
+    from emos.transport.context import runtime_root, run_is_alive
+
+    runs = [p for p in runtime_root().iterdir() if (p / "supervisor.sock").exists() and run_is_alive(p.name)]
+    return sorted(runs, key=lambda p: p.stat().st_mtime, reverse=True)

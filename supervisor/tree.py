@@ -1,0 +1,278 @@
+"""Erlang/OTP supervision: strategies, restart types, restart intensity and escalation.
+
+A :class:`Supervisor` starts its children in order and stops them in reverse order. When a
+child exits it decides, by the child's restart type, whether to restart:
+
+* ``permanent``: always; ``transient``: only after an abnormal exit; ``temporary``: never.
+
+and, by its strategy, what to restart:
+
+* ``one_for_one``: just that child;
+* ``one_for_all``: every child (the others are stopped first, in reverse order);
+* ``rest_for_one``: that child and the ones started after it.
+
+More than ``max_restarts`` restarts within ``max_seconds`` breaches the restart intensity: the
+supervisor stops all its children and exits itself with reason ``escalated``, and its own
+supervisor handles that like any child exit. At the root, that ends the system.
+
+Children are anything with an ``exited`` future and an async ``stop(timeout)``: a component
+process, a component thread, or another Supervisor.
+"""
+from __future__ import annotations
+
+import asyncio
+import collections
+import logging
+import time
+from enum import Enum
+from typing import Any, Awaitable, Callable, Protocol
+
+from attrs import define, field
+
+log = logging.getLogger("emos.supervisor")
+
+
+class Strategy(str, Enum):
+    ONE_FOR_ONE = "one_for_one"
+    ONE_FOR_ALL = "one_for_all"
+    REST_FOR_ONE = "rest_for_one"
+
+
+class RestartType(str, Enum):
+    PERMANENT = "permanent"
+    TRANSIENT = "transient"
+    TEMPORARY = "temporary"
+
+
+@define
+class Exit:
+    """Why a child stopped. ``reason``: normal, crash, killed, hang, shutdown, escalated, start_failed."""
+
+    reason: str
+    detail: str = ""
+    at: float = field(factory=time.monotonic)
+
+    @property
+    def abnormal(self) -> bool:
+        return self.reason not in ("normal", "shutdown")
+
+
+class Child(Protocol):
+    exited: "asyncio.Future[Exit]"
+
+    async def stop(self, timeout: float) -> Exit: ...
+
+    def info(self) -> dict[str, Any]: ...
+
+
+@define
+class ChildSpec:
+    id: str
+    start: Callable[[], Awaitable[Child]]
+    restart: RestartType = field(default=RestartType.PERMANENT, converter=RestartType)
+    shutdown: float = 5.0  # seconds between the polite stop and SIGKILL
+    kind: str = "worker"
+
+
+class StartFailed(RuntimeError):
+    pass
+
+
+EventSink = Callable[[dict[str, Any]], None]
+
+
+class Supervisor:
+    def __init__(
+        self,
+        name: str,
+        children: list[ChildSpec],
+        strategy: Strategy | str = Strategy.ONE_FOR_ONE,
+        max_restarts: int = 5,
+        max_seconds: float = 10.0,
+        on_event: EventSink | None = None,
+    ):
+        if max_restarts < 0 or max_seconds <= 0:
+            raise ValueError(f"supervisor {name!r}: max_restarts must be >= 0 and max_seconds > 0")
+        ids = [c.id for c in children]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"supervisor {name!r}: duplicate child ids in {ids}")
+        self.name = name
+        self.specs: list[ChildSpec] = list(children)
+        self.strategy = Strategy(strategy)
+        self.max_restarts = max_restarts
+        self.max_seconds = max_seconds
+        self.on_event = on_event
+        self.running: dict[str, Child] = {}
+        self.restart_counts: collections.Counter[str] = collections.Counter()
+        self._restarts: collections.deque[float] = collections.deque()
+        self._lock: asyncio.Lock | None = None
+        self._stopping = False
+        self._watchers: dict[str, asyncio.Task] = {}
+        self.exited: asyncio.Future[Exit] | None = None
+        self.started_at = 0.0
+
+    # ------------------------------------------------------------------ events
+    def _emit(self, event: str, child: str = "", **extra: Any) -> None:
+        record = {"t": time.monotonic(), "wall": time.time(), "supervisor": self.name, "child": child, "event": event, **extra}
+        if event in ("exit", "escalated", "start_failed"):
+            log.warning("[%s] %s %s %s", self.name, child, event, extra.get("detail", ""))
+        else:
+            log.info("[%s] %s %s %s", self.name, child, event, extra.get("detail", ""))
+        if self.on_event is not None:
+            self.on_event(record)
+
+    # ------------------------------------------------------------------ start / stop
+    async def start(self) -> "Supervisor":
+        loop = asyncio.get_running_loop()
+        self._lock = asyncio.Lock()
+        self.exited = loop.create_future()
+        self._stopping = False
+        self.started_at = time.monotonic()
+        started: list[str] = []
+        for spec in self.specs:
+            try:
+                await self._start_child(spec)
+            except Exception as exc:
+                self._emit("start_failed", spec.id, detail=str(exc))
+                for cid in reversed(started):
+                    await self._stop_child(cid)
+                raise StartFailed(f"supervisor {self.name!r}: child {spec.id!r} failed to start: {exc}") from exc
+            started.append(spec.id)
+        return self
+
+    async def _start_child(self, spec: ChildSpec) -> None:
+        child = await spec.start()
+        self.running[spec.id] = child
+        self._watchers[spec.id] = asyncio.ensure_future(self._watch(spec.id, child))
+        self._emit("started", spec.id, **{k: v for k, v in child.info().items() if k in ("pid",)})
+
+    async def _watch(self, cid: str, child: Child) -> None:
+        try:
+            result = await asyncio.shield(child.exited)
+        except asyncio.CancelledError:
+            return
+        await self._on_exit(cid, child, result)
+
+    async def stop(self, timeout: float | None = None) -> Exit:
+        """Stop every child in reverse start order, then finish with reason ``shutdown``."""
+        assert self._lock is not None and self.exited is not None
+        self._stopping = True
+        async with self._lock:
+            for spec in reversed(self.specs):
+                if spec.id in self.running:
+                    await self._stop_child(spec.id)
+        if not self.exited.done():
+            self.exited.set_result(Exit("shutdown", f"supervisor {self.name} stopped"))
+        return self.exited.result()
+
+    async def _stop_child(self, cid: str) -> Exit | None:
+        child = self.running.pop(cid, None)
+        watcher = self._watchers.pop(cid, None)
+        if watcher is not None:
+            watcher.cancel()
+        if child is None:
+            return None
+        spec = self._spec(cid)
+        result = await child.stop(spec.shutdown if spec else 5.0)
+        self._emit("stopped", cid, detail=result.detail or result.reason)
+        return result
+
+    def _spec(self, cid: str) -> ChildSpec | None:
+        return next((s for s in self.specs if s.id == cid), None)
+
+    # ------------------------------------------------------------------ restarts
+    async def _on_exit(self, cid: str, child: Child, result: Exit) -> None:
+        assert self._lock is not None
+        async with self._lock:
+            if self._stopping or self.running.get(cid) is not child:
+                return  # we stopped it ourselves (shutdown or strategy), or it was replaced
+            del self.running[cid]
+            self._watchers.pop(cid, None)
+            self._emit("exit", cid, reason=result.reason, detail=result.detail, detected_at=result.at)
+            spec = self._spec(cid)
+            if spec is None:
+                return
+            if spec.restart == RestartType.TEMPORARY or (spec.restart == RestartType.TRANSIENT and not result.abnormal):
+                if spec.restart == RestartType.TEMPORARY:
+                    self.specs.remove(spec)
+                return
+            await self._restart_from(spec)
+
+    def _intensity_ok(self) -> bool:
+        now = time.monotonic()
+        self._restarts.append(now)
+        while self._restarts and now - self._restarts[0] > self.max_seconds:
+            self._restarts.popleft()
+        return len(self._restarts) <= self.max_restarts
+
+    async def _restart_from(self, failed: ChildSpec) -> None:
+        idx = self.specs.index(failed)
+        if self.strategy == Strategy.ONE_FOR_ONE:
+            group = [failed]
+        elif self.strategy == Strategy.ONE_FOR_ALL:
+            group = list(self.specs)
+        else:
+            group = self.specs[idx:]
+        # Stop the others of the group in reverse order before restarting all of it in order.
+        for spec in reversed(group):
+            if spec.id in self.running:
+                await self._stop_child(spec.id)
+        for spec in group:
+            while True:
+                if not self._intensity_ok():
+                    await self._escalate(f"more than {self.max_restarts} restarts in {self.max_seconds:g} s (last: {failed.id})")
+                    return
+                self.restart_counts[spec.id] += 1
+                try:
+                    await self._start_child(spec)
+                    self._emit("restarted", spec.id, count=self.restart_counts[spec.id])
+                    break
+                except Exception as exc:
+                    self._emit("start_failed", spec.id, detail=str(exc))
+                    await asyncio.sleep(0.05)  # counted against intensity; avoid a hot loop
+
+    async def _escalate(self, why: str) -> None:
+        self._stopping = True
+        self._emit("escalated", detail=why)
+        for spec in reversed(self.specs):
+            if spec.id in self.running:
+                await self._stop_child(spec.id)
+        assert self.exited is not None
+        if not self.exited.done():
+            self.exited.set_result(Exit("escalated", f"supervisor {self.name}: {why}"))
+
+    # ------------------------------------------------------------------ introspection
+    def info(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "kind": "supervisor",
+            "strategy": self.strategy.value,
+            "intensity": f"{self.max_restarts}/{self.max_seconds:g}s",
+            "restarts": sum(self.restart_counts.values()),
+        }
+
+    def tree(self) -> dict[str, Any]:
+        node = self.info()
+        node["children"] = []
+        for spec in self.specs:
+            child = self.running.get(spec.id)
+            if isinstance(child, Supervisor):
+                entry = child.tree()
+            elif child is not None:
+                entry = child.info()
+            else:
+                entry = {"name": spec.id, "kind": spec.kind, "state": "stopped"}
+            entry.setdefault("name", spec.id)
+            entry["restart"] = spec.restart.value
+            entry["restarts"] = self.restart_counts[spec.id] if not isinstance(child, Supervisor) else entry.get("restarts", 0) + self.restart_counts[spec.id]
+            node["children"].append(entry)
+        return node
+
+
+def supervisor_spec(sup_factory: Callable[[], Supervisor], sid: str, restart: RestartType | str = RestartType.PERMANENT, shutdown: float = 30.0) -> ChildSpec:
+    """A ChildSpec whose child is a (sub-)supervisor built fresh at every start."""
+
+    async def start() -> Child:
+        return await sup_factory().start()
+
+    return ChildSpec(id=sid, start=start, restart=RestartType(restart), shutdown=shutdown, kind="supervisor")
