@@ -38,6 +38,8 @@ __all__ = [
     "DetectionRequest",
     "Detection2D",
     "DetectionResponse",
+    "PolicyObservation",
+    "ActionChunk",
     "decode_tool_arguments",
     "sniff_image_mime",
     "encode_png",
@@ -434,3 +436,33 @@ class Detection2D:
 @attrs.define
 class DetectionResponse:
     detections: list[Detection2D]
+
+
+# --------------------------------------------------------------------------- VLA policies
+
+
+@attrs.define
+class PolicyObservation:
+    """One robot observation for a VLA policy: joint values by name, camera images (HxWx3
+    uint8 arrays) by name and the ``task`` instruction, keyed as the policy's dataset expects."""
+
+    observation: dict = attrs.field(validator=_dict_of_str_keys)
+    timestep: int = attrs.field(default=0, validator=attrs.validators.instance_of(int))
+    must_go: bool = True
+    timestamp: float | None = None
+
+
+@attrs.define
+class ActionChunk:
+    """Actions predicted for consecutive timesteps: ``actions`` is (t, a) float32."""
+
+    timesteps: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.int64).reshape(-1))
+    timestamps: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.float64).reshape(-1))
+    actions: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.float32))
+
+    def __attrs_post_init__(self) -> None:
+        if self.actions.ndim != 2 or not (len(self.actions) == len(self.timesteps) == len(self.timestamps)):
+            raise ValueError(
+                f"ActionChunk: expected (t, a) actions with t timesteps and timestamps, got actions {self.actions.shape}, "
+                f"{len(self.timesteps)} timesteps, {len(self.timestamps)} timestamps"
+            )

@@ -32,7 +32,7 @@ def build_app(models: LocalModels) -> tuple[web.Application, RoboMLNodes]:
 
 
 async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, resp_port: int | None = None,
-                ready: Any = None) -> None:
+                lerobot_port: int | None = None, ready: Any = None) -> None:
     """Serve until SIGTERM/SIGINT, then close listeners and in-flight connections cleanly."""
     app, nodes = build_app(models)
     runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=2.0)
@@ -40,6 +40,11 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
     site = web.TCPSite(runner, host, port, reuse_address=True)
     await site.start()
     resp = await start_resp_server(nodes, host, resp_port) if resp_port is not None else None
+    policy = None
+    if lerobot_port is not None:
+        from .lerobot_policy import HoldPositionPolicyServer  # grpc threads start only if asked
+
+        policy = HoldPositionPolicyServer(host, lerobot_port).start()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -51,12 +56,16 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
     resp_bound = resp.port if resp else None
     log.info("serving on http://%s:%s (RESP %s)", host, bound[0], resp_bound)
     # One parseable line so supervisors and tests know when (and where) the server listens.
-    print(f"emos-model-server ready http={host}:{bound[0]} resp={resp_bound or '-'}", flush=True)
+    lerobot_bound = policy.port if policy else None
+    print(f"emos-model-server ready http={host}:{bound[0]} resp={resp_bound or '-'} lerobot={lerobot_bound or '-'}",
+          flush=True)
     if ready is not None:
         ready(bound[0], resp_bound)
     try:
         await stop.wait()
     finally:
+        if policy is not None:
+            await asyncio.get_running_loop().run_in_executor(None, policy.stop)
         if resp is not None:
             await resp.close()
         await runner.cleanup()

@@ -14,6 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=8000, help="HTTP/WebSocket port (default 8000; 0 = any free port)")
     parser.add_argument("--resp-port", type=int, default=None,
                         help="also serve RoboML's RESP protocol on this port (default: off)")
+    parser.add_argument("--lerobot-port", type=int, default=None,
+                        help="also serve a hold-position LeRobot policy over gRPC on this port (default: off)")
     parser.add_argument("--script", default=None, help="YAML/JSON file of scripted chat replies")
     parser.add_argument("--model", action="append", default=[], metavar="NAME",
                         help="extra chat model name answered by the scripted responder (repeatable)")
@@ -32,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos serve models: {exc}", file=sys.stderr)
         return 2
     try:
-        asyncio.run(serve(models, args.host, args.port, args.resp_port))
+        asyncio.run(serve(models, args.host, args.port, args.resp_port, args.lerobot_port))
     except OSError as exc:  # port in use, bad interface
         print(f"emos serve models: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
         return 1
