@@ -4,8 +4,8 @@ The YAML keys are those of the ROS 2 map_server (nav2_map_server ``map_io``): ``
 ``resolution``, ``origin`` [x, y, yaw], ``free_thresh``, ``occupied_thresh``, ``negate`` (all
 required) and ``mode`` (``trinary`` by default, or ``scale`` / ``raw``). Pixel to cell rules:
 
-- shade = mean of the colour channels / maxval (in trinary mode an alpha channel is averaged in
-  as ``maxval - alpha``, as map_server does); occ = shade if negate else 1 - shade;
+- shade = mean of the colour channels / maxval (in trinary mode an alpha channel, opaque =
+  maxval, is averaged in with them, as map_server does); occ = shade if negate else 1 - shade;
 - trinary: occ > occupied_thresh -> 100, occ < free_thresh -> 0, otherwise -1;
 - scale: non-opaque pixels -> -1, then as trinary except the in-between band, which becomes
   ``rint(100 * (occ - free) / (occupied - free))``;
@@ -126,8 +126,9 @@ def image_to_grid(
         px = px[..., None]
     stack = [px[..., i] for i in range(px.shape[-1])]
     if mode == "trinary" and alpha is not None:
-        # map_server folds transparency into the average in trinary mode (high alpha = opaque).
-        stack.append(maxval - np.asarray(alpha, dtype=np.float64))
+        # map_server folds alpha into the average in trinary mode, so a transparent white
+        # pixel reads darker (unknown) while an opaque one stays free.
+        stack.append(np.asarray(alpha, dtype=np.float64))
     shade = np.mean(stack, axis=0) / float(maxval)
     occ = shade if negate else 1.0 - shade
     cells = np.full(shade.shape, -1, dtype=np.int64)

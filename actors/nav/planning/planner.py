@@ -212,6 +212,15 @@ class OMPLGeometricPlanner:
         objective = ob.PathLengthOptimizationObjective(si)
         pdef.setOptimizationObjective(objective)
 
+        # A goal in plain sight: the straight SE2 motion is the shortest path, so no search is
+        # needed (and OMPL 2.0's AORRTC reports such queries as a zero-length failure).
+        t0 = time.perf_counter()
+        for k in range(goal_states.getStateCount()):
+            if si.checkMotion(start_state, goal_states.getState(k)):
+                g = goal_states.getState(k)
+                states = np.array([(sx, sy, syaw), (g.getX(), g.getY(), g.getYaw())])
+                return self._finish(states, name, time.perf_counter() - t0, 0.0, "straight line")
+
         planner = make_planner(cfg.planner_id, si, cfg.planner_params)
         planner.setProblemDefinition(pdef)
         planner.setup()
@@ -234,7 +243,9 @@ class OMPLGeometricPlanner:
         states = np.array([(st.getX(), st.getY(), st.getYaw()) for st in raw.getStates()], dtype=np.float64)
         return self._finish(states, name, t_plan, t_simpl)
 
-    def _finish(self, states: np.ndarray, name: str, t_plan: float, t_simpl: float) -> PlanResult:
+    def _finish(
+        self, states: np.ndarray, name: str, t_plan: float, t_simpl: float, message: str = ""
+    ) -> PlanResult:
         checker = self.checker
         assert checker is not None
         res = checker.grid.resolution
@@ -249,4 +260,4 @@ class OMPLGeometricPlanner:
                 f"final fcl verification rejected the path at ({bad[0]:.3f}, {bad[1]:.3f}, {bad[2]:.3f})",
             )
         path = interpolate_se2(states, self.config.path_resolution)
-        return PlanResult(True, path, name, "EXACT_SOLUTION", t_plan, t_simpl, path_length(path))
+        return PlanResult(True, path, name, "EXACT_SOLUTION", t_plan, t_simpl, path_length(path), message)
