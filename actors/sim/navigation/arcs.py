@@ -22,10 +22,12 @@ class ArcConfig:
     turns: int = 17  # angular velocities from -max to max
     max_speed: float = 2.0
     max_turn: float = 3.0
-    margin: float = 0.03  # m added around the footprint for the hard check
+    margin: float = 0.015  # m added around the footprint for the hard check
     safe_clearance: float = 0.12  # m; closer than this (+ speed term) costs extra
     clearance_weight: float = 6.0
     lookahead: float = 0.4  # m ahead of the arc end, scored too, to end aligned with the path
+    reverse_speed: float = 0.3  # m/s of the backing-up arcs (0 disables them)
+    reverse_cost: float = 1.0  # extra cost of backing up, so it is only chosen to get unstuck
 
 
 class ArcPlanner:
@@ -34,60 +36,76 @@ class ArcPlanner:
         self.cfg = cfg = config or ArcConfig()
         vmax = min(cfg.max_speed, spec.max_vx)
         wmax = min(cfg.max_turn, spec.max_omega)
-        v, w = np.meshgrid(np.linspace(0.0, vmax, cfg.speeds), np.linspace(-wmax, wmax, cfg.turns), indexing="ij")
-        self.v, self.w = v.ravel(), w.ravel()
-        n_samples = max(4, int(math.ceil(vmax * cfg.horizon / cfg.step)))
-        # Rotations sweep the footprint corners too: sample them finely enough as well.
-        n_samples = max(n_samples, int(math.ceil(wmax * cfg.horizon * spec.circumscribed_radius / cfg.step)))
-        t = cfg.horizon * np.arange(1, n_samples + 1) / n_samples
-        self.t = t
-        # Arc poses relative to the start pose: (arcs, samples).
-        wt = self.w[:, None] * t[None, :]
-        straight = np.abs(self.w) < 1e-6
-        safe_w = np.where(straight, 1.0, self.w)[:, None]
-        self.dx = np.where(straight[:, None], self.v[:, None] * t, self.v[:, None] * np.sin(wt) / safe_w)
-        self.dy = np.where(straight[:, None], 0.0, self.v[:, None] * (1 - np.cos(wt)) / safe_w)
-        self.dth = wt
+        speeds = np.linspace(0.0, vmax, cfg.speeds)
+        if cfg.reverse_speed > 0:
+            speeds = np.concatenate([[-min(cfg.reverse_speed, vmax)], speeds])
+        turns = np.linspace(-wmax, wmax, cfg.turns)
+        # One group of arcs per speed: slow arcs need fewer samples and see fewer points,
+        # which keeps the (arcs, samples, points) arrays small.
+        self.groups = []
+        for v in speeds:
+            swept = abs(v) * cfg.horizon + np.abs(turns) * cfg.horizon * spec.circumscribed_radius
+            n = max(2, int(math.ceil(swept.max() / cfg.step)))
+            t = cfg.horizon * np.arange(1, n + 1) / n
+            wt = turns[:, None] * t[None, :]
+            straight = np.abs(turns) < 1e-6
+            safe_w = np.where(straight, 1.0, turns)[:, None]
+            dx = np.where(straight[:, None], v * t, v * np.sin(wt) / safe_w)
+            dy = np.where(straight[:, None], 0.0, v * (1 - np.cos(wt)) / safe_w)
+            reach = abs(v) * cfg.horizon + spec.circumscribed_radius + abs(spec.center_offset) + cfg.margin + 0.05
+            self.groups.append((v, turns, dx.astype(np.float32), dy.astype(np.float32),
+                                np.cos(wt).astype(np.float32), np.sin(wt).astype(np.float32), wt, reach))
+        self.v = np.repeat(speeds, len(turns))
+        self.w = np.tile(turns, len(speeds))
+
+    def clearances(self, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Smallest footprint-to-point gap (m, Chebyshev-like, < 0 = overlap) along each arc."""
+        spec = self.spec
+        x0, y0, th0 = pose
+        c0, s0 = math.cos(th0), math.sin(th0)
+        hx, hy, off = spec.length / 2, spec.width / 2, spec.center_offset
+        out = []
+        rel = np.asarray(points, dtype=float).reshape(-1, 2) - (x0, y0)
+        px_all = (c0 * rel[:, 0] + s0 * rel[:, 1]).astype(np.float32)
+        py_all = (-s0 * rel[:, 0] + c0 * rel[:, 1]).astype(np.float32)
+        d2 = px_all**2 + py_all**2
+        for v, turns, dx, dy, ct, st, _, reach in self.groups:
+            near = d2 <= reach * reach
+            if not near.any():
+                out.append(np.full(len(turns), np.inf))
+                continue
+            px, py = px_all[near], py_all[near]
+            qx = px - dx[..., None]
+            qy = py - dy[..., None]
+            lx = ct[..., None] * qx + st[..., None] * qy - off
+            ly = -st[..., None] * qx + ct[..., None] * qy
+            gap = np.maximum(np.abs(lx) - hx, np.abs(ly) - hy)
+            out.append(gap.min(axis=(1, 2)).astype(float))
+        return np.concatenate(out)
 
     def choose(self, pose: np.ndarray, points: np.ndarray,
                cost_to_go: Callable[[np.ndarray], np.ndarray]) -> tuple[float, float] | None:
         """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is."""
-        cfg, spec = self.cfg, self.spec
-        x0, y0, th0 = pose
-        c0, s0 = math.cos(th0), math.sin(th0)
-        hx, hy, off = spec.length / 2, spec.width / 2, spec.center_offset
-        if len(points):
-            rel = points - (x0, y0)
-            # Obstacle points in the start frame, then in each sampled pose's frame.
-            px = (c0 * rel[:, 0] + s0 * rel[:, 1]).astype(np.float32)
-            py = (-s0 * rel[:, 0] + c0 * rel[:, 1]).astype(np.float32)
-            ct, st = np.cos(self.dth).astype(np.float32)[..., None], np.sin(self.dth).astype(np.float32)[..., None]
-            qx = px - self.dx.astype(np.float32)[..., None]
-            qy = py - self.dy.astype(np.float32)[..., None]
-            lx = ct * qx + st * qy - off
-            ly = -st * qx + ct * qy
-            gap = np.maximum(np.abs(lx) - hx, np.abs(ly) - hy)  # < 0 inside the footprint
-            clearance = gap.min(axis=(1, 2))
-        else:
-            clearance = np.full(len(self.v), np.inf)
+        cfg = self.cfg
+        clearance = self.clearances(pose, points)
         ok = clearance > cfg.margin
         if not ok.any():
             return None
-        end_th = th0 + self.dth[:, -1]
-        ex = x0 + c0 * self.dx[:, -1] - s0 * self.dy[:, -1]
-        ey = y0 + s0 * self.dx[:, -1] + c0 * self.dy[:, -1]
-        ends = np.c_[ex, ey]
-        ahead = ends + cfg.lookahead * np.c_[np.cos(end_th), np.sin(end_th)]
-        score = cost_to_go(ends) + cost_to_go(ahead)
-        wanted = cfg.safe_clearance + 0.1 * self.v
+        x0, y0, th0 = pose
+        c0, s0 = math.cos(th0), math.sin(th0)
+        ends = []
+        for v, turns, dx, dy, _, _, wt, _ in self.groups:
+            ex = x0 + c0 * dx[:, -1] - s0 * dy[:, -1]
+            ey = y0 + s0 * dx[:, -1] + c0 * dy[:, -1]
+            ends.append(np.c_[ex, ey, th0 + wt[:, -1]])
+        end = np.concatenate(ends)
+        ahead = end[:, :2] + cfg.lookahead * np.c_[np.cos(end[:, 2]), np.sin(end[:, 2])]
+        score = cost_to_go(end[:, :2]) + cost_to_go(ahead)
+        wanted = cfg.safe_clearance + 0.1 * np.abs(self.v)
         score = score + cfg.clearance_weight * np.maximum(0.0, wanted - clearance)
+        score = score + np.where(self.v < 0, cfg.reverse_cost, 0.0)
         score = np.where(ok, score, np.inf)
         best = int(np.argmin(score))
         if not np.isfinite(score[best]):
-            # Every clear arc ends somewhere the global field calls unreachable: turn in place
-            # on the clear rotation that keeps the most clearance.
-            rotations = ok & (self.v == 0)
-            if not rotations.any():
-                return None
-            best = int(np.argmax(np.where(rotations, clearance, -np.inf)))
+            return None
         return float(self.v[best]), float(self.w[best])

@@ -19,9 +19,10 @@ UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has
 class GridNavigator:
     name = "builtin"
 
-    def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 0.5,
-                 arc_config: ArcConfig | None = None) -> None:
+    def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
+                 arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
+        self.stuck_time, self.stuck_progress = stuck_time, stuck_progress
         self.arc_config = arc_config
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
@@ -34,14 +35,18 @@ class GridNavigator:
         m = self.window_margin
         bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
         self.grid = HitGrid(bounds, self.resolution)
-        # Lethal a bit under the half-width: the grid blurs hit points by up to half a cell,
-        # and the arc planner checks the exact footprint anyway.
-        lethal = max(spec.width / 2 - self.resolution * 0.8, 0.05)
+        # Clearance is exact to the hit points but measured from cell centres, which sit up to
+        # half a cell off a gap's centre line: a little under the half-width keeps every gap
+        # the robot fits through open, and still closes gaps clearly narrower than the robot.
+        # The arc planner checks the exact footprint anyway.
+        lethal = max(spec.width / 2 - 0.3 * self.resolution, 0.05)
         self.field = CostField(self.grid.shape, self.resolution, lethal, inflation_radius=lethal + 0.45)
         self.arcs = ArcPlanner(spec, self.arc_config)
         self._goal_cell = self._cell((gx, gy))
         self._planned_version = -1
         self._last_plan = -math.inf
+        self._progress_ref: tuple[float, float] | None = None  # (stamp, cost-to-go) to beat
+        self.virtual_blocks: list[tuple[float, float]] = []
         self.plan = None
 
     def _cell(self, xy: tuple[float, float]) -> tuple[int, int]:
@@ -52,14 +57,14 @@ class GridNavigator:
         rows, cols, inside = self.grid.cell_of(xy)
         rows = np.clip(rows, 0, self.grid.shape[0] - 1)
         cols = np.clip(cols, 0, self.grid.shape[1] - 1)
-        ctg = self.field.ctg[rows, cols]
+        ctg = self.field.ctg_filled[rows, cols]
         # Outside the window: straight-line distance to the goal plus a penalty.
         straight = np.hypot(xy[:, 0] - self.task.goal[0], xy[:, 1] - self.task.goal[1])  # type: ignore[union-attr]
         ctg = np.where(inside, ctg, straight + 5.0)
         return np.where(np.isfinite(ctg), ctg, UNREACHABLE)
 
     def _replan(self, obs: Observation) -> None:
-        self.field.compute(self.grid.occupied, self._goal_cell)
+        self.field.compute(self.grid.occupied, self._goal_cell, self.grid.hit_xy, self.grid.origin)
         self._planned_version = self.grid.version
         self._last_plan = obs.stamp
         cells = self.field.path_from(self._cell((obs.pose[0], obs.pose[1])))
@@ -73,11 +78,42 @@ class GridNavigator:
         stale = self.grid.version != self._planned_version
         if self._planned_version < 0 or (stale and obs.stamp - self._last_plan >= self.replan_period):
             self._replan(obs)
+        if self._stuck(obs):
+            self._block_bottleneck(obs)
+            self._replan(obs)
         reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.task.robot.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
         choice = self.arcs.choose(obs.pose, points, self.cost_to_go)
         if choice is None:
-            # Boxed in (nothing clear, not even turning): creep backwards.
-            return (-0.1, 0.0, 0.0)
+            # Boxed in: no arc is clear, not even turning or backing up. Stand still; the
+            # stuck detector will block this route and the field will send us elsewhere.
+            return (0.0, 0.0, 0.0)
         v, w = choice
         return (v, 0.0, w)
+
+    def _stuck(self, obs: Observation) -> bool:
+        """No real progress along the cost-to-go for ``stuck_time`` seconds."""
+        here = float(self.cost_to_go(np.array([obs.pose[:2]]))[0])
+        if self._progress_ref is None or here < self._progress_ref[1] - self.stuck_progress:
+            self._progress_ref = (obs.stamp, here)
+            return False
+        if obs.stamp - self._progress_ref[0] >= self.stuck_time:
+            self._progress_ref = (obs.stamp, here)
+            return True
+        return False
+
+    def _block_bottleneck(self, obs: Observation) -> None:
+        """The plan leads somewhere the robot cannot go (a gap narrower than it looks, say):
+        put a virtual obstacle at the tightest spot of the next 2 m of plan so the field
+        routes around it."""
+        if self.plan is None or len(self.plan) < 2:
+            return
+        seg = np.linalg.norm(np.diff(self.plan, axis=0), axis=1)
+        ahead = self.plan[: int(np.searchsorted(np.cumsum(seg), 2.0)) + 1]
+        rows, cols, _ = self.grid.cell_of(ahead)
+        clear = self.field.clearance[np.clip(rows, 0, self.grid.shape[0] - 1), np.clip(cols, 0, self.grid.shape[1] - 1)]
+        x, y = ahead[int(np.argmin(clear))]
+        self.virtual_blocks.append((float(x), float(y)))
+        # A small ring of fake hits: with the lethal radius around them this closes the spot.
+        a = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+        self.grid.insert(np.c_[x + 0.05 * np.cos(a), y + 0.05 * np.sin(a)])

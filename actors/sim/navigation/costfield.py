@@ -39,17 +39,33 @@ class CostField:
         self.inflation_weight = inflation_weight
         self._a, self._b, self._len = lattice_edges(shape)
         self.ctg = np.full(shape, np.inf)
+        self.ctg_filled = np.full(shape, np.inf)
         self.clearance = np.full(shape, np.inf)
         self._pred = np.full(shape[0] * shape[1], -9999)
 
-    def compute(self, occupied: np.ndarray, goal_cell: tuple[int, int]) -> None:
-        """Recompute cost-to-go for the obstacle cells ``occupied`` and the goal cell."""
+    def compute(self, occupied: np.ndarray, goal_cell: tuple[int, int], hit_xy: np.ndarray | None = None,
+                origin: np.ndarray | None = None) -> None:
+        """Recompute cost-to-go for the obstacle cells ``occupied`` and the goal cell.
+
+        With ``hit_xy`` (rows, cols, 2: the exact obstacle point stored in each occupied cell)
+        and the grid ``origin``, clearance is measured from cell centres to those exact points
+        rather than to cell centres, so a gap narrower than the robot is not opened (or a wide
+        one closed) by grid rounding.
+        """
         ndimage, csgraph = _deps.scipy_ndimage(), _deps.scipy_csgraph()
         from scipy.sparse import csr_matrix
 
         n = self.shape[0] * self.shape[1]
         if occupied.any():
-            self.clearance = ndimage.distance_transform_edt(~occupied) * self.resolution
+            dist, (ri, ci) = ndimage.distance_transform_edt(~occupied, return_indices=True)
+            if hit_xy is not None and origin is not None:
+                rows, cols = np.indices(self.shape)
+                cx = origin[0] + (cols + 0.5) * self.resolution
+                cy = origin[1] + (rows + 0.5) * self.resolution
+                near = hit_xy[ri, ci]
+                self.clearance = np.hypot(cx - near[..., 0], cy - near[..., 1])
+            else:
+                self.clearance = dist * self.resolution
         else:
             self.clearance = np.full(self.shape, np.inf)
         clear = self.clearance.ravel()
@@ -67,6 +83,15 @@ class CostField:
         dist, pred = csgraph.dijkstra(graph, directed=False, indices=goal, return_predecessors=True)
         self.ctg = dist.reshape(self.shape)
         self._pred = pred
+        # Cells the field cannot reach (lethal, enclosed) take the value of the nearest
+        # reachable cell plus a steep slope, so a local planner near obstacles still sees
+        # which way is downhill instead of a flat wall of infinities.
+        unreachable = ~np.isfinite(self.ctg)
+        if unreachable.any() and not unreachable.all():
+            gap, (ri, ci) = ndimage.distance_transform_edt(unreachable, return_indices=True)
+            self.ctg_filled = np.where(unreachable, self.ctg[ri, ci] + 10.0 * gap * self.resolution, self.ctg)
+        else:
+            self.ctg_filled = self.ctg.copy()
 
     def path_from(self, cell: tuple[int, int], max_len: int = 100_000) -> list[tuple[int, int]]:
         """Cells from ``cell`` to the goal following the shortest-path tree ([] if unreachable)."""
