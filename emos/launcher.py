@@ -23,6 +23,8 @@ _RUN_DURATION: float | None = None
 
 
 class Launcher:
+    last_exit_code: int | None = None  # of the last bringup in this process, for `emos run`
+
     def __init__(
         self,
         config_file: str | None = None,
@@ -138,6 +140,8 @@ class Launcher:
         self.system = System(self._packages, options)
         code = self.system.run()
         self.exit_code, self.exit_reason = code, self.system.exit_reason
+        Launcher.last_exit_code = code
+        print(self.system.summary(), flush=True)
         log.info("bringup ended (exit code %d): %s", code, self.exit_reason)
         if code != 0 and os.environ.get("EMOS_RUN_CLI") != "1":
             raise SystemExit(code)

@@ -157,7 +157,7 @@ class System:
             log.info("system up: %d components (run %s)", len(self.components), self.ctx.run_id)
             waiters = [asyncio.ensure_future(self._stop_requested.wait()), self.root.exited]
             if self.options.duration:
-                waiters.append(asyncio.ensure_future(asyncio.sleep(self.options.duration)))
+                waiters.append(asyncio.ensure_future(self._stop_after(self.options.duration)))
             done, pending = await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
             for p in pending:
                 if p is not self.root.exited:
@@ -173,6 +173,10 @@ class System:
         finally:
             self.heartbeats.close()
             await self.control.close()
+
+    async def _stop_after(self, seconds: float) -> None:
+        await asyncio.sleep(seconds)
+        self.exit_reason = f"ran for the requested {seconds:g} s"
 
     def _on_signal(self, sig: int) -> None:
         log.info("%s received: stopping", signal.Signals(sig).name)
@@ -214,6 +218,22 @@ class System:
 
     def _record(self, event: dict[str, Any]) -> None:
         self.events.append(event)
+
+    def summary(self) -> str:
+        """What happened during the run, per component: restarts and why."""
+        exits: collections.Counter[tuple[str, str]] = collections.Counter()
+        for e in self.events:
+            if e["event"] == "exit":
+                exits[(e["child"], e.get("reason", "?"))] += 1
+        lines = [f"EMOS run {self.ctx.run_id}: exit code {self.exit_code} ({self.exit_reason})"]
+        for c in self.components:
+            name = c.component_name
+            reasons = ", ".join(f"{n} {r}" for (child, r), n in sorted(exits.items()) if child == name)
+            lines.append(f"  {name:<24} {'restarted after: ' + reasons if reasons else 'no restarts'}")
+        escalations = [e for e in self.events if e["event"] == "escalated"]
+        for e in escalations:
+            lines.append(f"  escalation in {e['supervisor']}: {e.get('detail', '')}")
+        return "\n".join(lines)
 
     # ------------------------------------------------------------------ control socket
     def expect_hello(self, name: str) -> "asyncio.Future[int]":

@@ -11,6 +11,7 @@ and a subscriber decodes arrays as zero-copy views of the frame it read.
 """
 from __future__ import annotations
 
+import math
 import struct
 from typing import Any
 
@@ -79,39 +80,119 @@ class Encoded:
         return bytes(out)
 
 
-def encode(msg: Any) -> Encoded:
-    """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame."""
-    arrays: list[np.ndarray] = []
-    offset = 0
+class _ArrayCollector:
+    """Collects the arrays of one message while its msgpack tree is built."""
 
-    def array_ext(arr: np.ndarray) -> msgpack.ExtType:
-        nonlocal offset
+    __slots__ = ("arrays", "offset")
+
+    def __init__(self) -> None:
+        self.arrays: list[np.ndarray] = []
+        self.offset = 0
+
+    def __call__(self, arr: np.ndarray) -> msgpack.ExtType:
         if arr.dtype.hasobject or arr.dtype.fields is not None:
             raise TypeError(f"cannot encode an array of dtype {arr.dtype}: only plain numeric dtypes travel on topics")
-        arr = np.ascontiguousarray(arr)
-        arrays.append(arr)
-        ext = msgpack.ExtType(_ARRAY_EXT, msgpack.packb([arr.dtype.str, list(arr.shape), offset]))
-        offset += _align(arr.nbytes)
+        if not arr.flags.c_contiguous:
+            arr = np.ascontiguousarray(arr)
+        self.arrays.append(arr)
+        ext = msgpack.ExtType(_ARRAY_EXT, msgpack.packb((arr.dtype.str, arr.shape, self.offset)))
+        self.offset += _align(arr.nbytes)
         return ext
 
-    def tree(obj: Any) -> list:
-        out = []
-        for name, kind, _ in _layout(type(obj)):
-            value = getattr(obj, name)
-            if kind == F.ARRAY:
-                out.append(array_ext(value))
-            elif kind == F.MESSAGE:
-                out.append(tree(value))
-            elif kind == F.OPTIONAL_MESSAGE:
-                out.append(None if value is None else tree(value))
-            elif kind == F.MESSAGE_LIST:
-                out.append([tree(v) for v in value])
-            else:
-                out.append(value)
-        return out
 
-    meta = msgpack.packb(tree(msg), use_bin_type=True)
-    return Encoded(meta, arrays, offset)
+# Per-class encoders and decoders, generated once as straight-line code (as attrs generates
+# __init__): a message is encoded and decoded on every publish and every read, and a generic
+# loop over fields costs several times more.
+_ENCODERS: dict[type, Any] = {}
+_DECODERS: dict[type, Any] = {}
+
+
+def _encoder(cls: type) -> Any:
+    fn = _ENCODERS.get(cls)
+    if fn is None:
+        fn = _compile_encoder(cls)
+    return fn
+
+
+def _compile_encoder(cls: type) -> Any:
+    env: dict[str, Any] = {}
+    items = []
+    for i, (name, kind, resolver) in enumerate(_layout(cls)):
+        if kind == F.ARRAY:
+            items.append(f"A(o.{name})")
+        elif kind == F.MESSAGE:
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            items.append(f"E{i}(o.{name}, A)")
+        elif kind == F.OPTIONAL_MESSAGE:
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            items.append(f"(None if o.{name} is None else E{i}(o.{name}, A))")
+        elif kind == F.MESSAGE_LIST:
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            items.append(f"[E{i}(x, A) for x in o.{name}]")
+        else:
+            items.append(f"o.{name}")
+    src = f"def encode_{cls.__name__}(o, A):\n    return [{', '.join(items)}]\n"
+    exec(compile(src, f"<emos encoder {cls.__name__}>", "exec"), env)
+    fn = env[f"encode_{cls.__name__}"]
+    _ENCODERS[cls] = fn
+    return fn
+
+
+def _decoder(cls: type) -> Any:
+    fn = _DECODERS.get(cls)
+    if fn is None:
+        fn = _compile_decoder(cls)
+    return fn
+
+
+def _compile_decoder(cls: type) -> Any:
+    layout = _layout(cls)
+    env: dict[str, Any] = {"new": object.__new__, "sa": object.__setattr__, "cls": cls, "DecodeError": DecodeError, "n": len(layout)}
+    lines = [
+        f"def decode_{cls.__name__}(v):",
+        "    if type(v) is not list or len(v) != n:",
+        f"        raise DecodeError(f'{cls.__name__} expects {{n}} fields, frame has {{len(v) if type(v) is list else type(v).__name__}}')",
+        "    o = new(cls)",
+    ]
+    for i, (name, kind, resolver) in enumerate(layout):
+        if kind == F.MESSAGE:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
+            lines.append(f"    sa(o, '{name}', D{i}(v[{i}]))")
+        elif kind == F.OPTIONAL_MESSAGE:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
+            lines.append(f"    sa(o, '{name}', None if v[{i}] is None else D{i}(v[{i}]))")
+        elif kind == F.MESSAGE_LIST:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
+            lines.append(f"    sa(o, '{name}', [D{i}(x) for x in v[{i}]])")
+        else:
+            lines.append(f"    sa(o, '{name}', v[{i}])")
+    lines.append("    return o")
+    exec(compile("\n".join(lines) + "\n", f"<emos decoder {cls.__name__}>", "exec"), env)
+    fn = env[f"decode_{cls.__name__}"]
+    _DECODERS[cls] = fn
+    return fn
+
+
+class _LazyCoder:
+    """Resolves a nested message class on first use (classes may refer to later ones)."""
+
+    __slots__ = ("factory", "resolver", "fn")
+
+    def __init__(self, factory: Any, resolver: Any):
+        self.factory, self.resolver, self.fn = factory, resolver, None
+
+    def __call__(self, *args: Any) -> Any:
+        fn = self.fn
+        if fn is None:
+            fn = self.fn = self.factory(self.resolver())
+        return fn(*args)
+
+
+def encode(msg: Any) -> Encoded:
+    """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame."""
+    arrays = _ArrayCollector()
+    meta = msgpack.packb(_encoder(type(msg))(msg, arrays), use_bin_type=True)
+    return Encoded(meta, arrays.arrays, arrays.offset)
 
 
 def decode(cls: type, frame: Any, copy: bool = False) -> Any:
@@ -125,44 +206,30 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
     try:
         (meta_len,) = _U32.unpack_from(view, 0)
         base = _align(_U32.size + meta_len)
-        if base > len(view):
-            raise DecodeError(f"frame of {len(view)} bytes announces {meta_len} bytes of metadata")
+        end = len(view)
+        if base > end:
+            raise DecodeError(f"frame of {end} B announces {meta_len} bytes of metadata")
 
         def ext_hook(code: int, data: bytes) -> Any:
             if code != _ARRAY_EXT:
                 raise DecodeError(f"unknown msgpack extension {code}")
             dtype_str, shape, offset = msgpack.unpackb(data)
             dtype = np.dtype(dtype_str)
-            count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+            count = math.prod(shape)
             start = base + offset
-            if start + count * dtype.itemsize > len(view):
+            if start + count * dtype.itemsize > end:
                 raise DecodeError("array runs past the end of the frame")
-            arr = np.frombuffer(view, dtype=dtype, count=count, offset=start).reshape(shape)
+            arr = np.frombuffer(view, dtype=dtype, count=count, offset=start)
+            if len(shape) != 1:
+                arr = arr.reshape(shape)
             return arr.copy() if copy else arr
 
         tree = msgpack.unpackb(view[4 : 4 + meta_len], ext_hook=ext_hook, raw=False, strict_map_key=False)
-        return _build(cls, tree)
+        return _decoder(cls)(tree)
     except DecodeError:
         raise
     except (ValueError, TypeError, IndexError, KeyError, struct.error, msgpack.UnpackException) as exc:
         raise DecodeError(f"cannot decode {cls.__name__}: {exc}") from exc
-
-
-def _build(cls: type, values: list) -> Any:
-    layout = _layout(cls)
-    if not isinstance(values, list) or len(values) != len(layout):
-        raise DecodeError(f"{cls.__name__} expects {len(layout)} fields, frame has {len(values) if isinstance(values, list) else type(values).__name__}")
-    obj = object.__new__(cls)
-    for (name, kind, resolver), value in zip(layout, values):
-        if kind == F.MESSAGE:
-            value = _build(resolver(), value)
-        elif kind == F.OPTIONAL_MESSAGE:
-            value = None if value is None else _build(resolver(), value)
-        elif kind == F.MESSAGE_LIST:
-            nested = resolver()
-            value = [_build(nested, v) for v in value]
-        object.__setattr__(obj, name, value)
-    return obj
 
 
 def pack(msg: Any) -> bytes:

@@ -69,8 +69,9 @@ class Ring:
         self.name = name
         self.fd = fd
         self.mm = mm
-        self.u64 = np.frombuffer(mm, dtype=np.uint64)
+        self.u64 = np.frombuffer(mm, dtype=np.uint64)  # for table operations (waiters)
         self.view = memoryview(mm)
+        self.q = self.view.cast("Q")  # u64 fields on the hot path: ~3x cheaper than numpy scalars
         geom = int(self.u64[_GEOM])
         self.slot_count = geom & 0xFFFFFFFF
         self.stride = int(self.u64[_STRIDE])
@@ -137,6 +138,7 @@ class Ring:
     def close(self) -> None:
         if self.mm is None:
             return
+        self.q.release()
         self.view.release()
         self.u64 = None  # type: ignore[assignment]
         try:
@@ -157,15 +159,15 @@ class Ring:
     # -- header ----------------------------------------------------------------------------------
     @property
     def head(self) -> int:
-        return int(self.u64[_HEAD])
+        return self.q[_HEAD]
 
     @property
     def first(self) -> int:
-        return int(self.u64[_FIRST])
+        return self.q[_FIRST]
 
     @property
     def moved_to(self) -> int:
-        return int(self.u64[_MOVED_PID]) & 0xFFFFFFFF
+        return self.q[_MOVED_PID] & 0xFFFFFFFF
 
     def set_moved_to(self, generation: int) -> None:
         self.u64[_MOVED_PID] = (self.writer_pid << 32) | generation
@@ -182,18 +184,18 @@ class Ring:
         """Claim the next message number; returns it and the payload buffer to fill."""
         if nbytes > self.capacity:
             raise MessageTooLarge(f"{nbytes} B > slot capacity {self.capacity} B")
-        n = int(self.u64[_HEAD])
+        n = self.q[_HEAD]
         off = HEADER_SIZE + (n % self.slot_count) * self.stride
-        idx = off // 8
-        self.u64[idx] = 2 * n + 1  # being written
+        self.q[off >> 3] = 2 * n + 1  # being written
         return n, self.view[off + SLOT_HEADER : off + SLOT_HEADER + nbytes]
 
     def commit(self, n: int, nbytes: int, stamp_ns: int) -> None:
-        idx = (HEADER_SIZE + (n % self.slot_count) * self.stride) // 8
-        self.u64[idx + 1] = nbytes
-        self.u64[idx + 2] = stamp_ns
-        self.u64[idx] = 2 * n + 2  # complete
-        self.u64[_HEAD] = n + 1
+        q = self.q
+        idx = (HEADER_SIZE + (n % self.slot_count) * self.stride) >> 3
+        q[idx + 1] = nbytes
+        q[idx + 2] = stamp_ns
+        q[idx] = 2 * n + 2  # complete
+        q[_HEAD] = n + 1
 
     def write(self, payload: bytes | memoryview, stamp_ns: int | None = None) -> int:
         n, buf = self.begin(len(payload))
@@ -206,21 +208,21 @@ class Ring:
     def read(self, n: int) -> tuple[int, bytearray | None, int]:
         """Copy out message ``n``: ``(OK, payload, stamp_ns)``, ``(NOT_READY, None, 0)`` or ``(LAPPED, None, 0)``."""
         off = HEADER_SIZE + (n % self.slot_count) * self.stride
-        idx = off // 8
-        u64 = self.u64
+        idx = off >> 3
+        q = self.q
         want = 2 * n + 2
-        s1 = int(u64[idx])
+        s1 = q[idx]
         if s1 != want:
             return (NOT_READY if s1 < want else LAPPED), None, 0
-        length = int(u64[idx + 1])
-        stamp = int(u64[idx + 2])
+        length = q[idx + 1]
+        stamp = q[idx + 2]
         if length > self.capacity:
             return LAPPED, None, 0
         start = off + SLOT_HEADER
         # bytearray(slice) is one malloc + memcpy; bytearray(n) then a slice assignment costs
         # a page fault per 4 KiB on large frames (calloc hands out fresh zero pages).
         buf = bytearray(self.view[start : start + length])
-        if int(u64[idx]) != want:
+        if q[idx] != want:
             return LAPPED, None, 0
         return OK, buf, stamp
 
@@ -242,7 +244,7 @@ class Ring:
 
     @property
     def waiters_version(self) -> int:
-        return int(self.u64[_WAITERS_VER])
+        return self.q[_WAITERS_VER]
 
     def add_waiter(self, token: int) -> bool:
         with self._locked():

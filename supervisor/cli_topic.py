@@ -1,0 +1,123 @@
+"""``emos topic list|echo|hz|pub``: look at and feed the topics of a running system."""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from emos.msgs import codec
+from emos.msgs.registry import resolve
+from emos.supervisor.cli_common import add_run_argument, join_run
+from emos.transport.pubsub import Publisher, Subscriber, list_topics
+from emos.transport.waker import Waker
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", required=True)
+    p = sub.add_parser("list", help="topics, their types, publishers and subscribers")
+    add_run_argument(p)
+    p.add_argument("--json", action="store_true")
+    p = sub.add_parser("echo", help="print messages as they arrive")
+    add_run_argument(p)
+    p.add_argument("topic")
+    p.add_argument("--count", "-n", type=int, default=0, help="stop after N messages")
+    p.add_argument("--timeout", type=float, default=0.0, help="stop after S seconds")
+    p.add_argument("--arrays", type=int, default=8, help="print at most this many array elements")
+    p = sub.add_parser("hz", help="measure the publishing rate")
+    add_run_argument(p)
+    p.add_argument("topic")
+    p.add_argument("--window", type=float, default=2.0, help="seconds per report")
+    p.add_argument("--reports", type=int, default=0, help="stop after N reports")
+    p = sub.add_parser("pub", help="publish a message given as JSON (or YAML) fields")
+    add_run_argument(p)
+    p.add_argument("topic")
+    p.add_argument("msg_type")
+    p.add_argument("fields", nargs="?", default="{}", help='e.g. \'{"data": 1.5}\'')
+    p.add_argument("--rate", type=float, default=0.0, help="publish repeatedly at this rate (Hz)")
+    p.add_argument("--count", "-n", type=int, default=1, help="number of messages (0 = until Ctrl-C)")
+
+
+def _topic_type(ctx, topic: str) -> type:
+    info = list_topics(ctx).get(topic if topic.startswith("/") else "/" + topic)
+    if info is None or info["type"] == "?":
+        raise SystemExit(f"emos topic: no publisher on {topic!r} yet (see `emos topic list`)")
+    return resolve(info["type"])
+
+
+def _short(value, n: int):
+    if isinstance(value, dict):
+        return {k: _short(v, n) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_short(v, n) for v in value[:n]] + ([f"... ({len(value)} items)"] if len(value) > n else [])
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    ctx = join_run(args.run)
+    if args.action == "list":
+        topics = list_topics(ctx)
+        if args.json:
+            print(json.dumps(topics, indent=2))
+        else:
+            for name, info in sorted(topics.items()):
+                print(f"{name:<40} {info['type']:<40} pubs={len(info['publishers'])} subs={info.get('subscribers', 0)}")
+        return 0
+    topic = args.topic if args.topic.startswith("/") else "/" + args.topic
+    if args.action == "pub":
+        cls = resolve(args.msg_type)
+        try:
+            fields = json.loads(args.fields)
+        except json.JSONDecodeError:
+            import yaml
+
+            fields = yaml.safe_load(args.fields)
+        msg = codec.from_builtin(cls, fields or {})
+        pub = Publisher(ctx, topic, cls)
+        try:
+            sent = 0
+            while args.count == 0 or sent < args.count:
+                pub.publish(msg)
+                sent += 1
+                if args.rate <= 0 and args.count == 1:
+                    break
+                time.sleep(1.0 / args.rate if args.rate > 0 else 0.0)
+            time.sleep(0.05)  # let subscribers copy the last message before the ring goes away
+        finally:
+            pub.close()
+        print(f"published {sent} {cls.__name__} on {topic}")
+        return 0
+    cls = _topic_type(ctx, topic)
+    waker = Waker(ctx)
+    sub = Subscriber(ctx, topic, cls, waker=waker, queue_size=1000)
+    import select
+
+    try:
+        if args.action == "echo":
+            seen, t_end = 0, time.monotonic() + args.timeout if args.timeout else None
+            while (not args.count or seen < args.count) and (t_end is None or time.monotonic() < t_end):
+                select.select([waker.fd], [], [], 0.2)
+                waker.drain()
+                for msg in sub.take():
+                    print(json.dumps(_short(codec.to_builtin(msg), args.arrays), default=str))
+                    print("---", flush=True)
+                    seen += 1
+            return 0
+        reports = 0
+        while not args.reports or reports < args.reports:
+            stamps: list[int] = []
+            t_end = time.monotonic() + args.window
+            while time.monotonic() < t_end:
+                select.select([waker.fd], [], [], 0.1)
+                waker.drain()
+                stamps.extend(stamp for stamp, _, _ in sub.take_raw())
+            reports += 1
+            if len(stamps) < 2:
+                print(f"{topic}: no messages in {args.window:g} s", flush=True)
+                continue
+            gaps = [(b - a) / 1e9 for a, b in zip(stamps, stamps[1:])]
+            mean = sum(gaps) / len(gaps)
+            print(f"{topic}: {1 / mean:.2f} Hz  min {min(gaps) * 1e3:.2f} ms  max {max(gaps) * 1e3:.2f} ms  n={len(stamps)}", flush=True)
+        return 0
+    finally:
+        sub.close()
+        waker.close()
