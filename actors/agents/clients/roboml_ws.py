@@ -86,8 +86,11 @@ class RoboMLWSClient(RoboMLHTTPClient):
         if self._ws is None:
             from websockets.sync.client import connect
 
-            self._ws = connect(self.websocket_url, open_timeout=self.connect_timeout, max_size=64 * 1024 * 1024,
-                               compression=None, proxy=None)
+            options = {"open_timeout": self.connect_timeout, "max_size": 64 * 1024 * 1024, "compression": None}
+            try:  # websockets >= 15: a held (not context-managed) connection is "legacy" mode
+                self._ws = connect(self.websocket_url, proxy=None, legacy=True, **options)
+            except TypeError:  # older websockets: no proxy/legacy keywords, direct connection is the default
+                self._ws = connect(self.websocket_url, **options)
         return self._ws
 
     def _send(self, payload: dict[str, Any]) -> Any:
