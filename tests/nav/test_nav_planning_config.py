@@ -139,3 +139,24 @@ def test_interpolation_spacing_endpoints_and_shortest_yaw():
     assert len(fine_turn) == 11
     with pytest.raises(ValueError):
         interpolate_se2(np.zeros((3, 2)), 0.1)
+
+
+def test_config_from_the_spec_yaml_block():
+    import yaml
+
+    block = yaml.safe_load(
+        """
+ompl:
+  log_level: 'WARN'
+  planning_timeout: 10.0
+  simplification_timeout: 0.01
+  goal_tolerance: 0.01
+  optimization_objective: 'PathLengthOptimizationObjective'
+  planner_id: 'ompl.geometric.KPIECE1'
+  planner_params: {range: 0.5, border_fraction: 0.8}
+"""
+    )["ompl"]
+    cfg = OMPLConfig.from_dict(block)
+    assert cfg.planner_name == "KPIECE1" and cfg.planner_params == {"range": 0.5, "border_fraction": 0.8}
+    with pytest.raises(ValueError, match="unknown key.*planing_timeout"):
+        OMPLConfig.from_dict({"planing_timeout": 1.0})

@@ -94,6 +94,17 @@ class OMPLConfig:
             raise TypeError(f"OMPLConfig.planner_params: expected a dict, got {type(value).__name__}")
         planner_spec(self.planner_id).validate(value)
 
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "OMPLConfig":
+        """Build from a config-file mapping such as the spec's ``ompl:`` YAML block."""
+        if not isinstance(values, dict):
+            raise TypeError(f"OMPLConfig.from_dict: expected a mapping, got {type(values).__name__}")
+        known = [f.name for f in attrs.fields(cls)]
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(f"OMPLConfig: unknown key(s) {unknown}; valid keys: {known}")
+        return cls(**values)
+
     @property
     def planner_name(self) -> str:
         """Short OMPL class name of the chosen planner (e.g. ``"KPIECE1"``)."""
