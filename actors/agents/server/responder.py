@@ -61,8 +61,8 @@ def load_script(source: str | Path | dict | None) -> tuple[list[Rule], str, list
     """Parse a script file (or dict) into (rules, default reply, extra model names)."""
     if source is None:
         return [], DEFAULT_REPLY, []
-    if isinstance(source, dict):
-        data = source
+    if not isinstance(source, (str, Path)):
+        data = source  # already parsed (validated below)
     else:
         path = Path(source)
         if not path.is_file():
