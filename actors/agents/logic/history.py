@@ -44,9 +44,9 @@ class ChatHistory:
         if excess <= 0:
             return
         turns = self._turns[excess:]
-        # Never start the window inside a tool exchange: a tool result without the assistant
-        # call that asked for it is rejected by OpenAI-compatible servers.
-        while turns and turns[0].role != "user":
+        # Never start the window with a tool result whose assistant call was cut off:
+        # OpenAI-compatible servers reject an orphan tool message.
+        while turns and turns[0].role == "tool":
             turns.pop(0)
         self._turns = turns
 
