@@ -14,6 +14,7 @@ from .errors import (
     ModelConnectionError,
     ModelServerError,
     ModelTimeoutError,
+    ModelNotFoundError,
 )
 from .types import (
     ChatChunk,
@@ -29,10 +30,25 @@ from .types import (
     ToolSpec,
     TranscriptionRequest,
     TranscriptionResponse,
+    DetectionRequest,
+    DetectionResponse,
+    Detection2D,
+    PolicyObservation,
+    ActionChunk,
 )
 
 # public name -> submodule that defines it; resolved on first attribute access (PEP 562).
-_LAZY: dict[str, str] = {}
+_MODELS = ("GenericLLM", "GenericMLLM", "GenericTTS", "GenericSTT", "OllamaModel", "TransformersLLM",
+           "TransformersMLLM", "LeRobotPolicy", "RoboBrain2", "Whisper", "SpeechT5", "Bark", "MeloTTS",
+           "VisionModel", "model_from_dict")
+_CLIENTS = ("ModelClient", "GenericHTTPClient", "OllamaClient", "RoboMLHTTPClient", "RoboMLWSClient",
+            "RoboMLRESPClient", "LeRobotClient", "client_from_serialized")
+_LAZY: dict[str, str] = {
+    **{name: ".models" for name in _MODELS},
+    **{name: ".clients" for name in _CLIENTS},
+    "ChromaDB": ".db",
+    "ChromaClient": ".db",
+}
 
 
 def __getattr__(name: str) -> Any:

@@ -172,6 +172,20 @@ def test_ollama_embeddings(server):
 # ------------------------------------------------------------------ RoboML (HTTP, WebSocket, RESP)
 
 
+def stick_person(height: int = 400, width: int = 300) -> np.ndarray:
+    """A dark stick figure on a light background: enough for OpenCV's HOG people detector."""
+    import cv2
+
+    image = np.full((height, width, 3), 210, np.uint8)
+    ink, cx = (30, 30, 30), width // 2
+    cv2.circle(image, (cx, 60), 14, ink, -1)
+    cv2.fillPoly(image, [np.array([(cx - 24, 78), (cx + 24, 78), (cx + 18, 158), (cx - 18, 158)])], ink)
+    for (x0, y0, x1, y1, thickness) in ((-22, 84, -34, 150, 9), (22, 84, 34, 150, 9),
+                                        (-10, 156, -15, 245, 13), (10, 156, 15, 245, 13)):
+        cv2.line(image, (cx + x0, y0), (cx + x1, y1), ink, thickness)
+    return image
+
+
 def roboml(kind, model, server):
     if kind is RoboMLRESPClient:
         return kind(model, port=server.resp_port)
@@ -206,8 +220,12 @@ def test_roboml_speech_vision_and_multimodal_nodes(kind, server):
     assert "three" in stt.inference(TranscriptionRequest(audio)).text
     vision = roboml(kind, VisionModel(name=f"det_{kind.__name__}"), server)
     vision.initialize()
-    result = vision.inference(DetectionRequest(images=[np.zeros((128, 64, 3), np.uint8)] * 2, threshold=0.5))
-    assert len(result.detections) == 2 and result.detections[0].boxes.shape[1] == 4
+    result = vision.inference(DetectionRequest(images=[stick_person(), np.full((128, 64, 3), 128, np.uint8)], threshold=0.5))
+    person, empty = result.detections
+    assert "person" in person.labels and np.all(person.scores >= 0.5)
+    x1, y1, x2, y2 = person.boxes[person.labels.index("person")]
+    assert x1 < 150 < x2 and y1 < 120 < y2  # the box covers the figure
+    assert empty.labels == [] and empty.boxes.shape == (0, 4)
     mllm = roboml(kind, TransformersMLLM(name=f"mllm_{kind.__name__}"), server)
     mllm.initialize()
     reply = mllm.inference(ChatRequest(messages=[ChatMessage("user", "what colour?", images=[np.ones((4, 4, 3), np.uint8)])]))

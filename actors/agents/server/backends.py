@@ -103,22 +103,16 @@ class LocalModels:
 
     # ------------------------------------------------------------------ detection
     def detect(self, image: np.ndarray, threshold: float) -> dict[str, Any]:
-        """People detection with OpenCV's built-in HOG+SVM detector (weights ship in OpenCV)."""
+        """People and faces with OpenCV's packaged detectors (the local Vision model)."""
         with self._lock:
             if self._detector is None:
                 try:
-                    import cv2
-                except ImportError:
-                    raise BackendUnavailable("object detection needs OpenCV: pip install 'emos[agents]'") from None
-                hog = cv2.HOGDescriptor()
-                hog.setSVMDetector(cv2.HOGDescriptor_getDefaultPeopleDetector())
-                self._detector = hog
-            rects, weights = self._detector.detectMultiScale(image, winStride=(8, 8), padding=(8, 8), scale=1.05)
-        rects = np.asarray(rects, dtype=np.float64).reshape(-1, 4)
-        scores = np.asarray(weights, dtype=np.float64).reshape(-1)
-        # SVM margins are unbounded; squash to 0..1 so `threshold` means what it does elsewhere.
-        scores = 1.0 / (1.0 + np.exp(-scores))
-        keep = scores >= threshold
-        boxes = rects[keep].copy()
-        boxes[:, 2:] += boxes[:, :2]  # x, y, w, h -> x1, y1, x2, y2
-        return {"bboxes": boxes.tolist(), "labels": ["person"] * int(keep.sum()), "scores": scores[keep].tolist()}
+                    from ..local.vision import LocalDetector
+
+                    # Threshold 0 here: each request filters with its own threshold below.
+                    self._detector = LocalDetector(threshold=0.0)
+                except ImportError as exc:
+                    raise BackendUnavailable(f"no local detector: {exc}") from None
+        found = [d for d in self._detector.detect(image) if d.score >= threshold]
+        return {"bboxes": [list(d.box) for d in found], "labels": [d.label for d in found],
+                "scores": [float(d.score) for d in found]}

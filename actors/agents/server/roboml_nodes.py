@@ -41,13 +41,16 @@ class NodeError(Exception):
 
 
 def _decode_image(value: Any) -> np.ndarray:
-    import cv2  # detection only; cv2 ships with the agents extra
+    try:
+        import cv2  # detection only; cv2 ships with the agents extra
+    except ImportError:
+        raise NodeError(501, "decoding images needs OpenCV: pip install 'emos[agents]'") from None
 
     raw = value if isinstance(value, bytes) else base64.b64decode(str(value).split(",")[-1])
     image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
     if image is None:
         raise NodeError(400, "images: expected base64-encoded PNG/JPEG images")
-    return image
+    return np.ascontiguousarray(image[:, :, ::-1])  # OpenCV decodes BGR; detectors take RGB
 
 
 class RoboMLNodes:
