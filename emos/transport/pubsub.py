@@ -103,10 +103,21 @@ class Publisher:
     def _grow(self, nbytes: int) -> None:
         old = self.ring
         capacity = max(2 * old.capacity, int(nbytes * 1.25))
+        # Carry the messages still held by the old ring over, under the same numbers, so a
+        # subscriber that finds only the new generation (or follows late) loses nothing.
+        start = max(old.first, old.head - old.slot_count)
         new = R.Ring.create(
             self.ctx.segment_name(self.topic, self.publisher_id, old.generation + 1), old.slot_count, capacity,
-            old.fingerprint, old.type_name, generation=old.generation + 1, first=old.head,
+            old.fingerprint, old.type_name, generation=old.generation + 1, first=start,
         )
+        for n in range(start, old.head):
+            status, payload, stamp = old.read(n)
+            if status != R.OK:  # cannot happen for our own completed messages; keep numbering dense
+                payload, stamp = bytearray(), 0
+            m, buf = new.begin(len(payload))
+            buf[:] = payload
+            buf.release()
+            new.commit(m, len(payload), stamp)
         new.set_writer_pid(os.getpid())
         for token in old.waiters()[1]:
             new.add_waiter(token)

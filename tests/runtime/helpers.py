@@ -1,0 +1,142 @@
+"""Running real EMOS systems from tests: a recipe in a subprocess, reached through its sockets."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import psutil
+
+from emos.core.rpc import RpcClient
+from emos.transport.context import SHM_DIR, RunContext, runtime_root
+
+REPO = Path(__file__).resolve().parents[2]
+
+RECIPE_HEADER = """
+import os, sys, time, signal
+import numpy as np
+from emos import BaseComponent, Launcher, Topic
+from emos import msgs as M
+"""
+
+
+def wait_until(pred: Callable[[], Any], timeout: float = 10.0, interval: float = 0.02, what: str = "condition") -> Any:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = pred()
+        if value:
+            return value
+        time.sleep(interval)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class SystemUnderTest:
+    """A recipe running under ``emos run`` in its own process."""
+
+    def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None):
+        self.script = tmp_path / "recipe.py"
+        self.script.write_text(RECIPE_HEADER + textwrap.dedent(body))
+        cmd = [sys.executable, "-m", "emos", "run", str(self.script)]
+        if duration:
+            cmd += ["--duration", str(duration)]
+        self.log_path = tmp_path / "system.log"
+        self._log = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}, cwd=tmp_path)
+        self.run_dir: Path | None = None
+        self.ctx: RunContext | None = None
+        self.rpc: RpcClient | None = None
+
+    def wait_up(self, timeout: float = 30.0, components: list[str] | None = None) -> "SystemUnderTest":
+        def find() -> Path | None:
+            if self.proc.poll() is not None:
+                raise AssertionError(f"system exited early with {self.proc.returncode}:\n{self.output()}")
+            for d in runtime_root().iterdir():
+                if d.name.startswith(f"{self.proc.pid}-") and (d / "supervisor.sock").exists():
+                    return d
+            return None
+
+        self.run_dir = wait_until(find, timeout, what="the system's run directory")
+        self.ctx = RunContext(self.run_dir.name, self.run_dir, owner=False)
+        self.rpc = RpcClient(self.run_dir / "supervisor.sock")
+        if components:
+            wait_until(lambda: all(self.state(c) == "active" for c in components), timeout, what=f"{components} active")
+        return self
+
+    def tree(self) -> dict:
+        assert self.rpc is not None
+        return self.rpc.call("tree")["tree"]
+
+    def workers(self) -> dict[str, dict]:
+        out = {}
+
+        def walk(node: dict) -> None:
+            if node.get("kind") == "worker" or node.get("state") == "stopped":
+                out[node["name"]] = node
+            for child in node.get("children", []):
+                walk(child)
+
+        walk(self.tree())
+        return out
+
+    def pid(self, name: str) -> int | None:
+        return self.workers().get(name, {}).get("pid")
+
+    def state(self, name: str) -> str | None:
+        return self.workers().get(name, {}).get("state")
+
+    def events(self, since: float = 0.0) -> list[dict]:
+        assert self.rpc is not None
+        return self.rpc.call("events", since=since)
+
+    def wait_new_pid(self, name: str, old: int | None, timeout: float = 10.0) -> int:
+        def new() -> int | None:
+            w = self.workers().get(name, {})
+            pid = w.get("pid")
+            return pid if pid and pid != old and w.get("state") == "active" else None
+
+        return wait_until(new, timeout, what=f"{name} restarted with a new pid")
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 30.0) -> int:
+        if self.rpc is not None:
+            self.rpc.close()
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            return self.proc.wait(timeout)
+        finally:
+            self._log.close()
+
+    def wait_exit(self, timeout: float = 30.0) -> int:
+        try:
+            return self.proc.wait(timeout)
+        finally:
+            self._log.close()
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def leftovers(self) -> list[str]:
+        """Shared-memory segments, run directory and processes the run left behind."""
+        assert self.ctx is not None
+        left = [n for n in os.listdir(SHM_DIR) if n.startswith(self.ctx.shm_prefix)]
+        if self.run_dir is not None and self.run_dir.exists():
+            left.append(str(self.run_dir))
+        for p in psutil.process_iter(["name"]):
+            if p.info["name"] and p.info["name"].startswith("emos:"):
+                try:
+                    if p.environ().get("EMOS_RUN_ID") == self.ctx.run_id and p.status() != psutil.STATUS_ZOMBIE:
+                        left.append(f"process {p.pid} {p.info['name']}")
+                except psutil.Error:
+                    pass
+        return left
+
+    def kill_all(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
