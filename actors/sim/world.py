@@ -167,7 +167,7 @@ class World:
             raise ValueError(f"sensor {sensor.name!r} rides on a robot that is not in this world")
         sensor.bind(self, self.rng())
         self.sensors.append(sensor)
-        self._next_due.append(self.clock.now())
+        self._next_due.append(self.clock.now() + self.clock.dt)
         return sensor
 
     # -- stepping ----------------------------------------------------------------------------
@@ -204,8 +204,10 @@ class World:
             if stamp >= self._next_due[i] - 1e-9:
                 out.append((sensor, sensor.publish(stamp)))
                 period = 1.0 / sensor.rate_hz
-                # Keep a fixed schedule (no drift) but never fall behind by more than a period.
-                self._next_due[i] = max(self._next_due[i] + period, stamp + period - dt / 2)
+                # A fixed schedule (no drift); periods shorter than a tick fire once per tick.
+                self._next_due[i] += period
+                if self._next_due[i] <= stamp + 1e-9:
+                    self._next_due[i] = stamp + period
         return out
 
     def run_for(self, seconds: float) -> list[tuple[Sensor, Any]]:

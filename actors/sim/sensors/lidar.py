@@ -124,9 +124,11 @@ class Lidar(Sensor):
         end[:, :2] = (sx, sy) + d * cfg.range_max
         start[:, 2] = end[:, 2] = self._z
         client = self.world.client  # type: ignore[union-attr]
-        results = client.rayTestBatch(start.tolist(), end.tolist(), numThreads=1)
-        hit = np.fromiter((r[0] for r in results), dtype=np.int64, count=n) >= 0
-        frac = np.fromiter((r[2] for r in results), dtype=float, count=n)
+        # numpy arrays go straight in (no tolist); zip(*) splits the result columns in C.
+        results = client.rayTestBatch(start, end, numThreads=1)
+        ids, _, fractions, _, _ = zip(*results)
+        hit = np.array(ids) >= 0
+        frac = np.array(fractions)
         ranges = cfg.range_min + frac * (cfg.range_max - cfg.range_min)
         if cfg.noise_std > 0:
             ranges = ranges + self.rng.normal(0.0, cfg.noise_std, n)

@@ -1,0 +1,64 @@
+"""``emos bench sim``: how many times faster than real time the Jackal world steps.
+
+The world: BARN world 1 (about 230 obstacles), the Jackal at the BARN start driving a slow
+circle, a 720-beam lidar at 20 Hz and odometry at 50 Hz, physics ticks of 10 ms, lock-step
+clock (no pacing), pinned to one CPU core.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration", type=float, default=60.0, help="simulated seconds to run (default 60)")
+    parser.add_argument("--world", type=int, default=1, help="BARN world index to use (default 1)")
+    parser.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
+    parser.add_argument("--json", action="store_true", help='print only {"realtime_factor": x}')
+
+
+def measure(duration: float = 60.0, world_idx: int = 1) -> dict:
+    from .barn_worlds import BARN_START
+    from .builders import from_barn
+    from .clock import ClockMode, SimClock
+    from .sensors import Lidar, LidarConfig, Odometry, OdometryConfig
+
+    world = from_barn(world_idx, clock=SimClock(dt=0.01, mode=ClockMode.LOCKSTEP))
+    try:
+        robot = world.add_robot("jackal", BARN_START)
+        lidar = world.add_sensor(Lidar(robot, LidarConfig(fov_deg=360.0, beams=720, rate_hz=20.0)))
+        world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=50.0)))
+        robot.command(0.3, 0.0, 0.5)  # a 0.6 m circle in the free area around the start
+        world.step()  # bake the obstacle mesh outside the timed part
+        ticks = int(round(duration / world.clock.dt))
+        scans = 0
+        t0 = time.perf_counter()
+        for _ in range(ticks):
+            scans += sum(1 for sensor, _ in world.step() if sensor is lidar)
+        wall = time.perf_counter() - t0
+        if robot.collided:
+            raise RuntimeError("bench sim: the robot collided; the benchmark world is not what it should be")
+        return {"realtime_factor": duration / wall, "wall_s": wall, "sim_s": duration, "ticks": ticks,
+                "scans": scans, "obstacles": len(world.shapes)}
+    finally:
+        world.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    pinned = None
+    if not args.no_pin and hasattr(os, "sched_setaffinity"):
+        pinned = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {pinned})
+    result = measure(args.duration, args.world)
+    if args.json:
+        print(json.dumps({"realtime_factor": round(result["realtime_factor"], 2)}))
+        return 0
+    print("EMOS simulation speed (Jackal, 720-beam lidar @ 20 Hz, odometry @ 50 Hz, 10 ms ticks, lock-step)")
+    print(f"  world               BARN {args.world} ({result['obstacles']} obstacles)")
+    print(f"  cpu                 {'core ' + str(pinned) if pinned is not None else 'not pinned'}")
+    print(f"  simulated           {result['sim_s']:.1f} s ({result['ticks']} ticks, {result['scans']} scans)")
+    print(f"  wall                {result['wall_s']:.2f} s")
+    print(f"  realtime factor     {result['realtime_factor']:.1f}x")
+    return 0
