@@ -1,7 +1,9 @@
 """Exact Euclidean distance transform in numpy (no scipy).
 
 Felzenszwalb & Huttenlocher's separable algorithm: a 1D squared-distance transform along
-every column, then along every row of the result. Each 1D pass is the lower envelope of the
+every column, then along every row of the result. For a binary input the column pass is just
+the distance to the nearest feature above or below (two running-max scans); the row pass needs
+the general lower-envelope transform. Each 1D pass is the lower envelope of the
 parabolas ``(q - p)^2 + f(p)``. Instead of one Python loop per line, every line of the grid is
 processed at once: the loop runs over the positions along the line, and each step updates all
 lines' envelopes with masked numpy operations. The Python loop is therefore O(width + pops),
@@ -69,11 +71,32 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
         v[cand, kc] = q
         z[cand, kc] = s_final[cand]
         z[cand, kc + 1] = np.inf
-    # Read the envelope back: for position q, the parabola whose interval [z_j, z_{j+1}) holds q.
+    # Read the envelope back: position q belongs to parabola j where z[j] <= q < z[j+1]
+    # (ties go to the lower j, as in the original algorithm). One global searchsorted does it
+    # for every line: boundaries are offset by line so they form one sorted array.
     out = np.full((n_lines, n), np.inf)
     has = k >= 0
     if not has.any():
         return out
+    r = rows[has]
+    kk = k[r]
+    span = float(n + 3)
+    # Inner boundaries z[1..k] of each line, clipped into [-1, n+1] so offsets keep them apart.
+    width = int(kk.max())
+    if width > 0:
+        inner = np.clip(z[r, 1:width + 1], -1.0, n + 1.0)
+        valid = np.arange(1, width + 1)[None, :] <= kk[:, None]
+        keys = (inner + (np.arange(r.size)[:, None] * span))[valid]
+    else:
+        keys = np.zeros(0)
+    queries = np.arange(n)[None, :] + (np.arange(r.size)[:, None] * span)
+    # Number of inner boundaries < q within the line = index of the parabola.
+    before_line = np.r_[0, np.cumsum(kk)[:-1]]
+    j = np.searchsorted(keys, queries.ravel(), side="left").reshape(r.size, n) - before_line[:, None]
+    vj = np.take_along_axis(v[r], j, axis=1)
+    q = np.arange(n)[None, :]
+    out[r] = (q - vj) ** 2 + np.take_along_axis(f[r], vj, axis=1)
+    return out
     r = rows[has]
     j = np.zeros(r.size, dtype=np.int64)
     zz = z[r]
@@ -92,6 +115,19 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
     return out
 
 
+def _binary_column_distance_sq(mask: np.ndarray) -> np.ndarray:
+    """Squared distance from each cell to the nearest True cell in the same column (inf if none)."""
+    h = mask.shape[0]
+    idx = np.arange(h, dtype=np.float64)[:, None]
+    last = np.where(mask, idx, -np.inf)
+    np.maximum.accumulate(last, axis=0, out=last)
+    nxt = np.where(mask, idx, np.inf)[::-1]
+    np.minimum.accumulate(nxt, axis=0, out=nxt)
+    nxt = nxt[::-1]
+    d = np.minimum(idx - last, nxt - idx)
+    return d * d
+
+
 def euclidean_distance_transform(feature_mask: np.ndarray, sampling: float = 1.0) -> np.ndarray:
     """Exact Euclidean distance from every cell centre to the nearest ``True`` cell centre.
 
@@ -104,8 +140,9 @@ def euclidean_distance_transform(feature_mask: np.ndarray, sampling: float = 1.0
         raise ValueError(f"euclidean_distance_transform: expected a 2D mask, got shape {mask.shape}")
     if not (np.isfinite(sampling) and sampling > 0):
         raise ValueError(f"euclidean_distance_transform: sampling must be > 0, got {sampling!r}")
-    f = np.where(mask.astype(bool), 0.0, np.inf)
-    # Columns first (transpose so the pass runs along the last axis), then rows.
-    cols = squared_distance_transform_1d(f.T).T
+    # Pass 1 along columns needs no envelope for a binary input: it is the squared distance to
+    # the nearest feature above or below, found with two running-max scans (no Python loop).
+    cols = _binary_column_distance_sq(mask.astype(bool))
+    # Pass 2 along rows: the lower envelope of the column distances.
     sq = squared_distance_transform_1d(cols)
     return np.sqrt(sq) * float(sampling)
