@@ -216,3 +216,19 @@ def test_random_cluttered_maps_never_yield_a_colliding_path(seed):
     assert result.solved, result.status
     check_endpoints(result.path, start, goal, 0.01)
     assert_disc_path_clear(result.path, grid, radius)
+
+
+def test_final_verification_rejects_a_path_through_a_wall(rooms):
+    # The safety net behind OMPL: a candidate path that crosses the wall between the south
+    # rooms (x = 0, away from its doorway) is refused, whatever produced it.
+    planner = OMPLGeometricPlanner(OMPLConfig(planner_id="RRTConnect"), cylinder_robot())
+    planner.set_map(rooms)
+    through_wall = np.array([[-1.0, -4.0, 0.0], [1.0, -4.0, 0.0]])
+    result = planner._finish(through_wall, "RRTConnect", 0.0, 0.0)
+    assert not result.solved and result.status == "PATH_IN_COLLISION"
+    assert result.path.shape == (0, 3)
+    # Grazing the table edge (y = -2.5) by 1 cm is caught; passing 1 cm below it is fine.
+    grazing = np.array([[-3.5, -2.74, 0.0], [-2.5, -2.74, 0.0]])
+    assert not planner._finish(grazing, "RRTConnect", 0.0, 0.0).solved
+    clear = np.array([[-3.5, -2.76, 0.0], [-2.5, -2.76, 0.0]])
+    assert planner._finish(clear, "RRTConnect", 0.0, 0.0).solved
