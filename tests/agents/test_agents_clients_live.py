@@ -310,3 +310,13 @@ def test_clients_reject_models_they_cannot_serve():
         RoboMLHTTPClient(OllamaModel(name="o"))
     with pytest.raises(ValueError, match="port"):
         GenericHTTPClient(GenericLLM(name="g"), port=70000)
+
+
+def test_base_urls_from_hosts_and_full_urls():
+    assert GenericHTTPClient(GenericLLM(name="g")).url == "http://127.0.0.1:8000"
+    assert GenericHTTPClient(GenericLLM(name="g"), host="https://api.openai.com", port=None).url == "https://api.openai.com"
+    assert GenericHTTPClient(GenericLLM(name="g"), host="http://gpu-box/openai", port=9000).url == "http://gpu-box:9000/openai"
+    assert GenericHTTPClient(GenericLLM(name="g"), host="http://gpu-box:7000", port=9000).url == "http://gpu-box:7000"
+    assert OllamaClient(OllamaModel(name="o"), host="10.0.0.5", port=None).url == "http://10.0.0.5:11434"
+    ws = RoboMLWSClient(TransformersLLM(name="n"), host="gpu-box", port=8000)
+    assert ws.websocket_url == "ws://gpu-box:8000/n/ws_inference"

@@ -80,7 +80,9 @@ class ModelClient:
             )
         if not isinstance(host, str) or not host:
             raise ValueError(f"{type(self).__name__}.host: expected a host name or URL, got {host!r}")
-        port = self.DEFAULT_PORT if port is None else port
+        has_scheme = host.startswith(("http://", "https://", "ws://", "wss://"))
+        # A full URL (https://api.openai.com) may omit the port; a bare host gets the default.
+        port = self.DEFAULT_PORT if port is None and not has_scheme else port
         if port is not None and (isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536):
             raise ValueError(f"{type(self).__name__}.port: expected an integer in 1..65535, got {port!r}")
         _positive(f"{type(self).__name__}.inference_timeout", inference_timeout)
@@ -114,7 +116,13 @@ class ModelClient:
         """Base URL of the server (scheme://host:port)."""
         if self.host.startswith(("http://", "https://", "ws://", "wss://")):
             base = self.host.rstrip("/")
-            return f"{base}:{self.port}" if self.port and base.count(":") < 2 else base
+            if self.port is None:
+                return base
+            scheme, _, rest = base.partition("://")
+            authority, slash, path = rest.partition("/")
+            if ":" not in authority:  # add the port unless the URL already names one
+                authority = f"{authority}:{self.port}"
+            return f"{scheme}://{authority}{slash}{path}"
         return f"http://{self.host}:{self.port}" if self.port else f"http://{self.host}"
 
     def _error_context(self, url: str | None = None) -> dict[str, str | None]:
