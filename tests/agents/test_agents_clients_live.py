@@ -320,3 +320,31 @@ def test_base_urls_from_hosts_and_full_urls():
     assert OllamaClient(OllamaModel(name="o"), host="10.0.0.5", port=None).url == "http://10.0.0.5:11434"
     ws = RoboMLWSClient(TransformersLLM(name="n"), host="gpu-box", port=8000)
     assert ws.websocket_url == "ws://gpu-box:8000/n/ws_inference"
+
+
+def test_async_facade_does_not_block_the_event_loop(server):
+    import asyncio
+
+    from emos.actors.agents.clients import AsyncClient
+
+    async def main() -> tuple[str, str, int]:
+        client = AsyncClient(GenericHTTPClient(GenericLLM(name="llm", checkpoint="emos-scripted"), port=server.port))
+        await client.check_connection()
+        ticks = 0
+
+        async def ticker() -> None:
+            nonlocal ticks
+            while True:
+                ticks += 1
+                await asyncio.sleep(0.001)
+
+        task = asyncio.create_task(ticker())
+        reply = await client.inference(ask("hello"))
+        stream = await client.inference(ask("async stream works", stream=True))
+        text = "".join([chunk.content async for chunk in stream])
+        task.cancel()
+        return reply.message.content, text, ticks
+
+    reply, text, ticks = asyncio.run(main())
+    assert reply == "Hello! I am a robot." and text == "You said: async stream works"
+    assert ticks > 0  # the loop kept running while requests were in flight

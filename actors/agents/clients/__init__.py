@@ -15,6 +15,7 @@ _LAZY = {
     "RoboMLWSClient": ".roboml_ws",
     "RoboMLRESPClient": ".roboml_resp",
     "LeRobotClient": ".lerobot",
+    "AsyncClient": ".aio",
 }
 
 __all__ = ["ModelClient", "client_from_serialized", "CLIENT_TYPES", *_LAZY]

@@ -142,6 +142,8 @@ class ModelClient:
         """Run one request. Chat with ``stream=True`` returns an iterator of :class:`ChatChunk`."""
         if isinstance(request, ChatRequest):
             if request.stream:
+                # Streams are not retried: a retry after partial output would repeat text the
+                # component has already published.
                 return self._chat_stream(request)
             return self._retrying(lambda: self._chat(request))
         if isinstance(request, EmbeddingRequest):

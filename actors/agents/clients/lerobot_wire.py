@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import io
 import pickle
-import struct
 from dataclasses import dataclass, field
 from typing import Any, Iterator
 
@@ -112,24 +111,6 @@ def chunk_payload(data: bytes, size: int = CHUNK_BYTES) -> Iterator[bytes]:
         last = k == len(offsets) - 1
         state = TRANSFER_END if last else (TRANSFER_BEGIN if k == 0 else TRANSFER_MIDDLE)
         yield encode_chunk(state, data[start : start + size])
-
-
-def dense_actions(buf: bytes) -> dict[str, Any]:
-    """Decode ``ActionsDense`` (t0, i0, dt, t, a, actions_f32, seq) into plain values."""
-    import numpy as np
-
-    f = decode_fields(buf)
-    t, a = int(f.get(4, 0)), int(f.get(5, 0))
-    raw = f.get(6, b"")
-    if len(raw) != t * a * 4:
-        raise ValueError(f"ActionsDense: {len(raw)} bytes for a {t}x{a} float32 array")
-    return {
-        "t0": struct.unpack("<d", f[1])[0] if 1 in f else 0.0,
-        "i0": int(f.get(2, 0)),
-        "dt": struct.unpack("<f", f[3])[0] if 3 in f else 0.0,
-        "actions": np.frombuffer(raw, dtype="<f4").reshape(t, a).copy(),
-        "seq": int(f.get(7, 0)),
-    }
 
 
 # ------------------------------------------------------------------ pickled payloads
