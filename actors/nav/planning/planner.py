@@ -76,7 +76,7 @@ class OMPLGeometricPlanner:
         self.geometry_params = geometry_params
         self.checker: MapCollisionChecker | None = None
         self._si: Any = None
-        self._margin = 0.0
+        self._margin_slot = [0.0]
         self._base_margin = 0.0
         ob, og, ou = _ompl()
         ou.setLogLevel(getattr(ou, f"LOG_{self.config.log_level.upper()}"))
@@ -124,7 +124,9 @@ class OMPLGeometricPlanner:
         free_above = checker.outer_radius + res * math.sqrt(2.0)
         blocked_below = checker.inner_radius - res * math.sqrt(2.0) / 2.0
         floor = math.floor
-        planner = self
+        # The margin changes per query; share it through a one-slot list rather than `self`,
+        # so the callback held by OMPL (C++) does not keep the planner alive in a cycle.
+        margin_slot = self._margin_slot
 
         def is_valid(state: Any) -> bool:
             x = state.getX()
@@ -135,7 +137,7 @@ class OMPLGeometricPlanner:
             if ix < 0 or iy < 0 or ix >= width or iy >= height:
                 return False
             d = dist[iy, ix]
-            margin = planner._margin
+            margin = margin_slot[0]
             if d > free_above + margin:
                 return True
             if d < blocked_below:
@@ -191,7 +193,7 @@ class OMPLGeometricPlanner:
             return failed("INVALID_GOAL", "the robot collides with the map at the goal")
         # A robot parked closer to a wall than the margin must still be able to leave.
         clearances = [checker.min_distance(sx, sy, syaw)] + [checker.min_distance(gx, gy, a) for a in goal_yaws]
-        self._margin = min(self._base_margin, 0.5 * min(clearances))
+        self._margin_slot[0] = min(self._base_margin, 0.5 * min(clearances))
 
         si = self._si
         pdef = ob.ProblemDefinition(si)
