@@ -1,6 +1,8 @@
 """Local controllers: path followers (Pure Pursuit, Stanley, DWA, DVZ) and vision followers."""
 from .base import ControllersID, ControlResult, ControlStatus
+from .dwa import DWA, DWAConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
+from .stanley import Stanley, StanleyConfig
 from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 
 __all__ = [
@@ -11,5 +13,9 @@ __all__ = [
     "OccupancyGrid2D",
     "PurePursuit",
     "PurePursuitConfig",
+    "DWA",
+    "DWAConfig",
+    "Stanley",
+    "StanleyConfig",
     "obstacle_points",
 ]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from .path_distance import PathDistanceField, polyline_distance_exact
+from .path_distance import PathDistanceField, polyline_distance_exact, simplify_polyline
 from .weights import TrajectoryCostsWeights
 
 __all__ = [
@@ -45,6 +45,13 @@ def _xy(trajectories: np.ndarray) -> np.ndarray:
     return t[..., :2]
 
 
+def _check_path(path: np.ndarray) -> np.ndarray:
+    p = np.asarray(path, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] < 2 or p.shape[0] < 1:
+        raise ValueError(f"reference_path: expected an (R, 2+) array, got shape {p.shape}")
+    return p[:, :2]
+
+
 def path_length(path: np.ndarray) -> float:
     p = np.asarray(path, dtype=np.float64)[:, :2]
     if p.shape[0] < 2:
@@ -57,6 +64,9 @@ def reference_path_cost(trajectories: np.ndarray, reference_path: np.ndarray,
     """Mean distance (m) of each trajectory's points to the reference path."""
     xy = _xy(trajectories)
     ref = np.asarray(reference_path)
+    if field is None:
+        # Collinear and nearly collinear points change distances by < 1 mm: drop them.
+        ref = simplify_polyline(_check_path(ref), 1e-3)
     if field is None and xy.shape[0] * xy.shape[1] * max(ref.shape[0] - 1, 1) <= _DENSE_LIMIT:
         return polyline_distance_exact(xy, ref).mean(axis=1)
     if field is None:

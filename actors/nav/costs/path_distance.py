@@ -46,22 +46,25 @@ def _segments_input(path: np.ndarray) -> np.ndarray:
     return p[:, :2]
 
 
-def polyline_distance_exact(points: np.ndarray, path: np.ndarray, chunk: int = 4096) -> np.ndarray:
+def polyline_distance_exact(points: np.ndarray, path: np.ndarray) -> np.ndarray:
     """Exact distance of points (..., 2) to the polyline ``path`` (R, 2); O(points x R).
 
-    The reference implementation, used for small problems and to validate the field.
+    Loops over segments (vectorized over points), so it is cheap for short or simplified
+    paths; the reference the distance field is validated against.
     """
     a, d, inv = _segments(path)
     pts = np.asarray(points, dtype=np.float64)
-    flat = pts.reshape(-1, 2)
-    out = np.empty(flat.shape[0])
-    for s in range(0, flat.shape[0], chunk):
-        q = flat[s:s + chunk, None, :]  # (c, 1, 2)
-        w = q - a[None]
-        t = np.clip(np.einsum("cij,ij->ci", w, d) * inv[None], 0.0, 1.0)
-        diff = w - t[..., None] * d[None]
-        out[s:s + chunk] = np.sqrt(np.min(np.einsum("cij,cij->ci", diff, diff), axis=1))
-    return out.reshape(pts.shape[:-1])
+    px = pts[..., 0]
+    py = pts[..., 1]
+    best = np.full(px.shape, np.inf)
+    for k in range(a.shape[0]):
+        wx = px - a[k, 0]
+        wy = py - a[k, 1]
+        t = np.clip((wx * d[k, 0] + wy * d[k, 1]) * inv[k], 0.0, 1.0)
+        wx -= t * d[k, 0]
+        wy -= t * d[k, 1]
+        np.minimum(best, wx * wx + wy * wy, out=best)
+    return np.sqrt(best)
 
 
 def simplify_polyline(path: np.ndarray, tolerance: float) -> np.ndarray:

@@ -1,0 +1,205 @@
+"""Dynamic Window Approach over the three motion models.
+
+Per step: (1) the dynamic window of velocities reachable within ``control_time_step`` from the
+current velocity (acceleration and deceleration limits apart); (2) ``max_linear_samples`` x
+``max_angular_samples`` constant-velocity commands (omni robots add lateral samples) rolled out
+over ``prediction_horizon`` in closed form, all at once; (3) trajectories whose footprint comes
+within ``safety_margin`` of an obstacle are discarded; (4) the rest are scored with the
+trajectory costs against the local segment of the reference path, and the best command is
+repeated over ``control_horizon``. Differential and omni robots rotate in place first when the
+path direction is more than ``rotate_in_place_angle`` away (rotate-then-move).
+"""
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from ..costs import TrajectoryCostsWeights, evaluate_costs
+from ..kinematics import dynamic_window, feasible_commands, rollout, wrap_angle
+from ..robot import RobotConfig, RobotType
+from .base import ControlResult, ControlStatus, FollowerConfig, field, setters
+from .follower import PathFollower
+from .clearance import nearby_obstacles, voxel_downsample
+from .sensors import ObstacleInput, sensor_offset
+
+__all__ = ["DWAConfig", "DWA", "dwa_samples"]
+
+
+def _vector(size: int):
+    def convert(value):
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+        if arr.size != size or not np.all(np.isfinite(arr)):
+            raise ValueError(f"expected {size} finite numbers, got {value!r}")
+        return arr
+
+    return convert
+
+
+@attrs.define
+class DWAConfig(FollowerConfig):
+    """Spec parameters (times in seconds). ``octree_resolution`` (m) is the cell of the voxel
+    filter applied to obstacle points before collision checking (half of it, conservatively)."""
+
+    prediction_horizon: float = field(1.0, 1e-4, 1e6)
+    control_horizon: float = field(0.2, 1e-4, 1e6)
+    max_linear_samples: int = field(20, 1, 1000, int)
+    max_angular_samples: int = field(20, 1, 1000, int)
+    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=_vector(3), on_setattr=setters, eq=False)
+    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
+    octree_resolution: float = field(0.1, 1e-9, 1e3)
+    costs_weights: TrajectoryCostsWeights = attrs.field(factory=TrajectoryCostsWeights)
+    max_num_threads: int = field(1, 1, 100, int)
+
+    @costs_weights.validator
+    def _check_weights(self, attribute, value) -> None:
+        if not isinstance(value, TrajectoryCostsWeights):
+            raise TypeError(f"DWAConfig.costs_weights: expected TrajectoryCostsWeights, got {type(value).__name__}")
+
+    @property
+    def horizon_steps(self) -> int:
+        return max(1, int(round(self.prediction_horizon / self.control_time_step)))
+
+    @property
+    def control_steps(self) -> int:
+        return max(1, min(self.horizon_steps, int(round(self.control_horizon / self.control_time_step))))
+
+
+def dwa_samples(robot: RobotConfig, velocity: np.ndarray, dt: float, n_linear: int, n_angular: int) -> np.ndarray:
+    """Command samples (N, 3) spanning the dynamic window (feasible for the motion model)."""
+    win = dynamic_window(robot, velocity, dt)
+    vx = np.linspace(win[0, 0], win[0, 1], n_linear)
+    om = np.linspace(win[2, 0], win[2, 1], n_angular)
+    if robot.model_type is RobotType.OMNI:
+        vy = np.linspace(win[1, 0], win[1, 1], max(3, n_linear // 4))
+    else:
+        vy = np.zeros(1)
+    grid = np.stack(np.meshgrid(vx, vy, om, indexing="ij"), axis=-1).reshape(-1, 3)
+    return feasible_commands(robot, grid)
+
+
+class DWA(PathFollower):
+    config: DWAConfig
+
+    def __init__(self, robot: RobotConfig, config: DWAConfig | None = None) -> None:
+        super().__init__(robot, config or DWAConfig())
+        self.sensor_pose = sensor_offset(self.config.sensor_position_to_robot, self.config.sensor_rotation_to_robot)
+        self._detour_side = 1.0  # left first on a tie; then sticky (see _local_segment)
+
+    def _local_segment(self, obstacles: np.ndarray) -> np.ndarray:
+        """The part of the reference path the costs compare against.
+
+        Normally the next ``max_vel * prediction_horizon`` metres. Path points that the robot
+        cannot occupy (an obstacle within its radius) are removed and, if the path is blocked,
+        the segment extends to the first free point behind the blockage, so the goal term pulls
+        the robot around the obstacle instead of into a stop in front of it.
+        """
+        assert self.path is not None and self.progress is not None
+        robot = self.robot
+        reach = robot.ctrl_vx_limits.max_vel * self.config.prediction_horizon + robot.radius
+        stop = self.progress.point_ahead(reach) + 1
+        seg = self.path.points[self.progress.index:stop]
+        if obstacles.shape[0] == 0:
+            return seg
+        far = self.progress.point_ahead(reach + 4.0 * robot.radius + 1.0) + 1
+        ext = self.path.points[self.progress.index:far]
+        near = nearby_obstacles(obstacles, ext[0], float(self.path.s[far - 1] - self.path.s[self.progress.index]) + robot.radius + 0.1)
+        if near.shape[0] == 0:
+            return seg
+        clearance_needed = robot.radius + self.config.safety_margin + 0.05
+        free = self._free(ext, near, clearance_needed)
+        n = seg.shape[0]
+        if np.all(free[:n]):
+            return seg
+        # Extend to the first free point behind the blockage, and push the blocked points
+        # sideways (one side for the whole blockage) until the robot would fit there.
+        first_blocked = int(np.argmin(free[:n]))
+        after = np.nonzero(free[first_blocked:])[0]
+        end = first_blocked + int(after[0]) if after.size else ext.shape[0] - 1
+        seg = ext[: end + 1].copy()
+        blocked = ~free[: end + 1]
+        yaw_all = self.path.yaw[self.progress.index:self.progress.index + end + 1]
+        normal_all = np.stack([-np.sin(yaw_all), np.cos(yaw_all)], axis=-1)
+        normal = normal_all[blocked]
+        shifts = np.arange(1, 41) * 0.05
+        need: dict[float, float] = {}
+        for side in (1.0, -1.0):
+            cand = seg[blocked][:, None, :] + side * shifts[None, :, None] * normal[:, None, :]
+            ok = self._free(cand.reshape(-1, 2), near, clearance_needed).reshape(cand.shape[:2])
+            if np.all(ok.any(axis=1)):
+                need[side] = float(shifts[np.argmax(ok, axis=1)].max())
+        best_side, best_shift = 1.0, None
+        if need:
+            # Keep the side chosen before unless it became clearly worse: flipping sides
+            # while passing an obstacle is how a reactive planner ends up dithering.
+            prefer = self._detour_side
+            best_side = min(need, key=lambda sd: need[sd] - (0.25 if sd == prefer else 0.0))
+            best_shift = need[best_side]
+            self._detour_side = best_side
+        if best_shift is None:  # no way around within 2 m: track up to the blockage only
+            return seg[: max(first_blocked, 1)]
+        # Full offset on the blocked points, ramping in linearly over ``ramp`` metres before
+        # them: a smooth detour whose path-distance cost pulls the robot aside early.
+        s_all = self.path.s[self.progress.index:self.progress.index + end + 1]
+        s_block = s_all[blocked]
+        ramp = 2.0 * robot.radius + 0.5
+        gap = np.maximum(s_block.min() - s_all, 0.0) + np.maximum(s_all - s_block.max(), 0.0)
+        weight = np.where(blocked, 1.0, np.clip(1.0 - gap / ramp, 0.0, 1.0))
+        seg += (best_side * best_shift * weight)[:, None] * normal_all
+        # The ramped detour must itself be passable; drop points that are not.
+        ok = self._free(seg, near, robot.radius + self.config.safety_margin)
+        return seg[ok] if np.count_nonzero(ok) >= 2 else seg
+
+    @staticmethod
+    def _free(points: np.ndarray, obstacles: np.ndarray, clearance: float) -> np.ndarray:
+        d2 = ((points[:, None, :] - obstacles[None, :, :]) ** 2).sum(-1).min(axis=1)
+        return d2 > clearance * clearance
+
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+        pose = np.asarray(pose, dtype=np.float64)
+        velocity = np.asarray(velocity, dtype=np.float64)
+        if self.progress is None:
+            return self._no_path(pose)
+        self.progress.update(pose)
+        if self.goal_reached(pose):
+            return self._done(pose)
+        cfg = self.config
+        dt = cfg.control_time_step
+        obs = voxel_downsample(self.world_obstacles(pose, obstacles), 0.5 * cfg.octree_resolution)
+        segment = self._local_segment(obs)
+        # Rotate-then-move: align with the direction of the path a little ahead first.
+        ahead = segment[min(len(segment) - 1, max(1, len(segment) // 3))]
+        direction = math.atan2(ahead[1] - pose[1], ahead[0] - pose[0]) if len(segment) > 1 else pose[2]
+        heading = float(wrap_angle(pose[2] - direction))
+        if self.needs_rotation(heading):
+            target = self.rotate_command(heading)
+            cmds, plan = self.plan(pose, velocity, target[None], cfg.control_steps)
+            return ControlResult(cmds[0], plan[0], ControlStatus.ROTATING, {"heading_error": heading})
+        samples = dwa_samples(self.robot, velocity, dt, cfg.max_linear_samples, cfg.max_angular_samples)
+        trajectories = rollout(pose, samples, dt, cfg.horizon_steps)
+        # Downsampling can hide a point up to one cell diagonal away: stay conservative.
+        clear = self.clearances(trajectories, obs) - 0.5 * cfg.octree_resolution * math.sqrt(2.0)
+        here = self.clearances(np.repeat(pose[None, None], 2, axis=1), obs)[0] - 0.5 * cfg.octree_resolution * math.sqrt(2.0)
+        admissible = clear > min(cfg.safety_margin, here - 1e-3)
+        if not np.any(admissible):
+            brake, plan = self.plan(pose, velocity, np.zeros((1, 3)), cfg.control_steps)
+            return ControlResult(brake[0], plan[0], ControlStatus.BLOCKED, {"clearance": float(clear.max())})
+        idx = np.nonzero(admissible)[0]
+        trajs = trajectories[idx]
+        vel = np.broadcast_to(samples[idx][:, None, :], (idx.size, cfg.horizon_steps, 3))
+        lim = (self.robot.ctrl_vx_limits, self.robot.ctrl_vy_limits, self.robot.ctrl_omega_limits)
+        costs = evaluate_costs(
+            cfg.costs_weights, trajs, vel,
+            reference_path=segment, goal=segment[-1],
+            obstacle_min_distance=np.where(np.isinf(clear[idx]), np.inf, clear[idx] + self.robot.radius),
+            robot_radius=self.robot.radius, dt=dt,
+            acc_limits=np.array([l.max_acc for l in lim]), initial_velocity=velocity,
+        )
+        best = int(np.argmin(costs.total))
+        command = samples[idx[best]]
+        return ControlResult(
+            np.repeat(command[None], cfg.control_steps, axis=0), trajs[best], ControlStatus.RUNNING,
+            {"cost": float(costs.total[best]), "samples": int(samples.shape[0]),
+             "admissible": int(idx.size), "clearance": float(clear[idx[best]])},
+        )
