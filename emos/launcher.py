@@ -35,15 +35,27 @@ class Launcher:
         max_restarts: int = 5,
         max_seconds: float = 10.0,
         strategy: str = "one_for_one",
+        stop_timeout: float = 5.0,
         **kwargs: Any,
     ) -> None:
+        """``heartbeat_timeout``: seconds without a status message before a component counts as
+        hung and is killed. ``max_restarts`` in ``max_seconds``: restart intensity of every group
+        (unless ``add_pkg`` overrides it) and of the root, which restarts whole groups. ``strategy``:
+        one_for_one, one_for_all or rest_for_one. ``stop_timeout``: seconds between SIGTERM and SIGKILL.
+        """
         if kwargs:
             raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
         self.config_file = config_file
         self.multi_processing = bool(multi_processing)
         self.activate_all_components_on_start = activate_all_components_on_start
         self.enable_monitoring = enable_monitoring
+        for name, value in (("heartbeat_timeout", heartbeat_timeout), ("max_seconds", max_seconds), ("stop_timeout", stop_timeout)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
+                raise ValueError(f"Launcher: {name} must be a positive number of seconds, got {value!r}")
+        if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
+            raise ValueError(f"Launcher: max_restarts must be an int >= 0, got {max_restarts!r}")
         self.heartbeat_timeout = heartbeat_timeout
+        self.stop_timeout = stop_timeout
         self.default_policy = dict(strategy=strategy, max_restarts=max_restarts, max_seconds=max_seconds)
         self._packages: list[Any] = []
         self._events_actions: list[dict] = []
@@ -136,7 +148,10 @@ class Launcher:
                         "(supervisor restarts are active)")
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-        options = SystemOptions(heartbeat_timeout=self.heartbeat_timeout, duration=duration or _RUN_DURATION)
+        options = SystemOptions(
+            heartbeat_timeout=self.heartbeat_timeout, stop_timeout=self.stop_timeout, duration=duration or _RUN_DURATION,
+            max_restarts=self.default_policy["max_restarts"], max_seconds=self.default_policy["max_seconds"],
+        )
         self.system = System(self._packages, options)
         code = self.system.run()
         self.exit_code, self.exit_reason = code, self.system.exit_reason

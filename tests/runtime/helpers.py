@@ -118,13 +118,17 @@ class SystemUnderTest:
             self._log.close()
 
     def output(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors="replace")
 
     def leftovers(self) -> list[str]:
         """Shared-memory segments, run directory and processes the run left behind."""
-        assert self.ctx is not None
-        left = [n for n in os.listdir(SHM_DIR) if n.startswith(self.ctx.shm_prefix)]
+        prefix = self.ctx.shm_prefix if self.ctx else f"emos.{self.proc.pid}-"
+        left = [n for n in os.listdir(SHM_DIR) if n.startswith(prefix)]
+        if self.ctx is None:
+            left += [str(d) for d in runtime_root().iterdir() if d.name.startswith(f"{self.proc.pid}-")]
+            return left
         if self.run_dir is not None and self.run_dir.exists():
             left.append(str(self.run_dir))
         for p in psutil.process_iter(["name"]):

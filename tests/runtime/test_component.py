@@ -1,0 +1,223 @@
+"""Components: lifecycle, health on every step, event triggers, errors; services and actions across processes."""
+import threading
+import time
+
+import pytest
+
+from emos import BaseComponent, Topic
+from emos import msgs as M
+from emos.core.lifecycle import InvalidTransition, LifecycleState, path_to
+from emos.core.node import Node, control_socket
+from emos.core.rpc import RpcClient, RpcError
+from emos.core.services import ActionCanceled, ActionClient, ServiceClient
+from emos.transport.context import RunContext
+from emos.transport.pubsub import Publisher, Subscriber
+
+from tests.runtime.helpers import SystemUnderTest, wait_until
+
+
+@pytest.fixture
+def ctx():
+    c = RunContext.create()
+    yield c
+    c.remove_everything()
+
+
+class Doubler(BaseComponent):
+    def custom_on_configure(self):
+        self.events = ["configure"]
+
+    def custom_on_activate(self):
+        self.events.append("activate")
+
+    def custom_on_deactivate(self):
+        self.events.append("deactivate")
+
+    def custom_on_shutdown(self):
+        self.events.append("shutdown")
+
+    def _execution_step(self, msg=None, topic=None):
+        if msg.data < 0:
+            raise ValueError("negative input")
+        if msg.data == 0:
+            self.health_status.set_fail_algorithm(algorithm_names=["doubling"])
+            return
+        self.publish(self.out_topics[0], M.Int64(data=2 * msg.data))
+        self.health_status.set_healthy()
+
+
+def run_node(component, ctx):
+    node = Node(component, ctx=ctx, supervisor_socket="")
+    thread = threading.Thread(target=node.run, kwargs={"install_signal_handlers": False}, daemon=True)
+    thread.start()
+    wait_until(lambda: control_socket(ctx, component.component_name).exists(), what="control socket")
+    return node, thread, RpcClient(control_socket(ctx, component.component_name))
+
+
+def test_lifecycle_paths():
+    S = LifecycleState
+    assert [t.value for t in path_to(S.UNCONFIGURED, S.ACTIVE)] == ["configure", "activate"]
+    assert [t.value for t in path_to(S.ACTIVE, S.UNCONFIGURED)] == ["deactivate", "cleanup"]
+    assert [t.value for t in path_to(S.INACTIVE, S.FINALIZED)] == ["shutdown"]
+
+
+def test_event_component_lifecycle_health_and_errors(ctx):
+    inp, out = Topic(name="in", msg_type="Int64"), Topic(name="out", msg_type="Int64")
+    comp = Doubler(component_name="doubler", inputs=[inp], outputs=[out], trigger=inp)
+    node, thread, rpc = run_node(comp, ctx)
+    status = Subscriber(ctx, "/doubler/status", M.ComponentStatus, queue_size=100)
+    results = Subscriber(ctx, "/out", M.Int64)
+    feed = Publisher(ctx, "/in", M.Int64)
+    try:
+        assert rpc.call("get_state")["state"] == "unconfigured"
+        feed.publish(M.Int64(data=1))  # ignored: not active yet
+        with pytest.raises(RpcError, match="cannot activate from unconfigured"):
+            rpc.call("transition", transition="activate")
+        assert rpc.call("transition", transition="configure") == "inactive"
+        assert rpc.call("transition", transition="activate") == "active"
+        status.take()
+        reports = []
+        for value in (3, 0, -1, 5):
+            steps = node.steps
+            feed.publish(M.Int64(data=value))
+            wait_until(lambda: node.steps > steps, what=f"a step for input {value}")
+        wait_until(lambda: reports.extend(status.take()) or len(reports) >= 4, what="status of every step")
+        codes = [s.status for s in reports if s.lifecycle_state == "active"]
+        assert [m.data for m in results.take()] == [6, 10]
+        assert M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL in codes
+        assert M.ComponentStatus.STATUS_FAILURE_COMPONENT_LEVEL in codes  # the ValueError, caught
+        failing = next(s for s in reports if s.status == M.ComponentStatus.STATUS_FAILURE_COMPONENT_LEVEL)
+        assert "negative input" in failing.message and failing.src_components == ["doubler"]
+        assert node.steps >= 4
+        assert rpc.call("transition", transition="deactivate") == "inactive"
+        assert comp.events == ["configure", "activate", "deactivate"]
+        with pytest.raises(RpcError, match="update_config"):
+            rpc.call("nonsense_op")
+    finally:
+        rpc.call("exit")
+        thread.join(10)
+    assert not thread.is_alive()
+    assert comp.events[-1] == "shutdown"
+
+
+def test_outputs_reach_subscribers_with_values(ctx):
+    inp, out = Topic(name="in2", msg_type="Int64"), Topic(name="out2", msg_type="Int64")
+    comp = Doubler(component_name="doubler2", inputs=[inp], outputs=[out], trigger=inp)
+    node, thread, rpc = run_node(comp, ctx)
+    results = Subscriber(ctx, "/out2", M.Int64, queue_size=10)
+    feed = Publisher(ctx, "/in2", M.Int64)
+    try:
+        rpc.call("transition", transition="configure")
+        rpc.call("transition", transition="activate")
+        for v in (1, 2, 3):
+            feed.publish(M.Int64(data=v))
+        got = []
+        wait_until(lambda: got.extend(m.data for m in results.take()) or len(got) >= 3, what="doubled values")
+        assert got == [2, 4, 6]
+    finally:
+        rpc.call("exit")
+        thread.join(10)
+
+
+class BrokenConfigure(BaseComponent):
+    def custom_on_configure(self):
+        raise RuntimeError("camera not found")
+
+
+def test_failed_transition_reports_component_failure_and_returns_to_unconfigured(ctx):
+    node, thread, rpc = run_node(BrokenConfigure(component_name="broken"), ctx)
+    try:
+        with pytest.raises(RpcError, match="configure failed: camera not found"):
+            rpc.call("transition", transition="configure")
+        state = rpc.call("get_state")
+        assert state["state"] == "unconfigured" and state["health"] == "COMPONENT_FAILURE"
+    finally:
+        rpc.call("exit")
+        thread.join(10)
+
+
+def test_parameters_update_validated_and_methods_execute(ctx):
+    class Tunable(BaseComponent):
+        def ping(self, x):
+            return x + 1
+
+    node, thread, rpc = run_node(Tunable(component_name="tunable"), ctx)
+    try:
+        assert rpc.call("update_config", values={"loop_rate": 4.0})["loop_rate"] == 4.0
+        with pytest.raises(RpcError, match="loop_rate must be in"):
+            rpc.call("update_config", values={"loop_rate": -1.0})
+        assert rpc.call("execute_method", method="ping", args=[41]) == 42
+        with pytest.raises(RpcError, match="no public method '_execution_step'"):
+            rpc.call("execute_method", method="_execution_step")
+    finally:
+        rpc.call("exit")
+        thread.join(10)
+
+
+SERVICES_RECIPE = """
+class Adder(BaseComponent):
+    main_srv_type = ("SetBool_Request", "SetBool_Response")
+    def custom_on_configure(self):
+        self.calls = 0
+    def _main_srv_callback(self, request):
+        self.calls += 1
+        return M.SetBoolResponse(success=request.data, message=f"call {self.calls} in pid {os.getpid()}")
+
+class Counter(BaseComponent):
+    main_action_type = ("Int64", "Int64", "String")
+    def _main_action_callback(self, goal):
+        for i in range(goal.goal.data):
+            if goal.is_cancel_requested:
+                return M.String(data="canceled")
+            goal.publish_feedback(M.Int64(data=i))
+            time.sleep(0.02)
+        return M.String(data=f"counted to {goal.goal.data}")
+
+adder = Adder(component_name="adder", run_type="Server")
+counter = Counter(component_name="counter", run_type="ActionServer")
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[adder, counter])
+launcher.bringup()
+"""
+
+
+def test_services_and_actions_across_processes(tmp_path):
+    system = SystemUnderTest(tmp_path, SERVICES_RECIPE).wait_up(components=["adder", "counter"])
+    try:
+        srv = ServiceClient("adder/service", "SetBool_Request", "SetBool_Response", ctx=system.ctx)
+        wait_until(lambda: (system.run_dir / "srv").exists() and any((system.run_dir / "srv").iterdir()), what="service socket")
+        reply = wait_until(lambda: _try(lambda: srv.call(M.SetBoolRequest(data=True))), what="service reply")
+        assert reply.success is True and f"pid {system.pid('adder')}" in reply.message
+        assert srv.call(M.SetBoolRequest(data=False)).message.startswith("call 2")
+        with pytest.raises(TypeError, match="takes SetBoolRequest, got Int64"):
+            srv.call(M.Int64(data=1))
+
+        action = ActionClient("counter/action", "Int64", "Int64", "String", ctx=system.ctx)
+        feedback = []
+        result = action.send_goal(M.Int64(data=5), feedback_callback=lambda fb: feedback.append(fb.data))
+        assert result.data == "counted to 5" and feedback == [0, 1, 2, 3, 4]
+
+        outcome = {}
+        t = threading.Thread(target=lambda: outcome.update(r=_catch(lambda: action.send_goal(M.Int64(data=500), goal_id="long"))))
+        t.start()
+        time.sleep(0.2)
+        assert action.cancel("long") is True
+        t.join(10)
+        assert isinstance(outcome["r"], ActionCanceled)
+    finally:
+        assert system.stop() == 0
+    assert system.leftovers() == []
+
+
+def _try(fn):
+    try:
+        return fn()
+    except Exception:
+        return None
+
+
+def _catch(fn):
+    try:
+        return fn()
+    except Exception as exc:
+        return exc
