@@ -74,6 +74,16 @@ def test_parameters_reach_the_ompl_planner(si):
     assert prm.getMaxNearestNeighbors() == 12
 
 
+def test_bad_parameters_fail_before_the_planner_is_built(si):
+    # OMPL 2.0.1's AORRTC crashes the process if destroyed before setup(); a bad parameter
+    # must therefore raise before construction (a crash here would kill the test run).
+    with pytest.raises(ValueError, match="unknown parameter"):
+        make_planner("AORRTC", si, {"goal_bias": 0.1})
+    p = make_planner("AORRTC", si, {"range": 0.4})
+    assert p.getRange() == 0.4
+    p.setup()  # leave it in a state it can be destroyed from
+
+
 def test_unknown_or_badly_typed_parameters_are_clear_errors():
     with pytest.raises(ValueError) as err:
         OMPLConfig(planner_id="RRTConnect", planner_params={"goal_bias": 0.1})

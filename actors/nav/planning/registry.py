@@ -245,6 +245,10 @@ def planner_spec(planner_id: str) -> PlannerSpec:
 def make_planner(planner_id: str, space_information: Any, params: dict[str, Any] | None = None) -> Any:
     """Instantiate the planner for ``planner_id`` on ``space_information`` and apply ``params``."""
     spec = planner_spec(planner_id)
+    # Validate before constructing: OMPL 2.0.1's AORRTC segfaults if it is destroyed before
+    # setup(), so a planner must never be built and then dropped because of a bad parameter.
+    values = spec.validate(dict(params or {}))
     planner = getattr(_geometric(), spec.name)(space_information)
-    spec.apply(planner, dict(params or {}))
+    for key, value in values.items():
+        getattr(planner, spec.params[key][0])(value)
     return planner
