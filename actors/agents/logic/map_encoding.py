@@ -113,7 +113,8 @@ class MapEncoder:
             raise RuntimeError("map resolution unknown: call set_resolution() (no map received yet)")
         size = self.resolution * self._layer(layer_name).resolution_multiple
         positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        index = np.floor(positions[:, :2] / size).astype(np.int64)
+        # The epsilon keeps positions on a cell edge (1.2 / 0.15 = 7.999...) in the upper cell.
+        index = np.floor(positions[:, :2] / size + 1e-9).astype(np.int64)
         coordinates = positions.copy()
         coordinates[:, :2] = (index + 0.5) * size
         return index, np.round(coordinates, 6)
