@@ -86,29 +86,44 @@ def load_path_csv(file: str | os.PathLike) -> np.ndarray:
 
 
 class PathRecorder:
-    """Record a driven path from a stream of poses, keeping a pose only when the robot has moved
-    at least ``min_distance`` metres or turned at least ``min_angle`` radians since the last
-    kept pose. The first pose is always kept; :meth:`path` can append the latest pose so the
-    recording ends where the robot stopped.
+    """Record a driven path from a stream of poses.
+
+    Two filters decide whether an offered pose is kept (the first pose always is):
+
+    - spatial: the robot moved at least ``min_distance`` metres or turned at least
+      ``min_angle`` radians since the last kept pose (so standing still records nothing);
+    - temporal, when ``recording_time_step`` is set (the spec's planner service parameter):
+      at least that many seconds passed since the last kept pose, by the poses' stamps.
+
+    :meth:`path` can append the latest pose so the recording ends where the robot stopped.
     """
 
-    def __init__(self, min_distance: float = 0.1, min_angle: float = 0.2) -> None:
+    def __init__(
+        self, min_distance: float = 0.1, min_angle: float = 0.2, recording_time_step: float | None = None
+    ) -> None:
         if not (math.isfinite(min_distance) and min_distance >= 0):
             raise ValueError(f"PathRecorder.min_distance: expected >= 0 m, got {min_distance!r}")
         if not (math.isfinite(min_angle) and min_angle >= 0):
             raise ValueError(f"PathRecorder.min_angle: expected >= 0 rad, got {min_angle!r}")
+        if recording_time_step is not None and not (math.isfinite(recording_time_step) and recording_time_step > 0):
+            raise ValueError(f"PathRecorder.recording_time_step: expected > 0 s or None, got {recording_time_step!r}")
         self.min_distance = float(min_distance)
         self.min_angle = float(min_angle)
+        self.recording_time_step = None if recording_time_step is None else float(recording_time_step)
         self._kept: list[tuple[float, float, float]] = []
+        self._last_stamp: float | None = None
         self._latest: tuple[float, float, float] | None = None
 
     def __len__(self) -> int:
         return len(self._kept)
 
-    def add(self, x: float, y: float, yaw: float) -> bool:
-        """Offer one pose; returns True if it was kept. Non-finite poses raise ``ValueError``."""
+    def add(self, x: float, y: float, yaw: float, stamp: float | None = None) -> bool:
+        """Offer one pose (``stamp`` in seconds, required with ``recording_time_step``);
+        returns True if it was kept. Non-finite poses raise ``ValueError``."""
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
             raise ValueError(f"PathRecorder.add: expected a finite pose, got ({x}, {y}, {yaw})")
+        if self.recording_time_step is not None and (stamp is None or not math.isfinite(stamp)):
+            raise ValueError("PathRecorder.add: a finite stamp (s) is required when recording_time_step is set")
         pose = (float(x), float(y), float(yaw))
         self._latest = pose
         if self._kept:
@@ -117,13 +132,22 @@ class PathRecorder:
             turned = abs((yaw - lyaw + math.pi) % (2 * math.pi) - math.pi)
             if moved < self.min_distance and turned < self.min_angle:
                 return False
+            if self.recording_time_step is not None and self._last_stamp is not None:
+                if stamp - self._last_stamp < self.recording_time_step:  # type: ignore[operator]
+                    return False
         self._kept.append(pose)
+        self._last_stamp = stamp
         return True
 
-    def add_many(self, poses: np.ndarray) -> int:
-        """Offer an (N, 3) batch of poses in order; returns how many were kept."""
+    def add_many(self, poses: np.ndarray, stamps: np.ndarray | None = None) -> int:
+        """Offer an (N, 3) batch of poses in order (with N stamps if timed); returns how many were kept."""
         p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        return sum(self.add(*row) for row in p)
+        if stamps is None:
+            return sum(self.add(*row) for row in p)
+        t = np.asarray(stamps, dtype=np.float64).reshape(-1)
+        if len(t) != len(p):
+            raise ValueError(f"PathRecorder.add_many: {len(p)} poses but {len(t)} stamps")
+        return sum(self.add(*row, stamp=float(ts)) for row, ts in zip(p, t))
 
     def path(self, include_latest: bool = True) -> np.ndarray:
         """The recorded (N, 3) path; with ``include_latest`` the last offered pose closes it."""
@@ -135,6 +159,7 @@ class PathRecorder:
     def clear(self) -> None:
         self._kept.clear()
         self._latest = None
+        self._last_stamp = None
 
     def save(self, file: str | os.PathLike) -> Path:
         return save_path_csv(self.path(), file)

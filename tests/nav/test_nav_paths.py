@@ -76,3 +76,21 @@ def test_recorder_handles_angle_wrap():
     rec.add(0, 0, math.pi - 0.1)
     assert not rec.add(0, 0, -math.pi + 0.1)  # only 0.2 rad apart across the wrap
     assert rec.add(0, 0, -math.pi + 0.45)
+
+
+def test_recorder_time_step_throttles_and_skips_standing_still():
+    # Binary-exact times (1/32 s odometry, 1/8 s recording step) keep the count unambiguous.
+    rec = PathRecorder(min_distance=0.01, min_angle=0.01, recording_time_step=0.125)
+    t = np.arange(32) / 32.0  # 0.5 m/s for 1 s ...
+    poses = np.column_stack((0.5 * t, np.zeros_like(t), np.zeros_like(t)))
+    assert rec.add_many(poses, stamps=t) == 8  # one pose per 0.125 s
+    np.testing.assert_allclose(np.diff(rec.path(include_latest=False)[:, 0]), 0.0625)
+    # ... then standing still for a second: nothing new although time passes.
+    still = np.tile(poses[-1], (32, 1))
+    assert rec.add_many(still, stamps=1.0 + t) == 0
+    with pytest.raises(ValueError, match="stamp"):
+        rec.add(1.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="stamps"):
+        rec.add_many(poses, stamps=t[:3])
+    with pytest.raises(ValueError, match="recording_time_step"):
+        PathRecorder(recording_time_step=0)
