@@ -85,9 +85,11 @@ def test_recorder_time_step_throttles_and_skips_standing_still():
     poses = np.column_stack((0.5 * t, np.zeros_like(t), np.zeros_like(t)))
     assert rec.add_many(poses, stamps=t) == 8  # one pose per 0.125 s
     np.testing.assert_allclose(np.diff(rec.path(include_latest=False)[:, 0]), 0.0625)
-    # ... then standing still for a second: nothing new although time passes.
+    # ... then standing still for a second: the stop position is kept once, then nothing
+    # more although time passes.
     still = np.tile(poses[-1], (32, 1))
-    assert rec.add_many(still, stamps=1.0 + t) == 0
+    assert rec.add_many(still, stamps=1.0 + t) == 1
+    assert np.allclose(rec.path(include_latest=False)[-1], poses[-1])
     with pytest.raises(ValueError, match="stamp"):
         rec.add(1.0, 0.0, 0.0)
     with pytest.raises(ValueError, match="stamps"):
