@@ -1,5 +1,6 @@
 """Local controllers: path followers (Pure Pursuit, Stanley, DWA, DVZ) and vision followers."""
 from .base import ControllersID, ControlResult, ControlStatus
+from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
 from .stanley import Stanley, StanleyConfig
@@ -13,6 +14,8 @@ __all__ = [
     "OccupancyGrid2D",
     "PurePursuit",
     "PurePursuitConfig",
+    "DVZ",
+    "DVZConfig",
     "DWA",
     "DWAConfig",
     "Stanley",
