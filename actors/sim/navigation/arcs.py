@@ -83,10 +83,12 @@ class ArcPlanner:
             out.append(gap.min(axis=(1, 2)).astype(float))
         return np.concatenate(out)
 
-    def choose(self, pose: np.ndarray, points: np.ndarray,
-               cost_to_go: Callable[[np.ndarray], np.ndarray]) -> tuple[float, float] | None:
-        """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is."""
+    def choose(self, pose: np.ndarray, points: np.ndarray, cost_to_go: Callable[[np.ndarray], np.ndarray],
+               reverse_cost: float | None = None) -> tuple[float, float] | None:
+        """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is.
+        ``reverse_cost`` overrides the configured cost of backing up (recovery makes it < 0)."""
         cfg = self.cfg
+        reverse_cost = cfg.reverse_cost if reverse_cost is None else reverse_cost
         clearance = self.clearances(pose, points)
         ok = clearance > cfg.margin
         if not ok.any():
@@ -99,11 +101,13 @@ class ArcPlanner:
             ey = y0 + s0 * dx[:, -1] + c0 * dy[:, -1]
             ends.append(np.c_[ex, ey, th0 + wt[:, -1]])
         end = np.concatenate(ends)
-        ahead = end[:, :2] + cfg.lookahead * np.c_[np.cos(end[:, 2]), np.sin(end[:, 2])]
+        # Look ahead in the direction of travel (behind the robot for backing-up arcs).
+        travel = np.where(self.v < 0, -1.0, 1.0)[:, None]
+        ahead = end[:, :2] + travel * cfg.lookahead * np.c_[np.cos(end[:, 2]), np.sin(end[:, 2])]
         score = cost_to_go(end[:, :2]) + cost_to_go(ahead)
         wanted = cfg.safe_clearance + 0.1 * np.abs(self.v)
         score = score + cfg.clearance_weight * np.maximum(0.0, wanted - clearance)
-        score = score + np.where(self.v < 0, cfg.reverse_cost, 0.0)
+        score = score + np.where(self.v < 0, reverse_cost, 0.0)
         score = np.where(ok, score, np.inf)
         best = int(np.argmin(score))
         if not np.isfinite(score[best]):

@@ -20,9 +20,10 @@ class GridNavigator:
     name = "builtin"
 
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
-                 arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3) -> None:
+                 arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3,
+                 recovery_time: float = 2.0) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
-        self.stuck_time, self.stuck_progress = stuck_time, stuck_progress
+        self.stuck_time, self.stuck_progress, self.recovery_time = stuck_time, stuck_progress, recovery_time
         self.arc_config = arc_config
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
@@ -47,6 +48,8 @@ class GridNavigator:
         self._last_plan = -math.inf
         self._progress_ref: tuple[float, float] | None = None  # (stamp, cost-to-go) to beat
         self.virtual_blocks: list[tuple[float, float]] = []
+        self._recover_until = -math.inf
+        self._last_recovery = -math.inf
         self.plan = None
 
     def _cell(self, xy: tuple[float, float]) -> tuple[int, int]:
@@ -79,11 +82,17 @@ class GridNavigator:
         if self._planned_version < 0 or (stale and obs.stamp - self._last_plan >= self.replan_period):
             self._replan(obs)
         if self._stuck(obs):
-            self._block_bottleneck(obs)
-            self._replan(obs)
+            # First time: back out for a while (pockets, a nose against a wall). Stuck again
+            # soon after: the route itself is impossible, so block its tightest spot.
+            if obs.stamp - self._last_recovery < 3 * self.stuck_time + self.recovery_time:
+                self._block_bottleneck(obs)
+                self._replan(obs)
+            self._last_recovery = obs.stamp
+            self._recover_until = obs.stamp + self.recovery_time
         reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.task.robot.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
-        choice = self.arcs.choose(obs.pose, points, self.cost_to_go)
+        recovering = obs.stamp < self._recover_until
+        choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None)
         if choice is None:
             # Boxed in: no arc is clear, not even turning or backing up. Stand still; the
             # stuck detector will block this route and the field will send us elsewhere.
@@ -109,7 +118,12 @@ class GridNavigator:
         if self.plan is None or len(self.plan) < 2:
             return
         seg = np.linalg.norm(np.diff(self.plan, axis=0), axis=1)
-        ahead = self.plan[: int(np.searchsorted(np.cumsum(seg), 2.0)) + 1]
+        ahead = self.plan[: int(np.searchsorted(np.cumsum(seg), 2.5)) + 1]
+        # Never block the ground the robot stands on: that would box it in for good.
+        keep_out = self.task.robot.circumscribed_radius + 0.15  # type: ignore[union-attr]
+        ahead = ahead[np.hypot(ahead[:, 0] - obs.pose[0], ahead[:, 1] - obs.pose[1]) > keep_out]
+        if len(ahead) == 0:
+            return
         rows, cols, _ = self.grid.cell_of(ahead)
         clear = self.field.clearance[np.clip(rows, 0, self.grid.shape[0] - 1), np.clip(cols, 0, self.grid.shape[1] - 1)]
         x, y = ahead[int(np.argmin(clear))]
