@@ -64,7 +64,7 @@ class GenericHTTPClient(ModelClient):
         body = self._http.request_json("GET", "/v1/models")
         data = body.get("data") if isinstance(body, dict) else None
         if not isinstance(data, list):
-            raise MalformedResponseError("a model list object with 'data'", body, **self._http._ctx("/v1/models"))
+            raise MalformedResponseError("a model list object with 'data'", body, **self._http.context_for("/v1/models"))
         return [str(item.get("id")) for item in data if isinstance(item, dict)]
 
     def _initialize(self) -> None:
@@ -73,7 +73,7 @@ class GenericHTTPClient(ModelClient):
         if served and self.checkpoint not in served:
             raise ModelNotFoundError(
                 f"checkpoint {self.checkpoint!r} is not served; available: {served[:20]}",
-                **self._http._ctx("/v1/models"),
+                **self._http.context_for("/v1/models"),
             )
 
     def close(self) -> None:
@@ -83,12 +83,12 @@ class GenericHTTPClient(ModelClient):
     def _chat(self, request: ChatRequest) -> ChatResponse:
         payload = openai_codec.build_chat_payload(request, self.checkpoint, self._defaults())
         body = self._http.request_json("POST", "/v1/chat/completions", json=payload)
-        return openai_codec.parse_chat_response(body, self._http._ctx("/v1/chat/completions"))
+        return openai_codec.parse_chat_response(body, self._http.context_for("/v1/chat/completions"))
 
     def _chat_stream(self, request: ChatRequest) -> Iterator[ChatChunk]:
         payload = openai_codec.build_chat_payload(request, self.checkpoint, self._defaults())
         lines = self._http.stream_lines("POST", "/v1/chat/completions", json=payload)
-        return openai_codec.parse_chat_stream(iter_sse_data(lines), self._http._ctx("/v1/chat/completions"))
+        return openai_codec.parse_chat_stream(iter_sse_data(lines), self._http.context_for("/v1/chat/completions"))
 
     def _embed(self, request: EmbeddingRequest) -> EmbeddingResponse:
         path = "/v1/embeddings"
@@ -98,9 +98,9 @@ class GenericHTTPClient(ModelClient):
             vectors = [row["embedding"] for row in rows]
             response = EmbeddingResponse(embeddings=vectors, model=body.get("model", ""), usage=body.get("usage"))
         except (KeyError, TypeError, ValueError):
-            raise MalformedResponseError("an embedding list object", body, **self._http._ctx(path)) from None
+            raise MalformedResponseError("an embedding list object", body, **self._http.context_for(path)) from None
         if response.embeddings.shape[0] != len(request.texts):
-            raise MalformedResponseError(f"{len(request.texts)} embeddings", f"{response.embeddings.shape[0]}", **self._http._ctx(path))
+            raise MalformedResponseError(f"{len(request.texts)} embeddings", f"{response.embeddings.shape[0]}", **self._http.context_for(path))
         return response
 
     def _speech(self, request: SpeechRequest) -> SpeechResponse:
@@ -110,7 +110,7 @@ class GenericHTTPClient(ModelClient):
                    "response_format": request.response_format}
         response = self._http.request("POST", "/v1/audio/speech", json=payload)
         if not response.content:
-            raise MalformedResponseError("audio bytes", "an empty body", **self._http._ctx("/v1/audio/speech"))
+            raise MalformedResponseError("audio bytes", "an empty body", **self._http.context_for("/v1/audio/speech"))
         mime = response.headers.get("content-type", AUDIO_MIME[request.response_format]).split(";")[0]
         return SpeechResponse(audio=response.content, mime_type=mime)
 
@@ -128,5 +128,5 @@ class GenericHTTPClient(ModelClient):
         files = {"file": (request.filename, request.audio, "application/octet-stream")}
         body = self._http.request_json("POST", path, data=data, files=files)
         if not isinstance(body, dict) or not isinstance(body.get("text"), str):
-            raise MalformedResponseError("a transcription object with 'text'", body, **self._http._ctx(path))
+            raise MalformedResponseError("a transcription object with 'text'", body, **self._http.context_for(path))
         return TranscriptionResponse(text=body["text"], language=body.get("language"))

@@ -52,12 +52,12 @@ class HTTPTransport:
             self._client.close()
             self._client = None
 
-    def _ctx(self, path: str) -> dict[str, str | None]:
+    def context_for(self, path: str) -> dict[str, str | None]:
         return {**self.context, "url": f"{self.base_url}{path}"}
 
     @contextlib.contextmanager
     def _mapped(self, path: str) -> Iterator[None]:
-        ctx = self._ctx(path)
+        ctx = self.context_for(path)
         try:
             yield
         except httpx.ConnectTimeout:
@@ -80,7 +80,7 @@ class HTTPTransport:
                 body = response.text
             except (httpx.HTTPError, UnicodeDecodeError):
                 body = ""
-            raise ModelServerError("server returned an error status", status=response.status_code, body=body, **self._ctx(path))
+            raise ModelServerError("server returned an error status", status=response.status_code, body=body, **self.context_for(path))
 
     def request(self, method: str, path: str, *, timeout: float | None = None, **kwargs: Any) -> httpx.Response:
         """Send a request; returns the response only if its status is < 400."""
@@ -97,7 +97,7 @@ class HTTPTransport:
         try:
             return response.json()
         except (ValueError, UnicodeDecodeError):
-            raise MalformedResponseError("a JSON body", response.text[:300], **self._ctx(path)) from None
+            raise MalformedResponseError("a JSON body", response.text[:300], **self.context_for(path)) from None
 
     def stream_lines(self, method: str, path: str, **kwargs: Any) -> Iterator[str]:
         """Yield the response body line by line (for SSE and NDJSON), errors typed."""
@@ -125,7 +125,7 @@ class HTTPTransport:
             try:
                 obj = json.loads(line)
             except ValueError:
-                raise MalformedResponseError("an NDJSON line holding a JSON object", line, **self._ctx(path)) from None
+                raise MalformedResponseError("an NDJSON line holding a JSON object", line, **self.context_for(path)) from None
             if not isinstance(obj, dict):
-                raise MalformedResponseError("an NDJSON line holding a JSON object", line, **self._ctx(path))
+                raise MalformedResponseError("an NDJSON line holding a JSON object", line, **self.context_for(path))
             yield obj

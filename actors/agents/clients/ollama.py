@@ -42,7 +42,7 @@ class OllamaClient(ModelClient):
     def _check_connection(self) -> None:
         body = self._http.request_json("GET", "/api/tags")
         if not isinstance(body, dict) or not isinstance(body.get("models"), list):
-            raise MalformedResponseError("an /api/tags object with 'models'", body, **self._http._ctx("/api/tags"))
+            raise MalformedResponseError("an /api/tags object with 'models'", body, **self._http.context_for("/api/tags"))
 
     def list_models(self) -> list[str]:
         body = self._http.request_json("GET", "/api/tags")
@@ -54,10 +54,10 @@ class OllamaClient(ModelClient):
             body = self._http.request_json("POST", "/api/show", json={"model": self.checkpoint})
         except ModelServerError as exc:
             if exc.status == 404:
-                raise ModelNotFoundError(f"Ollama does not have {self.checkpoint!r}", **self._http._ctx("/api/show")) from None
+                raise ModelNotFoundError(f"Ollama does not have {self.checkpoint!r}", **self._http.context_for("/api/show")) from None
             raise
         if not isinstance(body, dict):
-            raise MalformedResponseError("an /api/show object", body, **self._http._ctx("/api/show"))
+            raise MalformedResponseError("an /api/show object", body, **self._http.context_for("/api/show"))
         return body
 
     def pull(self) -> None:
@@ -66,7 +66,7 @@ class OllamaClient(ModelClient):
         body = self._http.request_json("POST", path, json={"model": self.checkpoint, "stream": False},
                                        timeout=self.init_timeout or max(self.inference_timeout, 600.0))
         if not isinstance(body, dict) or body.get("status") != "success":
-            raise ModelNotFoundError(f"pull of {self.checkpoint!r} failed: {body!r}", **self._http._ctx(path))
+            raise ModelNotFoundError(f"pull of {self.checkpoint!r} failed: {body!r}", **self._http.context_for(path))
 
     def preload(self) -> None:
         """Load the model into memory now and keep it for ``model.keep_alive``."""
@@ -96,11 +96,11 @@ class OllamaClient(ModelClient):
 
     def _chat(self, request: ChatRequest) -> ChatResponse:
         body = self._http.request_json("POST", "/api/chat", json=self._payload(request))
-        return ollama_codec.parse_chat_response(body, self._http._ctx("/api/chat"))
+        return ollama_codec.parse_chat_response(body, self._http.context_for("/api/chat"))
 
     def _chat_stream(self, request: ChatRequest) -> Iterator[ChatChunk]:
         lines = self._http.stream_lines("POST", "/api/chat", json=self._payload(request))
-        ctx = self._http._ctx("/api/chat")
+        ctx = self._http.context_for("/api/chat")
         return ollama_codec.parse_chat_stream(self._http.json_lines(lines, "/api/chat"), ctx)
 
     def _embed(self, request: EmbeddingRequest) -> EmbeddingResponse:
@@ -110,7 +110,7 @@ class OllamaClient(ModelClient):
         try:
             response = EmbeddingResponse(embeddings=body["embeddings"], model=body.get("model", ""))
         except (KeyError, TypeError, ValueError):
-            raise MalformedResponseError("an /api/embed object with 'embeddings'", body, **self._http._ctx(path)) from None
+            raise MalformedResponseError("an /api/embed object with 'embeddings'", body, **self._http.context_for(path)) from None
         if response.embeddings.shape[0] != len(request.texts):
-            raise MalformedResponseError(f"{len(request.texts)} embeddings", f"{response.embeddings.shape[0]}", **self._http._ctx(path))
+            raise MalformedResponseError(f"{len(request.texts)} embeddings", f"{response.embeddings.shape[0]}", **self._http.context_for(path))
         return response

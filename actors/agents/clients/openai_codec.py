@@ -32,6 +32,7 @@ __all__ = [
     "chat_request_from_openai",
     "chat_response_to_openai",
     "chunk_to_openai",
+    "completion_id",
 ]
 
 Context = dict[str, Any]
@@ -245,11 +246,11 @@ def chat_request_from_openai(body: dict[str, Any]) -> tuple[str, ChatRequest]:
     return str(body.get("model", "")), request
 
 
-def _completion_id() -> str:
+def completion_id() -> str:
     return f"chatcmpl-{uuid.uuid4().hex[:24]}"
 
 
-def chat_response_to_openai(response: ChatResponse, completion_id: str | None = None) -> dict[str, Any]:
+def chat_response_to_openai(response: ChatResponse, response_id: str | None = None) -> dict[str, Any]:
     message: dict[str, Any] = {"role": "assistant", "content": response.message.content}
     if response.message.tool_calls:
         message["tool_calls"] = [
@@ -257,7 +258,7 @@ def chat_response_to_openai(response: ChatResponse, completion_id: str | None = 
             for c in response.message.tool_calls
         ]
     return {
-        "id": completion_id or _completion_id(),
+        "id": response_id or completion_id(),
         "object": "chat.completion",
         "created": int(time.time()),
         "model": response.model,

@@ -39,14 +39,14 @@ class RoboMLHTTPClient(ModelClient):
         status = self.status()
         if status != "READY":
             raise ModelServerError(f"node {self.model_name!r} is {status} after initialization", status=500,
-                                   **self._http._ctx(f"/{self.model_name}/get_status"))
+                                   **self._http.context_for(f"/{self.model_name}/get_status"))
 
     def status(self) -> str:
         """The node's status on the server: LOADED, INITIALIZING, READY or INITIALIZATION_ERROR."""
         path = f"/{self.model_name}/get_status"
         status = self._http.request_json("GET", path)
         if not isinstance(status, str):
-            raise MalformedResponseError("a status string", status, **self._http._ctx(path))
+            raise MalformedResponseError("a status string", status, **self._http.context_for(path))
         return status
 
     def _deinitialize(self) -> None:
@@ -58,7 +58,7 @@ class RoboMLHTTPClient(ModelClient):
         return f"/{self.model_name}/inference"
 
     def _run(self, request: Any) -> Any:
-        ctx = self._http._ctx(self._inference_path)
+        ctx = self._http.context_for(self._inference_path)
         kind = roboml_codec.kind_of(request, self.model_type, ctx)
         body = self._http.request_json("POST", self._inference_path, json=roboml_codec.build_payload(request, kind))
         return roboml_codec.parse_output(body, kind, self.model.checkpoint, ctx)
@@ -71,7 +71,7 @@ class RoboMLHTTPClient(ModelClient):
         return super()._other_inference(request)
 
     def _chat_stream(self, request: ChatRequest) -> Iterator[ChatChunk]:
-        ctx = self._http._ctx(self._inference_path)
+        ctx = self._http.context_for(self._inference_path)
         kind = roboml_codec.kind_of(request, self.model_type, ctx)
         pieces = self._http.stream_text("POST", self._inference_path, json=roboml_codec.build_payload(request, kind))
 

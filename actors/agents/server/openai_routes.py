@@ -41,7 +41,7 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
             return web.json_response(openai_codec.chat_response_to_openai(response))
         stream = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"})
         await stream.prepare(request)
-        cid, created = openai_codec._completion_id(), int(time.time())
+        cid, created = openai_codec.completion_id(), int(time.time())
 
         async def send(delta: dict, finish: str | None = None, usage: dict | None = None) -> None:
             chunk = openai_codec.chunk_to_openai(cid, model, delta, finish, usage, created)
