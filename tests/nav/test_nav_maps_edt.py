@@ -86,3 +86,15 @@ def test_distance_map_in_metres_and_unknown_option():
     assert d[5, 8] == pytest.approx(0.6)
     assert d[0, 0] == pytest.approx(0.2 * np.hypot(5, 5))
     assert distance_map(grid, unknown_is_occupied=True)[0, 0] == 0.0
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_1d_transform_matches_brute_force_with_gaps(seed):
+    rng = np.random.default_rng(100 + seed)
+    f = rng.integers(0, 60, size=(37, 41)).astype(float)
+    f[rng.random(f.shape) < 0.6] = np.inf
+    f[3] = np.inf  # a line without any sample stays inf
+    q = np.arange(f.shape[1])
+    want = np.min((q[:, None] - q[None, :])[None] ** 2 + f[:, None, :], axis=2)
+    got = squared_distance_transform_1d(f)
+    assert np.array_equal(got, want)

@@ -29,48 +29,58 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
     n_lines, n = f.shape
     if n == 0 or n_lines == 0:
         return f.copy()
-    rows = np.arange(n_lines)
-    # Envelope per line: parabola vertices v[:, :k+1], boundaries z[:, :k+2]; k = -1 when empty.
-    v = np.zeros((n_lines, n), dtype=np.int64)
-    z = np.full((n_lines, n + 1), np.inf)
+    stride = n + 1
+    base = np.arange(n_lines, dtype=np.int64) * stride
+    all_lines = np.arange(n_lines)
+    # Envelope of each line, stored flat (line * stride + slot) because flat gathers are the
+    # cheapest numpy indexing: vertex v, parabola constant h = f(v) + v^2, left boundary z.
+    # k is the index of each line's last envelope slot (-1 while the line is empty).
+    v = np.zeros(n_lines * stride, dtype=np.int64)
+    h = np.zeros(n_lines * stride)
+    z = np.full(n_lines * stride, np.inf)
     k = np.full(n_lines, -1, dtype=np.int64)
     finite = np.isfinite(f)
+    s_out = np.empty(n_lines)
     for q in range(n):
-        fq = f[:, q]
-        active = finite[:, q]
-        if not active.any():
-            continue
-        first = active & (k < 0)
-        if first.any():
-            r = rows[first]
-            k[r] = 0
-            v[r, 0] = q
-            z[r, 0] = -np.inf
-            z[r, 1] = np.inf
-        cand = rows[active & ~first]
-        if cand.size == 0:
-            continue
-        fq_c = fq[cand] + q * q
-        # Pop envelope parabolas hidden by the new one; lines pop independently, so iterate
-        # only over the lines that still pop.
-        todo = cand
-        todo_fq = fq_c
-        s_final = np.empty(n_lines)
-        while todo.size:
-            kv = k[todo]
-            vk = v[todo, kv]
-            s = (todo_fq - (f[todo, vk] + vk * vk)) / (2.0 * (q - vk))
-            pop = s <= z[todo, kv]
-            done = ~pop
-            s_final[todo[done]] = s[done]
-            k[todo[pop]] -= 1
-            todo = todo[pop]
-            todo_fq = todo_fq[pop]
+        act = finite[:, q]
+        hq_all = f[:, q] + q * q
+        if act.all() and k.min() >= 0:
+            cand, hq = all_lines, hq_all  # the common case in the row pass: no subsetting
+        else:
+            first = act & (k < 0)
+            if first.any():
+                r = base[first]
+                k[first] = 0
+                v[r] = q
+                h[r] = hq_all[first]
+                z[r] = -np.inf
+                z[r + 1] = np.inf
+            sel = act & ~first
+            if not sel.any():
+                continue
+            cand, hq = all_lines[sel], hq_all[sel]
+        # Pop the parabolas the new one hides; lines pop independently, so each round only
+        # carries the lines that popped in the previous one.
+        todo, t_hq, t_base, kk = cand, hq, base[cand], k[cand]
+        while True:
+            idx = t_base + kk
+            vk = v[idx]
+            s = (t_hq - h[idx]) / (2.0 * (q - vk))
+            pop = s <= z[idx]
+            if not pop.any():
+                s_out[todo] = s
+                k[todo] = kk
+                break
+            keep = ~pop
+            s_out[todo[keep]] = s[keep]
+            k[todo[keep]] = kk[keep]
+            todo, t_hq, t_base, kk = todo[pop], t_hq[pop], t_base[pop], kk[pop] - 1
         k[cand] += 1
-        kc = k[cand]
-        v[cand, kc] = q
-        z[cand, kc] = s_final[cand]
-        z[cand, kc + 1] = np.inf
+        idx = base[cand] + k[cand]
+        v[idx] = q
+        h[idx] = hq
+        z[idx] = s_out[cand]
+        z[idx + 1] = np.inf
     # Read the envelope back: position q belongs to parabola j where z[j] <= q < z[j+1]
     # (ties go to the lower j, as in the original algorithm). One global searchsorted does it
     # for every line: boundaries are offset by line so they form one sorted array.
@@ -78,8 +88,10 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
     has = k >= 0
     if not has.any():
         return out
-    r = rows[has]
+    r = np.nonzero(has)[0]
     kk = k[r]
+    z = z.reshape(n_lines, stride)
+    v = v.reshape(n_lines, stride)
     span = float(n + 3)
     # Inner boundaries z[1..k] of each line, clipped into [-1, n+1] so offsets keep them apart.
     width = int(kk.max())
@@ -96,22 +108,6 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
     vj = np.take_along_axis(v[r], j, axis=1)
     q = np.arange(n)[None, :]
     out[r] = (q - vj) ** 2 + np.take_along_axis(f[r], vj, axis=1)
-    return out
-    r = rows[has]
-    j = np.zeros(r.size, dtype=np.int64)
-    zz = z[r]
-    vv = v[r]
-    ff = f[r]
-    ridx = np.arange(r.size)
-    for q in range(n):
-        # Boundaries only increase, so advancing j monotonically is enough (amortised O(n)).
-        while True:
-            adv = zz[ridx, j + 1] < q
-            if not adv.any():
-                break
-            j = j + adv
-        vj = vv[ridx, j]
-        out[r, q] = (q - vj) ** 2 + ff[ridx, vj]
     return out
 
 
