@@ -134,6 +134,10 @@ def test_goal_without_heading_accepts_any_yaw(rooms):
     result = planner.plan(SW_ROOM, (1.5, -3.0))
     assert result.solved
     assert math.hypot(result.path[-1, 0] - 1.5, result.path[-1, 1] + 3.0) <= 0.01
+    # In plain sight the robot arrives facing its direction of travel.
+    straight = planner.plan(SW_ROOM, (-1.0, -3.0))
+    assert straight.message == "straight line"
+    assert straight.path[-1, 2] == pytest.approx(math.atan2(1.0, 3.0))
 
 
 def test_unreachable_goal_fails_cleanly_within_the_timeout(rooms):

@@ -185,9 +185,14 @@ class OMPLGeometricPlanner:
 
         if not checker.is_valid_exact(sx, sy, syaw):
             return failed("INVALID_START", "the robot collides with the map at the start pose")
-        goal_yaws = [gyaw] if gyaw is not None else list(
-            wrap_angle(np.arange(ANY_HEADING_SAMPLES) * 2.0 * math.pi / ANY_HEADING_SAMPLES)
-        )
+        if gyaw is not None:
+            goal_yaws = [gyaw]
+        else:
+            # Any heading will do; offer the ones closest to the direction of travel first so
+            # the straight-line case arrives facing forward.
+            travel = math.atan2(gy - sy, gx - sx)
+            candidates = wrap_angle(travel + np.arange(ANY_HEADING_SAMPLES) * 2.0 * math.pi / ANY_HEADING_SAMPLES)
+            goal_yaws = list(candidates[np.argsort(np.abs(wrap_angle(candidates - travel)), kind="stable")])
         goal_yaws = [float(a) for a in goal_yaws if checker.is_valid_exact(gx, gy, float(a))]
         if not goal_yaws:
             return failed("INVALID_GOAL", "the robot collides with the map at the goal")
