@@ -39,7 +39,8 @@ class HitGrid:
             return 0
         rows, cols, inside = self.cell_of(points)
         rows, cols, pts = rows[inside], cols[inside], np.asarray(points)[inside]
-        new = int(np.count_nonzero(~self.occupied[rows, cols]))
+        fresh = ~self.occupied[rows, cols]
+        new = len(np.unique(rows[fresh] * self.shape[1] + cols[fresh]))  # one batch may hit a cell twice
         self.occupied[rows, cols] = True
         self.hit_xy[rows, cols] = pts
         if new:

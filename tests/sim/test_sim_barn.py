@@ -1,0 +1,101 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from emos.actors.sim.barn import BarnRules, run_episode, summarize
+from emos.actors.sim.barn_worlds import BarnWorld, barn_metric, load_barn_worlds
+
+
+class Straight:
+    """Scripted navigator: drive straight ahead at a fixed speed."""
+
+    name = "straight"
+    plan = None
+
+    def __init__(self, speed):
+        self.speed = speed
+
+    def reset(self, task):
+        self.task = task
+
+    def step(self, obs):
+        return (self.speed, 0.0, 0.0)
+
+
+def _empty(path_length, cylinders=()):
+    return BarnWorld(idx=42, cylinders=np.asarray(cylinders, dtype=float).reshape(-1, 2), path_length=path_length)
+
+
+@pytest.mark.parametrize("path_length", [1.0, 4.0, 10.0])
+def test_a_scripted_run_is_scored_by_the_official_formula(path_length):
+    r = run_episode(_empty(path_length), Straight(1.0))
+    # 9 m from the start (y = 3) to the goal circle (y = 12) at 1 m/s, plus the short ramp-up.
+    assert r.success and not r.collided and not r.timeout
+    assert r.time_s == pytest.approx(9.03, abs=0.05)
+    t_opt = path_length / 2.0
+    assert r.metric == pytest.approx(t_opt / min(max(r.time_s, 2 * t_opt), 8 * t_opt))
+    assert r.metric == pytest.approx(barn_metric(True, r.time_s, path_length))
+
+
+def test_official_formula_clips_both_ways():
+    assert barn_metric(True, 1.0, 10.0) == pytest.approx(0.5)  # faster than 2T still scores 0.5
+    assert barn_metric(True, 100.0, 10.0) == pytest.approx(1 / 8)  # slower than 8T floors at 1/8
+    assert barn_metric(True, 20.0, 10.0) == pytest.approx(0.25)
+    assert barn_metric(False, 20.0, 10.0) == 0.0
+
+
+def test_hitting_an_obstacle_is_a_failure_and_stops_the_run():
+    r = run_episode(_empty(10.0, [[-2.25, 6.0]]), Straight(1.0))
+    assert r.collided and not r.success and not r.timeout
+    assert r.metric == 0.0
+    assert r.time_s < 3.0  # ended at the collision, not at the time limit
+
+
+def test_not_arriving_in_time_is_a_timeout():
+    r = run_episode(_empty(10.0), Straight(0.0), BarnRules(time_limit=2.0))
+    assert r.timeout and not r.success and not r.collided
+    assert r.time_s == pytest.approx(2.0, abs=0.02)
+
+
+def test_summary_rates():
+    res = [run_episode(_empty(10.0), Straight(1.0)), run_episode(_empty(10.0), Straight(0.0), BarnRules(time_limit=1.0))]
+    s = summarize(res)
+    assert s == {"success_rate": 0.5, "collision_rate": 0.0, "timeout_rate": 0.5, "mean_metric": 0.25}
+
+
+def test_builtin_navigator_solves_a_real_barn_world():
+    from emos.actors.sim.navigation import GridNavigator
+
+    world = load_barn_worlds()[3]
+    r = run_episode(world, GridNavigator())
+    assert r.success, r.reason
+    assert r.metric > 0.3
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "barn", *args],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_cli_json_output_has_exactly_the_documented_shape(tmp_path):
+    path = tmp_path / "w.json"
+    path.write_text(json.dumps({"5": {"cylinders": [], "path_length": 10.0},
+                                "6": {"cylinders": [[-2.25, y] for y in np.arange(4.2, 6, 0.15).tolist()], "path_length": 12.0}}))
+    out = _cli("--worlds-file", str(path), "--worlds", "5-6", "--json", "--png", str(tmp_path / "png"))
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)  # nothing but JSON on stdout
+    assert set(data) == {"worlds", "summary"}
+    assert [w["idx"] for w in data["worlds"]] == [5, 6]
+    assert set(data["worlds"][0]) == {"idx", "success", "collided", "timeout", "time_s", "metric"}
+    assert set(data["summary"]) == {"success_rate", "collision_rate", "timeout_rate", "mean_metric"}
+    assert data["worlds"][0]["success"] is True
+    assert (tmp_path / "png" / "barn_005.png").is_file() and (tmp_path / "png" / "barn_006.png").is_file()
+
+
+def test_cli_reports_a_missing_world_file_clearly(tmp_path):
+    out = _cli("--worlds-file", str(tmp_path / "missing.json"))
+    assert out.returncode == 2
+    assert "BARN world file not found" in out.stderr

@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+
+from emos.actors.sim import Box, World, render_topdown
+from emos.actors.sim.navigation.costfield import CostField, lattice_edges
+from emos.actors.sim.navigation.grid import HitGrid
+
+
+def test_topdown_png_shows_obstacles_trail_plan_and_goal(tmp_path, make_world):
+    world = make_world()
+    world.add(Box((2.0, 0.0), (1.0, 1.0)))
+    robot = world.add_robot("jackal", (-2.0, 0.0, 0.0))
+    robot.command(1.0)
+    world.step(150)
+    path = tmp_path / "pic.png"
+    img = render_topdown(world, path, plan=[(-2, -1), (3, -1)], goal=(3.0, 2.0), goal_radius=0.5,
+                         bounds=(-3, -3, 4, 3), pixels_per_m=20)
+    assert path.is_file()
+    arr = np.asarray(img)
+    assert arr.shape == (120, 140, 3)
+
+    def at(x, y):
+        return arr[int((3 - y) * 20), int((x + 3) * 20)]
+
+    assert at(2.0, 0.0).tolist() == [90, 90, 100]  # obstacle
+    assert at(-1.5, 0.0).tolist() == [30, 90, 220]  # trail
+    assert at(0.0, -1.0).tolist() == [40, 170, 60]  # plan
+    assert at(3.0, 2.0).tolist() == [220, 40, 40]  # goal cross
+
+
+def test_costfield_routes_around_a_wall_through_its_gap():
+    shape = (60, 60)
+    occ = np.zeros(shape, dtype=bool)
+    occ[30, :] = True
+    occ[30, 45:50] = False  # a 5-cell gap
+    field = CostField(shape, 0.1, lethal_radius=0.15, inflation_radius=0.5)
+    field.compute(occ, (55, 10))
+    path = np.array(field.path_from((5, 10)))
+    assert tuple(path[0]) == (5, 10) and tuple(path[-1]) == (55, 10)
+    crossing = path[path[:, 0] == 30]
+    assert np.all((crossing[:, 1] >= 45) & (crossing[:, 1] < 50))
+    occ[30, 45:50] = True  # closed: unreachable
+    field.compute(occ, (55, 10))
+    assert field.path_from((5, 10)) == []
+    assert len(lattice_edges((3, 4))[0]) == 29
+
+
+def test_hit_grid_keeps_exact_points():
+    grid = HitGrid((0, 0, 2, 2), 0.1)
+    assert grid.insert(np.array([[0.51, 0.52], [0.53, 0.54], [5.0, 5.0]])) == 1  # same cell, one outside
+    pts = grid.points_near((0.5, 0.5), 0.2)
+    assert pts.tolist() == [[0.53, 0.54]]
+    with pytest.raises(ValueError, match="HitGrid"):
+        HitGrid((0, 0, 0, 1), 0.1)
