@@ -67,11 +67,14 @@ class Encoded:
         _U32.pack_into(buf, 0, meta_len)
         buf[4 : 4 + meta_len] = self.meta
         pos = self.header_bytes
-        for arr in self.arrays:
-            n = arr.nbytes
-            if n:
-                buf[pos : pos + n] = arr.reshape(-1).view(np.uint8)
-            pos += _align(n)
+        if self.arrays:
+            # One numpy view of the destination; np.copyto is the cheapest bulk copy into it.
+            dst = np.frombuffer(buf, dtype=np.uint8)
+            for arr in self.arrays:
+                n = arr.nbytes
+                if n:
+                    np.copyto(dst[pos : pos + n], arr.reshape(-1).view(np.uint8))
+                pos += _align(n)
         return pos
 
     def to_bytes(self) -> bytes:

@@ -23,6 +23,7 @@ log = logging.getLogger("emos.transport")
 
 DEFAULT_CAPACITY = 64 * 1024
 MAX_MESSAGE_BYTES = 512 * 1024 * 1024
+_MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 
 
 class TopicTypeError(TypeError):
@@ -212,6 +213,7 @@ class Subscriber:
         self.dropped = 0
         self._created_ns = time.time_ns()
         self._shm_mtime = -1
+        self._scanned_at_ns = 0
         self._prefix = f"{ctx.shm_prefix}{encode_name(topic)}."
         if waker is not None:
             self._interest = self.ctx.subscriber_dir(topic) / f"{waker.token:016x}"
@@ -223,9 +225,13 @@ class Subscriber:
     # -- discovery --------------------------------------------------------------------------------
     def rescan(self, force: bool = False) -> None:
         mtime = os.stat(SHM_DIR).st_mtime_ns
-        if not force and mtime == self._shm_mtime:
+        # An unchanged directory mtime proves nothing new appeared only if our last scan came
+        # clearly after that mtime: tmpfs timestamps are coarse (a jiffy), so a segment created
+        # in the same tick as our scan leaves the mtime unchanged.
+        if not force and mtime == self._shm_mtime and self._scanned_at_ns - mtime > _MTIME_GRANULARITY_NS:
             return
         self._shm_mtime = mtime
+        self._scanned_at_ns = time.time_ns()
         latest: dict[str, tuple[int, str]] = {}
         for name in os.listdir(SHM_DIR):
             if not name.startswith(self._prefix):

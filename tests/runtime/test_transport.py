@@ -202,3 +202,14 @@ def test_segments_of_dead_runs_are_swept(tmp_path):
     assert run_id in sweep_stale_runs()
     assert not any(n.startswith(prefix) for n in os.listdir(SHM_DIR))
     assert not os.path.exists(run_dir)
+
+
+def test_rings_created_right_after_a_scan_are_still_found(ctx):
+    # Discovery regression test. On kernels with coarse tmpfs timestamps (one jiffy) the ring
+    # below is created in the same tick as the subscriber's scan and the directory mtime does
+    # not change; Subscriber.rescan must not trust it then. Kernels with fine-grained
+    # timestamps (this CI machine) exercise only the ordinary path.
+    for i in range(20):
+        sub = Subscriber(ctx, f"/tick{i}", M.Int64)
+        Publisher(ctx, f"/tick{i}", M.Int64, publisher_id="p").publish(M.Int64(data=i))
+        assert [m.data for m in sub.take()] == [i]
