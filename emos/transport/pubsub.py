@@ -147,9 +147,12 @@ class Publisher:
         finally:
             buf.release()
         ring.commit(n, nbytes, stamp)
-        if ring.waiters_version != self._waiters_version:
+        if ring.q[R._WAITERS_VER] != self._waiters_version:
             self._sync_waiters()
-        self._wake()
+        if self.sender.fds:
+            dead = self.sender.wake()
+            for token in dead:
+                self._drop_waiter(token)
         return n
 
     def _sync_waiters(self) -> None:
