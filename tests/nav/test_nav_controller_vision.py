@@ -21,7 +21,7 @@ from .sim2d import World, make_robot
 K = CameraIntrinsics(fx=500.0, fy=500.0, cx=320.0, cy=240.0)
 W, H = 640, 480
 CAM_Z = 0.5  # camera height above the floor
-PERSON = (0.5, 1.6)  # width, height (m)
+PERSON = (0.5, 1.0)  # width, height (m): fits the image from 1 m on
 
 
 def camera(pose, target):

@@ -4,6 +4,9 @@ from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
 from .stanley import Stanley, StanleyConfig
+from .vision_common import BoundingBox, CameraIntrinsics
+from .vision_rgb import VisionRGBFollower, VisionRGBFollowerConfig
+from .vision_rgbd import VisionRGBDFollower, VisionRGBDFollowerConfig
 from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 
 __all__ = [
@@ -20,5 +23,11 @@ __all__ = [
     "DWAConfig",
     "Stanley",
     "StanleyConfig",
+    "BoundingBox",
+    "CameraIntrinsics",
+    "VisionRGBFollower",
+    "VisionRGBFollowerConfig",
+    "VisionRGBDFollower",
+    "VisionRGBDFollowerConfig",
     "obstacle_points",
 ]

@@ -21,7 +21,8 @@ from ..kinematics import dynamic_window, feasible_commands, rollout, wrap_angle
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig, field, setters
 from .follower import PathFollower
-from .clearance import nearby_obstacles, voxel_downsample
+from .clearance import voxel_downsample
+from .detour import detour_reference
 from .sensors import ObstacleInput, sensor_offset
 
 __all__ = ["DWAConfig", "DWA", "dwa_samples"]
@@ -88,73 +89,18 @@ class DWA(PathFollower):
         self._detour_side = 1.0  # left first on a tie; then sticky (see _local_segment)
 
     def _local_segment(self, obstacles: np.ndarray) -> np.ndarray:
-        """The part of the reference path the costs compare against.
-
-        Normally the next ``max_vel * prediction_horizon`` metres. Path points that the robot
-        cannot occupy (an obstacle within its radius) are removed and, if the path is blocked,
-        the segment extends to the first free point behind the blockage, so the goal term pulls
-        the robot around the obstacle instead of into a stop in front of it.
-        """
+        """The part of the reference path the costs compare against: the next
+        ``max_vel * prediction_horizon`` metres, detoured around blocking obstacles."""
         assert self.path is not None and self.progress is not None
         robot = self.robot
         reach = robot.ctrl_vx_limits.max_vel * self.config.prediction_horizon + robot.radius
+        i0 = self.progress.index
         stop = self.progress.point_ahead(reach) + 1
-        seg = self.path.points[self.progress.index:stop]
-        if obstacles.shape[0] == 0:
-            return seg
         far = self.progress.point_ahead(reach + 4.0 * robot.radius + 1.0) + 1
-        ext = self.path.points[self.progress.index:far]
-        near = nearby_obstacles(obstacles, ext[0], float(self.path.s[far - 1] - self.path.s[self.progress.index]) + robot.radius + 0.1)
-        if near.shape[0] == 0:
-            return seg
-        clearance_needed = robot.radius + self.config.safety_margin + 0.05
-        free = self._free(ext, near, clearance_needed)
-        n = seg.shape[0]
-        if np.all(free[:n]):
-            return seg
-        # Extend to the first free point behind the blockage, and push the blocked points
-        # sideways (one side for the whole blockage) until the robot would fit there.
-        first_blocked = int(np.argmin(free[:n]))
-        after = np.nonzero(free[first_blocked:])[0]
-        end = first_blocked + int(after[0]) if after.size else ext.shape[0] - 1
-        seg = ext[: end + 1].copy()
-        blocked = ~free[: end + 1]
-        yaw_all = self.path.yaw[self.progress.index:self.progress.index + end + 1]
-        normal_all = np.stack([-np.sin(yaw_all), np.cos(yaw_all)], axis=-1)
-        normal = normal_all[blocked]
-        shifts = np.arange(1, 41) * 0.05
-        need: dict[float, float] = {}
-        for side in (1.0, -1.0):
-            cand = seg[blocked][:, None, :] + side * shifts[None, :, None] * normal[:, None, :]
-            ok = self._free(cand.reshape(-1, 2), near, clearance_needed).reshape(cand.shape[:2])
-            if np.all(ok.any(axis=1)):
-                need[side] = float(shifts[np.argmax(ok, axis=1)].max())
-        best_side, best_shift = 1.0, None
-        if need:
-            # Keep the side chosen before unless it became clearly worse: flipping sides
-            # while passing an obstacle is how a reactive planner ends up dithering.
-            prefer = self._detour_side
-            best_side = min(need, key=lambda sd: need[sd] - (0.25 if sd == prefer else 0.0))
-            best_shift = need[best_side]
-            self._detour_side = best_side
-        if best_shift is None:  # no way around within 2 m: track up to the blockage only
-            return seg[: max(first_blocked, 1)]
-        # Full offset on the blocked points, ramping in linearly over ``ramp`` metres before
-        # them: a smooth detour whose path-distance cost pulls the robot aside early.
-        s_all = self.path.s[self.progress.index:self.progress.index + end + 1]
-        s_block = s_all[blocked]
-        ramp = 2.0 * robot.radius + 0.5
-        gap = np.maximum(s_block.min() - s_all, 0.0) + np.maximum(s_all - s_block.max(), 0.0)
-        weight = np.where(blocked, 1.0, np.clip(1.0 - gap / ramp, 0.0, 1.0))
-        seg += (best_side * best_shift * weight)[:, None] * normal_all
-        # The ramped detour must itself be passable; drop points that are not.
-        ok = self._free(seg, near, robot.radius + self.config.safety_margin)
-        return seg[ok] if np.count_nonzero(ok) >= 2 else seg
-
-    @staticmethod
-    def _free(points: np.ndarray, obstacles: np.ndarray, clearance: float) -> np.ndarray:
-        d2 = ((points[:, None, :] - obstacles[None, :, :]) ** 2).sum(-1).min(axis=1)
-        return d2 > clearance * clearance
+        seg, self._detour_side = detour_reference(
+            self.path.points[i0:far], self.path.yaw[i0:far], self.path.s[i0:far], stop - i0,
+            obstacles, robot.radius, self.config.safety_margin, self._detour_side)
+        return seg
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
         pose = np.asarray(pose, dtype=np.float64)
