@@ -39,12 +39,24 @@ RELIABLE, BEST_EFFORT = ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFOR
 VOLATILE, TRANSIENT_LOCAL = DurabilityPolicy.VOLATILE, DurabilityPolicy.TRANSIENT_LOCAL
 
 
+def _history(value: object) -> HistoryPolicy:
+    return enum_converter(HistoryPolicy)(value)
+
+
+def _reliability(value: object) -> ReliabilityPolicy:
+    return enum_converter(ReliabilityPolicy)(value)
+
+
+def _durability(value: object) -> DurabilityPolicy:
+    return enum_converter(DurabilityPolicy)(value)
+
+
 @define(kw_only=True)
 class QoSConfig(BaseAttrs):
-    history: HistoryPolicy = field(default=HistoryPolicy.KEEP_LAST, converter=enum_converter(HistoryPolicy))
+    history: HistoryPolicy = field(default=HistoryPolicy.KEEP_LAST, converter=_history)
     queue_size: int = field(default=10, validator=in_range(min_value=1, max_value=10_000))
-    reliability: ReliabilityPolicy = field(default=ReliabilityPolicy.RELIABLE, converter=enum_converter(ReliabilityPolicy))
-    durability: DurabilityPolicy = field(default=DurabilityPolicy.VOLATILE, converter=enum_converter(DurabilityPolicy))
+    reliability: ReliabilityPolicy = field(default=ReliabilityPolicy.RELIABLE, converter=_reliability)
+    durability: DurabilityPolicy = field(default=DurabilityPolicy.VOLATILE, converter=_durability)
 
     @property
     def transient_local(self) -> bool:

@@ -150,7 +150,7 @@ class BaseComponent:
             self.config.loop_rate = 1.0 / float(value)
             self._run_type = ComponentRunType.TIMED
             return
-        topics = [value] if isinstance(value, Topic) else list(value)
+        topics = [value] if isinstance(value, Topic) else list(value)  # type: ignore[arg-type]
         for t in topics:
             if not isinstance(t, Topic):
                 raise TypeError(f"component {self.component_name!r}: trigger must be a Topic, a list of Topics or a period in seconds, got {type(t).__name__}")

@@ -64,7 +64,7 @@ class Node:
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
-        self._main_timer: asyncio.TimerHandle | None = None
+        self._main_timer: _Timer | None = None
         self._timers: list["_Timer"] = []
         self._servers: list[ServiceServer | ActionServer] = []
         self._extra_servers: list[tuple[str, tuple]] = []
@@ -190,8 +190,9 @@ class Node:
         comp = self.component
         comp.custom_on_activate()
         run_type = comp.run_type
+        assert self.loop is not None
         if run_type == ComponentRunType.TIMED:
-            self._main_timer = _Timer(self.loop, 1.0 / comp.config.loop_rate, self._run_step)  # type: ignore[assignment]
+            self._main_timer = _Timer(self.loop, 1.0 / comp.config.loop_rate, self._run_step)
         elif run_type == ComponentRunType.SERVER:
             req, resp = comp.main_srv_type  # type: ignore[misc]
             await self._start_server(ServiceServer(self.ctx, comp.main_srv_name, req, resp, self._serve_main, owner=self.name))
@@ -199,8 +200,12 @@ class Node:
             goal, fb, res = comp.main_action_type  # type: ignore[misc]
             await self._start_server(ActionServer(self.ctx, comp.main_action_name, goal, fb, res, comp._main_action_callback, owner=self.name))
         for kind, args in self._extra_servers:
-            cls = ServiceServer if kind == "service" else ActionServer
-            await self._start_server(cls(self.ctx, *args, owner=self.name))
+            if kind == "service":
+                name, req, resp, callback = args
+                await self._start_server(ServiceServer(self.ctx, name, req, resp, callback, owner=self.name))
+            else:
+                name, goal, fb, res, callback = args
+                await self._start_server(ActionServer(self.ctx, name, goal, fb, res, callback, owner=self.name))
         self._on_wake()  # messages that arrived while inactive may trigger a first step
 
     async def _start_server(self, server: ServiceServer | ActionServer) -> None:

@@ -77,13 +77,18 @@ class RpcServer:
         self._connections: set[asyncio.Task] = set()
 
     async def start(self) -> None:
-        if self.path.exists() or self.path.is_symlink():
-            self.path.unlink()
+        # Bind under a temporary name and rename once listening: whoever sees the socket file
+        # can connect (between bind and listen a connect is refused).
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}")
+        for stale in (tmp, self.path):
+            if stale.exists() or stale.is_symlink():
+                stale.unlink()
         old = os.umask(0o177)  # the socket file is created 0600, with no window at a wider mode
         try:
-            self._server = await asyncio.start_unix_server(self._serve, path=str(self.path))
+            self._server = await asyncio.start_unix_server(self._serve, path=str(tmp))
         finally:
             os.umask(old)
+        os.rename(tmp, self.path)
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         me = asyncio.current_task()

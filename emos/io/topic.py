@@ -66,7 +66,7 @@ class Topic(BaseAttrs):
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Topic) and (self.name, self.msg_type) == (other.name, other.msg_type)
 
-    def __hash__(self) -> int:
+    def __hash__(self) -> int:  # type: ignore[override]
         return hash((self.name, self.msg_type))
 
     def to_dict(self) -> dict[str, Any]:

@@ -1,22 +1,24 @@
 """Command and joint messages: TwistArray (Kompass), RGBD (RealSense), joint trajectories and jogs."""
 from __future__ import annotations
 
+import numpy as np
+
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.sensor import CameraInfo, Image
 from emos.msgs.std import Duration, Header
 
 
 @message_type("kompass_interfaces")
-class TwistArray:
+class TwistArray(Message):
     """Candidate velocity commands: ``linear_velocities`` and ``angular_velocities`` are (N, 3)."""
 
-    linear_velocities: object = F.array(dtype="float64", ndim=2, shape=(-1, 3))
-    angular_velocities: object = F.array(dtype="float64", ndim=2, shape=(-1, 3))
+    linear_velocities: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 3))
+    angular_velocities: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 3))
 
 
 @message_type("realsense2_camera_msgs")
-class RGBD:
+class RGBD(Message):
     header: Header = F.message(Header)
     rgb_camera_info: CameraInfo = F.message(CameraInfo)
     depth_camera_info: CameraInfo = F.message(CameraInfo)
@@ -25,25 +27,25 @@ class RGBD:
 
 
 @message_type("trajectory_msgs")
-class JointTrajectoryPoint:
-    positions: object = F.array(dtype="float64", ndim=1)
-    velocities: object = F.array(dtype="float64", ndim=1)
-    accelerations: object = F.array(dtype="float64", ndim=1)
-    effort: object = F.array(dtype="float64", ndim=1)
+class JointTrajectoryPoint(Message):
+    positions: np.ndarray = F.array(dtype="float64", ndim=1)
+    velocities: np.ndarray = F.array(dtype="float64", ndim=1)
+    accelerations: np.ndarray = F.array(dtype="float64", ndim=1)
+    effort: np.ndarray = F.array(dtype="float64", ndim=1)
     time_from_start: Duration = F.message(Duration)
 
 
 @message_type("trajectory_msgs")
-class JointTrajectory:
+class JointTrajectory(Message):
     header: Header = F.message(Header)
     joint_names: list = F.string_list()
     points: list = F.message_list(JointTrajectoryPoint)
 
 
 @message_type("control_msgs")
-class JointJog:
+class JointJog(Message):
     header: Header = F.message(Header)
     joint_names: list = F.string_list()
-    displacements: object = F.array(dtype="float64", ndim=1)
-    velocities: object = F.array(dtype="float64", ndim=1)
+    displacements: np.ndarray = F.array(dtype="float64", ndim=1)
+    velocities: np.ndarray = F.array(dtype="float64", ndim=1)
     duration: float = F.float64()

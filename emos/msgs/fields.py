@@ -166,7 +166,7 @@ def bytes_array() -> Any:
     )
 
 
-def message(cls: Callable[[], Any]) -> Any:
+def message(cls: Any) -> Any:
     """A nested message; ``cls`` may be a class or a zero-argument callable returning it."""
 
     def resolve() -> type:
@@ -186,7 +186,7 @@ def message(cls: Callable[[], Any]) -> Any:
     )
 
 
-def optional_message(cls: Callable[[], Any]) -> Any:
+def optional_message(cls: Any) -> Any:
     def resolve() -> type:
         return cls if isinstance(cls, type) else cls()  # type: ignore[return-value]
 
@@ -200,7 +200,7 @@ def optional_message(cls: Callable[[], Any]) -> Any:
     )
 
 
-def message_list(cls: Callable[[], Any]) -> Any:
+def message_list(cls: Any) -> Any:
     def resolve() -> type:
         return cls if isinstance(cls, type) else cls()  # type: ignore[return-value]
 

@@ -6,26 +6,26 @@ import math
 import numpy as np
 
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.std import Header
 
 
 @message_type("geometry_msgs")
-class Vector3:
+class Vector3(Message):
     x: float = F.float64()
     y: float = F.float64()
     z: float = F.float64()
 
 
 @message_type("geometry_msgs")
-class Point:
+class Point(Message):
     x: float = F.float64()
     y: float = F.float64()
     z: float = F.float64()
 
 
 @message_type("geometry_msgs")
-class Quaternion:
+class Quaternion(Message):
     x: float = F.float64()
     y: float = F.float64()
     z: float = F.float64()
@@ -41,68 +41,68 @@ class Quaternion:
 
 
 @message_type("geometry_msgs")
-class Pose:
+class Pose(Message):
     position: Point = F.message(Point)
     orientation: Quaternion = F.message(Quaternion)
 
 
 @message_type("geometry_msgs")
-class Pose2D:
+class Pose2D(Message):
     x: float = F.float64()
     y: float = F.float64()
     theta: float = F.float64()
 
 
 @message_type("geometry_msgs")
-class PoseStamped:
+class PoseStamped(Message):
     header: Header = F.message(Header)
     pose: Pose = F.message(Pose)
 
 
 @message_type("geometry_msgs")
-class PoseWithCovariance:
+class PoseWithCovariance(Message):
     pose: Pose = F.message(Pose)
-    covariance: object = F.array(dtype="float64", shape=(36,))
+    covariance: np.ndarray = F.array(dtype="float64", shape=(36,))
 
 
 @message_type("geometry_msgs")
-class PoseWithCovarianceStamped:
+class PoseWithCovarianceStamped(Message):
     header: Header = F.message(Header)
     pose: PoseWithCovariance = F.message(PoseWithCovariance)
 
 
 @message_type("geometry_msgs")
-class PointStamped:
+class PointStamped(Message):
     header: Header = F.message(Header)
     point: Point = F.message(Point)
 
 
 @message_type("geometry_msgs")
-class Twist:
+class Twist(Message):
     linear: Vector3 = F.message(Vector3)
     angular: Vector3 = F.message(Vector3)
 
 
 @message_type("geometry_msgs")
-class TwistStamped:
+class TwistStamped(Message):
     header: Header = F.message(Header)
     twist: Twist = F.message(Twist)
 
 
 @message_type("geometry_msgs")
-class TwistWithCovariance:
+class TwistWithCovariance(Message):
     twist: Twist = F.message(Twist)
-    covariance: object = F.array(dtype="float64", shape=(36,))
+    covariance: np.ndarray = F.array(dtype="float64", shape=(36,))
 
 
 @message_type("geometry_msgs")
-class Transform:
+class Transform(Message):
     translation: Vector3 = F.message(Vector3)
     rotation: Quaternion = F.message(Quaternion)
 
 
 @message_type("geometry_msgs")
-class TransformStamped:
+class TransformStamped(Message):
     header: Header = F.message(Header)
     child_frame_id: str = F.string()
     transform: Transform = F.message(Transform)

@@ -1,14 +1,16 @@
 """EmbodiedAgents messages: streamed text, video, detections, points of interest, trackings."""
 from __future__ import annotations
 
+import numpy as np
+
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.sensor import CompressedImage, Image
 from emos.msgs.std import Header
 
 
 @message_type("automatika_embodied_agents")
-class StreamingString:
+class StreamingString(Message):
     """One chunk of a streamed reply; ``done`` marks the last one."""
 
     stream: bool = F.boolean()
@@ -17,21 +19,21 @@ class StreamingString:
 
 
 @message_type("automatika_embodied_agents")
-class Video:
+class Video(Message):
     header: Header = F.message(Header)
     frames: list = F.message_list(Image)
     compressed_frames: list = F.message_list(CompressedImage)
 
 
 @message_type("automatika_embodied_agents")
-class Detections:
+class Detections(Message):
     """2D detections in one image: ``boxes`` is (N, 4) as x1, y1, x2, y2 in pixels."""
 
     header: Header = F.message(Header)
-    scores: object = F.array(dtype="float64", ndim=1)
+    scores: np.ndarray = F.array(dtype="float64", ndim=1)
     labels: list = F.string_list()
-    boxes: object = F.array(dtype="float64", ndim=2, shape=(-1, 4))
-    image: object = F.optional_message(Image)
+    boxes: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 4))
+    image: Image | None = F.optional_message(Image)
 
     def __attrs_post_init__(self) -> None:
         n = len(self.labels)
@@ -40,34 +42,34 @@ class Detections:
 
 
 @message_type("automatika_embodied_agents")
-class DetectionsMultiSource:
+class DetectionsMultiSource(Message):
     header: Header = F.message(Header)
     detections: list = F.message_list(Detections)
 
 
 @message_type("automatika_embodied_agents")
-class PointsOfInterest:
+class PointsOfInterest(Message):
     """Pixel coordinates of interest in an image: ``points`` is (N, 2) as x, y."""
 
     header: Header = F.message(Header)
-    points: object = F.array(dtype="float64", ndim=2, shape=(-1, 2))
-    image: object = F.optional_message(Image)
+    points: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 2))
+    image: Image | None = F.optional_message(Image)
 
 
 @message_type("automatika_embodied_agents")
-class Trackings:
+class Trackings(Message):
     """Tracked objects: ids, labels, boxes (N, 4), centroids (N, 2) and pixel velocities (N, 2)."""
 
     header: Header = F.message(Header)
-    ids: object = F.array(dtype="int64", ndim=1)
+    ids: np.ndarray = F.array(dtype="int64", ndim=1)
     labels: list = F.string_list()
-    boxes: object = F.array(dtype="float64", ndim=2, shape=(-1, 4))
-    centroids: object = F.array(dtype="float64", ndim=2, shape=(-1, 2))
-    estimated_velocities: object = F.array(dtype="float64", ndim=2, shape=(-1, 2))
-    image: object = F.optional_message(Image)
+    boxes: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 4))
+    centroids: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 2))
+    estimated_velocities: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 2))
+    image: Image | None = F.optional_message(Image)
 
 
 @message_type("automatika_embodied_agents")
-class TrackingsMultiSource:
+class TrackingsMultiSource(Message):
     header: Header = F.message(Header)
     trackings: list = F.message_list(Trackings)

@@ -1,14 +1,16 @@
 """nav_msgs."""
 from __future__ import annotations
 
+import numpy as np
+
 from emos.msgs import fields as F
 from emos.msgs.geometry import Pose, PoseStamped, PoseWithCovariance, TwistWithCovariance
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.std import Header, Time
 
 
 @message_type("nav_msgs")
-class Odometry:
+class Odometry(Message):
     header: Header = F.message(Header)
     child_frame_id: str = F.string()
     pose: PoseWithCovariance = F.message(PoseWithCovariance)
@@ -16,13 +18,13 @@ class Odometry:
 
 
 @message_type("nav_msgs")
-class Path:
+class Path(Message):
     header: Header = F.message(Header)
     poses: list = F.message_list(PoseStamped)
 
 
 @message_type("nav_msgs")
-class MapMetaData:
+class MapMetaData(Message):
     map_load_time: Time = F.message(Time)
     resolution: float = F.float32()
     width: int = F.integer(bits=32, signed=False)
@@ -31,12 +33,12 @@ class MapMetaData:
 
 
 @message_type("nav_msgs")
-class OccupancyGrid:
+class OccupancyGrid(Message):
     """Row-major grid, row 0 at the origin (lowest y); -1 unknown, 0..100 occupancy."""
 
     header: Header = F.message(Header)
     info: MapMetaData = F.message(MapMetaData)
-    data: object = F.array(dtype="int8", ndim=1)
+    data: np.ndarray = F.array(dtype="int8", ndim=1)
 
     def grid(self):
         """A (height, width) view of ``data``."""

@@ -7,13 +7,26 @@ from __future__ import annotations
 
 import difflib
 import hashlib
-from typing import Any, Callable, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import attrs
 
 from emos.msgs.fields import bind_field_names
 
 T = TypeVar("T")
+
+
+class Message:
+    """Base of every message class (attrs generates the real ``__init__`` per class).
+
+    Type checkers see a keyword-only constructor; attribute types come from the annotations.
+    """
+
+    __slots__ = ()
+
+    if TYPE_CHECKING:
+
+        def __init__(self, **fields: Any) -> None: ...
 
 _BY_NAME: dict[str, type] = {}  # short name and "pkg/msg/Name" -> class
 _CANONICAL: dict[type, str] = {}  # class -> "pkg/msg/Name"
@@ -34,7 +47,7 @@ def message_type(package: str = "emos_msgs", name: str | None = None) -> Callabl
 
     def wrap(cls: type[T]) -> type[T]:
         if not attrs.has(cls):
-            cls = attrs.define(kw_only=True, eq=True)(cls)
+            cls = attrs.define(kw_only=True, eq=True)(cls)  # type: ignore[assignment]
         bind_field_names(cls)
         short = name or cls.__name__
         full = f"{package}/msg/{short}"
@@ -43,9 +56,9 @@ def message_type(package: str = "emos_msgs", name: str | None = None) -> Callabl
         _BY_NAME.setdefault(short, cls)
         _BY_NAME[full] = cls
         _CANONICAL[cls] = full
-        layout = ";".join(f"{f.name}:{f.metadata.get('kind')}" for f in attrs.fields(cls))
-        cls._emos_fingerprint = hashlib.blake2b(f"{full}|{layout}".encode(), digest_size=8).hexdigest()  # type: ignore[attr-defined]
-        return cls
+        layout = ";".join(f"{f.name}:{f.metadata.get('kind')}" for f in attrs.fields(cls))  # type: ignore[arg-type]
+        cls._emos_fingerprint = hashlib.blake2b(f"{full}|{layout}".encode(), digest_size=8).hexdigest()  # type: ignore[attr-defined,union-attr]
+        return cls  # type: ignore[return-value]
 
     return wrap
 

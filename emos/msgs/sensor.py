@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.std import Header
 
 # encoding -> (numpy dtype, channels)
@@ -25,14 +25,14 @@ IMAGE_ENCODINGS: dict[str, tuple[str, int]] = {
 
 
 @message_type("sensor_msgs")
-class Image:
+class Image(Message):
     header: Header = F.message(Header)
     height: int = F.integer(bits=32, signed=False)
     width: int = F.integer(bits=32, signed=False)
     encoding: str = F.string()
     is_bigendian: int = F.integer(bits=8, signed=False)
     step: int = F.integer(bits=32, signed=False)
-    data: object = F.bytes_array()
+    data: np.ndarray = F.bytes_array()
 
     @classmethod
     def from_numpy(cls, array: np.ndarray, encoding: str = "rgb8", header: Header | None = None) -> "Image":
@@ -75,14 +75,14 @@ class Image:
 
 
 @message_type("sensor_msgs")
-class CompressedImage:
+class CompressedImage(Message):
     header: Header = F.message(Header)
     format: str = F.string()
-    data: object = F.bytes_array()
+    data: np.ndarray = F.bytes_array()
 
 
 @message_type("sensor_msgs")
-class RegionOfInterest:
+class RegionOfInterest(Message):
     x_offset: int = F.integer(bits=32, signed=False)
     y_offset: int = F.integer(bits=32, signed=False)
     height: int = F.integer(bits=32, signed=False)
@@ -91,15 +91,15 @@ class RegionOfInterest:
 
 
 @message_type("sensor_msgs")
-class CameraInfo:
+class CameraInfo(Message):
     header: Header = F.message(Header)
     height: int = F.integer(bits=32, signed=False)
     width: int = F.integer(bits=32, signed=False)
     distortion_model: str = F.string("plumb_bob")
-    d: object = F.array(dtype="float64")
-    k: object = F.array(dtype="float64", shape=(9,))
-    r: object = F.array(dtype="float64", shape=(9,))
-    p: object = F.array(dtype="float64", shape=(12,))
+    d: np.ndarray = F.array(dtype="float64")
+    k: np.ndarray = F.array(dtype="float64", shape=(9,))
+    r: np.ndarray = F.array(dtype="float64", shape=(9,))
+    p: np.ndarray = F.array(dtype="float64", shape=(12,))
     binning_x: int = F.integer(bits=32, signed=False)
     binning_y: int = F.integer(bits=32, signed=False)
     roi: RegionOfInterest = F.message(RegionOfInterest)
@@ -128,7 +128,7 @@ class CameraInfo:
 
 
 @message_type("sensor_msgs")
-class LaserScan:
+class LaserScan(Message):
     header: Header = F.message(Header)
     angle_min: float = F.float32()
     angle_max: float = F.float32()
@@ -137,8 +137,8 @@ class LaserScan:
     scan_time: float = F.float32()
     range_min: float = F.float32()
     range_max: float = F.float32()
-    ranges: object = F.array(dtype="float32", ndim=1)
-    intensities: object = F.array(dtype="float32", ndim=1)
+    ranges: np.ndarray = F.array(dtype="float32", ndim=1)
+    intensities: np.ndarray = F.array(dtype="float32", ndim=1)
 
     def angles(self) -> np.ndarray:
         """The bearing of every beam, in the scan frame."""
@@ -152,7 +152,7 @@ class LaserScan:
 
 
 @message_type("sensor_msgs")
-class PointField:
+class PointField(Message):
     INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = 1, 2, 3, 4, 5, 6, 7, 8
     name: str = F.string()
     offset: int = F.integer(bits=32, signed=False)
@@ -161,7 +161,7 @@ class PointField:
 
 
 @message_type("sensor_msgs")
-class PointCloud2:
+class PointCloud2(Message):
     header: Header = F.message(Header)
     height: int = F.integer(bits=32, signed=False)
     width: int = F.integer(bits=32, signed=False)
@@ -169,7 +169,7 @@ class PointCloud2:
     is_bigendian: bool = F.boolean()
     point_step: int = F.integer(bits=32, signed=False)
     row_step: int = F.integer(bits=32, signed=False)
-    data: object = F.bytes_array()
+    data: np.ndarray = F.bytes_array()
     is_dense: bool = F.boolean()
 
     @classmethod
@@ -200,19 +200,19 @@ class PointCloud2:
 
 
 @message_type("sensor_msgs")
-class JointState:
+class JointState(Message):
     header: Header = F.message(Header)
     name: list = F.string_list()
-    position: object = F.array(dtype="float64", ndim=1)
-    velocity: object = F.array(dtype="float64", ndim=1)
-    effort: object = F.array(dtype="float64", ndim=1)
+    position: np.ndarray = F.array(dtype="float64", ndim=1)
+    velocity: np.ndarray = F.array(dtype="float64", ndim=1)
+    effort: np.ndarray = F.array(dtype="float64", ndim=1)
 
 
 @message_type("audio_common_msgs", name="Audio")
-class Audio:
+class Audio(Message):
     """Raw audio bytes; EmbodiedAgents streams 16 kHz mono 16-bit PCM by convention."""
 
-    data: object = F.bytes_array()
+    data: np.ndarray = F.bytes_array()
 
 
 def scan_from_ranges(ranges: np.ndarray, angle_min: float = -math.pi, angle_max: float = math.pi, range_min: float = 0.05, range_max: float = 30.0, header: Header | None = None) -> LaserScan:

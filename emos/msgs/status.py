@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 from emos.msgs.std import Header
 
 
 @message_type("sugar")
-class ComponentStatus:
+class ComponentStatus(Message):
     STATUS_HEALTHY = 0
     STATUS_FAILURE_ALGORITHM_LEVEL = 1
     STATUS_FAILURE_COMPONENT_LEVEL = 2

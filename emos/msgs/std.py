@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from emos.msgs import fields as F
-from emos.msgs.registry import message_type
+from emos.msgs.registry import Message, message_type
 
 
 @message_type("builtin_interfaces")
-class Time:
+class Time(Message):
     sec: int = F.integer(bits=32)
     nanosec: int = F.integer(bits=32, signed=False)
 
@@ -30,7 +32,7 @@ class Time:
 
 
 @message_type("builtin_interfaces")
-class Duration:
+class Duration(Message):
     sec: int = F.integer(bits=32)
     nanosec: int = F.integer(bits=32, signed=False)
 
@@ -39,83 +41,83 @@ class Duration:
 
 
 @message_type("std_msgs")
-class Header:
+class Header(Message):
     stamp: Time = F.message(Time)
     frame_id: str = F.string()
 
 
 @message_type("std_msgs")
-class Empty:
+class Empty(Message):
     pass
 
 
 @message_type("std_msgs")
-class String:
+class String(Message):
     data: str = F.string()
 
 
 @message_type("std_msgs")
-class Bool:
+class Bool(Message):
     data: bool = F.boolean()
 
 
 @message_type("std_msgs")
-class Float32:
+class Float32(Message):
     data: float = F.float32()
 
 
 @message_type("std_msgs")
-class Float64:
+class Float64(Message):
     data: float = F.float64()
 
 
 @message_type("std_msgs")
-class Int32:
+class Int32(Message):
     data: int = F.integer(bits=32)
 
 
 @message_type("std_msgs")
-class Int64:
+class Int64(Message):
     data: int = F.integer(bits=64)
 
 
 @message_type("std_msgs")
-class UInt8:
+class UInt8(Message):
     data: int = F.integer(bits=8, signed=False)
 
 
 @message_type("std_msgs")
-class MultiArrayDimension:
+class MultiArrayDimension(Message):
     label: str = F.string()
     size: int = F.integer(bits=32, signed=False)
     stride: int = F.integer(bits=32, signed=False)
 
 
 @message_type("std_msgs")
-class MultiArrayLayout:
+class MultiArrayLayout(Message):
     dim: list = F.message_list(MultiArrayDimension)
     data_offset: int = F.integer(bits=32, signed=False)
 
 
 @message_type("std_msgs")
-class Float32MultiArray:
+class Float32MultiArray(Message):
     layout: MultiArrayLayout = F.message(MultiArrayLayout)
-    data: object = F.array(dtype="float32")
+    data: np.ndarray = F.array(dtype="float32")
 
 
 @message_type("std_msgs")
-class Float64MultiArray:
+class Float64MultiArray(Message):
     layout: MultiArrayLayout = F.message(MultiArrayLayout)
-    data: object = F.array(dtype="float64")
+    data: np.ndarray = F.array(dtype="float64")
 
 
 @message_type("std_msgs")
-class Int32MultiArray:
+class Int32MultiArray(Message):
     layout: MultiArrayLayout = F.message(MultiArrayLayout)
-    data: object = F.array(dtype="int32")
+    data: np.ndarray = F.array(dtype="int32")
 
 
 @message_type("std_msgs")
-class UInt8MultiArray:
+class UInt8MultiArray(Message):
     layout: MultiArrayLayout = F.message(MultiArrayLayout)
-    data: object = F.bytes_array()
+    data: np.ndarray = F.bytes_array()

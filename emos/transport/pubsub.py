@@ -112,9 +112,9 @@ class Publisher:
             old.fingerprint, old.type_name, generation=old.generation + 1, first=start,
         )
         for n in range(start, old.head):
-            status, payload, stamp = old.read(n)
-            if status != R.OK:  # cannot happen for our own completed messages; keep numbering dense
-                payload, stamp = bytearray(), 0
+            status, read, stamp = old.read(n)
+            # Not OK cannot happen for our own completed messages; keep the numbering dense anyway.
+            payload = read if status == R.OK and read is not None else bytearray()
             m, buf = new.begin(len(payload))
             buf[:] = payload
             buf.release()
@@ -205,7 +205,7 @@ class Subscriber:
     (ROS's TRANSIENT_LOCAL durability); otherwise only later ones.
     """
 
-    def __init__(self, ctx: RunContext, topic: str, msg_cls: type | None, waker: Waker | None = None, queue_size: int = 10, transient_local: bool = False):
+    def __init__(self, ctx: RunContext, topic: str, msg_cls: type, waker: Waker | None = None, queue_size: int = 10, transient_local: bool = False):
         self.ctx = ctx
         self.topic = topic
         self.msg_cls = msg_cls
@@ -218,11 +218,10 @@ class Subscriber:
         self._shm_mtime = -1
         self._scanned_at_ns = 0
         self._prefix = f"{ctx.shm_prefix}{encode_name(topic)}."
+        self._interest: Path | None = None
         if waker is not None:
             self._interest = self.ctx.subscriber_dir(topic) / f"{waker.token:016x}"
             self._interest.touch(mode=0o600)
-        else:
-            self._interest = None
         self.rescan(force=True)
 
     # -- discovery --------------------------------------------------------------------------------
@@ -267,8 +266,6 @@ class Subscriber:
             del self.sources[pub]
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
-        if self.msg_cls is None:
-            return
         if ring.fingerprint != _fingerprint(self.msg_cls):
             ring.close()
             raise TopicTypeError(
@@ -327,7 +324,7 @@ class Subscriber:
                 src.cursor = head - ring.slot_count
             while src.cursor < head:
                 status, buf, stamp = ring.read(src.cursor)
-                if status == R.OK:
+                if status == R.OK and buf is not None:
                     out.append((stamp, buf, src.publisher_id))
                     src.cursor += 1
                 elif status == R.LAPPED:
@@ -353,24 +350,18 @@ class Subscriber:
         for src in self.sources.values():
             self._follow(src)
             ring = src.ring
-            for _ in range(3):
-                n = ring.head - 1
+            # The newest slot may belong to a writer that died mid-copy; the one before it is
+            # then the newest complete message.
+            for n in (ring.head - 1, ring.head - 2):
                 if n < max(src.cursor, ring.first):
                     break
                 status, buf, stamp = ring.read(n)
-                if status == R.OK:
+                if status == R.OK and buf is not None:
                     src.cursor = n + 1
                     if best is None or stamp > best[0]:
                         best = (stamp, buf, src.publisher_id)
                     break
-                if status == R.NOT_READY:
-                    n -= 1  # torn slot of a dead writer: the previous message is the latest complete one
-                    if n >= max(src.cursor, ring.first):
-                        status, buf, stamp = ring.read(n)
-                        if status == R.OK:
-                            src.cursor = n + 1
-                            if best is None or stamp > best[0]:
-                                best = (stamp, buf, src.publisher_id)
+                if status == R.LAPPED:
                     break
         return best
 
@@ -415,10 +406,9 @@ def list_topics(ctx: RunContext) -> dict[str, dict[str, Any]]:
         ring.close()
     subs_dir = ctx.run_dir / "subs"
     if subs_dir.is_dir():
-        for entry in subs_dir.iterdir():
-            topic = decode_name(entry.name)
-            info = topics.setdefault(topic, {"type": "?", "publishers": []})
-            info["subscribers"] = sum(1 for _ in entry.iterdir())
+        for folder in subs_dir.iterdir():
+            info = topics.setdefault(decode_name(folder.name), {"type": "?", "publishers": []})
+            info["subscribers"] = len(list(folder.iterdir()))
     return topics
 
 

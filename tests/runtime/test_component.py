@@ -143,6 +143,10 @@ def test_parameters_update_validated_and_methods_execute(ctx):
 
     node, thread, rpc = run_node(Tunable(component_name="tunable"), ctx)
     try:
+        import os
+        import stat
+
+        assert stat.S_IMODE(os.stat(control_socket(ctx, "tunable")).st_mode) == 0o600
         assert rpc.call("update_config", values={"loop_rate": 4.0})["loop_rate"] == 4.0
         with pytest.raises(RpcError, match="loop_rate must be in"):
             rpc.call("update_config", values={"loop_rate": -1.0})
