@@ -14,6 +14,7 @@ from .results import Hit, Record, hits_from_query, records_from_get
 from .spec import DISTANCES, ChromaDB
 
 # Chroma's own rule for collection names, checked here to fail before any I/O.
+_BATCH = 1000
 _NAME = re.compile(r"^[a-zA-Z0-9][a-zA-Z0-9._-]{1,510}[a-zA-Z0-9]$")
 
 
@@ -110,7 +111,11 @@ class ChromaClient:
         if n == 0:
             return []
         col = self._open(name, distance, create=True)
-        self._backend.add(col, ids, vectors, documents, metas, upsert)
+        # Chroma caps one request's batch (a few thousand rows): send large writes in slices.
+        for start in range(0, n, _BATCH):
+            end = start + _BATCH
+            self._backend.add(col, ids[start:end], vectors[start:end], documents[start:end],
+                              None if metas is None else metas[start:end], upsert)
         return ids
 
     # ------------------------------------------------------------------ reads

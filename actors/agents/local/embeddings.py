@@ -47,12 +47,35 @@ def _load(model_path: str) -> Any:
         return model
 
 
-class SentenceEmbedder:
-    """Embeds texts into L2-normalized float32 vectors (cosine similarity == dot product)."""
+#: Batches up to this size skip sentence-transformers' ``encode`` bookkeeping (length sorting,
+#: progress handling, per-batch conversions), which costs as much as the model on one query.
+_FAST_BATCH = 16
 
-    def __init__(self, model_path: str | None = None) -> None:
+
+def _set_threads(num_threads: int | None) -> None:
+    if num_threads is None:
+        return
+    if isinstance(num_threads, bool) or not isinstance(num_threads, int) or num_threads < 1:
+        raise ValueError(f"num_threads: expected a positive integer or None, got {num_threads!r}")
+    import torch
+
+    if torch.get_num_threads() != num_threads:
+        torch.set_num_threads(num_threads)
+
+
+class SentenceEmbedder:
+    """Embeds texts into L2-normalized float32 vectors (cosine similarity == dot product).
+
+    ``num_threads`` sets torch's intra-op threads for the whole process (None leaves them as
+    they are). The default of 1 is deliberate: a one-sentence query gains nothing from more
+    threads, and on a robot whose cores are shared with other components torch's spinning
+    worker threads made routing 5-10x slower in our measurements (docs/benchmarks.md).
+    """
+
+    def __init__(self, model_path: str | None = None, num_threads: int | None = 1) -> None:
         self.model_path = model_path or packaged_model_path()
         self._model = _load(self.model_path)
+        _set_threads(num_threads)
         getter = getattr(self._model, "get_embedding_dimension", None) or getattr(
             self._model, "get_sentence_embedding_dimension"
         )
@@ -73,10 +96,23 @@ class SentenceEmbedder:
                 raise TypeError(f"SentenceEmbedder.embed: item {i} is {type(text).__name__}, expected str")
         if not texts:
             return np.zeros((0, self._dimension), dtype=np.float32)
+        if len(texts) <= _FAST_BATCH:
+            return self._embed_small(texts)
         vectors = self._model.encode(
             texts, normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
         )
         return np.ascontiguousarray(vectors, dtype=np.float32)
+
+    def _embed_small(self, texts: list[str]) -> np.ndarray:
+        import torch
+
+        model = self._model
+        tokenize = getattr(model, "preprocess", None) or model.tokenize
+        with torch.inference_mode():
+            features = tokenize(texts)
+            vectors = model(features)["sentence_embedding"]
+            vectors = torch.nn.functional.normalize(vectors, p=2, dim=1)
+        return np.ascontiguousarray(vectors.cpu().numpy(), dtype=np.float32)
 
     def embed_one(self, text: str) -> np.ndarray:
         """Embed a single text; returns a ``(dimension,)`` vector."""
