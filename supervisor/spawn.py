@@ -90,19 +90,76 @@ def _recv(sock: socket.socket) -> Any:
     return msgpack.unpackb(body, raw=False)
 
 
+def _await_parent(pid: int, timeout: float = 2.0) -> None:
+    deadline = time.monotonic() + timeout
+    while os.getppid() != pid and time.monotonic() < deadline:
+        time.sleep(0.0002)
+
+
 class ZygoteError(RuntimeError):
     pass
 
 
+SPAWN_TIMEOUT_S = 2.0  # a healthy zygote answers in milliseconds; a stopped one never does
+
+
+class _ZygoteHandle:
+    """The launcher's end of one zygote process."""
+
+    def __init__(self, pid: int, sock: socket.socket, direct_child: bool):
+        self.pid, self.sock, self.direct_child = pid, sock, direct_child
+        sock.settimeout(SPAWN_TIMEOUT_S)
+
+    def request(self, req: dict, with_fd: bool = False) -> tuple[dict, int | None]:
+        _send(self.sock, req)
+        if not with_fd:
+            return _recv(self.sock), None
+        msg, fds, _, _ = socket.recv_fds(self.sock, 4, 1)
+        if len(msg) < 4:
+            raise EOFError("zygote channel closed")
+        (n,) = _LEN.unpack(msg)
+        body = b""
+        while len(body) < n:
+            chunk = self.sock.recv(n - len(body))
+            if not chunk:
+                raise EOFError("zygote channel closed")
+            body += chunk
+        return msgpack.unpackb(body, raw=False), (fds[0] if fds else None)
+
+    def discard(self) -> None:
+        """Kill and reap a zygote that failed us."""
+        try:
+            os.kill(self.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.sock.close()
+        try:
+            os.waitpid(self.pid, 0)
+        except ChildProcessError:
+            pass
+
+
 class Zygote:
-    """Forks workers on request. ``targets[i]()`` is what worker ``i`` runs; it returns an exit code."""
+    """Forks workers on request. ``targets[i]()`` is what worker ``i`` runs; it returns an exit code.
+
+    Two zygotes run: the primary forks workers; the spare stands by. If the primary dies or
+    stops answering, the spare takes over and is asked to clone itself into a new spare. A
+    zygote clones by double fork (the clone is re-parented to the launcher, like workers) and
+    hands the launcher its end of the new channel over ``SCM_RIGHTS``. The launcher itself never
+    forks again after start-up, so no process with an event loop or threads is ever forked.
+    """
 
     def __init__(self, targets: list[Callable[[], int]], names: list[str], janitor: Callable[[], None] | None = None):
         self.targets = targets
         self.names = names
         self.janitor = janitor
-        self.pid = -1
-        self.sock: socket.socket | None = None
+        self.primary: _ZygoteHandle | None = None
+        self.spare: _ZygoteHandle | None = None
+        self.replacements = 0
+
+    @property
+    def pid(self) -> int:
+        return self.primary.pid if self.primary else -1
 
     # ---------------------------------------------------------------------- launcher side
     def start(self) -> None:
@@ -118,17 +175,31 @@ class Zygote:
         pid = os.fork()
         if pid == 0:  # zygote
             parent_sock.close()
-            code = 0
-            try:
-                self._zygote_main(child_sock, launcher)
-            except BaseException:
-                code = 1
-            finally:
-                os._exit(code)
+            self._run_zygote(child_sock, launcher)
         child_sock.close()
-        self.pid = pid
-        self.sock = parent_sock
-        self.sock.setblocking(True)
+        self.primary = _ZygoteHandle(pid, parent_sock, direct_child=True)
+        self.spare = self._clone(self.primary)
+
+    def _clone(self, source: _ZygoteHandle) -> _ZygoteHandle | None:
+        try:
+            reply, fd = source.request({"op": "clone"}, with_fd=True)
+        except (OSError, EOFError) as exc:
+            log.error("zygote %d could not clone a spare: %s", source.pid, exc)
+            return None
+        if "error" in reply or fd is None:
+            log.error("zygote %d could not clone a spare: %s", source.pid, reply.get("error"))
+            return None
+        return _ZygoteHandle(int(reply["pid"]), socket.socket(fileno=fd), direct_child=False)
+
+    def _replace_primary(self, why: str) -> None:
+        failed = self.primary
+        log.error("zygote %s %s; switching to the spare", failed.pid if failed else "?", why)
+        if failed is not None:
+            failed.discard()
+        self.primary, self.spare = self.spare, None
+        self.replacements += 1
+        if self.primary is not None:
+            self.spare = self._clone(self.primary)
 
     def spawn(self, index: int) -> int:
         """Fork worker ``index``; returns its pid (soon a child of this process).
@@ -136,38 +207,55 @@ class Zygote:
         Blocking but short (two forks, about a millisecond): the event loop never runs two
         spawns interleaved, so the request/reply channel needs no lock.
         """
-        if self.sock is None:
-            raise ZygoteError("zygote is not running")
-        try:
-            _send(self.sock, {"op": "spawn", "index": index})
-            reply = _recv(self.sock)
-        except (OSError, EOFError) as exc:
-            raise ZygoteError(f"zygote (pid {self.pid}) is gone: {exc}") from exc
-        if "error" in reply:
-            raise ZygoteError(reply["error"])
-        return int(reply["pid"])
+        for _ in range(2):
+            if self.primary is None:
+                break
+            try:
+                reply, _ = self.primary.request({"op": "spawn", "index": index})
+            except socket.timeout:
+                self._replace_primary(f"did not answer within {SPAWN_TIMEOUT_S:g} s")
+                continue
+            except (OSError, EOFError) as exc:
+                self._replace_primary(f"is gone ({exc})")
+                continue
+            if "error" in reply:
+                raise ZygoteError(reply["error"])
+            return int(reply["pid"])
+        raise ZygoteError("no zygote left to fork components (primary and spare both failed)")
 
     def stop(self) -> None:
-        if self.sock is not None:
+        for handle in (self.spare, self.primary):
+            if handle is None:
+                continue
             try:
-                _send(self.sock, {"op": "exit"})
+                _send(handle.sock, {"op": "exit"})
             except OSError:
                 pass
-            self.sock.close()
-            self.sock = None
-        if self.pid > 0:
+            handle.sock.close()
             try:
-                os.waitpid(self.pid, 0)
+                os.waitpid(handle.pid, 0)
             except ChildProcessError:
                 pass
-            self.pid = -1
+        self.primary = self.spare = None
 
     # ---------------------------------------------------------------------- zygote side
+    def _run_zygote(self, sock: socket.socket, launcher: int) -> None:
+        code = 0
+        try:
+            self._zygote_main(sock, launcher)
+        except BaseException:
+            code = 1
+        finally:
+            os._exit(code)
+
     def _zygote_main(self, sock: socket.socket, launcher: int) -> None:
         set_process_name("emos:zygote")
-        os.setpgid(0, 0)  # Ctrl-C at the terminal is for the launcher, which stops us in order
+        if os.getpgid(0) != os.getpid():
+            os.setpgid(0, 0)  # Ctrl-C at the terminal is for the launcher, which stops us in order
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, lambda *_: self._orphaned())
+        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+        _await_parent(launcher)  # a cloned spare is adopted by the launcher a moment after birth
         if not die_with(launcher):
             self._orphaned()
         while True:
@@ -179,10 +267,22 @@ class Zygote:
                 os._exit(0)
             if req.get("op") == "spawn":
                 try:
-                    pid = self._double_fork(int(req["index"]), sock, launcher)
+                    pid = self._double_fork(lambda: self._worker_main(int(req["index"]), launcher), sock)
                     _send(sock, {"pid": pid})
                 except Exception as exc:
                     _send(sock, {"error": f"{type(exc).__name__}: {exc}"})
+            elif req.get("op") == "clone":
+                mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+                try:
+                    pid = self._double_fork(lambda: (mine.close(), self._run_zygote(theirs, launcher)), sock)
+                    body = msgpack.packb({"pid": pid})
+                    # The launcher's end of the clone's channel travels with the reply.
+                    socket.send_fds(sock, [_LEN.pack(len(body)) + body], [mine.fileno()])
+                except Exception as exc:
+                    _send(sock, {"error": f"{type(exc).__name__}: {exc}"})
+                finally:
+                    mine.close()
+                    theirs.close()
 
     def _orphaned(self) -> None:
         """The launcher died without stopping us: clean its shared state, then leave."""
@@ -194,9 +294,8 @@ class Zygote:
                 pass
         os._exit(0)
 
-    def _double_fork(self, index: int, sock: socket.socket, launcher: int) -> int:
-        if not 0 <= index < len(self.targets):
-            raise IndexError(f"no component #{index}")
+    def _double_fork(self, child: Callable[[], Any], sock: socket.socket) -> int:
+        """Run ``child`` in a grandchild that the launcher (subreaper) will adopt; its pid."""
         r, w = os.pipe()
         mid = os.fork()
         if mid == 0:  # intermediate
@@ -205,7 +304,8 @@ class Zygote:
             if worker == 0:
                 os.close(w)
                 sock.close()
-                self._worker_main(index, launcher)
+                child()
+                os._exit(0)
             os.write(w, struct.pack("<i", worker))
             os._exit(0)
         os.close(w)
@@ -218,20 +318,20 @@ class Zygote:
         os.close(r)
         os.waitpid(mid, 0)
         if len(data) != 4:
-            raise ZygoteError(f"fork of component #{index} failed")
+            raise ZygoteError("fork failed")
         return struct.unpack("<i", data)[0]
 
     def _worker_main(self, index: int, launcher: int) -> None:
         code = 70
+        if not 0 <= index < len(self.targets):
+            os._exit(code)
         try:
             set_process_name(f"emos:{self.names[index]}")
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_DFL)
             # Wait to be re-parented to the launcher (the intermediate exits right away), then
             # ask to die with it.
-            deadline = time.monotonic() + 2.0
-            while os.getppid() != launcher and time.monotonic() < deadline:
-                time.sleep(0.0002)
+            _await_parent(launcher)
             if not die_with(launcher):
                 os._exit(0)
             code = int(self.targets[index]() or 0)

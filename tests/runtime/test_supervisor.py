@@ -251,3 +251,33 @@ launcher.bringup()
     finally:
         sub.close()
         assert system.stop() == 0
+
+
+def _zygotes(system):
+    return [p for p in psutil.Process(system.proc.pid).children() if p.name() == "emos:zygote"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP])
+def test_a_killed_or_stopped_zygote_is_replaced_and_restarts_keep_working(tmp_path, sig):
+    system = SystemUnderTest(tmp_path, recipe("""
+launcher = Launcher(multi_processing=True, max_restarts=20, max_seconds=60)
+launcher.add_pkg(components=[steady("w")])
+launcher.bringup()
+""")).wait_up(components=["w"])
+    try:
+        zygotes = wait_until(lambda: len(_zygotes(system)) == 2 and _zygotes(system), what="primary and spare zygotes")
+        for z in zygotes:  # whichever is primary, both die or freeze
+            os.kill(z.pid, sig)
+            pid = system.pid("w")
+            os.kill(pid, signal.SIGKILL)
+            pid = system.wait_new_pid("w", pid, timeout=15)
+            if sig == signal.SIGSTOP and psutil.pid_exists(z.pid):
+                try:
+                    os.kill(z.pid, signal.SIGCONT)
+                except ProcessLookupError:
+                    pass  # replaced, killed and reaped already
+        wait_until(lambda: len(_zygotes(system)) == 2, what="two healthy zygotes again")
+        assert not {z.pid for z in zygotes} & {z.pid for z in _zygotes(system)}
+    finally:
+        assert system.stop() == 0
+    assert system.leftovers() == []

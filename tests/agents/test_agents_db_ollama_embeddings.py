@@ -1,0 +1,45 @@
+"""ChromaDB with the Ollama embedding backend, against the local model server's real
+``/api/embed`` endpoint (which serves the packaged all-MiniLM-L6-v2)."""
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+
+from emos.actors.agents.db import ChromaClient, ChromaDB
+from emos.actors.agents.db.embedding import OllamaEmbedder
+from emos.actors.agents.errors import ModelConnectionError, ModelServerError
+from emos.actors.agents.local.embeddings import SentenceEmbedder
+
+from .fixtures.server_process import start_server
+
+
+@pytest.fixture(scope="module")
+def server():
+    proc = start_server(script=None)
+    yield proc
+    assert proc.stop() == 0
+
+
+def test_ollama_backend_embeds_like_the_local_model_and_drives_queries(server, tmp_path):
+    db = ChromaDB(path=str(tmp_path / "s"), embeddings="ollama", checkpoint="all-minilm", ollama_port=server.port)
+    client = ChromaClient(db)
+    assert isinstance(client.embedder, OllamaEmbedder)
+    texts = ["go to the kitchen", "what is the capital of France?"]
+    remote = client.embed(texts)
+    local = SentenceEmbedder().embed(texts)
+    assert remote.shape == (2, 384) and np.allclose(remote, local, atol=1e-4)
+    client.add("docs", ["a red fridge in the kitchen", "a desk in the office"], ids=["k", "o"])
+    assert client.query("docs", "where is the fridge", n_results=1)[0].id == "k"
+
+
+def test_ollama_backend_errors_are_typed(server):
+    with pytest.raises(ModelServerError) as info:
+        OllamaEmbedder("no-such-embedding-model", port=server.port).embed(["x"])
+    assert 400 <= info.value.status < 500
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(ModelConnectionError, match="cannot reach the Ollama server"):
+        OllamaEmbedder("all-minilm", port=port).embed(["x"])

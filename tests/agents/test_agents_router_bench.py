@@ -1,0 +1,21 @@
+"""`emos bench agents --json` prints exactly the keys the issue names (small sizes: this checks
+the output contract, not performance)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+
+def test_bench_agents_json_contract():
+    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
+    out = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "agents", "--json",
+                          "--entries", "300", "--queries", "20", "--repeats", "1"],
+                         capture_output=True, text=True, env=env, timeout=240, check=True)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert set(result) == {"route_ms", "route_accuracy", "chroma_query_ms"}
+    assert set(result["route_ms"]) == {"p50", "p95"} and set(result["chroma_query_ms"]) == {"p50"}
+    assert 0 < result["route_ms"]["p50"] <= result["route_ms"]["p95"]
+    assert 0.9 <= result["route_accuracy"] <= 1.0
+    assert result["chroma_query_ms"]["p50"] > 0
