@@ -281,3 +281,22 @@ launcher.bringup()
     finally:
         assert system.stop() == 0
     assert system.leftovers() == []
+
+
+def test_a_frozen_launcher_resumes_without_false_hang_verdicts(tmp_path):
+    system = SystemUnderTest(tmp_path, recipe("""
+launcher = Launcher(multi_processing=True, heartbeat_timeout=0.5)
+launcher.add_pkg(components=[steady("a"), steady("b")])
+launcher.bringup()
+""")).wait_up(components=["a", "b"])
+    try:
+        before = _pids(system, "ab")
+        os.kill(system.proc.pid, signal.SIGSTOP)
+        time.sleep(1.5)  # three heartbeat deadlines pass while the supervisor is frozen
+        os.kill(system.proc.pid, signal.SIGCONT)
+        time.sleep(1.0)
+        assert _pids(system, "ab") == before
+        assert not [e for e in system.events() if e["event"] == "exit"]
+    finally:
+        assert system.stop() == 0
+    assert system.leftovers() == []
