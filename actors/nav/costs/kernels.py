@@ -70,11 +70,12 @@ def reference_path_cost(trajectories: np.ndarray, reference_path: np.ndarray,
     if field is None and xy.shape[0] * xy.shape[1] * max(ref.shape[0] - 1, 1) <= _DENSE_LIMIT:
         return polyline_distance_exact(xy, ref).mean(axis=1)
     if field is None:
-        flat = xy.reshape(-1, 2)
-        bounds = (float(flat[:, 0].min()), float(flat[:, 1].min()),
-                  float(flat[:, 0].max()), float(flat[:, 1].max()))
+        bounds = (float(xy[..., 0].min()), float(xy[..., 1].min()),
+                  float(xy[..., 0].max()), float(xy[..., 1].max()))
         field = PathDistanceField(ref, bounds, resolution=resolution)
-    return field.distance(xy).mean(axis=1, dtype=np.float64)
+    # Pass the poses themselves (not the x, y slice): a contiguous (T, P, 3) array reshapes
+    # without a copy, and the field reads only the first two columns.
+    return field.distance(np.asarray(trajectories)).mean(axis=1, dtype=np.float64)
 
 
 def goal_cost(trajectories: np.ndarray, goal: np.ndarray, normalizer: float = 1.0) -> np.ndarray:

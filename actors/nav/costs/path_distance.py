@@ -20,6 +20,9 @@ grid cell.
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 __all__ = ["polyline_distance_exact", "simplify_polyline", "PathDistanceField"]
@@ -172,38 +175,53 @@ class PathDistanceField:
         # Only an empty seed set leaves -1 behind; the path always seeds at least one cell.
         return np.maximum(seg, 0).astype(np.int32)
 
-    def distance(self, points: np.ndarray, chunk: int = 1 << 16) -> np.ndarray:
-        """Distance (float32) of points (..., 2) to the path."""
+    def distance(self, points: np.ndarray, chunk: int = 1 << 16, threads: int | None = None) -> np.ndarray:
+        """Distance (float32) of points (..., 2+) to the path; extra columns are ignored.
+
+        Chunks are independent, and numpy releases the GIL inside ufuncs, so with ``threads``
+        > 1 (default: up to 2, the cores of the reference machine) chunks run in parallel.
+        """
         pts = np.asarray(points)
+        lead = pts.shape[:-1]
+        # (N, C) view without copying when the input is contiguous, e.g. (T, P, 3) poses.
         flat = pts.reshape(-1, pts.shape[-1])
         out = np.empty(flat.shape[0], dtype=np.float32)
+        starts = range(0, flat.shape[0], chunk)
+        workers = min(threads if threads is not None else min(2, os.cpu_count() or 1), len(starts))
+        if workers > 1:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                list(pool.map(lambda s: self._distance_chunk(flat, out, s, chunk), starts))
+        else:
+            for s in starts:
+                self._distance_chunk(flat, out, s, chunk)
+        return out.reshape(lead)
+
+    def _distance_chunk(self, flat: np.ndarray, out: np.ndarray, s: int, chunk: int) -> None:
         ox, oy = np.float32(self.origin[0]), np.float32(self.origin[1])
         inv_res = np.float32(1.0 / self.resolution)
-        for s in range(0, flat.shape[0], chunk):
-            px = flat[s:s + chunk, 0].astype(np.float32, copy=False)
-            py = flat[s:s + chunk, 1].astype(np.float32, copy=False)
-            ci = np.clip(((px - ox) * inv_res).astype(np.int32), 0, self.width - 1)
-            ri = np.clip(((py - oy) * inv_res).astype(np.int32), 0, self.height - 1)
-            k = self.segment_of_cell[ri, ci]
-            best = None
-            # Flat 1D float32 passes over contiguous gathers: measured ~3x faster than the
-            # same maths on (n, 3) arrays broadcast against (n, 1).
-            for ax, ay, dx, dy, inv in self._neighbours:
-                wx = px - ax[k]
-                wy = py - ay[k]
-                gx = dx[k]
-                gy = dy[k]
-                t = wx * gx
-                t += wy * gy
-                t *= inv[k]
-                np.clip(t, 0.0, 1.0, out=t)
-                gx *= t
-                gy *= t
-                wx -= gx
-                wy -= gy
-                wx *= wx
-                wy *= wy
-                wx += wy
-                best = wx if best is None else np.minimum(best, wx, out=best)
-            out[s:s + chunk] = np.sqrt(best)
-        return out.reshape(pts.shape[:-1])
+        px = flat[s:s + chunk, 0].astype(np.float32)
+        py = flat[s:s + chunk, 1].astype(np.float32)
+        ci = np.clip(((px - ox) * inv_res).astype(np.int32), 0, self.width - 1)
+        ri = np.clip(((py - oy) * inv_res).astype(np.int32), 0, self.height - 1)
+        k = self.segment_of_cell[ri, ci]
+        best = None
+        # Flat 1D float32 passes over contiguous gathers: measured ~3x faster than the
+        # same maths on (n, 3) arrays broadcast against (n, 1).
+        for ax, ay, dx, dy, inv in self._neighbours:
+            wx = px - ax[k]
+            wy = py - ay[k]
+            gx = dx[k]
+            gy = dy[k]
+            t = wx * gx
+            t += wy * gy
+            t *= inv[k]
+            np.clip(t, 0.0, 1.0, out=t)
+            gx *= t
+            gy *= t
+            wx -= gx
+            wy -= gy
+            wx *= wx
+            wy *= wy
+            wx += wy
+            best = wx if best is None else np.minimum(best, wx, out=best)
+        out[s:s + chunk] = np.sqrt(best)
