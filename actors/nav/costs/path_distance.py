@@ -8,12 +8,12 @@ path, a *nearest-segment field* on a grid covering the query area:
 2. an exact separable Euclidean distance transform (column pass by running min/max, row pass
    as a small (W x W) min per row, chunked) gives, for every cell, the nearest seed and thus
    the nearest path segment;
-3. a query looks up its cell and computes the *exact* distance to that segment and its two
-   neighbours.
+3. a query looks up its cell and computes the *exact* distance to that segment and, where
+   the projection falls off one of its ends, to the neighbouring segment on that side.
 
 Cost: O(W^2 H) once for the field plus O(points) per query, in float32 and cache-sized chunks.
-The result is the exact distance to the nearest of three candidate segments of the
-simplified path; it equals the true distance whenever the nearest segment is among them; on
+The result is the exact distance to one or two candidate segments of the simplified path;
+it equals the true distance whenever the nearest segment is among them; on
 smooth paths the measured error is below 1 mm for most points and a few mm near the path,
 and far from the path (where the nearest point is ill-conditioned) it is bounded by about one
 grid cell.
@@ -116,9 +116,11 @@ class PathDistanceField:
         # leaves segments long enough for the +-1 neighbourhood to be exact on smooth paths.
         a, d, inv = _segments(simplify_polyline(_segments_input(path), tolerance))
         self.n_segments = a.shape[0]
-        # For offsets -1, 0, +1: contiguous arrays (ax, ay, dx, dy, 1/len^2) of segment k+off
-        # indexed by k, so a query needs plain 1D gathers only.
-        seg = [np.ascontiguousarray(v, dtype=np.float32) for v in (a[:, 0], a[:, 1], d[:, 0], d[:, 1], inv)]
+        # For offsets -1, 0, +1: contiguous arrays (ax, ay, ux, uy, length) of segment k+off
+        # indexed by k (u the unit direction), so a query needs plain 1D gathers only.
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        unit = d / np.maximum(length, 1e-12)[:, None]
+        seg = [np.ascontiguousarray(v, dtype=np.float32) for v in (a[:, 0], a[:, 1], unit[:, 0], unit[:, 1], length)]
         idx = np.arange(self.n_segments)
         self._neighbours = [
             tuple(np.ascontiguousarray(v[np.clip(idx + off, 0, self.n_segments - 1)]) for v in seg)
@@ -204,24 +206,39 @@ class PathDistanceField:
         ci = np.clip(((px - ox) * inv_res).astype(np.int32), 0, self.width - 1)
         ri = np.clip(((py - oy) * inv_res).astype(np.int32), 0, self.height - 1)
         k = self.segment_of_cell[ri, ci]
-        best = None
-        # Flat 1D float32 passes over contiguous gathers: measured ~3x faster than the
-        # same maths on (n, 3) arrays broadcast against (n, 1).
-        for ax, ay, dx, dy, inv in self._neighbours:
-            wx = px - ax[k]
-            wy = py - ay[k]
-            gx = dx[k]
-            gy = dy[k]
-            t = wx * gx
-            t += wy * gy
-            t *= inv[k]
-            np.clip(t, 0.0, 1.0, out=t)
-            gx *= t
-            gy *= t
-            wx -= gx
-            wy -= gy
-            wx *= wx
-            wy *= wy
-            wx += wy
-            best = wx if best is None else np.minimum(best, wx, out=best)
-        out[s:s + chunk] = np.sqrt(best)
+        d2, before, after = self._segment_d2(px, py, k, self._neighbours[1])
+        # Only where the projection onto segment k was clamped at one of its ends can a
+        # neighbouring segment be nearer; checking it just there (about 40 % of points on
+        # the benchmark) instead of everywhere saves a third of the work.
+        for mask, table in ((before, self._neighbours[0]), (after, self._neighbours[2])):
+            sel = np.flatnonzero(mask)
+            if sel.size:
+                other, _, _ = self._segment_d2(px[sel], py[sel], k[sel], table)
+                d2[sel] = np.minimum(d2[sel], other)
+        np.maximum(d2, 0.0, out=d2)
+        out[s:s + chunk] = np.sqrt(d2)
+
+    @staticmethod
+    def _segment_d2(px: np.ndarray, py: np.ndarray, k: np.ndarray, table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Squared distance to segment ``table[k]``, and masks of projections before/after it.
+
+        With unit direction u and length L: p = w.u, t = clip(p, 0, L), and
+        |w - t u|^2 = |w|^2 - t (2 p - t): one fewer gather and multiply than the textbook form.
+        """
+        ax, ay, ux, uy, length = table
+        wx = px - ax[k]
+        wy = py - ay[k]
+        proj = wx * ux[k]
+        proj += wy * uy[k]
+        seg_len = length[k]
+        before = proj < 0.0
+        after = proj > seg_len
+        t = np.clip(proj, 0.0, seg_len)
+        wx *= wx
+        wy *= wy
+        wx += wy
+        proj *= 2.0
+        proj -= t
+        proj *= t
+        wx -= proj
+        return wx, before, after
