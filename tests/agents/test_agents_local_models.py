@@ -56,7 +56,9 @@ def test_espeak_errors_are_clear():
     with pytest.raises(ValueError, match="non-empty"):
         tts.synthesize("   ")
     with pytest.raises(ValueError, match="speed_wpm"):
-        tts.synthesize("hi", speed_wpm=5)
+        tts.synthesize("hi", speed_wpm=0)
+    # out-of-range rates are clamped to what espeak-ng can speak
+    assert len(tts.synthesize("hello there", speed_wpm=5)) == len(tts.synthesize("hello there", speed_wpm=80))
     with pytest.raises(TTSError, match="voice"):
         tts.synthesize("hi", voice="nonexistentvoice")
     with pytest.raises(FileNotFoundError, match="apt-get install -y espeak-ng"):

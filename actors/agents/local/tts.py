@@ -36,9 +36,11 @@ class EspeakTTS:
             raise ValueError("EspeakTTS.synthesize: text must be a non-empty string")
         cmd = [self.binary, "--stdout", "-v", voice or self.default_voice]
         if speed_wpm is not None:
-            if not _MIN_WPM <= int(speed_wpm) <= _MAX_WPM:
-                raise ValueError(f"speed_wpm must be within [{_MIN_WPM}, {_MAX_WPM}], got {speed_wpm}")
-            cmd += ["-s", str(int(speed_wpm))]
+            if isinstance(speed_wpm, bool) or not isinstance(speed_wpm, (int, float)) or not speed_wpm > 0:
+                raise ValueError(f"speed_wpm: expected a positive number of words per minute, got {speed_wpm!r}")
+            # espeak-ng only speaks between ~80 and ~500 wpm; callers map relative speeds
+            # (OpenAI's 0.25x..4x) onto wpm, so out-of-range requests get the nearest rate.
+            cmd += ["-s", str(int(min(max(round(speed_wpm), _MIN_WPM), _MAX_WPM)))]
         # Text goes through stdin so that a leading '-' is never read as an option.
         cmd.append("--stdin")
         try:
