@@ -121,6 +121,14 @@ def test_distance_functions_are_collection_spaces(client, space, expected):
         client.query(client.collection, "x", distance_func=other)
 
 
+def test_store_rejections_are_value_errors_on_both_backends(client):
+    client.add(client.collection, ["a"], ids=["a"], embeddings=np.zeros((1, 3), np.float32))
+    with pytest.raises(ValueError, match="dimension"):
+        client.add(client.collection, ["b"], ids=["b"], embeddings=np.zeros((1, 4), np.float32))
+    with pytest.raises(ValueError, match="Chroma rejected"):
+        client.metadata_query(client.collection, where={"k": {"$near": 1}})
+
+
 def test_reset_empties_and_missing_collections_read_empty(client):
     client.add(client.collection, ROOMS)
     client.reset(client.collection)

@@ -30,7 +30,9 @@ class EmbeddedBackend:
             from chromadb.config import Settings
         except ImportError as exc:  # pragma: no cover - depends on the environment
             raise ImportError("the embedded vector store needs chromadb: pip install 'emos[agents]'") from exc
-        self._chromadb = chromadb
+        from chromadb import errors
+
+        self._errors = errors
         # anonymized_telemetry off: a robot must not try to phone home.
         self._client = chromadb.PersistentClient(
             path=db.path, settings=Settings(anonymized_telemetry=False, allow_reset=True),
@@ -51,26 +53,36 @@ class EmbeddedBackend:
             else:
                 try:
                     col = self._client.get_collection(name, embedding_function=None)
-                except Exception as exc:  # chromadb raises NotFoundError / ValueError by version
+                except self._errors.NotFoundError as exc:
                     raise CollectionMissing(name) from exc
             self._collections[name] = col
         config = col.configuration or {}
         actual = ((config.get("hnsw") or {}).get("space")) or space
         return col, actual
 
+    def _rejected(self, what: str, call):
+        """Run ``call``; Chroma's invalid-argument errors become ValueError naming the operation
+        (the same error the HTTP backend raises for a 4xx InvalidArgumentError)."""
+        try:
+            return call()
+        except (self._errors.InvalidArgumentError, ValueError) as exc:
+            raise ValueError(f"Chroma rejected the {what}: {exc}") from None
+
     def add(self, col: Any, ids, embeddings, documents, metadatas, upsert: bool) -> None:
         fn = col.upsert if upsert else col.add
-        fn(ids=ids, embeddings=embeddings, documents=documents, metadatas=metadatas)
+        self._rejected("upsert" if upsert else "add", lambda: fn(
+            ids=ids, embeddings=embeddings, documents=documents, metadatas=metadatas))
 
     def query(self, col: Any, embeddings: np.ndarray, n_results: int, where: dict | None) -> dict:
-        return dict(col.query(query_embeddings=embeddings, n_results=n_results, where=where,
-                              include=INCLUDE_QUERY))
+        return dict(self._rejected("query", lambda: col.query(
+            query_embeddings=embeddings, n_results=n_results, where=where, include=INCLUDE_QUERY)))
 
     def get(self, col: Any, ids: list[str] | None, where: dict | None, limit: int | None) -> dict:
-        return dict(col.get(ids=ids, where=where, limit=limit, include=INCLUDE_GET))
+        return dict(self._rejected("metadata query", lambda: col.get(
+            ids=ids, where=where, limit=limit, include=INCLUDE_GET)))
 
     def delete(self, col: Any, ids: list[str] | None, where: dict | None) -> None:
-        col.delete(ids=ids, where=where)
+        self._rejected("delete", lambda: col.delete(ids=ids, where=where))
 
     def count(self, col: Any) -> int:
         return int(col.count())
@@ -79,7 +91,7 @@ class EmbeddedBackend:
         self._collections.pop(name, None)
         try:
             self._client.delete_collection(name)
-        except Exception:  # already absent: dropping is idempotent
+        except self._errors.NotFoundError:  # already absent: dropping is idempotent
             pass
 
     def close(self) -> None:
