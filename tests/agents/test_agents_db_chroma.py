@@ -196,3 +196,23 @@ def test_garbage_and_failing_servers_are_typed():
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_client_rebuilds_from_its_serialized_form_in_another_process(tmp_path):
+    import json
+    import pickle
+    import sys
+
+    client = ChromaClient(ChromaDB(path=str(tmp_path / "shared")))
+    client.add("shared-docs", ["hello"], ids=["h"], embeddings=np.ones((1, 3), np.float32))
+    client.deinitialize()
+    data = json.dumps(client.serialize())
+    code = ("import json, sys\nfrom emos.actors.agents.db import ChromaClient\n"
+            "c = ChromaClient.from_serialized(json.loads(sys.argv[1]))\n"
+            "print([r.id for r in c.metadata_query('shared-docs')])")
+    out = subprocess.run([sys.executable, "-c", code, data], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "['h']"
+    clone = pickle.loads(pickle.dumps(client))
+    assert clone.db == client.db and clone._backend is None
+    with pytest.raises(ValueError, match="serialized ChromaClient"):
+        ChromaClient.from_serialized({"db": {}})

@@ -49,7 +49,8 @@ class EmbeddedBackend:
             if create:
                 # embedding_function=None: we embed ourselves; Chroma's default would download a model.
                 col = self._client.get_or_create_collection(
-                    name, embedding_function=None, configuration={"hnsw": {"space": space}})
+                    name, embedding_function=None,
+                    configuration={"hnsw": {"space": space}})  # type: ignore[arg-type]  # TypedDict
             else:
                 try:
                     col = self._client.get_collection(name, embedding_function=None)

@@ -5,6 +5,7 @@ import re
 import uuid
 from typing import Any, Sequence
 
+import attrs
 import numpy as np
 
 from ..errors import ModelConnectionError
@@ -114,7 +115,7 @@ class ChromaClient:
         # Chroma caps one request's batch (a few thousand rows): send large writes in slices.
         for start in range(0, n, _BATCH):
             end = start + _BATCH
-            self._backend.add(col, ids[start:end], vectors[start:end], documents[start:end],
+            self._store().add(col, ids[start:end], vectors[start:end], documents[start:end],
                               None if metas is None else metas[start:end], upsert)
         return ids
 
@@ -140,7 +141,7 @@ class ChromaClient:
             return [[] for _ in queries]
         if not queries:
             return []
-        raw = self._backend.query(col, vectors, n_results, where)
+        raw = self._store().query(col, vectors, n_results, where)
         return [hits_from_query(raw, i) for i in range(len(queries))]
 
     def metadata_query(self, collection_name: str, where: dict | None = None, ids: Sequence[str] | None = None,
@@ -152,7 +153,7 @@ class ChromaClient:
             col = self._open(collection_name, None, create=False)
         except CollectionMissing:
             return []
-        raw = self._backend.get(col, list(ids) if ids is not None else None, where, limit)
+        raw = self._store().get(col, list(ids) if ids is not None else None, where, limit)
         return records_from_get(raw)
 
     def count(self, collection_name: str) -> int:
@@ -163,7 +164,7 @@ class ChromaClient:
 
     def _backend_count(self, name: str) -> int:
         col = self._open(name, None, create=False)
-        return self._backend.count(col)
+        return self._store().count(col)
 
     # ------------------------------------------------------------------ deletes
     def delete(self, collection_name: str, ids: Sequence[str] | None = None, where: dict | None = None) -> None:
@@ -174,24 +175,24 @@ class ChromaClient:
             col = self._open(collection_name, None, create=False)
         except CollectionMissing:
             return
-        self._backend.delete(col, list(ids) if ids is not None else None, where)
+        self._store().delete(col, list(ids) if ids is not None else None, where)
 
     def reset(self, collection_name: str) -> None:
         """Drop one collection and everything in it (the next write recreates it)."""
-        self._ensure()
-        self._backend.drop(_check_name(collection_name))
+        self._store().drop(_check_name(collection_name))
 
     # ------------------------------------------------------------------ helpers
-    def _ensure(self) -> None:
+    def _store(self) -> EmbeddedBackend | HTTPBackend:
         if self._backend is None:
             self.initialize()
+        assert self._backend is not None
+        return self._backend
 
     def _open(self, name: str, distance: str | None, create: bool) -> Any:
-        self._ensure()
         _check_name(name)
         if distance is not None:
             _check_distance(distance)
-        col, actual = self._backend.open(name, distance or "l2", create)
+        col, actual = self._store().open(name, distance or "l2", create)
         if distance is not None and actual != distance:
             raise ValueError(f"collection {name!r} uses distance {actual!r}, not {distance!r}: "
                              "a collection's distance is fixed when it is created (reset it to change)")
@@ -205,11 +206,24 @@ class ChromaClient:
             raise ValueError(f"embeddings: expected {len(texts)} rows, got shape {vectors.shape}")
         return vectors
 
-    def __getstate__(self) -> dict:  # rebuildable in another process: spec only, no live handles
+    def serialize(self) -> dict[str, Any]:
+        """Plain data that rebuilds this client in another process (no live handles)."""
+        return {"client_type": type(self).__name__, "db": attrs.asdict(self.db)}
+
+    @classmethod
+    def from_serialized(cls, data: dict[str, Any]) -> "ChromaClient":
+        if not isinstance(data, dict) or data.get("client_type") != cls.__name__ or "db" not in data:
+            raise ValueError(f"serialized ChromaClient: expected {{'client_type': 'ChromaClient', 'db': {{...}}}}, "
+                             f"got {data!r}")
+        return cls(ChromaDB(**data["db"]))
+
+    def __getstate__(self) -> dict:  # pickling keeps the spec only; handles reopen lazily
         return {"db": self.db}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state["db"])
+        self.db = state["db"]
+        self._embedder = None
+        self._backend = None
 
 
 def _texts(what: str, values: Sequence[str]) -> list[str]:

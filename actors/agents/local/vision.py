@@ -128,5 +128,6 @@ class LocalDetector:
     def _boxes(self, label: str, xywh: np.ndarray, scores: np.ndarray) -> list[Detection]:
         boxes = np.column_stack([xywh[:, 0], xywh[:, 1], xywh[:, 0] + xywh[:, 2], xywh[:, 1] + xywh[:, 3]])
         keep = _nms(boxes, scores, self.nms_iou)
-        return [Detection(label, float(scores[i]), tuple(float(v) for v in boxes[i]))
+        return [Detection(label, float(scores[i]), (float(boxes[i, 0]), float(boxes[i, 1]),
+                                                    float(boxes[i, 2]), float(boxes[i, 3])))
                 for i in keep if scores[i] >= self.threshold]

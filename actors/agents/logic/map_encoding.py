@@ -124,7 +124,7 @@ class MapEncoder:
         ids = self.encode_many(layer_name, [text], [position], [timestamp])
         return ids[0] if ids else None
 
-    def encode_many(self, layer_name: str, texts: Sequence[str], positions: Sequence[Any],
+    def encode_many(self, layer_name: str, texts: Sequence[str], positions: Sequence[Any] | np.ndarray,
                     timestamps: Sequence[float | None] | None = None,
                     embeddings: np.ndarray | None = None) -> list[str]:
         layer = self._layer(layer_name)
@@ -140,7 +140,10 @@ class MapEncoder:
             return []
         points = np.stack([_position(positions[i]) for i in keep])
         index, centres = self.cells(layer_name, points)
-        ids, metadatas, documents, source = [], [], [], []
+        ids: list[str] = []
+        metadatas: list[dict] = []
+        documents: list[str] = []
+        source: list[int] = []
         seen: dict[str, int] = {}
         for row, i in enumerate(keep):
             cell = ":".join(str(v) for v in index[row])

@@ -50,7 +50,7 @@ def format_hits(hits: list[Hit], add_metadata: bool) -> str:
 
 def retrieve(store: VectorStore, settings: RAGSettings, query: str) -> str:
     """The context text for ``query`` ("" when RAG is off or nothing is stored)."""
-    if not settings.enable_rag:
+    if not settings.enable_rag or settings.collection_name is None:
         return ""
     hits = store.query(settings.collection_name, query, n_results=settings.n_results,
                        distance_func=settings.distance_func)

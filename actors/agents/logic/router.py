@@ -59,7 +59,8 @@ DEFAULT_MAXIMUM_DISTANCE = {"l2": 1.5, "ip": 0.75, "cosine": 0.75}
 class SemanticRouterConfig:
     """``maximum_distance`` is in the units of ``distance_func`` (None: the default for it)."""
 
-    router_name: str = attrs.field(validator=[attrs.validators.instance_of(str), attrs.validators.min_len(1)])
+    router_name: str = attrs.field(validator=attrs.validators.and_(attrs.validators.instance_of(str),
+                                                                   attrs.validators.min_len(1)))
     distance_func: str = attrs.field(default="l2", validator=attrs.validators.in_(DISTANCES))
     maximum_distance: float | None = attrs.field(default=None)
 
