@@ -8,6 +8,7 @@ import pytest
 
 from emos.actors.agents.clients import GenericHTTPClient
 from emos.actors.agents.logic.router import LLMRouter, Route
+from emos.actors.agents.logic.streaming import chunk_stream
 from emos.actors.agents.logic.tools import (
     ToolArgumentError,
     ToolError,
@@ -133,3 +134,10 @@ def test_llm_router_decides_from_the_tool_call(chat):
     assert router.decide("Who wrote Hamlet?").route is llm
     decision = router.decide("banana")  # the model answers without calling a tool
     assert decision.route is llm and decision.is_default
+
+
+def test_streamed_reply_is_chunked_by_sentence(chat):
+    request = ChatRequest(messages=[ChatMessage("user", "tell me about yourself")], stream=True)
+    chunks = list(chat(request))
+    assert len(chunks) > 3  # streamed word by word, ending with an empty "done" chunk
+    assert list(chunk_stream(chunks, ".")) == ["I am a robot.", "I can drive to places.", "I like kitchens"]
