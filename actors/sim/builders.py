@@ -45,7 +45,7 @@ def demo_house(**world_kwargs: Any) -> World:
     """A small house with four rooms and doorways; the robot fits through every door."""
     world = World(name="demo_house", **world_kwargs)
     world.add(house_shapes())
-    world.spawn = HOUSE_SPAWN  # type: ignore[attr-defined]
+    world.spawn = HOUSE_SPAWN
     return world
 
 
@@ -54,7 +54,7 @@ def from_map(yaml_path: str | Path, wall_height: float = 1.0, **world_kwargs: An
     occ = read_ros_map(yaml_path)
     world = World(name=Path(yaml_path).stem, **world_kwargs)
     world.add(map_to_boxes(occ, wall_height))
-    world.occupancy_map = occ  # type: ignore[attr-defined]
+    world.occupancy_map = occ
     return world
 
 
@@ -67,7 +67,7 @@ def from_barn(world: int | BarnWorld, worlds_file: str | Path | None = None, **w
     entry = world if isinstance(world, BarnWorld) else _barn_entry(int(world), worlds_file)
     sim = World(name=f"barn_{entry.idx}", **world_kwargs)
     sim.add(barn_shapes(entry))
-    sim.barn = entry  # type: ignore[attr-defined]
+    sim.barn = entry
     return sim
 
 

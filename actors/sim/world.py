@@ -61,6 +61,10 @@ class World:
         self._stop = threading.Event()
         self._lock = threading.RLock()
         self.ground_id: int | None = None
+        # Set by the ready-made builders: a suggested robot pose, the BARN entry, the ROS map.
+        self.spawn: tuple[float, float, float] | None = None
+        self.barn: Any = None
+        self.occupancy_map: Any = None
         if ground:
             self.client.setAdditionalSearchPath(_deps.pybullet_data_path())
             self.ground_id = self.client.loadURDF("plane.urdf")

@@ -27,7 +27,7 @@ class ArcConfig:
     clearance_weight: float = 6.0
     lookahead: float = 0.4  # m ahead of the arc end, scored too, to end aligned with the path
     reverse_speed: float = 0.3  # m/s of the backing-up arcs (0 disables them)
-    reverse_cost: float = 0.3  # extra cost of backing up, so it is only chosen to get unstuck
+    reverse_cost: float = 1.0  # extra cost of backing up, so it is only chosen to get unstuck
 
 
 class ArcPlanner:
