@@ -11,8 +11,9 @@ from .registry import planner_spec, resolve_planner_name
 __all__ = ["OMPLConfig", "LOG_LEVELS", "OPTIMIZATION_OBJECTIVES"]
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARN", "ERROR", "NONE")
-# Objectives the installed binding can build. OMPL's other objectives (clearance, mechanical
-# work, ...) need a C++ state-cost override that the Python binding does not dispatch.
+# Objectives the installed binding can build. OMPL's clearance / mechanical-work objectives are
+# not exposed. A Python OptimizationObjective subclass *is* dispatched, but was tried and
+# rejected: PRM/PRMstar deadlock calling it from their roadmap thread, FMT/BFMT fail with it.
 OPTIMIZATION_OBJECTIVES = ("PathLengthOptimizationObjective",)
 _KNOWN_OMPL_OBJECTIVES = (
     "MaximizeMinClearanceObjective",
