@@ -99,3 +99,14 @@ def test_cli_reports_a_missing_world_file_clearly(tmp_path):
     out = _cli("--worlds-file", str(tmp_path / "missing.json"))
     assert out.returncode == 2
     assert "BARN world file not found" in out.stderr
+
+
+def test_navigation_core_controllers_drive_barn_through_the_adapter():
+    pytest.importorskip("emos.actors.nav.controllers", reason="navigation core (emos.actors.nav) not importable")
+    from emos.actors.sim.barn.controllers import make_controller
+
+    nav = make_controller("navcore-purepursuit")
+    r = run_episode(load_barn_worlds()[3], nav)
+    assert r.success, r.reason
+    with pytest.raises(ValueError, match="unknown controller"):
+        make_controller("teleport")

@@ -12,10 +12,22 @@ def _builtin() -> Navigator:
     return GridNavigator()
 
 
+def _navcore(name: str) -> Callable[[], Navigator]:
+    def factory() -> Navigator:
+        from .navcore import NavCoreNavigator
+
+        return NavCoreNavigator(name)
+
+    return factory
+
+
 # name -> (factory, one-line description). Factories import lazily.
 CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
     "builtin": (_builtin, "lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
 }
+for _name, _cls in (("navcore-dwa", "DWA"), ("navcore-purepursuit", "PurePursuit"),
+                    ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ")):
+    CONTROLLERS[_name] = (_navcore(_name), f"simulator global plan + emos.actors.nav {_cls} local controller")
 
 
 def make_controller(name: str) -> Navigator:

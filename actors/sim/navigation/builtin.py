@@ -77,7 +77,9 @@ class GridNavigator:
             rc = np.asarray(cells)
             self.plan = self.grid.center_of(rc[:, 0], rc[:, 1])
 
-    def step(self, obs: Observation) -> tuple[float, float, float]:
+    def update(self, obs: Observation) -> bool:
+        """Global layer: remember the scan, refresh the cost-to-go and plan, watch for being
+        stuck. Returns True while a recovery (backing out) is in force."""
         if obs.scan is not None:
             self.grid.insert(obs.scan.world_points())
         stale = self.grid.version != self._planned_version
@@ -91,9 +93,12 @@ class GridNavigator:
                 self._replan(obs)
             self._last_recovery = obs.stamp
             self._recover_until = obs.stamp + self.recovery_time
+        return obs.stamp < self._recover_until
+
+    def step(self, obs: Observation) -> tuple[float, float, float]:
+        recovering = self.update(obs)
         reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.task.robot.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
-        recovering = obs.stamp < self._recover_until
         choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None)
         if choice is None:
             # Boxed in: no arc is clear, not even turning or backing up. Stand still; the
