@@ -76,3 +76,17 @@ def test_wall_across_the_path_blocks_without_collision(name):
     res = run_closed_loop(controller, robot, wall, (0.0, 0.0, 0.0), max_steps=150)
     assert not res.reached
     assert res.min_clearance > 0.0
+
+
+@pytest.mark.parametrize("path_name", ["straight", "u_turn"])
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("name", AVOIDING)
+def test_box_footprint_passes_obstacle_without_touching(name, model, path_name):
+    """A rectangular robot: clearance is measured from its rotated box, not a circle."""
+    robot = make_robot(model, "BOX", (0.4, 0.3, 0.2))
+    controller = FACTORIES[name](robot)
+    make_path, obstacle = PATHS[path_name]
+    controller.set_path(make_path())
+    res = run_closed_loop(controller, robot, World([obstacle]), (0.0, 0.0, 0.0), max_steps=800)
+    assert res.reached, f"{name}/{model}/{path_name}: stuck at {res.poses[-1]}"
+    assert res.min_clearance > 0.0

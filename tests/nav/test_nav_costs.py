@@ -43,11 +43,12 @@ def test_goal_cost_normalized_by_path_length():
     np.testing.assert_allclose(goal_cost(trajs, [4.0, 0.0], 4.0), [3.0 / 4.0, np.hypot(3, 3) / 4.0])
 
 
-def test_obstacles_cost_is_inverse_clearance():
+def test_obstacles_cost_is_inverse_clearance_in_robot_radii():
     trajs = np.stack([straight(0.0), straight(1.0)])
     obstacles = np.array([[0.5, 2.0]])
     cost = obstacles_cost(trajs, obstacles, robot_radius=0.5)
-    np.testing.assert_allclose(cost, [1.0 / 1.5, 1.0 / 0.5])
+    np.testing.assert_allclose(cost, [0.5 / 1.5, 0.5 / 0.5])
+    np.testing.assert_allclose(obstacles_cost(trajs, obstacles), [1.0 / 2.0, 1.0 / 1.0])  # point robot
     assert np.all(obstacles_cost(trajs, np.zeros((0, 2))) == 0.0)
 
 

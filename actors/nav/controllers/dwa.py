@@ -141,6 +141,10 @@ class DWA(PathFollower):
             obstacle_min_distance=np.where(np.isinf(clear[idx]), np.inf, clear[idx] + self.robot.radius),
             robot_radius=self.robot.radius, dt=dt,
             acc_limits=np.array([l.max_acc for l in lim]), initial_velocity=velocity,
+            # Progress relative to what the horizon can cover: measured against the whole
+            # segment, one step of progress from standstill is too small to outweigh the
+            # obstacle term and the robot parks in front of obstacles it could pass.
+            goal_normalizer=max(self.robot.ctrl_vx_limits.max_vel * cfg.prediction_horizon, 0.1),
         )
         best = int(np.argmin(costs.total))
         command = samples[idx[best]]

@@ -70,8 +70,11 @@ class PathFollower:
         cmds = ramp_commands(self.robot, velocity, targets, self.config.control_time_step, steps)
         return cmds, integrate_sequence(pose, cmds, self.config.control_time_step)
 
-    def clearances(self, poses: np.ndarray, obstacles_world: np.ndarray) -> np.ndarray:
-        """Minimum footprint clearance per candidate trajectory (N,)."""
+    def clearances(self, poses: np.ndarray, obstacles_world: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+        """Minimum footprint clearance per candidate trajectory (N,).
+
+        ``valid`` (N, P) masks the poses that count (e.g. per-candidate horizons).
+        """
         if obstacles_world.shape[0] == 0:
             return np.full(poses.shape[0], np.inf)
         reach = float(np.max(np.hypot(poses[..., 0] - poses[0, 0, 0], poses[..., 1] - poses[0, 0, 1]))) + self.robot.radius + 0.5
@@ -79,7 +82,10 @@ class PathFollower:
         if near.shape[0] == 0:
             return np.full(poses.shape[0], np.inf)
         # The start pose is where the robot already is: judge only where it is going.
-        return pose_clearance(self.robot, poses[:, 1:], near).min(axis=-1)
+        clear = pose_clearance(self.robot, poses[:, 1:], near)
+        if valid is not None:
+            clear = np.where(valid[:, 1:], clear, np.inf)
+        return clear.min(axis=-1)
 
     def _no_path(self, pose: np.ndarray) -> ControlResult:
         return ControlResult.stop(pose, ControlStatus.NO_PATH)

@@ -89,14 +89,24 @@ class PurePursuit(PathFollower):
         obs = self.world_obstacles(pose, obstacles)
         steps = cfg.prediction_horizon
         targets = self.candidates(nominal)
-        cmds, poses = self.plan(pose, velocity, targets, steps)
-        clear = self.clearances(poses, obs)
+        # Every candidate is checked over the same *distance*: a slower candidate gets a
+        # proportionally longer horizon. Otherwise "the same, but at half speed" looks free
+        # only because it sees less far, and the robot creeps into the obstacle.
+        cmds, poses = self.plan(pose, velocity, targets, 2 * steps)
+        reach = np.maximum(np.hypot(targets[:, 0], targets[:, 1]), 1e-9)
+        full = max(float(np.hypot(nominal[0], nominal[1])), float(reach.max()))
+        horizon = np.clip(np.ceil(steps * full / reach), steps, 2 * steps).astype(int)
+        horizon[reach < 1e-6] = steps  # turning in place: its own horizon
+        mask = np.arange(2 * steps)[None, :] < horizon[:, None]
+        valid = np.concatenate([np.ones((len(targets), 1), dtype=bool), mask], axis=1)
+        clear = self.clearances(poses, obs, valid=valid)
+        cmds = cmds[:, :steps]
+        poses = poses[:, : steps + 1]
         here = self.clearances(np.repeat(pose[None, None], 2, axis=1), obs)[0]
         # Keep the safety margin; if already inside it, at least do not get closer.
         ok = np.nonzero(clear > min(cfg.safety_margin, here - 1e-3))[0]
         if ok.size == 0:
-            brake, plan = self.plan(pose, velocity, np.zeros((1, 3)), steps)
-            return ControlResult(brake[0], plan[0], ControlStatus.BLOCKED, {"clearance": float(clear.max())})
+            return self._back_off(pose, velocity, obs, steps, here, float(clear.max()))
         best = int(ok[0])
         chosen = targets[best] - targets[0]
         offset = chosen[1] if self.robot.model_type is RobotType.OMNI else chosen[2]
@@ -108,6 +118,27 @@ class PurePursuit(PathFollower):
             ControlStatus.RUNNING if best == 0 else ControlStatus.AVOIDING)
         return ControlResult(cmds[best], poses[best], status,
                              {"clearance": float(clear[best]), "tracked_index": self.progress.index})
+
+    def _back_off(self, pose: np.ndarray, velocity: np.ndarray, obs: np.ndarray, steps: int,
+                  here: float, best_forward: float) -> ControlResult:
+        """Nothing ahead is free: reverse slowly (steering either way) if that gains clearance,
+        otherwise brake. A car in particular cannot turn away without moving, so without this
+        it would stay stuck nose-to-obstacle."""
+        cfg = self.config
+        k = np.arange(0, cfg.max_search_candidates + 1) * cfg.path_search_step
+        back = np.zeros((2 * k.size, 3))
+        back[:, 0] = -0.3 * self.robot.ctrl_vx_limits.max_vel
+        back[:, 2] = np.concatenate([k, -k])
+        cmds, poses = self.plan(pose, velocity, back, steps)
+        clear = self.clearances(poses, obs)
+        best = int(np.argmax(clear))
+        if clear[best] > max(here, 0.0) + 1e-3 and clear[best] > 0.0:
+            self._commit = steps
+            self._side = -math.copysign(1.0, back[best, 2]) if back[best, 2] != 0 else self._side
+            return ControlResult(cmds[best], poses[best], ControlStatus.AVOIDING,
+                                 {"clearance": float(clear[best]), "reversing": True})
+        brake, plan = self.plan(pose, velocity, np.zeros((1, 3)), steps)
+        return ControlResult(brake[0], plan[0], ControlStatus.BLOCKED, {"clearance": best_forward})
 
     def candidates(self, nominal: np.ndarray) -> np.ndarray:
         """Nominal command first, then detours in order of growing offset.

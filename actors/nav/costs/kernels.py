@@ -8,8 +8,12 @@ Definitions (T trajectories, P points, poses (T, P, 2+), velocities (T, P, 3)):
 * reference path: mean over points of the distance (m) to the reference polyline;
 * goal: distance from the last point to the goal, divided by the reference path length
   (1 m when there is no reference path), so 1.0 means "a whole path length away";
-* obstacles: ``1 / max(clearance, 0.01 m)`` with clearance the smallest distance from any
-  point to any obstacle minus the robot radius; 0 when there are no obstacles;
+* obstacles: the inverse of the clearance in robot radii, ``r / max(clearance, 0.01 m)``,
+  with clearance the smallest distance from any point to any obstacle minus the robot radius
+  ``r`` (``r = 1 m`` for a point robot); 0 when there are no obstacles. Measuring in robot
+  radii keeps the term commensurate with the others: with plain ``1 / clearance`` a robot
+  parks half a metre in front of an obstacle it could pass, its repulsion outweighing the
+  progress a short dynamic-window step can make;
 * smoothness: mean over steps of ``sum_axis |dv| / (a_max * dt)``: 1.0 per step means
   changing velocity at exactly the acceleration limit on one axis;
 * jerk: mean over steps of ``sum_axis |d^2 v| / (a_max * dt)``: the change of that change.
@@ -107,13 +111,15 @@ def min_obstacle_distance(trajectories: np.ndarray, obstacles: np.ndarray,
 
 def obstacles_cost(trajectories: np.ndarray | None, obstacles: np.ndarray | None,
                    robot_radius: float = 0.0, min_distance: np.ndarray | None = None) -> np.ndarray:
-    """``1 / max(clearance, 0.01)`` per trajectory; ``min_distance`` may be precomputed."""
+    """``r / max(clearance, 0.01)`` per trajectory (see module docstring); ``min_distance``
+    (centre to nearest obstacle) may be precomputed."""
     if min_distance is None:
         if obstacles is None or np.asarray(obstacles).size == 0:
             return np.zeros(_xy(trajectories).shape[0])
         min_distance = min_obstacle_distance(trajectories, obstacles)
     clearance = np.asarray(min_distance, dtype=np.float64) - robot_radius
-    cost = 1.0 / np.maximum(clearance, 0.01)
+    scale = robot_radius if robot_radius > 0 else 1.0
+    cost = scale / np.maximum(clearance, 0.01)
     return np.where(np.isinf(min_distance), 0.0, cost)
 
 
@@ -192,12 +198,21 @@ def evaluate_costs(
     initial_velocity: np.ndarray | None = None,
     obstacle_min_distance: np.ndarray | None = None,
     path_field: PathDistanceField | None = None,
+    goal_normalizer: float | None = None,
 ) -> CostBreakdown:
-    """Weighted total cost per trajectory. Kernels with weight 0 are not run at all."""
+    """Weighted total cost per trajectory. Kernels with weight 0 are not run at all.
+
+    ``goal_normalizer`` (m) overrides the goal term's default divisor, the reference path
+    length (a sampling controller may prefer the distance it can cover in its horizon).
+    """
     T = _xy(trajectories).shape[0]
     total = np.zeros(T)
     terms: dict[str, np.ndarray] = {}
     ref_len = path_length(reference_path) if reference_path is not None else 0.0
+    if goal_normalizer is not None:
+        if not goal_normalizer > 0:
+            raise ValueError(f"goal_normalizer: expected > 0 m, got {goal_normalizer!r}")
+        ref_len = float(goal_normalizer)
     if weights.reference_path_distance_weight > 0 and reference_path is not None:
         terms["reference_path"] = reference_path_cost(trajectories, reference_path, field=path_field)
     if weights.goal_distance_weight > 0 and goal is not None:
