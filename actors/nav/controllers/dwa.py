@@ -41,7 +41,9 @@ def _vector(size: int):
 @attrs.define
 class DWAConfig(FollowerConfig):
     """Spec parameters (times in seconds). ``octree_resolution`` (m) is the cell of the voxel
-    filter applied to obstacle points before collision checking (half of it, conservatively)."""
+    filter applied to obstacle points before collision checking (half of it, conservatively).
+    ``max_num_threads`` is accepted and validated; one step is a handful of vectorized numpy
+    calls over all samples at once, so there is no per-thread work split to configure."""
 
     prediction_horizon: float = field(1.0, 1e-4, 1e6)
     control_horizon: float = field(0.2, 1e-4, 1e6)

@@ -38,6 +38,8 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     ``target_distance=None`` keeps the distance measured at the first detection.
     ``camera_rotation_to_robot`` is the quaternion (x, y, z, w) of the camera body frame
     (x forward) on the robot; the optical frame convention (z forward) is applied on top.
+    The DWA parameters (samples, sensor pose, ``octree_resolution``, ``costs_weights``,
+    ``max_num_threads``) mean what they mean in :class:`DWAConfig`.
     """
 
     target_distance: float | None = attrs.field(default=None, on_setattr=setters)
@@ -52,6 +54,11 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     camera_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
     max_linear_samples: int = field(20, 1, 1000, int)
     max_angular_samples: int = field(20, 1, 1000, int)
+    # DWA parameters the RGB-D follower shares (same names and defaults as DWAConfig).
+    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=_vector(3), on_setattr=setters, eq=False)
+    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
+    octree_resolution: float = field(0.1, 1e-9, 1e3)
+    max_num_threads: int = field(1, 1, 100, int)
     costs_weights: TrajectoryCostsWeights = attrs.field(factory=lambda: TrajectoryCostsWeights(
         reference_path_distance_weight=0.0, goal_distance_weight=3.0, obstacles_distance_weight=0.5,
         smoothness_weight=0.1, jerk_weight=0.0))
@@ -122,7 +129,7 @@ class VisionRGBDFollower:
                                    cfg.target_search_timeout, cfg.enable_search)
         self.tracker = _AlphaBeta()
         self.distance: float | None = cfg.target_distance
-        self.sensor_pose = (0.0, 0.0, 0.0)
+        self.sensor_pose = sensor_offset(cfg.sensor_position_to_robot, cfg.sensor_rotation_to_robot)
         self._detour_side = 1.0
 
     def _target_world(self, box: BoundingBox, depth: np.ndarray, pose: np.ndarray) -> np.ndarray | None:
@@ -181,7 +188,7 @@ class VisionRGBDFollower:
         # The target itself shows up in the scan: it is the thing we approach, not an obstacle.
         if world.shape[0]:
             world = world[np.hypot(world[:, 0] - target[0], world[:, 1] - target[1]) > 0.5]
-        world = voxel_downsample(world, 0.05)
+        world = voxel_downsample(world, 0.5 * cfg.octree_resolution)
         reach = float(np.abs(samples[:, 0]).max()) * dt * cfg.prediction_horizon + robot.radius + 0.5
         near = nearby_obstacles(world, pose[:2], reach)
         clear = pose_clearance(robot, trajs[:, 1:], near).min(axis=1) if near.shape[0] else np.full(len(samples), np.inf)
