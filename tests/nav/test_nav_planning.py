@@ -240,3 +240,28 @@ def test_final_verification_rejects_a_path_through_a_wall(rooms):
     assert not planner._finish(grazing, "RRTConnect", 0.0, 0.0).solved
     clear = np.array([[-3.5, -2.76, 0.0], [-2.5, -2.76, 0.0]])
     assert planner._finish(clear, "RRTConnect", 0.0, 0.0).solved
+
+
+def test_cancel_from_another_thread(rooms):
+    import threading
+
+    robot = cylinder_robot()
+    # An anytime planner keeps its best path when cancelled ...
+    anytime = OMPLGeometricPlanner(OMPLConfig(planner_id="RRTstar", planning_timeout=30.0), robot)
+    anytime.set_map(rooms)
+    assert anytime.cancel() is False  # nothing running
+    timer = threading.Timer(0.5, anytime.cancel)
+    timer.start()
+    t0 = time.perf_counter()
+    result = anytime.plan(SW_ROOM, NE_ROOM)
+    assert time.perf_counter() - t0 < 5.0
+    assert result.solved and result.planning_time_s < 5.0
+    assert_disc_path_clear(result.path, rooms, RADIUS)
+    # ... a query that has nothing yet reports CANCELLED.
+    stuck = OMPLGeometricPlanner(OMPLConfig(planner_id="RRTConnect", planning_timeout=30.0), cylinder_robot(0.2))
+    stuck.set_map(rooms)
+    threading.Timer(0.3, stuck.cancel).start()
+    t0 = time.perf_counter()
+    result = stuck.plan(SW_ROOM, CLOSET)
+    assert time.perf_counter() - t0 < 5.0
+    assert not result.solved and result.status == "CANCELLED"

@@ -10,6 +10,7 @@ plain fcl collision queries before it is returned; a path that fails is never re
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any, Sequence
 
@@ -54,7 +55,8 @@ class OMPLGeometricPlanner:
 
     Build it with an :class:`OMPLConfig` and the robot (a ``RobotConfig``, or its
     ``geometry_type`` / ``geometry_params``), give it a map with :meth:`set_map`, then call
-    :meth:`plan`. Not thread-safe: use one instance per thread.
+    :meth:`plan`. One query at a time per instance; :meth:`cancel` may be called from any
+    thread to stop the query in progress.
     """
 
     def __init__(
@@ -78,6 +80,9 @@ class OMPLGeometricPlanner:
         self._si: Any = None
         self._margin_slot = [0.0]
         self._base_margin = 0.0
+        self._ptc_lock = threading.Lock()
+        self._ptc: Any = None
+        self._cancelled = False
         ob, og, ou = _ompl()
         ou.setLogLevel(getattr(ou, f"LOG_{self.config.log_level.upper()}"))
 
@@ -231,11 +236,23 @@ class OMPLGeometricPlanner:
         planner = make_planner(cfg.planner_id, si, cfg.planner_params)
         planner.setProblemDefinition(pdef)
         planner.setup()
-        t0 = time.perf_counter()
-        status = planner.solve(budget)
-        t_plan = time.perf_counter() - t0
+        # A C++-side timed condition: cancel() can end it from another thread without any
+        # Python call per planner iteration.
+        ptc = ob.timedPlannerTerminationCondition(budget)
+        with self._ptc_lock:
+            self._ptc, self._cancelled = ptc, False
+        try:
+            t0 = time.perf_counter()
+            status = planner.solve(ptc)
+            t_plan = time.perf_counter() - t0
+        finally:
+            with self._ptc_lock:
+                self._ptc = None
+                cancelled = self._cancelled
         status_name = status.getStatus().name
         if status_name != "EXACT_SOLUTION" or not pdef.hasExactSolution():
+            if cancelled:
+                return failed("CANCELLED", "cancelled before a solution was found", t_plan)
             if status_name == "APPROXIMATE_SOLUTION":
                 status_name = "TIMEOUT"
             return failed(status_name, f"no exact solution within {budget:.3g} s", t_plan)
@@ -249,6 +266,17 @@ class OMPLGeometricPlanner:
             t_simpl = time.perf_counter() - t1
         states = np.array([(st.getX(), st.getY(), st.getYaw()) for st in raw.getStates()], dtype=np.float64)
         return self._finish(states, name, t_plan, t_simpl)
+
+    def cancel(self) -> bool:
+        """Stop the query in progress (from any thread). An anytime planner that already has a
+        solution returns it; otherwise the result is ``solved=False``, status ``CANCELLED``.
+        Returns False if no query was running."""
+        with self._ptc_lock:
+            if self._ptc is None:
+                return False
+            self._cancelled = True
+            self._ptc.terminate()
+            return True
 
     def _finish(
         self, states: np.ndarray, name: str, t_plan: float, t_simpl: float, message: str = ""
