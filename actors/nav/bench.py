@@ -60,7 +60,7 @@ def bench_cost_eval(repeats: int = 5) -> float:
     s = np.linspace(0.0, 12.0, 1000)
     reference = np.stack([s, 1.5 * np.sin(s / 2.0)], axis=1)
     commands = np.stack([rng.uniform(0.2, 1.0, n_traj), np.zeros(n_traj), rng.uniform(-1.0, 1.0, n_traj)], 1)
-    trajectories = rollout([0.0, 0.0, 0.0], commands, dt, n_pts - 1).astype(np.float32)
+    trajectories = rollout(np.zeros(3), commands, dt, n_pts - 1).astype(np.float32)
     # Velocity profiles that change along the trajectory, so smoothness and jerk do work.
     ramp = np.linspace(0.5, 1.0, n_pts, dtype=np.float32)[None, :, None]
     velocities = (commands.astype(np.float32)[:, None, :] * ramp).astype(np.float32)

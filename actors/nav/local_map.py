@@ -62,6 +62,9 @@ class LocalMapper:
         rows, cols = self.config.shape
         self.origin = (-0.5 * cols * self.config.resolution, -0.5 * rows * self.config.resolution)
         self.grid = np.full((rows, cols), UNKNOWN, dtype=np.int8)
+        # Per scan layout: (beam index per cell, distance per cell); see _cell_beams.
+        self._cache_key: tuple | None = None
+        self._cache: tuple[np.ndarray, np.ndarray] = (np.zeros(0, np.int32), np.zeros(0, np.float32))
 
     def _beam_lengths(self, scan: LaserScan2D) -> tuple[np.ndarray, np.ndarray]:
         """Free length of each beam (0 for NaN/too-short beams) and the mask of real hits."""
@@ -93,7 +96,7 @@ class LocalMapper:
         angles = scan.beam_angles()
         key = (angles.size, float(angles[0]) if angles.size else 0.0,
                float(angles[-1]) if angles.size else 0.0, float(np.sum(angles)))
-        if getattr(self, "_cache_key", None) == key:
+        if self._cache_key == key:
             return self._cache
         cfg = self.config
         rows, cols = cfg.shape

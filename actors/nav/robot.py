@@ -205,6 +205,14 @@ def _ellipse_distance(x: np.ndarray, y: np.ndarray, a: float, b: float) -> np.nd
     return np.where(inside, -dist, dist)
 
 
+def _to_robot_type(value: "RobotType | str") -> RobotType:
+    return RobotType.from_any(value)
+
+
+def _to_geometry_type(value: "_GeometryType | str") -> _GeometryType:
+    return RobotGeometry.get_type(value)
+
+
 def _finite_number(name: str, *, positive: bool, allow_zero: bool = False):
     def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
@@ -278,30 +286,31 @@ class RobotConfig:
     """The robot's digital twin: motion model, geometry and control limits.
 
     ``ctrl_vy_limits`` is only used by OMNI robots; the other models never command vy.
-    ``wheel_base`` (Ackermann only) defaults to the footprint length (BOX) or diameter.
+    ``wheel_base`` (m, Ackermann only): 0 derives it from the footprint, its length for a
+    BOX and its inner diameter otherwise.
     """
 
-    model_type: RobotType = attrs.field(converter=RobotType.from_any)
-    geometry_type: _GeometryType = attrs.field(converter=RobotGeometry.get_type)
+    model_type: RobotType = attrs.field(converter=_to_robot_type)
+    geometry_type: _GeometryType = attrs.field(converter=_to_geometry_type)
     geometry_params: np.ndarray = attrs.field()
     ctrl_vx_limits: LinearCtrlLimits = attrs.field(factory=_default_vx, validator=_instance_of(LinearCtrlLimits))
     ctrl_vy_limits: LinearCtrlLimits = attrs.field(factory=_default_vy, validator=_instance_of(LinearCtrlLimits))
     ctrl_omega_limits: AngularCtrlLimits = attrs.field(factory=_default_omega, validator=_instance_of(AngularCtrlLimits))
-    wheel_base: float | None = attrs.field(default=None)
+    wheel_base: float = attrs.field(default=0.0, converter=float)
 
     def __attrs_post_init__(self) -> None:
         params = RobotGeometry.validate_params(self.geometry_type, self.geometry_params)
         params.setflags(write=False)
         object.__setattr__(self, "geometry_params", params)
-        if self.wheel_base is None:
+        if self.wheel_base == 0.0:
             if self.geometry_type is RobotGeometry.Type.BOX:
                 wb = float(params[0])
             else:
                 wb = 2.0 * RobotGeometry.inner_radius(self.geometry_type, params)
             object.__setattr__(self, "wheel_base", wb)
         elif not (math.isfinite(self.wheel_base) and self.wheel_base > 0):
-            raise ValueError(f"RobotConfig.wheel_base: expected a finite length > 0 m, "
-                             f"got {self.wheel_base!r}")
+            raise ValueError(f"RobotConfig.wheel_base: expected a finite length > 0 m "
+                             f"(or 0 to derive it from the geometry), got {self.wheel_base!r}")
         if self.ctrl_vx_limits.max_vel <= 0:
             raise ValueError("RobotConfig.ctrl_vx_limits.max_vel: a robot must be able to move "
                              f"forward, expected > 0, got {self.ctrl_vx_limits.max_vel}")
@@ -326,7 +335,7 @@ class RobotConfig:
     def max_curvature(self) -> float:
         """Largest path curvature (1/m) the robot can follow while moving (inf if it can spin)."""
         if self.model_type is RobotType.ACKERMANN:
-            return math.tan(self.ctrl_omega_limits.max_steer) / float(self.wheel_base)
+            return math.tan(self.ctrl_omega_limits.max_steer) / self.wheel_base
         return math.inf
 
     def footprint_distance(self, points: np.ndarray) -> np.ndarray:

@@ -28,14 +28,21 @@ from .sensors import ObstacleInput, sensor_offset
 __all__ = ["DWAConfig", "DWA", "dwa_samples"]
 
 
-def _vector(size: int):
-    def convert(value):
-        arr = np.asarray(value, dtype=np.float64).reshape(-1)
-        if arr.size != size or not np.all(np.isfinite(arr)):
-            raise ValueError(f"expected {size} finite numbers, got {value!r}")
-        return arr
+def _vector(value: object, size: int) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != size or not np.all(np.isfinite(arr)):
+        raise ValueError(f"expected {size} finite numbers, got {value!r}")
+    return arr
 
-    return convert
+
+def vec3(value: object) -> np.ndarray:
+    """attrs converter: exactly 3 finite numbers (a position)."""
+    return _vector(value, 3)
+
+
+def vec4(value: object) -> np.ndarray:
+    """attrs converter: exactly 4 finite numbers (a quaternion x, y, z, w)."""
+    return _vector(value, 4)
 
 
 @attrs.define
@@ -49,8 +56,8 @@ class DWAConfig(FollowerConfig):
     control_horizon: float = field(0.2, 1e-4, 1e6)
     max_linear_samples: int = field(20, 1, 1000, int)
     max_angular_samples: int = field(20, 1, 1000, int)
-    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=_vector(3), on_setattr=setters, eq=False)
-    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
+    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=vec3, on_setattr=setters, eq=False)
+    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=vec4, on_setattr=setters, eq=False)
     octree_resolution: float = field(0.1, 1e-9, 1e3)
     costs_weights: TrajectoryCostsWeights = attrs.field(factory=TrajectoryCostsWeights)
     max_num_threads: int = field(1, 1, 100, int)

@@ -51,6 +51,7 @@ class LaserScan2D:
     def beam_angles(self) -> np.ndarray:
         if self.angles is not None:
             return self.angles
+        assert self.angle_increment is not None  # set in __attrs_post_init__
         return self.angle_min + np.arange(self.ranges.size) * float(self.angle_increment)
 
     def valid_mask(self) -> np.ndarray:

@@ -42,7 +42,7 @@ class Stanley(PathFollower):
         self._rotating = False
 
     def _front_axle(self, pose: np.ndarray) -> np.ndarray:
-        half = 0.5 * float(self.robot.wheel_base)
+        half = 0.5 * self.robot.wheel_base
         return np.array([pose[0] + half * math.cos(pose[2]), pose[1] + half * math.sin(pose[2]), pose[2]])
 
     def steering(self, pose: np.ndarray, speed: float) -> tuple[float, float, float]:
@@ -99,7 +99,7 @@ class Stanley(PathFollower):
         if robot.model_type is RobotType.ACKERMANN:
             max_steer = robot.ctrl_omega_limits.max_steer
             delta = float(np.clip(delta, -max_steer, max_steer))
-            return np.array([v, 0.0, v * math.tan(delta) / float(robot.wheel_base)])
+            return np.array([v, 0.0, v * math.tan(delta) / robot.wheel_base])
         base = 2.0 * robot.radius
         delta = float(np.clip(delta, -1.2, 1.2))
         w = v * math.tan(delta) / base

@@ -24,7 +24,7 @@ from ..robot import RobotConfig
 from .base import ControlResult, ControlStatus, FollowerConfig, field, setters
 from .clearance import nearby_obstacles, pose_clearance, voxel_downsample
 from .detour import detour_reference
-from .dwa import _vector, dwa_samples
+from .dwa import dwa_samples, vec3, vec4
 from .sensors import ObstacleInput, obstacle_points, sensor_offset
 from .vision_common import BoundingBox, CameraIntrinsics, TargetSearch
 
@@ -50,13 +50,13 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     target_search_pause: float = field(2, 0, 1e6)
     enable_search: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool), on_setattr=setters)
     depth_conversion_factor: float = field(1e-3, 1e-9, 1e3)
-    camera_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=_vector(3), on_setattr=setters, eq=False)
-    camera_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
+    camera_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=vec3, on_setattr=setters, eq=False)
+    camera_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=vec4, on_setattr=setters, eq=False)
     max_linear_samples: int = field(20, 1, 1000, int)
     max_angular_samples: int = field(20, 1, 1000, int)
     # DWA parameters the RGB-D follower shares (same names and defaults as DWAConfig).
-    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=_vector(3), on_setattr=setters, eq=False)
-    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=_vector(4), on_setattr=setters, eq=False)
+    sensor_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=vec3, on_setattr=setters, eq=False)
+    sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=vec4, on_setattr=setters, eq=False)
     octree_resolution: float = field(0.1, 1e-9, 1e3)
     max_num_threads: int = field(1, 1, 100, int)
     costs_weights: TrajectoryCostsWeights = attrs.field(factory=lambda: TrajectoryCostsWeights(

@@ -114,6 +114,8 @@ def obstacles_cost(trajectories: np.ndarray | None, obstacles: np.ndarray | None
     """``r / max(clearance, 0.01)`` per trajectory (see module docstring); ``min_distance``
     (centre to nearest obstacle) may be precomputed."""
     if min_distance is None:
+        if trajectories is None:
+            raise ValueError("obstacles_cost: give trajectories or a precomputed min_distance")
         if obstacles is None or np.asarray(obstacles).size == 0:
             return np.zeros(_xy(trajectories).shape[0])
         min_distance = min_obstacle_distance(trajectories, obstacles)
