@@ -90,3 +90,15 @@ def test_box_footprint_passes_obstacle_without_touching(name, model, path_name):
     res = run_closed_loop(controller, robot, World([obstacle]), (0.0, 0.0, 0.0), max_steps=800)
     assert res.reached, f"{name}/{model}/{path_name}: stuck at {res.poses[-1]}"
     assert res.min_clearance > 0.0
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("name", AVOIDING)
+def test_slalom_through_three_obstacles(name, model):
+    robot = make_robot(model)
+    controller = FACTORIES[name](robot)
+    controller.set_path(straight_path(6.0))
+    world = World([(1.5, 0.1, 0.15), (3.0, -0.15, 0.2), (4.5, 0.0, 0.15)])
+    res = run_closed_loop(controller, robot, world, (0.0, 0.0, 0.0), max_steps=900)
+    assert res.reached, f"{name}/{model}: stuck at {res.poses[-1]}"
+    assert res.min_clearance > 0.0
