@@ -53,12 +53,21 @@ MapperConfig = MapConfig  # the name the spec's usage example uses
 
 
 class LocalMapper:
-    """Builds the ego-centric grid. ``origin`` is the robot-frame (x, y) of cell (0, 0)'s corner."""
+    """Builds the ego-centric grid. ``origin`` is the robot-frame (x, y) of cell (0, 0)'s corner.
+
+    With ``keep_memory`` and a robot pose (odom frame) given to :meth:`update`, the previous
+    grid rolls along with the robot: cells the new scan says nothing about keep what was seen
+    before (e.g. obstacles that left a narrow field of view), cells it observes are replaced
+    (so a beam through a stale obstacle frees it), and cells that leave the window are dropped.
+    """
 
     def __init__(self, config: MapConfig | None = None,
-                 sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+                 sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 keep_memory: bool = False) -> None:
         self.config = config or MapConfig()
         self.sensor_pose = sensor_pose
+        self.keep_memory = keep_memory
+        self._last_pose: np.ndarray | None = None
         rows, cols = self.config.shape
         self.origin = (-0.5 * cols * self.config.resolution, -0.5 * rows * self.config.resolution)
         self.grid = np.full((rows, cols), UNKNOWN, dtype=np.int8)
@@ -124,8 +133,45 @@ class LocalMapper:
         self._cache = (beam, dist.astype(np.float32).reshape(-1))
         return self._cache
 
-    def update(self, scan: LaserScan2D) -> np.ndarray:
-        """Rebuild the grid from ``scan`` and return it (int8, rows = y, cols = x)."""
+    def update(self, scan: LaserScan2D, pose: np.ndarray | None = None) -> np.ndarray:
+        """Rebuild the grid from ``scan`` and return it (int8, rows = y, cols = x).
+
+        ``pose`` (x, y, yaw) of the robot is only needed with ``keep_memory``.
+        """
+        carried = self._carry(pose) if self.keep_memory else None
+        self._observe(scan)
+        if carried is not None:
+            np.copyto(self.grid, carried, where=self.grid == UNKNOWN)
+        return self.grid
+
+    def _carry(self, pose: np.ndarray | None) -> np.ndarray | None:
+        """The previous grid resampled into the frame of ``pose`` (None on the first scan)."""
+        if pose is None:
+            return None
+        pose = np.asarray(pose, dtype=np.float64).reshape(3)
+        last, self._last_pose = self._last_pose, pose
+        if last is None:
+            return None
+        cfg = self.config
+        rows, cols = cfg.shape
+        res = cfg.resolution
+        xc = self.origin[0] + (np.arange(cols) + 0.5) * res
+        yc = self.origin[1] + (np.arange(rows) + 0.5) * res
+        x, y = np.meshgrid(xc, yc)
+        # Current robot frame -> world -> previous robot frame.
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        wx, wy = pose[0] + c * x - s * y, pose[1] + s * x + c * y
+        c0, s0 = math.cos(last[2]), math.sin(last[2])
+        dx, dy = wx - last[0], wy - last[1]
+        px, py = c0 * dx + s0 * dy, -s0 * dx + c0 * dy
+        col = np.floor((px - self.origin[0]) / res).astype(np.int64)
+        row = np.floor((py - self.origin[1]) / res).astype(np.int64)
+        inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+        carried = np.full((rows, cols), UNKNOWN, dtype=np.int8)
+        carried[inside] = self.grid[row[inside], col[inside]]
+        return carried
+
+    def _observe(self, scan: LaserScan2D) -> None:
         length, hit = self._beam_lengths(scan)
         beam, dist = self._cell_beams(scan)
         grid = self.grid.reshape(-1)
@@ -134,7 +180,6 @@ class LocalMapper:
         free = dist < reach - np.float32(0.5 * self.config.resolution)
         np.copyto(grid, np.where(free, np.int8(FREE), np.int8(UNKNOWN)))
         self._mark_hits(scan, hit)
-        return self.grid
 
     def trace_rays(self, scan: LaserScan2D) -> np.ndarray:
         """Rebuild the grid by sampling each beam every half cell (reference tracer)."""

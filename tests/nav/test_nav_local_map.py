@@ -73,3 +73,34 @@ def test_config_validation_and_alias():
         MapConfig(resolution=0.0)
     with pytest.raises(ValueError, match="coarser"):
         MapConfig(width=1000.0, height=1.0, resolution=0.01)
+
+
+def _front_cone_scan(obstacle_x=None):
+    """A 90 degree field of view; optionally a wall x = obstacle_x ahead."""
+    ang = np.linspace(-math.pi / 4, math.pi / 4, 181)
+    ranges = np.full(ang.size, np.inf) if obstacle_x is None else obstacle_x / np.cos(ang)
+    return LaserScan2D(ranges, angles=ang, range_max=3.0)
+
+
+def test_memory_rolls_obstacles_along_with_the_robot():
+    cfg = MapConfig(width=6.0, height=6.0, resolution=0.05)
+    plain = LocalMapper(cfg)
+    rolling = LocalMapper(cfg, keep_memory=True)
+    start = np.array([0.0, 0.0, 0.0])
+    for m in (plain, rolling):
+        m.update(_front_cone_scan(1.0), start)
+    # turn around and move 0.5 m: the wall is now 1.5 m behind, outside the field of view
+    turned = np.array([-0.5, 0.0, math.pi])
+    g_plain = plain.update(_front_cone_scan(None), turned)
+    g_roll = rolling.update(_front_cone_scan(None), turned)
+    behind = rolling.cell_of(-1.52, 0.0)  # world x = 1.02 seen from the new pose
+    assert g_plain[behind] == UNKNOWN
+    assert g_roll[behind] == OCCUPIED
+    assert g_roll[rolling.cell_of(1.0, 0.0)] == FREE  # what the new scan sees wins
+
+
+def test_memory_clears_a_stale_obstacle_when_a_beam_passes_through():
+    rolling = LocalMapper(MapConfig(width=6.0, height=6.0, resolution=0.05), keep_memory=True)
+    rolling.update(_front_cone_scan(1.0), np.zeros(3))
+    grid = rolling.update(_front_cone_scan(None), np.zeros(3))  # the obstacle walked away
+    assert grid[rolling.cell_of(1.02, 0.0)] == FREE
