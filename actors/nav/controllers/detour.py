@@ -19,8 +19,14 @@ def free_points(points: np.ndarray, obstacles: np.ndarray, clearance: float) -> 
     """Whether each point (N, 2) is farther than ``clearance`` from every obstacle (M, 2)."""
     if obstacles.shape[0] == 0:
         return np.ones(points.shape[0], dtype=bool)
-    d2 = ((points[:, None, :] - obstacles[None, :, :]) ** 2).sum(-1).min(axis=1)
-    return d2 > clearance * clearance
+    p = np.asarray(points, dtype=np.float32)
+    o = np.asarray(obstacles, dtype=np.float32)
+    dx = p[:, 0:1] - o[None, :, 0]
+    dy = p[:, 1:2] - o[None, :, 1]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return dx.min(axis=1) > np.float32(clearance * clearance)
 
 
 def detour_reference(points: np.ndarray, yaw: np.ndarray, s: np.ndarray, horizon: int,
