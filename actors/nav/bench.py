@@ -27,7 +27,7 @@ import numpy as np
 
 from .controllers.dwa import DWA, DWAConfig
 from .controllers.sensors import LaserScan2D
-from .costs import TrajectoryCostsWeights, evaluate_costs
+from .costs import TrajectoryCostsWeights, evaluate_costs, polyline_distance_exact
 from .kinematics import integrate, rollout
 from .local_map import LocalMapper, MapConfig
 from .robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
@@ -54,7 +54,8 @@ def _robot() -> RobotConfig:
         ctrl_omega_limits=AngularCtrlLimits(max_vel=1.5, max_acc=3.0, max_decel=3.0))
 
 
-def bench_cost_eval(repeats: int = 5) -> float:
+def _cost_problem() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """(trajectories, velocities, reference path, commands, dt) of the cost benchmark."""
     rng = np.random.default_rng(0)
     n_traj, n_pts, dt = 5001, 1000, 0.01
     s = np.linspace(0.0, 12.0, 1000)
@@ -64,6 +65,20 @@ def bench_cost_eval(repeats: int = 5) -> float:
     # Velocity profiles that change along the trajectory, so smoothness and jerk do work.
     ramp = np.linspace(0.5, 1.0, n_pts, dtype=np.float32)[None, :, None]
     velocities = (commands.astype(np.float32)[:, None, :] * ramp).astype(np.float32)
+    return trajectories, velocities, reference, commands, dt
+
+
+def bench_dense_reference_path(trajectories: np.ndarray, reference: np.ndarray, sample: int = 50) -> float:
+    """Same-run peer: exact point-to-polyline distances for 1/``sample`` of the trajectories
+    (all 999 segments, no field), scaled to the full set (ms)."""
+    subset = trajectories[::sample, :, :2]
+    t0 = time.perf_counter()
+    polyline_distance_exact(subset, reference).mean(axis=1)
+    return 1e3 * (time.perf_counter() - t0) * trajectories.shape[0] / subset.shape[0]
+
+
+def bench_cost_eval(repeats: int = 5) -> float:
+    trajectories, velocities, reference, _, dt = _cost_problem()
     weights = TrajectoryCostsWeights(reference_path_distance_weight=1.0, goal_distance_weight=1.0,
                                      obstacles_distance_weight=0.0, smoothness_weight=1.0, jerk_weight=1.0)
 
@@ -80,14 +95,17 @@ def _bench_scan(n: int = 3600) -> LaserScan2D:
                        angle_increment=2 * math.pi / n, range_max=10.0)
 
 
-def bench_local_map(repeats: int = 50) -> tuple[float, float]:
-    """(steady-state ms, first-update ms including the per-layout cell/beam table)."""
+def bench_local_map(repeats: int = 50) -> tuple[float, float, float]:
+    """(steady-state ms, first-update ms including the per-layout cell/beam table, and the
+    same-run peer: ms of the direct ray-sampling tracer on the same scan)."""
     scan = _bench_scan()
     mapper = LocalMapper(MapConfig(width=20.0, height=20.0, resolution=0.05))
     t0 = time.perf_counter()
     mapper.update(scan)
     cold = 1e3 * (time.perf_counter() - t0)
-    return _median_ms(lambda: mapper.update(scan), repeats, warmup=0), cold
+    steady = _median_ms(lambda: mapper.update(scan), repeats, warmup=0)
+    rays = _median_ms(lambda: mapper.trace_rays(scan), max(5, repeats // 10))
+    return steady, cold, rays
 
 
 def bench_critical_zone(repeats: int = 200) -> tuple[float, float]:
@@ -139,8 +157,13 @@ def bench_dwa(steps: int = 200) -> dict[str, float]:
     return {"p50": float(np.percentile(arr, 50)), "p95": float(np.percentile(arr, 95))}
 
 
-def measure_kernels() -> dict[str, Any]:
-    local_ms, local_cold = bench_local_map()
+def measure_kernels(peers: bool = False) -> dict[str, Any]:
+    """The JSON kernels; with ``peers`` also the same-run reference formulations."""
+    local_ms, local_cold, local_rays = bench_local_map()
+    dense = None
+    if peers:
+        trajectories, _, reference, _, _ = _cost_problem()
+        dense = bench_dense_reference_path(trajectories, reference)
     cloud_ms, scan_ms = bench_critical_zone()
     return {
         "cost_eval_ms": bench_cost_eval(),
@@ -149,6 +172,8 @@ def measure_kernels() -> dict[str, Any]:
         "critical_zone_scan_ms": scan_ms,
         "dwa_step_ms": bench_dwa(),
         "_local_map_cold_ms": local_cold,
+        "_local_map_rays_ms": local_rays,
+        "_dense_cost_ms": dense,
     }
 
 
@@ -174,7 +199,7 @@ def _fmt(v: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    kernels = measure_kernels()
+    kernels = measure_kernels(peers=not args.json)
     rows, error = _planning(args.planning_budget, args.planners)
     result = {k: v for k, v in kernels.items() if not k.startswith("_")}
     result["planning"] = rows
@@ -190,6 +215,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'local_map (first scan)':<26}{kernels['_local_map_cold_ms']:>10.3f}{'':>12}")
     dwa = result["dwa_step_ms"]
     print(f"{'dwa_step p50 / p95':<26}{dwa['p50']:>10.3f}{10.0:>12.1f}   p95 {dwa['p95']:.3f}")
+    print("Same-run peers (direct formulations of the same computation):")
+    rays = kernels["_local_map_rays_ms"]
+    print(f"  local map by sampling every ray: {rays:.3f} ms ({rays / result['local_map_ms']:.1f}x the cell lookup)")
+    dense = kernels["_dense_cost_ms"]
+    print(f"  reference-path distance, exact against all 999 segments (1/50 of the trajectories, "
+          f"scaled): {dense:.0f} ms ({dense / result['cost_eval_ms']:.0f}x the whole cost evaluation)")
     print()
     if error:
         print(error)
