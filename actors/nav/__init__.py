@@ -29,7 +29,7 @@ from .controllers import (
 from .costs import TrajectoryCostsWeights, evaluate_costs
 from .local_map import LocalMapper, MapConfig, MapperConfig
 from .robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from .safety import CommandFilter, CommandFilterConfig, SafetyZones, SafetyZonesConfig
+from .safety import CommandFilter, CommandFilterConfig, DriveSafety, SafetyZones, SafetyZonesConfig
 
 __all__ = [
     "AngularCtrlLimits",
@@ -41,6 +41,7 @@ __all__ = [
     "ControlStatus",
     "ControllersID",
     "DVZ",
+    "DriveSafety",
     "DVZConfig",
     "DWA",
     "DWAConfig",

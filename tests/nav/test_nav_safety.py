@@ -183,3 +183,27 @@ def test_free_travel_box_footprint():
     box = robot("BOX", (0.6, 0.4, 0.3), model="OMNI")
     pts = np.array([[1.0, 0.15], [0.8, 0.5]])  # first is in the swept band, second beside it
     assert free_travel(box, pts, 0.0) == pytest.approx(0.7)
+
+
+def test_drive_safety_pipeline_stops_at_once_slows_and_limits():
+    from emos.actors.nav.safety import DriveSafety
+
+    drive = DriveSafety(robot(), ZONES, CommandFilterConfig(control_time_step=0.1))
+    free = scan_with(0.0, 5.0)
+    out, check = drive.step([0.5, 0.0, 0.0], free)
+    assert out[0] == pytest.approx(0.1) and check.factor == 1.0  # acceleration-limited start
+    for _ in range(10):
+        out, _ = drive.step([0.5, 0.0, 0.0], free)
+    assert out[0] == pytest.approx(0.5)
+    # slowdown zone: requested 0.5 scaled to 0.25, reached at the deceleration limit (2 m/s^2)
+    out, check = drive.step([0.5, 0.0, 0.0], scan_with(0.0, 0.4 + 0.05))
+    assert 0.0 < check.factor < 1.0 and out[0] == pytest.approx(max(0.5 * check.factor, 0.3))
+    # obstacle in the critical zone: zero immediately, no deceleration ramp
+    out, check = drive.step([0.5, 0.0, 0.0], scan_with(0.0, 0.25))
+    assert check.emergency_stop and np.all(out == 0.0)
+    # and the next start ramps up from rest again
+    out, _ = drive.step([0.5, 0.0, 0.0], free)
+    assert out[0] == pytest.approx(0.1)
+    # no scan at all: do not drive blind
+    out, check = drive.step([0.5, 0.0, 0.0], None)
+    assert np.all(out == 0.0)

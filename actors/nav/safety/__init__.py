@@ -10,11 +10,13 @@ from .maneuvers import (
     rotation_is_free,
     trapezoid_profile,
 )
+from .pipeline import DriveSafety
 from .zones import SafetyZones, SafetyZonesConfig, ZoneCheck
 
 __all__ = [
     "CommandFilter",
     "CommandFilterConfig",
+    "DriveSafety",
     "Maneuver",
     "SafetyZones",
     "SafetyZonesConfig",
