@@ -83,6 +83,16 @@ class ArcPlanner:
             out.append(gap.min(axis=(1, 2)).astype(float))
         return np.concatenate(out)
 
+    def _here_clearance(self, pose: np.ndarray, points: np.ndarray) -> float:
+        if len(points) == 0:
+            return math.inf
+        x0, y0, th0 = pose
+        c0, s0 = math.cos(th0), math.sin(th0)
+        rel = np.asarray(points, dtype=float).reshape(-1, 2) - (x0, y0)
+        lx = c0 * rel[:, 0] + s0 * rel[:, 1] - self.spec.center_offset
+        ly = -s0 * rel[:, 0] + c0 * rel[:, 1]
+        return float(np.min(np.maximum(np.abs(lx) - self.spec.length / 2, np.abs(ly) - self.spec.width / 2)))
+
     def choose(self, pose: np.ndarray, points: np.ndarray, cost_to_go: Callable[[np.ndarray], np.ndarray],
                reverse_cost: float | None = None) -> tuple[float, float] | None:
         """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is.
@@ -90,7 +100,10 @@ class ArcPlanner:
         cfg = self.cfg
         reverse_cost = cfg.reverse_cost if reverse_cost is None else reverse_cost
         clearance = self.clearances(pose, points)
-        ok = clearance > cfg.margin
+        # Already closer than the margin (sensor noise, a tight squeeze): accept any arc that
+        # does not get closer still, so the robot can always back or turn away.
+        here = self._here_clearance(pose, points)
+        ok = clearance > min(cfg.margin, here - 1e-3)
         if not ok.any():
             return None
         x0, y0, th0 = pose

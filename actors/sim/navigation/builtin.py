@@ -37,13 +37,16 @@ class GridNavigator:
         m = self.window_margin
         bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
         self.grid = HitGrid(bounds, self.resolution)
-        # Clearance is exact to the hit points (measured from cell centres). The lethal radius
-        # is the half-width plus ``lethal_bias``: gaps only a little wider than the robot are
-        # closed on purpose, because threading them needs more precision than sampled arcs
-        # have and a plan through them only gets the robot stuck. (All 250 shipped BARN worlds
-        # stay solvable up to a bias of 0.13 m, checked on their true geometry.)
-        lethal = max(spec.width / 2 + self.lethal_bias, 0.05)
-        self.field = CostField(self.grid.shape, self.resolution, lethal, inflation_radius=lethal + 0.45)
+        # Clearance is exact to the hit points (measured from cell centres). The robot's centre
+        # can never be closer than its half-width (less a cell's rounding): lethal. Up to the
+        # half-width plus ``lethal_bias`` travel is allowed but expensive: gaps only a little
+        # wider than the robot need more precision than sampled arcs have, and a plan through
+        # them tends to get the robot stuck. (All 250 shipped BARN worlds keep a route with a
+        # bias of 0.13 m, checked on their true geometry.)
+        hard = max(spec.width / 2 - 0.5 * self.resolution, 0.05)
+        soft = spec.width / 2 + self.lethal_bias
+        self.field = CostField(self.grid.shape, self.resolution, hard, inflation_radius=soft + 0.45,
+                               soft_radius=soft)
         self.arcs = ArcPlanner(spec, self.arc_config)
         self._goal_cell = self._cell((gx, gy))
         self._planned_version = -1
@@ -69,10 +72,19 @@ class GridNavigator:
         return np.where(np.isfinite(ctg), ctg, UNREACHABLE)
 
     def _replan(self, obs: Observation) -> None:
-        self.field.compute(self.grid.occupied, self._goal_cell, self.grid.hit_xy, self.grid.origin)
+        blocked, xy = self.grid.blocked()
+        self.field.compute(blocked, self._goal_cell, xy, self.grid.origin)
+        cells = self.field.path_from(self._cell((obs.pose[0], obs.pose[1])))
+        if not cells and self.grid.virtual.any():
+            # Our own blocks have boxed the robot in: forget them and plan again.
+            self.grid.clear_blocks()
+            self.virtual_blocks.clear()
+            blocked, xy = self.grid.blocked()
+            self.field.compute(blocked, self._goal_cell, xy, self.grid.origin)
+            cells = self.field.path_from(self._cell((obs.pose[0], obs.pose[1])))
         self._planned_version = self.grid.version
         self._last_plan = obs.stamp
-        cells = self.field.path_from(self._cell((obs.pose[0], obs.pose[1])))
+        self.plan = None
         if cells:
             rc = np.asarray(cells)
             self.plan = self.grid.center_of(rc[:, 0], rc[:, 1])
@@ -135,6 +147,6 @@ class GridNavigator:
         clear = self.field.clearance[np.clip(rows, 0, self.grid.shape[0] - 1), np.clip(cols, 0, self.grid.shape[1] - 1)]
         x, y = ahead[int(np.argmin(clear))]
         self.virtual_blocks.append((float(x), float(y)))
-        # A small ring of fake hits: with the lethal radius around them this closes the spot.
+        # A small ring of blocked points: with the lethal radius around it this closes the spot.
         a = np.linspace(0, 2 * np.pi, 12, endpoint=False)
-        self.grid.insert(np.c_[x + 0.05 * np.cos(a), y + 0.05 * np.sin(a)])
+        self.grid.block(np.c_[x + 0.05 * np.cos(a), y + 0.05 * np.sin(a)])

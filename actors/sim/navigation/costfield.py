@@ -30,12 +30,22 @@ def lattice_edges(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 class CostField:
+    """``lethal_radius``: cells closer than this to an obstacle are impassable. Between it and
+    ``soft_radius`` a cell costs ``soft_weight`` times its length (possible, but only when
+    nothing else is); beyond, a penalty fading out at ``inflation_radius`` keeps paths
+    centred in corridors. A soft band instead of a hard wall keeps the field smooth, so a
+    robot that finds itself close to obstacles still sees a way out downhill."""
+
     def __init__(self, shape: tuple[int, int], resolution: float, lethal_radius: float,
-                 inflation_radius: float = 0.6, inflation_weight: float = 3.0) -> None:
-        if not 0 <= lethal_radius < inflation_radius:
-            raise ValueError(f"CostField needs 0 <= lethal_radius < inflation_radius, got {lethal_radius}, {inflation_radius}")
+                 inflation_radius: float = 0.6, inflation_weight: float = 3.0,
+                 soft_radius: float | None = None, soft_weight: float = 20.0) -> None:
+        soft_radius = lethal_radius if soft_radius is None else soft_radius
+        if not 0 <= lethal_radius <= soft_radius < inflation_radius:
+            raise ValueError("CostField needs 0 <= lethal_radius <= soft_radius < inflation_radius, got "
+                             f"{lethal_radius}, {soft_radius}, {inflation_radius}")
         self.shape, self.resolution = shape, float(resolution)
         self.lethal_radius, self.inflation_radius = lethal_radius, inflation_radius
+        self.soft_radius, self.soft_weight = soft_radius, soft_weight
         self.inflation_weight = inflation_weight
         self._a, self._b, self._len = lattice_edges(shape)
         self.ctg = np.full(shape, np.inf)
@@ -72,9 +82,9 @@ class CostField:
         free = clear > self.lethal_radius
         # Penalty grows as clearance shrinks towards the lethal radius: paths keep to the
         # middle of corridors unless squeezing through is the only way.
-        span = self.inflation_radius - self.lethal_radius
+        span = self.inflation_radius - self.soft_radius
         closeness = np.clip((self.inflation_radius - clear) / span, 0.0, 1.0)
-        penalty = self.inflation_weight * closeness**2
+        penalty = np.where(clear <= self.soft_radius, self.soft_weight, self.inflation_weight * closeness**2)
         keep = free[self._a] & free[self._b]
         a, b = self._a[keep], self._b[keep]
         w = self._len[keep] * self.resolution * (1.0 + 0.5 * (penalty[a] + penalty[b]))

@@ -21,7 +21,11 @@ class HitGrid:
         self.shape = (int(math.ceil((ymax - ymin) / resolution)), int(math.ceil((xmax - xmin) / resolution)))
         self.occupied = np.zeros(self.shape, dtype=bool)
         self.hit_xy = np.zeros(self.shape + (2,), dtype=float)
-        self.version = 0  # bumps when new cells become occupied
+        # Cells a planner has closed on purpose (not seen obstacles): they block plans but
+        # are not obstacle points, and can be forgotten all at once.
+        self.virtual = np.zeros(self.shape, dtype=bool)
+        self.virtual_xy = np.zeros(self.shape + (2,), dtype=float)
+        self.version = 0  # bumps when the blocked cells change
 
     def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, cols, inside) for world points (N, 2)."""
@@ -46,6 +50,26 @@ class HitGrid:
         if new:
             self.version += 1
         return new
+
+    def block(self, points: np.ndarray) -> None:
+        """Mark cells as virtually blocked (for planning only)."""
+        rows, cols, inside = self.cell_of(points)
+        self.virtual[rows[inside], cols[inside]] = True
+        self.virtual_xy[rows[inside], cols[inside]] = np.asarray(points)[inside]
+        self.version += 1
+
+    def clear_blocks(self) -> None:
+        if self.virtual.any():
+            self.virtual[:] = False
+            self.version += 1
+
+    def blocked(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cells that block plans, their exact points): seen obstacles and virtual blocks."""
+        if not self.virtual.any():
+            return self.occupied, self.hit_xy
+        only_virtual = self.virtual & ~self.occupied
+        xy = np.where(only_virtual[..., None], self.virtual_xy, self.hit_xy)
+        return self.occupied | self.virtual, xy
 
     def points_near(self, xy: tuple[float, float], radius: float) -> np.ndarray:
         """Exact hit points of occupied cells within ``radius`` of ``xy``."""
