@@ -165,3 +165,21 @@ def test_dvz_deformation_analytic():
     # an obstacle on the left gives a deformation angle on the left
     _, theta, _ = deformation(np.array([[0.0, 0.4], [0.05, 0.4]]), 1.0, 1.0)
     assert theta == pytest.approx(math.pi / 2, abs=0.1)
+
+
+@pytest.mark.parametrize("factory", [DWA, PurePursuit, DVZ, Stanley])
+def test_non_finite_robot_state_is_a_clear_error(factory):
+    controller = factory(make_robot("DIFFERENTIAL_DRIVE"))
+    controller.set_path(straight_path())
+    with pytest.raises(ValueError, match="pose"):
+        controller.compute(np.array([np.nan, 0.0, 0.0]), np.zeros(3))
+    with pytest.raises(ValueError, match="velocity"):
+        controller.compute(np.zeros(3), np.zeros(2))
+
+
+def test_bad_path_is_a_clear_error():
+    controller = DWA(make_robot("OMNI"))
+    with pytest.raises(ValueError, match="path"):
+        controller.set_path(np.array([[0.0, 0.0], [np.inf, 1.0]]))
+    with pytest.raises(ValueError, match="path"):
+        controller.set_path(np.zeros((5, 4)))

@@ -51,7 +51,7 @@ def test_back_projection_recovers_target_position():
     assert target_from_depth(box, np.zeros_like(depth), K, 1e-3) is None
 
 
-@pytest.mark.parametrize("model", ["DIFFERENTIAL_DRIVE", "OMNI"])
+@pytest.mark.parametrize("model", ["DIFFERENTIAL_DRIVE", "OMNI", "ACKERMANN"])
 def test_rgb_follower_centres_and_restores_distance_after_target_moves(model):
     robot = make_robot(model)
     follower = VisionRGBFollower(robot, VisionRGBFollowerConfig())

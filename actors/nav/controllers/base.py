@@ -8,7 +8,7 @@ from typing import Any
 import attrs
 import numpy as np
 
-__all__ = ["ControllersID", "ControlResult", "ControlStatus", "in_range", "FollowerConfig", "setters"]
+__all__ = ["ControllersID", "ControlResult", "ControlStatus", "in_range", "FollowerConfig", "setters", "robot_state"]
 
 # Validate on every assignment, not only at construction.
 setters = attrs.setters.pipe(attrs.setters.convert, attrs.setters.validate)
@@ -67,6 +67,18 @@ class ControlResult:
     @classmethod
     def stop(cls, pose: np.ndarray, status: ControlStatus, steps: int = 1, **info: Any) -> "ControlResult":
         return cls(np.zeros((max(steps, 1), 3)), np.asarray(pose, dtype=np.float64).reshape(1, 3), status, info)
+
+
+def robot_state(pose: Any, velocity: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Validate the robot state: pose (x, y, yaw) and body velocity (vx, vy, omega), finite."""
+    out = []
+    for name, value in (("pose", pose), ("velocity", velocity)):
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+        if arr.size != 3 or not np.all(np.isfinite(arr)):
+            expected = "(x, y, yaw)" if name == "pose" else "(vx, vy, omega)"
+            raise ValueError(f"{name}: expected 3 finite numbers {expected}, got {value!r}")
+        out.append(arr)
+    return out[0], out[1]
 
 
 def in_range(lo: float, hi: float):

@@ -21,7 +21,7 @@ import attrs
 import numpy as np
 
 from ..robot import RobotConfig, RobotType
-from .base import ControlResult, ControlStatus, FollowerConfig, field
+from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state
 from .follower import PathFollower
 from .sensors import ObstacleInput, obstacle_points
 from .stanley import Stanley, StanleyConfig
@@ -76,8 +76,7 @@ class DVZ(PathFollower):
         self.progress = self._follower.progress
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
-        pose = np.asarray(pose, dtype=np.float64)
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)
         cfg = self.config

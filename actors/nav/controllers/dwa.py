@@ -19,7 +19,7 @@ import numpy as np
 from ..costs import TrajectoryCostsWeights, evaluate_costs
 from ..kinematics import dynamic_window, feasible_commands, rollout, wrap_angle
 from ..robot import RobotConfig, RobotType
-from .base import ControlResult, ControlStatus, FollowerConfig, field, setters
+from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state, setters
 from .follower import PathFollower
 from .clearance import voxel_downsample
 from .detour import detour_reference
@@ -112,8 +112,7 @@ class DWA(PathFollower):
         return seg
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
-        pose = np.asarray(pose, dtype=np.float64)
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)
         self.progress.update(pose)

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..kinematics import to_robot_frame
 from ..robot import RobotConfig, RobotType
-from .base import ControlResult, ControlStatus, FollowerConfig, field
+from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state
 from .follower import PathFollower
 from .sensors import ObstacleInput
 
@@ -77,8 +77,7 @@ class PurePursuit(PathFollower):
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
         """One control step from the current world ``pose`` and body ``velocity``."""
-        pose = np.asarray(pose, dtype=np.float64)
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)
         self.progress.update(pose)

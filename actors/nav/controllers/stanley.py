@@ -17,7 +17,7 @@ import numpy as np
 
 from ..kinematics import limit_command_change, wrap_angle
 from ..robot import RobotConfig, RobotType
-from .base import ControlResult, ControlStatus, FollowerConfig, field
+from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state
 from .follower import PathFollower
 from .sensors import ObstacleInput
 
@@ -57,8 +57,7 @@ class Stanley(PathFollower):
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
         """One control step (``obstacles`` is accepted for a uniform interface and ignored)."""
-        pose = np.asarray(pose, dtype=np.float64)
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)
         # Track progress at the front axle: that is where Stanley measures its errors.

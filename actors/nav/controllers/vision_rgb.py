@@ -13,7 +13,7 @@ import numpy as np
 
 from ..kinematics import integrate_sequence, ramp_commands
 from ..robot import RobotConfig
-from .base import ControlResult, ControlStatus, field, in_range, setters
+from .base import ControlResult, ControlStatus, field, robot_state, setters
 from .vision_common import BoundingBox, TargetSearch
 
 __all__ = ["VisionRGBFollowerConfig", "VisionRGBFollower"]
@@ -51,7 +51,7 @@ class VisionRGBFollower:
                 pose: np.ndarray = np.zeros(3)) -> ControlResult:
         cfg = self.config
         robot = self.robot
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         if target is None:
             cmd, status = self.search.step()
         else:
@@ -68,6 +68,9 @@ class VisionRGBFollower:
             if abs(es) > cfg.tolerance:
                 v = cfg.speed_gain * es * robot.ctrl_vx_limits.max_vel
                 v = math.copysign(max(abs(v), cfg.min_vel), v)
+            if robot.model_type.name == "ACKERMANN" and w != 0.0 and abs(v) < cfg.min_vel:
+                # A car turns only while rolling: creep forward to be able to re-centre.
+                v = cfg.min_vel
             cmd, status = np.array([v, 0.0, w]), ControlStatus.RUNNING
         cmds = ramp_commands(robot, velocity, cmd[None], cfg.control_time_step, cfg.control_horizon)[0]
         plan = integrate_sequence(pose, cmds, cfg.control_time_step)[0]

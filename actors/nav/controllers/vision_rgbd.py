@@ -21,7 +21,7 @@ import numpy as np
 from ..costs import TrajectoryCostsWeights, evaluate_costs
 from ..kinematics import integrate_sequence, ramp_commands, rollout, wrap_angle
 from ..robot import RobotConfig
-from .base import ControlResult, ControlStatus, FollowerConfig, field, setters
+from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state, setters
 from .clearance import nearby_obstacles, pose_clearance, voxel_downsample
 from .detour import detour_reference
 from .dwa import dwa_samples, vec3, vec4
@@ -145,8 +145,7 @@ class VisionRGBDFollower:
     def compute(self, pose: np.ndarray, velocity: np.ndarray, target: BoundingBox | None,
                 depth_image: np.ndarray | None, obstacles: ObstacleInput = None) -> ControlResult:
         cfg = self.config
-        pose = np.asarray(pose, dtype=np.float64)
-        velocity = np.asarray(velocity, dtype=np.float64)
+        pose, velocity = robot_state(pose, velocity)
         dt = cfg.control_time_step
         measured = None
         if target is not None and depth_image is not None:
