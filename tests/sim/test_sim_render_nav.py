@@ -52,3 +52,25 @@ def test_hit_grid_keeps_exact_points():
     assert pts.tolist() == [[0.53, 0.54]]
     with pytest.raises(ValueError, match="HitGrid"):
         HitGrid((0, 0, 0, 1), 0.1)
+
+
+def test_virtual_blocks_close_plans_but_are_not_obstacle_points():
+    grid = HitGrid((0, 0, 2, 2), 0.1)
+    grid.insert(np.array([[0.25, 0.25]]))
+    v0 = grid.version
+    grid.block(np.array([[1.05, 1.05]]))
+    assert grid.version > v0
+    blocked, xy = grid.blocked()
+    assert blocked[10, 10] and blocked[2, 2] and blocked.sum() == 2
+    assert xy[10, 10].tolist() == [1.05, 1.05]
+    assert grid.points_near((1.0, 1.0), 0.3).shape == (0, 2)  # never a collision point
+    grid.clear_blocks()
+    assert grid.blocked()[0].sum() == 1
+
+
+def test_gui_request_without_a_display_runs_headless(monkeypatch, caplog):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with World(gui=True) as world:
+        assert not world.gui
+    assert "no display" in caplog.text
