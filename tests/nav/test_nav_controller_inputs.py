@@ -183,3 +183,17 @@ def test_bad_path_is_a_clear_error():
         controller.set_path(np.array([[0.0, 0.0], [np.inf, 1.0]]))
     with pytest.raises(ValueError, match="path"):
         controller.set_path(np.zeros((5, 4)))
+
+
+def test_small_closed_loop_is_not_done_at_its_start():
+    from emos.actors.nav.controllers.path import PathProgress, ReferencePath
+
+    th = np.linspace(-math.pi / 2, 1.5 * math.pi, 60)
+    loop = np.stack([0.2 * np.cos(th), 0.2 + 0.2 * np.sin(th)], 1)  # 1.26 m long, ends where it starts
+    progress = PathProgress(ReferencePath(loop), search_ahead=0.3)
+    progress.update(np.zeros(3))
+    assert not progress.goal_reached(np.zeros(3), 0.1)
+    for pose in loop[::3]:
+        progress.update(np.array([pose[0], pose[1], 0.0]))
+    progress.update(np.zeros(3))
+    assert progress.goal_reached(np.zeros(3), 0.1)

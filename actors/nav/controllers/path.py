@@ -100,4 +100,5 @@ class PathProgress:
     def goal_reached(self, pose: np.ndarray, tolerance: float) -> bool:
         end = self.path.points[-1]
         close = math.hypot(pose[0] - end[0], pose[1] - end[1]) <= tolerance
-        return close and self.remaining <= tolerance + self.search_ahead * 0.5
+        # Also near the end *along* the path: the start of a closed loop is close to its end.
+        return close and self.remaining <= 2.0 * tolerance + 0.05
