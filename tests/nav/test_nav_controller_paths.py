@@ -102,3 +102,28 @@ def test_slalom_through_three_obstacles(name, model):
     res = run_closed_loop(controller, robot, world, (0.0, 0.0, 0.0), max_steps=900)
     assert res.reached, f"{name}/{model}: stuck at {res.poses[-1]}"
     assert res.min_clearance > 0.0
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_sensorless_stanley_behind_drive_safety_stops_before_the_obstacle(model):
+    """The spec pairs Stanley (no obstacle handling) with the DriveManager's safety zones."""
+    from emos.actors.nav.kinematics import integrate
+    from emos.actors.nav.safety import DriveSafety, SafetyZonesConfig
+    from emos.actors.nav.controllers.clearance import pose_clearance
+
+    robot = make_robot(model)
+    stanley = Stanley(robot)
+    stanley.set_path(straight_path())
+    drive = DriveSafety(robot, SafetyZonesConfig(critical_zone_distance=0.1, slowdown_zone_distance=0.3))
+    world = World([(2.0, 0.0, 0.15)])
+    boundary = world.boundary_points()
+    pose, vel = np.zeros(3), np.zeros(3)
+    for _ in range(300):
+        scan = world.scan(pose)
+        cmd, check = drive.step(stanley.compute(pose, vel, scan).command, scan)
+        vel = cmd
+        pose = integrate(pose, vel, 0.1)
+        assert pose_clearance(robot, pose[None], boundary)[0] > 0.0
+    # The slowdown zone brings it to a halt at the edge of the critical zone (0.1 m).
+    assert abs(vel[0]) < 0.02
+    assert pose_clearance(robot, pose[None], boundary)[0] == pytest.approx(0.1, abs=0.03)
