@@ -127,3 +127,15 @@ def test_sensorless_stanley_behind_drive_safety_stops_before_the_obstacle(model)
     # The slowdown zone brings it to a halt at the edge of the critical zone (0.1 m).
     assert abs(vel[0]) < 0.02
     assert pose_clearance(robot, pose[None], boundary)[0] == pytest.approx(0.1, abs=0.03)
+
+
+@pytest.mark.parametrize("geometry,params", [
+    ("ELLIPSOID", (0.25, 0.15, 0.2)), ("SPHERE", (0.2,)), ("CAPSULE", (0.15, 0.3)), ("CONE", (0.15, 0.3)),
+])
+@pytest.mark.parametrize("name", ["PurePursuit", "DWA"])
+def test_every_geometry_type_passes_an_obstacle(name, geometry, params):
+    robot = make_robot("DIFFERENTIAL_DRIVE", geometry, params)
+    controller = FACTORIES[name](robot)
+    controller.set_path(straight_path())
+    res = run_closed_loop(controller, robot, World([(2.0, 0.0, 0.15)]), (0.0, 0.0, 0.0), max_steps=600)
+    assert res.reached and res.min_clearance > 0.0
