@@ -1,4 +1,4 @@
-"""`emos bench nav` end to end (small planning budget; kernel sizes are the real ones)."""
+"""`emos bench nav` end to end (DWA step, kernels and the planning rows; small planning budget)."""
 import json
 import subprocess
 import sys
