@@ -197,3 +197,18 @@ def test_small_closed_loop_is_not_done_at_its_start():
         progress.update(np.array([pose[0], pose[1], 0.0]))
     progress.update(np.zeros(3))
     assert progress.goal_reached(np.zeros(3), 0.1)
+
+
+def test_make_controller_by_id():
+    from emos.actors.nav.controllers import CameraIntrinsics, make_controller
+
+    robot = make_robot("DIFFERENTIAL_DRIVE")
+    assert isinstance(make_controller("DWA", robot), DWA)
+    pp = make_controller(ControllersID.PURE_PURSUIT, robot, PurePursuitConfig(lookahead_gain_forward=0.5))
+    assert pp.config.lookahead_gain_forward == 0.5
+    with pytest.raises(TypeError, match="expected StanleyConfig"):
+        make_controller("Stanley", robot, DWAConfig())
+    with pytest.raises(TypeError, match="intrinsics"):
+        make_controller("VisionRGBDFollower", robot)
+    rgbd = make_controller("VisionRGBDFollower", robot, intrinsics=CameraIntrinsics(500, 500, 320, 240))
+    assert rgbd.intrinsics.fx == 500

@@ -3,6 +3,7 @@ from .base import ControllersID, ControlResult, ControlStatus
 from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
+from .registry import CONTROLLERS, make_controller
 from .stanley import Stanley, StanleyConfig
 from .vision_common import BoundingBox, CameraIntrinsics
 from .vision_rgb import VisionRGBFollower, VisionRGBFollowerConfig
@@ -10,6 +11,8 @@ from .vision_rgbd import VisionRGBDFollower, VisionRGBDFollowerConfig
 from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 
 __all__ = [
+    "CONTROLLERS",
+    "make_controller",
     "ControllersID",
     "ControlResult",
     "ControlStatus",
