@@ -25,6 +25,7 @@ from .controllers import (
     VisionRGBDFollowerConfig,
     VisionRGBFollower,
     VisionRGBFollowerConfig,
+    make_controller,
 )
 from .costs import TrajectoryCostsWeights, evaluate_costs
 from .local_map import LocalMapper, MapConfig, MapperConfig
@@ -67,4 +68,5 @@ __all__ = [
     "VisionRGBFollower",
     "VisionRGBFollowerConfig",
     "evaluate_costs",
+    "make_controller",
 ]
