@@ -33,7 +33,9 @@ class PathFollower:
     def set_path(self, path: np.ndarray) -> None:
         """Start tracking a new world-frame path (R, 2) or (R, 3)."""
         self.path = ReferencePath(path, spacing=self.config.path_resolution)
-        reach = max(1.0, 4.0 * self.robot.ctrl_vx_limits.max_vel * 1.0)
+        # Progress may jump ahead by what the robot can drive in a few seconds (a detour
+        # rejoining the path further on), but never to a far branch of a U-turn or loop.
+        reach = max(1.0, 4.0 * self.robot.ctrl_vx_limits.max_vel)
         self.progress = PathProgress(self.path, search_ahead=reach)
 
     def goal_reached(self, pose: np.ndarray) -> bool:
