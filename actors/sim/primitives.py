@@ -37,7 +37,7 @@ def _positive(instance: object, attribute: attrs.Attribute, value: float) -> Non
 
 
 def _color(value: object) -> Color:
-    c = tuple(float(v) for v in value)  # type: ignore[union-attr]
+    c = tuple(float(v) for v in value)  # type: ignore[attr-defined]
     if len(c) == 3:
         c = (*c, 1.0)
     if len(c) != 4 or not all(0.0 <= v <= 1.0 for v in c):

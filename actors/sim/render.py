@@ -20,7 +20,7 @@ GOAL = (220, 40, 40)
 POINTS = (230, 150, 0)
 
 
-def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | None = None,
+def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | np.ndarray | None = None,
                    goal: Sequence[float] | None = None, goal_radius: float = 0.0,
                    points: np.ndarray | None = None, bounds: tuple[float, float, float, float] | None = None,
                    pixels_per_m: float = 40.0, title: str | None = None) -> Any:
@@ -64,9 +64,8 @@ def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequ
         draw.polygon(px(fp @ np.array([[c, s], [-s, c]]) + (x, y)), fill=MOVER)
         draw.line(px(mover.waypoints), fill=MOVER, width=1)
     if goal is not None:
-        gx, gy = float(goal[0]), float(goal[1])
         r = max(goal_radius, 0.1) * pixels_per_m
-        (u, v), = px(np.array([gx, gy]))
+        (u, v), = px(np.array([float(goal[0]), float(goal[1])]))
         draw.ellipse([u - r, v - r, u + r, v + r], outline=GOAL, width=2)
         draw.line([(u - 6, v - 6), (u + 6, v + 6)], fill=GOAL, width=2)
         draw.line([(u - 6, v + 6), (u + 6, v - 6)], fill=GOAL, width=2)

@@ -102,7 +102,7 @@ class Camera(Sensor):
         super().__init__(robot, name)
         self.config = config or CameraConfig()
         self.rate_hz = self.config.rate_hz
-        self._projection = None
+        self._projection: list[float] | None = None
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Camera position and optical-frame rotation in the world."""
