@@ -35,10 +35,20 @@ def wait_until(pred: Callable[[], Any], timeout: float = 10.0, interval: float =
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
+_STARTED: list["SystemUnderTest"] = []
+
+
+def kill_leftover_systems() -> None:
+    """Called after every test (tests/runtime/conftest.py): no test leaves a system running."""
+    while _STARTED:
+        _STARTED.pop().kill_all()
+
+
 class SystemUnderTest:
     """A recipe running under ``emos run`` in its own process."""
 
     def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None):
+        _STARTED.append(self)
         self.script = tmp_path / "recipe.py"
         self.script.write_text(RECIPE_HEADER + textwrap.dedent(body))
         cmd = [sys.executable, "-m", "emos", "run", str(self.script)]
@@ -141,6 +151,9 @@ class SystemUnderTest:
         return left
 
     def kill_all(self) -> None:
+        """SIGKILL the launcher; its workers and zygotes follow it (parent-death signal)."""
         if self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait()
+        if not self._log.closed:
+            self._log.close()
