@@ -19,6 +19,15 @@ async def read_json(request: web.Request) -> Any:
         raise ValueError(f"request body is not valid JSON ({exc})") from None
 
 
+def text_inputs(body: Any) -> list[str]:
+    """The ``input`` of an embeddings request (OpenAI and Ollama share the shape): one or more strings."""
+    texts = body["input"]
+    texts = [texts] if isinstance(texts, str) else texts
+    if not isinstance(texts, list) or not texts or not all(isinstance(t, str) for t in texts):
+        raise ValueError("'input' must be a string or a non-empty list of strings")
+    return texts
+
+
 async def in_thread(fn: Callable[..., T], *args: Any) -> T:
     """Run a blocking model call off the event loop."""
     return await asyncio.get_running_loop().run_in_executor(None, fn, *args)

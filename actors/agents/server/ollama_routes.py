@@ -11,7 +11,7 @@ from aiohttp import web
 from ..clients import ollama_codec
 from ..types import ChatMessage, ChatRequest
 from .backends import EMBEDDING_NAMES, BackendUnavailable, LocalModels
-from .common import in_thread, iterate_in_thread, read_json
+from .common import in_thread, iterate_in_thread, read_json, text_inputs
 
 __all__ = ["add_ollama_routes"]
 
@@ -152,10 +152,7 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
     async def embed(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
-            texts = body["input"]
-            texts = [texts] if isinstance(texts, str) else texts
-            if not isinstance(texts, list) or not texts or not all(isinstance(t, str) for t in texts):
-                raise ValueError("'input' must be a string or a non-empty list of strings")
+            texts = text_inputs(body)
         except (ValueError, TypeError, KeyError) as exc:
             return _error(400, f"invalid embed request: {exc}")
         name = body.get("model")

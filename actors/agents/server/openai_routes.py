@@ -11,7 +11,7 @@ from ..clients import openai_codec
 from ..clients.sse import SSE_DONE, format_sse
 from ..types import AUDIO_MIME
 from .backends import EMBEDDING_NAMES, BackendUnavailable, LocalModels
-from .common import in_thread, iterate_in_thread, read_json
+from .common import in_thread, iterate_in_thread, read_json, text_inputs
 
 __all__ = ["add_openai_routes"]
 
@@ -71,10 +71,7 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
     async def embeddings(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
-            texts = body["input"]
-            texts = [texts] if isinstance(texts, str) else texts
-            if not isinstance(texts, list) or not texts or not all(isinstance(t, str) for t in texts):
-                raise ValueError("'input' must be a string or a non-empty list of strings")
+            texts = text_inputs(body)
         except (ValueError, TypeError, KeyError) as exc:
             return _error(400, f"invalid embeddings request: {exc}")
         model = body.get("model") or EMBEDDING_NAMES[0]
