@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
     parser.add_argument("--seed", type=int, default=0, help="simulation seed")
+    parser.add_argument("--noisy-odometry", action="store_true",
+                        help="navigate on drifting wheel odometry with 2%% slip instead of ground truth (harder)")
 
 
 def summarize(results: list[EpisodeResult]) -> dict:
@@ -60,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos bench barn: none of the selected worlds is in the file "
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
+    rules = BarnRules(noisy_odometry=args.noisy_odometry)
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
     if not args.json:
@@ -68,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     for idx in indices:
         png = args.png / f"barn_{idx:03d}.png" if args.png else None
         navigator = make_controller(args.controller)
-        r = run_episode(worlds[idx], navigator, seed=args.seed, png_path=png)
+        r = run_episode(worlds[idx], navigator, rules, seed=args.seed, png_path=png)
         results.append(r)
         if not args.json:
             status = "success" if r.success else ("collision" if r.collided else "timeout")

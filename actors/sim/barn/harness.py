@@ -47,6 +47,10 @@ class BarnRules:
     lidar: LidarConfig = LidarConfig(noise_std=0.01)
     control_rate_hz: float = 10.0
     physics_dt: float = 0.01
+    # The navigator's pose: ground-truth odometry (default), or drifting wheel odometry with
+    # this much wheel slip (a harder, more realistic variant).
+    noisy_odometry: bool = False
+    slip: float = 0.02
 
 
 def score_run(entry: BarnWorld, reached: bool, collided: bool, time_s: float, rules: BarnRules = BarnRules()) -> EpisodeResult:
@@ -63,9 +67,10 @@ def run_episode(entry: BarnWorld, navigator: Navigator, rules: BarnRules = BarnR
     wall0 = time.perf_counter()
     world = from_barn(entry, clock=SimClock(dt=rules.physics_dt, mode=ClockMode.LOCKSTEP), seed=seed)
     try:
-        robot = world.add_robot(rules.robot, rules.start)
+        robot = world.add_robot(rules.robot, rules.start, slip=rules.slip if rules.noisy_odometry else 0.0)
         lidar = world.add_sensor(Lidar(robot, rules.lidar))
-        odom = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=rules.control_rate_hz)))
+        odom = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=rules.control_rate_hz,
+                                                               noisy=rules.noisy_odometry)))
         navigator.reset(NavTask(rules.robot, rules.start, rules.goal, rules.goal_radius, rules.lidar, rules.control_rate_hz))
         ticks_per_control = max(1, int(round(1.0 / (rules.control_rate_hz * rules.physics_dt))))
         max_ticks = int(math.ceil(rules.time_limit / rules.physics_dt))

@@ -89,11 +89,23 @@ class GridNavigator:
             rc = np.asarray(cells)
             self.plan = self.grid.center_of(rc[:, 0], rc[:, 1])
 
+    def _scan_in_world(self, obs: Observation) -> np.ndarray:
+        """Scan hits placed with the robot's own pose estimate (odometry) and the lidar mount,
+        never with the simulator's ground truth."""
+        lidar = self.task.lidar  # type: ignore[union-attr]
+        x, y, yaw = obs.pose
+        mx, my = lidar.mount_xy
+        c, s = math.cos(yaw), math.sin(yaw)
+        sx, sy, syaw = x + c * mx - s * my, y + s * mx + c * my, yaw + lidar.mount_yaw
+        p = obs.scan.points()  # type: ignore[union-attr]
+        cs, ss = math.cos(syaw), math.sin(syaw)
+        return np.c_[sx + cs * p[:, 0] - ss * p[:, 1], sy + ss * p[:, 0] + cs * p[:, 1]]
+
     def update(self, obs: Observation) -> bool:
         """Global layer: remember the scan, refresh the cost-to-go and plan, watch for being
         stuck. Returns True while a recovery (backing out) is in force."""
         if obs.scan is not None:
-            self.grid.insert(obs.scan.world_points())
+            self.grid.insert(self._scan_in_world(obs))
         stale = self.grid.version != self._planned_version
         if self._planned_version < 0 or (stale and obs.stamp - self._last_plan >= self.replan_period):
             self._replan(obs)
