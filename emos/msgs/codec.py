@@ -24,6 +24,7 @@ from emos.msgs import fields as F
 _ARRAY_EXT = 1
 _U32 = struct.Struct("<I")
 _ALIGN = 8
+_BULK = 64 * 1024  # arrays at least this big are copied with numpy
 
 
 class DecodeError(ValueError):
@@ -67,14 +68,20 @@ class Encoded:
         _U32.pack_into(buf, 0, meta_len)
         buf[4 : 4 + meta_len] = self.meta
         pos = self.header_bytes
-        if self.arrays:
-            # One numpy view of the destination; np.copyto is the cheapest bulk copy into it.
-            dst = np.frombuffer(buf, dtype=np.uint8)
-            for arr in self.arrays:
-                n = arr.nbytes
+        dst = None
+        for arr in self.arrays:
+            n = arr.nbytes
+            if n < _BULK:
                 if n:
-                    np.copyto(dst[pos : pos + n], arr.reshape(-1).view(np.uint8))
-                pos += _align(n)
+                    try:
+                        buf[pos : pos + n] = memoryview(arr).cast("B")  # cheapest for small arrays
+                    except TypeError:  # formats memoryview will not cast (e.g. big-endian, float16)
+                        buf[pos : pos + n] = arr.reshape(-1).view(np.uint8).tobytes()
+            else:
+                if dst is None:
+                    dst = np.frombuffer(buf, dtype=np.uint8)
+                np.copyto(dst[pos : pos + n], arr.reshape(-1).view(np.uint8))  # cheapest for bulk
+            pos += _align(n)
         return pos
 
     def to_bytes(self) -> bytes:

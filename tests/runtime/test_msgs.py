@@ -124,3 +124,18 @@ def test_builtin_round_trip_validates_fields():
 def test_object_arrays_never_travel():
     with pytest.raises(F.FieldTypeError):
         M.Float64MultiArray(data=np.array([object()], dtype=object))
+
+
+@pytest.mark.parametrize("dtype", [">f4", "<f8", "float16", "complex64", "bool", "int16", ">i8"])
+def test_any_plain_dtype_travels_with_its_byte_order(dtype):
+    data = (np.arange(12) % 5).astype(dtype).reshape(3, 4)
+    from emos.msgs import fields as F
+    from emos.msgs.registry import message_type
+
+    @message_type("test_msgs", name=f"Any_{dtype.replace('>', 'be').replace('<', 'le')}")
+    class AnyArray:
+        data: object = F.array()
+
+    back = codec.decode(AnyArray, codec.pack(AnyArray(data=data)))
+    assert back.data.dtype == np.dtype(dtype) and back.data.shape == (3, 4)
+    np.testing.assert_array_equal(back.data, data)
