@@ -74,3 +74,16 @@ def test_gui_request_without_a_display_runs_headless(monkeypatch, caplog):
     with World(gui=True) as world:
         assert not world.gui
     assert "no display" in caplog.text
+
+
+def test_carving_clears_ghosts_crossed_by_beams_but_keeps_grazed_obstacles():
+    grid = HitGrid((0, 0, 4, 4), 0.05)
+    grid.insert(np.array([[2.0, 1.0], [2.0, 2.06]]))  # a ghost on the beam line, a point 6 cm off it
+    d = np.array([[1.0, 0.0], [1.0, 0.0]])
+    cleared = grid.carve((0.5, 1.0), d[:1], np.array([3.0]))
+    assert cleared == 1 and grid.points_near((2.0, 1.0), 0.1).shape == (0, 2)
+    grid.insert(np.array([[2.0, 1.0]]))
+    grid.carve((0.5, 2.04), d[:1], np.array([3.0]))  # grazes the point at y = 2.06 (2 cm off)
+    assert grid.points_near((2.0, 2.06), 0.01).shape == (1, 2)
+    grid.carve((0.5, 1.0), d[:1], np.array([1.4]))  # beam ends before the hit: kept
+    assert grid.points_near((2.0, 1.0), 0.01).shape == (1, 2)

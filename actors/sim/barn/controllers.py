@@ -22,8 +22,17 @@ def _navcore(name: str) -> Callable[[], Navigator]:
 
 
 # name -> (factory, one-line description). Factories import lazily.
+def _builtin_carve() -> Navigator:
+    from ..navigation.builtin import GridNavigator
+
+    nav = GridNavigator(carve_range=4.0)
+    nav.name = "builtin-carve"
+    return nav
+
+
 CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
     "builtin": (_builtin, "lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
+    "builtin-carve": (_builtin_carve, "builtin, clearing free space along beams (for drifting odometry)"),
 }
 for _name, _cls in (("navcore-dwa", "DWA"), ("navcore-purepursuit", "PurePursuit"),
                     ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ")):

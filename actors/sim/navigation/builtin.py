@@ -21,10 +21,15 @@ class GridNavigator:
 
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
                  arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3,
-                 recovery_time: float = 2.0, lethal_bias: float = 0.08) -> None:
+                 recovery_time: float = 2.0, lethal_bias: float = 0.08, carve_range: float = 0.0) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
         self.stuck_time, self.stuck_progress, self.recovery_time = stuck_time, stuck_progress, recovery_time
         self.lethal_bias = lethal_bias
+        # m of free space cleared along beams. 0 (default): never forget an obstacle, best
+        # with good odometry (a dead end seen once stays known). > 0: erase ghosts that
+        # drifting odometry or moved obstacles leave behind, at the price of sometimes
+        # forgetting obstacles seen only at grazing angles.
+        self.carve_range = carve_range
         self.arc_config = arc_config
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
@@ -89,23 +94,30 @@ class GridNavigator:
             rc = np.asarray(cells)
             self.plan = self.grid.center_of(rc[:, 0], rc[:, 1])
 
-    def _scan_in_world(self, obs: Observation) -> np.ndarray:
-        """Scan hits placed with the robot's own pose estimate (odometry) and the lidar mount,
-        never with the simulator's ground truth."""
-        lidar = self.task.lidar  # type: ignore[union-attr]
+    def _insert_scan(self, obs: Observation) -> None:
+        """Place the scan with the robot's own pose estimate (odometry) and the lidar mount,
+        never with the simulator's ground truth; carve free space along the beams first."""
+        lidar, scan = self.task.lidar, obs.scan  # type: ignore[union-attr]
         x, y, yaw = obs.pose
         mx, my = lidar.mount_xy
         c, s = math.cos(yaw), math.sin(yaw)
         sx, sy, syaw = x + c * mx - s * my, y + s * mx + c * my, yaw + lidar.mount_yaw
-        p = obs.scan.points()  # type: ignore[union-attr]
-        cs, ss = math.cos(syaw), math.sin(syaw)
-        return np.c_[sx + cs * p[:, 0] - ss * p[:, 1], sy + ss * p[:, 0] + cs * p[:, 1]]
+        angles = syaw + scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))  # type: ignore[union-attr]
+        d = np.c_[np.cos(angles), np.sin(angles)]
+        r = scan.ranges.astype(float)  # type: ignore[union-attr]
+        hit = np.isfinite(r)
+        if self.carve_range > 0:
+            # Stop a cell and a half short of each hit; beams without a return carve up to
+            # carve_range.
+            length = np.where(hit, np.minimum(r, self.carve_range) - 1.5 * self.resolution, self.carve_range)
+            self.grid.carve((sx, sy), d, np.maximum(length, 0.0))
+        self.grid.insert(np.c_[sx + r[hit] * d[hit, 0], sy + r[hit] * d[hit, 1]])
 
     def update(self, obs: Observation) -> bool:
         """Global layer: remember the scan, refresh the cost-to-go and plan, watch for being
         stuck. Returns True while a recovery (backing out) is in force."""
         if obs.scan is not None:
-            self.grid.insert(self._scan_in_world(obs))
+            self._insert_scan(obs)
         stale = self.grid.version != self._planned_version
         if self._planned_version < 0 or (stale and obs.stamp - self._last_plan >= self.replan_period):
             self._replan(obs)

@@ -51,6 +51,38 @@ class HitGrid:
             self.version += 1
         return new
 
+    def carve(self, origin: tuple[float, float], directions: np.ndarray, lengths: np.ndarray,
+              tolerance: float | None = None) -> int:
+        """Free-space evidence: a beam from ``origin`` along a unit direction (N, 2) that went
+        on past a stored hit point, within ``tolerance`` of it (default a fifth of a cell, about
+        the lidar noise), proves nothing is there any more: clear that cell. Beams passing a
+        point further off may just have grazed the obstacle it belongs to, so they do not
+        count. Returns how many cells were cleared. This removes ghosts left by odometry drift
+        or by obstacles that moved."""
+        if len(lengths) == 0 or not self.occupied.any():
+            return 0
+        tol = 0.2 * self.resolution if tolerance is None else tolerance
+        t = np.arange(0.0, float(np.max(lengths)), self.resolution)
+        beam, step = np.nonzero(t[None, :] < lengths[:, None])
+        if len(beam) == 0:
+            return 0
+        pts = np.asarray(origin) + directions[beam] * t[step][:, None]
+        rows, cols, inside = self.cell_of(pts)
+        beam, rows, cols = beam[inside], rows[inside], cols[inside]
+        hit = self.occupied[rows, cols]
+        beam, rows, cols = beam[hit], rows[hit], cols[hit]
+        rel = self.hit_xy[rows, cols] - np.asarray(origin)
+        d = directions[beam]
+        on_beam = np.abs(d[:, 0] * rel[:, 1] - d[:, 1] * rel[:, 0]) <= tol
+        before_end = (d[:, 0] * rel[:, 0] + d[:, 1] * rel[:, 1]) < lengths[beam]
+        clear = on_beam & before_end
+        if not clear.any():
+            return 0
+        r, c = rows[clear], cols[clear]
+        self.occupied[r, c] = False
+        self.version += 1
+        return len(np.unique(r * self.shape[1] + c))
+
     def block(self, points: np.ndarray) -> None:
         """Mark cells as virtually blocked (for planning only)."""
         rows, cols, inside = self.cell_of(points)
