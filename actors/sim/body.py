@@ -51,6 +51,7 @@ class SimRobot:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.pose = np.asarray(pose, dtype=float).copy()
         self.start_pose = self.pose.copy()
+        self._previous = self.pose.copy()  # pose before the current tick, restored on contact
         self.twist = np.zeros(3)  # achieved body twist (ground truth)
         self.wheel_twist = np.zeros(3)  # what the wheels turn at (what encoders see)
         self._command = np.zeros(3)
@@ -102,6 +103,7 @@ class SimRobot:
 
     def reset(self, pose: tuple[float, float, float] | None = None) -> None:
         self.pose = np.asarray(pose if pose is not None else self.start_pose, dtype=float).copy()
+        self._previous = self.pose.copy()
         self.twist[:] = 0.0
         self.wheel_twist[:] = 0.0
         self._command[:] = 0.0
@@ -130,8 +132,7 @@ class SimRobot:
         ]
         if touching:
             self.collided = True
-            if hasattr(self, "_previous"):
-                self.pose = self._previous
+            self.pose = self._previous.copy()
             self.twist[:] = 0.0
             self.wheel_twist[:] = 0.0
             self._place()
