@@ -113,3 +113,17 @@ def test_feasible_command_and_acceleration_are_pure():
     assert cmd.tolist() == [2.0, 0.0, -4.0]
     out = accelerate(JACKAL, np.zeros(3), cmd, 0.01)
     assert out == pytest.approx([0.2, 0.0, -0.25])
+
+
+def test_reset_puts_the_robot_back_and_clears_its_history(make_world):
+    world = make_world()
+    world.add_wall((1.0, -2.0), (1.0, 2.0))
+    robot = world.add_robot("jackal", (0.0, 0.0, 0.0))
+    robot.command(1.0)
+    world.step(200)
+    assert robot.collided and robot.distance_travelled > 0.5
+    robot.reset()
+    assert robot.pose.tolist() == [0.0, 0.0, 0.0]
+    assert not robot.collided and robot.distance_travelled == 0.0 and len(robot.trail) == 1
+    world.step()
+    assert robot.pose.tolist() == [0.0, 0.0, 0.0]  # the command was cleared too
