@@ -110,3 +110,28 @@ def test_navigation_core_controllers_drive_barn_through_the_adapter():
     assert r.success, r.reason
     with pytest.raises(ValueError, match="unknown controller"):
         make_controller("teleport")
+
+
+def test_every_shipped_world_keeps_a_route_through_the_navigators_soft_band():
+    """The built-in navigator makes gaps narrower than half-width + lethal_bias expensive;
+    with the whole map known, every shipped world must still have a route that avoids them."""
+    from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START
+    from emos.actors.sim.navigation.builtin import GridNavigator
+    from emos.actors.sim.navigation.costfield import CostField
+    from emos.actors.sim.navigation.grid import HitGrid
+    from emos.actors.sim.robots import JACKAL
+
+    band = JACKAL.width / 2 + GridNavigator().lethal_bias
+    ring = 0.075 * np.c_[np.cos(np.linspace(0, 2 * np.pi, 24, endpoint=False)),
+                         np.sin(np.linspace(0, 2 * np.pi, 24, endpoint=False))]
+    blocked = []
+    for idx, world in load_barn_worlds().items():
+        grid = HitGrid((-5.25, 0.0, 0.75, 16.0), 0.05)
+        grid.insert((world.cylinders[:, None, :] + ring[None]).reshape(-1, 2))
+        field = CostField(grid.shape, 0.05, lethal_radius=band, inflation_radius=band + 0.45)
+        (gr,), (gc,), _ = grid.cell_of(np.array([BARN_GOAL]))
+        field.compute(grid.occupied, (gr, gc), grid.hit_xy, grid.origin)
+        (sr,), (sc,), _ = grid.cell_of(np.array([BARN_START[:2]]))
+        if not np.isfinite(field.ctg[sr, sc]):
+            blocked.append(idx)
+    assert blocked == []

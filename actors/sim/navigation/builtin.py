@@ -17,6 +17,14 @@ UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has
 
 
 class GridNavigator:
+    """Navigator for unknown static worlds (BARN). Each control step: add the scan to the
+    obstacle memory (placed with the odometry pose); at most every ``replan_period`` s, when
+    the memory changed, recompute the cost-to-go from the goal and the plan; pick the best
+    collision-free arc; if the cost-to-go has not dropped by ``stuck_progress`` m within
+    ``stuck_time`` s, back out for ``recovery_time`` s, and if that recurs, block the tightest
+    spot of the plan ahead so the field routes elsewhere.
+    """
+
     name = "builtin"
 
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
@@ -46,8 +54,8 @@ class GridNavigator:
         # can never be closer than its half-width (less a cell's rounding): lethal. Up to the
         # half-width plus ``lethal_bias`` travel is allowed but expensive: gaps only a little
         # wider than the robot need more precision than sampled arcs have, and a plan through
-        # them tends to get the robot stuck. (All 250 shipped BARN worlds keep a route with a
-        # bias of 0.13 m, checked on their true geometry.)
+        # them tends to get the robot stuck. (All 250 shipped BARN worlds keep a route outside
+        # the band, up to a bias of 0.13 m; tests/sim/test_sim_barn.py checks the default.)
         hard = max(spec.width / 2 - 0.5 * self.resolution, 0.05)
         soft = spec.width / 2 + self.lethal_bias
         self.field = CostField(self.grid.shape, self.resolution, hard, inflation_radius=soft + 0.45,
