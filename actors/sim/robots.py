@@ -84,11 +84,12 @@ TURTLEBOT3 = RobotSpec(
     max_vx=0.22, max_omega=2.84, max_acc_x=2.5, max_acc_omega=3.2, lidar_height=0.2,
     color=(0.2, 0.2, 0.2, 1.0),
 )
-# pybullet_data's MIT racecar (1:10): base frame on the rear axle, wheelbase 0.325 m.
+# pybullet_data's MIT racecar (1:10): base frame on the rear axle, wheelbase 0.325 m; the box
+# covers its links' extent (x from -0.05 to 0.41 m, wheels at +-0.147 m).
 RACECAR = RobotSpec(
-    name="racecar", drive="ackermann", length=0.45, width=0.30, height=0.12,
+    name="racecar", drive="ackermann", length=0.47, width=0.30, height=0.12,
     max_vx=3.0, max_omega=6.0, max_acc_x=4.0, max_acc_omega=20.0, wheelbase=0.325, max_steer=0.5,
-    center_offset=0.16, urdf="racecar/racecar.urdf", lidar_height=0.2, color=(0.8, 0.2, 0.2, 1.0),
+    center_offset=0.18, urdf="racecar/racecar.urdf", lidar_height=0.2, color=(0.8, 0.2, 0.2, 1.0),
 )
 HOLONOMIC = RobotSpec(
     name="holonomic", drive="omni", length=0.5, width=0.5, height=0.25,
