@@ -77,3 +77,19 @@ def test_lidar_noise_is_seeded(make_world):
 def test_lidar_config_rejects_bad_values(kwargs):
     with pytest.raises(ValueError, match="LidarConfig"):
         LidarConfig(**kwargs)
+
+
+def test_lidar_sees_a_moving_obstacle_where_its_path_puts_it(make_world):
+    from emos.actors.sim import Box, MovingObstacle
+
+    world = make_world()
+    mover = MovingObstacle(Box((0, 0), (0.4, 0.4)), waypoints=[(3.0, -4.0), (3.0, 4.0)], speed=2.0, mode="once")
+    world.add(mover)
+    robot = world.add_robot("jackal", (0.0, 0.0, 0.0))
+    lidar = world.add_sensor(Lidar(robot, LidarConfig(fov_deg=2, beams=3, rate_hz=100)))
+    world.step()
+    assert np.isinf(lidar.latest.ranges[1])  # still 4 m away from the beam
+    world.run_for(2.0 - world.clock.now())  # the box centre crosses y = 0 at t = 2 s
+    assert lidar.latest.ranges[1] == pytest.approx(3.0 - 0.2, abs=2e-3)
+    world.run_for(1.0)
+    assert np.isinf(lidar.latest.ranges[1])
