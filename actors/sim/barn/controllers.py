@@ -30,9 +30,18 @@ def _builtin_carve() -> Navigator:
     return nav
 
 
+def _builtin_localize() -> Navigator:
+    from ..navigation.builtin import GridNavigator
+
+    nav = GridNavigator(localize=True)
+    nav.name = "builtin-localize"
+    return nav
+
+
 CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
     "builtin": (_builtin, "lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
     "builtin-carve": (_builtin_carve, "builtin, clearing free space along beams (for drifting odometry)"),
+    "builtin-localize": (_builtin_localize, "builtin, correcting odometry drift by scan matching against its map"),
 }
 for _name, _cls in (("navcore-dwa", "DWA"), ("navcore-purepursuit", "PurePursuit"),
                     ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ")):

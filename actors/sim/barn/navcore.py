@@ -59,6 +59,7 @@ class NavCoreNavigator:
         self._tracked = None
 
     def step(self, obs: Observation) -> tuple[float, float, float]:
+        obs = self._global.localized(obs)
         self._global.update(obs)
         plan = self._global.plan
         self.plan = plan

@@ -12,6 +12,7 @@ from .arcs import ArcConfig, ArcPlanner
 from .costfield import CostField
 from .grid import HitGrid
 from .interface import NavTask, Observation
+from .localize import ScanMatcher, compose, correction_between
 
 UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has no path
 
@@ -29,7 +30,8 @@ class GridNavigator:
 
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
                  arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3,
-                 recovery_time: float = 2.0, lethal_bias: float = 0.08, carve_range: float = 0.0) -> None:
+                 recovery_time: float = 2.0, lethal_bias: float = 0.08, carve_range: float = 0.0,
+                 localize: bool = False) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
         self.stuck_time, self.stuck_progress, self.recovery_time = stuck_time, stuck_progress, recovery_time
         self.lethal_bias = lethal_bias
@@ -38,6 +40,9 @@ class GridNavigator:
         # drifting odometry or moved obstacles leave behind, at the price of sometimes
         # forgetting obstacles seen only at grazing angles.
         self.carve_range = carve_range
+        # Scan matching against the obstacle memory corrects odometry drift (off by default:
+        # with good odometry it only adds cost).
+        self.localize = localize
         self.arc_config = arc_config
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
@@ -68,6 +73,8 @@ class GridNavigator:
         self.virtual_blocks: list[tuple[float, float]] = []
         self._recover_until = -math.inf
         self._last_recovery = -math.inf
+        self._correction = np.zeros(3)  # map <- odometry
+        self._matcher = ScanMatcher() if self.localize else None
         self.plan = None
 
     def _cell(self, xy: tuple[float, float]) -> tuple[int, int]:
@@ -121,6 +128,24 @@ class GridNavigator:
             self.grid.carve((sx, sy), d, np.maximum(length, 0.0))
         self.grid.insert(np.c_[sx + r[hit] * d[hit, 0], sy + r[hit] * d[hit, 1]])
 
+    def localized(self, obs: Observation) -> Observation:
+        """``obs`` with its pose in the navigator's map frame: odometry corrected by matching
+        the scan against the obstacle memory (when ``localize``), else unchanged."""
+        if self._matcher is None:
+            return obs
+        guess = compose(self._correction, obs.pose)
+        if obs.scan is not None:
+            lidar = self.task.lidar  # type: ignore[union-attr]
+            mx, my = lidar.mount_xy
+            p = obs.scan.points()
+            cm, sm = math.cos(lidar.mount_yaw), math.sin(lidar.mount_yaw)
+            local = np.c_[mx + cm * p[:, 0] - sm * p[:, 1], my + sm * p[:, 0] + cm * p[:, 1]]
+            pose, best, at_guess = self._matcher.match(self.grid, guess, local)
+            if best > at_guess + 0.01:
+                self._correction = correction_between(pose, np.asarray(obs.pose, dtype=float))
+                guess = pose
+        return Observation(obs.stamp, guess, obs.twist, obs.scan)
+
     def update(self, obs: Observation) -> bool:
         """Global layer: remember the scan, refresh the cost-to-go and plan, watch for being
         stuck. Returns True while a recovery (backing out) is in force."""
@@ -140,6 +165,7 @@ class GridNavigator:
         return obs.stamp < self._recover_until
 
     def step(self, obs: Observation) -> tuple[float, float, float]:
+        obs = self.localized(obs)
         recovering = self.update(obs)
         reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.task.robot.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
