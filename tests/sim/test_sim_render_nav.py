@@ -87,3 +87,29 @@ def test_carving_clears_ghosts_crossed_by_beams_but_keeps_grazed_obstacles():
     assert grid.points_near((2.0, 2.06), 0.01).shape == (1, 2)
     grid.carve((0.5, 1.0), d[:1], np.array([1.4]))  # beam ends before the hit: kept
     assert grid.points_near((2.0, 1.0), 0.01).shape == (1, 2)
+
+
+def test_scan_matcher_recovers_a_pose_offset():
+    from emos.actors.sim.navigation.localize import ScanMatcher, compose, correction_between
+
+    rng = np.random.default_rng(0)
+    # An L-shaped room corner plus a few posts, remembered in the grid.
+    wall = np.r_[np.c_[np.linspace(0, 4, 200), np.zeros(200)], np.c_[np.zeros(200), np.linspace(0, 4, 200)]]
+    posts = rng.uniform(0.5, 3.5, (8, 2))
+    world_pts = np.r_[wall, posts]
+    grid = HitGrid((-1, -1, 5, 5), 0.05)
+    grid.insert(world_pts)
+    true_pose = np.array([2.0, 1.5, 0.3])
+    c, s = np.cos(true_pose[2]), np.sin(true_pose[2])
+    rel = world_pts - true_pose[:2]
+    local = np.c_[c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]  # the scan, robot frame
+    guess = true_pose + np.array([0.06, -0.08, 0.03])  # drifted odometry
+    pose, best, at_guess = ScanMatcher().match(grid, guess, local)
+    assert best > at_guess
+    assert pose[:2] == pytest.approx(true_pose[:2], abs=0.025)
+    assert pose[2] == pytest.approx(true_pose[2], abs=0.011)
+    t = correction_between(pose, guess)
+    assert compose(t, guess) == pytest.approx(pose)
+    # Too little map: the guess is returned untouched.
+    empty = HitGrid((-1, -1, 5, 5), 0.05)
+    assert ScanMatcher().match(empty, guess, local)[0].tolist() == guess.tolist()
