@@ -113,3 +113,11 @@ def test_scan_matcher_recovers_a_pose_offset():
     # Too little map: the guess is returned untouched.
     empty = HitGrid((-1, -1, 5, 5), 0.05)
     assert ScanMatcher().match(empty, guess, local)[0].tolist() == guess.tolist()
+
+
+@pytest.mark.parametrize("kwargs", [dict(speeds=1), dict(horizon=0), dict(margin=-0.1), dict(step=float("nan"))])
+def test_arc_config_rejects_bad_values(kwargs):
+    from emos.actors.sim.navigation.arcs import ArcConfig
+
+    with pytest.raises(ValueError, match="ArcConfig"):
+        ArcConfig(**kwargs)

@@ -14,19 +14,34 @@ import numpy as np
 from ..robots import RobotSpec
 
 
+def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ValueError(f"ArcConfig.{attribute.name} must be a finite number > 0, got {value!r}")
+
+
+def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+        raise ValueError(f"ArcConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
+
+
+def _count(instance: object, attribute: attrs.Attribute, value: int) -> None:
+    if not (isinstance(value, int) and value >= 2):
+        raise ValueError(f"ArcConfig.{attribute.name} must be an integer >= 2, got {value!r}")
+
+
 @attrs.define
 class ArcConfig:
-    horizon: float = 1.0  # s of constant-velocity motion checked for collision
-    step: float = 0.06  # m between collision samples along the fastest arc (< obstacle size)
-    speeds: int = 7  # forward speeds from 0 to max
-    turns: int = 17  # angular velocities from -max to max
-    max_speed: float = 2.0
-    max_turn: float = 3.0
-    margin: float = 0.015  # m added around the footprint for the hard check
-    safe_clearance: float = 0.12  # m; closer than this (+ speed term) costs extra
-    clearance_weight: float = 6.0
-    lookahead: float = 0.4  # m ahead of the arc end, scored too, to end aligned with the path
-    reverse_speed: float = 0.3  # m/s of the backing-up arcs (0 disables them)
+    horizon: float = attrs.field(default=1.0, validator=_positive)  # s of constant-velocity motion checked
+    step: float = attrs.field(default=0.06, validator=_positive)  # m between collision samples (< obstacle size)
+    speeds: int = attrs.field(default=7, validator=_count)  # forward speeds from 0 to max
+    turns: int = attrs.field(default=17, validator=_count)  # angular velocities from -max to max
+    max_speed: float = attrs.field(default=2.0, validator=_positive)
+    max_turn: float = attrs.field(default=3.0, validator=_positive)
+    margin: float = attrs.field(default=0.015, validator=_nonneg)  # m around the footprint, hard check
+    safe_clearance: float = attrs.field(default=0.12, validator=_nonneg)  # closer (+ speed term) costs extra
+    clearance_weight: float = attrs.field(default=6.0, validator=_nonneg)
+    lookahead: float = attrs.field(default=0.4, validator=_nonneg)  # m past the arc end, scored too
+    reverse_speed: float = attrs.field(default=0.3, validator=_nonneg)  # m/s of backing-up arcs (0: none)
     reverse_cost: float = 1.0  # extra cost of backing up, so it is only chosen to get unstuck
 
 
