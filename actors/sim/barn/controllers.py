@@ -25,23 +25,23 @@ def _navcore(name: str) -> Callable[[], Navigator]:
 def _builtin_carve() -> Navigator:
     from ..navigation.builtin import GridNavigator
 
-    nav = GridNavigator(carve_range=4.0)
+    nav = GridNavigator(carve_range=4.0, localize=False)
     nav.name = "builtin-carve"
     return nav
 
 
-def _builtin_localize() -> Navigator:
+def _builtin_odom() -> Navigator:
     from ..navigation.builtin import GridNavigator
 
-    nav = GridNavigator(localize=True)
-    nav.name = "builtin-localize"
+    nav = GridNavigator(localize=False)
+    nav.name = "builtin-odom"
     return nav
 
 
 CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
-    "builtin": (_builtin, "lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
-    "builtin-carve": (_builtin_carve, "builtin, clearing free space along beams (for drifting odometry)"),
-    "builtin-localize": (_builtin_localize, "builtin, correcting odometry drift by scan matching against its map"),
+    "builtin": (_builtin, "scan-matched lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
+    "builtin-odom": (_builtin_odom, "builtin without scan matching: trusts odometry"),
+    "builtin-carve": (_builtin_carve, "builtin-odom, clearing free space along beams instead"),
 }
 for _name, _cls in (("navcore-dwa", "DWA"), ("navcore-purepursuit", "PurePursuit"),
                     ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ")):
