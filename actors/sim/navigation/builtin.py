@@ -1,6 +1,6 @@
-"""The simulator's own navigator: lidar-built obstacle memory, Dijkstra cost-to-go from the
-goal (global plan), and a sampled-arc local planner. No map is given; it only sees the world
-through its lidar, as a BARN entry would.
+"""The simulator's own navigator: lidar-built obstacle memory (scans aligned to it by scan
+matching), Dijkstra cost-to-go from the goal (global plan), and a sampled-arc local planner.
+No map is given; it only sees the world through its lidar and odometry, as a BARN entry would.
 """
 from __future__ import annotations
 
@@ -18,8 +18,9 @@ UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has
 
 
 class GridNavigator:
-    """Navigator for unknown static worlds (BARN). Each control step: add the scan to the
-    obstacle memory (placed with the odometry pose); at most every ``replan_period`` s, when
+    """Navigator for unknown static worlds (BARN). Each control step: correct the odometry pose
+    by matching the scan against the obstacle memory (``localize``), add the scan to the
+    memory at that pose; at most every ``replan_period`` s, when
     the memory changed, recompute the cost-to-go from the goal and the plan; pick the best
     collision-free arc; if the cost-to-go has not dropped by ``stuck_progress`` m within
     ``stuck_time`` s, back out for ``recovery_time`` s, and if that recurs, block the tightest
