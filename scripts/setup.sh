@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs EMOS and everything it needs on a fresh Debian machine with Python 3.11.
 #   scripts/setup.sh          the runtime and every extra (what the main job needs)
-#   scripts/setup.sh --test   the same plus the test tools and the system packages tests use
+#   scripts/setup.sh --test   the same plus the test tools
 # Safe to run again: installed pieces are skipped quickly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,9 +12,9 @@ want_test=0
 PY=${PYTHON:-python3}
 export PIP_DISABLE_PIP_VERSION_CHECK=1
 
-# System packages: espeak-ng for local text to speech, chromium for browser tests.
+# System packages: espeak-ng for local text to speech. (Browser tests will add chromium and
+# chromium-driver here when the web UI lands.)
 apt_pkgs=(espeak-ng)
-[ $want_test = 1 ] && apt_pkgs+=(chromium chromium-driver)
 missing=()
 for p in "${apt_pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
