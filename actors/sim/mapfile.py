@@ -1,7 +1,8 @@
-"""Read a ROS map (map_server YAML + PGM/PNG) and turn occupied cells into wall boxes.
+"""Turn a ROS map (map_server YAML + PGM/PNG) into wall boxes for the simulator.
 
-Kept deliberately small and independent of the navigation map server: the simulator only
-needs "which cells are occupied" and the cell-to-world transform.
+Reading the map is the navigation core's job (`emos.actors.nav.maps.load_map`, with all of
+map_server's modes, thresholds, negate and alpha rules); this module only decides which cells
+are walls and covers them with few boxes.
 """
 from __future__ import annotations
 
@@ -10,9 +11,7 @@ from pathlib import Path
 
 import attrs
 import numpy as np
-import yaml
 
-from . import _deps
 from .primitives import Box
 
 
@@ -25,34 +24,18 @@ class OccupancyMap:
     origin: tuple[float, float, float]  # world pose of the bottom-left corner of cell (0, 0)
 
 
-def read_ros_map(yaml_path: str | Path) -> OccupancyMap:
-    """Parse a map_server YAML and its image (trinary/scale modes, ``negate``, thresholds)."""
-    yaml_path = Path(yaml_path)
-    if not yaml_path.is_file():
-        raise FileNotFoundError(f"ROS map YAML not found: {yaml_path}")
-    with yaml_path.open() as fh:
-        meta = yaml.safe_load(fh)
-    if not isinstance(meta, dict):
-        raise ValueError(f"{yaml_path}: expected a YAML mapping with image, resolution, origin")
-    missing = [k for k in ("image", "resolution", "origin") if k not in meta]
-    if missing:
-        raise ValueError(f"{yaml_path}: missing required key(s) {missing}")
-    resolution = float(meta["resolution"])
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise ValueError(f"{yaml_path}: resolution must be > 0, got {meta['resolution']!r}")
-    origin = [float(v) for v in meta["origin"]]
-    if len(origin) != 3:
-        raise ValueError(f"{yaml_path}: origin must be [x, y, yaw], got {meta['origin']!r}")
-    image_path = Path(meta["image"])
-    if not image_path.is_absolute():
-        image_path = yaml_path.parent / image_path
-    if not image_path.is_file():
-        raise FileNotFoundError(f"{yaml_path}: map image not found: {image_path}")
-    pixels = np.asarray(_deps.pil_image().open(image_path).convert("L"), dtype=float)
-    occ_prob = pixels / 255.0 if int(meta.get("negate", 0)) else (255.0 - pixels) / 255.0
-    occupied = occ_prob > float(meta.get("occupied_thresh", 0.65))
-    # Image row 0 is the top of the map; flip so row index grows with world y.
-    return OccupancyMap(np.ascontiguousarray(occupied[::-1]), resolution, (origin[0], origin[1], origin[2]))
+def read_ros_map(yaml_path: str | Path, occupied_at: int = 65) -> OccupancyMap:
+    """Cells at or above ``occupied_at`` (of 0..100) become walls; unknown cells stay open.
+
+    Errors (missing file, key or image, bad values) are the map loader's ``MapFileError``,
+    a ``ValueError`` naming the file and the problem.
+    """
+    from emos.actors.nav.maps import load_map
+
+    grid = load_map(yaml_path)
+    occupied = np.asarray(grid.data) >= occupied_at
+    ox, oy, oyaw = grid.origin
+    return OccupancyMap(np.ascontiguousarray(occupied), float(grid.resolution), (ox, oy, oyaw))
 
 
 def merge_cells(occupied: np.ndarray) -> np.ndarray:

@@ -112,13 +112,15 @@ def test_ros_map_walls_are_extruded_in_the_right_place(tmp_path, make_world):
 
 
 def test_ros_map_errors_name_the_problem(tmp_path):
-    with pytest.raises(FileNotFoundError, match="ROS map YAML not found"):
+    with pytest.raises(ValueError, match="missing.yaml"):
         read_ros_map(tmp_path / "missing.yaml")
     (tmp_path / "a.yaml").write_text("image: a.pgm\n")
     with pytest.raises(ValueError, match="resolution"):
         read_ros_map(tmp_path / "a.yaml")
-    (tmp_path / "b.yaml").write_text("image: nothere.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
-    with pytest.raises(FileNotFoundError, match="map image not found"):
+    (tmp_path / "b.yaml").write_text(
+        "image: nothere.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
+    with pytest.raises(ValueError, match="map image not found"):
         read_ros_map(tmp_path / "b.yaml")
 
 
