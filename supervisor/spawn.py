@@ -132,11 +132,14 @@ class _ZygoteHandle:
             os.kill(self.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+        self.close_and_reap()
+
+    def close_and_reap(self) -> None:
         self.sock.close()
         try:
             os.waitpid(self.pid, 0)
         except ChildProcessError:
-            pass
+            pass  # already reaped
 
 
 class Zygote:
@@ -231,11 +234,7 @@ class Zygote:
                 _send(handle.sock, {"op": "exit"})
             except OSError:
                 pass
-            handle.sock.close()
-            try:
-                os.waitpid(handle.pid, 0)
-            except ChildProcessError:
-                pass
+            handle.close_and_reap()
         self.primary = self.spare = None
 
     # ---------------------------------------------------------------------- zygote side

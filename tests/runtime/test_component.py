@@ -16,13 +16,6 @@ from emos.transport.pubsub import Publisher, Subscriber
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
 
-@pytest.fixture
-def ctx():
-    c = RunContext.create()
-    yield c
-    c.remove_everything()
-
-
 class Doubler(BaseComponent):
     def custom_on_configure(self):
         self.events = ["configure"]

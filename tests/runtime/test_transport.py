@@ -18,13 +18,6 @@ from emos.transport.pubsub import MessageTooLarge, Publisher, Subscriber, TopicT
 from emos.transport.waker import Waker
 
 
-@pytest.fixture
-def ctx():
-    c = RunContext.create()
-    yield c
-    c.remove_everything()
-
-
 def test_many_publishers_and_subscribers_queued_and_latest(ctx):
     waker = Waker(ctx)
     queued = Subscriber(ctx, "/chatter", M.Int64, waker=waker, queue_size=100)
