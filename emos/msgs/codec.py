@@ -100,14 +100,47 @@ class _ArrayCollector:
         self.offset = 0
 
     def __call__(self, arr: np.ndarray) -> msgpack.ExtType:
-        if arr.dtype.hasobject or arr.dtype.fields is not None:
-            raise TypeError(f"cannot encode an array of dtype {arr.dtype}: only plain numeric dtypes travel on topics")
         if not arr.flags.c_contiguous:
             arr = np.ascontiguousarray(arr)
+        key = (arr.dtype, arr.shape, self.offset)
+        header = _HEADERS_OUT.get(key)
+        if header is None:
+            if arr.dtype.hasobject or arr.dtype.fields is not None:
+                raise TypeError(f"cannot encode an array of dtype {arr.dtype}: only plain numeric dtypes travel on topics")
+            header = msgpack.packb((arr.dtype.str, arr.shape, self.offset))
+            _remember(_HEADERS_OUT, key, header)
         self.arrays.append(arr)
-        ext = msgpack.ExtType(_ARRAY_EXT, msgpack.packb((arr.dtype.str, arr.shape, self.offset)))
         self.offset += _align(arr.nbytes)
-        return ext
+        return msgpack.ExtType(_ARRAY_EXT, header)
+
+
+# Array headers (dtype, shape, offset) repeat from message to message on a topic (same image
+# size, same scan length), so both directions cache them: a dict lookup instead of a msgpack
+# round trip, a dtype parse and a product per array.
+_HEADERS_OUT: dict[tuple, bytes] = {}
+_HEADERS_IN: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int, int]] = {}
+_HEADER_CACHE_SIZE = 4096
+
+
+def _remember(cache: dict, key: Any, value: Any) -> None:
+    if len(cache) >= _HEADER_CACHE_SIZE:
+        cache.clear()  # bounded: topics whose shapes keep changing must not grow memory
+    cache[key] = value
+
+
+def _array_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int, int]:
+    """(dtype, shape, count, offset, nbytes) of an encoded array header."""
+    spec = _HEADERS_IN.get(data)
+    if spec is None:
+        dtype_str, shape, offset = msgpack.unpackb(data)
+        dtype = np.dtype(dtype_str)
+        shape = tuple(int(d) for d in shape)
+        count = math.prod(shape)
+        if dtype.hasobject or offset < 0 or count < 0:
+            raise DecodeError(f"invalid array header {dtype_str!r} {shape} at {offset}")
+        spec = (dtype, shape, count, int(offset), count * dtype.itemsize)
+        _remember(_HEADERS_IN, bytes(data), spec)
+    return spec
 
 
 # Per-class encoders and decoders, generated once as straight-line code (as attrs generates
@@ -223,11 +256,9 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
         def ext_hook(code: int, data: bytes) -> Any:
             if code != _ARRAY_EXT:
                 raise DecodeError(f"unknown msgpack extension {code}")
-            dtype_str, shape, offset = msgpack.unpackb(data)
-            dtype = np.dtype(dtype_str)
-            count = math.prod(shape)
+            dtype, shape, count, offset, nbytes = _array_header(data)
             start = base + offset
-            if start + count * dtype.itemsize > end:
+            if start + nbytes > end:
                 raise DecodeError("array runs past the end of the frame")
             arr = np.frombuffer(view, dtype=dtype, count=count, offset=start)
             if len(shape) != 1:

@@ -139,3 +139,24 @@ def test_any_plain_dtype_travels_with_its_byte_order(dtype):
     back = codec.decode(AnyArray, codec.pack(AnyArray(data=data)))
     assert back.data.dtype == np.dtype(dtype) and back.data.shape == (3, 4)
     np.testing.assert_array_equal(back.data, data)
+
+
+def test_array_header_caches_stay_bounded_and_correct_when_shapes_keep_changing():
+    for n in range(codec._HEADER_CACHE_SIZE + 50):
+        data = np.full(n % 97 + 1, n % 251, dtype=np.uint8)
+        back = codec.decode(M.UInt8MultiArray, codec.pack(M.UInt8MultiArray(data=data)))
+        np.testing.assert_array_equal(back.data, data)
+    scans = [M.LaserScan(ranges=np.arange(k, dtype=np.float32)) for k in range(1, 30)]
+    for scan in scans:
+        np.testing.assert_array_equal(codec.decode(M.LaserScan, codec.pack(scan)).ranges, scan.ranges)
+    assert len(codec._HEADERS_IN) <= codec._HEADER_CACHE_SIZE
+    assert len(codec._HEADERS_OUT) <= codec._HEADER_CACHE_SIZE
+
+
+def test_a_forged_array_header_is_a_decode_error():
+    import msgpack
+
+    forged = msgpack.packb([[], msgpack.ExtType(1, msgpack.packb(("|u1", [10**12], 0)))])
+    frame = len(forged).to_bytes(4, "little") + forged
+    with pytest.raises(codec.DecodeError, match="past the end"):
+        codec.decode(M.UInt8MultiArray, frame)
