@@ -132,3 +132,21 @@ def test_component_argument_errors():
         BaseComponent(component_name="c", run_type="Sometimes")
     c = BaseComponent(component_name="c", trigger=0.5)
     assert c.run_type.value == "Timed" and c.config.loop_rate == 2.0
+
+
+def test_launcher_config_file_configures_every_component_it_is_given(tmp_path):
+    from emos import Launcher
+
+    path = tmp_path / "robot.toml"
+    path.write_text('["/**"]\nloop_rate = 7.0\n\n[awesome]\nextra_float = 3.5\n')
+    launcher = Launcher(config_file=str(path), multi_processing=True)
+    a, b = Awesome(component_name="awesome"), Awesome(component_name="other")
+    launcher.add_pkg(components=[a, b])
+    assert (a.config.loop_rate, a.config.extra_float) == (7.0, 3.5)
+    assert (b.config.loop_rate, b.config.extra_float) == (7.0, 10.0)
+    with pytest.raises(ValueError, match="already added: awesome"):
+        launcher.add_pkg(components=[Awesome(component_name="awesome")])
+    with pytest.raises(TypeError, match="BaseComponent instances"):
+        launcher.add_pkg(components=["not a component"])
+    with pytest.raises(ValueError, match="stop_timeout must be a positive number"):
+        Launcher(stop_timeout=-1)
