@@ -13,10 +13,13 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
+import numpy as np
+
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
+from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
 from emos.transport.waker import WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -189,13 +192,40 @@ class Publisher:
 class _Source:
     """One publisher's ring as seen by one subscriber."""
 
-    __slots__ = ("ring", "cursor", "publisher_id", "base")
+    __slots__ = ("ring", "cursor", "publisher_id", "base", "loans")
 
-    def __init__(self, ring: R.Ring, cursor: int, publisher_id: str, base: str):
+    def __init__(self, ring: R.Ring, cursor: int, publisher_id: str, base: str, loans: int):
         self.ring = ring
         self.cursor = cursor
         self.publisher_id = publisher_id
         self.base = base
+        self.loans = LoanBook(ring, loans) if loans > 0 else None
+
+    def switch_to(self, ring: R.Ring, base: str, loans: int) -> None:
+        """Follow the publisher to the next generation of its ring."""
+        self.close()
+        self.ring, self.base = ring, base
+        self.loans = LoanBook(ring, loans) if loans > 0 else None
+
+    def read(self, n: int) -> tuple[int, "np.ndarray | memoryview | None", int]:
+        """Message ``n``: a loaned view when it is big and an entry is free, else a copy.
+
+        Either way the bytes are read-only, so code that works on small (copied) messages
+        behaves the same on big (loaned) ones.
+        """
+        ring, book = self.ring, self.loans
+        if book is not None and book.free and ring.length_of(n) >= LOAN_MIN_BYTES:
+            got = book.loan(n)
+            if got is not None:
+                return got
+        status, buf, stamp = ring.read(n)
+        return status, (None if buf is None else memoryview(buf).toreadonly()), stamp
+
+    def close(self) -> None:
+        if self.loans is not None:
+            self.loans.close()
+            self.loans = None
+        self.ring.close()
 
 
 class Subscriber:
@@ -203,10 +233,16 @@ class Subscriber:
 
     ``transient_local`` delivers up to ``queue_size`` messages published before it joined
     (ROS's TRANSIENT_LOCAL durability); otherwise only later ones.
+
+    Payloads of ``LOAN_MIN_BYTES`` or more arrive zero-copy: read-only views into the
+    publisher's ring, each pinning its slot until the last array viewing it is garbage
+    collected. ``loans`` (per publisher) bounds how many such messages this subscriber holds at
+    once; beyond that, and with ``loans=0``, messages are copied.
     """
 
-    def __init__(self, ctx: RunContext, topic: str, msg_cls: type, waker: Waker | None = None, queue_size: int = 10, transient_local: bool = False):
+    def __init__(self, ctx: RunContext, topic: str, msg_cls: type, waker: Waker | None = None, queue_size: int = 10, transient_local: bool = False, loans: int = LOANS_PER_SUBSCRIBER):
         self.ctx = ctx
+        self.loans = max(int(loans), 0)
         self.topic = topic
         self.msg_cls = msg_cls
         self.queue_size = max(int(queue_size), 1)
@@ -256,13 +292,13 @@ class Subscriber:
                 continue
             self._check_type(ring, pub)
             self._register(ring)
-            self.sources[pub] = _Source(ring, self._start_cursor(ring), pub, name)
+            self.sources[pub] = _Source(ring, self._start_cursor(ring), pub, name, self.loans)
         # Forget publishers whose ring disappeared (removed at the end of a run).
         for pub in [p for p in self.sources if p not in latest]:
             src = self.sources[pub]
             if src.ring.moved_to:
                 continue
-            src.ring.close()
+            src.close()
             del self.sources[pub]
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
@@ -293,18 +329,21 @@ class Subscriber:
             new = R.Ring.attach(name)
             if new is None:
                 return
-            src.ring.close()
+            src.switch_to(new, name, self.loans)
             self._register(new)
             if src.cursor < new.first:
                 self.dropped += new.first - src.cursor
                 src.cursor = new.first
-            src.ring, src.base = new, name
 
     # -- reading -----------------------------------------------------------------------------------
-    def take_raw(self) -> list[tuple[int, bytearray, str]]:
-        """Every new message as ``(stamp_ns, payload, publisher_id)``, oldest first."""
+    def take_raw(self) -> list[tuple[int, Any, str]]:
+        """Every new message as ``(stamp_ns, payload, publisher_id)``, oldest first.
+
+        ``payload`` is a read-only buffer (a loaned ndarray or a memoryview of a copy) for
+        :func:`emos.msgs.codec.decode`.
+        """
         self.rescan()
-        out: list[tuple[int, bytearray, str]] = []
+        out: list[tuple[int, Any, str]] = []
         for src in self.sources.values():
             self._drain(src, out)
         if len(self.sources) > 1:
@@ -323,7 +362,7 @@ class Subscriber:
                 self.dropped += head - ring.slot_count - src.cursor
                 src.cursor = head - ring.slot_count
             while src.cursor < head:
-                status, buf, stamp = ring.read(src.cursor)
+                status, buf, stamp = src.read(src.cursor)
                 if status == R.OK and buf is not None:
                     out.append((stamp, buf, src.publisher_id))
                     src.cursor += 1
@@ -343,10 +382,10 @@ class Subscriber:
     def take_with_info(self) -> list[tuple[Any, int, str]]:
         return [(codec.decode(self.msg_cls, buf), stamp, pub) for stamp, buf, pub in self.take_raw()]
 
-    def latest_raw(self) -> tuple[int, bytearray, str] | None:
+    def latest_raw(self) -> tuple[int, Any, str] | None:
         """The newest message across publishers, skipping any backlog."""
         self.rescan()
-        best: tuple[int, bytearray, str] | None = None
+        best: tuple[int, Any, str] | None = None
         for src in self.sources.values():
             self._follow(src)
             ring = src.ring
@@ -355,7 +394,7 @@ class Subscriber:
             for n in (ring.head - 1, ring.head - 2):
                 if n < max(src.cursor, ring.first):
                     break
-                status, buf, stamp = ring.read(n)
+                status, buf, stamp = src.read(n)
                 if status == R.OK and buf is not None:
                     src.cursor = n + 1
                     if best is None or stamp > best[0]:
@@ -380,7 +419,7 @@ class Subscriber:
                     src.ring.remove_waiter(self.waker.token)
                 except (OSError, ValueError, TypeError):
                     pass
-            src.ring.close()
+            src.close()
         self.sources.clear()
         if self._interest is not None:
             try:

@@ -1,19 +1,31 @@
 """A single-writer, many-reader ring of variable-size messages in one shared-memory segment.
 
-Layout: a 4 KiB header, then ``slot_count`` slots of ``slot_stride`` bytes. Each slot starts
-with ``seq | length | stamp_ns | reserved`` (u64 each) followed by the payload.
+Layout: a header (at least 4 KiB: fields, wake-up tokens, loan pins, the message map), then
+``slot_count`` *physical* slots of ``slot_stride`` bytes. Each slot starts with
+``seq | length | stamp_ns | reserved`` (u64 each) followed by the payload.
 
-Seqlock protocol, for message number ``n`` (0, 1, 2, ...) in slot ``n % slot_count``:
+The ring keeps the last ``depth`` messages. The *message map* says where each lives: entry
+``n % depth`` holds ``(n << 16) | slot`` for message ``n``. There are ``depth + LOAN_ENTRIES``
+physical slots, so a reader may *loan* a slot (read it in place, zero-copy) and the writer
+simply writes elsewhere until the loan ends.
 
-* the writer stores ``seq = 2n+1`` (being written), copies the payload, stores
-  ``seq = 2n+2`` (complete), then advances ``head`` to ``n+1``;
-* a reader reads ``seq``, copies the payload out, reads ``seq`` again; it accepts the copy
-  only if both reads equal ``2n+2``. Anything else means "not there yet" or "overwritten".
+Seqlock protocol, for message number ``n`` (0, 1, 2, ...):
 
-A writer killed mid-copy leaves ``seq = 2n+1`` and ``head = n``: readers see no new message,
-never a torn one, and a restarted writer rewrites message ``n`` in the same slot. x86-64 keeps
-stores in program order and loads in program order, which is all the protocol needs; the
-interpreter's own memory fences cover weaker architectures in practice.
+* the writer picks a free slot ``p`` (not mapped to one of the other ``depth - 1`` kept
+  messages, not pinned by a loan), stores ``seq = 2n+1`` (being written), copies the payload,
+  stores ``seq = 2n+2`` (complete), stores the map entry, then advances ``head`` to ``n+1``;
+* a copying reader looks ``n`` up in the map, reads ``seq``, copies the payload out, reads
+  ``seq`` again; it accepts the copy only if both reads equal ``2n+2``;
+* a loaning reader stores the slot in one of its pin entries, fences, and checks ``seq == 2n+2``.
+  The writer stores ``seq = 2n+1``, fences, and checks the pins before touching the payload; if
+  the slot is pinned it restores ``seq`` and picks another slot. The two fences make the classic
+  store-then-load handshake (Dekker's): at least one side sees the other, so a loaned slot is
+  never overwritten while the loan lasts.
+
+A writer killed mid-copy leaves ``seq = 2n+1``, the map and ``head`` untouched: readers see no
+new message, never a torn one, and a restarted writer rewrites message ``n``. Apart from the
+two fences the protocol needs only that stores and loads each stay in program order, which
+x86-64 guarantees; the interpreter's own memory fences cover weaker architectures in practice.
 
 A message bigger than a slot *grows* the ring: the writer creates generation ``g+1`` with
 larger slots and records it in the old header's ``moved_to``; readers follow.
@@ -23,6 +35,7 @@ from __future__ import annotations
 import fcntl
 import mmap
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -30,20 +43,43 @@ import numpy as np
 
 from emos.transport.context import SHM_DIR
 
-MAGIC = 0x31474E52534F4D45  # b"EMOSRNG1" little-endian
-HEADER_SIZE = 4096
+MAGIC = 0x32474E52534F4D45  # b"EMOSRNG2" little-endian
+MIN_HEADER = 4096
 SLOT_HEADER = 32
 MAX_WAITERS = 64
+LOAN_ENTRIES = 8  # pin entries per ring: loans outstanding at once, across all its readers
+MAX_DEPTH = 65535  # slots are numbered in 16 bits in the message map
 # Header fields as u64 indices.
 _MAGIC, _GEOM, _STRIDE, _CAPACITY, _HEAD, _MOVED_PID, _WAITERS_VER, _FIRST, _CREATED = range(9)
 _FINGERPRINT_OFF = 80  # 16 ascii bytes
 _TYPE_OFF = 96  # 128 utf-8 bytes
+_SLOTS, _DATA_OFF = 28, 29  # physical slot count; byte offset of slot 0
 _WAITERS_IDX = 256 // 8  # MAX_WAITERS u64 tokens
+_PIN_OWNER_IDX = 768 // 8  # LOAN_ENTRIES u64: pid of the reader that claimed the entry, or 0
+_PIN_IDX = _PIN_OWNER_IDX + LOAN_ENTRIES  # LOAN_ENTRIES u64: loaned slot + 1, or 0
+_MAP_IDX = 1024 // 8  # depth u64 map entries
+_EMPTY = (1 << 48) - 1  # the message number of a map entry that holds nothing yet
 
 # Status of reading one message number.
 NOT_READY = 0  # not written yet, or being written
 LAPPED = 1  # overwritten by a newer message (the reader fell more than a ring behind)
 OK = 2
+
+_FENCE_LOCK = threading.Lock()
+
+
+def full_fence() -> None:
+    """A full memory barrier (store -> load ordering), which Python has no statement for.
+
+    An uncontended lock acquire and release are atomic read-modify-writes on the lock word:
+    ``lock cmpxchg`` / ``lock xadd`` on x86-64, which are full barriers; acquire and release
+    operations on arm64, where a release followed by an acquire orders everything before it
+    against everything after it. Two rounds make the second case hold. About 0.2 us.
+    """
+    _FENCE_LOCK.acquire()
+    _FENCE_LOCK.release()
+    _FENCE_LOCK.acquire()
+    _FENCE_LOCK.release()
 
 
 class RingError(RuntimeError):
@@ -73,21 +109,32 @@ class Ring:
         self.view = memoryview(mm)
         self.q = self.view.cast("Q")  # u64 fields on the hot path: ~3x cheaper than numpy scalars
         geom = int(self.u64[_GEOM])
-        self.slot_count = geom & 0xFFFFFFFF
+        self.depth = geom & 0xFFFFFFFF
+        self.generation = geom >> 32
         self.stride = int(self.u64[_STRIDE])
         self.capacity = int(self.u64[_CAPACITY])
-        self.generation = geom >> 32
+        self.physical_slots = int(self.u64[_SLOTS])
+        self.data_offset = int(self.u64[_DATA_OFF])
         self.fingerprint = bytes(mm[_FINGERPRINT_OFF : _FINGERPRINT_OFF + 16]).decode()
         self.type_name = bytes(mm[_TYPE_OFF : _TYPE_OFF + 128]).rstrip(b"\0").decode()
+        self._pending_slot = -1  # writer: the slot claimed by begin(), filled in by commit()
+
+    @property
+    def slot_count(self) -> int:
+        """How many messages the ring keeps (its depth)."""
+        return self.depth
 
     # -- lifecycle -------------------------------------------------------------------------------
     @classmethod
     def create(cls, name: str, slot_count: int, capacity: int, fingerprint: str, type_name: str, generation: int = 0, first: int = 0) -> "Ring":
-        if slot_count < 1:
-            raise ValueError(f"ring {name}: slot_count must be >= 1, got {slot_count}")
+        """A new segment keeping ``slot_count`` messages of up to ``capacity`` bytes."""
+        if not 1 <= slot_count <= MAX_DEPTH:
+            raise ValueError(f"ring {name}: depth (slot_count) must be in 1..{MAX_DEPTH}, got {slot_count}")
         capacity = _align(max(capacity, 64), 64)
         stride = _align(SLOT_HEADER + capacity, 64)
-        size = HEADER_SIZE + stride * slot_count
+        physical = slot_count + LOAN_ENTRIES
+        data_offset = _align(_MAP_IDX * 8 + 8 * slot_count, MIN_HEADER)
+        size = data_offset + stride * physical
         path = SHM_DIR / name
         fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
         try:
@@ -101,14 +148,16 @@ class Ring:
         u64[_GEOM] = (generation << 32) | slot_count
         u64[_STRIDE] = stride
         u64[_CAPACITY] = capacity
+        u64[_SLOTS] = physical
+        u64[_DATA_OFF] = data_offset
         u64[_HEAD] = first
         u64[_FIRST] = first
         u64[_CREATED] = time.time_ns()
         mm[_FINGERPRINT_OFF : _FINGERPRINT_OFF + 16] = fingerprint.encode()[:16].ljust(16, b"\0")
         mm[_TYPE_OFF : _TYPE_OFF + 128] = type_name.encode()[:128].ljust(128, b"\0")
-        # Slots of messages before ``first`` must read as "already overwritten", not "not yet".
-        for i in range(slot_count):
-            u64[(HEADER_SIZE + i * stride) // 8] = 0
+        # Map entry i starts out empty and pointing at slot i: the writer fills slots 0..depth-1
+        # in turn, as a plain ring would; the LOAN_ENTRIES spare slots are used only around loans.
+        u64[_MAP_IDX : _MAP_IDX + slot_count] = (np.uint64(_EMPTY) << np.uint64(16)) | np.arange(slot_count, dtype=np.uint64)
         u64[_MAGIC] = MAGIC  # last: readers ignore a segment until it is fully initialised
         del u64
         return cls(name, fd, mm)
@@ -122,7 +171,7 @@ class Ring:
             return None
         try:
             size = os.fstat(fd).st_size
-            if size < HEADER_SIZE:
+            if size < MIN_HEADER:
                 os.close(fd)
                 return None
             mm = mmap.mmap(fd, size)
@@ -144,8 +193,8 @@ class Ring:
         try:
             self.mm.close()
         except BufferError:
-            # A decoded message still references this mapping (zero-copy view); the mapping is
-            # freed when that message is garbage collected.
+            # A message still references this mapping (a loan, or a view kept by its owner);
+            # the mapping is freed when that message is garbage collected.
             pass
         self.mm = None  # type: ignore[assignment]
         os.close(self.fd)
@@ -179,22 +228,62 @@ class Ring:
     def set_writer_pid(self, pid: int) -> None:
         self.u64[_MOVED_PID] = (pid << 32) | self.moved_to
 
+    def slot_index(self, slot: int) -> int:
+        """u64 index of a physical slot's header."""
+        return (self.data_offset + slot * self.stride) >> 3
+
+    def slot_of(self, n: int) -> int | None:
+        """The physical slot the map gives message ``n``, or ``None`` if it holds another one."""
+        entry = self.q[_MAP_IDX + n % self.depth]
+        return entry & 0xFFFF if entry >> 16 == n else None
+
     # -- writing ---------------------------------------------------------------------------------
     def begin(self, nbytes: int) -> tuple[int, memoryview]:
-        """Claim the next message number; returns it and the payload buffer to fill."""
+        """Claim the next message number and a free slot; returns the number and the payload buffer to fill."""
         if nbytes > self.capacity:
             raise MessageTooLarge(f"{nbytes} B > slot capacity {self.capacity} B")
-        n = self.q[_HEAD]
-        off = HEADER_SIZE + (n % self.slot_count) * self.stride
-        self.q[off >> 3] = 2 * n + 1  # being written
-        return n, self.view[off + SLOT_HEADER : off + SLOT_HEADER + nbytes]
+        q = self.q
+        n = q[_HEAD]
+        # Reuse the slot of the message this one retires (hot in cache), unless a reader holds it.
+        slot = q[_MAP_IDX + n % self.depth] & 0xFFFF
+        if not self._claim(slot, n):
+            slot = self._claim_any(n)
+        self._pending_slot = slot
+        off = self.data_offset + slot * self.stride + SLOT_HEADER
+        return n, self.view[off : off + nbytes]
+
+    def _claim(self, slot: int, n: int) -> bool:
+        """Mark ``slot`` as being written with message ``n`` unless a loan pins it."""
+        q = self.q
+        idx = self.slot_index(slot)
+        before = q[idx]
+        q[idx] = 2 * n + 1
+        full_fence()  # our store above must be visible before we look at the pins (see module doc)
+        if slot + 1 in q[_PIN_IDX : _PIN_IDX + LOAN_ENTRIES].tolist():
+            q[idx] = before  # untouched: the loaning reader keeps a valid message
+            return False
+        return True
+
+    def _claim_any(self, n: int) -> int:
+        q = self.q
+        k = n % self.depth
+        mapped = {q[_MAP_IDX + i] & 0xFFFF for i in range(self.depth) if i != k}
+        pinned = {p - 1 for p in q[_PIN_IDX : _PIN_IDX + LOAN_ENTRIES].tolist() if p}
+        # depth - 1 mapped + at most LOAN_ENTRIES pinned < depth + LOAN_ENTRIES slots: one is free.
+        for slot in range(self.physical_slots):
+            if slot not in mapped and slot not in pinned and self._claim(slot, n):
+                return slot
+        # Only a pin that appeared between our look and our claim gets here; the next look sees it.
+        return self._claim_any(n)
 
     def commit(self, n: int, nbytes: int, stamp_ns: int) -> None:
         q = self.q
-        idx = (HEADER_SIZE + (n % self.slot_count) * self.stride) >> 3
+        slot = self._pending_slot
+        idx = self.slot_index(slot)
         q[idx + 1] = nbytes
         q[idx + 2] = stamp_ns
         q[idx] = 2 * n + 2  # complete
+        q[_MAP_IDX + n % self.depth] = (n << 16) | slot
         q[_HEAD] = n + 1
 
     def write(self, payload: bytes | memoryview, stamp_ns: int | None = None) -> int:
@@ -205,20 +294,31 @@ class Ring:
         return n
 
     # -- reading ---------------------------------------------------------------------------------
+    def _locate(self, n: int) -> tuple[int, int]:
+        """``(status, slot)`` of message ``n`` by the map; status OK means "look at the slot"."""
+        entry = self.q[_MAP_IDX + n % self.depth]
+        held = entry >> 16
+        if held == n:
+            return OK, entry & 0xFFFF
+        if n < self.q[_FIRST]:
+            return LAPPED, -1
+        return (NOT_READY if held == _EMPTY or held < n else LAPPED), -1
+
     def read(self, n: int) -> tuple[int, bytearray | None, int]:
         """Copy out message ``n``: ``(OK, payload, stamp_ns)``, ``(NOT_READY, None, 0)`` or ``(LAPPED, None, 0)``."""
-        off = HEADER_SIZE + (n % self.slot_count) * self.stride
-        idx = off >> 3
+        status, slot = self._locate(n)
+        if status != OK:
+            return status, None, 0
         q = self.q
+        idx = self.slot_index(slot)
         want = 2 * n + 2
-        s1 = q[idx]
-        if s1 != want:
-            return (NOT_READY if s1 < want else LAPPED), None, 0
+        if q[idx] != want:
+            return LAPPED, None, 0  # the slot was reused after we looked at the map
         length = q[idx + 1]
         stamp = q[idx + 2]
         if length > self.capacity:
             return LAPPED, None, 0
-        start = off + SLOT_HEADER
+        start = (idx << 3) + SLOT_HEADER
         # bytearray(slice) is one malloc + memcpy; bytearray(n) then a slice assignment costs
         # a page fault per 4 KiB on large frames (calloc hands out fresh zero pages).
         buf = bytearray(self.view[start : start + length])
@@ -226,11 +326,42 @@ class Ring:
             return LAPPED, None, 0
         return OK, buf, stamp
 
+    def length_of(self, n: int) -> int:
+        """Payload size of message ``n`` if the map still has it, else 0 (a hint: not validated)."""
+        status, slot = self._locate(n)
+        return self.q[self.slot_index(slot) + 1] if status == OK else 0
+
+    def loan(self, n: int, entry: int) -> tuple[int, np.ndarray | None, int]:
+        """Pin message ``n`` through pin ``entry`` and return a read-only view of its payload.
+
+        ``(OK, view, stamp_ns)``: the writer will not touch the slot until :meth:`release`.
+        Otherwise ``(NOT_READY | LAPPED, None, 0)`` and the entry is free again.
+        """
+        status, slot = self._locate(n)
+        if status != OK:
+            return status, None, 0
+        q = self.q
+        q[_PIN_IDX + entry] = slot + 1
+        full_fence()  # the pin must be visible before we check seq (see module doc)
+        idx = self.slot_index(slot)
+        length = q[idx + 1]
+        if q[idx] != 2 * n + 2 or length > self.capacity:
+            q[_PIN_IDX + entry] = 0
+            return LAPPED, None, 0
+        view = np.frombuffer(self.mm, dtype=np.uint8, count=length, offset=(idx << 3) + SLOT_HEADER)
+        view.flags.writeable = False  # other readers share these bytes
+        return OK, view, q[idx + 2]
+
+    def pins(self) -> "PinTable":
+        """The pin entries, through a mapping of their own that outlives :meth:`close`."""
+        return PinTable(self.mm)
+
     def stamp_of(self, n: int) -> int | None:
-        idx = (HEADER_SIZE + (n % self.slot_count) * self.stride) // 8
-        if int(self.u64[idx]) != 2 * n + 2:
+        status, slot = self._locate(n)
+        if status != OK:
             return None
-        return int(self.u64[idx + 2])
+        idx = self.slot_index(slot)
+        return self.q[idx + 2] if self.q[idx] == 2 * n + 2 else None
 
     # -- wake-up registrations ---------------------------------------------------------------------
     def _locked(self) -> "_Flock":
@@ -265,6 +396,65 @@ class Ring:
             if hit.any():
                 table[hit] = 0
                 self.u64[_WAITERS_VER] += 1
+
+
+class PinTable:
+    """A reader's handle on a ring's pin entries: claim entries, release pins.
+
+    Entries are claimed under the ring's lock and stamped with the reader's pid, so the entries
+    of a reader that died can be taken over; a dead reader's pins keep their slots out of the
+    writer's way until then, which costs spare slots, never correctness.
+    """
+
+    def __init__(self, mm: mmap.mmap):
+        self._q = memoryview(mm).cast("Q")
+
+    def claim(self, fd: int, wanted: int) -> list[int]:
+        """Up to ``wanted`` free pin entries for this process (fewer, or none, if taken)."""
+        got: list[int] = []
+        me = os.getpid()
+        with _Flock(fd):
+            for entry in range(LOAN_ENTRIES):
+                if len(got) == wanted:
+                    break
+                owner = self._q[_PIN_OWNER_IDX + entry]
+                if owner and _alive(owner):
+                    continue
+                self._q[_PIN_IDX + entry] = 0  # a dead reader's pin, if any, ends here
+                self._q[_PIN_OWNER_IDX + entry] = me
+                got.append(entry)
+        return got
+
+    def unclaim(self, fd: int, entries: list[int]) -> None:
+        with _Flock(fd):
+            for entry in entries:
+                if self._q[_PIN_OWNER_IDX + entry] == os.getpid():
+                    self._q[_PIN_OWNER_IDX + entry] = 0
+
+    def release(self, entry: int) -> None:
+        """End the loan held through ``entry``. Safe from any thread, after the ring closed."""
+        self._q[_PIN_IDX + entry] = 0
+
+    def abandon(self, entry: int) -> None:
+        """Give ``entry`` back without the lock (its reader closed; a claimer sees 0 or our pid)."""
+        self._q[_PIN_OWNER_IDX + entry] = 0
+
+    def held(self, entry: int) -> int:
+        """The slot pinned through ``entry`` plus one, or 0."""
+        return self._q[_PIN_IDX + entry]
+
+    def close(self) -> None:
+        self._q.release()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 class _Flock:

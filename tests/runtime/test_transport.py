@@ -222,7 +222,7 @@ def test_a_complete_but_unannounced_message_stays_invisible_until_rewritten(ctx)
     n, buf = ring.begin(len(frame))
     buf[:] = frame
     buf.release()
-    idx = (R.HEADER_SIZE + (n % ring.slot_count) * ring.stride) >> 3
+    idx = ring.slot_index(ring._pending_slot)
     ring.q[idx + 1] = len(frame)
     ring.q[idx] = 2 * n + 2  # complete, but head still says n
     assert [m.data for m in sub.take()] == [1]
