@@ -23,11 +23,16 @@ ROW_KEYS = {"transport", "payload_bytes", "p50_us", "p99_us", "msgs_per_s", "dro
 
 
 def _bench(*extra: str, timeout: float = 120.0) -> tuple[subprocess.CompletedProcess, list[str]]:
-    """Run the bench; return its result and whatever it left behind (segments, run directory,
-    helper processes). The helpers are found by an environment token they inherit."""
+    return _run_python(["-m", "emos", "bench", "ipc", *extra], timeout)
+
+
+def _run_python(argv: list[str], timeout: float) -> tuple[subprocess.CompletedProcess, list[str]]:
+    """Run Python in a subprocess (benchmarks fork: never from the test process, which may run
+    threads); return its result and whatever it left behind (segments, run directory, helper
+    processes). The helpers are found by an environment token they inherit."""
     token = uuid.uuid4().hex
     proc = subprocess.Popen(
-        [sys.executable, "-m", "emos", "bench", "ipc", *extra],
+        [sys.executable, *argv],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
         env={**os.environ, "EMOS_BENCH_TEST_TOKEN": token},
     )
@@ -100,11 +105,19 @@ def test_bench_ipc_bad_arguments_exit_2_with_a_clear_message(args: list[str], ex
     assert left == []
 
 
-@pytest.mark.parametrize("transport", ["mp_pipe", "mp_queue"])
+@pytest.mark.parametrize("transport", sorted(TRANSPORTS))
 def test_pingpong_returns_exactly_the_requested_samples_after_warmup(transport: str) -> None:
-    samples = ipc_pingpong.latency_us(transport, 1024, 7)
+    code = (
+        "import json\n"
+        "from emos.supervisor.bench import ipc_pingpong\n"
+        f"print(json.dumps(ipc_pingpong.latency_us({transport!r}, 1024, 7)))\n"
+    )
+    result, left = _run_python(["-c", code], timeout=60.0)
+    assert result.returncode == 0, result.stderr
+    samples = json.loads(result.stdout)
     assert len(samples) == 7
     assert all(s > 0 for s in samples)
+    assert left == []
 
 
 def test_pingpong_echo_check_rejects_mangled_replies() -> None:
