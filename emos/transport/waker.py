@@ -3,6 +3,8 @@
 Each subscribing node owns one FIFO in the run directory, named by a random token. Publishers
 write one byte to the FIFO of every registered token after each message; the node's event loop
 watches the FIFO's file descriptor (``loop.add_reader``), drains it, and polls its rings.
+A publisher that appears or goes away writes ``ANNOUNCE`` instead of ``MESSAGE``: subscribers
+then look for new rings, which otherwise they need not do on every wake-up.
 A FIFO is a plain file descriptor (unlike a futex), works between unrelated processes (unlike an
 eventfd, which must be inherited), and lives in the run's mode-0700 directory.
 """
@@ -15,6 +17,9 @@ from pathlib import Path
 
 from emos.transport.context import RunContext
 
+MESSAGE = b"\x01"
+ANNOUNCE = b"\x02"
+
 
 class Waker:
     """The receiving end: a FIFO this node reads."""
@@ -25,11 +30,13 @@ class Waker:
         os.mkfifo(self.path, 0o600)
         # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
         self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
+        self.announcements = 0  # how many drains saw a publisher appear or go
 
     def fileno(self) -> int:
         return self.fd
 
     def drain(self) -> int:
+        """Read every pending wake-up; returns how many there were."""
         total = 0
         while True:
             try:
@@ -37,6 +44,8 @@ class Waker:
             except BlockingIOError:
                 return total
             total += len(chunk)
+            if ANNOUNCE in chunk:
+                self.announcements += 1
             if len(chunk) < 65536:
                 return total
 
@@ -79,12 +88,12 @@ class WakeSender:
                     raise
         return dead
 
-    def wake(self) -> list[int]:
-        """One byte to every FIFO; returns tokens whose reader is gone."""
+    def wake(self, what: bytes = MESSAGE) -> list[int]:
+        """One byte (``MESSAGE`` or ``ANNOUNCE``) to every FIFO; returns tokens whose reader is gone."""
         dead = []
         for token, fd in self.fds.items():
             try:
-                os.write(fd, b"\x01")
+                os.write(fd, what)
             except BlockingIOError:
                 pass  # FIFO full: the reader has wake-ups pending already
             except BrokenPipeError:
