@@ -156,7 +156,8 @@ class ThreadWorker(_Incarnation):
         loop = asyncio.get_running_loop()
         self.pid = os.getpid()
         component = self.system.fresh_component(self.index)
-        self.node = Node(component, ctx=self.system.ctx, supervisor_socket=str(self.system.control_path))
+        # No spinning for wake-ups in threads: a spinning thread holds the interpreter lock.
+        self.node = Node(component, ctx=self.system.ctx, supervisor_socket=str(self.system.control_path), wake_spin_us=0)
         self._thread_done: asyncio.Future[Exit] = loop.create_future()
 
         def main() -> None:

@@ -27,9 +27,10 @@ from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext, current, encode_name
 from emos.transport.pubsub import Publisher, Subscriber
-from emos.transport.waker import Waker
+from emos.transport.waker import DEFAULT_SPIN_US, Waker
 
 ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
+ENV_WAKE_SPIN_US = "EMOS_WAKE_SPIN_US"
 
 
 def control_socket(ctx: RunContext, component_name: str) -> Path:
@@ -47,9 +48,27 @@ class _Input:
         self.decoded: Any = None
 
 
+def wake_spin_setting() -> float:
+    """Microseconds a node spins for more messages after a wake-up: ``$EMOS_WAKE_SPIN_US`` or the default."""
+    raw = os.environ.get(ENV_WAKE_SPIN_US)
+    if raw is None:
+        return DEFAULT_SPIN_US
+    try:
+        value = float(raw)
+    except ValueError:
+        raise ValueError(f"${ENV_WAKE_SPIN_US} must be a number of microseconds, got {raw!r}") from None
+    if value < 0:
+        raise ValueError(f"${ENV_WAKE_SPIN_US} must be >= 0 microseconds, got {raw!r}")
+    return value
+
+
 class Node:
-    def __init__(self, component: BaseComponent, ctx: RunContext | None = None, supervisor_socket: str | None = None):
+    def __init__(self, component: BaseComponent, ctx: RunContext | None = None, supervisor_socket: str | None = None, wake_spin_us: float | None = None):
+        """``wake_spin_us``: how long the node spins for more messages after a wake-up before it
+        sleeps (see :mod:`emos.transport.waker`); default ``$EMOS_WAKE_SPIN_US`` or 100 us.
+        Threaded mode passes 0: a spinning thread would hold the interpreter lock."""
         self.component = component
+        self.wake_spin_us = wake_spin_setting() if wake_spin_us is None else wake_spin_us
         self.name = component.component_name
         self.ctx = ctx or current()
         self.supervisor_socket = supervisor_socket if supervisor_socket is not None else os.environ.get(ENV_SUPERVISOR_SOCKET)
@@ -93,7 +112,7 @@ class Node:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self._on_signal, sig)
         self.component._node = self
-        self._waker = Waker(self.ctx)
+        self._waker = Waker(self.ctx, spin_us=self.wake_spin_us)
         loop.add_reader(self._waker.fd, self._on_wake)
         self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
         self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name)
@@ -275,7 +294,17 @@ class Node:
 
     def _on_wake(self) -> None:
         if self._waker is not None:
-            self._waker.drain()
+            self._waker.serve(self._take_inputs, self._inputs_have_news)
+        else:
+            self._take_inputs()
+
+    def _inputs_have_news(self) -> bool:
+        for inp in self._inputs.values():
+            if inp.sub.has_news():
+                return True
+        return False
+
+    def _take_inputs(self) -> None:
         now = time.time_ns()
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()

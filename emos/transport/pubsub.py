@@ -390,6 +390,14 @@ class Subscriber:
                 return
             self._follow(src)
 
+    def has_news(self) -> bool:
+        """Whether a publisher we know has written past our cursor (cheap: for spin loops)."""
+        for src in self.sources.values():
+            q = src.ring.q
+            if q[R._HEAD] > src.cursor or q[R._MOVED_PID] & 0xFFFFFFFF:
+                return True
+        return False
+
     def take(self) -> list[Any]:
         """Every new message, decoded, oldest first (at most ``queue_size``)."""
         return [codec.decode(self.msg_cls, buf) for _, buf, _ in self.take_raw()]

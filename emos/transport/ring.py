@@ -35,13 +35,13 @@ from __future__ import annotations
 import fcntl
 import mmap
 import os
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 from emos.transport.context import SHM_DIR
+from emos.transport.fence import full_fence
 
 MAGIC = 0x32474E52534F4D45  # b"EMOSRNG2" little-endian
 MIN_HEADER = 4096
@@ -64,23 +64,6 @@ _EMPTY = (1 << 48) - 1  # the message number of a map entry that holds nothing y
 NOT_READY = 0  # not written yet, or being written
 LAPPED = 1  # overwritten by a newer message (the reader fell more than a ring behind)
 OK = 2
-
-_FENCE_LOCK = threading.Lock()
-
-
-def full_fence() -> None:
-    """A full memory barrier (store -> load ordering), which Python has no statement for.
-
-    An uncontended lock acquire and release are atomic read-modify-writes on the lock word:
-    ``lock cmpxchg`` / ``lock xadd`` on x86-64, which are full barriers; acquire and release
-    operations on arm64, where a release followed by an acquire orders everything before it
-    against everything after it. Two rounds make the second case hold. About 0.2 us.
-    """
-    _FENCE_LOCK.acquire()
-    _FENCE_LOCK.release()
-    _FENCE_LOCK.acquire()
-    _FENCE_LOCK.release()
-
 
 class RingError(RuntimeError):
     pass

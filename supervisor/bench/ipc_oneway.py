@@ -92,7 +92,7 @@ def _emos_receiver(topic: str, count: int, ready: Any, out: Any, mode: str, seco
         waker.close()
 
 
-def _emos_run(size: int, count: int, mode: str, seconds: float) -> Any:
+def _emos_run(size: int, count: int, mode: str, seconds: float, depth: int = 16) -> Any:
     from emos.msgs import UInt8MultiArray
     from emos.transport.context import current
     from emos.transport.pubsub import Publisher
@@ -107,7 +107,7 @@ def _emos_run(size: int, count: int, mode: str, seconds: float) -> Any:
     pub = None
     try:
         wait_ready(ready_r, proc)
-        pub = Publisher(ctx, topic, UInt8MultiArray, publisher_id="bench", depth=16)
+        pub = Publisher(ctx, topic, UInt8MultiArray, publisher_id="bench", depth=depth)
         msg = UInt8MultiArray(data=random_payload(size))
         # Warm up: grow the ring to the payload size and fault its pages in.
         for _ in range(20):
@@ -195,10 +195,10 @@ def _mp_run(kind: str, size: int, count: int, mode: str, seconds: float) -> Any:
 
 
 # ------------------------------------------------------------------ entry points
-def latency_us(transport: str, size: int, count: int) -> list[float]:
-    """One-way latencies in microseconds, paced sender, warm-up dropped."""
+def latency_us(transport: str, size: int, count: int, depth: int = 16) -> list[float]:
+    """One-way latencies in microseconds, paced sender, warm-up dropped; ``depth``: EMOS ring history."""
     if transport == "emos":
-        return _emos_run(size, count, "latency", 0.0)
+        return _emos_run(size, count, "latency", 0.0, depth)
     return _mp_run(transport, size, count, "latency", 0.0)
 
 

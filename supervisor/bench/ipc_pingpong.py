@@ -18,7 +18,6 @@ import numpy as np
 from emos.supervisor.bench.ipc_common import FORK, random_payload, remove_topic, start_child, stop_child, wait_ready
 
 SUBSCRIBER_QUEUE = 64
-PUBLISHER_DEPTH = 16
 # Generous bounds that only a hung or dead peer reaches.
 _READY_TIMEOUT_S = 30.0
 _STOP_TIMEOUT_S = 10.0
@@ -43,12 +42,13 @@ def _check_echo(data: np.ndarray, payload: np.ndarray, first: bool) -> None:
 
 # ------------------------------------------------------------------ EMOS
 @contextmanager
-def _emos_node(ctx: Any, listen: str, speak: str, publisher_id: str) -> Iterator[tuple[Any, Any, Any, Any]]:
+def _emos_node(ctx: Any, listen: str, speak: str, publisher_id: str, depth: int) -> Iterator[tuple[Any, Any, Any, Any]]:
     """What one side of the ping-pong owns, as a component does: its own uvloop event loop, a
     wake-up FIFO, a subscriber on ``listen`` and a named publisher on ``speak``; all closed on
     every path."""
     import uvloop
 
+    from emos.core.node import wake_spin_setting
     from emos.msgs import UInt8MultiArray
     from emos.transport.pubsub import Publisher, Subscriber
     from emos.transport.waker import Waker
@@ -57,9 +57,9 @@ def _emos_node(ctx: Any, listen: str, speak: str, publisher_id: str) -> Iterator
     asyncio.set_event_loop(loop)
     waker = sub = pub = None
     try:
-        waker = Waker(ctx)
+        waker = Waker(ctx, spin_us=wake_spin_setting())  # as a component's node does
         sub = Subscriber(ctx, listen, UInt8MultiArray, waker=waker, queue_size=SUBSCRIBER_QUEUE)
-        pub = Publisher(ctx, speak, UInt8MultiArray, publisher_id=publisher_id, depth=PUBLISHER_DEPTH)
+        pub = Publisher(ctx, speak, UInt8MultiArray, publisher_id=publisher_id, depth=depth)
         yield loop, waker, sub, pub
     finally:
         if waker is not None and waker.fd >= 0:
@@ -71,17 +71,18 @@ def _emos_node(ctx: Any, listen: str, speak: str, publisher_id: str) -> Iterator
         loop.close()
 
 
-def _emos_echo(ping: str, pong: str, ready: Any, timeout: float) -> None:
+def _emos_echo(ping: str, pong: str, ready: Any, timeout: float, depth: int) -> None:
     """Echo process: decode every ping (arrays become views, as in a component) and publish the
     decoded message itself on ``pong``. An empty array is the stop sentinel."""
     from emos.msgs import UInt8MultiArray, codec
     from emos.transport.context import current
 
-    with _emos_node(current(), ping, pong, "bench-echo") as (loop, waker, sub, pub):
+    with _emos_node(current(), ping, pong, "bench-echo", depth) as (loop, waker, sub, pub):
         done = loop.create_future()
 
-        def on_wake() -> None:
-            waker.drain()
+        def handle() -> None:
+            if done.done():
+                return
             try:
                 # ``raw`` goes only to decode: the transport decides what buffer it hands out.
                 for _, raw, _ in sub.take_raw():
@@ -94,13 +95,14 @@ def _emos_echo(ping: str, pong: str, ready: Any, timeout: float) -> None:
                 if not done.done():
                     done.set_exception(exc)
 
-        loop.add_reader(waker.fd, on_wake)
+        # A node's wake-up path: drain, handle, linger for more (waker.serve).
+        loop.add_reader(waker.fd, waker.serve, handle, sub.has_news)
         ready.send("ready")
         ready.close()
         loop.run_until_complete(asyncio.wait_for(done, timeout))
 
 
-def _emos_half_rtts(size: int, count: int) -> list[float]:
+def _emos_half_rtts(size: int, count: int, depth: int) -> list[float]:
     from emos.msgs import UInt8MultiArray, codec
     from emos.transport.context import current
 
@@ -109,13 +111,13 @@ def _emos_half_rtts(size: int, count: int) -> list[float]:
     total = warmup_round_trips(count) + count
     timeout = _round_trip_timeout(size, total)
     ready_r, ready_w = FORK.Pipe(duplex=False)
-    proc = start_child(_emos_echo, (ping, pong, ready_w, timeout + _READY_TIMEOUT_S), "emos:bench-echo")
+    proc = start_child(_emos_echo, (ping, pong, ready_w, timeout + _READY_TIMEOUT_S, depth), "emos:bench-echo")
     ready_w.close()
     try:
         wait_ready(ready_r, proc, _READY_TIMEOUT_S)
         payload = random_payload(size)
         msg = UInt8MultiArray(data=payload)
-        with _emos_node(ctx, pong, ping, "bench-initiator") as (loop, waker, sub, pub):
+        with _emos_node(ctx, pong, ping, "bench-initiator", depth) as (loop, waker, sub, pub):
             rtts_ns: list[int] = []
             done = loop.create_future()
             sent_at = 0  # 0: no ping in flight
@@ -125,9 +127,10 @@ def _emos_half_rtts(size: int, count: int) -> list[float]:
                 sent_at = time.perf_counter_ns()
                 pub.publish(msg)
 
-            def on_wake() -> None:
+            def handle() -> None:
                 nonlocal sent_at
-                waker.drain()
+                if done.done():
+                    return
                 try:
                     for _, raw, _ in sub.take_raw():
                         echo = codec.decode(UInt8MultiArray, raw)
@@ -145,7 +148,7 @@ def _emos_half_rtts(size: int, count: int) -> list[float]:
                     if not done.done():
                         done.set_exception(exc)
 
-            loop.add_reader(waker.fd, on_wake)
+            loop.add_reader(waker.fd, waker.serve, handle, sub.has_news)
             try:
                 loop.call_soon(send)
                 loop.run_until_complete(asyncio.wait_for(done, timeout))
@@ -239,10 +242,10 @@ def _queue_half_rtts(size: int, count: int) -> list[float]:
     return [ns / 2e3 for ns in rtts_ns[total - count :]]
 
 
-def latency_us(transport: str, size: int, count: int) -> list[float]:
+def latency_us(transport: str, size: int, count: int, depth: int = 2) -> list[float]:
     """``count`` half round trips in microseconds, after :func:`warmup_round_trips` discarded."""
     if transport == "emos":
-        return _emos_half_rtts(size, count)
+        return _emos_half_rtts(size, count, depth)
     if transport == "mp_pipe":
         return _pipe_half_rtts(size, count)
     return _queue_half_rtts(size, count)

@@ -56,8 +56,9 @@ def _run_python(argv: list[str], timeout: float) -> tuple[subprocess.CompletedPr
 
 
 def _check_results(doc: dict, method: str) -> None:
-    assert set(doc) == {"method", "results"}
+    assert set(doc) == {"method", "emos_depth", "emos_wake_spin_us", "results"}
     assert doc["method"] == method
+    assert doc["emos_depth"] == 2 and doc["emos_wake_spin_us"] >= 0
     rows = doc["results"]
     assert {(r["transport"], r["payload_bytes"]) for r in rows} == {(t, s) for t in TRANSPORTS for s in SIZES}
     assert len(rows) == len(TRANSPORTS) * len(SIZES)
@@ -92,6 +93,7 @@ def test_bench_ipc_human_table_names_the_method() -> None:
     ("args", "expected"),
     [
         (["--method", "roundtrip"], "invalid choice: 'roundtrip'"),
+        (["--depth", "1"], "--depth must be at least 2"),
         (["--transports", "emos,zmq"], "unknown transport(s) ['zmq']"),
         (["--sizes", "8,0"], "--sizes must be positive"),
         (["--sizes", "8,1k"], "--sizes must be comma-separated byte counts"),
