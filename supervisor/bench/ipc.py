@@ -29,7 +29,7 @@ import sys
 from typing import Any
 
 from emos.core.node import wake_spin_setting
-from emos.supervisor.bench import ipc_oneway, ipc_pingpong
+from emos.supervisor.bench import ipc_common, ipc_oneway, ipc_pingpong
 from emos.supervisor.bench.common import percentiles, table
 
 SIZES = [8, 1024, 65536, 921_600, 8 * 1024 * 1024]
@@ -51,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help=f"comma-separated, from {','.join(TRANSPORTS)}")
     parser.add_argument("--messages", type=int, default=400, help="latency samples per size (fewer for large payloads)")
     parser.add_argument("--throughput-seconds", type=float, default=1.0)
+    parser.add_argument("--cpus", default="0,1" if (os.cpu_count() or 1) >= 2 else "none", help="pin the two ends to these CPUs, 'A,B', or 'none' (default 0,1: each end on its own CPU)")
     parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, help=f"history depth (KEEP_LAST) of the EMOS rings in the latency test (default {DEFAULT_DEPTH})")
 
 
@@ -68,8 +69,9 @@ def measure(transports: list[str], sizes: list[int], messages: int, seconds: flo
             count = _samples_for(size, messages)
             if progress:
                 print(f"  {transport:>8} {size:>9} B: latency ({count} {unit})...", end="", flush=True)
-            lat = latency_us(transport, size, count, depth=depth)
-            got, span, dropped = ipc_oneway.throughput(transport, size, seconds)
+            with ipc_common.placed():
+                lat = latency_us(transport, size, count, depth=depth)
+                got, span, dropped = ipc_oneway.throughput(transport, size, seconds)
             p = percentiles(lat)
             rate = got / span if span > 0 else float("nan")
             if progress:
@@ -80,6 +82,20 @@ def measure(transports: list[str], sizes: list[int], messages: int, seconds: flo
 
 def _parse_list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
+
+
+def _parse_cpus(text: str) -> tuple[int, int] | None | str:
+    """``(A, B)``, ``None`` for 'none', or an error message."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        a, b = (int(part) for part in text.split(","))
+    except ValueError:
+        return f"--cpus must be 'A,B' (two CPU numbers) or 'none', got {text!r}"
+    allowed = os.sched_getaffinity(0)
+    if a not in allowed or b not in allowed:
+        return f"--cpus {text}: this process may run on CPUs {sorted(allowed)} only"
+    return a, b
 
 
 def _usage_error(message: str) -> int:
@@ -104,12 +120,17 @@ def run(args: argparse.Namespace) -> int:
         return _usage_error(f"--throughput-seconds must be positive, got {args.throughput_seconds}")
     if args.depth < 2:
         return _usage_error(f"--depth must be at least 2 (a ring keeps at least two messages), got {args.depth}")
+    placement = _parse_cpus(args.cpus)
+    if isinstance(placement, str):
+        return _usage_error(placement)
+    ipc_common.PLACEMENT = placement
     label = METHODS[args.method][0]
     if not args.json:
-        print(f"emos bench ipc on {os.cpu_count()} cores: payloads {sizes}; latency {label}; EMOS depth {args.depth}, wake spin {wake_spin_setting():g} us")
+        where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
+        print(f"emos bench ipc on {os.cpu_count()} cores ({where}): payloads {sizes}; latency {label}; EMOS depth {args.depth}, wake spin {wake_spin_setting():g} us")
     results = measure(transports, sizes, args.messages, args.throughput_seconds, args.method, progress=not args.json, depth=args.depth)
     if args.json:
-        print(json.dumps({"method": args.method, "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting(), "results": results}))
+        print(json.dumps({"method": args.method, "cpus": None if placement is None else list(placement), "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting(), "results": results}))
         return 0
     print()
     print(f"latency: {label} (--method {args.method}); throughput: one way, sender flat out")

@@ -5,7 +5,8 @@ import multiprocessing as mp
 import os
 import signal
 from multiprocessing.process import BaseProcess
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -16,6 +17,25 @@ from emos.transport.context import SHM_DIR, RunContext
 # are only visible inside one run). The benchmark forks only while it runs no threads of its own
 # (every multiprocessing.Queue is closed and its feeder thread joined before the next fork).
 FORK = mp.get_context("fork")
+
+# ``(benchmark CPU, helper CPU)`` or None: where the two ends run (``--cpus``). Latency benchmarks
+# pin both ends, each to its own CPU, so that scheduler placement (which CPU a woken process
+# lands on, with which caches) does not decide the result; see docs/benchmarks.md.
+PLACEMENT: tuple[int, int] | None = None
+
+
+@contextmanager
+def placed() -> Iterator[None]:
+    """Run the benchmark's own end on its CPU (if pinning), and restore its affinity after."""
+    if PLACEMENT is None:
+        yield
+        return
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {PLACEMENT[0]})
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, before)
 
 
 def random_payload(size: int) -> np.ndarray:
@@ -28,6 +48,8 @@ def _child_main(parent_pid: int, name: str, target: Callable[..., None], args: t
     # If the benchmark dies (Ctrl-C, SIGKILL), its helper must not linger.
     if not die_with(parent_pid, signal.SIGTERM):
         os._exit(1)
+    if PLACEMENT is not None:
+        os.sched_setaffinity(0, {PLACEMENT[1]})
     target(*args)
 
 

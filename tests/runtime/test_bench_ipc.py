@@ -56,7 +56,8 @@ def _run_python(argv: list[str], timeout: float) -> tuple[subprocess.CompletedPr
 
 
 def _check_results(doc: dict, method: str) -> None:
-    assert set(doc) == {"method", "emos_depth", "emos_wake_spin_us", "results"}
+    assert set(doc) == {"method", "cpus", "emos_depth", "emos_wake_spin_us", "results"}
+    assert doc["cpus"] in ([0, 1], None)
     assert doc["method"] == method
     assert doc["emos_depth"] == 2 and doc["emos_wake_spin_us"] >= 0
     rows = doc["results"]
@@ -73,7 +74,7 @@ def _check_results(doc: dict, method: str) -> None:
 def test_bench_ipc_json_shape_and_no_leftovers(method: str) -> None:
     args = ["--json", "--sizes", ",".join(map(str, SIZES)), "--messages", "40", "--throughput-seconds", "0.2"]
     if method == "oneway":
-        args += ["--method", "oneway"]  # pingpong is the default: not passing it tests that too
+        args += ["--method", "oneway", "--cpus", "none"]  # defaults (pingpong, pinned) are tested by the other case
     result, left = _bench(*args)
     assert result.returncode == 0, result.stderr
     # --json: the JSON document and nothing else on stdout (progress lines are for humans).
@@ -94,6 +95,8 @@ def test_bench_ipc_human_table_names_the_method() -> None:
     [
         (["--method", "roundtrip"], "invalid choice: 'roundtrip'"),
         (["--depth", "1"], "--depth must be at least 2"),
+        (["--cpus", "0"], "--cpus must be 'A,B'"),
+        (["--cpus", "0,4096"], "may run on CPUs"),
         (["--transports", "emos,zmq"], "unknown transport(s) ['zmq']"),
         (["--sizes", "8,0"], "--sizes must be positive"),
         (["--sizes", "8,1k"], "--sizes must be comma-separated byte counts"),
