@@ -48,7 +48,7 @@ MIN_HEADER = 4096
 SLOT_HEADER = 32
 MAX_WAITERS = 64
 LOAN_ENTRIES = 8  # pin entries per ring: loans outstanding at once, across all its readers
-MAX_DEPTH = 65535  # slots are numbered in 16 bits in the message map
+MAX_DEPTH = 0xFFFF - LOAN_ENTRIES  # physical slots are numbered in 16 bits in the message map
 # Header fields as u64 indices.
 _MAGIC, _GEOM, _STRIDE, _CAPACITY, _HEAD, _MOVED_PID, _WAITERS_VER, _FIRST, _CREATED = range(9)
 _FINGERPRINT_OFF = 80  # 16 ascii bytes
@@ -251,13 +251,13 @@ class Ring:
         q = self.q
         k = n % self.depth
         mapped = {q[_MAP_IDX + i] & 0xFFFF for i in range(self.depth) if i != k}
-        pinned = {p - 1 for p in q[_PIN_IDX : _PIN_IDX + LOAN_ENTRIES].tolist() if p}
-        # depth - 1 mapped + at most LOAN_ENTRIES pinned < depth + LOAN_ENTRIES slots: one is free.
-        for slot in range(self.physical_slots):
-            if slot not in mapped and slot not in pinned and self._claim(slot, n):
-                return slot
-        # Only a pin that appeared between our look and our claim gets here; the next look sees it.
-        return self._claim_any(n)
+        while True:
+            pinned = {p - 1 for p in q[_PIN_IDX : _PIN_IDX + LOAN_ENTRIES].tolist() if p}
+            # depth - 1 mapped + at most LOAN_ENTRIES pinned < depth + LOAN_ENTRIES slots: one is free.
+            for slot in range(self.physical_slots):
+                if slot not in mapped and slot not in pinned and self._claim(slot, n):
+                    return slot
+            # Only a pin that appeared between our look and our claim gets here; look again.
 
     def commit(self, n: int, nbytes: int, stamp_ns: int) -> None:
         q = self.q
