@@ -51,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help=f"comma-separated, from {','.join(TRANSPORTS)}")
     parser.add_argument("--messages", type=int, default=400, help="latency samples per size (fewer for large payloads)")
     parser.add_argument("--throughput-seconds", type=float, default=1.0)
-    parser.add_argument("--cpus", default="0,1" if (os.cpu_count() or 1) >= 2 else "none", help="pin the two ends to these CPUs, 'A,B', or 'none' (default 0,1: each end on its own CPU)")
+    parser.add_argument("--cpus", default=_default_cpus(), help="pin the two ends to these CPUs, 'A,B', or 'none' (default: the first two CPUs this process may use, each end on its own)")
     parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, help=f"history depth (KEEP_LAST) of the EMOS rings in the latency test (default {DEFAULT_DEPTH})")
 
 
@@ -82,6 +82,12 @@ def measure(transports: list[str], sizes: list[int], messages: int, seconds: flo
 
 def _parse_list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
+
+
+def _default_cpus() -> str:
+    """The first two CPUs this process may run on (cgroups and taskset restrict them), or 'none'."""
+    allowed = sorted(os.sched_getaffinity(0))
+    return f"{allowed[0]},{allowed[1]}" if len(allowed) >= 2 else "none"
 
 
 def _parse_cpus(text: str) -> tuple[int, int] | None | str:
