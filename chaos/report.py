@@ -101,7 +101,8 @@ def timeline_png(history_file: Path, result: dict[str, Any], out: Path) -> Path 
             ax.axvline(r["t"], color=colour, lw=1, alpha=0.6)
         else:
             ax.broken_barh([(r["t"], max(0.05, length))], (row - 0.45, 0.9), facecolor="none", edgecolor=colour, hatch="///", lw=1)
-        ax.text(r["t"], len(names) - 0.4, r["name"], rotation=90, fontsize=6, va="bottom", color=colour)
+        if len(result["outcomes"]) <= 40:  # past that, labels are ink, not information
+            ax.text(r["t"], len(names) - 0.4, r["name"], rotation=90, fontsize=6, va="bottom", color=colour)
     ax.set_yticks(range(len(names)), names)
     ax.set_ylim(-0.6, len(names) + 0.8)
     ax.set_title(f"chaos {result['scenario']} seed {result['seed']}: {result['recovered']}/{result['faults']} faults recovered, "
