@@ -131,19 +131,23 @@ class SimTimeDriver:
     def has_news(self) -> bool:
         return self.sub.has_news()
 
-    def on_wake(self, run_step: Callable[[], None] | None) -> None:
-        """Take new ticks; run the Timed step if one is due (``run_step`` None: not Timed or
-        not active); then answer the newest tick."""
-        global _driven_time
+    def take(self) -> Any | None:
+        """The newest new tick (a ``Clock``), or None. Taken *before* the node's inputs, so
+        every message published before that tick is visible when the inputs are read."""
         items = self.sub.take()
         if not items:
-            return
-        latest = items[-1].clock
-        t = latest.to_sec()
+            return None
+        self.ticks += len(items)
+        return items[-1]
+
+    def handle(self, tick: Any, run_step: Callable[[], None] | None) -> None:
+        """Run the Timed step if one is due at ``tick`` (``run_step`` None: not a Timed
+        component, or not active), then answer the tick."""
+        global _driven_time
+        t = tick.clock.to_sec()
         self.time = t
         with _state_lock:
             _driven_time = t
-        self.ticks += len(items)
         if run_step is not None:
             if self._next_step is None:
                 self._next_step = t
@@ -154,7 +158,7 @@ class SimTimeDriver:
                     self._next_step += period
         else:
             self._next_step = None
-        self.pub.publish(self._clock_cls(clock=latest))
+        self.pub.publish(tick)
 
     def close(self) -> None:
         self.sub.close()

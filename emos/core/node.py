@@ -316,6 +316,7 @@ class Node:
         now = time.time_ns()
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
+        tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
         for name, inp in list(self._inputs.items()):
             items = inp.sub.take_raw()
             if not items:
@@ -327,14 +328,9 @@ class Node:
                     msg = codec.decode(inp.topic.msg_type, raw_i)
                     inp.decoded = msg if raw_i is inp.raw else inp.decoded
                     self._run_step(msg=msg, topic=inp.topic)
-        if self._sim_time is not None:  # after the inputs that came with the tick
+        if tick is not None and self._sim_time is not None:  # after the inputs that came with the tick
             timed = active and self.component.run_type == ComponentRunType.TIMED
-            self._sim_time.on_wake(self._run_step if timed else None)
-
-    def poll_inputs(self) -> None:
-        """Take every message waiting now (a component that must see all messages published
-        before some point, e.g. a lockstep answer, calls this from its loop thread)."""
-        self._take_inputs()
+            self._sim_time.handle(tick, self._run_step if timed else None)
 
     def _input(self, topic: Topic | str) -> _Input:
         name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
