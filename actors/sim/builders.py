@@ -26,8 +26,8 @@ def house_shapes() -> list[Shape]:
 
     shapes: list[Shape] = [
         wall((0, 0), (10, 0)), wall((10, 0), (10, 8)), wall((10, 8), (0, 8)), wall((0, 8), (0, 0)),
-        # Middle wall x=5 with a doorway at y in [3, 3 + DOOR].
-        wall((5, 0), (5, 3)), wall((5, 3 + DOOR), (5, 8)),
+        # Middle wall x=5 with a doorway at y in [2.7, 2.7 + DOOR] (clear of the walls at y=4).
+        wall((5, 0), (5, 2.7)), wall((5, 2.7 + DOOR), (5, 8)),
         # Rooms split at y=4, doorways at x in [2, 2 + DOOR] (left) and [7.5, 7.5 + DOOR] (right).
         wall((0, 4), (2, 4)), wall((2 + DOOR, 4), (5, 4)),
         wall((5, 4), (7.5, 4)), wall((7.5 + DOOR, 4), (10, 4)),

@@ -90,7 +90,7 @@ def _texture(client: Any) -> int:
 
 # In the demo house: from the spawn room, across the robot's view, through the middle doorway
 # into the east room (out of view behind the wall) and back.
-HOUSE_PERSON_PATH = ((4.2, 0.6), (4.2, 3.55), (7.0, 3.55))
+HOUSE_PERSON_PATH = ((4.2, 0.6), (4.2, 3.25), (7.0, 3.25))
 
 
 def house_with_person(**world_kwargs: Any) -> Any:

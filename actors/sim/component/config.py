@@ -57,7 +57,9 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
         path = Path(value).expanduser()
         if not path.is_file():
             raise ValueError(f"SimulatorConfig.world: map file {str(path)!r} does not exist")
-        read_map_yaml(path)  # a malformed YAML or a missing image fails here, naming the file
+        meta = read_map_yaml(path)  # a malformed YAML fails here, naming the file and key
+        if not Path(meta["image"]).is_file():
+            raise ValueError(f"SimulatorConfig.world: map {str(path)!r} names image {str(meta['image'])!r}, which does not exist")
         return
     raise ValueError(f"SimulatorConfig.world: unknown world {value!r}; expected one of {', '.join(NAMED_WORLDS)}, "
                      "'barn:<index>' or the path of a ROS map YAML")
