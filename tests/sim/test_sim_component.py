@@ -112,12 +112,22 @@ launcher.bringup()
 
 def test_twist_moves_the_robot_and_a_stale_command_stops_it(tmp_path):
     system = SystemUnderTest(tmp_path, SIM_HEADER + """
+from emos.core import clock
+
+class Probe(BaseComponent):
+    def _execution_step(self):  # wall-timed, not use_sim_time: clock.now() follows /clock anyway
+        with open(os.environ["PROBE"], "a") as f:
+            f.write(f"{clock.now()!r} {clock.sim_time()!r}\\n")
+        self.health_status.set_healthy()
+
+probe = Probe("probe")
+probe.config.loop_rate = 5.0
 sim = Simulator("sim", config=SimulatorConfig(world="empty", robot="jackal", command_timeout=0.3))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="TwistStamped"))
 launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[sim])
+launcher.add_pkg(components=[sim, probe])
 launcher.bringup()
-""").wait_up(components=["sim"], timeout=60)
+""", env={"PROBE": str(tmp_path / "probe.txt")}).wait_up(components=["sim", "probe"], timeout=60)
     rec = Recorder(system.ctx, {"/odom": M.Odometry})
     cmd = Publisher(system.ctx, "/cmd_vel", M.TwistStamped, publisher_id="test")
 
@@ -150,7 +160,14 @@ launcher.bringup()
         after = latest()
         assert after.pose.pose.position.x == stopped.pose.pose.position.x
         assert after.pose.pose.orientation.yaw() == stopped.pose.pose.orientation.yaw()
+        sim_now = after.header.stamp.to_sec()
     finally:
         cmd.close()
         rec.close()
         assert system.stop() == 0
+    # A component that reads emos.core.clock.now() gets simulated time once the Simulator runs
+    # (it started at 0 with the simulator, so it is far below the wall clock's epoch seconds).
+    probes = [line.split() for line in (tmp_path / "probe.txt").read_text().splitlines()]
+    late = [(float(now), sim) for now, sim in probes if sim != "None"]
+    assert late and all(0.0 <= now <= sim_now + 2.0 for now, _ in late)
+    assert [float(sim) for _, sim in late] == [now for now, _ in late]
