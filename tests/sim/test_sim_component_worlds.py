@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from emos import Topic
+from emos import msgs as M
 
 pytest.importorskip("pybullet", reason="pybullet (emos[sim]) is not installed")
 
@@ -160,3 +161,21 @@ def test_bad_simulator_wiring_fails_at_definition(tmp_path):
         from emos.config import BaseComponentConfig
 
         Simulator("sim2", config=BaseComponentConfig())
+
+
+def test_command_follower_twist_array_timeout_and_bad_values():
+    from emos.actors.sim.component.commands import CommandFollower
+
+    follower = CommandFollower(timeout=0.5, array_step=0.1)
+    assert follower.target(0.0).tolist() == [0.0, 0.0, 0.0]  # nothing received: stand still
+    follower.receive(M.Twist(linear=M.Vector3(x=0.4, y=0.1), angular=M.Vector3(z=0.2)), now=1.0)
+    assert follower.target(1.5).tolist() == [0.4, 0.1, 0.2]
+    assert follower.target(1.51).tolist() == [0.0, 0.0, 0.0]  # stale
+    array = M.TwistArray(linear_velocities=np.array([[0.1, 0, 0], [0.2, 0, 0], [0.3, 0, 0]]),
+                         angular_velocities=np.array([[0, 0, 0.5], [0, 0, 0.6], [0, 0, 0.7]]))
+    follower.receive(array, now=2.0)
+    assert [follower.target(t)[0] for t in (2.0, 2.15, 2.25, 2.31)] == [0.1, 0.2, 0.3, 0.0]
+    with pytest.raises(ValueError, match="non-finite"):
+        follower.receive(M.Twist(linear=M.Vector3(x=float("nan"))), now=3.0)
+    with pytest.raises(TypeError, match="Twist, TwistStamped or TwistArray"):
+        follower.receive(M.String(data="go"), now=3.0)

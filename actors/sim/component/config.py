@@ -103,6 +103,27 @@ def _consumers(value: Any) -> list[str]:
     return list(value)
 
 
+def _obstacles(value: Any) -> list:
+    from ..primitives import Box, Cylinder, Wall
+
+    items = list(value)
+    for item in items:
+        if not isinstance(item, (Box, Cylinder, Wall)):
+            raise ValueError(f"SimulatorConfig.obstacles must be Box, Cylinder or Wall objects, got {type(item).__name__} {item!r}")
+    return items
+
+
+def _movers(value: Any) -> list:
+    from ..moving import MovingObstacle
+
+    items = list(value)
+    for item in items:
+        if not isinstance(item, MovingObstacle):
+            raise ValueError(f"SimulatorConfig.moving_obstacles must be MovingObstacle (or Person) objects, "
+                             f"got {type(item).__name__} {item!r}")
+    return items
+
+
 def _int_at_least(low: int) -> Any:
     def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
@@ -118,6 +139,10 @@ class SimulatorConfig(BaseComponentConfig):
     robot: str = field(default="jackal", validator=_check_robot)
     spawn: tuple[float, float, float] | None = field(default=None, converter=_spawn)
     """Robot pose (x, y, yaw) in the world frame; None = the world's suggested spawn."""
+    obstacles: list = field(factory=list, converter=_obstacles)
+    """Extra static Box / Cylinder / Wall shapes added to the world (not to its map)."""
+    moving_obstacles: list = field(factory=list, converter=_movers)
+    """MovingObstacle / Person objects walking their waypoints in simulated time."""
     frames: Any = field(factory=_frames_default, validator=_check_frames)
     """Frame names (``RobotFrames``); ``launcher.frames`` overrides them at bringup."""
 

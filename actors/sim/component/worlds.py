@@ -29,6 +29,15 @@ class SimSetup:
 
 
 def build_world(cfg: SimulatorConfig) -> World:
+    world = _named_world(cfg)
+    if cfg.obstacles:
+        world.add(cfg.obstacles)
+    for mover in cfg.moving_obstacles:
+        world.add(mover)
+    return world
+
+
+def _named_world(cfg: SimulatorConfig) -> World:
     # The component paces time itself (realtime sleeps, lockstep handshakes), so the world's
     # own clock never sleeps: its mode is lockstep, advanced tick by tick.
     clock = SimClock(dt=1.0 / cfg.physics_rate, mode=ClockMode.LOCKSTEP)
