@@ -55,19 +55,23 @@ class RobotSpec:
     urdf: str | None = None  # pybullet_data-relative visual model, if any
     lidar_height: float = attrs.field(default=0.3, converter=float, validator=_pos)
     color: tuple[float, float, float, float] = (0.15, 0.3, 0.8, 1.0)
+    # > 0: the body is a vertical cylinder of this radius (length and width are its diameter).
+    radius: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
 
     def __attrs_post_init__(self) -> None:
         if self.drive is DriveType.OMNI and not (self.max_vy > 0 and self.max_acc_y > 0):
             raise ValueError(f"RobotSpec {self.name!r}: an omni robot needs max_vy and max_acc_y > 0")
         if self.drive is DriveType.ACKERMANN and not (self.wheelbase > 0 and self.max_steer > 0):
             raise ValueError(f"RobotSpec {self.name!r}: an Ackermann robot needs wheelbase and max_steer > 0")
+        if self.radius > 0 and not (abs(self.length - 2 * self.radius) < 1e-9 and abs(self.width - 2 * self.radius) < 1e-9):
+            raise ValueError(f"RobotSpec {self.name!r}: a cylinder robot's length and width must be 2 * radius")
 
     @property
     def circumscribed_radius(self) -> float:
         return math.hypot(self.length / 2, self.width / 2)
 
     def footprint(self) -> np.ndarray:
-        """Footprint corners (4, 2) in the base frame."""
+        """Footprint corners (4, 2) in the base frame (of the bounding box for a cylinder)."""
         hx, hy, c = self.length / 2, self.width / 2, self.center_offset
         return np.array([[c + hx, hy], [c - hx, hy], [c - hx, -hy], [c + hx, -hy]])
 

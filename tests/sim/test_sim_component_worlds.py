@@ -179,3 +179,37 @@ def test_command_follower_twist_array_timeout_and_bad_values():
         follower.receive(M.Twist(linear=M.Vector3(x=float("nan"))), now=3.0)
     with pytest.raises(TypeError, match="Twist, TwistStamped or TwistArray"):
         follower.receive(M.String(data="go"), now=3.0)
+
+
+def test_launcher_robot_config_becomes_the_simulated_robot():
+    """``launcher.robot`` reaches the Simulator: it simulates the robot navigation plans for."""
+    from emos import Launcher
+    from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
+    from emos.actors.sim import SimClock, Simulator, World
+    from emos.actors.sim.component.robot_model import resolve_robot
+
+    my_robot = RobotConfig(  # the point-navigation recipe's robot
+        model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
+        geometry_params=np.array([0.1, 0.3]),
+        ctrl_vx_limits=LinearCtrlLimits(max_vel=0.4, max_acc=1.5, max_decel=2.5),
+        ctrl_omega_limits=AngularCtrlLimits(max_vel=0.4, max_acc=2.0, max_decel=2.0, max_steer=np.pi / 3))
+    sim = Simulator("sim")
+    launcher = Launcher()
+    launcher.add_pkg(components=[sim])
+    launcher.robot = my_robot
+    launcher._apply_shared()  # what bringup does first
+    assert sim.config.robot is my_robot
+    spec = resolve_robot(sim.config.robot)
+    assert (spec.radius, spec.height, spec.max_vx, spec.max_omega) == (0.1, 0.3, 0.4, 0.4)
+    world = World(clock=SimClock(mode="lockstep"))
+    try:
+        world.add_wall((2.0, -1.0), (2.0, 1.0), thickness=0.1)
+        robot = world.add_robot(spec, (0.0, 0.0, 0.0))
+        robot.command(1.0)  # above its limit
+        world.run_for(1.0)
+        assert robot.twist[0] == pytest.approx(0.4)
+        world.run_for(6.0)
+        assert robot.collided  # a cylinder of radius 0.1 stops at the wall face (x = 1.95)
+        assert robot.pose[0] + 0.1 == pytest.approx(1.95, abs=0.01)
+    finally:
+        world.close()

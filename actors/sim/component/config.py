@@ -66,8 +66,13 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
 
 
 def _check_robot(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if value not in PRESETS:
-        raise ValueError(f"SimulatorConfig.robot: unknown robot {value!r}; expected one of {', '.join(sorted(PRESETS))}")
+    from emos.actors.nav.robot import RobotConfig
+
+    if isinstance(value, RobotConfig):
+        return
+    if not isinstance(value, str) or value not in PRESETS:
+        raise ValueError(f"SimulatorConfig.robot: unknown robot {value!r}; expected one of {', '.join(sorted(PRESETS))} "
+                         "or a RobotConfig")
 
 
 def _rate(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
@@ -136,7 +141,9 @@ class SimulatorConfig(BaseComponentConfig):
     """Parameters of the :class:`Simulator`. Rates are in Hz of *simulated* time."""
 
     world: str = field(default="house", validator=check_world)
-    robot: str = field(default="jackal", validator=_check_robot)
+    robot: Any = field(default="jackal", validator=_check_robot)
+    """A preset name, or a navigation ``RobotConfig`` (``launcher.robot`` sets it at bringup:
+    the simulated robot is then the one navigation plans for, see ``robot_model.py``)."""
     spawn: tuple[float, float, float] | None = field(default=None, converter=_spawn)
     """Robot pose (x, y, yaw) in the world frame; None = the world's suggested spawn."""
     obstacles: list = field(factory=list, converter=_obstacles)

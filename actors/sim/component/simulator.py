@@ -78,8 +78,9 @@ class Simulator(KeyedComponent):
         wanted = self._wanted_outputs()
         self.setup = build_setup(self.config, want_scan="scan" in wanted,
                                  want_camera=any(k in wanted for k in CAMERA_KEYS))
-        self.get_logger().info("[%s] world %r (%s), robot %s at %s, clock %s", self.component_name, self.config.world,
-                               self.setup.world.name, self.config.robot, tuple(round(float(v), 3) for v in self.setup.robot.pose),
+        spec = self.setup.robot.spec
+        self.get_logger().info("[%s] world %r (%s), robot %s (%s, %.2f x %.2f m) at %s, clock %s", self.component_name,
+                               self.config.world, self.setup.world.name, spec.name, spec.drive.value, spec.length, spec.width, tuple(round(float(v), 3) for v in self.setup.robot.pose),
                                self.config.clock_mode.value)
 
     def custom_on_activate(self) -> None:

@@ -13,6 +13,7 @@ from ..clock import ClockMode, SimClock
 from ..sensors import Camera, CameraConfig, Lidar, LidarConfig, Odometry, OdometryConfig
 from ..world import World
 from .config import SimulatorConfig
+from .robot_model import resolve_robot
 
 EMPTY_SPAWN = (0.0, 0.0, 0.0)
 
@@ -80,7 +81,7 @@ def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool) -> Sim
     world = build_world(cfg)
     try:
         spawn = cfg.spawn or world.spawn or EMPTY_SPAWN
-        robot = world.add_robot(cfg.robot, spawn, slip=cfg.slip, actuation_noise=cfg.actuation_noise)
+        robot = world.add_robot(resolve_robot(cfg.robot), spawn, slip=cfg.slip, actuation_noise=cfg.actuation_noise)
         frames = cfg.frames
         odom = Odometry(robot, OdometryConfig(rate_hz=cfg.odom_rate, noisy=cfg.odom_noise,
                                               frame_id=frames.odom, child_frame_id=frames.robot_base))
