@@ -149,8 +149,8 @@ class SimTimeDriver:
         with _state_lock:
             _driven_time = t
         if run_step is not None:
-            if self._next_step is None:
-                self._next_step = t
+            if self._next_step is None or t < self._next_step - 2 * self._period():
+                self._next_step = t  # the first tick, or time went back (the simulator restarted)
             if t >= self._next_step - 1e-9:
                 run_step()
                 period = self._period()
