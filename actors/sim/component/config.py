@@ -18,7 +18,7 @@ from ..clock import ClockMode
 from ..robots import PRESETS
 
 # Named worlds; a path to a ROS map YAML and "barn:<index>" are accepted too (see worlds.py).
-NAMED_WORLDS = ("house", "house_person", "empty")
+NAMED_WORLDS = ("house", "house_person", "empty", "tabletop")
 
 
 def _frames_default() -> Any:
@@ -35,7 +35,8 @@ def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None
 
 
 def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    """``house``, ``house_person``, ``empty``, ``barn:<index>`` or a ROS map YAML path."""
+    """``house``, ``house_person``, ``empty``, ``tabletop`` (the arm), ``barn:<index>`` or a
+    ROS map YAML path."""
     if not isinstance(value, str) or not value.strip():
         raise ValueError(f"SimulatorConfig.world must be a world name or a map path, got {value!r}")
     if value in NAMED_WORLDS:
@@ -165,6 +166,8 @@ class SimulatorConfig(BaseComponentConfig):
     command_array_step: float = field(default=0.1, validator=_positive)
     """Seconds each entry of a TwistArray command lasts (the controller's time step)."""
 
+    joint_state_rate: float = field(default=30.0, validator=_rate)
+    """Arm joint states (the ``tabletop`` world)."""
     odom_rate: float = field(default=50.0, validator=_rate)
     odom_noise: bool = False
     """True: wheel odometry with drift (OdometryConfig.noisy); False: ground truth."""
