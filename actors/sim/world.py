@@ -66,6 +66,7 @@ class World:
         self.barn: Any = None
         self.occupancy_map: Any = None
         self.dynamics = False  # see enable_dynamics()
+        self.tick_hooks: list[Any] = []  # called with the stamp after every tick's physics (an arm's grasp)
         if ground:
             self.client.setAdditionalSearchPath(_deps.pybullet_data_path())
             self.ground_id = self.client.loadURDF("plane.urdf")
@@ -213,6 +214,8 @@ class World:
         if self.dynamics:
             self.client.stepSimulation()
         stamp = self.clock.tick()
+        for hook in self.tick_hooks:
+            hook(stamp)
         self._place_movers()
         if self.robots:
             self.client.performCollisionDetection()

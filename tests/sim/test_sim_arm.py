@@ -74,3 +74,44 @@ launcher.bringup()
             s.close()
         assert system.stop() == 0
     assert "rejected command #1 on /isaac_joint_command: arm has no joint 'shoulder_pan'" in system.output()
+
+
+def test_a_scripted_pick_puts_an_orange_in_the_bowl():
+    """The table-top physics is good enough to manipulate: reach, pinch, lift, carry, drop."""
+    import math
+
+    from emos.actors.sim import SimClock
+    from emos.actors.sim.arm.tabletop import BOWL_CENTER, BOWL_RADIUS, TABLE_HEIGHT, orange_positions, tabletop_world
+
+    world = tabletop_world(clock=SimClock(mode="lockstep"))
+    try:
+        arm, c = world.arm, world.client
+        down = c.getQuaternionFromEuler([0, math.pi, 0])
+
+        def move(xyz, jaw: float, seconds: float = 1.5) -> None:
+            q = c.calculateInverseKinematics(arm.body_id, arm.link_index["gripper"], xyz, down,
+                                             maxNumIterations=300, residualThreshold=1e-4)
+            names = [n for n in arm.names if n != "Jaw"]
+            arm.command(names + ["Jaw"], list(q[:5]) + [jaw])
+            world.run_for(seconds)
+
+        others = orange_positions(world)[1:].copy()
+        x, y, z = orange_positions(world)[0]
+        # The jaw is on the gripper's +x, which points to world -x when the gripper points down:
+        # stand 2 cm to +x so the orange sits between the fixed finger and the open jaw.
+        move([x + 0.02, y, z + 0.15], jaw=1.2)
+        move([x + 0.02, y, z + 0.065], jaw=1.2)
+        move([x + 0.02, y, z + 0.065], jaw=-0.17, seconds=1.0)
+        assert arm.held == world.oranges[0]
+        move([x + 0.02, y, z + 0.16], jaw=-0.17)
+        assert orange_positions(world)[0][2] > z + 0.06  # lifted
+        move([BOWL_CENTER[0] + 0.02, BOWL_CENTER[1], TABLE_HEIGHT + 0.16], jaw=-0.17)
+        move([BOWL_CENTER[0] + 0.02, BOWL_CENTER[1], TABLE_HEIGHT + 0.16], jaw=1.2)
+        move([BOWL_CENTER[0] + 0.02, BOWL_CENTER[1], TABLE_HEIGHT + 0.22], jaw=1.2)
+        assert arm.held is None
+        ox, oy, oz = orange_positions(world)[0]
+        assert math.hypot(ox - BOWL_CENTER[0], oy - BOWL_CENTER[1]) < BOWL_RADIUS - 0.03  # inside the bowl
+        assert oz < TABLE_HEIGHT + 0.05  # resting on its bottom, not on the rim or the fingers
+        assert np.allclose(orange_positions(world)[1:], others, atol=0.01)  # the other oranges stayed put
+    finally:
+        world.close()

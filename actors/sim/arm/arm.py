@@ -72,8 +72,16 @@ class SimArm:
         for name, value in start.items():
             self._check_name(name)
             c.resetJointState(self.body_id, self.joint_index[name], self._clip(name, value))
+        for link in ("jaw", "fixed_finger"):  # rubber finger pads: objects are held by friction
+            if link in self.link_index:
+                c.changeDynamics(self.body_id, self.link_index[link], lateralFriction=2.0, spinningFriction=0.01,
+                                 rollingFriction=0.001, frictionAnchor=True)
         self.command(list(start), list(start.values()))
         world._body_names[self.body_id] = "arm"
+        self.graspable: set[int] = set()  # bodies the jaw may hold (see update_grasp)
+        self.held: int | None = None
+        self._grasp: int | None = None  # the constraint holding ``held``
+        world.tick_hooks.append(self.update_grasp)
 
     def _check_name(self, name: str) -> None:
         if name not in self.joint_index:
@@ -101,6 +109,39 @@ class SimArm:
             forces=[self._efforts[n] for n in self.names], positionGains=[self.config.position_gain] * len(idx))
         for j in idx:  # cap joint speed so a far target is approached smoothly
             self.world.client.changeDynamics(self.body_id, j, maxJointVelocity=self.config.max_velocity)
+
+    def update_grasp(self, stamp: float = 0.0) -> None:
+        """Hold a graspable body while the jaw closes on it; let go when the jaw opens.
+
+        A body squeezed between the jaw and the fixed finger (touching both) while the jaw is
+        commanded to close is fixed to the gripper where it is; commanding the jaw to open
+        (a target wider than where it is) releases it. Box fingers pinching a sphere slip in
+        a rigid-body engine however they are tuned, so the pinch is made to hold, as simulator
+        grasp plug-ins do; the jaw still has to reach and close on the object.
+        """
+        c, pb = self.world.client, _deps.pybullet()
+        jaw_now = c.getJointState(self.body_id, self.joint_index["Jaw"])[0]
+        if self.held is not None:
+            if self.targets["Jaw"] > jaw_now + 0.05:
+                c.removeConstraint(self._grasp)
+                self.held = self._grasp = None
+            return
+        if self.targets["Jaw"] >= jaw_now - 0.02:  # not closing
+            return
+        jaw, finger = self.link_index["jaw"], self.link_index["fixed_finger"]
+        for body in self.graspable:
+            touching = {p[3] for p in c.getContactPoints(bodyA=self.body_id, bodyB=body)}
+            if jaw in touching and finger in touching:
+                gripper = self.link_index["gripper"]
+                g_pos, g_orn = c.getLinkState(self.body_id, gripper)[4:6]
+                b_pos, b_orn = c.getBasePositionAndOrientation(body)
+                inv_pos, inv_orn = c.invertTransform(g_pos, g_orn)
+                rel_pos, rel_orn = c.multiplyTransforms(inv_pos, inv_orn, b_pos, b_orn)
+                self._grasp = c.createConstraint(self.body_id, gripper, body, -1, pb.JOINT_FIXED, [0, 0, 0],
+                                                 rel_pos, [0, 0, 0], rel_orn)
+                c.changeConstraint(self._grasp, maxForce=50.0)
+                self.held = body
+                return
 
     def joint_state(self) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
         """(names, positions, velocities, efforts)."""

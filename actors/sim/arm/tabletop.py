@@ -14,12 +14,13 @@ TABLE_HEIGHT = 0.4
 TABLE_SIZE = (0.8, 0.7)
 ARM_BASE = (-0.3, 0.0)  # on the table, near its -x edge, facing +x
 ORANGE_RADIUS = 0.033
-ORANGES = ((-0.08, 0.12), (-0.05, -0.1), (0.02, 0.02))  # table-top (x, y)
-BOWL_CENTER = (0.05, 0.22)
+# Within the arm's reach (0.16-0.22 m from its base, gripper pointing down, joint limits kept).
+ORANGES = ((-0.11, 0.03), (-0.12, -0.07), (-0.14, -0.15))  # table-top (x, y)
+BOWL_CENTER = (-0.15, 0.16)
 BOWL_RADIUS = 0.08
 BOWL_HEIGHT = 0.045
 FRONT_CAMERA_EYE = (0.45, 0.0, TABLE_HEIGHT + 0.35)
-FRONT_CAMERA_TARGET = (-0.1, 0.05, TABLE_HEIGHT)
+FRONT_CAMERA_TARGET = (-0.15, 0.0, TABLE_HEIGHT)
 
 
 def bowl_shapes(center: tuple[float, float], radius: float = BOWL_RADIUS, height: float = BOWL_HEIGHT,
@@ -48,6 +49,7 @@ def tabletop_world(**world_kwargs: Any) -> World:
     world.step()  # bake the static shapes before the dynamic bodies drop onto them
     world.arm = SimArm(world, _arm_config())
     world.oranges = [_orange(world, xy) for xy in ORANGES]
+    world.arm.graspable.update(world.oranges)
     world.front_camera_pose = look_at(FRONT_CAMERA_EYE, FRONT_CAMERA_TARGET)
     world.spawn = None
     world.run_for(0.5)  # let the oranges settle and the arm reach its ready pose
