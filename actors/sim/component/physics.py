@@ -31,6 +31,7 @@ log = logging.getLogger("emos.sim")
 
 WAIT_SLICE_S = 0.25  # lockstep: republish the tick this often while waiting (late joiners)
 WARN_AFTER_S = 5.0  # lockstep: say who we wait for after this long, then every WARN_AFTER_S
+MAX_LAG_S = 0.5  # realtime: further behind the wall clock than this, drop the debt instead of racing
 
 
 class PhysicsLoop(threading.Thread):
@@ -50,6 +51,7 @@ class PhysicsLoop(threading.Thread):
         self.clock_ticks = 0
         self.published: dict[str, int] = {}
         self.waited_s = 0.0  # lockstep: wall time spent waiting for answers
+        self.lag_resets = 0  # realtime: how often the machine could not keep up (simulated time slowed)
         self._waker: Waker | None = None
         self._command_sub: Subscriber | None = None
         self._joint_sub: Subscriber | None = None
@@ -124,6 +126,13 @@ class PhysicsLoop(threading.Thread):
                     delay = target - time.monotonic()
                     if delay > 0 and self._stop_event.wait(delay):
                         return
+                    if delay < -MAX_LAG_S:
+                        # A real world does not run faster to catch up after a stall: re-anchor.
+                        wall_start -= delay
+                        self.lag_resets += 1
+                        if self.lag_resets in (1, 10, 100) or self.lag_resets % 1000 == 0:
+                            log.warning("[%s] realtime: %.2f s behind the wall clock (#%d); simulated time slowed "
+                                        "down instead of racing to catch up", self.component_name, -delay, self.lag_resets)
             self._send_clock()
 
     def _send(self, key: str, msg: Any) -> None:

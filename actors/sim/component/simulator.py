@@ -11,6 +11,7 @@ Keys and default topics (``None``: off until the recipe gives a topic):
 key                 message types                                default
 =================== ============================================ ==============================
 command (in)        Twist, TwistStamped, TwistArray              /cmd_vel (Twist)
+joint_command (in)  JointState, JointTrajectory (the arm)        None
 odom                Odometry                                     /odom
 scan                LaserScan                                    /scan
 tf                  TFMessage                                    /tf
@@ -21,6 +22,8 @@ camera_info         CameraInfo                                   None
 depth_camera_info   CameraInfo                                   None
 rgbd                RGBD                                         None
 map                 OccupancyGrid                                None
+joint_states        JointState (the arm)                         None
+wrist_camera        Image or CompressedImage (the arm)           None
 =================== ============================================ ==============================
 
 Frames come from ``config.frames`` (``launcher.frames`` sets it at bringup): odometry is
@@ -28,7 +31,9 @@ Frames come from ``config.frames`` (``launcher.frames`` sets it at bringup): odo
 ``frames.rgb`` and depth ``frames.depth``; ``/tf`` carries world -> odom -> base -> sensors.
 
 The physics runs in a thread of this component's process (see ``physics.py``); the Timed
-step reports its health. A command older than ``command_timeout`` stops the robot.
+step reports its health. A command older than ``command_timeout`` stops the robot. In the
+``tabletop`` world there is an arm instead of a mobile base: ``camera`` is the front camera,
+and the arm holds its last joint targets (a position-controlled arm's safe behaviour).
 """
 from __future__ import annotations
 
