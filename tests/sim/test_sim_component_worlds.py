@@ -213,3 +213,33 @@ def test_launcher_robot_config_becomes_the_simulated_robot():
         assert robot.pose[0] + 0.1 == pytest.approx(1.95, abs=0.01)
     finally:
         world.close()
+
+
+def test_simulator_config_file_sets_parameters_frames_and_keyed_topics(tmp_path):
+    from emos.actors.sim import Simulator
+
+    path = tmp_path / "sim.yaml"
+    path.write_text("""
+sim:
+  world: empty
+  robot: holonomic
+  spawn: [1.0, 2.0, 0.5]
+  clock_mode: lockstep
+  lockstep_consumers: [driver]
+  frames: {odom: odom, robot_base: base_footprint, scan: laser}
+  outputs:
+    odom: {name: /odometry/filtered, msg_type: Odometry}
+""")
+    sim = Simulator("sim", config_file=str(path))
+    cfg = sim.config
+    assert (cfg.world, cfg.robot, cfg.spawn, cfg.clock_mode.value, cfg.lockstep_consumers) == (
+        "empty", "holonomic", (1.0, 2.0, 0.5), "lockstep", ["driver"])
+    assert (cfg.frames.world, cfg.frames.robot_base, cfg.frames.scan) == ("map", "base_footprint", "laser")
+    assert sim.get_out_topic("odom").name == "/odometry/filtered"
+    assert [t.name for t in sim.out_topics] == ["/odometry/filtered", "/scan", "/tf", "/clock"]
+    path.write_text("sim:\n  outputs:\n    lidar: {name: /scan, msg_type: LaserScan}\n")
+    with pytest.raises(ValueError, match="has no output key 'lidar'"):
+        Simulator("sim", config_file=str(path))
+    path.write_text("sim:\n  frames: {odom: odom, base: base_link}\n")
+    with pytest.raises(ValueError, match="unknown parameter.*sim.frames.base"):
+        Simulator("sim", config_file=str(path))

@@ -27,6 +27,18 @@ def _frames_default() -> Any:
     return RobotFrames()
 
 
+def _frames(value: Any) -> Any:
+    """A RobotFrames, or a mapping of its fields (config files)."""
+    if isinstance(value, dict):
+        from emos.actors.nav.robot import RobotFrames
+
+        try:
+            return RobotFrames(**value)
+        except TypeError as exc:
+            raise ValueError(f"SimulatorConfig.frames: {exc}") from None
+    return value
+
+
 def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
     from emos.actors.nav.robot import RobotFrames
 
@@ -151,7 +163,7 @@ class SimulatorConfig(BaseComponentConfig):
     """Extra static Box / Cylinder / Wall shapes added to the world (not to its map)."""
     moving_obstacles: list = field(factory=list, converter=_movers)
     """MovingObstacle / Person objects walking their waypoints in simulated time."""
-    frames: Any = field(factory=_frames_default, validator=_check_frames)
+    frames: Any = field(factory=_frames_default, converter=_frames, validator=_check_frames)
     """Frame names (``RobotFrames``); ``launcher.frames`` overrides them at bringup."""
 
     physics_rate: float = field(default=100.0, validator=_rate)
