@@ -32,6 +32,7 @@ log = logging.getLogger("emos.sim")
 WAIT_SLICE_S = 0.25  # lockstep: republish the tick this often while waiting (late joiners)
 WARN_AFTER_S = 5.0  # lockstep: say who we wait for after this long, then every WARN_AFTER_S
 MAX_LAG_S = 0.5  # realtime: further behind the wall clock than this, drop the debt instead of racing
+MAP_PERIOD_S = 1.0  # the map output is republished this often (simulated s) for late subscribers
 
 
 class PhysicsLoop(threading.Thread):
@@ -114,7 +115,7 @@ class PhysicsLoop(threading.Thread):
                 return
             if "map" in self.outputs and self.map_grid is not None and self.sim_time >= map_due - 1e-9:
                 self._send("map", occupancy_msg(self.map_grid, self.sim_time, cfg.frames.world))
-                map_due += 5.0
+                map_due += MAP_PERIOD_S
             for _ in range(cfg.ticks_per_clock):
                 self._take_commands()
                 if self.setup.robot is not None:
