@@ -91,6 +91,9 @@ def test_the_local_detector_sees_the_walking_person_and_loses_it_behind_the_wall
     from emos.actors.agents.local.vision import LocalDetector
     from emos.actors.sim import Camera, CameraConfig, Lidar, LidarConfig, SimClock
     from emos.actors.sim.person import PERSON_RADIUS, house_with_person
+    from emos.actors.sim.component.publishing import jpeg as frame_jpeg
+    from PIL import Image
+    import io
 
     world = house_with_person(clock=SimClock(mode="lockstep"))
     detector = LocalDetector(labels=("person",))
@@ -102,7 +105,10 @@ def test_the_local_detector_sees_the_walking_person_and_loses_it_behind_the_wall
         seen, centre = {}, {}
         for t in (1.0, 3.0, 8.0):  # right of the view's centre, left of it, in the east room
             world.run_for(t - world.clock.now())
-            seen[t] = detector.detect(camera.latest.rgb)
+            # Through the JPEG the Simulator publishes on a CompressedImage topic, as a Vision
+            # component subscribed to /image_raw/compressed receives it.
+            jpeg = frame_jpeg(camera.latest, 85)
+            seen[t] = detector.detect(np.asarray(Image.open(io.BytesIO(jpeg.data.tobytes()))))
             if seen[t]:
                 x1, _, x2, _ = seen[t][0].box
                 centre[t] = (x1 + x2) / 2

@@ -63,8 +63,9 @@ def _arm_config() -> Any:
 
 
 def _orange(world: World, xy: tuple[float, float]) -> int:
-    import pybullet as pb
+    from .. import _deps
 
+    pb = _deps.pybullet()
     c = world.client
     col = c.createCollisionShape(pb.GEOM_SPHERE, radius=ORANGE_RADIUS)
     vis = c.createVisualShape(pb.GEOM_SPHERE, radius=ORANGE_RADIUS, rgbaColor=[1.0, 0.55, 0.05, 1.0])
