@@ -249,3 +249,39 @@ sim:
     path.write_text("sim:\n  frames: {odom: odom, base: base_link}\n")
     with pytest.raises(ValueError, match="unknown parameter.*sim.frames.base"):
         Simulator("sim", config_file=str(path))
+
+
+def test_tf_tree_composes_to_the_true_pose_and_skips_an_odom_frame_equal_to_the_world():
+    from emos.actors.nav.robot import RobotFrames
+    from emos.actors.sim.component.publishing import quaternion_from_matrix, tf_tree
+    from emos.actors.sim.sensors.odometry import OdometryReading
+
+    def yaw_of(q) -> float:
+        return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
+
+    drifted = OdometryReading(2.0, "odom", "base_link", 1.0, 0.5, 0.3, 0.0, 0.0, 0.0)  # odometry's belief
+    true_pose = np.array([1.2, 0.4, 0.25])
+    tree = tf_tree(RobotFrames(), drifted, true_pose, None, None)
+    (world_odom, odom_base) = tree.transforms
+    assert (world_odom.header.frame_id, world_odom.child_frame_id) == ("map", "odom")
+    # Compose map->odom with odom->base: the true pose.
+    a = world_odom.transform
+    ax, ay, ayaw = a.translation.x, a.translation.y, yaw_of(a.rotation)
+    bx, by, byaw = odom_base.transform.translation.x, odom_base.transform.translation.y, yaw_of(odom_base.transform.rotation)
+    composed = (ax + math.cos(ayaw) * bx - math.sin(ayaw) * by, ay + math.sin(ayaw) * bx + math.cos(ayaw) * by, ayaw + byaw)
+    assert np.allclose(composed, true_pose)
+    assert odom_base.header.stamp.to_sec() == pytest.approx(2.0)
+    # The spec's recipe uses odom="map": then there is no map->odom edge.
+    tree = tf_tree(RobotFrames(world="map", odom="map"), drifted, true_pose, None, None)
+    assert [(t.header.frame_id, t.child_frame_id) for t in tree.transforms] == [("map", "base_link")]
+    # Rotation matrices of every kind round-trip through quaternions.
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.standard_normal(4)
+        q /= np.linalg.norm(q)
+        x, y, z, w = q
+        r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        back = np.array(quaternion_from_matrix(r))
+        assert np.allclose(back, q) or np.allclose(back, -q)
