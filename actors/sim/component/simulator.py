@@ -84,6 +84,9 @@ class Simulator(KeyedComponent):
     def custom_on_configure(self) -> None:
         self.config.check_rates()
         wanted = self._wanted_outputs()
+        if self.config.lockstep_consumers and "clock" not in wanted:
+            raise ValueError(f"Simulator {self.component_name!r}: lockstep_consumers {self.config.lockstep_consumers} "
+                             "answer /clock ticks, but the clock output was removed; give it a topic")
         self.setup = build_setup(self.config, want_scan="scan" in wanted,
                                  want_camera=any(k in wanted for k in CAMERA_KEYS), want_wrist="wrist_camera" in wanted)
         log, name = self.get_logger(), self.component_name
