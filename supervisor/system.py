@@ -22,6 +22,7 @@ from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
 from emos.core.rpc import RpcServer
 from emos.supervisor.heartbeat import HeartbeatMonitor
+from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
 from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
@@ -89,6 +90,7 @@ class System:
         self.control_path = self.ctx.run_dir / "supervisor.sock"
         os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
         become_subreaper()
+        self.reaper = OrphanReaper(protected=self._zygote_pids)
         try:
             process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
             if process_indices:
@@ -112,10 +114,15 @@ class System:
         finally:
             if self.zygote is not None:
                 self.zygote.stop()
+            self.reaper.finish()
             removed = self.ctx.remove_everything()
             log.debug("removed %d shared-memory segments", removed)
             set_current(None)
         return self.exit_code
+
+    def _zygote_pids(self) -> list[int]:
+        z = self.zygote
+        return [h.pid for h in (z.primary, z.spare) if h is not None] if z is not None else []
 
     def _mode(self, index: int) -> str:
         i = index
@@ -143,6 +150,7 @@ class System:
         self._stop_requested = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
+        self.reaper.install(loop)
         self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor")
         await self.control.start()
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
@@ -173,6 +181,7 @@ class System:
         finally:
             self.heartbeats.close()
             await self.control.close()
+            self.reaper.uninstall()
 
     async def _stop_after(self, seconds: float) -> None:
         await asyncio.sleep(seconds)
