@@ -368,6 +368,22 @@ class Subscriber:
             out = out[-self.queue_size :]
         return out
 
+    def take_raw_from(self, publisher_id: str) -> tuple[list[tuple[int, Any, str]], int]:
+        """New messages of one publisher only, and its ring's writer pid (0 if it has no ring).
+
+        Messages of the other publishers are skipped unread; for readers that trust one writer
+        (the supervisor reads a component's heartbeat only from the component itself).
+        """
+        self.rescan()
+        out: list[tuple[int, Any, str]] = []
+        for pub, src in self.sources.items():
+            if pub == publisher_id:
+                self._drain(src, out)
+            else:
+                src.cursor = max(src.cursor, src.ring.head)
+        src = self.sources.get(publisher_id)
+        return out[-self.queue_size :], (src.ring.writer_pid if src is not None else 0)
+
     def _drain(self, src: _Source, out: list) -> None:
         # Drain the current generation before following a move, so nothing written there is lost.
         for _ in range(2):
