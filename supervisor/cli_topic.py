@@ -6,7 +6,7 @@ import json
 import time
 
 from emos.msgs import codec
-from emos.msgs.registry import resolve
+from emos.msgs.registry import canonical_name, resolve
 from emos.supervisor.cli_common import add_run_argument, join_run
 from emos.transport.pubsub import Publisher, Subscriber, list_topics
 from emos.transport.waker import Waker
@@ -72,6 +72,12 @@ def run(args: argparse.Namespace) -> int:
 
             fields = yaml.safe_load(args.fields)
         msg = codec.from_builtin(cls, fields or {})
+        existing = list_topics(ctx).get(topic)
+        if existing is not None and existing["type"] not in ("?", canonical_name(cls)):
+            raise SystemExit(
+                f"emos topic pub: {topic} carries {existing['type']} (publishers: {', '.join(existing['publishers'])}), "
+                f"not {canonical_name(cls)}; its subscribers would reject every message"
+            )
         pub = Publisher(ctx, topic, cls)
         try:
             sent = 0
@@ -88,7 +94,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     cls = _topic_type(ctx, topic)
     waker = Waker(ctx)
-    sub = Subscriber(ctx, topic, cls, waker=waker, queue_size=1000)
+    try:
+        sub = Subscriber(ctx, topic, cls, waker=waker, queue_size=1000)
+    except BaseException:
+        waker.close()
+        raise
     import select
 
     try:

@@ -20,7 +20,8 @@ from attrs import define, field
 
 from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
-from emos.core.rpc import RpcServer
+from emos.core.rpc import CONTROL_FRAME, RpcServer
+from emos.core.wiring import check_system
 from emos.supervisor.heartbeat import HeartbeatMonitor
 from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
@@ -71,6 +72,7 @@ class System:
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"component names must be unique in a system; repeated: {', '.join(dupes)}")
+        check_system(self.components)  # topic types agree, names fit: before anything starts
         self._pristine: dict[int, BaseComponent] = {}
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=2000)
         self.exit_code = EXIT_OK
@@ -151,7 +153,7 @@ class System:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
         self.reaper.install(loop)
-        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor")
+        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor", max_frame=CONTROL_FRAME)
         await self.control.start()
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
         self.root = self._build_root()
@@ -231,14 +233,20 @@ class System:
     def summary(self) -> str:
         """What happened during the run, per component: restarts and why."""
         exits: collections.Counter[tuple[str, str]] = collections.Counter()
+        failed_starts: collections.Counter[str] = collections.Counter()
         for e in self.events:
             if e["event"] == "exit":
                 exits[(e["child"], e.get("reason", "?"))] += 1
+            elif e["event"] == "start_failed":
+                failed_starts[e["child"]] += 1  # restart attempts (or the first start) that never came up
         lines = [f"EMOS run {self.ctx.run_id}: exit code {self.exit_code} ({self.exit_reason})"]
         for c in self.components:
             name = c.component_name
             reasons = ", ".join(f"{n} {r}" for (child, r), n in sorted(exits.items()) if child == name)
-            lines.append(f"  {name:<24} {'restarted after: ' + reasons if reasons else 'no restarts'}")
+            text = "restarted after: " + reasons if reasons else "no restarts"
+            if failed_starts[name]:
+                text += f"; {failed_starts[name]} start(s) failed during start-up"
+            lines.append(f"  {name:<24} {text}")
         escalations = [e for e in self.events if e["event"] == "escalated"]
         for e in escalations:
             lines.append(f"  escalation in {e['supervisor']}: {e.get('detail', '')}")
