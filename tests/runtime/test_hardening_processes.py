@@ -113,3 +113,18 @@ launcher.bringup()
     pids = wait_until(lambda: len(_logged_pids(pid_log)) == 3 and _logged_pids(pid_log), what="3 children")
     system.kill_all()
     wait_until(lambda: not any(_alive(p) for p in pids), timeout=10, what="children to die with the launcher")
+
+
+def test_children_of_threaded_components_die_with_the_run(tmp_path):
+    pid_log = tmp_path / "pids"
+    system = SystemUnderTest(tmp_path, FORKER + """
+c = Forker(component_name="forker")
+launcher = Launcher(multi_processing=False)
+launcher.add_pkg(components=[c])
+launcher.bringup()
+""", env={"PID_LOG": str(pid_log)}).wait_up(components=["forker"])
+    try:
+        pids = wait_until(lambda: len(_logged_pids(pid_log)) == 3 and _logged_pids(pid_log), what="3 children")
+    finally:
+        assert system.stop() == 0
+    wait_until(lambda: not any(_alive(p) for p in pids), timeout=10, what="the threaded component's children to die with the run")
