@@ -133,3 +133,51 @@ def test_serve_models_names_the_resp_port_that_is_busy():
         busy.close()
     assert out.returncode == 1
     assert f"cannot listen for RESP on 127.0.0.1:{port}" in out.stderr, out.stderr
+
+
+def _helpers_of(token: str) -> list[int]:
+    import psutil
+
+    found = []
+    for p in psutil.process_iter():
+        try:
+            if p.environ().get("EMOS_HARDENING_TOKEN") == token and p.status() != psutil.STATUS_ZOMBIE:
+                found.append(p.pid)
+        except psutil.Error:
+            pass
+    return found
+
+
+@pytest.mark.parametrize("mode", ["transport", "component"])
+def test_ctrl_c_at_the_terminal_ends_emos_bench_quietly_with_its_helpers(mode):
+    token = f"bench-{os.getpid()}-{mode}"
+    bench = subprocess.Popen(
+        [sys.executable, "-m", "emos", "bench", "ipc", "--mode", mode, "--sizes", "8", "--messages", "200000", "--transports", "emos"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "EMOS_HARDENING_TOKEN": token},
+    )
+    try:
+        wait_until(lambda: len(_helpers_of(token)) >= 2, timeout=30, what="the benchmark and its helpers")
+        time.sleep(1.0)
+        os.killpg(bench.pid, signal.SIGINT)  # what a terminal's Ctrl-C does: the whole foreground group
+        _, err = bench.communicate(timeout=60)
+    finally:
+        if bench.poll() is None:
+            os.killpg(bench.pid, signal.SIGKILL)
+            bench.wait()
+    assert bench.returncode == 130, err
+    assert "Traceback" not in err, err
+    wait_until(lambda: _helpers_of(token) == [], timeout=15, what="the benchmark's helpers to end")
+
+
+def test_ctrl_c_ends_serve_models_cleanly():
+    serve = _emos("serve", "models", "--port", "0")
+    try:
+        wait_until(lambda: "emos-model-server ready" in serve.stdout.readline(), timeout=60, what="the server")
+        serve.send_signal(signal.SIGINT)
+        _, err = serve.communicate(timeout=30)
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.wait()
+    assert serve.returncode == 0 and "Traceback" not in err, err
