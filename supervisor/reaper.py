@@ -63,6 +63,11 @@ def _children(pid: int) -> list[int]:
         try:
             with open(f"/proc/{pid}/task/{tid}/children") as f:
                 out.extend(int(x) for x in f.read().split())
+        except FileNotFoundError:  # a kernel without CONFIG_PROC_CHILDREN: scan every process
+            try:
+                return [c.pid for c in psutil.Process(pid).children()]
+            except psutil.Error:
+                return []
         except OSError:
             continue
     return out

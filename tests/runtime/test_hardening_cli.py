@@ -39,6 +39,7 @@ def system(tmp_path):
 
 
 def _fifos(system) -> set[str]:
+    """Wake-up FIFOs and their state pages."""
     return {p.name for p in (system.run_dir / "wake").iterdir()}
 
 
@@ -49,7 +50,8 @@ def _segments(system, topic_token: str) -> list[str]:
 def test_sigterm_to_topic_echo_removes_its_wakeup_fifo(system):
     before = _fifos(system)
     echo = _emos("topic", "echo", "/listener/status", "--run", system.run_dir.name)
-    wait_until(lambda: len(_fifos(system)) > len(before), what="the echo's FIFO")
+    # Wait for the FIFO itself (made after its state page): then the echo is past its set-up.
+    wait_until(lambda: any(not n.endswith(".state") for n in _fifos(system) - before), what="the echo's FIFO")
     echo.send_signal(signal.SIGTERM)
     out, err = echo.communicate(timeout=10)
     assert echo.returncode == 143, err
@@ -181,3 +183,16 @@ def test_ctrl_c_ends_serve_models_cleanly():
             serve.kill()
             serve.wait()
     assert serve.returncode == 0 and "Traceback" not in err, err
+
+
+def test_sigterm_at_any_moment_of_topic_echo_leaves_nothing(system):
+    """SIGTERM early, while the echo is still setting up, leaves no half-made FIFO either."""
+    before = _fifos(system)
+    for delay in (0.3, 0.5, 0.7, 0.9):
+        echo = _emos("topic", "echo", "/listener/status", "--run", system.run_dir.name)
+        time.sleep(delay)
+        echo.send_signal(signal.SIGTERM)
+        _, err = echo.communicate(timeout=10)
+        # -15: the signal came before Python set up its handler (and before any FIFO existed).
+        assert echo.returncode in (143, -signal.SIGTERM) and "Traceback" not in err, err
+        assert _fifos(system) == before, delay
