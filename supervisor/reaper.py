@@ -14,18 +14,22 @@ nothing, so:
   terminal's Ctrl-C does), a hang SIGKILL.
 * **Escapees are ours anyway.** A child that leaves the group (``setsid``, ``setpgid``) is still
   a descendant of the launcher, which is a child subreaper: once its parent dies it is
-  re-parented to the launcher. Workers export ``EMOS_WORKER_PID``; an adopted process whose
-  group is a worker's, or whose environment names a worker, belongs to that worker and is
-  killed once that worker is gone. (A process that clears its environment *and* leaves the
-  group is the one case only a cgroup could catch.)
-* **Reaping.** The launcher reaps, five times a second, the adopted processes that ended: the
-  zombies no one else would wait for. It never touches its own direct children (the zygote,
-  and in threaded mode whatever a component started with ``subprocess``), whose owners wait
-  for them.
-* **End of the run.** Every process still carrying the run's id in its environment is killed
-  and reaped before the launcher exits (this also covers threaded mode, where components are
-  threads of the launcher and their children are the launcher's own), and the zygote does the
-  same if the launcher was SIGKILLed.
+  re-parented to the launcher. Workers export ``EMOS_WORKER_PID`` to what they execute; an
+  adopted process whose group is a worker's, or whose environment names a worker, belongs to
+  that worker and is killed once that worker is gone. (A process that leaves the group and
+  does not show the variable in ``/proc/<pid>/environ``, because it cleared its environment or
+  was forked without ``exec``, is killed only at the end of the run: the one case a cgroup
+  would catch earlier.)
+* **Reaping.** The launcher reaps, five times a second and when a worker ends, the adopted
+  processes that ended: the zombies no one else would wait for. (uvloop keeps SIGCHLD for
+  itself.) It never waits for its own direct children (the zygote, and in threaded mode
+  whatever a component started with ``subprocess``), whose owners wait for them.
+* **End of the run.** Every child of the launcher that is neither a zygote nor older than the
+  run is killed and reaped, pass after pass as their own children are re-parented to it. This
+  also covers threaded mode, where components are threads of the launcher and their children
+  are the launcher's own (so there the guarantee holds per run, not per restart).
+* **Launcher SIGKILLed.** Workers get SIGTERM (parent-death signal); the zygote kills the groups
+  of the workers it forked last and the processes that name them in ``EMOS_WORKER_PID``.
 """
 from __future__ import annotations
 
@@ -157,6 +161,7 @@ class OrphanReaper:
 
     def sweep(self) -> None:
         """One pass over our children; cheap (a few /proc reads), safe to call any time."""
+        self._forget_empty_groups()
         protected = set(self.protected()) | self.preexisting
         for pid in _children(os.getpid()):
             if pid in self.live or pid in protected:
@@ -180,6 +185,15 @@ class OrphanReaper:
                     self.killed += 1
                 except ProcessLookupError:
                     pass
+
+    def _forget_empty_groups(self) -> None:
+        """A dead worker's group id is remembered only while processes (zombies included) still
+        carry it: once empty, the number may be reused by a process that is none of ours."""
+        for pgid in self.groups - self.live:
+            try:
+                os.killpg(pgid, 0)
+            except (ProcessLookupError, PermissionError):
+                self.groups.discard(pgid)
 
     def _reap(self, pid: int) -> None:
         try:
