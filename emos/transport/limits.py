@@ -13,6 +13,7 @@ The run id is not known before the run starts, so its longest form is assumed.
 """
 from __future__ import annotations
 
+import functools
 import os
 
 from emos.transport.context import SHM_PREFIX, encode_name, runtime_root
@@ -30,12 +31,23 @@ _GENERATION_DIGITS = 5
 ANONYMOUS_PUBLISHER_MAX = 3 + _PID_DIGITS + 1 + 16
 
 
+@functools.lru_cache(maxsize=8)
+def _root_bytes(xdg_runtime_dir: str | None) -> int:
+    return len(os.fsencode(str(runtime_root())))
+
+
+def _runtime_root_bytes() -> int:
+    # Cached per $XDG_RUNTIME_DIR (what runtime_root() depends on): names are checked on hot
+    # paths too (a publish by topic name), and runtime_root() makes and stats a directory.
+    return _root_bytes(os.environ.get("XDG_RUNTIME_DIR"))
+
+
 def socket_name_limit(subdir: str = "ctl") -> int:
     """Longest encoded name whose socket ``<run dir>/<subdir>/<name>.sock`` fits ``sun_path``.
 
     Includes the temporary name the server binds first, ``.<name>.sock.<pid>``.
     """
-    fixed = len(os.fsencode(str(runtime_root()))) + 1 + RUN_ID_MAX + 1 + len(subdir) + 1
+    fixed = _runtime_root_bytes() + 1 + RUN_ID_MAX + 1 + len(subdir) + 1
     return SUN_PATH_MAX - fixed - len(".") - len(".sock") - len(".") - _PID_DIGITS
 
 
@@ -50,10 +62,17 @@ def segment_name_limit(publisher_id: str | None = None) -> int:
     :func:`component_name_limit`) or an anonymous one.
     """
     if publisher_id is None:
-        pub_len = max(component_name_limit(), ANONYMOUS_PUBLISHER_MAX)
-    else:
-        pub_len = len(encode_name(publisher_id))
-    fixed = len(SHM_PREFIX) + RUN_ID_MAX + 1 + 1 + pub_len + len(".g") + _GENERATION_DIGITS
+        return _any_publisher_limit(os.environ.get("XDG_RUNTIME_DIR"))
+    return _topic_limit(len(encode_name(publisher_id)))
+
+
+@functools.lru_cache(maxsize=8)
+def _any_publisher_limit(xdg_runtime_dir: str | None) -> int:
+    return _topic_limit(max(component_name_limit(), ANONYMOUS_PUBLISHER_MAX))
+
+
+def _topic_limit(publisher_bytes: int) -> int:
+    fixed = len(SHM_PREFIX) + RUN_ID_MAX + 1 + 1 + publisher_bytes + len(".g") + _GENERATION_DIGITS
     return NAME_MAX - fixed
 
 
@@ -67,8 +86,12 @@ def check_component_name(name: str) -> None:
 
 
 def check_topic_name(name: str, publisher_id: str | None = None) -> None:
-    encoded = len(encode_name(name))
+    if 3 * len(name) <= _TOPIC_FLOOR and (publisher_id is None or 3 * len(publisher_id) <= _PUBLISHER_CEILING):
+        return  # fits whatever the runtime root (hot path: no lookups)
     limit = segment_name_limit(publisher_id)
+    if 3 * len(name) <= limit:  # encoding at most triples a name: fits without encoding it
+        return
+    encoded = len(encode_name(name))
     if encoded > limit:
         who = f"publisher {publisher_id!r}" if publisher_id else "any publisher"
         raise ValueError(
@@ -86,3 +109,9 @@ def check_socket_name(kind: str, name: str, subdir: str = "srv") -> None:
             f"{kind} name {name[:32]!r}... is {encoded} bytes as a file name; at most {limit} fit: its socket "
             f"{runtime_root()}/<run id>/{subdir}/<name>.sock must fit the {SUN_PATH_MAX + 1}-byte AF_UNIX path limit (sun_path)"
         )
+
+
+# The smallest topic limit any runtime root allows (a 1-byte root gives the longest component
+# names, hence the longest publisher ids): names up to a third of it never need checking.
+_PUBLISHER_CEILING = max(SUN_PATH_MAX - (1 + 1 + RUN_ID_MAX + 1 + len("ctl") + 1) - len("..sock.") - _PID_DIGITS, ANONYMOUS_PUBLISHER_MAX)
+_TOPIC_FLOOR = _topic_limit(_PUBLISHER_CEILING)
