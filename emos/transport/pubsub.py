@@ -335,7 +335,7 @@ class Subscriber:
             del self.sources[pub]
 
     def _reject(self, segment: str, pub: str, type_name: str | None) -> None:
-        count, logged_at, type_name = self._rejected.get(segment, (0, 0.0, type_name or "?"))
+        count, logged_at, type_name = self._rejected.get(segment, (0, float("-inf"), type_name or "?"))
         count += 1
         now = time.monotonic()
         if now - logged_at >= REJECT_LOG_PERIOD_S:
