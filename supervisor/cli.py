@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 
 # name -> (module, one-line help). Modules are imported only when their command runs.
@@ -70,7 +72,28 @@ def _chosen_path(argv: list[str]) -> list[str]:
     return words
 
 
+def _terminated(signum: int, frame: object) -> None:
+    # SIGTERM unwinds like Ctrl-C, so every command's `finally` releases what it holds (a
+    # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM.
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; Ctrl-C (130), a closed output pipe (141) and SIGTERM (143) end it quietly."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`emos topic echo ... | head`). Point stdout at
+        # /dev/null so the interpreter's final flush does not complain a second time.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
+
+
+def _main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     # Resolve the chosen plug-in first, then let it add its own arguments and parse again.
@@ -81,6 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     if entry is None:
         parser.parse_args(argv)  # prints usage or help and exits
         return 2
+    if entry[0] != COMMANDS["run"][0]:  # `emos run` hands signals to the supervisor instead
+        signal.signal(signal.SIGTERM, _terminated)
     module = importlib.import_module(entry[0])
     # Rebuild a parser whose chosen leaf gets the plug-in's arguments.
     leaf = argparse.ArgumentParser(prog="emos " + " ".join(words[:2] if table else words[:1]), description=entry[1])

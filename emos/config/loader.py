@@ -178,3 +178,32 @@ def load_into(config: Any, config_file: str | Path, component_name: str) -> dict
     apply_mapping(config, common, str(config_file), ignore_unknown=True)
     apply_mapping(config, own, str(config_file), path=component_name)
     return topics
+
+
+def section_problems(data: dict[str, Any], component_names: list[str], source: str) -> list[str]:
+    """Sections of a config file that no component will read, each with a hint.
+
+    A misspelled component section, or a parameter written at the top level instead of under
+    ``/**`` or a component, would otherwise be ignored without a word.
+    """
+    import difflib
+
+    problems = []
+    names = sorted(component_names)
+    for key, value in data.items():
+        if key == COMMON_SECTION:
+            continue
+        name = str(key).lstrip("/")
+        if name in component_names:
+            continue
+        if not isinstance(value, dict):
+            problems.append(
+                f"{source}: top-level key {key!r} holds a {type(value).__name__} ({value!r}), not a section; "
+                f"parameters go under {COMMON_SECTION!r} or under a component's name ({', '.join(names)})"
+            )
+            continue
+        close = difflib.get_close_matches(name, names, n=3)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}?" if close else f"components: {', '.join(names)}"
+        problems.append(f"{source}: section {key!r} matches no component of this system and is ignored; {hint}")
+    return problems
+

@@ -21,7 +21,7 @@ from emos.config.loader import ConfigError
 from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
-from emos.core.rpc import AsyncRpcClient, RpcServer
+from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
 from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs import codec
@@ -117,7 +117,7 @@ class Node:
         self._waker = Waker(self.ctx, spin_us=self.wake_spin_us)
         loop.add_reader(self._waker.fd, self._on_wake)
         self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
-        self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name)
+        self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name, max_frame=CONTROL_FRAME)
         await self._control.start()
         self._heartbeat = _Timer(loop, 1.0 / self.component.config.heartbeat_rate, self._heartbeat_tick)
         self.publish_status()
