@@ -1,0 +1,110 @@
+"""``UIComponent``: the web page of a recipe, as a supervised component of its own.
+
+It subscribes to the topics the page shows (each message is handed to its hub, see
+:mod:`emos.actors.ui.streams`), publishes what the user enters on the page, and serves both over
+HTTP and a websocket from its own event loop. ``Launcher.enable_ui`` creates it.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+from emos.actors.ui.config import UIConfig
+from emos.actors.ui.widgets import output_kind
+from emos.core.component import BaseComponent
+from emos.io.topic import Topic
+
+
+class UIComponent(BaseComponent):
+    def __init__(
+        self,
+        ui_inputs: Sequence[Topic] = (),
+        ui_outputs: Sequence[Topic] = (),
+        components: Sequence[BaseComponent] = (),
+        config: UIConfig | None = None,
+        component_name: str = "ui",
+    ) -> None:
+        """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
+        ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers."""
+        config = config or UIConfig()
+        if not isinstance(config, UIConfig):
+            raise TypeError(f"UIComponent config must be a UIConfig, got {type(config).__name__}")
+        shown, controls = list(ui_outputs), list(ui_inputs)
+        both = sorted({t.name for t in shown} & {t.name for t in controls})
+        if both:
+            # The page would receive its own messages back; say so instead of looping.
+            raise ValueError(f"enable_ui: topic(s) {', '.join(both)} are both inputs and outputs of the UI")
+        super().__init__(component_name=component_name, inputs=shown, outputs=controls, config=config,
+                         trigger=shown if shown else 1.0)
+        self.config: UIConfig
+        self._settings_of = {c.component_name: c.config for c in components if c is not self}
+        self._server: Any = None
+        self._start_task: Any = None
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        from emos.actors.ui.server import UIServer
+        from emos.actors.ui.streams import make_hub
+        from emos.core.node import control_socket
+
+        node = self.node
+        hubs, first_map = [], True
+        for t in self.in_topics:
+            kind = output_kind(t.msg_type.__name__)
+            hubs.append(make_hub(t.name, t.msg_type.__name__, kind, self.config, overlay=kind == "map" and not first_map))
+            first_map = first_map and kind != "map"
+        self._hubs = {h.topic: h for h in hubs}
+        self._server = UIServer(
+            self.config, hubs, {t.name: t.msg_type.__name__ for t in self.out_topics}, self._settings_of,
+            publish=self.publish, control_socket=lambda name: Path(control_socket(node.ctx, name)),
+            supervisor_socket=node.supervisor_socket, own_name=self.component_name,
+        )
+        self._server.bind()  # a taken port fails configure, with the address in the message
+
+    def custom_on_activate(self) -> None:
+        import asyncio
+
+        if self._start_task is None:
+            self._start_task = asyncio.ensure_future(self._serve())
+
+    async def _serve(self) -> None:
+        try:
+            await self._server.start()
+        except Exception as exc:
+            self.get_logger().error("[%s] the web server did not start: %s", self.component_name, exc)
+            self.health_status.set_fail_component(component_names=[self.component_name], message=f"web server: {exc}")
+            return
+        self.get_logger().info("[%s] page at %s", self.component_name, page_url(self.config))
+
+    def custom_on_shutdown(self) -> None:
+        self._stop_server()
+
+    def custom_on_cleanup(self) -> None:
+        self._stop_server()
+
+    def _stop_server(self) -> None:
+        import asyncio
+
+        if self._server is not None:
+            server, self._server = self._server, None
+            server.close_listener()
+            try:
+                asyncio.ensure_future(server.stop())
+            except RuntimeError:  # no loop any more: the listener is closed, the rest goes with the process
+                pass
+        self._start_task = None
+
+    # -- every shown message -----------------------------------------------------------------------
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+        if msg is not None and topic is not None:
+            hub = self._hubs.get(topic.name)
+            if hub is not None:
+                hub.push(msg, time.time_ns())
+        self.health_status.set_healthy()
+
+
+def page_url(config: UIConfig) -> str:
+    host = config.host if config.host not in ("0.0.0.0", "::") else "<this machine's address>"
+    host = f"[{host}]" if ":" in host and not host.startswith("<") else host
+    return f"http://{host}:{config.port}/" + (f"?token={config.token}" if config.token else "")
