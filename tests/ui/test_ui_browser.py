@@ -186,3 +186,35 @@ def test_system_view_and_the_ui_coming_back_after_a_kill(ui_system, browser):
     wait_for(lambda: stats(browser)["connects"] > connects, timeout=30, what="the page reconnecting")
     before = stats(browser)["frames"]["/camera"]
     wait_for(lambda: stats(browser)["frames"]["/camera"] > before + 3, what="frames after the reconnect")
+
+
+def test_a_page_that_never_confirms_gets_no_backlog(ui_system):
+    """A stalled page is sent at most ``frames_in_flight`` frames while the camera goes on."""
+    import asyncio
+
+    import aiohttp
+
+    port = ui_system[0]
+
+    async def scenario() -> tuple[int, int, int]:
+        async with aiohttp.ClientSession() as session:
+            async def camera_received() -> int:
+                async with session.get(f"http://127.0.0.1:{port}/api/stats") as r:
+                    return next(h["received"] for h in (await r.json())["hubs"] if h["topic"] == "/camera")
+
+            async with session.ws_connect(f"http://127.0.0.1:{port}/ws") as ws:
+                before = await camera_received()
+                frames = 0
+                deadline = asyncio.get_running_loop().time() + 2.0
+                while (left := deadline - asyncio.get_running_loop().time()) > 0:
+                    try:
+                        msg = await ws.receive(timeout=left)
+                    except asyncio.TimeoutError:
+                        break
+                    if msg.type == aiohttp.WSMsgType.BINARY and b'"/camera"' in msg.data[:200]:
+                        frames += 1  # never acknowledged
+                return frames, before, await camera_received()
+
+    frames, before, after = asyncio.run(scenario())
+    assert 1 <= frames <= 2, frames  # UIConfig.frames_in_flight defaults to 2
+    assert after - before >= 10, (before, after)  # the topic kept flowing into the UI meanwhile
