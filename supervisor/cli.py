@@ -15,6 +15,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("emos.supervisor.cli_run", "run a recipe script under the supervisor"),
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
+    "ls": ("emos.supervisor.cli_ls", "list the recipes on this machine"),
+    "info": ("emos.supervisor.cli_info", "show the sensors and topics a recipe needs, without running it"),
+    "logs": ("emos.supervisor.cli_logs", "list the logs of past runs, or show one"),
+    "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
+    "version": ("emos.supervisor.cli_version", "show the EMOS version"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.

@@ -63,7 +63,7 @@ def ui_system(tmp_path_factory):
     """The test recipe running under `emos run`: (port, recorder output file, process)."""
     tmp = tmp_path_factory.mktemp("ui")
     port, out = free_port(), tmp / "received.jsonl"
-    proc = start_recipe(HERE / "ui_recipe.py", {"EMOS_UI_TEST_PORT": str(port), "EMOS_UI_TEST_OUT": str(out)}, tmp / "recipe.log")
+    proc = start_recipe(HERE / "ui_recipe.py", {"EMOS_UI_TEST_PORT": str(port), "EMOS_UI_TEST_OUT": str(out), "EMOS_HOME": str(tmp / "home")}, tmp / "recipe.log")
     try:
         wait_http(port, proc=proc)
         yield port, out, proc
