@@ -30,6 +30,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),
+    "ui": ("emos.actors.ui.bench", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
 }
 
 # `emos serve NAME`: long-running development services.
