@@ -218,3 +218,24 @@ def test_a_page_that_never_confirms_gets_no_backlog(ui_system):
     frames, before, after = asyncio.run(scenario())
     assert 1 <= frames <= 2, frames  # UIConfig.frames_in_flight defaults to 2
     assert after - before >= 10, (before, after)  # the topic kept flowing into the UI meanwhile
+
+
+def test_topic_plot_records_a_field_of_the_running_system(ui_system, tmp_path):
+    """`emos topic plot` (here against the UI test system): a CSV of odometry x, and a clear
+    error for a field the message does not have."""
+    import subprocess
+    import sys
+    import urllib.request
+
+    port = ui_system[0]
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/system", timeout=10) as r:
+        run_id = json.loads(r.read())["run_id"]
+    out = tmp_path / "odom.csv"
+    cmd = [sys.executable, "-m", "emos.supervisor.cli", "topic", "plot", "--run", run_id, "/odom"]
+    done = subprocess.run(cmd + ["pose.pose.position.x", "--duration", "2.5", "--output", str(out)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    rows = out.read_text().splitlines()
+    assert rows[0] == "t_s,pose.pose.position.x" and len(rows) >= 2
+    assert float(rows[1].split(",")[1]) == 1.0  # the test recipe's robot stands at x = 1
+    bad = subprocess.run(cmd + ["pose.pose.positon.x", "--duration", "2.5", "--output", str(out)], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "Pose has no field 'positon'" in bad.stderr
