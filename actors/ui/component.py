@@ -6,6 +6,8 @@ HTTP and a websocket from its own event loop. ``Launcher.enable_ui`` creates it.
 """
 from __future__ import annotations
 
+import os
+import threading
 import time
 from pathlib import Path
 from typing import Any, Sequence
@@ -49,6 +51,9 @@ class UIComponent(BaseComponent):
         from emos.core.node import control_socket
 
         node = self.node
+        if self.config.nice and not getattr(self, "_reniced", False) and threading.current_thread() is threading.main_thread():
+            self._reniced = True
+            os.nice(self.config.nice)  # our own process (a threaded UI would renice the launcher: not then)
         hubs, first_map = [], True
         for t in self.in_topics:
             kind = output_kind(t.msg_type.__name__)

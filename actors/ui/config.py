@@ -55,5 +55,9 @@ class UIConfig(BaseComponentConfig):
     pose_rate: float = field(default=20.0, validator=base_validators.in_range(min_value=0.5, max_value=100.0))
     """Maximum rate (Hz) at which latest-value widgets (poses, paths, messages) are refreshed."""
 
+    nice: int = field(default=5, validator=base_validators.in_range(min_value=0, max_value=19))
+    """Scheduling niceness added to the UI's process: the page is best effort, so when the CPU is
+    short the robot's components run first and the page shows fewer frames."""
+
     title: str = field(default="EMOS")
     """Page title (the recipe's name by default)."""
