@@ -14,6 +14,7 @@ from typing import Any, Sequence
 
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.widgets import output_kind
+from emos.core.action_input import ActionInput
 from emos.core.component import BaseComponent
 from emos.io.topic import Topic
 
@@ -24,11 +25,13 @@ class UIComponent(BaseComponent):
         ui_inputs: Sequence[Topic] = (),
         ui_outputs: Sequence[Topic] = (),
         components: Sequence[BaseComponent] = (),
+        ui_actions: Sequence[ActionInput] = (),
         config: UIConfig | None = None,
         component_name: str = "ui",
     ) -> None:
         """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
-        ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers."""
+        ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers.
+        ``ui_actions``: actions the page sends goals to (``component.ui_main_action_input``)."""
         config = config or UIConfig()
         if not isinstance(config, UIConfig):
             raise TypeError(f"UIComponent config must be a UIConfig, got {type(config).__name__}")
@@ -41,6 +44,10 @@ class UIComponent(BaseComponent):
                          trigger=shown if shown else 1.0)
         self.config: UIConfig
         self._settings_of = {c.component_name: c.config for c in components if c is not self}
+        for a in ui_actions:
+            if not isinstance(a, ActionInput):
+                raise TypeError(f"UIComponent ui_actions must be ActionInput objects, got {type(a).__name__}")
+        self._actions = {a.name: a for a in ui_actions}
         self._server: Any = None
         self._start_task: Any = None
 
@@ -49,6 +56,7 @@ class UIComponent(BaseComponent):
         from emos.actors.ui.server import UIServer
         from emos.actors.ui.streams import make_hub
         from emos.core.node import control_socket
+        from emos.core.services import service_socket
 
         node = self.node
         if self.config.nice and not getattr(self, "_reniced", False) and threading.current_thread() is threading.main_thread():
@@ -64,6 +72,7 @@ class UIComponent(BaseComponent):
             self.config, hubs, {t.name: t.msg_type.__name__ for t in self.out_topics}, self._settings_of,
             publish=self.publish, control_socket=lambda name: Path(control_socket(node.ctx, name)),
             supervisor_socket=node.supervisor_socket, own_name=self.component_name,
+            actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)),
         )
         self._server.bind()  # a taken port fails configure, with the address in the message
 

@@ -105,3 +105,54 @@ def message_from_upload(topic: str, type_name: str, body: bytes) -> Any:
             raise InputRefused(f"{topic}: cannot read the uploaded picture ({exc})") from None
         return cls.from_numpy(np.ascontiguousarray(rgb), encoding="rgb8", header=Header(stamp=Time.now()))
     raise InputRefused(f"{topic}: {type_name} does not take uploads")
+
+
+_GOAL_TYPES = ("PoseStamped", "PointStamped", "Pose", "Point")
+
+
+def goal_field(goal_cls: type) -> str | None:
+    """The field of an action goal a click on the map fills: the goal itself if it is a pose or a
+    point, else its first pose or point field (``None`` if it has none)."""
+    import attrs
+
+    if goal_cls.__name__ in _GOAL_TYPES:
+        return ""
+    for f in attrs.fields(goal_cls):
+        cls = (f.metadata or {}).get("cls")
+        cls = cls() if callable(cls) and not isinstance(cls, type) else cls
+        if isinstance(cls, type) and cls.__name__ in _GOAL_TYPES:
+            return f.name
+    return None
+
+
+def _pose_like(cls: type, topic: str, value: dict[str, Any]) -> Any:
+    name = cls.__name__
+    if name in ("PoseStamped", "PointStamped"):
+        return message_from_page(topic, name, value)
+    stamped = message_from_page(topic, "PoseStamped", value)
+    return stamped.pose if name == "Pose" else stamped.pose.position
+
+
+def goal_from_page(action: str, goal_cls: type, value: Any) -> Any:
+    """An action goal from the page: a map click ``{x, y[, yaw]}`` fills the goal's pose or point
+    field; anything else is the goal's fields as an object."""
+    import attrs
+
+    if isinstance(value, dict) and set(value) <= {"x", "y", "yaw", "frame_id"} and {"x", "y"} <= set(value):
+        name = goal_field(goal_cls)
+        if name == "":
+            return _pose_like(goal_cls, action, value)
+        if name is not None:
+            field = next(f for f in attrs.fields(goal_cls) if f.name == name)
+            cls = field.metadata["cls"]
+            cls = cls() if callable(cls) and not isinstance(cls, type) else cls
+            try:
+                return goal_cls(**{name: _pose_like(cls, action, value)})
+            except TypeError as exc:
+                raise InputRefused(f"{action}: {goal_cls.__name__} needs more than a point: {exc}") from None
+    if not isinstance(value, dict):
+        raise InputRefused(f"{action}: expected the fields of {goal_cls.__name__} as an object, got {type(value).__name__}")
+    try:
+        return codec.from_builtin(goal_cls, value)
+    except (TypeError, ValueError) as exc:
+        raise InputRefused(f"{action}: {exc}") from None

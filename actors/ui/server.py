@@ -14,6 +14,7 @@ from typing import Any, Callable
 from aiohttp import WSMsgType, web
 
 from emos.actors.ui import settings as settings_mod
+from emos.actors.ui.actions import ActionRunner
 from emos.actors.ui.auth import SECURITY_HEADERS, make_middleware
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
@@ -25,6 +26,10 @@ from emos.msgs.registry import resolve
 log = logging.getLogger("emos.ui")
 
 STATIC = {"app.js": "application/javascript", "app.css": "text/css", "index.html": "text/html", "favicon.svg": "image/svg+xml"}
+
+
+def _dumps(obj: Any) -> str:
+    return json.dumps(obj, default=str)
 
 
 def bind_socket(host: str, port: int) -> socket.socket:
@@ -45,11 +50,12 @@ def bind_socket(host: str, port: int) -> socket.socket:
 class UIServer:
     def __init__(self, config: UIConfig, hubs: list[Hub], inputs: dict[str, str], components: dict[str, Any],
                  publish: Callable[[str, Any], None], control_socket: Callable[[str], Path], supervisor_socket: str | None,
-                 own_name: str):
+                 own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None):
         self.config, self.hubs, self.inputs = config, hubs, inputs
         self.components = components  # name -> config object (its class drives the form)
         self.publish, self.control_socket, self.own_name = publish, control_socket, own_name
         self.system = SystemView(supervisor_socket, control_socket, own_name)
+        self.actions = ActionRunner(actions or {}, action_socket or (lambda name: Path(name)))
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ui-encode")
         self.clients: set[Client] = set()
         self._closed = asyncio.Event()
@@ -88,6 +94,7 @@ class UIServer:
 
     async def stop(self) -> None:
         self.close_listener()
+        self.actions.close()
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
@@ -114,6 +121,7 @@ class UIServer:
             if entry["kind"] == "form":
                 entry["fields"] = describe_fields(resolve(type_name))
             inputs.append(entry)
+        inputs += self.actions.describe()
         return web.json_response({"title": self.config.title, "outputs": [h.describe() for h in self.hubs], "inputs": inputs,
                                   "components": sorted(self.components), "ui": self.own_name})
 
@@ -145,6 +153,10 @@ class UIServer:
                     client.ack(str(request_msg.get("topic")))
                 elif op == "publish":
                     await ws.send_json(self._publish_from_page(request_msg))
+                elif op == "goal":
+                    await ws.send_json(self.actions.send(request_msg, lambda m: ws.send_json(m, dumps=_dumps)))
+                elif op == "cancel":
+                    await ws.send_json(self.actions.cancel(request_msg))
                 else:
                     await ws.send_json({"op": "error", "error": f"unknown op {op!r}"})
                 if sender.done():

@@ -124,6 +124,21 @@ def test_click_on_the_map_publishes_a_goal_at_that_point(ui_system, browser):
     browser.save_screenshot(str(ARTIFACTS / "map_goal.png"))
 
 
+def test_action_goal_from_the_page_shows_feedback_and_result(ui_system, browser):
+    from selenium.webdriver.common.by import By
+
+    _, out, _ = ui_system
+    card = browser.find_element(By.CSS_SELECTOR, "[data-input='navigator/action']")
+    x, y = card.find_elements(By.CSS_SELECTOR, "input[type=number]")
+    x.send_keys("1.25")
+    y.send_keys("-0.5")
+    card.find_element(By.CSS_SELECTOR, "button[data-send='navigator/action']").click()
+    status = card.find_element(By.CSS_SELECTOR, "[data-action-status]")
+    wait_for(lambda: status.get_attribute("data-state") == "succeeded", what="the action's result")
+    assert "reached 1.25 -0.50" in status.text
+    assert received(out, "navigate") == [[1.25, -0.5]]
+
+
 def test_wrong_input_type_is_refused_with_a_message(ui_system, browser):
     _, out, _ = ui_system
     result = browser.execute_async_script("""

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from emos import BaseComponent, Launcher, Topic
-from emos.msgs import Image, MapMetaData, OccupancyGrid, Odometry, String
+from emos.msgs import Float32, Image, MapMetaData, OccupancyGrid, Odometry, PoseStamped, String
 from emos.msgs.std import Header, Time
 
 OUT = os.environ["EMOS_UI_TEST_OUT"]
@@ -64,11 +64,27 @@ class Recorder(BaseComponent):
         self.health_status.set_healthy()
 
 
+class Navigator(BaseComponent):
+    """An action server: goal a pose, feedback the distance left, result a sentence."""
+
+    main_action_type = (PoseStamped, Float32, String)
+
+    def _main_action_callback(self, goal_handle):
+        p = goal_handle.goal.pose.position
+        for left in (2.0, 1.0):
+            goal_handle.publish_feedback(Float32(data=left))
+            time.sleep(0.05)
+        with open(OUT, "a") as f:
+            f.write(json.dumps({"topic": "navigate", "value": [p.x, p.y], "t": time.time()}) + "\n")
+        return String(data=f"reached {p.x:.2f} {p.y:.2f}")
+
+
+navigator = Navigator(component_name="navigator", run_type="ActionServer")
 cam = Camera(component_name="camera", outputs=[camera], trigger=1 / 30)
 world = World(component_name="world", outputs=[grid, odom], trigger=0.5)
 recorder = Recorder(component_name="recorder", inputs=[question, goal, estop], outputs=[answer], trigger=[question, goal, estop])
 
 launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[cam, world, recorder])
-launcher.enable_ui(inputs=[question, goal, estop], outputs=[camera, grid, odom, answer], port=PORT)
+launcher.add_pkg(components=[cam, world, recorder, navigator])
+launcher.enable_ui(inputs=[question, goal, estop, navigator.ui_main_action_input], outputs=[camera, grid, odom, answer], port=PORT)
 launcher.bringup()

@@ -17,7 +17,7 @@ const el = (tag, attrs = {}, ...children) => {
 // Measurements the benchmark and the tests read.
 window.emosStats = { frames: {}, latencies: [], messages: 0, connects: 0, published: [] };
 
-const state = { layout: null, ws: null, widgets: {}, map: null, requests: new Map(), nextId: 1 };
+const state = { layout: null, ws: null, widgets: {}, map: null, requests: new Map(), nextId: 1, actions: new Map() };
 
 function toast(text, good) {
   const t = $("#toast");
@@ -279,7 +279,8 @@ async function sendInput(topic, value) {
   const id = state.nextId++;
   if (!state.ws || state.ws.readyState !== WebSocket.OPEN) { toast("not connected to the robot", false); return false; }
   const done = new Promise(resolve => state.requests.set(id, resolve));
-  state.ws.send(JSON.stringify({ op: "publish", id, topic, value }));
+  const op = state.actions.has(topic) ? "goal" : "publish";
+  state.ws.send(JSON.stringify({ op, id, topic, value }));
   const res = await done;
   window.emosStats.published.push({ topic, ok: res.ok, error: res.error });
   if (!res.ok) toast(res.error, false);
@@ -300,6 +301,26 @@ function buildInput(inp, hasMap) {
   } else if (inp.kind === "number") {
     const box = el("input", { type: "number", step: "any", value: "0" });
     c.append(box, el("div", { class: "row" }, el("button", { class: "act", onclick: () => sendInput(inp.topic, Number(box.value)) }, "Send")));
+  } else if (inp.kind === "action") {
+    const status = el("div", { class: "muted", "data-action-status": inp.topic }, "no goal sent yet");
+    state.actions.set(inp.topic, status);
+    if (inp.click) {
+      const x = el("input", { type: "number", step: "any", placeholder: "x (m)" }), y = el("input", { type: "number", step: "any", placeholder: "y (m)" });
+      c.append(el("div", { class: "muted" }, hasMap ? "Click on the map, or enter a goal:" : "Enter a goal in map coordinates:"),
+        el("div", { class: "row" }, x, y),
+        el("div", { class: "row" }, el("button", { class: "act", "data-send": inp.topic, onclick: () => sendInput(inp.topic, { x: Number(x.value), y: Number(y.value) }) }, "Send goal"),
+          el("button", { class: "act secondary", onclick: () => cancelGoal(inp.topic) }, "Cancel")));
+    } else {
+      const initial = {};
+      for (const f of inp.fields || []) if (f.default !== undefined) initial[f.name] = f.default;
+      const box = el("textarea", { rows: 6 });
+      box.value = JSON.stringify(initial, null, 1);
+      c.append(box, el("div", { class: "row" }, el("button", { class: "act", onclick: () => {
+        let v; try { v = JSON.parse(box.value); } catch (e) { toast(`${inp.topic}: not valid JSON (${e.message})`, false); return; }
+        sendInput(inp.topic, v);
+      } }, "Send goal"), el("button", { class: "act secondary", onclick: () => cancelGoal(inp.topic) }, "Cancel")));
+    }
+    c.append(status);
   } else if (inp.kind === "goal") {
     const x = el("input", { type: "number", step: "any", placeholder: "x (m)" }), y = el("input", { type: "number", step: "any", placeholder: "y (m)" });
     c.append(el("div", { class: "muted" }, hasMap ? "Click on the map, or enter a goal:" : "Enter a goal in map coordinates:"),
@@ -327,6 +348,15 @@ function buildInput(inp, hasMap) {
   }
 }
 
+async function cancelGoal(topic) {
+  const id = state.nextId++;
+  if (!state.ws || state.ws.readyState !== WebSocket.OPEN) return;
+  const done = new Promise(resolve => state.requests.set(id, resolve));
+  state.ws.send(JSON.stringify({ op: "cancel", id, topic }));
+  const res = await done;
+  if (!res.ok) toast(res.error, false);
+}
+
 // ------------------------------------------------------------------ connection
 function ack(topic) { if (state.ws && state.ws.readyState === WebSocket.OPEN) state.ws.send(JSON.stringify({ op: "ack", topic })); }
 
@@ -348,6 +378,11 @@ function connect() {
       const msg = JSON.parse(ev.data);
       if (msg.op === "result") { const r = state.requests.get(msg.id); state.requests.delete(msg.id); if (r) r(msg); return; }
       if (msg.op === "error") { toast(msg.error, false); return; }
+      if (msg.op === "action") {
+        const status = state.actions.get(msg.topic);
+        if (status) { status.textContent = `${msg.state}: ${typeof msg.value === "string" ? msg.value : JSON.stringify(msg.value)}`; status.dataset.state = msg.state; }
+        return;
+      }
       const w = state.widgets[msg.topic];
       if (!w) return;
       if (msg.op === "log") w.log(msg); else if (msg.op === "latest") w.latest(msg);
@@ -468,7 +503,7 @@ async function start() {
   state.layout = layout;
   document.title = layout.title;
   $("#title").textContent = layout.title.replace(/^EMOS\s*·?\s*/, "");
-  const goalInputs = layout.inputs.filter(i => i.kind === "goal");
+  const goalInputs = layout.inputs.filter(i => i.kind === "goal" || (i.kind === "action" && i.click));
   const mapOuts = layout.outputs.filter(o => ["map", "pose", "path"].includes(o.kind));
   const hasMap = mapOuts.some(o => o.kind === "map");
   if (hasMap) {
