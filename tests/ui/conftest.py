@@ -19,7 +19,9 @@ ARTIFACTS = Path(os.environ.get("EMOS_TEST_ARTIFACTS", ROOT / "test-artifacts"))
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 CHROME_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=1400,1000")
+                "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=1400,1000",
+                # A fake microphone (a beep), allowed without a prompt: the page's recorder is tested.
+                "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream")
 
 
 def free_port() -> int:

@@ -97,6 +97,17 @@ def test_bool_buttons_publish(ui_system, browser):
     assert wait_for(lambda: received(out, "/estop") == [True], what="True on /estop")
 
 
+def test_microphone_recording_reaches_the_audio_topic(ui_system, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    _, out, _ = ui_system
+    button = browser.find_element(By.CSS_SELECTOR, "button[data-record='/voice']")
+    ActionChains(browser).click_and_hold(button).pause(1.0).release().perform()
+    sizes = wait_for(lambda: received(out, "/voice"), what="a recording on /voice")
+    assert sizes[-1] >= 8000 and sizes[-1] % 2 == 0, sizes  # about a second of 16 kHz 16-bit PCM
+
+
 def test_click_on_the_map_publishes_a_goal_at_that_point(ui_system, browser):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By

@@ -23,6 +23,7 @@ question = Topic(name="question", msg_type="String")
 answer = Topic(name="answer", msg_type="String")
 goal = Topic(name="goal", msg_type="PoseStamped")
 estop = Topic(name="estop", msg_type="Bool")
+voice = Topic(name="voice", msg_type="Audio")
 
 RES, W, H = 0.05, 200, 160  # 10 m x 8 m; origin (-2, -1)
 
@@ -55,6 +56,8 @@ class Recorder(BaseComponent):
         if msg is not None:
             if topic.name == "/goal":
                 value = [msg.pose.position.x, msg.pose.position.y, msg.header.frame_id]
+            elif topic.name == "/voice":
+                value = len(msg.data)
             else:
                 value = msg.data
             with open(OUT, "a") as f:
@@ -82,9 +85,9 @@ class Navigator(BaseComponent):
 navigator = Navigator(component_name="navigator", run_type="ActionServer")
 cam = Camera(component_name="camera", outputs=[camera], trigger=1 / 30)
 world = World(component_name="world", outputs=[grid, odom], trigger=0.5)
-recorder = Recorder(component_name="recorder", inputs=[question, goal, estop], outputs=[answer], trigger=[question, goal, estop])
+recorder = Recorder(component_name="recorder", inputs=[question, goal, estop, voice], outputs=[answer], trigger=[question, goal, estop, voice])
 
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[cam, world, recorder, navigator])
-launcher.enable_ui(inputs=[question, goal, estop, navigator.ui_main_action_input], outputs=[camera, grid, odom, answer], port=PORT)
+launcher.enable_ui(inputs=[question, goal, estop, voice, navigator.ui_main_action_input], outputs=[camera, grid, odom, answer], port=PORT)
 launcher.bringup()

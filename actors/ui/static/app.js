@@ -330,12 +330,17 @@ function buildInput(inp, hasMap) {
     const file = el("input", { type: "file", accept: inp.kind === "audio" ? "audio/wav" : "image/*" });
     const upload = async () => {
       if (!file.files.length) return;
-      const res = await fetch("/api/upload" + inp.topic, { method: "POST", body: file.files[0] });
-      const body = await res.json();
-      body.ok ? toast(`sent to ${inp.topic}`, true) : toast(body.error, false);
+      await uploadTo(inp.topic, file.files[0]);
     };
     c.append(el("div", { class: "muted" }, inp.kind === "audio" ? "WAV, 16 kHz mono 16-bit" : "a picture file"), file,
       el("div", { class: "row" }, el("button", { class: "act", onclick: upload }, "Upload")));
+    if (inp.kind === "audio") {
+      const rec = el("button", { class: "act secondary", "data-record": inp.topic }, "Hold to talk");
+      const mic = microphone(inp.topic, rec);
+      rec.addEventListener("pointerdown", mic.start);
+      for (const ev of ["pointerup", "pointerleave"]) rec.addEventListener(ev, mic.stop);
+      c.append(el("div", { class: "row" }, rec));
+    }
   } else {
     const initial = {};
     for (const f of inp.fields || []) if (f.default !== undefined) initial[f.name] = f.default;
@@ -355,6 +360,58 @@ async function cancelGoal(topic) {
   state.ws.send(JSON.stringify({ op: "cancel", id, topic }));
   const res = await done;
   if (!res.ok) toast(res.error, false);
+}
+
+async function uploadTo(topic, blob) {
+  const res = await fetch("/api/upload" + (topic.startsWith("/") ? topic : "/" + topic), { method: "POST", body: blob });
+  const body = await res.json();
+  window.emosStats.published.push({ topic, ok: body.ok, error: body.error });
+  body.ok ? toast(`sent to ${topic}`, true) : toast(body.error, false);
+  return body.ok;
+}
+
+// The microphone, recorded as 16 kHz mono 16-bit PCM (what Audio topics carry), sent as a WAV
+// when the button is released. Browsers allow it on localhost or over HTTPS only.
+function microphone(topic, button) {
+  let ctx = null, stream = null, node = null, chunks = [];
+  async function start() {
+    if (ctx) return;
+    if (!navigator.mediaDevices) { toast("the microphone needs HTTPS or localhost; upload a WAV instead", false); return; }
+    try {
+      stream = await navigator.mediaDevices.getUserMedia({ audio: { channelCount: 1 } });
+    } catch (e) { toast(`microphone: ${e.message}`, false); return; }
+    ctx = new AudioContext({ sampleRate: 16000 });
+    const source = ctx.createMediaStreamSource(stream);
+    node = ctx.createScriptProcessor(4096, 1, 1);
+    chunks = [];
+    node.onaudioprocess = ev => chunks.push(new Float32Array(ev.inputBuffer.getChannelData(0)));
+    source.connect(node); node.connect(ctx.destination);
+    button.textContent = "Recording... release to send";
+  }
+  async function stop() {
+    if (!ctx) return;
+    node.disconnect(); stream.getTracks().forEach(t => t.stop());
+    const rate = ctx.sampleRate;
+    await ctx.close(); ctx = null;
+    button.textContent = "Hold to talk";
+    const n = chunks.reduce((a, c) => a + c.length, 0);
+    if (!n) return;
+    const pcm = new Int16Array(n);
+    let i = 0;
+    for (const c of chunks) for (const v of c) pcm[i++] = Math.max(-32768, Math.min(32767, Math.round(v * 32767)));
+    await uploadTo(topic, wav(pcm, rate));
+  }
+  return { start, stop };
+}
+
+function wav(pcm, rate) {
+  const buf = new ArrayBuffer(44 + pcm.length * 2), v = new DataView(buf);
+  const str = (o, s) => { for (let k = 0; k < s.length; k++) v.setUint8(o + k, s.charCodeAt(k)); };
+  str(0, "RIFF"); v.setUint32(4, 36 + pcm.length * 2, true); str(8, "WAVEfmt "); v.setUint32(16, 16, true);
+  v.setUint16(20, 1, true); v.setUint16(22, 1, true); v.setUint32(24, rate, true); v.setUint32(28, rate * 2, true);
+  v.setUint16(32, 2, true); v.setUint16(34, 16, true); str(36, "data"); v.setUint32(40, pcm.length * 2, true);
+  new Int16Array(buf, 44).set(pcm);
+  return new Blob([buf], { type: "audio/wav" });
 }
 
 // ------------------------------------------------------------------ connection
