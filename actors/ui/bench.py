@@ -208,6 +208,9 @@ def run(args: argparse.Namespace) -> int:
     if args.duration <= 0 or args.rounds < 1 or not 0 <= args.browser_nice <= 19:
         print("emos bench ui: --duration must be > 0 seconds, --rounds >= 1, --browser-nice in 0..19", file=sys.stderr)
         return 2
+    from emos.supervisor.plotting import check_plot_argument
+
+    check_plot_argument(args.plot)
     result = measure(args.duration, args.rounds, args.browser_nice)
     if args.plot:
         save_plot(result, args.plot)

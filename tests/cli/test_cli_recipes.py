@@ -111,3 +111,12 @@ def test_version_and_every_command_has_help_with_an_example():
     for command in ("ls", "info", "logs", "service", "version"):
         out = emos(command, "--help")
         assert out.returncode == 0 and "example" in out.stdout, command
+
+
+def test_bench_plot_saves_the_main_result_and_checks_the_file_name_first(tmp_path):
+    picture = tmp_path / "restart.png"
+    out = emos("bench", "restart", "--kills", "3", "--plot", str(picture), timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = emos("bench", "restart", "--kills", "3", "--plot", str(tmp_path / "x.gif"))
+    assert bad.returncode != 0 and "must end in .png, .svg or .pdf" in bad.stderr
