@@ -116,6 +116,9 @@ class LogHub(Hub):
         value = msg.data
         if self.kind == "number":
             value = float(value)
+        elif self.type_name == "StreamingString":
+            # Chunks of one streamed reply go into one bubble on the page, closed by ``done``.
+            value = {"text": msg.data, "stream": bool(msg.stream), "done": bool(msg.done)}
         self.items.append((self.seq, stamp_ms(msg, received_ns), value))
 
     async def send_to(self, client: Client, loop: asyncio.AbstractEventLoop, executor: Executor) -> None:

@@ -87,6 +87,10 @@ def test_text_typed_reaches_its_topic_and_the_answer_is_shown(ui_system, browser
     assert wait_for(lambda: "where is the kitchen?" in received(out, "/question"), what="the question on /question")
     log = browser.find_element(By.CSS_SELECTOR, ".log[data-topic='/answer']")
     wait_for(lambda: "echo: where is the kitchen?" in log.text, what="the answer on the page")
+    # A streamed reply (StreamingString chunks) is one growing bubble, not one bubble per chunk.
+    streamed = browser.find_element(By.CSS_SELECTOR, ".log[data-topic='/reply']")
+    wait_for(lambda: "streamed reply to where is the kitchen?" in streamed.text, what="the streamed reply")
+    assert len(streamed.find_elements(By.CSS_SELECTOR, ".bubble")) == 1
 
 
 def test_bool_buttons_publish(ui_system, browser):

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from emos import BaseComponent, Launcher, Topic
-from emos.msgs import Float32, Image, MapMetaData, OccupancyGrid, Odometry, PoseStamped, String
+from emos.msgs import Float32, Image, MapMetaData, OccupancyGrid, Odometry, PoseStamped, StreamingString, String
 from emos.msgs.std import Header, Time
 
 OUT = os.environ["EMOS_UI_TEST_OUT"]
@@ -21,6 +21,7 @@ grid = Topic(name="map", msg_type="OccupancyGrid")
 odom = Topic(name="odom", msg_type="Odometry")
 question = Topic(name="question", msg_type="String")
 answer = Topic(name="answer", msg_type="String")
+reply = Topic(name="reply", msg_type="StreamingString")
 goal = Topic(name="goal", msg_type="PoseStamped")
 estop = Topic(name="estop", msg_type="Bool")
 voice = Topic(name="voice", msg_type="Audio")
@@ -64,6 +65,9 @@ class Recorder(BaseComponent):
                 f.write(json.dumps({"topic": topic.name, "value": value, "t": time.time()}) + "\n")
             if topic.name == "/question":
                 self.publish(answer, String(data=f"echo: {msg.data}"))
+                words = ["streamed", "reply", "to", msg.data]
+                for i, word in enumerate(words):  # as an LLM streams its tokens
+                    self.publish(reply, StreamingString(stream=True, done=i == len(words) - 1, data=word + " "))
         self.health_status.set_healthy()
 
 
@@ -85,9 +89,9 @@ class Navigator(BaseComponent):
 navigator = Navigator(component_name="navigator", run_type="ActionServer")
 cam = Camera(component_name="camera", outputs=[camera], trigger=1 / 30)
 world = World(component_name="world", outputs=[grid, odom], trigger=0.5)
-recorder = Recorder(component_name="recorder", inputs=[question, goal, estop, voice], outputs=[answer], trigger=[question, goal, estop, voice])
+recorder = Recorder(component_name="recorder", inputs=[question, goal, estop, voice], outputs=[answer, reply], trigger=[question, goal, estop, voice])
 
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[cam, world, recorder, navigator])
-launcher.enable_ui(inputs=[question, goal, estop, voice, navigator.ui_main_action_input], outputs=[camera, grid, odom, answer], port=PORT)
+launcher.enable_ui(inputs=[question, goal, estop, voice, navigator.ui_main_action_input], outputs=[camera, grid, odom, answer, reply], port=PORT)
 launcher.bringup()

@@ -108,10 +108,17 @@ function logWidget(out) {
   const c = card(out.topic, out.type);
   const list = el("div", { class: "log", "data-topic": out.topic });
   c.append(list);
+  let open = null;  // the bubble a streamed reply is still being written into
   return {
     log(msg) {
-      if (msg.missed) list.append(el("div", { class: "muted" }, `... ${msg.missed} messages skipped`));
+      if (msg.missed) { list.append(el("div", { class: "muted" }, `... ${msg.missed} messages skipped`)); open = null; }
       for (const [, stamp, value] of msg.items) {
+        if (value !== null && typeof value === "object") {  // StreamingString chunk
+          if (!open) { open = el("div", { class: "bubble" }, el("span", { class: "t" }, new Date(stamp).toLocaleTimeString()), ""); list.append(open); }
+          open.append(document.createTextNode(value.text));
+          if (value.done || !value.stream) open = null;
+          continue;
+        }
         list.append(el("div", { class: "bubble" }, el("span", { class: "t" }, new Date(stamp).toLocaleTimeString()), String(value)));
       }
       while (list.childElementCount > 200) list.firstElementChild.remove();
