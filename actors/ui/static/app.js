@@ -106,11 +106,13 @@ function audioWidget(out) {
 
 function logWidget(out) {
   const c = card(out.topic, out.type);
-  const list = el("div", { class: "log", "data-topic": out.topic });
+  const list = el("div", { class: "log", "data-topic": out.topic }, el("div", { class: "muted" }, "no messages yet"));
   c.append(list);
+  let empty = true;
   let open = null;  // the bubble a streamed reply is still being written into
   return {
     log(msg) {
+      if (empty) { list.replaceChildren(); empty = false; }
       if (msg.missed) { list.append(el("div", { class: "muted" }, `... ${msg.missed} messages skipped`)); open = null; }
       for (const [, stamp, value] of msg.items) {
         if (value !== null && typeof value === "object") {  // StreamingString chunk
