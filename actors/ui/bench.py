@@ -113,7 +113,7 @@ def measure(duration: float, rounds: int, browser_nice: int) -> dict[str, Any]:
     tmp = Path(tempfile.mkdtemp(prefix="emos-bench-ui-"))
     out, port = tmp / "probe.json", _free_port()
     env = dict(os.environ, EMOS_BENCH_UI_PORT=str(port), EMOS_BENCH_UI_OUT=str(out), EMOS_HOME=str(tmp / "home"))
-    proc = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "run", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "run", "--no-log", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     driver = profile = None
     off_windows, on_windows, shown, frames, maps, ui_cpu = [], [], [], 0, 0, []

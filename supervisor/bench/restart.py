@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_plot_argument(args.plot)
     env = dict(os.environ, EMOS_BENCH_KILLS=str(args.kills))
-    system = subprocess.Popen([sys.executable, "-m", "emos", "run", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    system = subprocess.Popen([sys.executable, "-m", "emos", "run", "--no-log", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     detect_ms: list[float] = []
     recover_ms: list[float] = []
     try:

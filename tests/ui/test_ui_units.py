@@ -174,3 +174,39 @@ def test_ui_component_refuses_a_topic_both_shown_and_sent():
     t = Topic(name="loop", msg_type="String")
     with pytest.raises(ValueError, match="both inputs and outputs"):
         UIComponent(ui_inputs=[t], ui_outputs=[t], components=[BaseComponent(component_name="x")])
+
+
+def _encode(hub, msg) -> tuple[dict, bytes]:
+    import json
+    import struct
+
+    frame = hub._encode(msg, 1, 0.0)
+    (n,) = struct.unpack(">I", frame[:4])
+    return json.loads(frame[4:4 + n]), frame[4 + n:]
+
+
+def test_frames_for_depth_detections_local_maps_and_audio():
+    cv2 = pytest.importorskip("cv2")
+    from emos.msgs import Audio, Detections
+
+    config = UIConfig()
+    depth = np.full((30, 40), 1000, np.uint16)
+    depth[:, 20:] = 3000  # far half darker than the near half
+    head, body = _encode(make_hub("/depth", "Image", "image", config), Image.from_numpy(depth, encoding="16UC1"))
+    picture = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert head["mime"] == "image/jpeg" and picture.shape == (30, 40) and picture[15, 5] > picture[15, 35] + 100
+    frame = Image.from_numpy(np.zeros((30, 40, 3), np.uint8))
+    dets = Detections(scores=np.array([0.9]), labels=["cup"], boxes=np.array([[1.0, 2.0, 11.0, 12.0]]), image=frame)
+    head, _ = _encode(make_hub("/dets", "Detections", "image", config), dets)
+    assert head["boxes"] == [[1.0, 2.0, 11.0, 12.0, "cup", 0.9]]
+    with pytest.raises(ValueError, match="carry no image"):
+        _encode(make_hub("/dets", "Detections", "image", config), Detections(scores=np.zeros(0), labels=[], boxes=np.zeros((0, 4))))
+    cells = np.zeros((2, 2), np.int8)
+    cells[1, 1] = 100
+    info = MapMetaData(resolution=0.5, width=2, height=2)
+    head, body = _encode(make_hub("/local", "OccupancyGrid", "map", config, overlay=True), OccupancyGrid(info=info, data=cells.reshape(-1)))
+    rgba = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert head["overlay"] is True and rgba.shape == (2, 2, 4) and rgba[0, 1, 3] == 255 and rgba[1, 0, 3] == 0
+    head, body = _encode(make_hub("/speech", "Audio", "audio", config), Audio(data=np.zeros(320, np.uint8)))
+    with wave.open(io.BytesIO(body)) as w:
+        assert (w.getframerate(), w.getnchannels(), w.getnframes()) == (16000, 1, 160)
