@@ -39,6 +39,25 @@ SERVICES: dict[str, tuple[str, str]] = {
 }
 
 
+# Examples for `--help` of commands whose modules do not give their own (``parser.epilog``).
+EXAMPLES: dict[str, str] = {
+    "run": "emos run ui_demo                      # a recipe by name (see `emos ls`)\n"
+           "emos run recipes/sensor_demo.py --duration 20\n"
+           "emos run --duration 30 ui_demo -- --port 5002   # arguments after -- go to the recipe",
+    "status": "emos status\nemos status --watch 1\nemos status --json --run 1234-5678",
+    "topic": "emos topic list\nemos topic echo /odom -n 1\nemos topic hz /camera/rgb\n"
+             "emos topic pub /goal PoseStamped '{\"pose\": {\"position\": {\"x\": 1.0}}}'\n"
+             "emos topic plot /cmd_vel twist.linear.x --duration 20 --output cmd.png",
+    "bench ipc": "emos bench ipc\nemos bench ipc --sizes 64,921600 --json\nemos bench ipc --plot ipc.png",
+    "bench restart": "emos bench restart --kills 50\nemos bench restart --kills 200 --plot restart.png",
+    "bench nav": "emos bench nav\nemos bench nav --json",
+    "bench sim": "emos bench sim\nemos bench sim --json",
+    "bench barn": "emos bench barn\nemos bench barn --json",
+    "bench agents": "emos bench agents\nemos bench agents --json",
+    "serve models": "emos serve models\nemos serve models --help   # address and models",
+}
+
+
 def _add_plugin(sub: argparse._SubParsersAction, name: str, module: str, help_text: str) -> None:
     parser = sub.add_parser(name, help=help_text, description=help_text)
     parser.set_defaults(_module=module)
@@ -90,6 +109,10 @@ def main(argv: list[str] | None = None) -> int:
     # Rebuild a parser whose chosen leaf gets the plug-in's arguments.
     leaf = argparse.ArgumentParser(prog="emos " + " ".join(words[:2] if table else words[:1]), description=entry[1])
     module.add_arguments(leaf)
+    example = EXAMPLES.get(" ".join(words[:2] if table else words[:1]))
+    if example and not leaf.epilog:
+        leaf.formatter_class = argparse.RawDescriptionHelpFormatter
+        leaf.epilog = "examples:\n  " + example.replace("\n", "\n  ")
     args = leaf.parse_args(argv[2 if table is not None else 1 :])
     return int(module.run(args) or 0)
 

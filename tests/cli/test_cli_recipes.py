@@ -108,7 +108,7 @@ def test_service_unit_is_written_printed_and_removed(home, tmp_path):
 def test_version_and_every_command_has_help_with_an_example():
     version = emos("version")
     assert version.returncode == 0 and version.stdout.startswith("emos 0.")
-    for command in ("ls", "info", "logs", "service", "version"):
+    for command in ("ls", "info", "logs", "service", "version", "run", "status", "topic"):
         out = emos(command, "--help")
         assert out.returncode == 0 and "example" in out.stdout, command
 
