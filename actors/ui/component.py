@@ -19,6 +19,9 @@ from emos.core.component import BaseComponent
 from emos.io.topic import Topic
 
 
+BIND_RETRY_S = 2.0
+
+
 class UIComponent(BaseComponent):
     def __init__(
         self,
@@ -50,6 +53,7 @@ class UIComponent(BaseComponent):
         self._actions = {a.name: a for a in ui_actions}
         self._server: Any = None
         self._start_task: Any = None
+        self._listening = False
 
     # -- lifecycle -------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
@@ -74,7 +78,7 @@ class UIComponent(BaseComponent):
             supervisor_socket=node.supervisor_socket, own_name=self.component_name,
             actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)),
         )
-        self._server.bind()  # a taken port fails configure, with the address in the message
+        self._listening = False
 
     def custom_on_activate(self) -> None:
         import asyncio
@@ -83,12 +87,28 @@ class UIComponent(BaseComponent):
             self._start_task = asyncio.ensure_future(self._serve())
 
     async def _serve(self) -> None:
-        try:
-            await self._server.start()
-        except Exception as exc:
-            self.get_logger().error("[%s] the web server did not start: %s", self.component_name, exc)
-            self.health_status.set_fail_component(component_names=[self.component_name], message=f"web server: {exc}")
+        """Listen and serve. A taken port does not stop the robot: the UI reports the failure
+        (health and a log line naming the address) and tries again every ``BIND_RETRY_S``."""
+        import asyncio
+
+        failures = 0
+        server = self._server
+        while server is not None and server is self._server:
+            try:
+                server.bind()
+                await server.start()
+                break
+            except OSError as exc:
+                failures += 1
+                if failures == 1 or failures % 30 == 0:
+                    self.get_logger().error("[%s] %s (tried %d times; retrying every %g s)", self.component_name, exc, failures, BIND_RETRY_S)
+                self.health_status.set_fail_component(component_names=[self.component_name], message=str(exc))
+                self.node.publish_status()
+                await asyncio.sleep(BIND_RETRY_S)
+        else:
             return
+        self._listening = True
+        self.health_status.set_healthy()
         self.get_logger().info("[%s] page at %s", self.component_name, page_url(self.config))
 
     def custom_on_shutdown(self) -> None:
@@ -107,7 +127,10 @@ class UIComponent(BaseComponent):
                 asyncio.ensure_future(server.stop())
             except RuntimeError:  # no loop any more: the listener is closed, the rest goes with the process
                 pass
+        if self._start_task is not None:
+            self._start_task.cancel()
         self._start_task = None
+        self._listening = False
 
     # -- every shown message -----------------------------------------------------------------------
     def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
@@ -115,7 +138,8 @@ class UIComponent(BaseComponent):
             hub = self._hubs.get(topic.name)
             if hub is not None:
                 hub.push(msg, time.time_ns())
-        self.health_status.set_healthy()
+        if self._listening:
+            self.health_status.set_healthy()
 
 
 def page_url(config: UIConfig) -> str:

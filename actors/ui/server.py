@@ -66,7 +66,9 @@ class UIServer:
 
     # ------------------------------------------------------------------ lifecycle
     def bind(self) -> None:
-        self._sock = bind_socket(self.config.host, self.config.port)
+        if self._sock is None:
+            self._closed.clear()
+            self._sock = bind_socket(self.config.host, self.config.port)
 
     async def start(self) -> None:
         app = web.Application(middlewares=[make_middleware(self.config.host, self.config.token)], client_max_size=32 * 2**20)
