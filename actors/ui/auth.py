@@ -51,10 +51,17 @@ def make_middleware(bind_host: str, token: str) -> Callable[..., Awaitable[web.S
                 given = auth[7:]
             if not hmac.compare_digest(given.encode(), token.encode()):
                 return web.Response(status=401, text="EMOS UI: access token required (open the address printed at start-up)\n")
-            response = await handler(request)
-            if request.query.get("token") and isinstance(response, web.Response):
+            if request.query.get("token"):
+                # Keep the token in a cookie and take it out of the address bar (and so out of
+                # the history, bookmarks and screenshots).
+                response: web.StreamResponse
+                if request.method == "GET" and request.path == "/":
+                    response = web.Response(status=303, headers={"Location": "/"})
+                else:
+                    response = await handler(request)
                 response.set_cookie(COOKIE, token, httponly=True, samesite="Strict")
-            return response
+                return response
+            return await handler(request)
         return await handler(request)
 
     return check

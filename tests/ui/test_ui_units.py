@@ -35,8 +35,8 @@ def test_token_required_off_loopback_and_host_checked_on_loopback():
         async with TestClient(TestServer(_serve("0.0.0.0", "s3cret"))) as client:
             assert (await client.get("/")).status == 401
             assert (await client.get("/?token=wrong")).status == 401
-            r = await client.get("/?token=s3cret")
-            assert r.status == 200 and COOKIE in r.cookies
+            r = await client.get("/?token=s3cret", allow_redirects=False)
+            assert r.status == 303 and r.headers["Location"] == "/" and COOKIE in r.cookies  # token out of the address bar
             assert (await client.get("/")).status == 200  # the cookie carries it from now on
             client.session.cookie_jar.clear()
             assert (await client.get("/", headers={"Authorization": "Bearer s3cret"})).status == 200
