@@ -25,7 +25,7 @@ from emos.msgs.registry import resolve
 
 log = logging.getLogger("emos.ui")
 
-STATIC = {"app.js": "application/javascript", "app.css": "text/css", "index.html": "text/html", "favicon.svg": "image/svg+xml"}
+STATIC = {"app.js": "application/javascript", "media.js": "application/javascript", "panels.js": "application/javascript", "app.css": "text/css", "index.html": "text/html", "favicon.svg": "image/svg+xml"}
 
 
 def _dumps(obj: Any) -> str:
