@@ -108,6 +108,8 @@ def convert_value(field: dict[str, Any], raw: Any) -> Any:
                         return choice
                 raise SettingRefused(f"{name} must be one of {field['choices']}, got {raw!r}")
             return raw if isinstance(raw, str) else str(raw)
+    except SettingRefused:
+        raise
     except (TypeError, ValueError):
         raise SettingRefused(f"{name} expects a {kind} value, got {raw!r}") from None
     return raw

@@ -198,9 +198,28 @@ def test_system_view_and_the_ui_coming_back_after_a_kill(ui_system, browser):
     from selenium.webdriver.common.by import By
 
     browser.find_element(By.ID, "tab-system").click()
-    row = wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, "tr[data-component='camera']"), what="the camera row")[0]
-    wait_for(lambda: "HEALTHY" in row.text, what="camera healthy")
+
+    # The table is redrawn every second: read and click through fresh look-ups each time.
+    def row_text(name: str) -> str:
+        return browser.execute_script(f"const r = document.querySelector(\"tr[data-component='{name}']\"); return r ? r.innerText : ''")
+
+    def cells(name: str) -> list:
+        return browser.execute_script(f"return Array.from(document.querySelectorAll(\"tr[data-component='{name}'] td\")).map(td => td.innerText)")
+
+    def press(name: str, action: str) -> None:
+        browser.execute_script(f"document.querySelector(\"tr[data-component='{name}'] button[data-action='{action}']\").click()")
+
+    wait_for(lambda: "HEALTHY" in row_text("camera"), what="camera healthy")
     browser.save_screenshot(str(ARTIFACTS / "system.png"))
+    # Stop and start are the lifecycle's deactivate and activate; restart is a fresh process.
+    press("camera", "stop")
+    wait_for(lambda: (cells("camera") or [None] * 3)[2] == "inactive", what="camera inactive")
+    press("camera", "start")
+    wait_for(lambda: (cells("camera") or [None] * 3)[2] == "active", what="camera active again")
+    world_pid = cells("world")[1]
+    press("world", "restart")
+    wait_for(lambda: (c := cells("world")) and c[1] not in (world_pid, "-") and c[2] == "active", timeout=30,
+             what="world restarted with a new pid")
     # A second tab gets its own stream.
     first = browser.current_window_handle
     browser.switch_to.new_window("tab")

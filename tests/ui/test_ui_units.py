@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import asyncio
+import enum
 import io
 import math
 import wave
@@ -9,6 +10,7 @@ import wave
 import numpy as np
 import pytest
 from aiohttp import web
+from attrs import define, field
 from aiohttp.test_utils import TestClient, TestServer
 
 from emos import BaseComponent, Launcher, Topic
@@ -18,6 +20,8 @@ from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
 from emos.actors.ui.settings import SettingRefused, convert_value, describe_config
 from emos.actors.ui.streams import Client, make_hub
+from emos.config import validators
+from emos.config.base import BaseComponentConfig, enum_converter
 from emos.msgs import Image, MapMetaData, OccupancyGrid
 
 
@@ -116,6 +120,31 @@ def test_settings_forms_follow_the_attrs_metadata():
         convert_value(fields["port"], "eighty")
     with pytest.raises(SettingRefused, match="expects a float"):
         convert_value(fields["pose_rate"], True)
+
+
+class _Mode(enum.Enum):
+    FAST = "fast"
+    SAFE = "safe"
+
+
+@define(kw_only=True)
+class _ChoiceConfig(BaseComponentConfig):
+    mode: _Mode = field(default=_Mode.SAFE, converter=enum_converter(_Mode))
+    planner: str = field(default="rrt", validator=validators.in_(["rrt", "prm"]))
+    nested: dict = field(factory=dict)
+
+
+def test_settings_forms_offer_enum_and_in_choices():
+    Cfg = _ChoiceConfig
+    fields = {f["name"]: f for f in describe_config(Cfg())}
+    assert fields["mode"]["kind"] == "choice" and fields["mode"]["choices"] == ["fast", "safe"]
+    assert fields["planner"]["choices"] == ["rrt", "prm"]
+    assert fields["nested"]["editable"] is False
+    assert convert_value(fields["planner"], "prm") == "prm"
+    with pytest.raises(SettingRefused, match=r"planner must be one of \['rrt', 'prm'\]"):
+        convert_value(fields["planner"], "astar")
+    with pytest.raises(SettingRefused, match="cannot be changed from the page"):
+        convert_value(fields["nested"], {})
 
 
 def test_a_stalled_page_gets_at_most_frames_in_flight_and_no_backlog():
