@@ -18,6 +18,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
     "chaos": ("emos.supervisor.cli_chaos", "inject faults into a running recipe and check that it recovers"),
+    "ls": ("emos.supervisor.cli_ls", "list the recipes on this machine"),
+    "info": ("emos.supervisor.cli_info", "show the sensors and topics a recipe needs, without running it"),
+    "logs": ("emos.supervisor.cli_logs", "list the logs of past runs, or show one"),
+    "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
+    "version": ("emos.supervisor.cli_version", "show the EMOS version"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
@@ -28,11 +33,31 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),
+    "ui": ("emos.actors.ui.bench", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
 }
 
 # `emos serve NAME`: long-running development services.
 SERVICES: dict[str, tuple[str, str]] = {
     "models": ("emos.actors.agents.server.cli", "local OpenAI- and Ollama-compatible model server"),
+}
+
+
+# Examples for `--help` of commands whose modules do not give their own (``parser.epilog``).
+EXAMPLES: dict[str, str] = {
+    "run": "emos run ui_demo                      # a recipe by name (see `emos ls`)\n"
+           "emos run recipes/sensor_demo.py --duration 20\n"
+           "emos run --duration 30 ui_demo -- --port 5002   # arguments after -- go to the recipe",
+    "status": "emos status\nemos status --watch 1\nemos status --json --run 1234-5678",
+    "topic": "emos topic list\nemos topic echo /odom -n 1\nemos topic hz /camera/rgb\n"
+             "emos topic pub /goal PoseStamped '{\"pose\": {\"position\": {\"x\": 1.0}}}'\n"
+             "emos topic plot /cmd_vel twist.linear.x --duration 20 --output cmd.png",
+    "bench ipc": "emos bench ipc\nemos bench ipc --sizes 64,921600 --json\nemos bench ipc --plot ipc.png",
+    "bench restart": "emos bench restart --kills 50\nemos bench restart --kills 200 --plot restart.png",
+    "bench nav": "emos bench nav\nemos bench nav --json",
+    "bench sim": "emos bench sim\nemos bench sim --json",
+    "bench barn": "emos bench barn\nemos bench barn --json",
+    "bench agents": "emos bench agents\nemos bench agents --json",
+    "serve models": "emos serve models\nemos serve models --help   # address and models",
 }
 
 
@@ -110,6 +135,10 @@ def _main(argv: list[str] | None = None) -> int:
     # Rebuild a parser whose chosen leaf gets the plug-in's arguments.
     leaf = argparse.ArgumentParser(prog="emos " + " ".join(words[:2] if table else words[:1]), description=entry[1])
     module.add_arguments(leaf)
+    example = EXAMPLES.get(" ".join(words[:2] if table else words[:1]))
+    if example and not leaf.epilog:
+        leaf.formatter_class = argparse.RawDescriptionHelpFormatter
+        leaf.epilog = "examples:\n  " + example.replace("\n", "\n  ")
     args = leaf.parse_args(argv[2 if table is not None else 1 :])
     return int(module.run(args) or 0)
 

@@ -22,16 +22,24 @@ def _seconds(text: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recipe", help="path of the recipe script")
+    parser.add_argument("recipe", help="recipe name (see `emos ls`) or path of the recipe script")
     parser.add_argument("--duration", type=_seconds, default=None, help="stop by itself after this many seconds")
+    parser.add_argument("--no-log", action="store_true", help="do not keep a copy of the output in ~/emos/logs")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
 def run(args: argparse.Namespace) -> int:
-    path = Path(args.recipe)
-    if not path.is_file():
-        print(f"emos run: recipe {path} not found", file=sys.stderr)
+    from emos.supervisor.recipes import RecipeNotFound, resolve_recipe
+
+    try:
+        path = resolve_recipe(args.recipe)
+    except RecipeNotFound as exc:
+        print(f"emos run: {exc}", file=sys.stderr)
         return 2
+    if not args.no_log:
+        from emos.supervisor.runlog import start_run_log
+
+        start_run_log(path, sys.argv[1:])
     import emos.launcher as launcher_mod
 
     launcher_mod._RUN_DURATION = args.duration

@@ -35,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("fields", nargs="?", default="{}", help='e.g. \'{"data": 1.5}\'')
     p.add_argument("--rate", type=float, default=0.0, help="publish repeatedly at this rate (Hz)")
     p.add_argument("--count", "-n", type=int, default=1, help="number of messages (0 = until Ctrl-C)")
+    from emos.supervisor import cli_topic_plot
+
+    p = sub.add_parser("plot", help="plot numeric fields over time, live or saved (--output FILE)")
+    add_run_argument(p)
+    cli_topic_plot.add_arguments(p)
 
 
 def _topic_type(ctx, topic: str) -> type:
@@ -95,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"published {sent} {cls.__name__} on {topic}")
         return 0
     cls = _topic_type(ctx, topic)
+    if args.action == "plot":
+        from emos.supervisor import cli_topic_plot
+
+        return cli_topic_plot.run(args, ctx, topic, cls)
     import select
 
     waker = sub = None

@@ -220,6 +220,17 @@ class BaseComponent:
             self._node.on_config_changed()
         return True
 
+    @property
+    def ui_main_action_input(self) -> Any:
+        """This component's main action as an input of the web UI: ``enable_ui(inputs=[c.ui_main_action_input])``."""
+        from emos.core.action_input import ActionInput
+        from emos.msgs.registry import resolve
+
+        if self.main_action_type is None:
+            raise ValueError(f"component {self.component_name!r} ({type(self).__name__}) has no main action (main_action_type)")
+        goal, feedback, result = (resolve(t) for t in self.main_action_type)
+        return ActionInput(self.main_action_name, goal, feedback, result, self.component_name)
+
     # -- hooks for subclasses ----------------------------------------------------------------------
     def custom_on_configure(self) -> None:
         pass

@@ -47,6 +47,7 @@ METHODS = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the machine-readable result")
+    parser.add_argument("--plot", metavar="FILE", help="save p50 latency by payload size and transport as a picture (.png, .svg, .pdf)")
     parser.add_argument("--method", choices=list(METHODS), default="pingpong", help="how latency is measured (default: pingpong, half a round trip)")
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes, comma-separated")
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help=f"comma-separated, from {','.join(TRANSPORTS)}")
@@ -144,12 +145,19 @@ def run(args: argparse.Namespace) -> int:
     where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
     doc: dict[str, Any] = {"mode": args.mode, "method": args.method, "cpus": None if placement is None else list(placement), "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting()}
     failed = False
+    from emos.supervisor.plotting import check_plot_argument, save_lines
+
+    check_plot_argument(args.plot)
     if args.mode in ("both", "transport"):
         if not args.json:
             print(f"emos bench ipc, transport mode, on {os.cpu_count()} cores ({where}): payloads {sizes}; latency {label}; EMOS depth {args.depth}, wake spin {wake_spin_setting():g} us")
         results = measure(transports, sizes, args.messages, args.throughput_seconds, args.method, progress=not args.json, depth=args.depth)
         doc["results"] = results
         failed = any("error" in r for r in results)
+        if args.plot:
+            save_lines(args.plot, f"emos bench ipc: {label}", "payload (bytes)", "p50 latency (us)",
+                       {t: ([r["payload_bytes"] for r in results if r["transport"] == t], [r["p50_us"] for r in results if r["transport"] == t])
+                        for t in dict.fromkeys(r["transport"] for r in results)}, log=True)
         if not args.json:
             _print_transport(results, sizes, label, args.method)
     if args.mode in ("both", "component"):
