@@ -15,12 +15,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("emos.supervisor.cli_run", "run a recipe script under the supervisor"),
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
+    "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
+    "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),

@@ -1,0 +1,248 @@
+"""Events, actions, the Monitor and fallbacks in real systems (processes and threads)."""
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from emos.core.node import control_socket
+from emos.core.rpc import RpcClient
+from tests.runtime.helpers import SystemUnderTest, wait_until
+
+COUNTER = """
+from emos import Event, Action
+from emos.actions import log, restart
+from pathlib import Path
+
+counter = Topic(name="counter", msg_type="Int32")
+
+class Source(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[counter], **kw)
+        self.config.loop_rate = 20.0
+        self.n = 0
+    def _execution_step(self):
+        self.n += 1
+        self.publish(counter, M.Int32(data=self.n))
+        self.health_status.set_healthy()
+
+class Sink(BaseComponent):
+    def record(self, value, note="x"):
+        with open("sink.txt", "a") as f:
+            f.write(f"{os.getpid()} {value} {note}\\n")
+        return True
+"""
+
+
+def lines(path):
+    return path.read_text().split() if path.exists() else []
+
+
+@pytest.mark.parametrize("multi", [True, False], ids=["processes", "threads"])
+def test_events_run_component_methods_recipe_functions_and_predefined_actions(tmp_path, multi):
+    body = COUNTER + f"""
+def note(value):
+    with open("fn.txt", "a") as f:
+        f.write(f"{{os.getpid()}} {{value}}\\n")
+
+src = Source(component_name="source")
+sink = Sink(component_name="sink")
+once = Event(counter.msg.data >= 5, handle_once=True)
+every_tenth = Event((counter.msg.data.is_in([10, 20, 30])) & counter)
+launcher = Launcher(multi_processing={multi})
+launcher.add_pkg(components=[src, sink], events_actions={{
+    once: [Action(sink.record, args=(counter.msg.data,), kwargs={{"note": "once"}}), Action(note, args=(counter.msg.data,)), log(msg="EVENT-LOG-LINE")],
+    every_tenth: Action(sink.record, args=(counter.msg.data,), kwargs={{"note": "tenth"}}),
+}})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source", "sink", "emos_monitor"])
+    sink_file = tmp_path / "sink.txt"
+    wait_until(lambda: "30" in lines(sink_file), 20, what="the tenth-message event to fire three times")
+    sink_pid = sut.pid("sink")
+    sut.stop()
+    rows = [r.split() for r in sink_file.read_text().splitlines()]
+    assert [r[1:] for r in rows] == [["5", "once"], ["10", "tenth"], ["20", "tenth"], ["30", "tenth"]]
+    assert {int(r[0]) for r in rows} == {sink_pid}  # ran inside the sink (its process, or the launcher's in threaded mode)
+    fn = (tmp_path / "fn.txt").read_text().split()
+    assert fn[1] == "5" and len(fn) == 2  # the recipe function ran once, with the injected value
+    if multi:
+        assert int(fn[0]) not in (sink_pid, sut.proc.pid)  # in the Monitor's process
+    assert sut.output().count("EVENT-LOG-LINE") == 1
+
+
+def test_a_component_that_fails_every_step_is_restarted_until_the_supervisor_gives_up(tmp_path):
+    """Issue 9, defect 4: without a declared ladder a component stuck in COMPONENT_FAILURE is
+    restarted through the supervisor, whose intensity limits bound it and escalate."""
+    body = """
+class Broken(BaseComponent):
+    def _execution_step(self):
+        raise RuntimeError("sensor unplugged")
+
+ok = BaseComponent(component_name="ok")
+broken = Broken(component_name="broken")
+launcher = Launcher(multi_processing=True, max_restarts=2, max_seconds=30.0)
+launcher.add_pkg(components=[ok, broken])
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body)
+    code = sut.wait_exit(60)
+    out = sut.output()
+    assert code == 3, out[-3000:]
+    assert "broken" in out and "restarted after:" in out.split("EMOS run")[-1]
+    summary = out.split("EMOS run")[-1]
+    broken_line = next(line for line in summary.splitlines() if line.strip().startswith("broken"))
+    assert "restart_requested" in broken_line
+    assert "supervision gave up" in out
+
+
+def test_repeated_step_tracebacks_are_rate_limited_with_a_count(tmp_path):
+    body = """
+from emos.actions import log
+
+class Broken(BaseComponent):
+    def _execution_step(self):
+        raise ValueError("bad reading")
+
+broken = Broken(component_name="broken")
+broken.config.loop_rate = 50.0
+broken.on_component_fail(action=log(msg="still broken"), max_retries=None)
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[broken])
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body, duration=6.5)
+    assert sut.wait_exit(40) == 0
+    out = sut.output()
+    assert out.count("Traceback (most recent call last)") == 1, out[-2000:]
+    assert "ValueError: bad reading again (" in out  # one counted line per 5 s window
+    assert "no restarts" in out  # a declared handler replaces the default restart
+
+
+LADDER = """
+from emos import Action
+from emos.actions import restart, log
+
+class Flaky(BaseComponent):
+    def _execution_step(self):
+        raise RuntimeError("stuck")
+    def recover(self):
+        with open("recover.txt", "a") as f:
+            f.write(f"{os.getpid()}\\n")
+        return False
+
+flaky = Flaky(component_name="flaky")
+flaky.config.loop_rate = 50.0
+flaky.on_component_fail(action=[Action(flaky.recover), restart(component=flaky)], max_retries=2)
+flaky.on_giveup(action=log(msg="GIVING-UP-ON-FLAKY"))
+launcher = Launcher(multi_processing=MULTI, max_restarts=10, fallback_reset_after=60.0)
+launcher.fallback_rate = 20.0
+launcher.add_pkg(components=[flaky])
+launcher.bringup()
+"""
+
+
+@pytest.mark.parametrize("multi", [True, False], ids=["processes", "threads"])
+def test_a_ladder_escalates_gives_up_and_shows_it_in_emos_status(tmp_path, multi):
+    sut = SystemUnderTest(tmp_path, LADDER.replace("MULTI", str(multi))).wait_up(components=["flaky"])
+    wait_until(lambda: sut.workers()["flaky"].get("health") == "GAVE_UP", 30, what="flaky to give up")
+    steps = [(e["handler"], e["step"], e["attempt"]) for e in sut.events() if e["event"] == "fallback"]
+    assert steps == [("on_component_fail", 1, 1), ("on_component_fail", 1, 2), ("on_component_fail", 2, 1), ("on_component_fail", 2, 2)]
+    assert sum(e["event"] == "gave_up" for e in sut.events()) == 1
+    restarts = [e for e in sut.events() if e["event"] == "restarted" and e["child"] == "flaky"]
+    assert len(restarts) == 2  # the ladder's restarts went through the supervision tree
+    status = subprocess.run([sys.executable, "-m", "emos", "status", "--run", sut.run_dir.name], capture_output=True, text=True, timeout=30)
+    assert "GAVE_UP" in status.stdout, status.stdout + status.stderr
+    assert len(lines(tmp_path / "recover.txt")) == 2
+    sut.stop()
+    assert sut.output().count("GIVING-UP-ON-FLAKY") == 1
+
+
+def test_the_monitor_survives_sigkill_and_keeps_handle_once_fired(tmp_path):
+    body = COUNTER + """
+src = Source(component_name="source")
+sink = Sink(component_name="sink")
+once = Event(counter.msg.data >= 3, handle_once=True)
+each = Event(counter)
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[src, sink], events_actions={
+    once: Action(sink.record, args=(counter.msg.data,), kwargs={"note": "once"}),
+    each: Action(sink.record, args=(counter.msg.data,), kwargs={"note": "each"}),
+})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source", "sink", "emos_monitor"])
+    sink_file = tmp_path / "sink.txt"
+    wait_until(lambda: sink_file.exists() and "once" in sink_file.read_text(), 15, what="the handle_once event")
+    for _ in range(2):
+        old = sut.pid("emos_monitor")
+        os.kill(old, signal.SIGKILL)
+        sut.wait_new_pid("emos_monitor", old, 20)
+    before = sink_file.read_text().count("each")
+    wait_until(lambda: sink_file.read_text().count("each") > before + 5, 15, what="events after the Monitor's restarts")
+    assert sink_file.read_text().count("once") == 1
+    assert sut.state("source") == "active" and sut.state("sink") == "active"
+    sut.stop()
+
+
+def test_actions_for_a_restarting_component_are_delivered_and_stats_add_up(tmp_path):
+    body = COUNTER + """
+src = Source(component_name="source")
+sink = Sink(component_name="sink")
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[src])
+launcher.add_pkg(components=[sink], events_actions={Event(counter): Action(sink.record, args=(counter.msg.data,))})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source", "sink", "emos_monitor"])
+    sink_file = tmp_path / "sink.txt"
+    wait_until(lambda: len(sink_file.read_text().splitlines()) > 5 if sink_file.exists() else False, 15, what="actions")
+    old = sut.pid("sink")
+    os.kill(old, signal.SIGKILL)
+    new = sut.wait_new_pid("sink", old, 20)
+    wait_until(lambda: f"{new} " in sink_file.read_text(), 15, what="actions in the new sink")
+    with RpcClient(control_socket(sut.ctx, "source")) as rpc:
+        rpc.call("transition", transition="deactivate")  # no more messages: let the queue drain
+    with RpcClient(control_socket(sut.ctx, "emos_monitor")) as rpc:
+        stats = wait_until(lambda: (lambda s: s if s["fired"] == s["actions_ok"] + s["actions_failed"] else None)(
+            rpc.call("execute_method", method="monitor_stats")), 20, what="in-flight actions to finish")
+    assert stats["actions_failed"] == 0, stats  # those fired while the sink was down waited for it
+    values = [int(line.split()[1]) for line in sink_file.read_text().splitlines()]
+    assert set(range(min(values), max(values) + 1)) <= set(values)  # no message's action was lost
+    sut.stop()
+
+
+def test_live_reconfiguration_from_the_cli_validates_and_swaps_topics(tmp_path):
+    body = """
+a = Topic(name="in_a", msg_type="Int32")
+b = Topic(name="in_b", msg_type="Int32")
+
+class Counter(BaseComponent):
+    def _execution_step(self, msg=None, topic=None):
+        with open("got.txt", "a") as f:
+            f.write(f"{topic.name} {msg.data}\\n")
+        self.health_status.set_healthy()
+
+c = Counter(component_name="counter", inputs=[a], trigger=a)
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[c])
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["counter"])
+    emos = [sys.executable, "-m", "emos"]
+    run = dict(capture_output=True, text=True, timeout=30)
+    ok = subprocess.run(emos + ["component", "call", "counter", "update_config_parameter", "name=loop_rate", "value=5", "--run", sut.run_dir.name], **run)
+    assert ok.returncode == 0 and json.loads(ok.stdout)["loop_rate"] == 5, ok.stderr
+    bad = subprocess.run(emos + ["component", "call", "counter", "update_config_parameters", "names=loop_rate,heartbeat_rate", "values=7,-3", "--run", sut.run_dir.name], **run)
+    assert bad.returncode == 1 and "heartbeat_rate" in bad.stderr, bad.stderr
+    with RpcClient(control_socket(sut.ctx, "counter")) as rpc:
+        assert rpc.call("info")["config"]["loop_rate"] == 5  # the refused batch changed nothing
+    swap = subprocess.run(emos + ["component", "call", "counter", "change_topic", "direction=0", "old_name=in_a", "new_name=in_b", "--run", sut.run_dir.name], **run)
+    assert swap.returncode == 0, swap.stderr
+    assert sut.state("counter") == "active"
+    pub = subprocess.run(emos + ["topic", "pub", "/in_b", "Int32", '{"data": 7}', "--rate", "20", "--count", "20", "--run", sut.run_dir.name], **run)
+    assert pub.returncode == 0, pub.stderr + pub.stdout
+    wait_until(lambda: (tmp_path / "got.txt").exists() and "/in_b 7" in (tmp_path / "got.txt").read_text(), 15, what="a message on the new input")
+    sut.stop()
