@@ -53,7 +53,8 @@ class FallbackDriver(ActionRuntime):
         self.last_status: dict[str, ComponentStatus] = {}
         self._not_before: dict[str, float] = {}  # wall time; statuses stamped earlier belong to a past incarnation
         self._tasks: dict[str, asyncio.Task] = {}
-        self._fresh: dict[str, asyncio.Event] = {}  # set when a status of a new incarnation arrives
+        # name -> (wall time, event): set by the first status stamped after that time
+        self._fresh: dict[str, tuple[float, asyncio.Event]] = {}
         self._publishers: dict[str, Publisher] = {}
         self._errors = RepeatLimiter()
         self.waker = Waker(self.ctx)
@@ -68,7 +69,10 @@ class FallbackDriver(ActionRuntime):
                 for key in LEVEL_HANDLERS.values():
                     if key not in handlers and (key in launcher or "on_fail" in launcher):
                         handlers[key] = launcher.get(key) or launcher["on_fail"]
-            rate = orchestration.fallback_rate or comp.config.fallback_rate
+            # launcher.fallback_rate paces the launcher-wide policies (and the default restart);
+            # a component's own handlers keep its config.fallback_rate.
+            own_handlers = any(k in own for k in HANDLERS)
+            rate = comp.config.fallback_rate if own_handlers or not orchestration.fallback_rate else orchestration.fallback_rate
             self.trackers[name] = FallbackTracker(handlers, own.get("on_giveup"), Fallback(A.restart(component=comp), None, f"{name} default"),
                                                   rate, reset_after=orchestration.reset_after)
             self.subs[name] = Subscriber(self.ctx, comp.status_topic.name, ComponentStatus, waker=self.waker, queue_size=4)
@@ -85,9 +89,10 @@ class FallbackDriver(ActionRuntime):
             if status.header.stamp.to_sec() < self._not_before.get(name, 0.0):
                 continue
             self.last_status[name] = status
-            fresh = self._fresh.pop(name, None)
-            if fresh is not None:
-                fresh.set()
+            waiting = self._fresh.get(name)
+            if waiting is not None and status.header.stamp.to_sec() >= waiting[0]:
+                del self._fresh[name]
+                waiting[1].set()
             tracker = self.trackers[name]
             tracker.observe(status.status)
             if tracker.failing and not tracker.gave_up and name not in self._tasks:
@@ -117,17 +122,24 @@ class FallbackDriver(ActionRuntime):
                 self._record(name, "fallback", handler=decision["handler"], action=action.describe(), step=decision["step"] + 1,
                              steps=decision["steps"], attempt=decision["try"], of=of if of is not None else "unlimited",
                              level=tracker.level.name)
-                restarting = action.kind == "lifecycle" and action.kwargs.get("op") == "restart" and action.component == name
-                if restarting:
-                    fresh = self._fresh[name] = asyncio.Event()
+                # Judge an action on this component by the status it publishes afterwards (a
+                # component action publishes one when it returns; a restarted one at start-up),
+                # not by the failure that was already on the stream.
+                on_self = action.component == name
+                restarting = on_self and action.kind == "lifecycle" and action.kwargs.get("op") == "restart"
+                fresh = asyncio.Event()
+                if on_self:
+                    self._fresh[name] = (time.time(), fresh)
                 try:
                     result = await asyncio.wait_for(run_action(action, self), self.timeout + 30.0)
                     if result is True and not restarting:
                         log.info("[%s] fallback %s reports recovery", name, action.describe())
-                    if restarting:  # judge the new incarnation by its own status, not the old one's
-                        await asyncio.wait_for(fresh.wait(), self.timeout)
+                    if on_self:
+                        await asyncio.wait_for(fresh.wait(), self.timeout if restarting else 1.0)
                 except Exception as exc:
                     self._report(name, action.describe(), exc)
+                finally:
+                    self._fresh.pop(name, None)
                 await asyncio.sleep(tracker.period)
         finally:
             self._tasks.pop(name, None)

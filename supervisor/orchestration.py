@@ -159,9 +159,8 @@ def fallback_summary(events: Any, components: Sequence[BaseComponent]) -> list[s
             attempts[e["child"]] += 1
         elif e.get("event") == "gave_up":
             gave_up.add(e["child"])
-    lines = []
-    for c in components:
-        name = c.component_name
-        if attempts[name] or name in gave_up:
-            lines.append(f"  {name:<24} {attempts[name]} fallback action(s){'; GAVE UP' if name in gave_up else ''}")
+    parts = [f"{c.component_name} {attempts[c.component_name]}" for c in components if attempts[c.component_name]]
+    lines = [f"  fallback actions run: {', '.join(parts)}"] if parts else []
+    if gave_up:
+        lines.append(f"  gave up (fallbacks exhausted): {', '.join(sorted(gave_up))}")
     return lines

@@ -127,7 +127,10 @@ def reconfig_ops(node: "Node") -> dict[str, Callable]:
             raise AttributeError(f"component {node.name!r} ({type(comp).__name__}) has no method {name!r}")
         args = decode_value(req.get("args") or [])
         kwargs = decode_value(req.get("kwargs") or {})
-        return _jsonable(method(*args, **kwargs))
+        try:
+            return _jsonable(method(*args, **kwargs))
+        finally:
+            node.publish_status()  # what the action did to the health is seen at once (fallbacks wait for it)
 
     async def run_step(req: dict, stream: Any) -> bool:
         if node.state != L.LifecycleState.ACTIVE:

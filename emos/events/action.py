@@ -78,11 +78,11 @@ class Action:
                     raise ValueError(f"Action: {self.component}.{name} is not a method an action may call")
 
     @classmethod
-    def _predefined(cls, name: str, impl: Callable[..., Any], component: str | None = None, **kwargs: Any) -> "Action":
+    def _predefined(cls, name: str, impl: Callable[..., Any], target: str | None = None, **kwargs: Any) -> "Action":
         action = cls(impl, kwargs=kwargs)
         action.kind = "predefined"
         action.predefined = name
-        action.component = component
+        action.component = target
         return action
 
     def event_parser(self, method: Callable[..., Any], output_mapping: str | None = None) -> "Action":

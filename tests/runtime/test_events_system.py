@@ -108,6 +108,7 @@ class Broken(BaseComponent):
 
 broken = Broken(component_name="broken")
 broken.config.loop_rate = 50.0
+broken.config.fallback_rate = 2.0
 broken.on_component_fail(action=log(msg="still broken"), max_retries=None)
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[broken])
@@ -119,6 +120,8 @@ launcher.bringup()
     assert out.count("Traceback (most recent call last)") == 1, out[-2000:]
     assert "ValueError: bad reading again (" in out  # one counted line per 5 s window
     assert "no restarts" in out  # a declared handler replaces the default restart
+    # 50 failing steps a second, but the unlimited fallback runs at fallback_rate (2 Hz), no faster
+    assert 8 <= out.count("still broken") <= 15, out.count("still broken")
 
 
 LADDER = """
