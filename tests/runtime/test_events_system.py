@@ -121,7 +121,7 @@ launcher.bringup()
     assert "ValueError: bad reading again (" in out  # one counted line per 5 s window
     assert "no restarts" in out  # a declared handler replaces the default restart
     # 50 failing steps a second, but the unlimited fallback runs at fallback_rate (2 Hz), no faster
-    assert 8 <= out.count("still broken") <= 15, out.count("still broken")
+    assert 8 <= out.count("emos.actions: still broken") <= 15, out.count("emos.actions: still broken")
 
 
 LADDER = """
