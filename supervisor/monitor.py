@@ -98,8 +98,18 @@ class Monitor(BaseComponent):
             return
         now = time.monotonic()
         self.board.put(topic.name, msg, now)
-        for i in self.by_topic.get(topic.name, ()):
-            if self.trackers[i].check(topic.name, self.board, now):
+        interested = self.by_topic.get(topic.name, ())
+        if not interested:
+            return
+        cache: dict[str, Any] = {}  # each topic's freshness is looked up once per message, not per leaf
+
+        def fresh(name: str) -> Any:
+            if name not in cache:
+                cache[name] = self.board.fresh(name, now)
+            return cache[name]
+
+        for i in interested:
+            if self.trackers[i].check(topic.name, self.board, now, fresh):
                 self._fire(i, topic.name, msg)
         self.health_status.set_healthy()
 
@@ -117,7 +127,9 @@ class Monitor(BaseComponent):
         event = self._entries[index][0]
         for k, (action, args) in enumerate(zip(actions, prepared)):
             try:
-                await asyncio.wait_for(run_action(action, self.runtime, topic, msg, args), self._action_timeout + 1.0)
+                # Every path of run_action has its own deadline (RPC, worker thread, service call),
+                # so no extra wait_for task sits on the hot path of an event.
+                await run_action(action, self.runtime, topic, msg, args)
                 self.stats["actions_ok"] += 1
             except asyncio.CancelledError:
                 raise

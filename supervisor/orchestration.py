@@ -109,7 +109,7 @@ def check_policy(key: str, action_name: Any, max_retries: Any) -> tuple[str, int
 
 
 def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]:
-    """The packages plus, when the recipe has events, one group holding the Monitor."""
+    """The packages plus, when the recipe has events, one group holding the Monitor (first)."""
     from emos.supervisor.monitor import Monitor
     from emos.supervisor.system import Package, SupervisionPolicy
 
@@ -122,8 +122,9 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
     if monitor.component_name in {c.component_name for c in components}:
         raise ValueError(f"component name {monitor.component_name!r} is reserved for the Monitor")
     multiprocessing = any(p.multiprocessing for p in packages)
-    return list(packages) + [Package(components=[monitor], multiprocessing=multiprocessing, activate=True,
-                                     policy=SupervisionPolicy(max_restarts=10, max_seconds=10.0), name="monitor")]
+    # First, so the events are armed before any component publishes (and it stops last).
+    return [Package(components=[monitor], multiprocessing=multiprocessing, activate=True,
+                    policy=SupervisionPolicy(max_restarts=10, max_seconds=10.0), name="monitor")] + list(packages)
 
 
 def lifecycle_op(driver: Callable[[], Any]) -> Any:

@@ -16,7 +16,7 @@ from typing import Any, Mapping
 import attrs
 import numpy as np
 
-from emos.events.conditions import Condition, ConditionError, as_condition, evaluate, render, topics_of
+from emos.events.conditions import Condition, ConditionError, as_condition, compile_condition, render, topics_of
 from emos.io.topic import Topic
 
 
@@ -110,6 +110,7 @@ class EventTracker:
     def __init__(self, spec: Mapping, fired_before: bool = False):
         self.spec = spec
         self.tree = spec["condition"]["tree"]
+        self._evaluate = compile_condition(self.tree)
         self.topics = topics_of(self.tree)
         self.fired_once = fired_before
         self.last_value = False
@@ -117,7 +118,9 @@ class EventTracker:
         self.last_fire = -float("inf")
         self.fire_count = 0
 
-    def check(self, trigger_topic: str, board: Blackboard, now: float | None = None) -> bool:
+    def check(self, trigger_topic: str, board: Blackboard, now: float | None = None, fresh: Any = None) -> bool:
+        """``fresh``: optional ``topic -> fresh message or None`` computed once per message for
+        all events (the Monitor's fast path); by default read from ``board`` at ``now``."""
         now = time.monotonic() if now is None else now
         if self.spec["whole_topic"]:
             if trigger_topic not in self.topics:
@@ -129,7 +132,7 @@ class EventTracker:
                 self.last_content = content
                 return self._decide(bool(value), now)
         else:
-            value = evaluate(self.tree, lambda t: board.fresh(t, now), trigger_topic)
+            value = self._evaluate(fresh or (lambda t: board.fresh(t, now)), trigger_topic)
         truth = value is True
         if self.spec["on_change"]:
             rising = truth and not self.last_value

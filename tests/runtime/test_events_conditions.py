@@ -167,3 +167,28 @@ def test_bare_topic_on_change_compares_content_not_stamps():
         board.put("/terrain", String(data=v), at=float(t))
         out.append(tr.check("/terrain", board, now=float(t)))
     assert out == [True, False, True, False, True]
+
+
+def test_compiled_conditions_agree_with_the_reference_evaluator():
+    from emos.events.conditions import compile_condition
+
+    conditions = [
+        battery.msg.data < 20.0, battery.msg.data.is_in([1.0, 10.0]), ~bumper.msg.data, mode.msg.data.contains("UT"),
+        dets.msg.labels.contains_all(["person", "desk"]), dets.msg.labels[1] == "desk", dets.msg.labels.length() >= 2,
+        multi.msg.detections.labels.not_contains_any(["cat"]), odom.msg.twist.twist.linear.x > 0.1,
+        ((battery.msg.data < 20.0) & ~bumper.msg.data) | mode, mode & (battery.msg.data >= 10.0), ~(dets.msg.scores.contains(1.0)),
+    ]
+    o = Odometry()
+    o.twist.twist.linear.x = 0.3
+    worlds = [
+        {},
+        {"/battery": Float32(data=10.0), "/bumper": Bool(data=False), "/mode": String(data="AUTO"), "/detections": detections("person", "desk"),
+         "/multi": DetectionsMultiSource(detections=[detections("cat")]), "/odom": o},
+        {"/battery": Float32(data=30.0), "/bumper": Bool(data=True), "/detections": detections()},
+    ]
+    for cond in conditions:
+        tree = cond.to_dict()["tree"]
+        fast = compile_condition(tree)
+        for world in worlds:
+            for trigger in (None, "/mode", "/battery"):
+                assert fast(world.get, trigger) == evaluate(tree, world.get, trigger), (cond, world.keys(), trigger)
