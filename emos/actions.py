@@ -19,7 +19,7 @@ import attrs
 
 from emos.config.base import BaseComponentConfig
 from emos.core.component import BaseComponent
-from emos.events.action import Action
+from emos.events.action import Action, Literal
 from emos.events.runner import ActionRuntime
 from emos.io.topic import Topic
 from emos.msgs.registry import resolve
@@ -264,6 +264,6 @@ def publish_message(*, topic: Topic, msg: Any, publish_rate: float | None = None
             raise ValueError(f"publish_message({topic.name}): {name} must be a positive number or None, got {value!r}")
     if publish_period is not None and publish_rate is None:
         raise ValueError(f"publish_message({topic.name}): publish_period needs publish_rate")
-    action = Action._predefined("publish_message", _publish, topic=topic, msg=msg, publish_rate=publish_rate, publish_period=publish_period, key="")
+    action = Action._predefined("publish_message", _publish, topic=Literal(topic), msg=msg, publish_rate=publish_rate, publish_period=publish_period, key="")
     action.kwargs["key"] = f"publish:{topic.name}:{id(action)}"
     return action

@@ -43,7 +43,8 @@ class Monitor(BaseComponent):
             for a in actions:
                 topics.update(a.bound_topics)
                 if a.predefined == "publish_message":
-                    outputs[a.kwargs["topic"].name] = a.kwargs["topic"]
+                    topic = a.kwargs["topic"].value  # a Literal: the topic itself, not a binding
+                    outputs[topic.name] = topic
         super().__init__(component_name=MONITOR_NAME, inputs=list(topics.values()), outputs=list(outputs.values()))
         if topics:
             self.trigger = list(topics.values())
@@ -164,7 +165,7 @@ class MonitorRuntime(ActionRuntime):
             raise RuntimeError("no supervisor to send the lifecycle request to")
         client = AsyncRpcClient(sock)
         try:
-            return await client.call("lifecycle", component=component, op=op, wait_time=wait_time, timeout=self.timeout + wait_time + 30.0)
+            return await client.call("lifecycle", component=component, request=op, wait_time=wait_time, timeout=self.timeout + wait_time + 30.0)
         finally:
             await client.close()
 

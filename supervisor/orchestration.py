@@ -133,7 +133,7 @@ def lifecycle_op(driver: Callable[[], Any]) -> Any:
     import logging
 
     async def lifecycle(req: dict, stream: Any) -> Any:
-        coro = driver().lifecycle(str(req.get("component", "")), str(req.get("op", "")), float(req.get("wait_time") or 0.0))
+        coro = driver().lifecycle(str(req.get("component", "")), str(req.get("request", "")), float(req.get("wait_time") or 0.0))
         if req.get("wait", True):
             return await coro
 
@@ -141,7 +141,7 @@ def lifecycle_op(driver: Callable[[], Any]) -> Any:
             try:
                 await coro
             except Exception as exc:
-                logging.getLogger("emos.supervisor").error("lifecycle %s of %s failed: %s", req.get("op"), req.get("component"), exc)
+                logging.getLogger("emos.supervisor").error("lifecycle %s of %s failed: %s", req.get("request"), req.get("component"), exc)
 
         asyncio.ensure_future(background())
         return True

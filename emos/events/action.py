@@ -108,7 +108,8 @@ class Action:
 
     def describe(self) -> str:
         if self.kind == "predefined":
-            return f"{self.predefined}({', '.join(f'{k}={v!r}' for k, v in self.kwargs.items() if k != 'component')})" + (f" on {self.component}" if self.component else "")
+            shown = ", ".join(f"{k}={v!r}" for k, v in self.kwargs.items() if k not in ("component", "key") and v is not None)
+            return f"{self.predefined}({shown})"
         if self.kind == "lifecycle":
             return f"{self.kwargs['op']}({self.component})"
         if self.component:
@@ -129,8 +130,23 @@ def _walk(values: Iterable[Any]) -> Iterable[Any]:
             yield v
 
 
+class Literal:
+    """An argument that is used as it is, never resolved as a binding (e.g. the Topic an action
+    publishes on)."""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value: Any):
+        self.value = value
+
+    def __repr__(self) -> str:
+        return repr(self.value)
+
+
 def resolve_bindings(value: Any, latest: Callable[[str], Any]) -> Any:
     """Replace topic bindings by the latest data (None when the topic has no message yet)."""
+    if isinstance(value, Literal):
+        return value.value
     if isinstance(value, MsgPath):
         msg = latest(value._topic.name)
         if msg is None:

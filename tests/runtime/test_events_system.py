@@ -249,3 +249,71 @@ launcher.bringup()
     assert pub.returncode == 0, pub.stderr + pub.stdout
     wait_until(lambda: (tmp_path / "got.txt").exists() and "/in_b 7" in (tmp_path / "got.txt").read_text(), 15, what="a message on the new input")
     sut.stop()
+
+
+def test_predefined_actions_services_publish_and_lifecycle(tmp_path):
+    body = """
+from emos import Event, Action
+from emos.actions import (publish_message, trigger_component_service, send_srv_request, restart, stop,
+                          update_parameters, send_component_action_server_goal)
+from emos.msgs import Bool, SetBoolRequest, SetBoolResponse, String, Float32
+
+flag = Topic(name="flag", msg_type="Bool")
+go = Topic(name="go", msg_type="Int32")
+chatter = Topic(name="chatter", msg_type="String")
+
+def write(name, text):
+    with open(name, "a") as f:
+        f.write(text + "\\n")
+
+class Switch(BaseComponent):
+    main_srv_type = (SetBoolRequest, SetBoolResponse)
+    def _main_srv_callback(self, request):
+        write("switch.txt", f"{request.data}")
+        return SetBoolResponse(success=True, message="ok")
+
+class Source(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[flag, go], **kw)
+        self.config.loop_rate = 10.0
+        self.n = 0
+    def _execution_step(self):
+        self.n += 1
+        if self.n == 3:
+            self.publish(flag, Bool(data=True))
+        self.publish(go, M.Int32(data=self.n))
+
+class Listener(BaseComponent):
+    def _execution_step(self, msg=None, topic=None):
+        write("chatter.txt", msg.data)
+
+class Victim(BaseComponent):
+    pass
+
+switch = Switch(component_name="switch")
+switch.run_type = "Server"
+src = Source(component_name="source")
+listener = Listener(component_name="listener", inputs=[chatter], trigger=chatter)
+victim = Victim(component_name="victim")
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[switch, src, listener, victim], events_actions={
+    Event(flag): [trigger_component_service(component=switch),
+                               send_srv_request(srv_name="switch/service", srv_type=(SetBoolRequest, SetBoolResponse), srv_request_msg=SetBoolRequest(data=False)),
+                               publish_message(topic=chatter, msg=M.String(data="once")),
+                               publish_message(topic=chatter, msg=M.String(data="tick"), publish_rate=20.0, publish_period=0.5)],
+    Event(go.msg.data == 5): [restart(component=victim), update_parameters(component=listener, params_names=["loop_rate"], new_values=[7.0])],
+    Event(go.msg.data == 30): stop(component=victim),
+})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["switch", "source", "listener", "victim", "emos_monitor"])
+    first_victim = sut.pid("victim")
+    wait_until(lambda: sut.state("victim") == "inactive", 20, what="the victim to be stopped by the third event")
+    assert (tmp_path / "switch.txt").read_text().split() == ["True", "False"]  # request built from the Bool message, then the given one
+    chatter = (tmp_path / "chatter.txt").read_text().split()
+    assert chatter[0] == "once" and 5 <= chatter.count("tick") <= 12, chatter
+    exits = [e for e in sut.events() if e["event"] == "exit" and e["child"] == "victim"]
+    assert [e["reason"] for e in exits] == ["restart_requested"] and sut.pid("victim") != first_victim
+    with RpcClient(control_socket(sut.ctx, "listener")) as rpc:
+        assert rpc.call("info")["config"]["loop_rate"] == 7.0
+    sut.stop()
