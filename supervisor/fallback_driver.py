@@ -19,7 +19,7 @@ import logging
 import time
 from typing import TYPE_CHECKING, Any, Callable
 
-from emos.core.fallbacks import HANDLERS, LEVEL_HANDLERS, Fallback, FallbackTracker
+from emos.core.fallbacks import HANDLERS, Fallback, FallbackTracker
 from emos.core.ratelimit import RepeatLimiter
 from emos.events.action import ActionError
 from emos.events.links import ComponentLinks
@@ -63,12 +63,7 @@ class FallbackDriver(ActionRuntime):
         for comp in system.components:
             name = comp.component_name
             own = comp.fallbacks
-            handlers = {k: v for k, v in own.items() if k in HANDLERS}
-            if "on_fail" not in handlers:  # launcher-wide policies fill what the component left open
-                launcher = orchestration.launcher_fallbacks(comp)
-                for key in LEVEL_HANDLERS.values():
-                    if key not in handlers and (key in launcher or "on_fail" in launcher):
-                        handlers[key] = launcher.get(key) or launcher["on_fail"]
+            handlers = orchestration.handlers_for(comp)
             # launcher.fallback_rate paces the launcher-wide policies (and the default restart);
             # a component's own handlers keep its config.fallback_rate.
             own_handlers = any(k in own for k in HANDLERS)

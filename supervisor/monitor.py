@@ -33,6 +33,11 @@ MONITOR_NAME = "emos_monitor"
 
 
 class Monitor(BaseComponent):
+    # No spinning after a wake-up: the actions a message fires are sent on the next turn of the
+    # event loop, which a spin would delay, and a spinning Monitor competes for the CPU with the
+    # components it watches.
+    _wake_spin_us = 0.0
+
     def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0):
         self._entries = entries
         self._action_timeout = action_timeout

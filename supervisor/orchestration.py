@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence
 from attrs import define, field
 
 from emos.core.component import BaseComponent
-from emos.core.fallbacks import DEFAULT_RESET_AFTER_S, HANDLERS, Fallback
+from emos.core.fallbacks import DEFAULT_RESET_AFTER_S, HANDLERS, LEVEL_HANDLERS, Fallback
 from emos.events.action import Action, call_signature_error
 from emos.events.event import Event
 from emos.events.runner import step_action
@@ -74,6 +74,20 @@ class Orchestration:
                     raise ValueError(f"launcher.{key}(action_name={action_name!r}): component {c.component_name!r} has no public method {action_name!r}; "
                                      f"use one of {', '.join(LAUNCHER_POLICY_ACTIONS)} or a method every component has")
 
+    def handlers_for(self, component: BaseComponent) -> dict[str, Fallback]:
+        """The component's own handlers, completed by the launcher-wide policies: a level the
+        component left open (and no own ``on_fail``) gets the launcher's policy for that level,
+        else the launcher's ``on_fail``."""
+        own = component.fallbacks
+        handlers = {k: v for k, v in own.items() if k in HANDLERS}
+        if "on_fail" in handlers:
+            return handlers
+        launcher = self.launcher_fallbacks(component)
+        for key in LEVEL_HANDLERS.values():
+            if key not in handlers and (key in launcher or "on_fail" in launcher):
+                handlers[key] = launcher.get(key) or launcher["on_fail"]
+        return handlers
+
     def launcher_fallbacks(self, component: BaseComponent) -> dict[str, Fallback]:
         """The launcher-wide policies as fallbacks of one component."""
         from emos import actions as A
@@ -114,10 +128,10 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
     from emos.supervisor.system import Package, SupervisionPolicy
 
     components = [c for p in packages for c in p.components]
+    orchestration.check(components)
     entries = orchestration.all_events(components)
     if not entries:
         return list(packages)
-    orchestration.check(components)
     monitor = Monitor(entries, orchestration.action_timeout)
     if monitor.component_name in {c.component_name for c in components}:
         raise ValueError(f"component name {monitor.component_name!r} is reserved for the Monitor")

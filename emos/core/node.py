@@ -70,6 +70,8 @@ class Node:
         sleeps (see :mod:`emos.transport.waker`); default ``$EMOS_WAKE_SPIN_US`` or 100 us.
         Threaded mode passes 0: a spinning thread would hold the interpreter lock."""
         self.component = component
+        if wake_spin_us is None:
+            wake_spin_us = getattr(component, "_wake_spin_us", None)  # the Monitor: 0, see supervisor/monitor.py
         self.wake_spin_us = wake_spin_setting() if wake_spin_us is None else wake_spin_us
         self.name = component.component_name
         self.ctx = ctx or current()

@@ -154,3 +154,25 @@ def test_component_fallback_runs_only_when_configured():
 
     d = Driver(component_name="d")
     assert d.reconnect() is False  # not running: skipped, reported as not recovered
+
+
+def test_launcher_wide_policies_fill_only_what_a_component_left_open():
+    from emos.supervisor.orchestration import Orchestration, check_policy
+
+    own = Comp(component_name="own")
+    own.on_algorithm_fail(action=Action(own.m1))
+    catch_all = Comp(component_name="catch_all")
+    catch_all.on_fail(action=Action(catch_all.m2))
+    bare = Comp(component_name="bare")
+    orch = Orchestration(policies={"on_fail": check_policy("on_fail", "restart", None),
+                                   "on_system_fail": check_policy("on_system_fail", "m0", 2)})
+    h = orch.handlers_for(own)
+    assert h["on_algorithm_fail"].steps[0].method_name == "m1"  # its own
+    assert h["on_component_fail"].steps[0].kind == "lifecycle"  # launcher on_fail: restart
+    assert h["on_system_fail"].steps[0].method_name == "m0" and h["on_system_fail"].max_retries == 2
+    assert set(orch.handlers_for(catch_all)) == {"on_fail"}  # its own catch-all wins everywhere
+    assert orch.handlers_for(bare)["on_component_fail"].steps[0].component == "bare"
+    with pytest.raises(ValueError, match="no public method 'nope'"):
+        Orchestration(policies={"on_fail": check_policy("on_fail", "nope", None)}).check([bare])
+    with pytest.raises(ValueError, match="max_retries"):
+        check_policy("on_fail", "restart", 0)
