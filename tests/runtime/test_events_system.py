@@ -49,12 +49,18 @@ def note(value):
 
 src = Source(component_name="source")
 sink = Sink(component_name="sink")
+def also(value):
+    with open("also.txt", "a") as f:
+        f.write(f"{{value}}\\n")
+
 once = Event(counter.msg.data >= 5, handle_once=True)
 every_tenth = Event((counter.msg.data.is_in([10, 20, 30])) & counter)
+at_twenty = Event(counter.msg.data == 20)  # fires on the same message as every_tenth
 launcher = Launcher(multi_processing={multi})
 launcher.add_pkg(components=[src, sink], events_actions={{
     once: [Action(sink.record, args=(counter.msg.data,), kwargs={{"note": "once"}}), Action(note, args=(counter.msg.data,)), log(msg="EVENT-LOG-LINE")],
     every_tenth: Action(sink.record, args=(counter.msg.data,), kwargs={{"note": "tenth"}}),
+    at_twenty: Action(also, args=(counter,)),
 }})
 launcher.bringup()
 """
@@ -71,6 +77,7 @@ launcher.bringup()
     if multi:
         assert int(fn[0]) not in (sink_pid, sut.proc.pid)  # in the Monitor's process
     assert sut.output().count("EVENT-LOG-LINE") == 1
+    assert (tmp_path / "also.txt").read_text().split() == ["Int32(data=20)"]  # the whole message, bound by its Topic
 
 
 def test_a_component_that_fails_every_step_is_restarted_until_the_supervisor_gives_up(tmp_path):
@@ -165,14 +172,26 @@ def test_a_ladder_escalates_gives_up_and_shows_it_in_emos_status(tmp_path, multi
 
 def test_the_monitor_survives_sigkill_and_keeps_handle_once_fired(tmp_path):
     body = COUNTER + """
+def slow(value):
+    time.sleep(0.3)  # the Monitor is mid-action most of the time it is killed
+
+class Flaky(BaseComponent):
+    def _execution_step(self):
+        self.health_status.set_fail_algorithm(algorithm_names=["never_converges"])
+    def recover(self):
+        return False
+
 src = Source(component_name="source")
 sink = Sink(component_name="sink")
+flaky = Flaky(component_name="flaky")
+flaky.config.fallback_rate = 2.0
+flaky.on_algorithm_fail(action=Action(flaky.recover), max_retries=4)
 once = Event(counter.msg.data >= 3, handle_once=True)
 each = Event(counter)
-launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[src, sink], events_actions={
+launcher = Launcher(multi_processing=True, fallback_reset_after=60.0)
+launcher.add_pkg(components=[src, sink, flaky], events_actions={
     once: Action(sink.record, args=(counter.msg.data,), kwargs={"note": "once"}),
-    each: Action(sink.record, args=(counter.msg.data,), kwargs={"note": "each"}),
+    each: [Action(sink.record, args=(counter.msg.data,), kwargs={"note": "each"}), Action(slow, args=(counter.msg.data,))],
 })
 launcher.bringup()
 """
@@ -187,6 +206,10 @@ launcher.bringup()
     wait_until(lambda: sink_file.read_text().count("each") > before + 5, 15, what="events after the Monitor's restarts")
     assert sink_file.read_text().count("once") == 1
     assert sut.state("source") == "active" and sut.state("sink") == "active"
+    # The ladder lives in the supervisor: the Monitor's deaths neither reset nor repeat it.
+    wait_until(lambda: any(e["event"] == "gave_up" for e in sut.events()), 20, what="flaky's ladder to be spent")
+    attempts = [e["attempt"] for e in sut.events() if e["event"] == "fallback" and e["child"] == "flaky"]
+    assert attempts == [1, 2, 3, 4]
     sut.stop()
 
 
