@@ -28,7 +28,7 @@ __all__ = [
     "start", "stop", "restart", "reconfigure", "update_parameter", "update_parameters",
     "send_component_service_request", "trigger_component_service", "send_component_action_server_goal",
     "trigger_component_action_server", "log", "publish_message", "send_srv_request", "trigger_service",
-    "send_action_goal", "trigger_action_server", "Action",
+    "send_action_goal", "trigger_action_server", "Action", "LogInfo", "ComponentActions",
 ]
 
 
@@ -267,3 +267,29 @@ def publish_message(*, topic: Topic, msg: Any, publish_rate: float | None = None
     action = Action._predefined("publish_message", _publish, topic=Literal(topic), msg=msg, publish_rate=publish_rate, publish_period=publish_period, key="")
     action.kwargs["key"] = f"publish:{topic.name}:{id(action)}"
     return action
+
+
+# ============================================================================ Kompass spellings
+def LogInfo(*, msg: str, logger_name: str | None = None) -> Action:  # noqa: N802 (the seed's name)
+    """``log`` under the name Kompass recipes use."""
+    return log(msg=msg, logger_name=logger_name)
+
+
+class ComponentActions:
+    """The Kompass spellings of the service and action-server actions."""
+
+    @staticmethod
+    def send_srv_request(*, srv_name: str, srv_type: Any, srv_request_msg: Any) -> Action:
+        return send_srv_request(srv_name=srv_name, srv_type=srv_type, srv_request_msg=srv_request_msg)
+
+    @staticmethod
+    def send_action_goal(*, action_name: str, action_type: Any, action_request_msg: Any) -> Action:
+        """The goal can be replaced at fire time: ``.event_parser(fn, output_mapping="action_request_msg")``."""
+        action = send_action_goal(server_name=action_name, server_type=action_type, request_msg=action_request_msg)
+        action.kwargs["action_request_msg"] = action.kwargs["goal"]
+        action.method = _goal_alias
+        return action
+
+
+async def _goal_alias(rt: ActionRuntime, *, action_request_msg: Any, goal: Any = None, **kwargs: Any) -> Any:
+    return await _goal(rt, goal=action_request_msg, **kwargs)

@@ -19,7 +19,7 @@ import time
 from attrs import define, field
 
 from emos import Action, BaseComponent, BaseComponentConfig, ComponentStatus, Event, Launcher, Topic
-from emos.actions import log, send_action_goal, update_parameter
+from emos.actions import ComponentActions, LogInfo, update_parameter
 from emos.msgs import Point, PointStamped, Pose, Time, Twist, message_type
 from emos.msgs import fields as F
 
@@ -46,7 +46,12 @@ class PlanPathResult:
     success: bool = F.boolean()
 
 
-PlanPath = (PlanPathGoal, PlanPathFeedback, PlanPathResult)
+class PlanPath:
+    """The planner's action interface, spelled as a ROS action type (``PlanPath.Goal()``)."""
+
+    Goal, Feedback, Result = PlanPathGoal, PlanPathFeedback, PlanPathResult
+
+
 clicked_point = Topic(name="/clicked_point", msg_type="PointStamped")
 cmd_vel = Topic(name="/cmd_vel", msg_type="Twist")
 
@@ -90,12 +95,12 @@ class DriveManager(BaseComponent):
 
 class Planner(BaseComponent):
     def custom_on_configure(self):
-        self.create_action_server("/planner/plan_path", *PlanPath, self.plan)
+        self.create_action_server("/planner/plan_path", PlanPath.Goal, PlanPath.Feedback, PlanPath.Result, self.plan)
 
     def plan(self, goal_handle):
         g = goal_handle.goal
         self.get_logger().info("[planner] planning to (%.2f, %.2f) within %.2f m", g.goal.position.x, g.goal.position.y, g.end_tolerance.lateral_distance_error)
-        return PlanPathResult(success=True)
+        return PlanPath.Result(success=True)
 
 
 class Clicker(BaseComponent):
@@ -129,11 +134,11 @@ activate_direct_sensor_mode = update_parameter(component=controller, param_name=
 
 # 3. Clicked point -> Planner goal
 event_clicked_point = Event(clicked_point.msg.header.stamp.sec > 0)
-send_goal = send_action_goal(server_name="/planner/plan_path", server_type=PlanPath, request_msg=PlanPathGoal())
+send_goal = ComponentActions.send_action_goal(action_name="/planner/plan_path", action_type=PlanPath, action_request_msg=PlanPath.Goal())
 
 
 def goal_point_parser(*, msg: PointStamped, **_):
-    action_request = PlanPathGoal()
+    action_request = PlanPath.Goal()
     goal = Pose()
     goal.position.x = msg.point.x
     goal.position.y = msg.point.y
@@ -142,10 +147,10 @@ def goal_point_parser(*, msg: PointStamped, **_):
     return action_request
 
 
-send_goal.event_parser(goal_point_parser, output_mapping="goal")
+send_goal.event_parser(goal_point_parser, output_mapping="action_request_msg")
 
 events_actions = {
-    event_clicked_point: [log(msg="Got new goal point"), send_goal],
+    event_clicked_point: [LogInfo(msg="Got new goal point"), send_goal],
     event_controller_fail: unblock_action,
     event_mapper_fault: activate_direct_sensor_mode,
 }
