@@ -72,6 +72,7 @@ class FallbackDriver(ActionRuntime):
                                                   rate, reset_after=orchestration.reset_after)
             self.subs[name] = Subscriber(self.ctx, comp.status_topic.name, ComponentStatus, waker=self.waker, queue_size=4)
         self._poll = asyncio.ensure_future(self._poll_loop())
+        self._closed = False
 
     # -- status intake --------------------------------------------------------------------------
     def _on_wake(self) -> None:
@@ -209,6 +210,9 @@ class FallbackDriver(ActionRuntime):
         return [n for n, t in self.trackers.items() if t.gave_up]
 
     async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
         self._poll.cancel()
         for task in list(self._tasks.values()):
             task.cancel()

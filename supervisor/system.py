@@ -173,6 +173,7 @@ class System:
                 log.error("supervision gave up: %s", result.detail)
             else:
                 self.exit_reason = self.exit_reason or "stopped on request"
+                await self.fallbacks.close()  # no ladder acts on components being shut down
                 await self.root.stop()
         finally:
             await self.fallbacks.close()

@@ -66,8 +66,10 @@ class Action:
         if isinstance(owner, BaseComponent):
             self.component = owner.component_name
             name = self.method.__name__
+            # BaseComponent's own start/stop/restart are lifecycle requests; a subclass that
+            # overrides one (a DriveManager's stop = brake) is an ordinary component method.
             base = getattr(BaseComponent, name, None)
-            if name in LIFECYCLE_METHODS and getattr(type(owner), name) is base:
+            if name in LIFECYCLE_METHODS and getattr(self.method, "__func__", None) is base:
                 self.kind = "lifecycle"
                 if self.args or set(self.kwargs) - {"wait_time"}:
                     raise TypeError(f"Action: {self.component}.{name} takes only wait_time; got args={self.args!r} kwargs={self.kwargs!r}")

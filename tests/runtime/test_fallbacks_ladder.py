@@ -176,3 +176,15 @@ def test_launcher_wide_policies_fill_only_what_a_component_left_open():
         Orchestration(policies={"on_fail": check_policy("on_fail", "nope", None)}).check([bare])
     with pytest.raises(ValueError, match="max_retries"):
         check_policy("on_fail", "restart", 0)
+
+
+def test_an_overridden_stop_is_a_component_method_but_actions_stop_is_lifecycle():
+    class DriveManager(BaseComponent):
+        def stop(self):
+            return "brake"
+
+    d = DriveManager(component_name="d")
+    assert Action(d.stop).kind == "component"
+    from emos.actions import stop
+
+    assert stop(component=d).kind == "lifecycle"
