@@ -103,7 +103,10 @@ class Monitor(BaseComponent):
         if topic is None:
             return
         now = time.monotonic()
-        self.board.put(topic.name, msg, now)
+        # Freshness counts from the publish stamp, not from our receipt: a message that waited in
+        # a ring (a restarted Monitor reading old messages) must not pass for fresh data.
+        age = self.input_age(topic)
+        self.board.put(topic.name, msg, now - age if age is not None and age > 0 else now)
         interested = self.by_topic.get(topic.name, ())
         if not interested:
             return

@@ -340,3 +340,43 @@ launcher.bringup()
     with RpcClient(control_socket(sut.ctx, "listener")) as rpc:
         assert rpc.call("info")["config"]["loop_rate"] == 7.0
     sut.stop()
+
+
+def test_stale_data_never_fires(tmp_path):
+    body = """
+from emos import Event, Action
+
+battery = Topic(name="battery", msg_type="Float32", data_timeout=0.5)
+tick = Topic(name="tick", msg_type="Int32")
+
+class Source(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[battery, tick], **kw)
+        self.config.loop_rate = 20.0
+        self.n = 0
+    def _execution_step(self):
+        self.n += 1
+        if self.n == 10:  # one low-battery reading, then silence: stale after 0.5 s
+            self.publish(battery, M.Float32(data=5.0))
+        self.publish(tick, M.Int32(data=self.n))
+
+def record(n):
+    with open("fired.txt", "a") as f:
+        f.write(f"{n}\\n")
+
+src = Source(component_name="source")
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[src], events_actions={Event((battery.msg.data < 10.0) & tick): Action(record, args=(tick.msg.data,)),
+                                                    Event(~(battery.msg.data > 50.0) & tick): Action(record, args=(-1,))})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source"])
+    fired = tmp_path / "fired.txt"
+    wait_until(lambda: fired.exists(), 15, what="the low-battery event")
+    with RpcClient(control_socket(sut.ctx, "source")) as rpc:
+        wait_until(lambda: rpc.call("get_state")["steps"] > 70, 20, what="2.5 s more of ticks")
+    sut.stop()
+    values = [int(v) for v in fired.read_text().split()]
+    ticks = [v for v in values if v > 0]
+    assert ticks and min(ticks) >= 10 and max(ticks) <= 10 + 15, ticks  # ~0.5 s of 20 Hz ticks after the reading, never later
+    assert values.count(-1) == len(ticks)  # the negated condition is no more true on stale data
