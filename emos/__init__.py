@@ -22,6 +22,7 @@ _LAZY = {
     "Action": "emos.events.action",
     "component_fallback": "emos.core.fallbacks",
     "ComponentStatus": "emos.msgs.status",
+    "ComponentServices": "emos.core.reconfig",
 }
 
 __all__ = sorted(_LAZY)

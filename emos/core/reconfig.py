@@ -164,3 +164,45 @@ def request_lifecycle(node: "Node", op: str, wait_time: float = 0.0) -> None:
             await client.close()
 
     loop.call_soon_threadsafe(lambda: asyncio.ensure_future(ask()))
+
+
+class ComponentServices:
+    """The live-reconfiguration services of one running component, from Python.
+
+        ComponentServices("controller").update_parameter("loop_rate", 5.0)
+
+    Works from any process of the run (a recipe function, a component, a test given ``ctx``);
+    a refused change raises :class:`~emos.core.rpc.RpcError` with the validator's message.
+    """
+
+    def __init__(self, component_name: str, ctx: Any = None, timeout: float = 15.0):
+        from emos.core.node import control_socket
+        from emos.transport.context import current
+
+        self.component_name = component_name
+        self.path = control_socket(ctx or current(), component_name)
+        self.timeout = timeout
+
+    def _call(self, op: str, **payload: Any) -> Any:
+        from emos.core.rpc import RpcClient
+
+        with RpcClient(self.path, timeout=self.timeout) as rpc:
+            return rpc.call(op, **payload)
+
+    def change_topic(self, direction: int | str, old_name: str, new_name: str, new_msg_type: str | None = None) -> dict:
+        return self._call("change_topic", direction=direction, old_name=old_name, new_name=new_name, new_msg_type=new_msg_type)
+
+    def update_parameter(self, name: str, value: Any, keep_alive: bool = True) -> dict:
+        return self._call("update_config_parameter", name=name, value=value, keep_alive=keep_alive)
+
+    def update_parameters(self, values: dict[str, Any], keep_alive: bool = True) -> dict:
+        return self._call("update_config_parameters", values=values, keep_alive=keep_alive)
+
+    def configure_from_file(self, path: str, keep_alive: bool = True) -> dict:
+        return self._call("configure_from_file", path=path, keep_alive=keep_alive)
+
+    def execute_method(self, method: str, *args: Any, **kwargs: Any) -> Any:
+        return self._call("execute_method", method=method, args=list(args), kwargs=kwargs)
+
+    def info(self) -> dict:
+        return self._call("info")

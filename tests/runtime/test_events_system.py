@@ -263,8 +263,15 @@ launcher.bringup()
     assert ok.returncode == 0 and json.loads(ok.stdout)["loop_rate"] == 5, ok.stderr
     bad = subprocess.run(emos + ["component", "call", "counter", "update_config_parameters", "names=loop_rate,heartbeat_rate", "values=7,-3", "--run", sut.run_dir.name], **run)
     assert bad.returncode == 1 and "heartbeat_rate" in bad.stderr, bad.stderr
-    with RpcClient(control_socket(sut.ctx, "counter")) as rpc:
-        assert rpc.call("info")["config"]["loop_rate"] == 5  # the refused batch changed nothing
+    from emos import ComponentServices
+    from emos.core.rpc import RpcError
+
+    counter = ComponentServices("counter", ctx=sut.ctx)
+    assert counter.info()["config"]["loop_rate"] == 5  # the refused batch changed nothing
+    with pytest.raises(RpcError, match="loop_rate"):
+        counter.update_parameter("loop_rate", -1.0)
+    assert counter.update_parameter("heartbeat_rate", 20.0, keep_alive=False)["heartbeat_rate"] == 20.0
+    assert sut.state("counter") == "active" and counter.info()["config"]["loop_rate"] == 5
     swap = subprocess.run(emos + ["component", "call", "counter", "change_topic", "direction=0", "old_name=in_a", "new_name=in_b", "--run", sut.run_dir.name], **run)
     assert swap.returncode == 0, swap.stderr
     assert sut.state("counter") == "active"
