@@ -78,10 +78,16 @@ class FallbackDriver(ActionRuntime):
     def _on_wake(self) -> None:
         self.waker.drain()
         for name, sub in self.subs.items():
-            items = sub.take_raw()
+            # Only the component's own status ring counts (its publisher id is its name): a
+            # stray publisher on <name>/status must not drive its fallbacks.
+            items = [item for item in sub.take_raw() if item[2] == name]
             if not items:
                 continue
-            status = codec.decode(ComponentStatus, items[-1][1], copy=True)
+            try:
+                status = codec.decode(ComponentStatus, items[-1][1], copy=True)
+            except Exception as exc:
+                self._report(name, "status decode", exc)
+                continue
             if status.header.stamp.to_sec() < self._not_before.get(name, 0.0):
                 continue
             self.last_status[name] = status

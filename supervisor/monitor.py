@@ -118,8 +118,14 @@ class Monitor(BaseComponent):
             return cache[name]
 
         for i in interested:
-            if self.trackers[i].check(topic.name, self.board, now, fresh):
-                self._fire(i, topic.name, msg)
+            try:
+                if self.trackers[i].check(topic.name, self.board, now, fresh):
+                    self._fire(i, topic.name, msg)
+            except Exception as exc:  # one broken event must not stop the others (or restart us)
+                log_now, _, suppressed = self._errors.hit((i, "evaluate", type(exc).__name__))
+                if log_now:
+                    self.get_logger().error("[%s] event %r on %s: %s: %s%s", self.component_name, self._entries[i][0], topic.name,
+                                            type(exc).__name__, exc, f" (and {suppressed} more times)" if suppressed else "")
         self.health_status.set_healthy()
 
     def _fire(self, index: int, topic: str, msg: Any) -> None:

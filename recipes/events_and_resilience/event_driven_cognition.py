@@ -8,8 +8,8 @@ trigger is ``event_person_detected`` (``labels`` contains "person", ``on_change=
 instead of on every frame.
 
 Stand-ins: the model is not the point here, so ``Camera`` renders a scripted scene (a person
-walks in at 1 s and out at 2 s: described; back at 3 s: not described, within 5 s of the last
-description; back at 6.5 s to stay: described), ``Vision`` "detects" by reading the
+walks in at 0.8 s and out at 1.6 s: described; back at 2.2 s: not described, within 5 s of the
+last description; back at 6 s to stay: described), ``Vision`` "detects" by reading the
 scene's colour code from the frame, and ``VLM`` describes the latest frame from its pixels with
 a fixed prompt. The event, the trigger and the launcher are the real API.
 """
@@ -24,7 +24,7 @@ camera_image = Topic(name="/image_raw", msg_type="Image")
 detections = Topic(name="/detections", msg_type="Detections")
 description_output = Topic(name="/description", msg_type="String")
 
-PERSON_VISIBLE = [(1.0, 2.0), (3.0, 4.0), (6.5, 1e9)]  # seconds after the camera starts
+PERSON_VISIBLE = [(0.8, 1.6), (2.2, 3.0), (6.0, 1e9)]  # seconds after the camera starts
 
 
 class Camera(BaseComponent):

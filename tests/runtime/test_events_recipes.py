@@ -19,7 +19,7 @@ def run_recipe(name: str, duration: float) -> str:
 
 
 def test_fallback_recipes():
-    out = run_recipe("fallback_recipes.py", 5)
+    out = run_recipe("fallback_recipes.py", 4)
     assert "switched to model client 'local_backup_client'" in out
     assert "answered: [local backup]" in out
     # controller ladder: restart once, then switch algorithm; driver restarted on system failure
@@ -29,7 +29,7 @@ def test_fallback_recipes():
 
 
 def test_event_driven_cognition_describes_on_appearance_with_debounce():
-    out = run_recipe("event_driven_cognition.py", 8.5)
+    out = run_recipe("event_driven_cognition.py", 7.5)
     assert out.count("[visual_describer] A person has been detected") == 2, out[-3000:]
 
 
@@ -46,7 +46,7 @@ def test_cross_component_events():
 
 
 def test_composed_events():
-    out = run_recipe("composed_events.py", 5.5)
+    out = run_recipe("composed_events.py", 5)
     assert out.count("EMERGENCY STOP (smart stop)") == 1  # fast near the obstacle, not slow near it
     assert out.count("EVENT describe person (battery ok)") == 1
     assert out.count("EVENT auto-track person (not in manual mode)") == 1
