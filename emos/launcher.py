@@ -69,6 +69,8 @@ class Launcher:
         self.exit_code: int | None = None
         self.exit_reason = ""
         self.system: Any = None
+        self._shared_wiring: list[tuple[str, dict[str, Any]]] = []
+        self._shared_config: dict[str, Any] = {}
 
     def add_pkg(
         self,
@@ -125,6 +127,62 @@ class Launcher:
             name=package_name or f"group{len(self._packages)}",
         ))
 
+    # -- Kompass-style conveniences: shared wiring and robot description ---------------------------
+    def kompass(self, components: Sequence[BaseComponent], multiprocessing: bool | None = None, **kwargs: Any) -> None:
+        """Add navigation components as one group (Kompass' name for ``add_pkg``)."""
+        self.add_pkg(components=components, package_name=kwargs.pop("package_name", "kompass"),
+                     multiprocessing=multiprocessing, **kwargs)
+
+    def inputs(self, **topics: Any) -> None:
+        """Wire an input key for every component that has it: ``launcher.inputs(location=odom)``.
+        Applied at bringup, so components added later get it too; a key no component has fails then."""
+        self._shared_wiring.append(("inputs", topics))
+
+    def outputs(self, **topics: Any) -> None:
+        """Wire an output key for every component that has it."""
+        self._shared_wiring.append(("outputs", topics))
+
+    @property
+    def robot(self) -> Any:
+        return self._shared_config.get("robot")
+
+    @robot.setter
+    def robot(self, value: Any) -> None:
+        """The robot description (``RobotConfig``) given to every component whose config has ``robot``."""
+        self._shared_config["robot"] = value
+
+    @property
+    def frames(self) -> Any:
+        return self._shared_config.get("frames")
+
+    @frames.setter
+    def frames(self, value: Any) -> None:
+        """The coordinate frames (``RobotFrames``) given to every component whose config has ``frames``."""
+        self._shared_config["frames"] = value
+
+    def _apply_shared(self) -> None:
+        from emos.core.keyed import KeyedComponent, key_name
+
+        components = [c for p in self._packages for c in p.components]
+        for role, topics in self._shared_wiring:
+            for raw_key, topic in topics.items():
+                key = key_name(raw_key)
+                takers = [c for c in components if isinstance(c, KeyedComponent) and key in c._allowed(role)]
+                if not takers:
+                    raise ValueError(f"Launcher.{role}({key}=...): no component added to this launcher has the {role[:-1]} key {key!r}")
+                for c in takers:
+                    getattr(c, role)(**{key: topic})
+        for name, value in self._shared_config.items():
+            if value is None:
+                continue
+            for c in components:
+                if hasattr(c.config, name):
+                    setattr(c.config, name, value)  # validated by the component's attrs config
+        for c in components:
+            missing = c.missing_required() if isinstance(c, KeyedComponent) else []
+            if missing:
+                raise ValueError(f"component {c.component_name!r} ({type(c).__name__}) has no topic for required {', '.join(missing)}")
+
     # Launcher-wide fallback policies: for every component without its own handler of that level
     # (see emos.core.fallbacks for the order). Run by the supervisor (emos.supervisor.fallback_driver).
     def _policy(self, key: str, action_name: str, max_retries: int | None) -> None:
@@ -155,6 +213,7 @@ class Launcher:
 
         if not self._packages:
             raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
+        self._apply_shared()
         from emos.supervisor.orchestration import Orchestration
 
         if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):

@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("emos.supervisor.cli_run", "run a recipe script under the supervisor"),
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
+    "chaos": ("emos.supervisor.cli_chaos", "inject faults into a running recipe and check that it recovers"),
     "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
 }
 
