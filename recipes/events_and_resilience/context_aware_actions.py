@@ -102,7 +102,9 @@ action_process_command = Action(method=navigate_to_location, args=(command_topic
 event_object_detected = Event(detections.msg.labels.length() > 0, on_change=True, keep_event_delay=5)
 action_describe = Action(method=describe_detected_object, args=(detections.msg.labels[0],))
 
+events_actions = {event_command_received: action_process_command, event_object_detected: action_describe}
+
 launcher = Launcher()
-launcher.add_pkg(components=[operator, planner, mapper, detector], activate_all_components_on_start=True, multiprocessing=True,
-                 events_actions={event_command_received: action_process_command, event_object_detected: action_describe})
+launcher.kompass(components=[operator, planner, mapper, detector], activate_all_components_on_start=True, multiprocessing=True,
+                 events_actions=events_actions)
 launcher.bringup()

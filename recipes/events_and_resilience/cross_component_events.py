@@ -156,6 +156,6 @@ events_actions = {
 }
 
 launcher = Launcher()
-launcher.add_pkg(components=[planner, controller, mapper, driver, clicker], events_actions=events_actions,
+launcher.kompass(components=[planner, controller, mapper, driver, clicker], events_actions=events_actions,
                  activate_all_components_on_start=True, multiprocessing=True)
 launcher.bringup()

@@ -109,5 +109,5 @@ events_action = {event_person_detected: [switch_algorithm_action, action_start_p
 
 launcher = Launcher()
 launcher.add_pkg(components=[camera, vision], ros_log_level="info", package_name="automatika_embodied_agents", multiprocessing=True)
-launcher.add_pkg(components=[controller, mapper, driver], events_actions=events_action, multiprocessing=True)
+launcher.kompass(components=[controller, mapper, driver], events_actions=events_action, multiprocessing=True)
 launcher.bringup()
