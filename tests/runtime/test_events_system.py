@@ -387,3 +387,42 @@ launcher.bringup()
     ticks = [v for v in values if v > 0]
     assert ticks and min(ticks) >= 10 and max(ticks) <= 10 + 15, ticks  # ~0.5 s of 20 Hz ticks after the reading, never later
     assert values.count(-1) == len(ticks)  # the negated condition is no more true on stale data
+
+
+def test_a_flood_on_an_event_topic_neither_blocks_the_publisher_nor_wedges_the_monitor(tmp_path):
+    body = """
+from emos import Event, Action
+
+flood = Topic(name="flood", msg_type="Int32")
+done = Topic(name="done", msg_type="Int32")
+
+class Flooder(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[flood, done], **kw)
+        self.config.loop_rate = 20.0
+        self.n = 0
+    def _execution_step(self):
+        self.n += 1
+        if self.n <= 60:  # 3 s of 500 messages per step, 100 events armed on them
+            for k in range(500):
+                self.publish(flood, M.Int32(data=k))
+        elif self.n == 70:
+            self.publish(done, M.Int32(data=1))
+        with open("steps.txt", "w") as f:
+            f.write(str(self.n))
+
+def finished():
+    open("finished.txt", "w").write("yes")
+
+events = {Event((flood.msg.data == -k) & flood): Action(finished) for k in range(1, 100)}
+events[Event(done)] = Action(finished)
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[Flooder(component_name="flooder")], events_actions=events)
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["flooder", "emos_monitor"])
+    wait_until(lambda: (tmp_path / "finished.txt").exists(), 40, what="the event after the flood")
+    assert int((tmp_path / "steps.txt").read_text()) >= 70  # the flooding component kept stepping
+    assert sut.state("emos_monitor") == "active"
+    assert not [e for e in sut.events() if e["event"] == "exit"]  # nobody died or was restarted
+    sut.stop()
