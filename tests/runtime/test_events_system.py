@@ -278,6 +278,11 @@ launcher.bringup()
     pub = subprocess.run(emos + ["topic", "pub", "/in_b", "Int32", '{"data": 7}', "--rate", "20", "--count", "20", "--run", sut.run_dir.name], **run)
     assert pub.returncode == 0, pub.stderr + pub.stdout
     wait_until(lambda: (tmp_path / "got.txt").exists() and "/in_b 7" in (tmp_path / "got.txt").read_text(), 15, what="a message on the new input")
+    old_pid = sut.pid("counter")
+    again = subprocess.run(emos + ["component", "call", "counter", "restart", "--run", sut.run_dir.name], **run)
+    assert again.returncode == 0, again.stderr
+    sut.wait_new_pid("counter", old_pid, 20)  # through the supervisor: recorded as a requested restart
+    assert [e["reason"] for e in sut.events() if e["event"] == "exit" and e["child"] == "counter"] == ["restart_requested"]
     sut.stop()
 
 
