@@ -5,7 +5,6 @@ import asyncio
 import time
 from typing import Any
 
-from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
@@ -48,10 +47,12 @@ class HeartbeatMonitor:
         self.waker.drain()
         now = time.monotonic()
         for name, sub in self.subs.items():
-            items = sub.take_raw()
+            # take() goes through the subscriber's validated path: a damaged or forged ring, or
+            # a frame that does not decode, is dropped and logged there and cannot raise here.
+            items = sub.take()
             if not items:
                 continue
-            self.status[name] = codec.decode(ComponentStatus, items[-1][1])
+            self.status[name] = items[-1]
             if name in self.watched:
                 self.watched[name] = (self.watched[name][0], now)
 

@@ -6,6 +6,11 @@ nothing but a gap in time. Subscribers find publishers by listing the run's segm
 subscriber with a waker rescans when a publisher announced itself (or left) through it, and at
 least every ``RESCAN_EVERY_NS`` as a safety net; one without a waker rescans when ``/dev/shm``
 changed (its mtime, one ``stat``).
+
+Nothing in ``/dev/shm`` is trusted (see :mod:`emos.transport.trust`): rings are opened through
+one validated path (``Ring.attach``), and a ring that is not ours, does not hold together, or
+turns out damaged while being read is dropped with a rate-limited warning naming the topic and
+segment; the subscriber keeps delivering from every other publisher of the topic.
 """
 from __future__ import annotations
 
@@ -21,7 +26,9 @@ from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
+from emos.transport.fence import full_fence
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
+from emos.transport.trust import UntrustedFile, check_path, rate_limited, remove_owned
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -32,6 +39,12 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 # An announcement can be lost only to a FIFO full of wake-ups (a reader stopped for a long
 # time); the periodic rescan bounds how late such a reader finds a new publisher.
 RESCAN_EVERY_NS = 1_000_000_000
+# A ring a subscriber dropped as untrusted or damaged is looked at again after this long (a
+# segment name is never reused for different contents by our own writers, but a damaged one
+# may be removed and a good one appear under a new generation in the meantime).
+RETRY_REJECTED_NS = 2_000_000_000
+# How many generation numbers a publisher skips past names other users planted before giving up.
+MAX_GENERATION_SKIPS = 64
 
 
 class TopicTypeError(TypeError):
@@ -75,14 +88,29 @@ class Publisher:
 
     # -- segment management ----------------------------------------------------------------------
     def _latest_generation(self) -> int | None:
+        """The newest generation of our ring that is ours (names other users planted are skipped)."""
         prefix = f"{self.ctx.shm_prefix}{encode_name(self.topic)}.{encode_name(self.publisher_id)}.g"
-        gens = [int(n[len(prefix) :]) for n in os.listdir(SHM_DIR) if n.startswith(prefix) and n[len(prefix) :].isdigit()]
-        return max(gens) if gens else None
+        best = None
+        for n in os.listdir(SHM_DIR):
+            if n.startswith(prefix) and n[len(prefix) :].isdigit():
+                reason = check_path(SHM_DIR / n)
+                if reason is None:
+                    best = max(best or 0, int(n[len(prefix) :]))
+                elif reason != "vanished":
+                    rate_limited.warning(f"distrust:{n}", "topic %s: ignoring segment %s: %s", self.topic, n, reason)
+        return best
 
     def _open_or_create(self) -> R.Ring:
+        """Re-open our ring after a restart if it is intact, else start a fresh generation."""
         gen = self._latest_generation()
+        first = 0
         if gen is not None:
-            ring = R.Ring.attach(self.ctx.segment_name(self.topic, self.publisher_id, gen))
+            name = self.ctx.segment_name(self.topic, self.publisher_id, gen)
+            try:
+                ring = R.Ring.attach(name, generation=gen)
+                problem = "it was never fully initialised" if ring is None else None
+            except (R.RingError, UntrustedFile) as exc:
+                ring, problem = None, str(exc)
             if ring is not None:
                 if ring.fingerprint != _fingerprint(self.msg_cls):
                     ring.close()
@@ -90,14 +118,35 @@ class Publisher:
                         f"topic {self.topic!r}: publisher {self.publisher_id!r} publishes {self.type_name}, "
                         f"but its existing ring carries {ring.type_name}"
                     )
-                ring.set_writer_pid(os.getpid())
-                return ring
-        ring = R.Ring.create(
-            self.ctx.segment_name(self.topic, self.publisher_id, 0), self.depth, DEFAULT_CAPACITY,
-            _fingerprint(self.msg_cls), self.type_name,
-        )
+                problem = ring.damage()
+                if problem is None:
+                    ring.set_writer_pid(os.getpid())
+                    return ring
+                first = ring.head  # the header itself passed its checks: keep numbering on
+                ring.close()
+            log.warning("topic %s: ring %s of publisher %s is damaged (%s); starting generation %d", self.topic, name, self.publisher_id, problem, gen + 1)
+            left = remove_owned(SHM_DIR / name)
+            if left is not None:
+                log.warning("topic %s: cannot remove damaged ring %s: %s", self.topic, name, left)
+            gen += 1
+        # Subscribers (re-)register from the subscriber directory in _announce, owed from ``first``.
+        ring = self._create_ring(gen or 0, self.depth, DEFAULT_CAPACITY, _fingerprint(self.msg_cls), self.type_name, first)
         ring.set_writer_pid(os.getpid())
         return ring
+
+    def _create_ring(self, generation: int, depth: int, capacity: int, fingerprint: str, type_name: str, first: int) -> R.Ring:
+        """A new generation of our ring, skipping generation numbers whose names are taken."""
+        for gen in range(generation, generation + MAX_GENERATION_SKIPS):
+            name = self.ctx.segment_name(self.topic, self.publisher_id, gen)
+            try:
+                return R.Ring.create(name, depth, capacity, fingerprint, type_name, generation=gen, first=first)
+            except FileExistsError:
+                # Not a ring of ours (we looked for those): someone planted the name in advance.
+                rate_limited.warning(f"taken:{name}", "topic %s: segment name %s is taken (%s); trying the next generation", self.topic, name, check_path(SHM_DIR / name))
+        raise R.RingError(
+            f"topic {self.topic!r}: publisher {self.publisher_id!r} found generations {generation}..{gen} of its ring "
+            f"all taken by files that are not its own in {SHM_DIR}; remove them"
+        )
 
     def _announce(self) -> None:
         """Register every known subscriber of the topic in our ring and wake them once."""
@@ -115,12 +164,12 @@ class Publisher:
         # Carry the messages still held by the old ring over, under the same numbers, so a
         # subscriber that finds only the new generation (or follows late) loses nothing.
         start = max(old.first, old.head - old.slot_count)
-        new = R.Ring.create(
-            self.ctx.segment_name(self.topic, self.publisher_id, old.generation + 1), old.slot_count, capacity,
-            old.fingerprint, old.type_name, generation=old.generation + 1, first=start,
-        )
+        new = self._create_ring(old.generation + 1, old.slot_count, capacity, old.fingerprint, old.type_name, start)
         for n in range(start, old.head):
-            status, read, stamp = old.read(n)
+            try:
+                status, read, stamp = old.read(n)
+            except R.RingCorrupt:  # scribbled on while we ran: carry an empty message in its place
+                status, read, stamp = R.LAPPED, None, 0
             # Not OK cannot happen for our own completed messages; keep the numbering dense anyway.
             payload = read if status == R.OK and read is not None else bytearray()
             m, buf = new.begin(len(payload))
@@ -128,8 +177,8 @@ class Publisher:
             buf.release()
             new.commit(m, len(payload), stamp)
         new.set_writer_pid(os.getpid())
-        for token in old.waiters()[1]:
-            new.add_waiter(token)
+        for token, mark in old.waiter_marks().items():
+            new.add_waiter(token, mark=max(mark, start))
         old.set_moved_to(new.generation)
         self.ring = new
         old.unlink()
@@ -155,10 +204,14 @@ class Publisher:
         finally:
             buf.release()
         ring.commit(n, nbytes, stamp)
+        # Our head store before we read the waiter table: a subscriber registers (stores), then
+        # reads head; with a fence on both sides one of us sees the other, so a subscriber that
+        # registered just now either reads this message or is woken for it (Dekker again).
+        full_fence()
         if ring.q[R._WAITERS_VER] != self._waiters_version:
             self._sync_waiters()
         if self.sender.fds:
-            dead = self.sender.wake()
+            dead = self.sender.wake(fenced=True)
             for token in dead:
                 self._drop_waiter(token)
         return n
@@ -256,7 +309,9 @@ class Subscriber:
         self.waker = waker
         self.sources: dict[str, _Source] = {}
         self.dropped = 0
-        self._created_ns = time.time_ns()
+        self.undecodable = 0  # messages that arrived but did not decode as ``msg_cls``
+        self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
+        self._created_ns = time.monotonic_ns()
         self._shm_mtime = -1
         self._scanned_at_ns = 0
         self._announcements = -1
@@ -285,29 +340,24 @@ class Subscriber:
             self._announcements = self.waker.announcements
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
-        latest: dict[str, tuple[int, str]] = {}
-        for name in os.listdir(SHM_DIR):
-            if not name.startswith(self._prefix):
-                continue
-            parsed = parse_segment(self.ctx, name)
-            if parsed is None:
-                continue
-            _, pub, gen = parsed
-            if pub not in latest or gen > latest[pub][0]:
-                latest[pub] = (gen, name)
+        latest = self._latest_trusted()
         for pub, (gen, name) in latest.items():
             src = self.sources.get(pub)
             if src is not None and src.ring.name == name:
                 continue
-            if src is not None:
+            if src is not None and 0 < src.ring.moved_to <= gen:
                 # The publisher moved to a bigger ring; ``_follow`` handles it on the next read.
                 continue
-            ring = R.Ring.attach(name)
+            ring = self._attach(name, pub, gen)
             if ring is None:
                 continue
             self._check_type(ring, pub)
-            self._register(ring)
-            self.sources[pub] = _Source(ring, self._start_cursor(ring), pub, name, self.loans)
+            mark = self._register(ring)
+            if src is not None:
+                # A fresh generation that is no growth: the publisher restarted and found its
+                # ring damaged. Its numbering may start over, so the cursor does too.
+                src.close()
+            self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, name, self.loans)
         # Forget publishers whose ring disappeared (removed at the end of a run).
         for pub in [p for p in self.sources if p not in latest]:
             src = self.sources[pub]
@@ -315,6 +365,61 @@ class Subscriber:
                 continue
             src.close()
             del self.sources[pub]
+
+    def _latest_trusted(self) -> dict[str, tuple[int, str]]:
+        """``{publisher: (generation, segment)}``: each publisher's newest segment that is a
+        regular file of ours, skipping names we rejected lately (another user may plant any
+        generation number; it must not hide the real one)."""
+        candidates: dict[str, list[tuple[int, str]]] = {}
+        for name in os.listdir(SHM_DIR):
+            if not name.startswith(self._prefix):
+                continue
+            parsed = parse_segment(self.ctx, name)
+            if parsed is not None:
+                candidates.setdefault(parsed[1], []).append((parsed[2], name))
+        now = time.monotonic_ns()
+        latest: dict[str, tuple[int, str]] = {}
+        for pub, gens in candidates.items():
+            held = self.sources.get(pub)
+            for gen, name in sorted(gens, reverse=True):
+                if held is not None and held.ring.name == name:
+                    latest[pub] = (gen, name)
+                    break
+                if self._rejected.get(name, 0) > now:
+                    continue
+                reason = check_path(SHM_DIR / name)
+                if reason is None:
+                    latest[pub] = (gen, name)
+                    break
+                if reason != "vanished":
+                    self._reject(name, reason)
+        return latest
+
+    def _attach(self, name: str, pub: str, gen: int) -> R.Ring | None:
+        """The one way a subscriber opens a ring: validated, or rejected with a warning."""
+        try:
+            return R.Ring.attach(name, generation=gen)
+        except (R.RingError, UntrustedFile) as exc:
+            self._reject(name, str(exc))
+            return None
+
+    def _reject(self, name: str, reason: str) -> None:
+        self._rejected[name] = time.monotonic_ns() + RETRY_REJECTED_NS
+        if len(self._rejected) > 1024:  # names are cheap to mint; forget the oldest verdicts
+            for old in sorted(self._rejected, key=self._rejected.__getitem__)[:512]:
+                del self._rejected[old]
+        rate_limited.warning(f"reject:{self.topic}:{name}", "topic %s: ignoring segment %s: %s", self.topic, name, reason)
+
+    def _drop(self, src: _Source, exc: BaseException) -> None:
+        """Stop reading a ring that failed (damaged or forged); other publishers carry on."""
+        if self.sources.get(src.publisher_id) is src:
+            del self.sources[src.publisher_id]
+        name = src.ring.name
+        try:
+            src.close()
+        except Exception as close_exc:  # a ring we give up on must not take the subscriber with it
+            log.debug("topic %s: closing dropped ring %s: %s", self.topic, name, close_exc)
+        self._reject(name, f"dropped while reading: {type(exc).__name__}: {exc}")
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
         if ring.fingerprint != _fingerprint(self.msg_cls):
@@ -324,31 +429,60 @@ class Subscriber:
                 f"publisher {pub!r} sends {ring.type_name}"
             )
 
-    def _register(self, ring: R.Ring) -> None:
-        if self.waker is not None and not ring.add_waiter(self.waker.token):
+    def _register(self, ring: R.Ring) -> int | None:
+        """Register our wake-up in ``ring``; returns the first message number owed to us."""
+        if self.waker is None:
+            return None
+        if not ring.add_waiter(self.waker.token):
             log.warning("topic %s: ring %s has no free wake-up slot; this subscriber will poll", self.topic, ring.name)
+            return None
+        return ring.mark_of(self.waker.token)
 
-    def _start_cursor(self, ring: R.Ring) -> int:
-        head = ring.head
-        created = int(ring.u64[R._CREATED])
-        if created >= self._created_ns:
-            return ring.first  # a publisher that appeared after us: everything it wrote is new
+    def _start_cursor(self, ring: R.Ring, mark: int | None) -> int:
+        """Where reading a newly found ring starts.
+
+        With a waker, at the mark the ring holds for our token: the publisher registered us
+        when it appeared (so everything it wrote is ours), or we registered ourselves just now
+        (so the next message is). Registration and publishing are ordered by fences on both
+        sides, so no message falls between the mark and the wake-ups. Without a waker, by
+        creation time (a monotonic clock, shared by every process of the machine).
+        """
+        head, first = ring.head, ring.first
         if self.transient_local:
-            return max(ring.first, head - min(self.queue_size, ring.slot_count))
+            return max(first, head - min(self.queue_size, ring.slot_count))
+        if mark is not None:
+            return min(max(mark, first), head)
+        if int(ring.u64[R._CREATED]) >= self._created_ns:
+            return first  # a publisher that appeared after us: everything it wrote is new
         return head
 
-    def _follow(self, src: _Source) -> None:
-        """Switch to the next generation of a ring that grew."""
+    def _follow(self, src: _Source) -> bool:
+        """Switch to the next generation of a ring that grew; ``False`` if the source was dropped."""
         while src.ring.moved_to:
-            name = self.ctx.segment_name(self.topic, src.publisher_id, src.ring.moved_to)
-            new = R.Ring.attach(name)
+            gen = src.ring.moved_to
+            if gen <= src.ring.generation:
+                raise R.RingCorrupt(f"ring {src.ring.name}: says it moved back to generation {gen}")
+            name = self.ctx.segment_name(self.topic, src.publisher_id, gen)
+            new = self._attach(name, src.publisher_id, gen)
             if new is None:
-                return
+                # Gone already (it grew again before we followed) or rejected: let the next
+                # scan find the newest generation.
+                self._drop_quietly(src)
+                return False
             src.switch_to(new, name, self.loans)
             self._register(new)
             if src.cursor < new.first:
                 self.dropped += new.first - src.cursor
                 src.cursor = new.first
+            elif src.cursor > new.head:
+                raise R.RingCorrupt(f"ring {name}: head {new.head} is behind our cursor {src.cursor}")
+        return True
+
+    def _drop_quietly(self, src: _Source) -> None:
+        if self.sources.get(src.publisher_id) is src:
+            del self.sources[src.publisher_id]
+        src.close()
+        self._scanned_at_ns = 0  # rescan on the next read
 
     # -- reading -----------------------------------------------------------------------------------
     def take_raw(self) -> list[tuple[int, Any, str]]:
@@ -359,8 +493,11 @@ class Subscriber:
         """
         self.rescan()
         out: list[tuple[int, Any, str]] = []
-        for src in self.sources.values():
-            self._drain(src, out)
+        for src in list(self.sources.values()):
+            try:
+                self._drain(src, out)
+            except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the topic
+                self._drop(src, exc)
         if len(self.sources) > 1:
             out.sort(key=lambda item: item[0])
         if len(out) > self.queue_size:
@@ -386,9 +523,8 @@ class Subscriber:
                     src.cursor += 1
                 else:
                     break  # a writer died mid-message: nothing after it exists yet
-            if not ring.moved_to:
+            if not ring.moved_to or not self._follow(src):
                 return
-            self._follow(src)
 
     def has_news(self) -> bool:
         """Whether a publisher we know has written past our cursor (cheap: for spin loops)."""
@@ -400,36 +536,59 @@ class Subscriber:
 
     def take(self) -> list[Any]:
         """Every new message, decoded, oldest first (at most ``queue_size``)."""
-        return [codec.decode(self.msg_cls, buf) for _, buf, _ in self.take_raw()]
+        return [msg for msg, _, _ in self.take_with_info()]
 
     def take_with_info(self) -> list[tuple[Any, int, str]]:
-        return [(codec.decode(self.msg_cls, buf), stamp, pub) for stamp, buf, pub in self.take_raw()]
+        out = []
+        for stamp, buf, pub in self.take_raw():
+            msg = self._decode(buf, pub)
+            if msg is not None:
+                out.append((msg, stamp, pub))
+        return out
+
+    def _decode(self, buf: Any, pub: str) -> Any | None:
+        """``buf`` decoded, or ``None`` (counted and logged) if it is not a ``msg_cls``."""
+        try:
+            return codec.decode(self.msg_cls, buf)
+        except codec.DecodeError as exc:
+            self.undecodable += 1
+            rate_limited.warning(f"decode:{self.topic}:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
+            return None
 
     def latest_raw(self) -> tuple[int, Any, str] | None:
         """The newest message across publishers, skipping any backlog."""
         self.rescan()
         best: tuple[int, Any, str] | None = None
-        for src in self.sources.values():
-            self._follow(src)
-            ring = src.ring
-            # The newest slot may belong to a writer that died mid-copy; the one before it is
-            # then the newest complete message.
-            for n in (ring.head - 1, ring.head - 2):
-                if n < max(src.cursor, ring.first):
-                    break
-                status, buf, stamp = src.read(n)
-                if status == R.OK and buf is not None:
-                    src.cursor = n + 1
-                    if best is None or stamp > best[0]:
-                        best = (stamp, buf, src.publisher_id)
-                    break
-                if status == R.LAPPED:
-                    break
+        for src in list(self.sources.values()):
+            try:
+                got = self._latest_of(src)
+            except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the topic
+                self._drop(src, exc)
+                continue
+            if got is not None and (best is None or got[0] > best[0]):
+                best = got
         return best
+
+    def _latest_of(self, src: _Source) -> tuple[int, Any, str] | None:
+        if not self._follow(src):
+            return None
+        ring = src.ring
+        # The newest slot may belong to a writer that died mid-copy; the one before it is then
+        # the newest complete message.
+        for n in (ring.head - 1, ring.head - 2):
+            if n < max(src.cursor, ring.first):
+                break
+            status, buf, stamp = src.read(n)
+            if status == R.OK and buf is not None:
+                src.cursor = n + 1
+                return (stamp, buf, src.publisher_id)
+            if status == R.LAPPED:
+                break
+        return None
 
     def latest(self) -> Any | None:
         item = self.latest_raw()
-        return None if item is None else codec.decode(self.msg_cls, item[1])
+        return None if item is None else self._decode(item[1], item[2])
 
     def publishers(self) -> list[str]:
         self.rescan()
@@ -458,8 +617,12 @@ def list_topics(ctx: RunContext) -> dict[str, dict[str, Any]]:
         parsed = parse_segment(ctx, name)
         if parsed is None:
             continue
-        topic, pub, _ = parsed
-        ring = R.Ring.attach(name)
+        topic, pub, gen = parsed
+        try:
+            ring = R.Ring.attach(name, generation=gen)
+        except (R.RingError, UntrustedFile) as exc:
+            rate_limited.warning(f"distrust:{name}", "topic %s: ignoring segment %s: %s", topic, name, exc)
+            continue
         if ring is None:
             continue
         entry = topics.setdefault(topic, {"type": ring.type_name, "publishers": []})
