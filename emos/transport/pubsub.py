@@ -28,7 +28,7 @@ from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
 from emos.transport.fence import full_fence
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
-from emos.transport.trust import UntrustedFile, check_path, rate_limited, remove_owned
+from emos.transport.trust import RateLimitedLog, UntrustedFile, check_path, rate_limited, remove_owned
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -311,6 +311,7 @@ class Subscriber:
         self.dropped = 0
         self.undecodable = 0  # messages that arrived but did not decode as ``msg_cls``
         self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
+        self._warn = RateLimitedLog(log)  # per subscriber: each one says once what it ignores
         self._created_ns = time.monotonic_ns()
         self._shm_mtime = -1
         self._scanned_at_ns = 0
@@ -408,7 +409,7 @@ class Subscriber:
         if len(self._rejected) > 1024:  # names are cheap to mint; forget the oldest verdicts
             for old in sorted(self._rejected, key=self._rejected.__getitem__)[:512]:
                 del self._rejected[old]
-        rate_limited.warning(f"reject:{self.topic}:{name}", "topic %s: ignoring segment %s: %s", self.topic, name, reason)
+        self._warn.warning(f"reject:{name}", "topic %s: ignoring segment %s: %s", self.topic, name, reason)
 
     def _drop(self, src: _Source, exc: BaseException) -> None:
         """Stop reading a ring that failed (damaged or forged); other publishers carry on."""
@@ -552,7 +553,7 @@ class Subscriber:
             return codec.decode(self.msg_cls, buf)
         except codec.DecodeError as exc:
             self.undecodable += 1
-            rate_limited.warning(f"decode:{self.topic}:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
+            self._warn.warning(f"decode:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
             return None
 
     def latest_raw(self) -> tuple[int, Any, str] | None:
