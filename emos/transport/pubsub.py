@@ -28,7 +28,8 @@ from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
 from emos.transport.fence import full_fence
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
-from emos.transport.trust import RateLimitedLog, UntrustedFile, check_path, rate_limited, remove_owned
+from emos.transport.screen import SegmentScreen
+from emos.transport.trust import UntrustedFile, check_path, rate_limited, remove_owned
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -39,10 +40,6 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 # An announcement can be lost only to a FIFO full of wake-ups (a reader stopped for a long
 # time); the periodic rescan bounds how late such a reader finds a new publisher.
 RESCAN_EVERY_NS = 1_000_000_000
-# A ring a subscriber dropped as untrusted or damaged is looked at again after this long (a
-# segment name is never reused for different contents by our own writers, but a damaged one
-# may be removed and a good one appear under a new generation in the meantime).
-RETRY_REJECTED_NS = 2_000_000_000
 # How many generation numbers a publisher skips past names other users planted before giving up.
 MAX_GENERATION_SKIPS = 64
 
@@ -310,13 +307,12 @@ class Subscriber:
         self.sources: dict[str, _Source] = {}
         self.dropped = 0
         self.undecodable = 0  # messages that arrived but did not decode as ``msg_cls``
-        self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
-        self._warn = RateLimitedLog(log)  # per subscriber: each one says once what it ignores
         self._created_ns = time.monotonic_ns()
         self._shm_mtime = -1
         self._scanned_at_ns = 0
         self._announcements = -1
         self._prefix = f"{ctx.shm_prefix}{encode_name(topic)}."
+        self._screen = SegmentScreen(topic, self._prefix, lambda name: parse_segment(ctx, name))
         self._interest: Path | None = None
         if waker is not None:
             self._interest = self.ctx.subscriber_dir(topic) / f"{waker.token:016x}"
@@ -341,7 +337,7 @@ class Subscriber:
             self._announcements = self.waker.announcements
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
-        latest = self._latest_trusted()
+        latest = self._screen.newest({pub: src.ring.name for pub, src in self.sources.items()})
         for pub, (gen, name) in latest.items():
             src = self.sources.get(pub)
             if src is not None and src.ring.name == name:
@@ -349,7 +345,7 @@ class Subscriber:
             if src is not None and 0 < src.ring.moved_to <= gen:
                 # The publisher moved to a bigger ring; ``_follow`` handles it on the next read.
                 continue
-            ring = self._attach(name, pub, gen)
+            ring = self._screen.attach(name, gen)
             if ring is None:
                 continue
             self._check_type(ring, pub)
@@ -367,50 +363,6 @@ class Subscriber:
             src.close()
             del self.sources[pub]
 
-    def _latest_trusted(self) -> dict[str, tuple[int, str]]:
-        """``{publisher: (generation, segment)}``: each publisher's newest segment that is a
-        regular file of ours, skipping names we rejected lately (another user may plant any
-        generation number; it must not hide the real one)."""
-        candidates: dict[str, list[tuple[int, str]]] = {}
-        for name in os.listdir(SHM_DIR):
-            if not name.startswith(self._prefix):
-                continue
-            parsed = parse_segment(self.ctx, name)
-            if parsed is not None:
-                candidates.setdefault(parsed[1], []).append((parsed[2], name))
-        now = time.monotonic_ns()
-        latest: dict[str, tuple[int, str]] = {}
-        for pub, gens in candidates.items():
-            held = self.sources.get(pub)
-            for gen, name in sorted(gens, reverse=True):
-                if held is not None and held.ring.name == name:
-                    latest[pub] = (gen, name)
-                    break
-                if self._rejected.get(name, 0) > now:
-                    continue
-                reason = check_path(SHM_DIR / name)
-                if reason is None:
-                    latest[pub] = (gen, name)
-                    break
-                if reason != "vanished":
-                    self._reject(name, reason)
-        return latest
-
-    def _attach(self, name: str, pub: str, gen: int) -> R.Ring | None:
-        """The one way a subscriber opens a ring: validated, or rejected with a warning."""
-        try:
-            return R.Ring.attach(name, generation=gen)
-        except (R.RingError, UntrustedFile) as exc:
-            self._reject(name, str(exc))
-            return None
-
-    def _reject(self, name: str, reason: str) -> None:
-        self._rejected[name] = time.monotonic_ns() + RETRY_REJECTED_NS
-        if len(self._rejected) > 1024:  # names are cheap to mint; forget the oldest verdicts
-            for old in sorted(self._rejected, key=self._rejected.__getitem__)[:512]:
-                del self._rejected[old]
-        self._warn.warning(f"reject:{name}", "topic %s: ignoring segment %s: %s", self.topic, name, reason)
-
     def _drop(self, src: _Source, exc: BaseException) -> None:
         """Stop reading a ring that failed (damaged or forged); other publishers carry on."""
         if self.sources.get(src.publisher_id) is src:
@@ -420,7 +372,7 @@ class Subscriber:
             src.close()
         except Exception as close_exc:  # a ring we give up on must not take the subscriber with it
             log.debug("topic %s: closing dropped ring %s: %s", self.topic, name, close_exc)
-        self._reject(name, f"dropped while reading: {type(exc).__name__}: {exc}")
+        self._screen.reject(name, f"dropped while reading: {type(exc).__name__}: {exc}")
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
         if ring.fingerprint != _fingerprint(self.msg_cls):
@@ -464,7 +416,7 @@ class Subscriber:
             if gen <= src.ring.generation:
                 raise R.RingCorrupt(f"ring {src.ring.name}: says it moved back to generation {gen}")
             name = self.ctx.segment_name(self.topic, src.publisher_id, gen)
-            new = self._attach(name, src.publisher_id, gen)
+            new = self._screen.attach(name, gen)
             if new is None:
                 # Gone already (it grew again before we followed) or rejected: let the next
                 # scan find the newest generation.
@@ -553,7 +505,7 @@ class Subscriber:
             return codec.decode(self.msg_cls, buf)
         except codec.DecodeError as exc:
             self.undecodable += 1
-            self._warn.warning(f"decode:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
+            self._screen.warn.warning(f"decode:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
             return None
 
     def latest_raw(self) -> tuple[int, Any, str] | None:

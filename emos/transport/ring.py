@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.transport import ring_check
 from emos.transport.context import SHM_DIR
 from emos.transport.fence import WEAK_ORDERING, full_fence
 from emos.transport.trust import SEGMENT_MODE, open_owned
@@ -105,7 +106,7 @@ class Ring:
     """One generation of a ring. Writers use :meth:`create`/:meth:`write`; readers :meth:`attach`/:meth:`read`."""
 
     def __init__(self, name: str, fd: int, mm: mmap.mmap):
-        """Wrap a mapped segment whose header :func:`header_problem` accepted (or that we created)."""
+        """Wrap a mapped segment whose header ``ring_check.header_problem`` accepted (or that we created)."""
         self.name = name
         self.fd = fd
         self.mm = mm
@@ -195,7 +196,7 @@ class Ring:
         magic = int(u64[_MAGIC])
         problem = None if magic == MAGIC else "" if magic == 0 else f"bad magic {magic:#x}"
         if problem is None:
-            problem = header_problem(u64, size, generation)
+            problem = ring_check.header_problem(u64, size, generation)
         del u64
         if problem is not None:
             mm.close()
@@ -460,44 +461,9 @@ class Ring:
                 table[hit] = 0
                 self.u64[_WAITERS_VER] += 1
 
-    # -- integrity -------------------------------------------------------------------------------
     def damage(self) -> str | None:
-        """What is wrong with the message map and slot headers, or ``None`` if they hold together.
-
-        For a writer re-opening its ring after a restart: O(depth), not for the hot path. It
-        accepts every state a writer killed at any point of ``begin``/``commit`` leaves behind.
-        """
-        q = self.q
-        head, first, depth = q[_HEAD], q[_FIRST], self.depth
-        if q[_MOVED_PID] & 0xFFFFFFFF:
-            return f"says it moved to generation {q[_MOVED_PID] & 0xFFFFFFFF}"
-        used: set[int] = set()
-        for i in range(depth):
-            entry = q[_MAP_IDX + i]
-            held, slot = entry >> 16, entry & 0xFFFF
-            if slot >= self.physical_slots:
-                return f"message map entry {i} points at slot {slot} of {self.physical_slots}"
-            if slot in used:
-                return f"message map entry {i} shares slot {slot} with another entry"
-            used.add(slot)
-            if held == _EMPTY:
-                # Empty is fine only if no kept message number falls on this entry.
-                window_start = max(first, head - depth)
-                if (i - window_start) % depth < head - window_start:
-                    return f"message map entry {i} is empty, but message numbers up to {head - 1} were written"
-                continue
-            # A killed writer may have stored the map entry of message ``head`` but not head.
-            if held % depth != i or not max(first, head - depth) <= held <= head:
-                return f"message map entry {i} holds message {held}, outside {max(first, head - depth)}..{head}"
-            idx = self.slot_index(slot)
-            # Complete, or being (re)written with message ``head`` by a writer that was killed.
-            if q[idx] not in (2 * held + 2, 2 * head + 1, 2 * head + 2):
-                return f"slot {slot} has sequence {q[idx]}, expected {2 * held + 2} for message {held}"
-            if q[idx + 1] > self.capacity:
-                return f"slot {slot} claims {q[idx + 1]} B, slots hold {self.capacity} B"
-        if head > first and (q[_MAP_IDX + (head - 1) % depth] >> 16) not in (head - 1, head):
-            return f"message {head - 1} (the newest) is not in the message map"
-        return None
+        """What is wrong with the message map and slot headers, or ``None`` (see :mod:`ring_check`)."""
+        return ring_check.damage(self)
 
 
 class PinTable:
@@ -568,34 +534,6 @@ class _Flock:
 
     def __exit__(self, *exc: object) -> None:
         fcntl.flock(self.fd, fcntl.LOCK_UN)
-
-
-def header_problem(u64: np.ndarray, size: int, generation: int | None = None) -> str | None:
-    """What is inconsistent in a ring header (``u64``: its first words; ``size``: the segment's
-    bytes), or ``None``. Every geometry field is implied by depth and capacity, so they are
-    recomputed rather than trusted: after this, no slot offset can point outside the segment."""
-    geom = int(u64[_GEOM])
-    depth, gen = geom & 0xFFFFFFFF, geom >> 32
-    if not 1 <= depth <= MAX_DEPTH:
-        return f"depth {depth} is outside 1..{MAX_DEPTH}"
-    if generation is not None and gen != generation:
-        return f"header says generation {gen}, its name says {generation}"
-    capacity, stride = int(u64[_CAPACITY]), int(u64[_STRIDE])
-    if not 64 <= capacity <= _MAX_CAPACITY or capacity % 64:
-        return f"slot capacity {capacity} B is not a multiple of 64 in 64..{_MAX_CAPACITY}"
-    if stride != _align(SLOT_HEADER + capacity, 64):
-        return f"slot stride {stride} B does not match capacity {capacity} B"
-    if int(u64[_SLOTS]) != depth + LOAN_ENTRIES:
-        return f"{int(u64[_SLOTS])} physical slots for depth {depth} (expected {depth + LOAN_ENTRIES})"
-    data_offset = _align(_MAP_IDX * 8 + 8 * depth, MIN_HEADER)
-    if int(u64[_DATA_OFF]) != data_offset:
-        return f"slot 0 at byte {int(u64[_DATA_OFF])}, expected {data_offset}"
-    if data_offset + stride * (depth + LOAN_ENTRIES) > size:
-        return f"{depth + LOAN_ENTRIES} slots of {stride} B do not fit in {size} B"
-    first, head = int(u64[_FIRST]), int(u64[_HEAD])
-    if not first <= head < _MAX_HEAD:
-        return f"first message {first} and head {head} are out of order or range"
-    return None
 
 
 def segment_exists(name: str) -> bool:

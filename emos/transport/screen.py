@@ -1,0 +1,79 @@
+"""Which of a topic's segments a subscriber opens, and what it remembers about those it refused.
+
+Another user can plant any name in a run's namespace (a forged ring, a directory, a link, a
+higher generation number of a real publisher's ring), and a writer of ours can leave a damaged
+ring. A subscriber looks at each publisher's newest segment *that passes the owner check*, opens
+it only through ``Ring.attach`` (owner, mode, header), and sets aside for a while whatever fails
+there or later while being read, saying so once per segment and interval.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from typing import Callable
+
+from emos.transport import ring as R
+from emos.transport.context import SHM_DIR
+from emos.transport.trust import RateLimitedLog, UntrustedFile, check_path
+
+# A refused segment is looked at again after this long: our own writers never reuse a name for
+# other contents, but a damaged ring may be replaced meanwhile (under a new generation).
+RETRY_REJECTED_NS = 2_000_000_000
+_MAX_VERDICTS = 1024  # names are cheap to mint: the oldest verdicts are forgotten beyond this
+
+log = logging.getLogger("emos.transport")
+
+
+class SegmentScreen:
+    """One subscriber's view of which segments of its topic it may read."""
+
+    def __init__(self, topic: str, prefix: str, parse: Callable[[str], "tuple[str, str, int] | None"]):
+        self.topic = topic
+        self.prefix = prefix
+        self.parse = parse
+        self.warn = RateLimitedLog(log)  # per subscriber: each one says once what it ignores
+        self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
+
+    def newest(self, held: dict[str, str]) -> dict[str, tuple[int, str]]:
+        """``{publisher: (generation, segment)}``: each publisher's newest segment that is a
+        regular file of ours and not refused lately. ``held``: publisher -> segment we read
+        already (trusted when it was opened)."""
+        candidates: dict[str, list[tuple[int, str]]] = {}
+        for name in os.listdir(SHM_DIR):
+            if not name.startswith(self.prefix):
+                continue
+            parsed = self.parse(name)
+            if parsed is not None:
+                candidates.setdefault(parsed[1], []).append((parsed[2], name))
+        now = time.monotonic_ns()
+        latest: dict[str, tuple[int, str]] = {}
+        for pub, gens in candidates.items():
+            for gen, name in sorted(gens, reverse=True):
+                if held.get(pub) == name:
+                    latest[pub] = (gen, name)
+                    break
+                if self._rejected.get(name, 0) > now:
+                    continue
+                reason = check_path(SHM_DIR / name)
+                if reason is None:
+                    latest[pub] = (gen, name)
+                    break
+                if reason != "vanished":
+                    self.reject(name, reason)
+        return latest
+
+    def attach(self, name: str, generation: int) -> R.Ring | None:
+        """The one way a subscriber opens a ring: validated, or refused with a warning."""
+        try:
+            return R.Ring.attach(name, generation=generation)
+        except (R.RingError, UntrustedFile) as exc:
+            self.reject(name, str(exc))
+            return None
+
+    def reject(self, name: str, reason: str) -> None:
+        self._rejected[name] = time.monotonic_ns() + RETRY_REJECTED_NS
+        if len(self._rejected) > _MAX_VERDICTS:
+            for old in sorted(self._rejected, key=self._rejected.__getitem__)[: _MAX_VERDICTS // 2]:
+                del self._rejected[old]
+        self.warn.warning(f"reject:{name}", "topic %s: ignoring segment %s: %s", self.topic, name, reason)
