@@ -42,6 +42,7 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 RESCAN_EVERY_NS = 1_000_000_000
 # How many generation numbers a publisher skips past names other users planted before giving up.
 MAX_GENERATION_SKIPS = 64
+_SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow can do that once)
 
 
 class TopicTypeError(TypeError):
@@ -180,6 +181,12 @@ class Publisher:
         self.ring = new
         old.unlink()
         old.close()
+        # Announce the move: a subscriber that had not found the old generation yet may have
+        # missed both names, since a directory listing that runs while one name is created and
+        # another removed may return neither; the announcement makes it list again, now that
+        # nothing of ours changes. (Without it such a subscriber waited for a wake-up that
+        # never came: the ping-pong bench's start-up hang at sizes that grow the ring.)
+        self._announce()
         log.info("topic %s: ring of %s grew to %d B slots for a %d B message", self.topic, self.publisher_id, new.capacity, nbytes)
 
     # -- publishing ------------------------------------------------------------------------------
@@ -337,26 +344,39 @@ class Subscriber:
             self._announcements = self.waker.announcements
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
-        latest = self._screen.newest({pub: src.ring.name for pub, src in self.sources.items()})
-        for pub, (gen, name) in latest.items():
-            src = self.sources.get(pub)
-            if src is not None and src.ring.name == name:
-                continue
-            if src is not None and 0 < src.ring.moved_to <= gen:
-                # The publisher moved to a bigger ring; ``_follow`` handles it on the next read.
-                continue
-            ring = self._screen.attach(name, gen)
-            if ring is None:
-                continue
-            self._check_type(ring, pub)
-            mark = self._register(ring)
-            if src is not None:
-                # A fresh generation that is no growth: the publisher restarted and found its
-                # ring damaged. Its numbering may start over, so the cursor does too.
-                src.close()
-            self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, name, self.loans)
+        # A publisher's ring may vanish between our listing and our open (it grew: the next
+        # generation exists before the old one is unlinked), or be listed before it is
+        # initialised: fall back to an older generation, and list again if that vanished too.
+        # Skipping it would lose the wake-up that brought us here (the start-up hang of the
+        # ping-pong bench: the first message went to a generation nobody had found).
+        for _ in range(_SCAN_ATTEMPTS):
+            found, listed = self._screen.candidates({pub: src.ring.name for pub, src in self.sources.items()})
+            incomplete = False
+            for pub, gens in found.items():
+                src = self.sources.get(pub)
+                if src is not None and (src.ring.name == gens[0][1] or src.ring.moved_to or src.ring.name in listed):
+                    # Up to date, or moved or moving to a bigger ring: ``_follow`` handles that
+                    # on the next read, keeping the cursor (numbers carry over).
+                    continue
+                ring = None
+                for gen, name in gens:
+                    ring = self._screen.attach(name, gen)
+                    if ring is not None:
+                        break
+                    incomplete = True
+                if ring is None:
+                    continue
+                self._check_type(ring, pub)
+                mark = self._register(ring)
+                if src is not None:
+                    # Our ring is gone without moving: the publisher restarted on a fresh
+                    # generation (its old ring was damaged). Numbering may start over.
+                    src.close()
+                self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, ring.name, self.loans)
+            if not incomplete:
+                break
         # Forget publishers whose ring disappeared (removed at the end of a run).
-        for pub in [p for p in self.sources if p not in latest]:
+        for pub in [p for p in self.sources if p not in found]:
             src = self.sources[pub]
             if src.ring.moved_to:
                 continue
@@ -416,12 +436,11 @@ class Subscriber:
             if gen <= src.ring.generation:
                 raise R.RingCorrupt(f"ring {src.ring.name}: says it moved back to generation {gen}")
             name = self.ctx.segment_name(self.topic, src.publisher_id, gen)
-            new = self._screen.attach(name, gen)
+            new = self._screen.attach(name, gen) or self._newest_after(src)
             if new is None:
-                # Gone already (it grew again before we followed) or rejected: let the next
-                # scan find the newest generation.
                 self._drop_quietly(src)
                 return False
+            name = new.name
             src.switch_to(new, name, self.loans)
             self._register(new)
             if src.cursor < new.first:
@@ -430,6 +449,18 @@ class Subscriber:
             elif src.cursor > new.head:
                 raise R.RingCorrupt(f"ring {name}: head {new.head} is behind our cursor {src.cursor}")
         return True
+
+    def _newest_after(self, src: _Source) -> R.Ring | None:
+        """The publisher's newest generation past ``src``'s: the ring grew again (and the
+        generation it first moved to is gone) before we followed."""
+        found, _ = self._screen.candidates({})
+        for gen, name in found.get(src.publisher_id, []):
+            if gen <= src.ring.generation:
+                break
+            ring = self._screen.attach(name, gen)
+            if ring is not None:
+                return ring
+        return None
 
     def _drop_quietly(self, src: _Source) -> None:
         if self.sources.get(src.publisher_id) is src:

@@ -35,33 +35,40 @@ class SegmentScreen:
         self.warn = RateLimitedLog(log)  # per subscriber: each one says once what it ignores
         self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
 
-    def newest(self, held: dict[str, str]) -> dict[str, tuple[int, str]]:
-        """``{publisher: (generation, segment)}``: each publisher's newest segment that is a
-        regular file of ours and not refused lately. ``held``: publisher -> segment we read
-        already (trusted when it was opened)."""
-        candidates: dict[str, list[tuple[int, str]]] = {}
+    def candidates(self, held: dict[str, str]) -> tuple[dict[str, list[tuple[int, str]]], set[str]]:
+        """``({publisher: [(generation, segment), ...] newest first}, every name listed)``.
+
+        Only regular files of ours that were not refused lately are candidates; ``held``
+        (publisher -> segment we read already, trusted when it was opened) always is. Another
+        user may plant any generation number: it must not hide the real one.
+        """
+        listed: set[str] = set()
+        found: dict[str, list[tuple[int, str]]] = {}
         for name in os.listdir(SHM_DIR):
             if not name.startswith(self.prefix):
                 continue
+            listed.add(name)
             parsed = self.parse(name)
             if parsed is not None:
-                candidates.setdefault(parsed[1], []).append((parsed[2], name))
+                found.setdefault(parsed[1], []).append((parsed[2], name))
         now = time.monotonic_ns()
-        latest: dict[str, tuple[int, str]] = {}
-        for pub, gens in candidates.items():
+        out: dict[str, list[tuple[int, str]]] = {}
+        held_names = set(held.values())
+        for pub, gens in found.items():
+            keep = []
             for gen, name in sorted(gens, reverse=True):
-                if held.get(pub) == name:
-                    latest[pub] = (gen, name)
-                    break
-                if self._rejected.get(name, 0) > now:
-                    continue
-                reason = check_path(SHM_DIR / name)
-                if reason is None:
-                    latest[pub] = (gen, name)
-                    break
-                if reason != "vanished":
-                    self.reject(name, reason)
-        return latest
+                if name not in held_names:
+                    if self._rejected.get(name, 0) > now:
+                        continue
+                    reason = check_path(SHM_DIR / name)
+                    if reason is not None:
+                        if reason != "vanished":
+                            self.reject(name, reason)
+                        continue
+                keep.append((gen, name))
+            if keep:
+                out[pub] = keep
+        return out, listed
 
     def attach(self, name: str, generation: int) -> R.Ring | None:
         """The one way a subscriber opens a ring: validated, or refused with a warning."""

@@ -97,6 +97,33 @@ def test_a_publisher_that_appears_after_a_subscriber_is_read_from_its_first_mess
         pub.close()
 
 
+def test_a_subscriber_whose_listing_missed_a_ring_finds_it_when_the_ring_grows(ctx, monkeypatch):
+    """A directory listing that runs while one name is created and another removed may return
+    neither. The subscriber below misses the publisher's ring that way; the publisher's first
+    big message then moves the ring to a new generation, and must make the subscriber look
+    again: nothing else would wake it (the ping-pong bench hung so at sizes that grow rings)."""
+    import numpy as np
+
+    waker = Waker(ctx)
+    sub = Subscriber(ctx, "/grows", M.UInt8MultiArray, waker=waker)
+    pub = Publisher(ctx, "/grows", M.UInt8MultiArray, publisher_id="p")
+    try:
+        real_listdir = os.listdir
+        with monkeypatch.context() as m:
+            m.setattr(os, "listdir", lambda d: [n for n in real_listdir(d) if ".grows." not in n])
+            waker.drain()  # the publisher's announcement...
+            assert sub.take() == [] and sub.publishers() == []  # ...and a listing that missed it
+        pub.publish(M.UInt8MultiArray(data=np.arange(200_000, dtype=np.uint8)))  # grows the ring
+        assert pub.ring.generation == 1
+        assert waker.drain() >= 1
+        got = sub.take()
+        assert len(got) == 1 and got[0].data.size == 200_000
+    finally:
+        sub.close()
+        waker.close()
+        pub.close()
+
+
 ECHO = textwrap.dedent(
     """
     import select, sys, time
