@@ -350,13 +350,14 @@ class Subscriber:
         # Skipping it would lose the wake-up that brought us here (the start-up hang of the
         # ping-pong bench: the first message went to a generation nobody had found).
         for _ in range(_SCAN_ATTEMPTS):
-            found, listed = self._screen.candidates({pub: src.ring.name for pub, src in self.sources.items()})
+            found = self._screen.candidates({pub: src.ring.name for pub, src in self.sources.items()})
             incomplete = False
             for pub, gens in found.items():
                 src = self.sources.get(pub)
-                if src is not None and (src.ring.name == gens[0][1] or src.ring.moved_to or src.ring.name in listed):
+                if src is not None and (src.ring.name == gens[0][1] or src.ring.moved_to or not src.ring.unlinked):
                     # Up to date, or moved or moving to a bigger ring: ``_follow`` handles that
-                    # on the next read, keeping the cursor (numbers carry over).
+                    # on the next read, keeping the cursor (numbers carry over). (Whether our
+                    # ring still exists is asked of its descriptor: a listing can miss it.)
                     continue
                 ring = None
                 for gen, name in gens:
@@ -453,7 +454,7 @@ class Subscriber:
     def _newest_after(self, src: _Source) -> R.Ring | None:
         """The publisher's newest generation past ``src``'s: the ring grew again (and the
         generation it first moved to is gone) before we followed."""
-        found, _ = self._screen.candidates({})
+        found = self._screen.candidates({})
         for gen, name in found.get(src.publisher_id, []):
             if gen <= src.ring.generation:
                 break

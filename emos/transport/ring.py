@@ -221,6 +221,11 @@ class Ring:
         self.mm = None  # type: ignore[assignment]
         os.close(self.fd)
 
+    @property
+    def unlinked(self) -> bool:
+        """Whether the segment's name is gone (the writer removed it); we may still read it."""
+        return os.fstat(self.fd).st_nlink == 0
+
     def unlink(self) -> None:
         try:
             os.unlink(SHM_DIR / self.name)

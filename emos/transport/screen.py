@@ -35,19 +35,17 @@ class SegmentScreen:
         self.warn = RateLimitedLog(log)  # per subscriber: each one says once what it ignores
         self._rejected: dict[str, int] = {}  # segment name -> monotonic ns until which it is ignored
 
-    def candidates(self, held: dict[str, str]) -> tuple[dict[str, list[tuple[int, str]]], set[str]]:
-        """``({publisher: [(generation, segment), ...] newest first}, every name listed)``.
+    def candidates(self, held: dict[str, str]) -> dict[str, list[tuple[int, str]]]:
+        """``{publisher: [(generation, segment), ...] newest first}``.
 
         Only regular files of ours that were not refused lately are candidates; ``held``
         (publisher -> segment we read already, trusted when it was opened) always is. Another
         user may plant any generation number: it must not hide the real one.
         """
-        listed: set[str] = set()
         found: dict[str, list[tuple[int, str]]] = {}
         for name in os.listdir(SHM_DIR):
             if not name.startswith(self.prefix):
                 continue
-            listed.add(name)
             parsed = self.parse(name)
             if parsed is not None:
                 found.setdefault(parsed[1], []).append((parsed[2], name))
@@ -68,7 +66,7 @@ class SegmentScreen:
                 keep.append((gen, name))
             if keep:
                 out[pub] = keep
-        return out, listed
+        return out
 
     def attach(self, name: str, generation: int) -> R.Ring | None:
         """The one way a subscriber opens a ring: validated, or refused with a warning."""
