@@ -379,7 +379,7 @@ class Subscriber:
         # Forget publishers whose ring disappeared (removed at the end of a run).
         for pub in [p for p in self.sources if p not in found]:
             src = self.sources[pub]
-            if src.ring.moved_to:
+            if src.ring.moved_to or not src.ring.unlinked:
                 continue
             src.close()
             del self.sources[pub]
