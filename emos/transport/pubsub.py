@@ -27,9 +27,10 @@ from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
 from emos.transport.fence import full_fence
+from emos.transport.generations import create_generation, latest_own_generation
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
 from emos.transport.screen import SegmentScreen
-from emos.transport.trust import UntrustedFile, check_path, rate_limited, remove_owned
+from emos.transport.trust import UntrustedFile, rate_limited, remove_owned
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -40,8 +41,6 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 # An announcement can be lost only to a FIFO full of wake-ups (a reader stopped for a long
 # time); the periodic rescan bounds how late such a reader finds a new publisher.
 RESCAN_EVERY_NS = 1_000_000_000
-# How many generation numbers a publisher skips past names other users planted before giving up.
-MAX_GENERATION_SKIPS = 64
 _SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow can do that once)
 
 
@@ -85,22 +84,9 @@ class Publisher:
         self._announce()
 
     # -- segment management ----------------------------------------------------------------------
-    def _latest_generation(self) -> int | None:
-        """The newest generation of our ring that is ours (names other users planted are skipped)."""
-        prefix = f"{self.ctx.shm_prefix}{encode_name(self.topic)}.{encode_name(self.publisher_id)}.g"
-        best = None
-        for n in os.listdir(SHM_DIR):
-            if n.startswith(prefix) and n[len(prefix) :].isdigit():
-                reason = check_path(SHM_DIR / n)
-                if reason is None:
-                    best = max(best or 0, int(n[len(prefix) :]))
-                elif reason != "vanished":
-                    rate_limited.warning(f"distrust:{n}", "topic %s: ignoring segment %s: %s", self.topic, n, reason)
-        return best
-
     def _open_or_create(self) -> R.Ring:
         """Re-open our ring after a restart if it is intact, else start a fresh generation."""
-        gen = self._latest_generation()
+        gen = latest_own_generation(self.ctx, self.topic, self.publisher_id)
         first = 0
         if gen is not None:
             name = self.ctx.segment_name(self.topic, self.publisher_id, gen)
@@ -133,18 +119,7 @@ class Publisher:
         return ring
 
     def _create_ring(self, generation: int, depth: int, capacity: int, fingerprint: str, type_name: str, first: int) -> R.Ring:
-        """A new generation of our ring, skipping generation numbers whose names are taken."""
-        for gen in range(generation, generation + MAX_GENERATION_SKIPS):
-            name = self.ctx.segment_name(self.topic, self.publisher_id, gen)
-            try:
-                return R.Ring.create(name, depth, capacity, fingerprint, type_name, generation=gen, first=first)
-            except FileExistsError:
-                # Not a ring of ours (we looked for those): someone planted the name in advance.
-                rate_limited.warning(f"taken:{name}", "topic %s: segment name %s is taken (%s); trying the next generation", self.topic, name, check_path(SHM_DIR / name))
-        raise R.RingError(
-            f"topic {self.topic!r}: publisher {self.publisher_id!r} found generations {generation}..{gen} of its ring "
-            f"all taken by files that are not its own in {SHM_DIR}; remove them"
-        )
+        return create_generation(self.ctx, self.topic, self.publisher_id, generation, depth, capacity, fingerprint, type_name, first)
 
     def _announce(self) -> None:
         """Register every known subscriber of the topic in our ring and wake them once."""
