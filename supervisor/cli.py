@@ -15,6 +15,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("emos.supervisor.cli_run", "run a recipe script under the supervisor"),
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
+    "record": ("emos.supervisor.cli_record", "record a running system's topics into an MCAP file"),
+    "play": ("emos.supervisor.cli_play", "publish an MCAP recording into a running system, with its timing"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
