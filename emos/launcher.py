@@ -176,6 +176,15 @@ class Launcher:
             if missing:
                 raise ValueError(f"component {c.component_name!r} ({type(c).__name__}) has no topic for required {', '.join(missing)}")
 
+    def enable_foxglove(self, port: int = 8765, host: str = "127.0.0.1", **config: Any) -> None:
+        """Serve every topic live to Foxglove on ``ws://host:port``, from a supervised component
+        (``foxglove_bridge``) in its own process. ``config``: more ``FoxgloveConfig`` fields
+        (``topics``, ``exclude``, ``loop_rate``, ``distribution``)."""
+        from emos.actors.viz import FoxgloveBridgeComponent, FoxgloveConfig
+
+        bridge = FoxgloveBridgeComponent(config=FoxgloveConfig(host=host, port=port, **config))
+        self.add_pkg(components=[bridge], package_name="foxglove", multiprocessing=True)
+
     # Launcher-wide fallback policies. Events, actions and fallback ladders arrive with their own
     # issue; the policy is recorded here so recipes that set it keep running meanwhile, and the
     # supervisor's restart semantics already bring crashed components back.

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
     "record": ("emos.supervisor.cli_record", "record a running system's topics into an MCAP file"),
     "play": ("emos.supervisor.cli_play", "publish an MCAP recording into a running system, with its timing"),
+    "viz": ("emos.supervisor.cli_viz", "serve a running system's topics to Foxglove over its WebSocket protocol"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
