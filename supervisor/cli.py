@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
+    "record": ("emos.supervisor.bench.record", "camera latency to its subscribers with and without `emos record`"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),

@@ -30,7 +30,7 @@ class Recorder:
     """Writes the wanted topics of a run (all by default, new ones included) to one MCAP file."""
 
     def __init__(self, ctx: RunContext, path: str, topics: Iterable[str] | None = None, exclude: Iterable[str] | None = None,
-                 compression: str = "lz4", chunk_size: int = 1 << 20, distribution: str = DEFAULT_DISTRIBUTION):
+                 compression: str = "none", chunk_size: int = 1 << 20, distribution: str = DEFAULT_DISTRIBUTION):
         self.writer = BagWriter(path, compression=compression, chunk_size=chunk_size, distribution=distribution,
                                 metadata={"run_id": ctx.run_id})
         try:

@@ -113,10 +113,14 @@ class Ros2Codec:
 
     def serialize(self, msg: Any) -> bytes:
         """``msg`` as ROS 2 CDR bytes (encapsulation header included)."""
+        return bytes(self.serialize_view(msg))
+
+    def serialize_view(self, msg: Any) -> memoryview:
+        """As :meth:`serialize`, without the final copy: a view of a fresh buffer (for writers)."""
         name = self.ros_type(type(msg))
         ros_msg = self.to_ros(msg)
         try:
-            return bytes(self.store.serialize_cdr(ros_msg, name))
+            return self.store.serialize_cdr(ros_msg, name)
         except Exception as exc:  # struct.error (a value out of range), rosbags' own errors, ...
             raise CdrError(f"cannot encode {name} as CDR: {exc}") from exc
 

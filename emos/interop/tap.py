@@ -45,6 +45,7 @@ class TopicTap:
         self.subs: dict[str, Subscriber] = {}
         self.types: dict[str, type] = {}
         self._refused: set[tuple[str, str]] = set()
+        self.dropped_total: dict[str, int] = {}  # kept by close()
         self._shm_mtime = -1
         self._next_discovery = 0.0
         self.discover(force=True)
@@ -104,6 +105,7 @@ class TopicTap:
         return {t: s.dropped for t, s in self.subs.items() if s.dropped}
 
     def close(self) -> None:
+        self.dropped_total = self.dropped()
         for sub in self.subs.values():
             sub.close()
         self.subs.clear()

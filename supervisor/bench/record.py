@@ -1,0 +1,122 @@
+"""``emos bench record``: what `emos record` costs the camera topic's other subscribers.
+
+One system (the sensor demo's camera, 640x480 RGB at 30 Hz, and a probe that logs every frame's
+publish-to-receive latency) runs throughout. Windows without and with a recorder (``emos record``
+of all topics, to a file) alternate, A B then B A, so drift in the machine's load hits both
+sides alike; each pair gives a ratio of the with/without latency percentiles.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+from emos.supervisor.bench.common import percentiles, table
+from emos.supervisor.bench.restart import _wait_for_run
+
+SYSTEM = Path(__file__).with_name("record_system.py")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--pairs", type=int, default=4, help="A/B window pairs (default 4)")
+    parser.add_argument("--window", type=float, default=6.0, help="seconds per window (default 6)")
+    parser.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none")
+    parser.add_argument("--json", action="store_true")
+
+
+def _latencies(path: Path, t0: float, t1: float) -> np.ndarray:
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip()]
+    return np.array([float(lat) for t, lat in rows if t0 <= float(t) < t1])
+
+
+def _recorded_frames(bag: Path) -> int:
+    from mcap.reader import make_reader
+
+    with open(bag, "rb") as f:
+        summary = make_reader(f).get_summary()
+    ids = [cid for cid, ch in summary.channels.items() if ch.topic == "/camera/rgb"]
+    return sum(summary.statistics.channel_message_counts.get(cid, 0) for cid in ids)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.pairs < 1 or args.window <= 0:
+        print("emos bench record: --pairs must be >= 1 and --window > 0")
+        return 2
+    work = Path(tempfile.mkdtemp(prefix="emos-bench-record-"))
+    # The probe's log lives in tmpfs: a file on the disk the recorder fills would make the
+    # probe's own writes wait for writeback, and measure that instead of the topic.
+    fd, lat_name = tempfile.mkstemp(prefix="emos-bench-record-", suffix=".txt", dir="/dev/shm")
+    os.close(fd)
+    lat_file = Path(lat_name)
+    env = dict(os.environ, EMOS_BENCH_LATENCY_FILE=str(lat_file))
+    system = subprocess.Popen([sys.executable, "-m", "emos", "run", str(SYSTEM)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    windows: list[dict] = []
+    try:
+        run_id = _wait_for_run(system.pid).name
+        time.sleep(3.0)  # components up and warm
+        for i in range(args.pairs):
+            for mode in (("off", "on") if i % 2 == 0 else ("on", "off")):
+                rec, bag = None, work / "bench.mcap"
+                if mode == "on":
+                    rec = subprocess.Popen([sys.executable, "-m", "emos", "record", "--run", run_id, "-o", str(bag), "--force", "-q",
+                                            "--compression", args.compression], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                    time.sleep(1.5)  # start-up (imports, first chunk) outside the window
+                    cpu0 = psutil.Process(rec.pid).cpu_times()
+                else:
+                    time.sleep(0.5)
+                t0 = time.time()
+                time.sleep(args.window)
+                t1 = time.time()
+                row = {"pair": i, "recorder": mode}
+                if rec is not None:
+                    cpu1 = psutil.Process(rec.pid).cpu_times()
+                    row["recorder_cpu_pct"] = 100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (t1 - t0)
+                    rec.send_signal(signal.SIGTERM)
+                    _, err = rec.communicate(timeout=30)
+                    if rec.returncode != 0:
+                        raise RuntimeError(f"emos record failed ({rec.returncode}): {err.decode(errors='replace')}")
+                    row["bag_mb"] = bag.stat().st_size / 1e6
+                    row["recorded"] = _recorded_frames(bag)
+                    bag.unlink()
+                lat = _latencies(lat_file, t0, t1)
+                row.update(n=len(lat), **percentiles(lat, (50, 90, 99)))
+                windows.append(row)
+    finally:
+        system.send_signal(signal.SIGINT)
+        try:
+            system.wait(30)
+        except subprocess.TimeoutExpired:
+            system.kill()
+            system.wait()
+    ratios = []
+    for i in range(args.pairs):
+        off = next(w for w in windows if w["pair"] == i and w["recorder"] == "off")
+        on = next(w for w in windows if w["pair"] == i and w["recorder"] == "on")
+        ratios.append({"pair": i, "p50_ratio": on["p50"] / off["p50"], "p90_ratio": on["p90"] / off["p90"], "p99_ratio": on["p99"] / off["p99"]})
+    summary = {key: {"median": float(np.median([r[key] for r in ratios])), "min": float(min(r[key] for r in ratios)),
+                     "max": float(max(r[key] for r in ratios))} for key in ("p50_ratio", "p90_ratio", "p99_ratio")}
+    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "compression": args.compression,
+              "windows": windows, "ratios": ratios, "summary": summary, "load_avg": os.getloadavg()}
+    lat_file.unlink(missing_ok=True)
+    work.rmdir()
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(table(windows, [("pair", "pair", "d"), ("recorder", "recorder", "s"), ("n", "frames", "d"), ("p50", "p50 ms", ".2f"),
+                          ("p90", "p90 ms", ".2f"), ("p99", "p99 ms", ".2f"), ("recorder_cpu_pct", "rec CPU %", ".0f"), ("bag_mb", "bag MB", ".0f"), ("recorded", "frames in bag", "d")]))
+    print()
+    print(table(ratios, [("pair", "pair", "d"), ("p50_ratio", "p50 on/off", ".3f"), ("p90_ratio", "p90 on/off", ".3f"), ("p99_ratio", "p99 on/off", ".3f")]))
+    for key, s in summary.items():
+        print(f"{key}: median {s['median']:.3f}  (min {s['min']:.3f}, max {s['max']:.3f})")
+    print(f"load average during the run: {result['load_avg'][0]:.2f}")
+    return 0
