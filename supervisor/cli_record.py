@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 from pathlib import Path
@@ -45,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="chunk compression (default none, as rosbag2: the least CPU; zstd halves camera images for ~1 ms of CPU per 640x480 frame)")
     parser.add_argument("--chunk-size", type=int, default=1 << 20, help="bytes per chunk (default 1 MiB); a killed recorder loses at most one")
     parser.add_argument("--distribution", default="humble", help="ROS 2 distribution of the cdr channels' type definitions (default humble)")
+    parser.add_argument("--nice", type=int, default=0, help="lower the recorder's CPU priority by this much (0-19), so that it yields to the robot's own processes")
     parser.add_argument("--force", action="store_true", help="overwrite an existing file")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     add_import_argument(parser)
@@ -59,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"emos record: {out} exists (use --force to overwrite)")
     if args.duration is not None and args.duration <= 0:
         raise SystemExit(f"emos record: --duration must be > 0 seconds, got {args.duration}")
+    if not 0 <= args.nice <= 19:
+        raise SystemExit(f"emos record: --nice must be 0..19, got {args.nice}")
+    if args.nice:
+        os.nice(args.nice)
     ctx = join_run(args.run)
     stop = stop_flag()
     recorder = Recorder(ctx, str(out), args.topics, args.exclude, compression=args.compression,

@@ -46,6 +46,7 @@ class TopicTap:
         self.types: dict[str, type] = {}
         self._refused: set[tuple[str, str]] = set()
         self.dropped_total: dict[str, int] = {}  # kept by close()
+        self.errors: dict[str, int] = {}
         self._shm_mtime = -1
         self._next_discovery = 0.0
         self.discover(force=True)
@@ -95,7 +96,16 @@ class TopicTap:
         """Every new message as ``(topic, publish stamp ns, raw frame)``, oldest first."""
         out: list[tuple[str, int, Any]] = []
         for topic, sub in self.subs.items():
-            for stamp, frame, _pub in sub.take_raw():
+            try:
+                got = sub.take_raw()
+            except TopicTypeError as exc:
+                # A second publisher with another type on the topic: keep reading the first one's
+                # messages, and say so (once per 100 reads: this repeats at every read).
+                n = self.errors[topic] = self.errors.get(topic, 0) + 1
+                if n == 1 or n % 100 == 0:
+                    log.error("topic %s: %s (%d times)", topic, exc, n)
+                continue
+            for stamp, frame, _pub in got:
                 out.append((topic, stamp, frame))
         if len(self.subs) > 1:
             out.sort(key=lambda item: item[1])

@@ -30,6 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pairs", type=int, default=4, help="A/B window pairs (default 4)")
     parser.add_argument("--window", type=float, default=6.0, help="seconds per window (default 6)")
     parser.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none")
+    parser.add_argument("--nice", type=int, default=0, help="pass --nice to emos record")
+    parser.add_argument("--against", choices=("record", "hz"), default="record",
+                        help="what runs in the 'on' windows: the recorder, or (a control) `emos topic hz` on the camera, a subscriber that only reads")
+    parser.add_argument("--bag-dir", default=None, help="where the recorder writes (default: a temporary directory on disk)")
     parser.add_argument("--json", action="store_true")
 
 
@@ -38,13 +42,12 @@ def _latencies(path: Path, t0: float, t1: float) -> np.ndarray:
     return np.array([float(lat) for t, lat in rows if t0 <= float(t) < t1])
 
 
-def _recorded_frames(bag: Path) -> int:
-    from mcap.reader import make_reader
+def _recorded_frames(bag: Path) -> tuple[int, int]:
+    """(frames in the file, frames the camera published between the first and the last of them)."""
+    from emos.interop.mcap_bag import read_bag
 
-    with open(bag, "rb") as f:
-        summary = make_reader(f).get_summary()
-    ids = [cid for cid, ch in summary.channels.items() if ch.topic == "/camera/rgb"]
-    return sum(summary.statistics.channel_message_counts.get(cid, 0) for cid in ids)
+    seqs = [int(m.decode().header.frame_id) for m in read_bag(bag, topics=["/camera/rgb"])]
+    return len(seqs), (max(seqs) - min(seqs) + 1 if seqs else 0)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,10 +69,13 @@ def run(args: argparse.Namespace) -> int:
         time.sleep(3.0)  # components up and warm
         for i in range(args.pairs):
             for mode in (("off", "on") if i % 2 == 0 else ("on", "off")):
-                rec, bag = None, work / "bench.mcap"
+                rec, bag = None, Path(args.bag_dir or work) / f"emos-bench-record-{os.getpid()}.mcap"
                 if mode == "on":
-                    rec = subprocess.Popen([sys.executable, "-m", "emos", "record", "--run", run_id, "-o", str(bag), "--force", "-q",
-                                            "--compression", args.compression], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                    if args.against == "record":
+                        cmd = ["record", "--run", run_id, "-o", str(bag), "--force", "-q", "--compression", args.compression, "--nice", str(args.nice)]
+                    else:
+                        cmd = ["topic", "hz", "--run", run_id, "/camera/rgb", "--window", "1"]
+                    rec = subprocess.Popen([sys.executable, "-m", "emos", *cmd], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
                     time.sleep(1.5)  # start-up (imports, first chunk) outside the window
                     cpu0 = psutil.Process(rec.pid).cpu_times()
                 else:
@@ -83,11 +89,12 @@ def run(args: argparse.Namespace) -> int:
                     row["recorder_cpu_pct"] = 100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (t1 - t0)
                     rec.send_signal(signal.SIGTERM)
                     _, err = rec.communicate(timeout=30)
-                    if rec.returncode != 0:
-                        raise RuntimeError(f"emos record failed ({rec.returncode}): {err.decode(errors='replace')}")
-                    row["bag_mb"] = bag.stat().st_size / 1e6
-                    row["recorded"] = _recorded_frames(bag)
-                    bag.unlink()
+                    if rec.returncode not in (0, -signal.SIGTERM):
+                        raise RuntimeError(f"emos {cmd[0]} failed ({rec.returncode}): {err.decode(errors='replace')}")
+                    if args.against == "record":
+                        row["bag_mb"] = bag.stat().st_size / 1e6
+                        row["recorded"], row["published"] = _recorded_frames(bag)
+                        bag.unlink()
                 lat = _latencies(lat_file, t0, t1)
                 row.update(n=len(lat), **percentiles(lat, (50, 90, 99)))
                 windows.append(row)
@@ -105,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         ratios.append({"pair": i, "p50_ratio": on["p50"] / off["p50"], "p90_ratio": on["p90"] / off["p90"], "p99_ratio": on["p99"] / off["p99"]})
     summary = {key: {"median": float(np.median([r[key] for r in ratios])), "min": float(min(r[key] for r in ratios)),
                      "max": float(max(r[key] for r in ratios))} for key in ("p50_ratio", "p90_ratio", "p99_ratio")}
-    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "compression": args.compression,
+    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "against": args.against, "compression": args.compression, "nice": args.nice, "bag_dir": args.bag_dir or "disk (temporary directory)",
               "windows": windows, "ratios": ratios, "summary": summary, "load_avg": os.getloadavg()}
     lat_file.unlink(missing_ok=True)
     work.rmdir()
@@ -113,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(table(windows, [("pair", "pair", "d"), ("recorder", "recorder", "s"), ("n", "frames", "d"), ("p50", "p50 ms", ".2f"),
-                          ("p90", "p90 ms", ".2f"), ("p99", "p99 ms", ".2f"), ("recorder_cpu_pct", "rec CPU %", ".0f"), ("bag_mb", "bag MB", ".0f"), ("recorded", "frames in bag", "d")]))
+                          ("p90", "p90 ms", ".2f"), ("p99", "p99 ms", ".2f"), ("recorder_cpu_pct", "rec CPU %", ".0f"), ("bag_mb", "bag MB", ".0f"), ("recorded", "frames in bag", "d"), ("published", "of published", "d")]))
     print()
     print(table(ratios, [("pair", "pair", "d"), ("p50_ratio", "p50 on/off", ".3f"), ("p90_ratio", "p90 on/off", ".3f"), ("p99_ratio", "p99 on/off", ".3f")]))
     for key, s in summary.items():
