@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from emos.supervisor.cli_common import add_run_argument, join_run
-from emos.supervisor.cli_record import add_import_argument, import_modules, stop_flag
+from emos.supervisor.cli_record import add_import_argument, check_distribution, import_modules, stop_flag
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"emos play: no such file {args.file!r}")
     if not args.rate > 0:
         raise SystemExit(f"emos play: --rate must be > 0, got {args.rate}")
+    check_distribution("emos play", args.distribution)
     ctx = join_run(args.run)
     stop = stop_flag()
     player = Player(ctx, args.file, rate=args.rate, loop=args.loop, topics=args.topics, distribution=args.distribution)
@@ -40,7 +41,9 @@ def run(args: argparse.Namespace) -> int:
         player.close()
     if not args.quiet:
         sys.stderr.write("\n")
-    print(f"played {total} messages from {args.file}" + (" (the file was cut short: played up to its last complete chunk)" if player.info.truncated else ""))
+    print(f"played {total} messages from {args.file}"
+          + (" (the file was cut short: played up to its last complete chunk)" if player.info.truncated else "")
+          + ("; the system stopped" if player.run_ended else ""))
     for topic, n in sorted(player.published.items()):
         print(f"  {topic:<40} {n:7d} messages")
     for topic, why in sorted(player.skipped.items()):

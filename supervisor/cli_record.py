@@ -24,6 +24,13 @@ def import_modules(names: list[str]) -> None:
             raise SystemExit(f"emos: cannot import {name!r} (from --import): {exc}") from exc
 
 
+def check_distribution(command: str, name: str) -> None:
+    from emos.interop.ros2_cdr import DISTRIBUTIONS
+
+    if name not in DISTRIBUTIONS:
+        raise SystemExit(f"{command}: --distribution must be one of {', '.join(DISTRIBUTIONS)}, got {name!r}")
+
+
 def stop_flag() -> list[int]:
     """A list that gets the signal number when SIGINT or SIGTERM arrives (the loops poll it)."""
     got: list[int] = []
@@ -65,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"emos record: --nice must be 0..19, got {args.nice}")
     if args.nice:
         os.nice(args.nice)
+    check_distribution("emos record", args.distribution)
     ctx = join_run(args.run)
     stop = stop_flag()
     recorder = Recorder(ctx, str(out), args.topics, args.exclude, compression=args.compression,
@@ -77,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         sys.stderr.write("\n")
     print(f"recorded {sum(s.messages for s in stats.values())} messages on {len(stats)} topics into {out} "
-          f"({out.stat().st_size / 1e6:.1f} MB)" + (f"; stopped by {signal.Signals(stop[0]).name}" if stop else ""))
+          f"({out.stat().st_size / 1e6:.1f} MB)" + (f"; stopped by {signal.Signals(stop[0]).name}" if stop else "")
+          + ("; the system stopped" if recorder.run_ended else ""))
     dropped = recorder.tap.dropped_total
     for topic, st in sorted(stats.items()):
         lost = dropped.get(topic, 0)

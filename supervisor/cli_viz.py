@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from emos.supervisor.cli_common import add_run_argument, join_run
-from emos.supervisor.cli_record import add_import_argument, import_modules, stop_flag
+from emos.supervisor.cli_record import add_import_argument, check_distribution, import_modules, stop_flag
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
     import_modules(args.imports)
     if not 0 <= args.port <= 65535:
         raise SystemExit(f"emos viz: --port must be 0..65535, got {args.port}")
+    check_distribution("emos viz", args.distribution)
     ctx = join_run(args.run)
     stop = stop_flag()
     try:

@@ -28,7 +28,7 @@ import attrs
 import numpy as np
 
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
-from emos.interop.tap import TopicTap
+from emos.interop.tap import RunWatch, TopicTap
 from emos.msgs import codec
 from emos.msgs.geometry import TransformStamped
 from emos.transport.context import RunContext
@@ -162,7 +162,11 @@ class FoxgloveBridge:
     def serve(self, should_stop: Any, progress: Any = None, progress_every: float = 2.0) -> None:
         """Forward until ``should_stop()`` (the ``emos viz`` loop)."""
         next_report = time.monotonic() + progress_every
+        alive = RunWatch(self.tap.ctx)
         while not should_stop():
+            if not alive():
+                log.info("Foxglove bridge: the system stopped")
+                return
             self.wait(0.1)
             self.step()
             if progress is not None and time.monotonic() >= next_report:

@@ -29,7 +29,7 @@ from attrs import define, field
 
 from emos.msgs import codec
 from emos.msgs.registry import UnknownMessageType, canonical_name, resolve
-from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, CdrError, NotShared, codec_for
+from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
 
 log = logging.getLogger("emos.interop")
 

@@ -13,7 +13,7 @@ from typing import Any, Callable, Iterable
 
 from emos.interop.mcap_bag import BagChannel, BagInfo, BagWriter, read_bag
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION
-from emos.interop.tap import TopicTap, normalize_patterns
+from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher
 
@@ -39,6 +39,8 @@ class Recorder:
             self.writer.close()
             raise
         self.errors: dict[str, int] = {}
+        self.alive = RunWatch(ctx)
+        self.run_ended = False  # the system stopped while we recorded
 
     def run(self, should_stop: Callable[[], bool], duration: float | None = None, progress: Progress | None = None,
             progress_every: float = 1.0) -> None:
@@ -48,6 +50,9 @@ class Recorder:
         for topic in self.tap.subs:
             log.info("recording %s (%s)", topic, self.tap.types[topic].__name__)
         while not should_stop() and (duration is None or time.monotonic() - start < duration):
+            if not self.alive():
+                self.run_ended = True
+                break
             self.tap.wait(0.1)
             self.step()
             for topic in self.tap.discover():
@@ -105,6 +110,8 @@ class Player:
         self.published: dict[str, int] = {}
         self.skipped: dict[str, str] = {}
         self.info = BagInfo()
+        self.alive = RunWatch(ctx)
+        self.run_ended = False  # the system stopped while we played
 
     def _wanted(self, topic: str) -> bool:
         import fnmatch
@@ -149,6 +156,9 @@ class Player:
             target = t0_wall + (m.publish_ns - t0_bag) / 1e9 / self.rate
             while True:  # sleep in slices so Ctrl-C is honoured during long gaps
                 if should_stop():
+                    return played, True
+                if not self.alive():
+                    self.run_ended = True
                     return played, True
                 delay = target - time.monotonic()
                 if delay <= 0:

@@ -15,7 +15,7 @@ import time
 from typing import Any, Iterable
 
 from emos.msgs.registry import UnknownMessageType, resolve
-from emos.transport.context import SHM_DIR, RunContext
+from emos.transport.context import SHM_DIR, RunContext, run_is_alive
 from emos.transport.pubsub import Subscriber, TopicTypeError, list_topics
 from emos.transport.waker import Waker
 
@@ -25,6 +25,22 @@ log = logging.getLogger("emos.interop")
 def normalize_patterns(topics: Iterable[str] | None) -> list[str]:
     """``scan`` -> ``/scan``; shell wildcards (``/camera/*``) are kept."""
     return [t if t.startswith("/") else "/" + t for t in (topics or [])]
+
+
+class RunWatch:
+    """Whether the run we joined from outside still exists (checked at most once per ``every`` s)."""
+
+    def __init__(self, ctx: RunContext, every: float = 1.0):
+        self.ctx, self.every = ctx, every
+        self._next = 0.0
+        self._alive = True
+
+    def __call__(self) -> bool:
+        now = time.monotonic()
+        if self._alive and now >= self._next:
+            self._next = now + self.every
+            self._alive = self.ctx.run_dir.exists() and run_is_alive(self.ctx.run_id)
+        return self._alive
 
 
 class TopicTap:

@@ -18,6 +18,8 @@ def emos(*args: str) -> subprocess.CompletedProcess:
     (["play", "{missing}"], "no such file"),
     (["play", "{existing}", "--rate", "0"], "--rate must be > 0"),
     (["viz", "--port", "70000"], "--port must be 0..65535"),
+    (["viz", "--distribution", "rolling"], "--distribution must be one of humble"),
+    (["play", "{existing}", "--distribution", "noetic"], "--distribution must be one of humble"),
     (["record", "-o", "{new}", "--import", "no_such_module_xyz"], "cannot import 'no_such_module_xyz'"),
 ])
 def test_bad_arguments(tmp_path, args, message):

@@ -15,7 +15,7 @@ from mcap.writer import Writer  # noqa: E402
 
 from emos.interop.mcap_bag import EMOS_ENCODING, BagInfo, BagWriter, read_bag  # noqa: E402
 from emos.interop.record import Player  # noqa: E402
-from emos.msgs import ComponentStatus, Detections, Image, LaserScan, String, codec, scan_from_ranges  # noqa: E402
+from emos.msgs import ComponentStatus, Detections, Image, String, codec, scan_from_ranges  # noqa: E402
 from emos.transport.context import RunContext  # noqa: E402
 from emos.transport.pubsub import Subscriber  # noqa: E402
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -17,7 +16,7 @@ pytest.importorskip("mcap")
 pytest.importorskip("rosbags")
 
 from emos.interop.mcap_bag import BagInfo, read_bag  # noqa: E402
-from tests.runtime.helpers import REPO, SystemUnderTest, wait_until  # noqa: E402
+from tests.runtime.helpers import REPO, SystemUnderTest  # noqa: E402
 
 CHECKER_RECIPE = """
 import json, zlib
@@ -79,6 +78,8 @@ def test_record_sensor_demo_then_replay_into_a_checker(tmp_path: Path):
     # SIGKILLed (must leave a file readable up to its last complete chunk).
     rec = emos("record", "--run", run, "-o", str(bag))
     killed = emos("record", "--run", run, "-o", str(killed_bag), "/camera/rgb", "--chunk-size", "3000000", "-q")
+    # One left running: it must end by itself, file complete, when the system stops.
+    until_end = emos("record", "--run", run, "-o", str(tmp_path / "until_end.mcap"), "/scan", "-q")
     time.sleep(1.0)
     # A topic that appears while recording is recorded too.
     late = emos("topic", "pub", "--run", run, "late", "std_msgs/String", '{"data": "late"}', "--rate", "20", "--count", "40")
@@ -90,6 +91,10 @@ def test_record_sensor_demo_then_replay_into_a_checker(tmp_path: Path):
     out = finish(rec)
     assert "stopped by SIGTERM" in out
     demo.stop()
+    assert "the system stopped" in finish(until_end, timeout=30)
+    end_info = BagInfo()
+    assert sum(1 for _ in read_bag(tmp_path / "until_end.mcap", info=end_info)) > 0
+    assert not end_info.truncated
 
     info = BagInfo()
     messages = list(read_bag(bag, info=info))
