@@ -54,6 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk-size", type=int, default=1 << 20, help="bytes per chunk (default 1 MiB); a killed recorder loses at most one")
     parser.add_argument("--distribution", default="humble", help="ROS 2 distribution of the cdr channels' type definitions (default humble)")
     parser.add_argument("--nice", type=int, default=0, help="lower the recorder's CPU priority by this much (0-19), so that it yields to the robot's own processes")
+    parser.add_argument("--idle", action="store_true",
+                        help="run the recorder under SCHED_IDLE: any other process that wants the CPU goes first "
+                             "(least disturbance; on a saturated CPU the recorder may fall behind and lose messages, which it reports)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing file")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     add_import_argument(parser)
@@ -72,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"emos record: --nice must be 0..19, got {args.nice}")
     if args.nice:
         os.nice(args.nice)
+    if args.idle:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     check_distribution("emos record", args.distribution)
     ctx = join_run(args.run)
     stop = stop_flag()

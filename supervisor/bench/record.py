@@ -31,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", type=float, default=6.0, help="seconds per window (default 6)")
     parser.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none")
     parser.add_argument("--nice", type=int, default=0, help="pass --nice to emos record")
+    parser.add_argument("--idle", action="store_true", help="pass --idle to emos record (SCHED_IDLE)")
     parser.add_argument("--against", choices=("record", "hz"), default="record",
                         help="what runs in the 'on' windows: the recorder, or (a control) `emos topic hz` on the camera, a subscriber that only reads")
     parser.add_argument("--bag-dir", default=None, help="where the recorder writes (default: a temporary directory on disk)")
@@ -40,6 +41,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _latencies(path: Path, t0: float, t1: float) -> np.ndarray:
     rows = [line.split() for line in path.read_text().splitlines() if line.strip()]
     return np.array([float(lat) for t, lat in rows if t0 <= float(t) < t1])
+
+
+def _wait_recording(proc: subprocess.Popen, bag: Path | None, timeout: float = 30.0) -> None:
+    """Keep the subscriber's start-up (imports: seconds of CPU on a loaded machine) out of the window:
+    wait until the recorder has written its first chunk, then one more second."""
+    end = time.monotonic() + timeout
+    while bag is not None and not (bag.exists() and bag.stat().st_size > 1_000_000):
+        if proc.poll() is not None or time.monotonic() > end:
+            raise RuntimeError(f"the recorder did not start recording within {timeout} s (exit code {proc.poll()})")
+        time.sleep(0.05)
+    time.sleep(1.0 if bag is not None else 3.0)
 
 
 def _recorded_frames(bag: Path) -> tuple[int, int]:
@@ -72,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
                 rec, bag = None, Path(args.bag_dir or work) / f"emos-bench-record-{os.getpid()}.mcap"
                 if mode == "on":
                     if args.against == "record":
-                        cmd = ["record", "--run", run_id, "-o", str(bag), "--force", "-q", "--compression", args.compression, "--nice", str(args.nice)]
+                        cmd = ["record", "--run", run_id, "-o", str(bag), "--force", "-q", "--compression", args.compression, "--nice", str(args.nice)] + (["--idle"] if args.idle else [])
                     else:
                         cmd = ["topic", "hz", "--run", run_id, "/camera/rgb", "--window", "1"]
                     rec = subprocess.Popen([sys.executable, "-m", "emos", *cmd], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-                    time.sleep(1.5)  # start-up (imports, first chunk) outside the window
+                    _wait_recording(rec, bag if args.against == "record" else None)
                     cpu0 = psutil.Process(rec.pid).cpu_times()
                 else:
                     time.sleep(0.5)
@@ -112,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
         ratios.append({"pair": i, "p50_ratio": on["p50"] / off["p50"], "p90_ratio": on["p90"] / off["p90"], "p99_ratio": on["p99"] / off["p99"]})
     summary = {key: {"median": float(np.median([r[key] for r in ratios])), "min": float(min(r[key] for r in ratios)),
                      "max": float(max(r[key] for r in ratios))} for key in ("p50_ratio", "p90_ratio", "p99_ratio")}
-    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "against": args.against, "compression": args.compression, "nice": args.nice, "bag_dir": args.bag_dir or "disk (temporary directory)",
+    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "against": args.against, "compression": args.compression, "nice": args.nice, "idle": args.idle, "bag_dir": args.bag_dir or "disk (temporary directory)",
               "windows": windows, "ratios": ratios, "summary": summary, "load_avg": os.getloadavg()}
     lat_file.unlink(missing_ok=True)
     work.rmdir()
