@@ -15,7 +15,8 @@ from emos.interop.mcap_bag import BagChannel, BagInfo, BagWriter, read_bag
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION
 from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
 from emos.transport.context import RunContext
-from emos.transport.pubsub import Publisher
+from emos.msgs.registry import canonical_name
+from emos.transport.pubsub import Publisher, list_topics
 
 log = logging.getLogger("emos.interop")
 
@@ -109,6 +110,7 @@ class Player:
         self.publishers: dict[str, Publisher] = {}
         self.published: dict[str, int] = {}
         self.skipped: dict[str, str] = {}
+        self.refused: set[str] = set()
         self.info = BagInfo()
         self.alive = RunWatch(ctx)
         self.run_ended = False  # the system stopped while we played
@@ -121,10 +123,19 @@ class Player:
     def _publisher(self, ch: BagChannel) -> Publisher | None:
         pub = self.publishers.get(ch.topic)
         if pub is None:
+            if ch.topic in self.refused:
+                return None
             if ch.cls is None:
                 if ch.topic not in self.skipped:
                     self.skipped[ch.topic] = ch.problem
                     log.warning("not playing %s: %s", ch.topic, ch.problem)
+                return None
+            # Subscribers refuse a ring of another type than the topic's, so never create one.
+            current = list_topics(self.ctx).get(ch.topic, {}).get("type", "?")
+            if current not in ("?", canonical_name(ch.cls)):
+                self.skipped[ch.topic] = f"the running system carries {current} on it, the recording {canonical_name(ch.cls)}"
+                log.warning("not playing %s: %s", ch.topic, self.skipped[ch.topic])
+                self.refused.add(ch.topic)
                 return None
             pub = self.publishers[ch.topic] = Publisher(self.ctx, ch.topic, ch.cls)
         return pub

@@ -152,3 +152,60 @@ def test_frames_are_stored_byte_exact_for_our_own_types(tmp_path):
         w.write("/d", msg, publish_ns=1)
     (m,) = list(read_bag(path))
     assert m.data == codec.pack(msg)
+
+
+def test_player_skips_a_topic_whose_type_differs_from_the_running_systems(ctx, tmp_path):
+    from emos.msgs import Int32
+    from emos.transport.pubsub import Publisher
+
+    path = tmp_path / "s.mcap"
+    with BagWriter(path) as w:
+        w.write("/chatter", String(data="x"), publish_ns=1)
+        w.write("/other", String(data="y"), publish_ns=2)
+    owner = Publisher(ctx, "/chatter", Int32, publisher_id="node")
+    sub = Subscriber(ctx, "/chatter", Int32, queue_size=10)
+    try:
+        player = Player(ctx, str(path))
+        assert player.run(lambda: False) == 1
+        player.close(linger=0)
+        assert "carries std_msgs/msg/Int32" in player.skipped["/chatter"]
+        assert player.published == {"/other": 1}
+        assert sub.take() == []  # and the system's subscriber is unharmed
+    finally:
+        sub.close()
+        owner.close()
+
+
+def test_a_file_written_as_rosbag2_writes_it_is_read_for_shared_types(tmp_path):
+    """Bytes made by rosbags from its own ROS 2 message objects, in the layout rosbag2 uses."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    T = store.types
+    ros_scan = T["sensor_msgs/msg/LaserScan"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=3, nanosec=4), frame_id="base_scan"),
+        angle_min=-1.0, angle_max=1.0, angle_increment=0.5, time_increment=0.0, scan_time=0.1, range_min=0.1,
+        range_max=3.5, ranges=np.array([1, 2, 3, 4, 5], np.float32), intensities=np.array([], np.float32))
+    path = tmp_path / "ros2.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="rosbag2-like")
+        sid = w.register_schema("sensor_msgs/msg/LaserScan", "ros2msg", store.generate_msgdef("sensor_msgs/msg/LaserScan", ros_version=2)[0].encode())
+        cid = w.register_channel("/scan", "cdr", sid, {"offered_qos_profiles": ""})
+        w.add_message(cid, log_time=10, publish_time=10, data=bytes(store.serialize_cdr(ros_scan, "sensor_msgs/msg/LaserScan")))
+        w.finish()
+    (m,) = list(read_bag(path))
+    scan = m.decode()
+    assert type(scan).__name__ == "LaserScan" and scan.header.frame_id == "base_scan" and scan.header.stamp.sec == 3
+    np.testing.assert_array_equal(scan.ranges, [1, 2, 3, 4, 5])
+
+
+def test_foxglove_config_is_validated_at_definition():
+    from emos.actors.viz import FoxgloveConfig
+
+    with pytest.raises(ValueError, match="port must be an int in 0..65535"):
+        FoxgloveConfig(port=70000)
+    with pytest.raises(ValueError, match="distribution must be one of"):
+        FoxgloveConfig(distribution="rolling")
+    with pytest.raises(ValueError, match="list of topic names"):
+        FoxgloveConfig(topics="/scan")
