@@ -46,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
           + ("; the system stopped" if player.run_ended else ""))
     for topic, n in sorted(player.published.items()):
         print(f"  {topic:<40} {n:7d} messages")
+    for topic, n in sorted(player.errors.items()):
+        print(f"  {topic:<40} {n} damaged messages not played (see the log)")
     for topic, why in sorted(player.skipped.items()):
         print(f"  {topic:<40} skipped: {why}")
     return 0

@@ -7,14 +7,16 @@ recipe runs on recorded data with no sensors or simulator.
 """
 from __future__ import annotations
 
+import fnmatch
 import logging
 import time
 from typing import Any, Callable, Iterable
 
 from emos.interop.mcap_bag import BagChannel, BagInfo, BagWriter, read_bag
-from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION
+from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, CdrError
 from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
 from emos.transport.context import RunContext
+from emos.msgs.codec import DecodeError
 from emos.msgs.registry import canonical_name
 from emos.transport.pubsub import Publisher, list_topics
 
@@ -111,13 +113,12 @@ class Player:
         self.published: dict[str, int] = {}
         self.skipped: dict[str, str] = {}
         self.refused: set[str] = set()
+        self.errors: dict[str, int] = {}
         self.info = BagInfo()
         self.alive = RunWatch(ctx)
         self.run_ended = False  # the system stopped while we played
 
     def _wanted(self, topic: str) -> bool:
-        import fnmatch
-
         return not self.patterns or any(fnmatch.fnmatchcase(topic, p) for p in self.patterns)
 
     def _publisher(self, ch: BagChannel) -> Publisher | None:
@@ -161,7 +162,13 @@ class Player:
             pub = self._publisher(m.channel)
             if pub is None:
                 continue
-            msg = m.decode(self.distribution)
+            try:
+                msg = m.decode(self.distribution)
+            except (CdrError, DecodeError) as exc:  # a damaged message: skip it, keep playing
+                n = self.errors[m.topic] = self.errors.get(m.topic, 0) + 1
+                if n == 1 or n % 100 == 0:
+                    log.error("topic %s: message not played (%d so far): %s", m.topic, n, exc)
+                continue
             if t0_bag is None:
                 t0_bag, t0_wall = m.publish_ns, time.monotonic()
             target = t0_wall + (m.publish_ns - t0_bag) / 1e9 / self.rate

@@ -167,10 +167,10 @@ def test_player_skips_a_topic_whose_type_differs_from_the_running_systems(ctx, t
     try:
         player = Player(ctx, str(path))
         assert player.run(lambda: False) == 1
+        assert sub.take() == []  # the system's subscriber is unharmed (a wrong-type ring would make it raise)
         player.close(linger=0)
         assert "carries std_msgs/msg/Int32" in player.skipped["/chatter"]
         assert player.published == {"/other": 1}
-        assert sub.take() == []  # and the system's subscriber is unharmed
     finally:
         sub.close()
         owner.close()
@@ -209,3 +209,28 @@ def test_foxglove_config_is_validated_at_definition():
         FoxgloveConfig(distribution="rolling")
     with pytest.raises(ValueError, match="list of topic names"):
         FoxgloveConfig(topics="/scan")
+
+
+def test_player_skips_a_damaged_message_and_plays_on(ctx, tmp_path):
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    path = tmp_path / "damaged.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2")
+        sid = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        cid = w.register_channel("/chatter", "cdr", sid)
+        good = bytes(store.serialize_cdr(store.types["std_msgs/msg/String"](data="ok"), "std_msgs/msg/String"))
+        for i, data in enumerate((good, b"\x00\x01\x00\x00\xff\xff\xff\x7f", good)):
+            w.add_message(cid, log_time=i, publish_time=i, data=data)
+        w.finish()
+    sub = Subscriber(ctx, "/chatter", String, queue_size=10)
+    try:
+        player = Player(ctx, str(path))
+        assert player.run(lambda: False) == 2
+        assert [m.data for m in sub.take()] == ["ok", "ok"]  # before close: the player's ring goes with it
+        player.close(linger=0)
+        assert player.errors == {"/chatter": 1}
+    finally:
+        sub.close()
