@@ -66,6 +66,7 @@ class Launcher:
         self.system: Any = None
         self._shared_wiring: list[tuple[str, dict[str, Any]]] = []
         self._shared_config: dict[str, Any] = {}
+        self._ui: dict[str, Any] | None = None
 
     def add_pkg(
         self,
@@ -176,6 +177,15 @@ class Launcher:
             if missing:
                 raise ValueError(f"component {c.component_name!r} ({type(c).__name__}) has no topic for required {', '.join(missing)}")
 
+    def enable_ui(self, inputs: Sequence[Any] | None = None, outputs: Sequence[Any] | None = None,
+                  port: int = 5001, host: str = "127.0.0.1", **settings: Any) -> None:
+        """Serve a web page for this recipe: ``outputs`` are shown, ``inputs`` can be sent from it.
+        Local-only by default; any other ``host`` requires the access token printed at start-up
+        (``$EMOS_UI_TOKEN``, or a fresh one). Further ``UIConfig`` fields may be given by name."""
+        from emos.actors.ui.launch import check_ui_request
+
+        self._ui = check_ui_request(inputs, outputs, port, host, settings)
+
     def enable_foxglove(self, port: int = 8765, host: str = "127.0.0.1", **config: Any) -> None:
         """Serve every topic live to Foxglove on ``ws://host:port``, from a supervised component
         (``foxglove_bridge``) in its own process. ``config``: more ``FoxgloveConfig`` fields
@@ -211,6 +221,10 @@ class Launcher:
         if not self._packages:
             raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
         self._apply_shared()
+        if self._ui is not None:
+            from emos.actors.ui.launch import add_ui
+
+            add_ui(self, self._ui)
         if self._events_actions or self._fallback_policies:
             log.warning("events, actions and launcher-wide fallbacks are recorded but not executed yet "
                         "(supervisor restarts are active)")

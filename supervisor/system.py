@@ -20,8 +20,10 @@ from attrs import define, field
 
 from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
-from emos.core.rpc import RpcServer
+from emos.core.rpc import CONTROL_FRAME, RpcServer
+from emos.core.wiring import check_system
 from emos.supervisor.heartbeat import HeartbeatMonitor
+from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
 from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
@@ -70,6 +72,7 @@ class System:
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"component names must be unique in a system; repeated: {', '.join(dupes)}")
+        check_system(self.components)  # topic types agree, names fit: before anything starts
         self._pristine: dict[int, BaseComponent] = {}
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=2000)
         self.exit_code = EXIT_OK
@@ -89,6 +92,7 @@ class System:
         self.control_path = self.ctx.run_dir / "supervisor.sock"
         os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
         become_subreaper()
+        self.reaper = OrphanReaper(protected=self._zygote_pids)
         try:
             process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
             if process_indices:
@@ -112,10 +116,15 @@ class System:
         finally:
             if self.zygote is not None:
                 self.zygote.stop()
+            self.reaper.finish()
             removed = self.ctx.remove_everything()
             log.debug("removed %d shared-memory segments", removed)
             set_current(None)
         return self.exit_code
+
+    def _zygote_pids(self) -> list[int]:
+        z = self.zygote
+        return [h.pid for h in (z.primary, z.spare) if h is not None] if z is not None else []
 
     def _mode(self, index: int) -> str:
         i = index
@@ -143,7 +152,8 @@ class System:
         self._stop_requested = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
-        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor")
+        self.reaper.install(loop)
+        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor", max_frame=CONTROL_FRAME)
         await self.control.start()
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
         self.root = self._build_root()
@@ -173,6 +183,7 @@ class System:
         finally:
             self.heartbeats.close()
             await self.control.close()
+            self.reaper.uninstall()
 
     async def _stop_after(self, seconds: float) -> None:
         await asyncio.sleep(seconds)
@@ -222,14 +233,20 @@ class System:
     def summary(self) -> str:
         """What happened during the run, per component: restarts and why."""
         exits: collections.Counter[tuple[str, str]] = collections.Counter()
+        failed_starts: collections.Counter[str] = collections.Counter()
         for e in self.events:
             if e["event"] == "exit":
                 exits[(e["child"], e.get("reason", "?"))] += 1
+            elif e["event"] == "start_failed":
+                failed_starts[e["child"]] += 1  # restart attempts (or the first start) that never came up
         lines = [f"EMOS run {self.ctx.run_id}: exit code {self.exit_code} ({self.exit_reason})"]
         for c in self.components:
             name = c.component_name
             reasons = ", ".join(f"{n} {r}" for (child, r), n in sorted(exits.items()) if child == name)
-            lines.append(f"  {name:<24} {'restarted after: ' + reasons if reasons else 'no restarts'}")
+            text = "restarted after: " + reasons if reasons else "no restarts"
+            if failed_starts[name]:
+                text += f"; {failed_starts[name]} start(s) failed during start-up"
+            lines.append(f"  {name:<24} {text}")
         escalations = [e for e in self.events if e["event"] == "escalated"]
         for e in escalations:
             lines.append(f"  escalation in {e['supervisor']}: {e.get('detail', '')}")

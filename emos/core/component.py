@@ -21,6 +21,7 @@ from emos.config.loader import load_into
 from emos.core.health import Status
 from emos.core.lifecycle import LifecycleState
 from emos.io.topic import Topic
+from emos.transport.limits import check_component_name
 
 if TYPE_CHECKING:
     from emos.core.node import Node
@@ -71,6 +72,7 @@ class BaseComponent:
     ) -> None:
         if not isinstance(component_name, str) or not component_name or not set(component_name) <= _COMPONENT_NAME_CHARS or component_name[0].isdigit():
             raise ValueError(f"component_name must be letters, digits and '_', not starting with a digit; got {component_name!r}")
+        check_component_name(component_name)
         if kwargs:
             raise TypeError(f"component {component_name!r}: unexpected argument(s) {', '.join(sorted(kwargs))}")
         self.component_name = component_name
@@ -217,6 +219,17 @@ class BaseComponent:
         if self._node is not None:
             self._node.on_config_changed()
         return True
+
+    @property
+    def ui_main_action_input(self) -> Any:
+        """This component's main action as an input of the web UI: ``enable_ui(inputs=[c.ui_main_action_input])``."""
+        from emos.core.action_input import ActionInput
+        from emos.msgs.registry import resolve
+
+        if self.main_action_type is None:
+            raise ValueError(f"component {self.component_name!r} ({type(self).__name__}) has no main action (main_action_type)")
+        goal, feedback, result = (resolve(t) for t in self.main_action_type)
+        return ActionInput(self.main_action_name, goal, feedback, result, self.component_name)
 
     # -- hooks for subclasses ----------------------------------------------------------------------
     def custom_on_configure(self) -> None:

@@ -21,6 +21,7 @@ from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
+from emos.transport.limits import check_topic_name
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
@@ -32,6 +33,7 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 # An announcement can be lost only to a FIFO full of wake-ups (a reader stopped for a long
 # time); the periodic rescan bounds how late such a reader finds a new publisher.
 RESCAN_EVERY_NS = 1_000_000_000
+REJECT_LOG_PERIOD_S = 10.0  # a publisher of the wrong type is logged at most this often, with a count
 
 
 class TopicTypeError(TypeError):
@@ -66,6 +68,7 @@ class Publisher:
         self.type_name = canonical_name(msg_cls)
         self.publisher_id = publisher_id or f"pid{os.getpid()}-{id(self):x}"
         self.anonymous = publisher_id is None
+        check_topic_name(topic, self.publisher_id)
         self.depth = max(int(depth), 2)
         self.max_bytes = max_bytes
         self.sender = WakeSender(ctx)
@@ -260,6 +263,8 @@ class Subscriber:
         self._shm_mtime = -1
         self._scanned_at_ns = 0
         self._announcements = -1
+        self._scanned_once = False
+        self._rejected: dict[str, tuple[int, float, str]] = {}  # segment -> (times seen, last logged, type)
         self._prefix = f"{ctx.shm_prefix}{encode_name(topic)}."
         self._interest: Path | None = None
         if waker is not None:
@@ -285,6 +290,8 @@ class Subscriber:
             self._announcements = self.waker.announcements
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
+        initial = not self._scanned_once
+        self._scanned_once = True
         latest: dict[str, tuple[int, str]] = {}
         for name in os.listdir(SHM_DIR):
             if not name.startswith(self._prefix):
@@ -302,12 +309,23 @@ class Subscriber:
             if src is not None:
                 # The publisher moved to a bigger ring; ``_follow`` handles it on the next read.
                 continue
+            if name in self._rejected:
+                self._reject(name, pub, None)
+                continue
             ring = R.Ring.attach(name)
             if ring is None:
+                continue
+            if not initial and ring.fingerprint != _fingerprint(self.msg_cls):
+                # A publisher that appeared later with the wrong type: that one peer is refused
+                # (logged, rate-limited) and the topic goes on with the others.
+                self._reject(name, pub, ring.type_name)
+                ring.close()
                 continue
             self._check_type(ring, pub)
             self._register(ring)
             self.sources[pub] = _Source(ring, self._start_cursor(ring), pub, name, self.loans)
+        for gone in [n for n in self._rejected if n not in {v[1] for v in latest.values()}]:
+            del self._rejected[gone]
         # Forget publishers whose ring disappeared (removed at the end of a run).
         for pub in [p for p in self.sources if p not in latest]:
             src = self.sources[pub]
@@ -315,6 +333,18 @@ class Subscriber:
                 continue
             src.close()
             del self.sources[pub]
+
+    def _reject(self, segment: str, pub: str, type_name: str | None) -> None:
+        count, logged_at, type_name = self._rejected.get(segment, (0, float("-inf"), type_name or "?"))
+        count += 1
+        now = time.monotonic()
+        if now - logged_at >= REJECT_LOG_PERIOD_S:
+            log.error(
+                "topic %s: ignoring publisher %r, which sends %s where this subscriber expects %s (seen %d time(s))",
+                self.topic, pub, type_name, canonical_name(self.msg_cls), count,
+            )
+            logged_at = now
+        self._rejected[segment] = (count, logged_at, type_name)
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
         if ring.fingerprint != _fingerprint(self.msg_cls):
@@ -367,6 +397,22 @@ class Subscriber:
             self.dropped += len(out) - self.queue_size
             out = out[-self.queue_size :]
         return out
+
+    def take_raw_from(self, publisher_id: str) -> tuple[list[tuple[int, Any, str]], int]:
+        """New messages of one publisher only, and its ring's writer pid (0 if it has no ring).
+
+        Messages of the other publishers are skipped unread; for readers that trust one writer
+        (the supervisor reads a component's heartbeat only from the component itself).
+        """
+        self.rescan()
+        out: list[tuple[int, Any, str]] = []
+        for pub, src in self.sources.items():
+            if pub == publisher_id:
+                self._drain(src, out)
+            else:
+                src.cursor = max(src.cursor, src.ring.head)
+        src = self.sources.get(publisher_id)
+        return out[-self.queue_size :], (src.ring.writer_pid if src is not None else 0)
 
     def _drain(self, src: _Source, out: list) -> None:
         # Drain the current generation before following a move, so nothing written there is lost.

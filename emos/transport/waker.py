@@ -53,14 +53,22 @@ class Waker:
         self.state_path = state_path(ctx, self.token)
         fd = os.open(self.state_path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
         try:
-            os.ftruncate(fd, _STATE_BYTES)
-            self._state_mm = mmap.mmap(fd, _STATE_BYTES)
-        finally:
-            os.close(fd)
-        self._state = memoryview(self._state_mm).cast("Q")
-        os.mkfifo(self.path, 0o600)
-        # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
-        self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
+            try:
+                os.ftruncate(fd, _STATE_BYTES)
+                self._state_mm = mmap.mmap(fd, _STATE_BYTES)
+            finally:
+                os.close(fd)
+            self._state = memoryview(self._state_mm).cast("Q")
+            os.mkfifo(self.path, 0o600)
+            # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
+            self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
+        except BaseException:  # an error or a signal (the CLI turns SIGTERM into SystemExit) half way
+            for path in (self.path, self.state_path):
+                try:
+                    os.unlink(path)
+                except FileNotFoundError:
+                    pass
+            raise
 
     def fileno(self) -> int:
         return self.fd

@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
                     row["recorder_cpu_pct"] = 100 * ((cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)) / (t1 - t0)
                     rec.send_signal(signal.SIGTERM)
                     _, err = rec.communicate(timeout=30)
-                    if rec.returncode not in (0, -signal.SIGTERM):
+                    if rec.returncode not in (0, 128 + signal.SIGTERM, -signal.SIGTERM):
                         raise RuntimeError(f"emos {cmd[0]} failed ({rec.returncode}): {err.decode(errors='replace')}")
                     if args.against == "record":
                         row["bag_mb"] = bag.stat().st_size / 1e6
