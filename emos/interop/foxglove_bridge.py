@@ -9,9 +9,10 @@ How each topic is offered:
   field names users already know. The bytes are those of :mod:`emos.interop.ros2_cdr`, the same
   as in our MCAP recordings, so a layout built on a live robot works on a recording and for a
   ROS 2 robot's data. One converter, instead of a second mapping to Foxglove's own schemas.
-* ``geometry_msgs/TransformStamped`` goes as ``foxglove.FrameTransforms`` (the SDK's schema):
-  Foxglove builds its transform tree from tf2_msgs/TFMessage or its own transform schemas, and
-  we have no TFMessage type; one transform per message becomes a one-element list.
+* ``tf2_msgs/TFMessage`` (``/tf``, ``/tf_static``) goes as ROS 2 cdr like the rest: Foxglove
+  builds its frame tree from it. Topics of single ``geometry_msgs/TransformStamped`` messages go
+  as ``foxglove.FrameTransforms`` (the SDK's schema, which Foxglove documents as a transform
+  source for its 3D and Image panels), one transform becoming a one-element list.
 * any other type (our own packages) goes as JSON, shown by the Raw Messages panel; arrays of
   more than ``MAX_JSON_ARRAY`` elements are replaced by a note of their dtype and shape.
 

@@ -23,6 +23,7 @@ from tests.runtime.helpers import SystemUnderTest, wait_until  # noqa: E402
 RECIPE = """
 import zlib
 from emos.msgs import Header, Image, LaserScan, Time, TransformStamped
+from emos.msgs.geometry import TFMessage
 
 class Sensors(BaseComponent):
     def custom_on_activate(self):
@@ -38,10 +39,12 @@ class Sensors(BaseComponent):
         tf = TransformStamped(header=Header(stamp=Time.now(), frame_id="odom"), child_frame_id="base_link")
         tf.transform.translation.x = 1.5
         self.publish("tf_base", tf)
+        self.publish("tf", TFMessage(transforms=[tf]))
         self.seq += 1
         self.health_status.set_healthy()
 
-topics = [Topic(name="scan", msg_type="LaserScan"), Topic(name="camera/rgb", msg_type="Image"), Topic(name="tf_base", msg_type="TransformStamped")]
+topics = [Topic(name="scan", msg_type="LaserScan"), Topic(name="camera/rgb", msg_type="Image"), Topic(name="tf_base", msg_type="TransformStamped"),
+          Topic(name="tf", msg_type="tf2_msgs/msg/TFMessage")]
 sensors = Sensors(component_name="sensors", outputs=topics)
 sensors.config.loop_rate = 10.0
 launcher = Launcher(multi_processing=True)
@@ -133,12 +136,15 @@ def test_launcher_foxglove_component_serves_scans_and_images(tmp_path):
     try:
         line = viz.stdout.readline()
         port2 = int(re.search(r"ws://127\.0\.0\.1:(\d+)", line).group(1))
-        channels2, payloads2 = asyncio.run(foxglove_session(f"ws://127.0.0.1:{port2}", {"/sensors/status": 1, "/tf_base": 1}))
+        channels2, payloads2 = asyncio.run(foxglove_session(f"ws://127.0.0.1:{port2}", {"/sensors/status": 1, "/tf_base": 1, "/tf": 1}))
         status = json.loads(payloads2["/sensors/status"][0])
         assert status["status"] == 0 and status["lifecycle_state"] == "active"
         assert channels2["/tf_base"]["encoding"] == "protobuf"
         tf = decode_protobuf(channels2["/tf_base"], payloads2["/tf_base"][0])
         assert [(t.parent_frame_id, t.child_frame_id, t.translation.x) for t in tf.transforms] == [("odom", "base_link", 1.5)]
+        assert channels2["/tf"]["schemaName"] == "tf2_msgs/msg/TFMessage" and channels2["/tf"]["encoding"] == "cdr"
+        ros_tf = STORE.deserialize_cdr(payloads2["/tf"][0], "tf2_msgs/msg/TFMessage")
+        assert [(t.child_frame_id, t.transform.translation.x) for t in ros_tf.transforms] == [("base_link", 1.5)]
     finally:
         viz.terminate()
         out, err = viz.communicate(timeout=20)

@@ -82,8 +82,8 @@ def test_channels_we_cannot_decode_say_why(tmp_path):
     with open(path, "wb") as f:
         w = Writer(f)
         w.start()
-        sid = w.register_schema("tf2_msgs/msg/TFMessage", "ros2msg", b"geometry_msgs/TransformStamped[] transforms")
-        c1 = w.register_channel("/tf", "cdr", sid)
+        sid = w.register_schema("visualization_msgs/msg/MarkerArray", "ros2msg", b"visualization_msgs/Marker[] markers")
+        c1 = w.register_channel("/markers", "cdr", sid)
         sid2 = w.register_schema("sugar/msg/ComponentStatus", "emos-msgpack-layout", json.dumps({"fingerprint": "0000"}).encode())
         c2 = w.register_channel("/x/status", EMOS_ENCODING, sid2)
         c3 = w.register_channel("/j", "json", 0)
@@ -93,10 +93,10 @@ def test_channels_we_cannot_decode_say_why(tmp_path):
     info = BagInfo()
     msgs = list(read_bag(path, info=info))
     problems = {ch.topic: ch.problem for ch in info.channels.values()}
-    assert "tf2_msgs/msg/TFMessage" in problems["/tf"]
+    assert "visualization_msgs/msg/MarkerArray" in problems["/markers"]
     assert "different field layout" in problems["/x/status"]
     assert "'json'" in problems["/j"]
-    with pytest.raises(LookupError, match="/tf"):
+    with pytest.raises(LookupError, match="/markers"):
         msgs[0].decode()
 
 
