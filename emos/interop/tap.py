@@ -21,6 +21,8 @@ from emos.transport.waker import Waker
 
 log = logging.getLogger("emos.interop")
 
+_MTIME_SLACK_NS = 50_000_000  # well above any kernel's timestamp tick
+
 
 def normalize_patterns(topics: Iterable[str] | None) -> list[str]:
     """``scan`` -> ``/scan``; shell wildcards (``/camera/*``) are kept."""
@@ -64,8 +66,13 @@ class TopicTap:
         self.dropped_total: dict[str, int] = {}  # kept by close()
         self.errors: dict[str, int] = {}
         self._shm_mtime = -1
+        self._scanned_at_ns = 0
         self._next_discovery = 0.0
-        self.discover(force=True)
+        try:
+            self.discover(force=True)
+        except BaseException:
+            self.close()
+            raise
 
     def wanted(self, topic: str) -> bool:
         if any(fnmatch.fnmatchcase(topic, p) for p in self.exclude):
@@ -79,9 +86,12 @@ class TopicTap:
             return []
         self._next_discovery = now + self.discover_every
         mtime = os.stat(SHM_DIR).st_mtime_ns
-        if not force and mtime == self._shm_mtime:
+        # An unchanged mtime proves nothing new only if our last scan came clearly after it:
+        # tmpfs timestamps are coarse, so a ring created in the tick of our scan leaves it as it was.
+        if not force and mtime == self._shm_mtime and self._scanned_at_ns - mtime > _MTIME_SLACK_NS:
             return []
         self._shm_mtime = mtime
+        self._scanned_at_ns = time.time_ns()
         new = []
         for topic, info in list_topics(self.ctx).items():
             if topic in self.subs or not info["publishers"] or not self.wanted(topic):
