@@ -54,6 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk-size", type=int, default=1 << 20, help="bytes per chunk (default 1 MiB); a killed recorder loses at most one")
     parser.add_argument("--distribution", default="humble", help="ROS 2 distribution of the cdr channels' type definitions (default humble)")
     parser.add_argument("--nice", type=int, default=0, help="lower the recorder's CPU priority by this much (0-19), so that it yields to the robot's own processes")
+    parser.add_argument("--defer-ms", type=float, default=5.0,
+                        help="wait this long after a wake-up before reading, so the robot's own subscribers of the same message "
+                             "run first (default 5; keep it well below a topic's queue duration; 0 reads at once)")
     parser.add_argument("--idle", action="store_true",
                         help="run the recorder under SCHED_IDLE: any other process that wants the CPU goes first "
                              "(least disturbance; on a saturated CPU the recorder may fall behind and lose messages, which it reports)")
@@ -71,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"emos record: {out} exists (use --force to overwrite)")
     if args.duration is not None and args.duration <= 0:
         raise SystemExit(f"emos record: --duration must be > 0 seconds, got {args.duration}")
+    if not 0 <= args.defer_ms <= 1000:
+        raise SystemExit(f"emos record: --defer-ms must be 0..1000, got {args.defer_ms}")
     if not 0 <= args.nice <= 19:
         raise SystemExit(f"emos record: --nice must be 0..19, got {args.nice}")
     if args.nice:
@@ -81,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     ctx = join_run(args.run)
     stop = stop_flag()
     recorder = Recorder(ctx, str(out), args.topics, args.exclude, compression=args.compression,
-                        chunk_size=args.chunk_size, distribution=args.distribution)
+                        chunk_size=args.chunk_size, distribution=args.distribution, defer=args.defer_ms / 1000.0)
     try:
         recorder.run(lambda: bool(stop), args.duration, None if args.quiet else default_progress())
     finally:

@@ -32,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none")
     parser.add_argument("--nice", type=int, default=0, help="pass --nice to emos record")
     parser.add_argument("--idle", action="store_true", help="pass --idle to emos record (SCHED_IDLE)")
+    parser.add_argument("--defer-ms", type=float, default=None, help="pass --defer-ms to emos record (default: its default)")
     parser.add_argument("--against", choices=("record", "hz"), default="record",
                         help="what runs in the 'on' windows: the recorder, or (a control) `emos topic hz` on the camera, a subscriber that only reads")
     parser.add_argument("--bag-dir", default=None, help="where the recorder writes (default: a temporary directory on disk)")
@@ -85,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
                 if mode == "on":
                     if args.against == "record":
                         cmd = ["record", "--run", run_id, "-o", str(bag), "--force", "-q", "--compression", args.compression, "--nice", str(args.nice)] + (["--idle"] if args.idle else [])
+                        if args.defer_ms is not None:
+                            cmd += ["--defer-ms", str(args.defer_ms)]
                     else:
                         cmd = ["topic", "hz", "--run", run_id, "/camera/rgb", "--window", "1"]
                     rec = subprocess.Popen([sys.executable, "-m", "emos", *cmd], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -124,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         ratios.append({"pair": i, "p50_ratio": on["p50"] / off["p50"], "p90_ratio": on["p90"] / off["p90"], "p99_ratio": on["p99"] / off["p99"]})
     summary = {key: {"median": float(np.median([r[key] for r in ratios])), "min": float(min(r[key] for r in ratios)),
                      "max": float(max(r[key] for r in ratios))} for key in ("p50_ratio", "p90_ratio", "p99_ratio")}
-    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "against": args.against, "compression": args.compression, "nice": args.nice, "idle": args.idle, "bag_dir": args.bag_dir or "disk (temporary directory)",
+    result = {"bench": "record", "window_s": args.window, "pairs": args.pairs, "against": args.against, "compression": args.compression, "nice": args.nice, "idle": args.idle, "defer_ms": args.defer_ms, "bag_dir": args.bag_dir or "disk (temporary directory)",
               "windows": windows, "ratios": ratios, "summary": summary, "load_avg": os.getloadavg()}
     lat_file.unlink(missing_ok=True)
     work.rmdir()

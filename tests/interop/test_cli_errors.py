@@ -15,6 +15,7 @@ def emos(*args: str) -> subprocess.CompletedProcess:
     (["record", "-o", "{existing}"], "exists (use --force to overwrite)"),
     (["record", "-o", "{new}", "--nice", "30"], "--nice must be 0..19"),
     (["record", "-o", "{new}", "--duration", "0"], "--duration must be > 0"),
+    (["record", "-o", "{new}", "--defer-ms", "-1"], "--defer-ms must be 0..1000"),
     (["play", "{missing}"], "no such file"),
     (["play", "{existing}", "--rate", "0"], "--rate must be > 0"),
     (["viz", "--port", "70000"], "--port must be 0..65535"),
