@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "logs": ("emos.supervisor.cli_logs", "list the logs of past runs, or show one"),
     "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
     "version": ("emos.supervisor.cli_version", "show the EMOS version"),
+    "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
     "record": ("emos.supervisor.cli_record", "record a running system's topics into an MCAP file"),
     "play": ("emos.supervisor.cli_play", "publish an MCAP recording into a running system, with its timing"),
     "viz": ("emos.supervisor.cli_viz", "serve a running system's topics to Foxglove over its WebSocket protocol"),
@@ -32,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
+    "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "record": ("emos.supervisor.bench.record", "camera latency to its subscribers with and without `emos record`"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
