@@ -345,6 +345,27 @@ class Node:
         inp = self._input(topic)
         return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
 
+    def publishers_alive(self, topic: Topic | str) -> bool | None:
+        """Whether a process publishing on ``topic`` is alive: None if no publisher was ever seen.
+
+        Lets a consumer tell "the producer died" (stop now) from "it is slow" (wait for the
+        data timeout), e.g. the DriveManager when the controller process is killed."""
+        sources = self._input(topic).sub.sources
+        if not sources:
+            return None
+        for src in list(sources.values()):
+            pid = src.ring.writer_pid
+            if pid <= 0:
+                return True  # no pid recorded: cannot tell, assume alive
+            try:
+                os.kill(pid, 0)
+                return True
+            except ProcessLookupError:
+                continue
+            except PermissionError:
+                return True
+        return False
+
     def stale_inputs(self) -> list[str]:
         stale = []
         for name, inp in self._inputs.items():

@@ -117,7 +117,7 @@ def test_every_shipped_world_keeps_a_route_through_the_navigators_soft_band():
     with the whole map known, every shipped world must still have a route that avoids them."""
     from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START
     from emos.actors.sim.navigation.builtin import GridNavigator
-    from emos.actors.sim.navigation.costfield import CostField
+    from emos.actors.nav.planning.costfield import CostField
     from emos.actors.sim.navigation.grid import HitGrid
     from emos.actors.sim.robots import JACKAL
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from emos.actors.sim import Box, World, render_topdown
-from emos.actors.sim.navigation.costfield import CostField, lattice_edges
+from emos.actors.nav.planning.costfield import CostField, lattice_edges
 from emos.actors.sim.navigation.grid import HitGrid
 
 

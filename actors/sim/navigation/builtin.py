@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from .arcs import ArcConfig, ArcPlanner
-from .costfield import CostField
+from emos.actors.nav.planning.costfield import CostField
 from .grid import HitGrid
 from .interface import NavTask, Observation
 from .localize import ScanMatcher, compose, correction_between
