@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,7 @@ class MotionServer(NavComponent):
         self._test: tuple[str, Any, float, list] | None = None
         self._started_once = False
         self.results: list[str] = []
+        self._plotters: list[threading.Thread] = []
 
     def custom_on_activate(self) -> None:
         self.create_timer(1.0 / self.config.loop_rate, self._tick)
@@ -156,14 +158,25 @@ class MotionServer(NavComponent):
             writer = csv.writer(f)
             writer.writerow(COLUMNS)
             writer.writerows(rows)
-        try:
-            plot_recording(csv_path, stem.with_suffix(".png"), title=f"{name} test")
-        except ImportError as exc:
-            self.get_logger().warning("[%s] %s: CSV written, no plot", self.component_name, exc)
+        # Plotting (and importing matplotlib) takes seconds: never on the event loop.
+        worker = threading.Thread(target=self._plot, args=(csv_path, stem.with_suffix(".png"), f"{name} test"),
+                                  name=f"{self.component_name}-plot", daemon=True)
+        worker.start()
+        self._plotters.append(worker)
         self.results.append(str(csv_path))
         self.get_logger().info("[%s] %s test recorded: %s (%d samples)", self.component_name, name, csv_path, len(rows))
         self.health_status.set_healthy()
         return str(csv_path)
+
+    def _plot(self, csv_path: Path, png_path: Path, title: str) -> None:
+        try:
+            plot_recording(csv_path, png_path, title=title)
+        except Exception as exc:  # reported; the CSV is written either way
+            self.get_logger().warning("[%s] CSV %s written, plot failed: %s", self.component_name, csv_path, exc)
+
+    def custom_on_shutdown(self) -> None:
+        for worker in getattr(self, "_plotters", []):
+            worker.join(timeout=10.0)
 
     # -- MotionRecording action ---------------------------------------------------------------------------
     def _main_action_callback(self, goal_handle: Any) -> MotionRecordingResult:
