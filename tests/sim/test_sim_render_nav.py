@@ -3,7 +3,7 @@ import pytest
 
 from emos.actors.sim import Box, World, render_topdown
 from emos.actors.nav.planning.costfield import CostField, lattice_edges
-from emos.actors.sim.navigation.grid import HitGrid
+from emos.actors.nav.mapping import HitGrid
 
 
 def test_topdown_png_shows_obstacles_trail_plan_and_goal(tmp_path, make_world):
@@ -90,7 +90,7 @@ def test_carving_clears_ghosts_crossed_by_beams_but_keeps_grazed_obstacles():
 
 
 def test_scan_matcher_recovers_a_pose_offset():
-    from emos.actors.sim.navigation.localize import ScanMatcher, compose, correction_between
+    from emos.actors.nav.mapping import ScanMatcher, compose, correction_between
 
     rng = np.random.default_rng(0)
     # An L-shaped room corner plus a few posts, remembered in the grid.
@@ -117,7 +117,7 @@ def test_scan_matcher_recovers_a_pose_offset():
 
 @pytest.mark.parametrize("kwargs", [dict(speeds=1), dict(horizon=0), dict(margin=-0.1), dict(step=float("nan"))])
 def test_arc_config_rejects_bad_values(kwargs):
-    from emos.actors.sim.navigation.arcs import ArcConfig
+    from emos.actors.nav.controllers.arcs import ArcConfig
 
     with pytest.raises(ValueError, match="ArcConfig"):
         ArcConfig(**kwargs)
