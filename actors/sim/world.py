@@ -127,6 +127,16 @@ class World:
         return wall
 
     def _add_mover(self, mover: MovingObstacle) -> None:
+        if hasattr(mover, "create_body"):  # draws itself (a Person's billboard)
+            body = mover.create_body(self.client)
+        else:
+            body = self._mover_body(mover)
+        self.movers.append(mover)
+        self._mover_bodies.append(body)
+        self._body_names[body] = mover.name
+        self._place_movers()
+
+    def _mover_body(self, mover: MovingObstacle) -> int:
         pb, c, shape = _deps.pybullet(), self.client, mover.shape
         if isinstance(shape, Box):
             half = [shape.size[0] / 2, shape.size[1] / 2, shape.height / 2]
@@ -135,11 +145,7 @@ class World:
         else:
             col = c.createCollisionShape(pb.GEOM_CYLINDER, radius=shape.radius, height=shape.height)
             vis = c.createVisualShape(pb.GEOM_CYLINDER, radius=shape.radius, length=shape.height, rgbaColor=list(shape.color))
-        body = c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
-        self.movers.append(mover)
-        self._mover_bodies.append(body)
-        self._body_names[body] = mover.name
-        self._place_movers()
+        return c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
 
     def _bake(self) -> None:
         """Turn pending static shapes into one mesh body per colour."""

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from emos.config.base import ComponentRunType
 from emos.config.loader import ConfigError
+from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
 from emos.core.rpc import AsyncRpcClient, RpcServer
@@ -90,6 +91,7 @@ class Node:
         self._control: RpcServer | None = None
         self._supervisor: AsyncRpcClient | None = None
         self._step_kwargs = component._step_accepts_kwargs()
+        self._sim_time: SimTimeDriver | None = None  # config.use_sim_time: steps and answers on /clock
         self.steps = 0
 
     # ============================================================================ running
@@ -203,6 +205,9 @@ class Node:
         for topic in self.component.in_topics:
             sub = Subscriber(self.ctx, topic.name, topic.msg_type, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
             self._inputs[topic.name] = _Input(topic, sub)
+        if getattr(self.component.config, "use_sim_time", False):
+            assert self._waker is not None
+            self._sim_time = SimTimeDriver(self.ctx, self.name, self._waker, lambda: 1.0 / self.component.config.loop_rate)
         self.component.custom_on_configure()
 
     async def _on_activate(self) -> None:
@@ -210,7 +215,7 @@ class Node:
         comp.custom_on_activate()
         run_type = comp.run_type
         assert self.loop is not None
-        if run_type == ComponentRunType.TIMED:
+        if run_type == ComponentRunType.TIMED and self._sim_time is None:
             self._main_timer = _Timer(self.loop, 1.0 / comp.config.loop_rate, self._run_step)
         elif run_type == ComponentRunType.SERVER:
             req, resp = comp.main_srv_type  # type: ignore[misc]
@@ -269,6 +274,9 @@ class Node:
         for inp in self._inputs.values():
             inp.sub.close()
         self._inputs.clear()
+        if self._sim_time is not None:
+            self._sim_time.close()
+            self._sim_time = None
 
     # ============================================================================ steps and data
     def _run_step(self, **kwargs: Any) -> None:
@@ -302,12 +310,13 @@ class Node:
         for inp in self._inputs.values():
             if inp.sub.has_news():
                 return True
-        return False
+        return self._sim_time is not None and self._sim_time.has_news()
 
     def _take_inputs(self) -> None:
         now = time.time_ns()
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
+        tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
         for name, inp in list(self._inputs.items()):
             items = inp.sub.take_raw()
             if not items:
@@ -319,6 +328,9 @@ class Node:
                     msg = codec.decode(inp.topic.msg_type, raw_i)
                     inp.decoded = msg if raw_i is inp.raw else inp.decoded
                     self._run_step(msg=msg, topic=inp.topic)
+        if tick is not None and self._sim_time is not None:  # after the inputs that came with the tick
+            timed = active and self.component.run_type == ComponentRunType.TIMED
+            self._sim_time.handle(tick, self._run_step if timed else None)
 
     def _input(self, topic: Topic | str) -> _Input:
         name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
