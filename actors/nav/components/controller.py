@@ -185,7 +185,11 @@ class Controller(VisionTracking, NavComponent):
             return
         stamp = (plan.header.stamp.sec, plan.header.stamp.nanosec, len(plan.poses))
         if stamp == self._finished_stamp:
-            return  # this plan was completed; wait for a new one
+            # This plan is done: hold the robot (a fresh zero command, so the DriveManager
+            # sees a live controller) until a new plan arrives.
+            self.publish_stop()
+            self.health_status.set_healthy()
+            return
         result = self.follow(plan, stamp)
         if result is not None and result.status is ControlStatus.GOAL_REACHED:
             self._finished_stamp = stamp
