@@ -22,6 +22,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
+    "navloop": ("emos.actors.nav.bench_navloop", "scan to motor command through LocalMapper, Controller and DriveManager processes"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),

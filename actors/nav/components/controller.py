@@ -25,6 +25,8 @@ from emos.config.validators import in_, in_range
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.control import TwistArray
+from emos.msgs.geometry import TwistStamped
+from emos.msgs.std import Header, Time
 from emos.msgs.sensor import LaserScan
 
 from ..controllers import ControllersID, ControlResult, ControlStatus
@@ -168,6 +170,7 @@ class Controller(VisionTracking, NavComponent):
             raise BadInput(f"no message on {topic.name} yet")
         if age is not None and age > self.config.sensor_timeout:
             raise BadInput(f"{topic.name} is stale: last message {age:.2f} s ago")
+        self._source_stamp = msg.header.stamp  # a TwistStamped command carries its data's time
         if key == "local_map":
             return grid2d_of(msg), key
         if isinstance(msg, LaserScan):
@@ -254,8 +257,14 @@ class Controller(VisionTracking, NavComponent):
 
     def _publish_command(self, cmd: np.ndarray) -> None:
         out = self.get_out_topic("command")
-        if out is not None:
-            self.publish(out, twist_msg(cmd))
+        if out is None:
+            return
+        msg = twist_msg(cmd)
+        if out.msg_type is TwistStamped:
+            # Stamped with the time of the sensor data it was computed from (its age downstream).
+            stamp = getattr(self, "_source_stamp", None) or Time.now()
+            msg = TwistStamped(header=Header(stamp=stamp, frame_id=self.config.frames.robot_base), twist=msg)
+        self.publish(out, msg)
 
     def publish_stop(self) -> None:
         self._sequence = None

@@ -162,6 +162,8 @@ class DriveManager(NavComponent):
         if latest is None:
             return "command", f"no command on {self.topic_name('command')} yet"
         cmd, age, key = latest
+        src = self.latest(key)
+        self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
         if age > cfg.cmd_timeout:
             return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
         if self.node.publishers_alive(self.get_in_topic(key)) is False:
@@ -232,7 +234,9 @@ class DriveManager(NavComponent):
         topic = self.get_out_topic("robot_command")
         msg = twist_msg(cmd)
         if topic.msg_type is TwistStamped:
-            msg = TwistStamped(header=Header(stamp=Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
+            # A stamped command keeps the time of the data behind it; otherwise: now.
+            stamp = getattr(self, "_command_stamp", None) if not stop else None
+            msg = TwistStamped(header=Header(stamp=stamp or Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(topic, msg)
         self._sent_at = time.monotonic()
         estop = bool(check.emergency_stop) and not stop
