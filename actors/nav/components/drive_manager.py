@@ -103,6 +103,8 @@ class DriveManager(NavComponent):
         self._stopped_reason = ""
         self._estop: bool | None = None
         self._maneuver: tuple[M.Maneuver, int] | None = None
+        self._cmd_ages: dict[str, float] = {}
+        self._cmd_writers: dict[str, list[int]] = {}
         for name in ("move_forward", "move_backward", "rotate_in_place", "move_to_unblock"):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
@@ -166,8 +168,8 @@ class DriveManager(NavComponent):
         self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
         if age > cfg.cmd_timeout:
             return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
-        if self.node.publishers_alive(self.get_in_topic(key)) is False:
-            return key, f"the publisher of {self.topic_name(key)} died"
+        if not self._publisher_alive(key, age):
+            return key, f"the process that published the last command on {self.topic_name(key)} died"
         self._command = cmd
         if cfg.closed_loop:
             odom_age = self.age_of("location")
@@ -175,6 +177,19 @@ class DriveManager(NavComponent):
                 what = "no odometry yet" if odom_age is None else f"odometry is {odom_age:.2f} s old (odom_timeout {cfg.odom_timeout:g} s)"
                 return "location", what
         return None
+
+    def _publisher_alive(self, key: str, age: float) -> bool:
+        """Is the process that sent the current command still running? A restarted publisher
+        (same ring, new pid) does not revive a command its dead predecessor sent."""
+        from emos.core.node import process_alive
+
+        topic = self.get_in_topic(key)
+        published_at = time.time() - age  # of the current message; commands are >= 1 ms apart
+        if published_at > self._cmd_ages.get(key, -math.inf) + 1e-3:  # a newer message: note who can have sent it
+            self._cmd_writers[key] = [pid for pid in self.node.publisher_pids(topic) if pid <= 0 or process_alive(pid)]
+            self._cmd_ages[key] = published_at
+        writers = self._cmd_writers.get(key)
+        return not writers or any(pid <= 0 or process_alive(pid) for pid in writers)
 
     def _obstacles(self) -> tuple[Any, str]:
         """The latest scan (and any range sensors) as obstacles; None with a reason when stale."""

@@ -94,6 +94,7 @@ def test_stack_drives_to_goal_survives_controller_kill_and_stops_on_stale_odomet
         wait_until(lambda: (m := _latest(cmd)) is not None and m.linear.x == 0.0 and m.angular.z == 0.0, 2.0,
                    interval=0.005, what="the DriveManager to stop the robot after the controller died")
         stop_after = time.monotonic() - killed_at
+        print(f"controller SIGKILL -> zero command seen after {stop_after * 1e3:.0f} ms")
         system.wait_new_pid("controller", old_pid, timeout=15)
 
         def arrived():
