@@ -100,3 +100,27 @@ launcher.bringup()
         assert float(rows[-1]["x"]) > 1.1
     finally:
         system.stop()
+
+
+def test_local_mapper_mapping_mode_publishes_memory_and_pose(tmp_path):
+    from emos.transport.pubsub import Subscriber
+
+    system = _system(tmp_path, """
+mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(mapping_bounds=(-0.5, -0.5, 6.5, 4.5), map_publish_period=0.5))
+mapper.run_type = "Event"
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.3))])
+launcher.kompass(components=[mapper], multiprocessing=True)
+launcher.bringup()
+""", ["base", "mapper"])
+    memory = Subscriber(system.ctx, "/local_map/memory", M.OccupancyGrid, transient_local=True)
+    pose = Subscriber(system.ctx, "/local_map/pose", M.PoseStamped)
+    try:
+        grid = wait_until(lambda: next(iter(memory.take()[-1:]), None), 15, what="the obstacle memory")
+        g = grid.grid()
+        assert grid.header.frame_id == "map" and g.shape == (100, 140) and (g == 100).sum() > 100
+        p = wait_until(lambda: next(iter(pose.take()[-1:]), None), 10, what="the localized pose")
+        assert abs(p.pose.position.x - 1.0) < 0.05 and abs(p.pose.position.y - 1.0) < 0.05
+    finally:
+        memory.close(), pose.close()
+        system.stop()
