@@ -162,7 +162,7 @@ class DriveManager(NavComponent):
         except BadInput as exc:
             return "command", str(exc)
         if latest is None:
-            return "command", f"no command on {self.topic_name('command')} yet"
+            return None  # nothing asked of the robot yet: it stands still, and that is no failure
         cmd, age, key = latest
         src = self.latest(key)
         self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
@@ -219,6 +219,10 @@ class DriveManager(NavComponent):
         return best
 
     def _drive(self) -> None:
+        if self.age_of("command") is None and self.age_of("multi_command") is None:
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            self.health_status.set_healthy()
+            return
         blocked = self._blocking_reason()
         if blocked is not None:
             key, reason = blocked

@@ -117,3 +117,29 @@ class MotionRecordingResult(Message):
     success: bool = F.boolean()
     message: str = F.string()
     file: str = F.string()
+
+
+# -- Planner: path files and recording (services) ------------------------------------------------------
+@message_type(_PKG, name="PathFromToFile_Request")
+class PathFromToFileRequest(Message):
+    file_location: str = F.string()
+    file_name: str = F.string()
+
+
+@message_type(_PKG, name="PathFromToFile_Response")
+class PathFromToFileResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+
+
+@message_type(_PKG, name="StartPathRecording_Request")
+class StartPathRecordingRequest(Message):
+    """Record the robot's location every ``recording_time_step`` s until the next save."""
+
+    recording_time_step: float = F.float64(0.1)
+
+
+@message_type(_PKG, name="StartPathRecording_Response")
+class StartPathRecordingResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()

@@ -5,7 +5,7 @@ Run types (all four): Timed re-plans from the current location to the last goal 
 ``PlanPath`` requests on ``<name>/service``; ActionServer takes a ``PlanPath`` goal on
 ``<name>/action`` and keeps re-planning until the robot is within ``distance_tolerance`` of it
 (or the goal is cancelled). The plan is published on ``plan`` and ``reached_end`` goes True
-when the robot arrives. A goal inside an obstacle, off the map or unreachable is an ALGORITHM
+when the robot arrives. Plans can be saved, loaded and recorded (:mod:`.planner_paths`). A goal inside an obstacle, off the map or unreachable is an ALGORITHM
 failure (the message says which); no map or no location is a SYSTEM failure naming the topic.
 
 Planning runs on a worker thread, so a long query never stalls the component's heartbeat.
@@ -35,6 +35,7 @@ from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, goal_of, grid_map_of, path_msg, pose_of
 from .interfaces import PlanPathFeedback, PlanPathRequest, PlanPathResponse, PlanPathResult
+from .planner_paths import PathFiles
 from .planners import check_planner_id, make_global_planner
 
 __all__ = ["Planner", "PlannerConfig"]
@@ -71,7 +72,7 @@ class _MainInterface:
         return f"{self.kind}({self.name!r}, {self.types[0].__name__})"
 
 
-class Planner(NavComponent):
+class Planner(PathFiles, NavComponent):
     allowed_inputs = {
         "map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
         "goal_point": AllowedTopic(types=("PointStamped", "PoseStamped", "Odometry"), default=Topic(name="/goal", msg_type="PointStamped")),
@@ -112,6 +113,7 @@ class Planner(NavComponent):
         self._goal_key: Any = None
         self._reached = False
         self.last_plan: np.ndarray | None = None
+        self.create_path_services()
 
     def custom_on_deactivate(self) -> None:
         self._algo.cancel()

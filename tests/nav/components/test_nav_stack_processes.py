@@ -133,3 +133,46 @@ def test_stack_drives_to_goal_survives_controller_kill_and_stops_on_stale_odomet
         for s in (odom, cmd, reached, planner_status, driver_status):
             s.close()
         system.stop()
+
+
+def test_planner_saves_loads_and_records_paths(tmp_path):
+    from emos.actors.nav.components.interfaces import (
+        PathFromToFileRequest, PathFromToFileResponse, StartPathRecordingRequest, StartPathRecordingResponse)
+    from emos.core.services import ServiceClient
+    from emos.transport.pubsub import Publisher
+
+    system = _start(tmp_path, tmp_path / "never")
+    plan_sub = _sub(system, "/plan", M.Path)
+    goal_pub = Publisher(system.ctx, "/goal", M.PointStamped, publisher_id="test_goal")
+    save = ServiceClient("planner/save_plan_to_file", PathFromToFileRequest, PathFromToFileResponse, ctx=system.ctx)
+    load = ServiceClient("planner/load_plan_from_file", PathFromToFileRequest, PathFromToFileResponse, ctx=system.ctx)
+    record = ServiceClient("planner/start_path_recording", StartPathRecordingRequest, StartPathRecordingResponse, ctx=system.ctx)
+    try:
+        bad = save.call(PathFromToFileRequest(file_location=str(tmp_path), file_name="early.csv"))
+        assert not bad.success and "no plan" in bad.message
+        goal_pub.publish(_goal(4.5, 1.0))
+        plan = wait_until(lambda: next(iter(plan_sub.take()[-1:]), None), 20, what="a plan")
+        ok = save.call(PathFromToFileRequest(file_location=str(tmp_path), file_name="computed.csv"))
+        assert ok.success, ok.message
+        rows = (tmp_path / "computed.csv").read_text().splitlines()
+        assert rows[0] == "x,y,yaw" and len(rows) > 20
+        assert record.call(StartPathRecordingRequest(recording_time_step=0.1)).success
+        time.sleep(2.0)
+        rec = save.call(PathFromToFileRequest(file_location=str(tmp_path), file_name="driven.csv"))
+        assert rec.success and "recorded path" in rec.message, rec.message
+        driven = np.loadtxt(tmp_path / "driven.csv", delimiter=",", skiprows=1)
+        assert len(driven) >= 5 and np.hypot(*(driven[-1, :2] - driven[0, :2])) > 0.2  # the robot moved meanwhile
+        missing = load.call(PathFromToFileRequest(file_location=str(tmp_path), file_name="nope.csv"))
+        assert not missing.success and "nope.csv" in missing.message
+        plan_sub.take()
+        loaded = load.call(PathFromToFileRequest(file_location=str(tmp_path), file_name="driven.csv"))
+        assert loaded.success, loaded.message
+        got = wait_until(lambda: next(iter(plan_sub.take()[-1:]), None), 10, what="the loaded plan")
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in got.poses])
+        assert xy.shape == (len(driven), 2) and np.allclose(xy, driven[:, :2], atol=1e-6)
+    finally:
+        for c in (save, load, record):
+            c.close()
+        goal_pub.close()
+        plan_sub.close()
+        system.stop()
