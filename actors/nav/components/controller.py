@@ -183,8 +183,9 @@ class Controller(VisionTracking, NavComponent):
             return  # an action drives the robot now
         plan = self.latest("plan")
         if plan is None or len(plan.poses) == 0:
+            # Nothing to follow: hold the robot; the health keeps the last report (a failed
+            # action stays visible to fallbacks until the controller has something new to do).
             self.publish_stop()
-            self.health_status.set_healthy()  # nothing to do is not a failure
             return
         stamp = (plan.header.stamp.sec, plan.header.stamp.nanosec, len(plan.poses))
         if stamp == self._finished_stamp:

@@ -121,6 +121,7 @@ class VisionTracking:
                 if result.status is ControlStatus.LOST:
                     self.publish_stop()  # type: ignore[attr-defined]
                     self.fail_algorithm(cid.value, f"target {goal.label!r} lost")  # type: ignore[attr-defined]
+                    self.node.publish_status()  # type: ignore[attr-defined]
                     return TrackVisionTargetResult(success=False, message=f"target {goal.label!r} lost")
                 self.health_status.set_healthy()  # type: ignore[attr-defined]
                 self.node.publish_status()  # type: ignore[attr-defined]
