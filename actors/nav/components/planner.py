@@ -33,7 +33,7 @@ from emos.msgs.std import Bool, Header, Time
 
 from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, goal_of, grid_map_of, path_msg, pose_of
+from .convert import BadInput, goal_of, grid_map_of, path_msg
 from .interfaces import PlanPathFeedback, PlanPathRequest, PlanPathResponse, PlanPathResult
 from .planner_paths import PathFiles
 from .planners import check_planner_id, make_global_planner

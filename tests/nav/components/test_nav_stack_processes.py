@@ -8,7 +8,6 @@ import signal
 import time
 
 import numpy as np
-import pytest
 
 from emos import msgs as M
 from emos.core.health import HealthLevel
