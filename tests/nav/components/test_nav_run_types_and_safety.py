@@ -151,3 +151,45 @@ launcher.bringup()
     finally:
         save.close()
         system.stop()
+
+
+def test_planner_action_drives_to_the_goal_while_the_motion_server_records(tmp_path):
+    from emos.actors.nav.components.convert import pose_stamped
+    from emos.actors.nav.components.interfaces import (MotionRecordingFeedback, MotionRecordingGoal, MotionRecordingResult,
+                                                        PlanPathFeedback, PlanPathRequest, PlanPathResult)
+    from emos.core.services import ActionClient
+    from tests.nav.components.fake_base import write_room_map
+
+    map_file = write_room_map(tmp_path / "room.yaml")
+    system = _system(tmp_path, f"""
+map_server = MapServer(component_name="map_server", config=MapServerConfig(map_file_path={map_file!r}))
+planner = Planner(component_name="planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0))
+planner.run_type = "ActionServer"
+controller = Controller(component_name="controller", config=ControllerConfig(algorithm="PurePursuit"))
+driver = DriveManager(component_name="driver", config=DriveManagerConfig(critical_zone_distance=0.05, slowdown_zone_distance=0.2))
+recorder = MotionServer(component_name="recorder", config=MotionServerConfig(tests_folder={str(tmp_path / 'rec')!r}))
+recorder.run_type = "ActionServer"
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.0))])
+launcher.kompass(components=[map_server, planner, controller, driver, recorder], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "map_server", "planner", "controller", "driver", "recorder"])
+    nav = ActionClient("planner/action", PlanPathRequest, PlanPathFeedback, PlanPathResult, ctx=system.ctx)
+    rec = ActionClient("recorder/action", MotionRecordingGoal, MotionRecordingFeedback, MotionRecordingResult, ctx=system.ctx)
+    recorded: dict = {}
+    try:
+        recording = threading.Thread(target=lambda: recorded.setdefault("r", rec.send_goal(
+            MotionRecordingGoal(duration=3.0, timestep=0.1, name="drive"), timeout=30)), daemon=True)
+        recording.start()
+        feedback: list = []
+        result = nav.send_goal(PlanPathRequest(goal=pose_stamped(2.0, 3.2, 0.0, "map")), feedback_callback=feedback.append, timeout=90)
+        assert result.success and result.message == "goal reached", result.message
+        assert feedback and feedback[0].plan_length > 0
+        recording.join(30)
+        r = recorded["r"]
+        assert r.success and r.file.endswith(".csv")
+        data = np.genfromtxt(r.file, delimiter=",", names=True)
+        assert len(data) >= 20 and np.nanmax(np.abs(data["cmd_vx"])) > 0.05  # it recorded the drive
+    finally:
+        system.stop()
