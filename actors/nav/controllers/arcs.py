@@ -11,6 +11,7 @@ from typing import Callable
 import attrs
 import numpy as np
 
+from ..kinematics import integrate
 from ..robot import RobotConfig, RobotGeometry
 
 
@@ -85,11 +86,10 @@ class ArcPlanner:
             swept = abs(v) * cfg.horizon + np.abs(turns) * cfg.horizon * spec.circumscribed_radius
             n = max(2, int(math.ceil(swept.max() / cfg.step)))
             t = cfg.horizon * np.arange(1, n + 1) / n
-            wt = turns[:, None] * t[None, :]
-            straight = np.abs(turns) < 1e-6
-            safe_w = np.where(straight, 1.0, turns)[:, None]
-            dx = np.where(straight[:, None], v * t, v * np.sin(wt) / safe_w)
-            dy = np.where(straight[:, None], 0.0, v * (1 - np.cos(wt)) / safe_w)
+            # Poses along each arc, relative to the start: the kinematics' closed-form arcs.
+            commands = np.stack([np.full_like(turns, v), np.zeros_like(turns), turns], axis=-1)
+            rel = integrate(np.zeros(3), commands[:, None, :], t[None, :])  # (turns, n, 3)
+            dx, dy, wt = rel[..., 0], rel[..., 1], rel[..., 2]
             reach = abs(v) * cfg.horizon + spec.circumscribed_radius + abs(spec.center_offset) + cfg.margin + 0.05
             self.groups.append((v, turns, dx.astype(np.float32), dy.astype(np.float32),
                                 np.cos(wt).astype(np.float32), np.sin(wt).astype(np.float32), wt, reach))
