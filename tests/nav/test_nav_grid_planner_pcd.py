@@ -67,3 +67,4 @@ def test_pcd_ascii_and_binary_project_a_height_slice(tmp_path):
         read_pcd(tmp_path / "c.pcd")
     with pytest.raises(MapFileError, match="missing.pcd"):
         read_pcd(tmp_path / "missing.pcd")
+

@@ -51,7 +51,9 @@ class ControllerConfig(NavComponentConfig):
     commands of a computed sequence. ``ctrl_publish_type``: "Sequence" (each command on
     ``command`` in its time step), "Array" (the whole sequence on ``multi_command``) or
     "Parallel" (both). ``use_direct_sensor``: obstacles from ``sensor_data`` (True) or
-    ``local_map`` (False). ``sensor_timeout`` / ``location_timeout`` (s): older inputs stop the robot."""
+    ``local_map`` (False). ``sensor_timeout`` / ``location_timeout`` (s): older inputs stop the robot.
+    Point clouds: only points between ``cloud_min_height`` (above the floor) and
+    ``cloud_max_height`` (default: the robot's height) are obstacles."""
 
     loop_rate: float = rate_field(10.0)
     algorithm: str = field(default=ControllersID.DWA.value, converter=_algorithm, on_setattr=attrs.setters.convert)
@@ -60,6 +62,8 @@ class ControllerConfig(NavComponentConfig):
     use_direct_sensor: bool = field(default=True)
     sensor_timeout: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e3))
     location_timeout: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e3))
+    cloud_min_height: float = field(default=0.05, validator=in_range(min_value=-100.0, max_value=100.0))
+    cloud_max_height: float | None = field(default=None)
 
 
 class Controller(VisionTracking, NavComponent):
@@ -175,7 +179,9 @@ class Controller(VisionTracking, NavComponent):
             return grid2d_of(msg), key
         if isinstance(msg, LaserScan):
             return scan_of(msg), key
-        return points_of(msg), key
+        pts = points_of(msg)
+        top = self.config.cloud_max_height if self.config.cloud_max_height is not None else self.config.robot.height
+        return pts[(pts[:, 2] >= self.config.cloud_min_height) & (pts[:, 2] <= top)], key
 
     # -- path following ----------------------------------------------------------------------------------
     def _execution_step(self, msg: Any = None, topic: Any = None) -> None:

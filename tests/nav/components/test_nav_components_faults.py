@@ -124,3 +124,43 @@ launcher.bringup()
     finally:
         memory.close(), pose.close()
         system.stop()
+
+
+def test_controller_on_a_point_cloud_ignores_the_floor_and_stops_for_a_wall(tmp_path):
+    from emos.actors.nav.components.convert import path_msg
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+controller = Controller(component_name="controller", config=ControllerConfig(algorithm="DWA", use_direct_sensor=True))
+controller.inputs(sensor_data=Topic(name="/cloud", msg_type="PointCloud2"))
+launcher = Launcher(multi_processing=True)
+launcher.kompass(components=[controller], multiprocessing=True)
+launcher.bringup()
+""", ["controller"])
+    cloud_pub = Publisher(system.ctx, "/cloud", M.PointCloud2, publisher_id="test_cloud")
+    odom_pub = Publisher(system.ctx, "/odom", M.Odometry, publisher_id="test_odom")
+    plan_pub = Publisher(system.ctx, "/plan", M.Path, publisher_id="test_plan")
+    cmd = Subscriber(system.ctx, "/control", M.Twist, queue_size=100)
+    gx, gy = np.meshgrid(np.linspace(-1, 3, 41), np.linspace(-1, 1, 21))
+    floor = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    wall = np.c_[np.full(21, 0.35), np.linspace(-1, 1, 21), np.full(21, 0.15)]
+    try:
+        def feed(points, seconds):
+            end = time.monotonic() + seconds
+            plan_pub.publish(path_msg(np.c_[np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], "map"))
+            while time.monotonic() < end:
+                odom = M.Odometry()
+                odom.pose.pose.orientation.w = 1.0
+                odom_pub.publish(odom)
+                cloud_pub.publish(M.PointCloud2.from_xyz(points))
+                time.sleep(0.05)
+            return cmd.take()
+
+        moving = feed(floor, 2.0)
+        assert max(c.linear.x for c in moving) > 0.1  # the floor is not an obstacle
+        blocked = feed(np.r_[floor, wall], 2.0)
+        assert blocked and max(c.linear.x for c in blocked[-5:]) < 0.05  # a wall 0.25 m ahead is
+    finally:
+        for x in (cloud_pub, odom_pub, plan_pub, cmd):
+            x.close()
+        system.stop()
