@@ -26,8 +26,9 @@ PERSON_RADIUS = 0.22  # m, collision cylinder
 
 def draw_person(width: int = 128, height: int = 256) -> np.ndarray:
     """(height, width, 3) uint8: a dark walking figure on a light background."""
-    from PIL import Image, ImageDraw
+    from . import _deps
 
+    Image, ImageDraw = _deps.pil_image(), _deps.pil_draw()
     img = Image.new("RGB", (width, height), (205, 205, 200))
     d = ImageDraw.Draw(img)
     s = height / 300.0  # figure drawn in a 300-unit tall frame, feet near the bottom
@@ -58,8 +59,9 @@ class Person(MovingObstacle):
 
     def create_body(self, client: Any) -> int:
         """Make the pybullet body (collision cylinder, billboard visual) in ``client``."""
-        import pybullet as pb
+        from . import _deps
 
+        pb = _deps.pybullet()
         h, w = self.shape.height, PERSON_WIDTH
         # Quad in the body's x-z plane (centred on the body origin, which sits at height h / 2),
         # both windings so it is visible from either side.
@@ -77,8 +79,9 @@ class Person(MovingObstacle):
 
 def _texture(client: Any) -> int:
     """Load the figure as a pybullet texture (pybullet loads textures from files only)."""
-    from PIL import Image
+    from . import _deps
 
+    Image = _deps.pil_image()
     fd, name = tempfile.mkstemp(prefix="emos-person-", suffix=".png")
     os.close(fd)
     try:

@@ -65,6 +65,8 @@ class World:
         self.spawn: tuple[float, float, float] | None = None
         self.barn: Any = None
         self.occupancy_map: Any = None
+        self.dynamics = False  # see enable_dynamics()
+        self.tick_hooks: list[Any] = []  # called with the stamp after every tick's physics (an arm's grasp)
         if ground:
             self.client.setAdditionalSearchPath(_deps.pybullet_data_path())
             self.ground_id = self.client.loadURDF("plane.urdf")
@@ -173,12 +175,19 @@ class World:
 
     def add_sensor(self, sensor: Sensor) -> Sensor:
         """Attach ``sensor``; its first reading is taken at the next tick."""
-        if sensor.robot not in self.robots:
+        if sensor.robot is not None and sensor.robot not in self.robots:  # None: fixed in the world
             raise ValueError(f"sensor {sensor.name!r} rides on a robot that is not in this world")
         sensor.bind(self, self.rng())
         self.sensors.append(sensor)
         self._next_due.append(self.clock.now() + self.clock.dt)
         return sensor
+
+    def enable_dynamics(self, gravity: float = -9.81, substeps: int = 4) -> None:
+        """Integrate rigid-body dynamics every tick (table-top manipulation: an arm's motors,
+        falling and grasped objects). Mobile bases stay kinematic: they are re-posed each tick."""
+        self.client.setGravity(0.0, 0.0, gravity)
+        self.client.setPhysicsEngineParameter(fixedTimeStep=self.clock.dt, numSubSteps=int(substeps))
+        self.dynamics = True
 
     # -- stepping ----------------------------------------------------------------------------
     def _place_movers(self) -> None:
@@ -202,7 +211,11 @@ class World:
         dt = self.clock.dt
         for robot in self.robots:
             robot.advance(dt)
+        if self.dynamics:
+            self.client.stepSimulation()
         stamp = self.clock.tick()
+        for hook in self.tick_hooks:
+            hook(stamp)
         self._place_movers()
         if self.robots:
             self.client.performCollisionDetection()

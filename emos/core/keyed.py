@@ -106,8 +106,12 @@ class KeyedComponent(BaseComponent):
             "inputs": self._defaults(self.allowed_inputs),
             "outputs": self._defaults(self.allowed_outputs),
         }
+        # The file's inputs/outputs sections are keyed too: apply it once the keyed tables exist.
+        config_file = kwargs.pop("config_file", None)
         super().__init__(component_name, **kwargs)
         self._sync_flat_lists()
+        if config_file:
+            self.configure(config_file)
         if inputs:
             self.inputs(**inputs)
         if outputs:
@@ -155,6 +159,32 @@ class KeyedComponent(BaseComponent):
             for key, allowed in self._allowed(role).items()
             if allowed.required and not self._keyed[role].get(key)
         ]
+
+    def _apply_config_file(self, path: str) -> None:
+        """Parameters as BaseComponent; ``inputs`` / ``outputs`` sections map *keys* to topics
+        (``outputs: {odom: {name: /odometry/filtered, msg_type: Odometry}}``), checked like
+        ``.inputs()`` / ``.outputs()``."""
+        from emos.config.loader import load_into
+
+        topics = load_into(self.config, path, self.component_name)
+        for role in ("inputs", "outputs"):
+            spec = topics.get(role)
+            if not spec:
+                continue
+            if not isinstance(spec, Mapping):
+                raise ValueError(f"{path}: {self.component_name}.{role} must map keys to topics")
+            staged: dict[str, list[Topic]] = {}
+            for key, tdef in spec.items():
+                defs = tdef if isinstance(tdef, list) else [tdef]
+                try:
+                    staged[key] = [Topic(**d) for d in defs]
+                except Exception as exc:
+                    raise ValueError(f"{path}: {self.component_name}.{role}.{key}: expected a mapping with name and "
+                                     f"msg_type (or a list of them): {exc}") from exc
+            try:
+                self._set(role, staged)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ValueError(f"{path}: {exc}") from exc
 
     # -- internals -------------------------------------------------------------------------------
     def _allowed(self, role: str) -> Mapping[str, AllowedTopic]:

@@ -59,14 +59,16 @@ sim = Simulator("sim", config=SimulatorConfig(world="house", robot="turtlebot3",
                                              camera_rate=5.0, camera_width=160, camera_height=120))
 sim.outputs(camera=Topic(name="/image_raw/compressed", msg_type="CompressedImage"),
             rgbd=Topic(name="/camera/rgbd", msg_type="RGBD"),
-            odom=Topic(name="/odometry/filtered", msg_type="Odometry"))
+            odom=Topic(name="/odometry/filtered", msg_type="Odometry"),
+            map=Topic(name="/map", msg_type="OccupancyGrid"))
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[sim])
 launcher.frames = RobotFrames(world="map", odom="odom", scan="LDS-01")
 launcher.bringup()
 """).wait_up(components=["sim"], timeout=60)
     rec = Recorder(system.ctx, {"/odometry/filtered": M.Odometry, "/scan": M.LaserScan, "/tf": M.TFMessage,
-                                "/clock": M.Clock, "/image_raw/compressed": M.CompressedImage, "/camera/rgbd": M.RGBD})
+                                "/clock": M.Clock, "/image_raw/compressed": M.CompressedImage, "/camera/rgbd": M.RGBD,
+                                "/map": M.OccupancyGrid})
     try:
         wall0 = time.monotonic()
         rec.run(4.0)
@@ -107,6 +109,15 @@ launcher.bringup()
     # Straight ahead (east) of the robot at (1.5, 1.5) is the bin at x = 3.8 - 0.3 m: ~2.1 m
     # from the camera (mounted 0.2 m ahead of the base).
     assert float(np.nanmin(depth[50:70, 75:85])) == pytest.approx(3.5 - 1.5 - 0.2, abs=0.15)
+    # The map output is the shipped house map, the one a MapServer loads.
+    from emos.actors.nav.maps import load_map
+    from emos.actors.sim.data import HOUSE_MAP
+
+    house = load_map(HOUSE_MAP)
+    grid = got["/map"][0]
+    assert grid.header.frame_id == "map" and grid.info.resolution == pytest.approx(0.05)
+    assert (grid.info.width, grid.info.height) == (house.data.shape[1], house.data.shape[0])
+    assert np.array_equal(grid.grid(), house.data)
     assert system.leftovers() == []
 
 

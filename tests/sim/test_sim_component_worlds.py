@@ -91,6 +91,9 @@ def test_the_local_detector_sees_the_walking_person_and_loses_it_behind_the_wall
     from emos.actors.agents.local.vision import LocalDetector
     from emos.actors.sim import Camera, CameraConfig, Lidar, LidarConfig, SimClock
     from emos.actors.sim.person import PERSON_RADIUS, house_with_person
+    from emos.actors.sim.component.publishing import jpeg as frame_jpeg
+    from PIL import Image
+    import io
 
     world = house_with_person(clock=SimClock(mode="lockstep"))
     detector = LocalDetector(labels=("person",))
@@ -102,7 +105,10 @@ def test_the_local_detector_sees_the_walking_person_and_loses_it_behind_the_wall
         seen, centre = {}, {}
         for t in (1.0, 3.0, 8.0):  # right of the view's centre, left of it, in the east room
             world.run_for(t - world.clock.now())
-            seen[t] = detector.detect(camera.latest.rgb)
+            # Through the JPEG the Simulator publishes on a CompressedImage topic, as a Vision
+            # component subscribed to /image_raw/compressed receives it.
+            jpeg = frame_jpeg(camera.latest, 85)
+            seen[t] = detector.detect(np.asarray(Image.open(io.BytesIO(jpeg.data.tobytes()))))
             if seen[t]:
                 x1, _, x2, _ = seen[t][0].box
                 centre[t] = (x1 + x2) / 2
@@ -213,3 +219,69 @@ def test_launcher_robot_config_becomes_the_simulated_robot():
         assert robot.pose[0] + 0.1 == pytest.approx(1.95, abs=0.01)
     finally:
         world.close()
+
+
+def test_simulator_config_file_sets_parameters_frames_and_keyed_topics(tmp_path):
+    from emos.actors.sim import Simulator
+
+    path = tmp_path / "sim.yaml"
+    path.write_text("""
+sim:
+  world: empty
+  robot: holonomic
+  spawn: [1.0, 2.0, 0.5]
+  clock_mode: lockstep
+  lockstep_consumers: [driver]
+  frames: {odom: odom, robot_base: base_footprint, scan: laser}
+  outputs:
+    odom: {name: /odometry/filtered, msg_type: Odometry}
+""")
+    sim = Simulator("sim", config_file=str(path))
+    cfg = sim.config
+    assert (cfg.world, cfg.robot, cfg.spawn, cfg.clock_mode.value, cfg.lockstep_consumers) == (
+        "empty", "holonomic", (1.0, 2.0, 0.5), "lockstep", ["driver"])
+    assert (cfg.frames.world, cfg.frames.robot_base, cfg.frames.scan) == ("map", "base_footprint", "laser")
+    assert sim.get_out_topic("odom").name == "/odometry/filtered"
+    assert [t.name for t in sim.out_topics] == ["/odometry/filtered", "/scan", "/tf", "/clock"]
+    path.write_text("sim:\n  outputs:\n    lidar: {name: /scan, msg_type: LaserScan}\n")
+    with pytest.raises(ValueError, match="has no output key 'lidar'"):
+        Simulator("sim", config_file=str(path))
+    path.write_text("sim:\n  frames: {odom: odom, base: base_link}\n")
+    with pytest.raises(ValueError, match="unknown parameter.*sim.frames.base"):
+        Simulator("sim", config_file=str(path))
+
+
+def test_tf_tree_composes_to_the_true_pose_and_skips_an_odom_frame_equal_to_the_world():
+    from emos.actors.nav.robot import RobotFrames
+    from emos.actors.sim.component.publishing import quaternion_from_matrix, tf_tree
+    from emos.actors.sim.sensors.odometry import OdometryReading
+
+    def yaw_of(q) -> float:
+        return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
+
+    drifted = OdometryReading(2.0, "odom", "base_link", 1.0, 0.5, 0.3, 0.0, 0.0, 0.0)  # odometry's belief
+    true_pose = np.array([1.2, 0.4, 0.25])
+    tree = tf_tree(RobotFrames(), drifted, true_pose, None, None)
+    (world_odom, odom_base) = tree.transforms
+    assert (world_odom.header.frame_id, world_odom.child_frame_id) == ("map", "odom")
+    # Compose map->odom with odom->base: the true pose.
+    a = world_odom.transform
+    ax, ay, ayaw = a.translation.x, a.translation.y, yaw_of(a.rotation)
+    bx, by, byaw = odom_base.transform.translation.x, odom_base.transform.translation.y, yaw_of(odom_base.transform.rotation)
+    composed = (ax + math.cos(ayaw) * bx - math.sin(ayaw) * by, ay + math.sin(ayaw) * bx + math.cos(ayaw) * by, ayaw + byaw)
+    assert np.allclose(composed, true_pose)
+    assert odom_base.header.stamp.to_sec() == pytest.approx(2.0)
+    # The spec's recipe uses odom="map": then there is no map->odom edge.
+    tree = tf_tree(RobotFrames(world="map", odom="map"), drifted, true_pose, None, None)
+    assert [(t.header.frame_id, t.child_frame_id) for t in tree.transforms] == [("map", "base_link")]
+    # Rotation matrices of every kind round-trip through quaternions.
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.standard_normal(4)
+        q /= np.linalg.norm(q)
+        x, y, z, w = q
+        r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        back = np.array(quaternion_from_matrix(r))
+        assert np.allclose(back, q) or np.allclose(back, -q)

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from emos import msgs as M
@@ -53,13 +54,23 @@ class Driver(BaseComponent):
             f.write(f"{t:.3f} {x!r} {y!r} {yaw!r} {vx!r} {omega!r}\\n")
         self.health_status.set_healthy()
 
+class ScanLog(BaseComponent):
+    '''Event-triggered on /scan: in lockstep it answers a tick only after handling its scans.'''
+    def _execution_step(self, msg=None, topic=None):
+        if msg is not None:
+            with open(os.environ["SCANS"], "a") as f:
+                f.write(f"{msg.header.stamp.to_sec():.3f} {float(np.min(msg.ranges))!r}\\n")
+        self.health_status.set_healthy()
+
+scan_log = ScanLog("scan_log", trigger=Topic(name="/scan", msg_type="LaserScan"),
+                   config=BaseComponentConfig(use_sim_time=True))
 driver = Driver("driver", inputs=[Topic(name="/odom", msg_type="Odometry")],
                 outputs=[Topic(name="/cmd_vel", msg_type="Twist")],
                 config=BaseComponentConfig(loop_rate=10.0, use_sim_time=True))
 sim = Simulator("sim", config=SimulatorConfig(world="house", robot="jackal", clock_mode="lockstep",
-                                             lockstep_consumers=["driver"], clock_rate=20.0, scan_rate=5.0))
+                                             lockstep_consumers=["driver", "scan_log"], clock_rate=20.0, scan_rate=5.0))
 launcher = Launcher(multi_processing=True, heartbeat_timeout=30.0)
-launcher.add_pkg(components=[sim, driver])
+launcher.add_pkg(components=[sim, driver, scan_log])
 launcher.bringup()
 """
 
@@ -69,9 +80,9 @@ SIM_SECONDS = 6.0
 def _run(tmp_path, name: str, load_s: float, pause_check: bool = False) -> list[str]:
     work = tmp_path / name
     work.mkdir()
-    trace, pause = work / "trace.txt", work / "pause"
-    env = {"TRACE": str(trace), "PAUSE_FLAG": str(pause), "LOAD_S": str(load_s)}
-    system = SystemUnderTest(work, RECIPE, env=env).wait_up(components=["sim", "driver"], timeout=60)
+    trace, pause, scans = work / "trace.txt", work / "pause", work / "scans.txt"
+    env = {"TRACE": str(trace), "PAUSE_FLAG": str(pause), "LOAD_S": str(load_s), "SCANS": str(scans)}
+    system = SystemUnderTest(work, RECIPE, env=env).wait_up(components=["sim", "driver", "scan_log"], timeout=60)
     clock = Subscriber(system.ctx, "/clock", M.Clock, queue_size=1000)
 
     def sim_time() -> float:
@@ -95,16 +106,18 @@ def _run(tmp_path, name: str, load_s: float, pause_check: bool = False) -> list[
     finally:
         clock.close()
         assert system.stop() == 0
-    lines = trace.read_text().splitlines()
-    return [line for line in lines if float(line.split()[0]) <= SIM_SECONDS - 0.5]
+    def upto(path):
+        return [line for line in path.read_text().splitlines() if float(line.split()[0]) <= SIM_SECONDS - 0.5]
+
+    return upto(trace), upto(scans)
 
 
 def test_lockstep_waits_for_consumers_and_load_changes_nothing(tmp_path):
-    quiet = _run(tmp_path, "quiet", load_s=0.0, pause_check=True)
+    quiet, quiet_scans = _run(tmp_path, "quiet", load_s=0.0, pause_check=True)
     # The same run on a loaded machine: a CPU hog beside it and random delays in every step.
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
-        loaded = _run(tmp_path, "loaded", load_s=0.03)
+        loaded, loaded_scans = _run(tmp_path, "loaded", load_s=0.03)
     finally:
         hog.kill()
         hog.wait()
@@ -113,3 +126,7 @@ def test_lockstep_waits_for_consumers_and_load_changes_nothing(tmp_path):
     assert times == sorted(times) and times[1] - times[0] == pytest.approx(0.1)
     assert float(quiet[-1].split()[1]) > 1.5  # the robot did drive toward (3, 2.5)
     assert loaded == quiet
+    # The event-triggered consumer handled every scan (5 Hz, none lost), the same ones both times.
+    stamps = [float(line.split()[0]) for line in quiet_scans]
+    assert len(stamps) >= 25 and np.allclose(np.diff(stamps), 0.2)
+    assert loaded_scans == quiet_scans

@@ -60,3 +60,20 @@ class CommandFollower:
             return self._commands[0] if age <= self.timeout + 1e-9 else np.zeros(3)
         index = int(math.floor(age / self.array_step + 1e-9))
         return self._commands[index] if 0 <= index < len(self._commands) else np.zeros(3)
+
+
+def joint_targets(msg: Any) -> tuple[list[str], np.ndarray]:
+    """(joint names, positions) of a JointState, or of a JointTrajectory's last point (its goal)."""
+    from emos.msgs import JointState, JointTrajectory
+
+    if isinstance(msg, JointState):
+        names, positions = list(msg.name), np.asarray(msg.position, dtype=float)
+    elif isinstance(msg, JointTrajectory):
+        if not msg.points:
+            raise ValueError("JointTrajectory has no points")
+        names, positions = list(msg.joint_names), np.asarray(msg.points[-1].positions, dtype=float)
+    else:
+        raise TypeError(f"joint_command must be JointState or JointTrajectory, got {type(msg).__name__}")
+    if len(names) != len(positions):
+        raise ValueError(f"joint command names {names} and positions {positions.tolist()} differ in length")
+    return names, positions

@@ -18,13 +18,25 @@ from ..clock import ClockMode
 from ..robots import PRESETS
 
 # Named worlds; a path to a ROS map YAML and "barn:<index>" are accepted too (see worlds.py).
-NAMED_WORLDS = ("house", "house_person", "empty")
+NAMED_WORLDS = ("house", "house_person", "empty", "tabletop")
 
 
 def _frames_default() -> Any:
     from emos.actors.nav.robot import RobotFrames
 
     return RobotFrames()
+
+
+def _frames(value: Any) -> Any:
+    """A RobotFrames, or a mapping of its fields (config files)."""
+    if isinstance(value, dict):
+        from emos.actors.nav.robot import RobotFrames
+
+        try:
+            return RobotFrames(**value)
+        except TypeError as exc:
+            raise ValueError(f"SimulatorConfig.frames: {exc}") from None
+    return value
 
 
 def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
@@ -35,7 +47,8 @@ def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None
 
 
 def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    """``house``, ``house_person``, ``empty``, ``barn:<index>`` or a ROS map YAML path."""
+    """``house``, ``house_person``, ``empty``, ``tabletop`` (the arm), ``barn:<index>`` or a
+    ROS map YAML path."""
     if not isinstance(value, str) or not value.strip():
         raise ValueError(f"SimulatorConfig.world must be a world name or a map path, got {value!r}")
     if value in NAMED_WORLDS:
@@ -150,7 +163,7 @@ class SimulatorConfig(BaseComponentConfig):
     """Extra static Box / Cylinder / Wall shapes added to the world (not to its map)."""
     moving_obstacles: list = field(factory=list, converter=_movers)
     """MovingObstacle / Person objects walking their waypoints in simulated time."""
-    frames: Any = field(factory=_frames_default, validator=_check_frames)
+    frames: Any = field(factory=_frames_default, converter=_frames, validator=_check_frames)
     """Frame names (``RobotFrames``); ``launcher.frames`` overrides them at bringup."""
 
     physics_rate: float = field(default=100.0, validator=_rate)
@@ -165,6 +178,8 @@ class SimulatorConfig(BaseComponentConfig):
     command_array_step: float = field(default=0.1, validator=_positive)
     """Seconds each entry of a TwistArray command lasts (the controller's time step)."""
 
+    joint_state_rate: float = field(default=30.0, validator=_rate)
+    """Arm joint states (the ``tabletop`` world)."""
     odom_rate: float = field(default=50.0, validator=_rate)
     odom_noise: bool = False
     """True: wheel odometry with drift (OdometryConfig.noisy); False: ground truth."""

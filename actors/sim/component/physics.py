@@ -21,7 +21,8 @@ from ..clock import ClockMode
 from ..sensors.camera import Camera
 from ..sensors.lidar import Lidar
 from ..sensors.odometry import Odometry
-from .commands import CommandFollower
+from ..msgs import header
+from .commands import CommandFollower, joint_targets
 from .config import SimulatorConfig
 from .publishing import CameraMessages, occupancy_msg, tf_tree
 from .worlds import SimSetup
@@ -30,12 +31,14 @@ log = logging.getLogger("emos.sim")
 
 WAIT_SLICE_S = 0.25  # lockstep: republish the tick this often while waiting (late joiners)
 WARN_AFTER_S = 5.0  # lockstep: say who we wait for after this long, then every WARN_AFTER_S
+MAX_LAG_S = 0.5  # realtime: further behind the wall clock than this, drop the debt instead of racing
+MAP_PERIOD_S = 1.0  # the map output is republished this often (simulated s) for late subscribers
 
 
 class PhysicsLoop(threading.Thread):
     """Steps ``setup.world`` until :meth:`stop`; ``publish(key, msg)`` sends an output by key."""
 
-    def __init__(self, name: str, cfg: SimulatorConfig, setup: SimSetup, ctx: Any, command_topic: Any | None,
+    def __init__(self, name: str, cfg: SimulatorConfig, setup: SimSetup, ctx: Any, inputs: dict[str, Any],
                  outputs: dict[str, type], publish: Callable[[str, Any], None], map_grid: Any | None) -> None:
         super().__init__(name=f"{name}-physics", daemon=True)
         self.cfg, self.setup, self.ctx = cfg, setup, ctx
@@ -49,15 +52,20 @@ class PhysicsLoop(threading.Thread):
         self.clock_ticks = 0
         self.published: dict[str, int] = {}
         self.waited_s = 0.0  # lockstep: wall time spent waiting for answers
+        self.lag_resets = 0  # realtime: how often the machine could not keep up (simulated time slowed)
         self._waker: Waker | None = None
         self._command_sub: Subscriber | None = None
+        self._joint_sub: Subscriber | None = None
         self._ack_subs: dict[str, Subscriber] = {}
         self._acked: dict[str, float] = {}
         self._bad_commands = 0
         if self.lockstep:  # the lockstep wait sleeps on this; realtime polls, so needs none
             self._waker = Waker(ctx, spin_us=0.0)
-        if command_topic is not None:
+        command_topic, joint_topic = inputs.get("command"), inputs.get("joint_command")
+        if command_topic is not None and setup.robot is not None:
             self._command_sub = Subscriber(ctx, command_topic.name, command_topic.msg_type, waker=self._waker, queue_size=16)
+        if joint_topic is not None and setup.arm is not None:
+            self._joint_sub = Subscriber(ctx, joint_topic.name, joint_topic.msg_type, waker=self._waker, queue_size=16)
         if self.lockstep:
             for consumer in cfg.lockstep_consumers:
                 self._ack_subs[consumer] = Subscriber(ctx, ack_topic(consumer), M.Clock, waker=self._waker, queue_size=16)
@@ -74,11 +82,11 @@ class PhysicsLoop(threading.Thread):
         self._close()
 
     def _close(self) -> None:
-        for sub in [self._command_sub, *self._ack_subs.values()]:
+        for sub in [self._command_sub, self._joint_sub, *self._ack_subs.values()]:
             if sub is not None:
                 sub.close()
         self._ack_subs.clear()
-        self._command_sub = None
+        self._command_sub = self._joint_sub = None
         if self._waker is not None:
             self._waker.close()
             self._waker = None
@@ -107,10 +115,11 @@ class PhysicsLoop(threading.Thread):
                 return
             if "map" in self.outputs and self.map_grid is not None and self.sim_time >= map_due - 1e-9:
                 self._send("map", occupancy_msg(self.map_grid, self.sim_time, cfg.frames.world))
-                map_due += 5.0
+                map_due += MAP_PERIOD_S
             for _ in range(cfg.ticks_per_clock):
                 self._take_commands()
-                self.setup.robot.command(*self.follower.target(self.sim_time))
+                if self.setup.robot is not None:
+                    self.setup.robot.command(*self.follower.target(self.sim_time))
                 for sensor, reading in world.step():
                     self._send_reading(sensor, reading)
                 if not self.lockstep and cfg.clock_mode is ClockMode.REALTIME:
@@ -118,6 +127,13 @@ class PhysicsLoop(threading.Thread):
                     delay = target - time.monotonic()
                     if delay > 0 and self._stop_event.wait(delay):
                         return
+                    if delay < -MAX_LAG_S:
+                        # A real world does not run faster to catch up after a stall: re-anchor.
+                        wall_start -= delay
+                        self.lag_resets += 1
+                        if self.lag_resets in (1, 10, 100) or self.lag_resets % 1000 == 0:
+                            log.warning("[%s] realtime: %.2f s behind the wall clock (#%d); simulated time slowed "
+                                        "down instead of racing to catch up", self.component_name, -delay, self.lag_resets)
             self._send_clock()
 
     def _send(self, key: str, msg: Any) -> None:
@@ -138,24 +154,41 @@ class PhysicsLoop(threading.Thread):
                 self._send("tf", tf_tree(frames, reading, setup.robot.pose, setup.lidar, setup.camera))
         elif isinstance(sensor, Lidar):
             self._send("scan", reading.to_msg())
+        elif sensor is setup.wrist_camera:
+            frame = CameraMessages(reading, reading.frame_id, self.cfg.jpeg_quality)
+            self._send("wrist_camera", frame.for_type("camera", self.outputs["wrist_camera"]))
         elif isinstance(sensor, Camera):
-            frame = CameraMessages(reading, frames.depth, self.cfg.jpeg_quality)
+            depth_frame = frames.depth if setup.robot is not None else reading.frame_id
+            frame = CameraMessages(reading, depth_frame, self.cfg.jpeg_quality)
             for key in ("camera", "depth", "camera_info", "depth_camera_info", "rgbd"):
                 if key in self.outputs:
                     self._send(key, frame.for_type(key, self.outputs[key]))
+        elif sensor is setup.joints and "joint_states" in self.outputs:
+            self._send("joint_states", M.JointState(header=header(reading.stamp, "base"), name=reading.names,
+                                                    position=reading.position, velocity=reading.velocity,
+                                                    effort=reading.effort))
 
     def _take_commands(self) -> None:
-        sub = self._command_sub
-        if sub is None:
-            return
-        for msg in sub.take():
-            try:
-                self.follower.receive(msg, self.sim_time)
-            except (ValueError, TypeError) as exc:
-                self.follower.stop()
-                self._bad_commands += 1
-                if self._bad_commands in (1, 10, 100) or self._bad_commands % 1000 == 0:
-                    log.error("[%s] rejected command #%d on %s: %s", self.component_name, self._bad_commands, sub.topic, exc)
+        if self._command_sub is not None:
+            for msg in self._command_sub.take():
+                try:
+                    self.follower.receive(msg, self.sim_time)
+                except (ValueError, TypeError) as exc:
+                    self.follower.stop()
+                    self._reject(self._command_sub.topic, exc)
+        if self._joint_sub is not None:
+            for msg in self._joint_sub.take():
+                try:
+                    names, positions = joint_targets(msg)
+                    self.setup.arm.command(names, positions)
+                    self.follower.received += 1
+                except (ValueError, TypeError) as exc:  # the arm keeps its previous targets
+                    self._reject(self._joint_sub.topic, exc)
+
+    def _reject(self, topic: str, exc: Exception) -> None:
+        self._bad_commands += 1
+        if self._bad_commands in (1, 10, 100) or self._bad_commands % 1000 == 0:
+            log.error("[%s] rejected command #%d on %s: %s", self.component_name, self._bad_commands, topic, exc)
 
     def _wait_for_answers(self) -> bool:
         """Lockstep: block until every consumer answered the current tick; False when stopping."""

@@ -94,8 +94,9 @@ def tf_tree(frames: Any, odom: OdometryReading, true_pose: np.ndarray, lidar: Li
 
 def jpeg(reading: CameraReading, quality: int) -> M.CompressedImage:
     """A JPEG CompressedImage (``format="rgb8; jpeg compressed bgr8"``, as ROS image_transport)."""
-    from PIL import Image as PILImage
+    from .. import _deps
 
+    PILImage = _deps.pil_image()
     buf = io.BytesIO()
     PILImage.fromarray(reading.rgb).save(buf, format="JPEG", quality=int(quality))
     return M.CompressedImage(header=header(reading.stamp, reading.frame_id), format="rgb8; jpeg compressed bgr8",

@@ -11,6 +11,7 @@ Keys and default topics (``None``: off until the recipe gives a topic):
 key                 message types                                default
 =================== ============================================ ==============================
 command (in)        Twist, TwistStamped, TwistArray              /cmd_vel (Twist)
+joint_command (in)  JointState, JointTrajectory (the arm)        None
 odom                Odometry                                     /odom
 scan                LaserScan                                    /scan
 tf                  TFMessage                                    /tf
@@ -21,6 +22,8 @@ camera_info         CameraInfo                                   None
 depth_camera_info   CameraInfo                                   None
 rgbd                RGBD                                         None
 map                 OccupancyGrid                                None
+joint_states        JointState (the arm)                         None
+wrist_camera        Image or CompressedImage (the arm)           None
 =================== ============================================ ==============================
 
 Frames come from ``config.frames`` (``launcher.frames`` sets it at bringup): odometry is
@@ -28,7 +31,9 @@ Frames come from ``config.frames`` (``launcher.frames`` sets it at bringup): odo
 ``frames.rgb`` and depth ``frames.depth``; ``/tf`` carries world -> odom -> base -> sensors.
 
 The physics runs in a thread of this component's process (see ``physics.py``); the Timed
-step reports its health. A command older than ``command_timeout`` stops the robot.
+step reports its health. A command older than ``command_timeout`` stops the robot. In the
+``tabletop`` world there is an arm instead of a mobile base: ``camera`` is the front camera,
+and the arm holds its last joint targets (a position-controlled arm's safe behaviour).
 """
 from __future__ import annotations
 
@@ -50,6 +55,7 @@ class Simulator(KeyedComponent):
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "command": AllowedTopic(types=("Twist", "TwistStamped", "TwistArray"),
                                 default=Topic(name="/cmd_vel", msg_type="Twist")),
+        "joint_command": AllowedTopic(types=("JointState", "JointTrajectory")),
     }
     allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "odom": AllowedTopic(types=("Odometry",), default=Topic(name="/odom", msg_type="Odometry")),
@@ -62,6 +68,8 @@ class Simulator(KeyedComponent):
         "depth_camera_info": AllowedTopic(types=("CameraInfo",)),
         "rgbd": AllowedTopic(types=("RGBD",)),
         "map": AllowedTopic(types=("OccupancyGrid",)),
+        "joint_states": AllowedTopic(types=("JointState",)),
+        "wrist_camera": AllowedTopic(types=("Image", "CompressedImage")),
     }
 
     def __init__(self, component_name: str, config: SimulatorConfig | None = None, **kwargs: Any) -> None:
@@ -76,24 +84,39 @@ class Simulator(KeyedComponent):
     def custom_on_configure(self) -> None:
         self.config.check_rates()
         wanted = self._wanted_outputs()
+        if self.config.lockstep_consumers and "clock" not in wanted:
+            raise ValueError(f"Simulator {self.component_name!r}: lockstep_consumers {self.config.lockstep_consumers} "
+                             "answer /clock ticks, but the clock output was removed; give it a topic")
         self.setup = build_setup(self.config, want_scan="scan" in wanted,
-                                 want_camera=any(k in wanted for k in CAMERA_KEYS))
-        spec = self.setup.robot.spec
-        self.get_logger().info("[%s] world %r (%s), robot %s (%s, %.2f x %.2f m) at %s, clock %s", self.component_name,
-                               self.config.world, self.setup.world.name, spec.name, spec.drive.value, spec.length, spec.width, tuple(round(float(v), 3) for v in self.setup.robot.pose),
-                               self.config.clock_mode.value)
+                                 want_camera=any(k in wanted for k in CAMERA_KEYS), want_wrist="wrist_camera" in wanted)
+        log, name = self.get_logger(), self.component_name
+        robot = self.setup.robot
+        if robot is not None:
+            spec = robot.spec
+            log.info("[%s] world %r, robot %s (%s, %.2f x %.2f m) at %s, clock %s", name, self.config.world, spec.name,
+                     spec.drive.value, spec.length, spec.width, tuple(round(float(v), 3) for v in robot.pose),
+                     self.config.clock_mode.value)
+        else:
+            log.info("[%s] world %r with the arm (joints %s), clock %s", name, self.config.world,
+                     ", ".join(self.setup.arm.names), self.config.clock_mode.value)
+        silent = [k for k in wanted if k in (("odom", "scan", "tf") if robot is None else ("joint_states", "wrist_camera"))]
+        if robot is not None and self.get_in_topic("joint_command") is not None:
+            silent.append("joint_command (input)")
+        if silent:
+            log.warning("[%s] world %r has no %s: %s stay silent", name, self.config.world,
+                        "mobile base" if robot is None else "arm", ", ".join(silent))
 
     def custom_on_activate(self) -> None:
         assert self.setup is not None, "configure builds the world before activate"
         wanted = self._wanted_outputs()
         topics = {key: self.get_out_topic(key) for key in wanted}
-        command = self.get_in_topic("command")
+        inputs = {key: self.get_in_topic(key) for key in self.allowed_inputs}
         map_grid = self._map_grid() if "map" in wanted else None
 
         def publish(key: str, msg: Any) -> None:
             self.publish(topics[key], msg)
 
-        self.physics = PhysicsLoop(self.component_name, self.config, self.setup, self.node.ctx, command,
+        self.physics = PhysicsLoop(self.component_name, self.config, self.setup, self.node.ctx, inputs,
                                    {k: t.msg_type for k, t in topics.items()}, publish, map_grid)
         self.physics.start()
 
@@ -166,8 +189,11 @@ class Simulator(KeyedComponent):
         out: dict = {"running": physics is not None and physics.is_alive()}
         if setup is not None:
             out["sim_time"] = setup.world.clock.now()
-            out["pose"] = [float(v) for v in setup.robot.pose]
-            out["collided"] = bool(setup.robot.collided)
+            if setup.robot is not None:
+                out["pose"] = [float(v) for v in setup.robot.pose]
+                out["collided"] = bool(setup.robot.collided)
+            if setup.arm is not None:
+                out["joints"] = dict(zip(setup.arm.names, setup.arm.joint_state()[1].tolist()))
         if physics is not None:
             out.update(clock_ticks=physics.clock_ticks, published=dict(physics.published),
                        commands=physics.follower.received, lockstep_wait_s=physics.waited_s)

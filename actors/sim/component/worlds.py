@@ -20,13 +20,17 @@ EMPTY_SPAWN = (0.0, 0.0, 0.0)
 
 @attrs.define(eq=False)
 class SimSetup:
-    """A built world: the robot and the sensors the component publishes (None = not wanted)."""
+    """A built world: the robot or arm and the sensors the component publishes (None = not
+    wanted, or not in this world: the table-top world has an arm and no mobile base)."""
 
     world: World
-    robot: SimRobot
-    odometry: Odometry
+    robot: SimRobot | None
+    odometry: Odometry | None
     lidar: Lidar | None
     camera: Camera | None
+    arm: Any = None
+    joints: Any = None
+    wrist_camera: Camera | None = None
 
 
 def build_world(cfg: SimulatorConfig) -> World:
@@ -50,6 +54,10 @@ def _named_world(cfg: SimulatorConfig) -> World:
         from ..person import house_with_person
 
         return house_with_person(**kwargs)
+    if name == "tabletop":
+        from ..arm import tabletop_world
+
+        return tabletop_world(**kwargs)
     if name == "empty":
         world = World(name="empty", **kwargs)
         world.spawn = EMPTY_SPAWN
@@ -77,9 +85,16 @@ def free_spawn(world: World) -> tuple[float, float, float]:
     return (ox + c * lx - s * ly, oy + s * lx + c * ly, 0.0)
 
 
-def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool) -> SimSetup:
+def _camera_config(cfg: SimulatorConfig, frame: str, near: float = 0.05) -> CameraConfig:
+    return CameraConfig(width=cfg.camera_width, height=cfg.camera_height, vfov_deg=cfg.camera_vfov_deg,
+                        rate_hz=cfg.camera_rate, frame_id=frame, near=near)
+
+
+def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool, want_wrist: bool = False) -> SimSetup:
     world = build_world(cfg)
     try:
+        if getattr(world, "arm", None) is not None:
+            return _arm_setup(cfg, world, want_camera, want_wrist)
         spawn = cfg.spawn or world.spawn or EMPTY_SPAWN
         robot = world.add_robot(resolve_robot(cfg.robot), spawn, slip=cfg.slip, actuation_noise=cfg.actuation_noise)
         frames = cfg.frames
@@ -93,11 +108,24 @@ def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool) -> Sim
             world.add_sensor(lidar)
         camera = None
         if want_camera:
-            camera = Camera(robot, CameraConfig(width=cfg.camera_width, height=cfg.camera_height,
-                                                vfov_deg=cfg.camera_vfov_deg, rate_hz=cfg.camera_rate,
-                                                frame_id=frames.rgb))
+            camera = Camera(robot, _camera_config(cfg, frames.rgb))
             world.add_sensor(camera)
         return SimSetup(world, robot, odom, lidar, camera)
     except BaseException:
         world.close()
         raise
+
+
+def _arm_setup(cfg: SimulatorConfig, world: World, want_camera: bool, want_wrist: bool) -> SimSetup:
+    from ..arm.arm import JointStateSensor, PosedCamera, wrist_camera_pose
+
+    arm = world.arm  # type: ignore[attr-defined]
+    joints = world.add_sensor(JointStateSensor(arm, cfg.joint_state_rate))
+    camera = wrist = None
+    if want_camera:
+        pose = world.front_camera_pose  # type: ignore[attr-defined]
+        camera = world.add_sensor(PosedCamera(lambda: pose, _camera_config(cfg, "front_camera", near=0.02), name="front"))
+    if want_wrist:
+        wrist = world.add_sensor(PosedCamera(lambda: wrist_camera_pose(arm), _camera_config(cfg, "wrist_camera", near=0.01),
+                                             name="wrist"))
+    return SimSetup(world, None, None, None, camera, arm=arm, joints=joints, wrist_camera=wrist)
