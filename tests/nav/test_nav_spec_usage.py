@@ -64,3 +64,17 @@ def test_bad_configs_fail_at_definition_naming_the_field():
         c.algorithms_config = {"lookahead": 1.0}
     with pytest.raises(TypeError, match="direct_sensor"):
         c.direct_sensor = "yes"
+
+
+def test_fallback_actions_of_the_spec_exist():
+    from emos.actors.nav.components import Controller, DriveManager
+    from emos.actors.nav.controllers import ControllersID
+
+    controller = Controller(component_name="controller")
+    controller.algorithm = ControllersID.DWA
+    assert controller.set_algorithm(ControllersID.PURE_PURSUIT) and controller.algorithm is ControllersID.PURE_PURSUIT
+    assert controller.update_parameter("use_direct_sensor", True) and controller.direct_sensor
+    assert controller.update_parameter("algorithm", "VisionRGBDFollower") and controller.algorithm is ControllersID.VISION_DEPTH
+    driver = DriveManager(component_name="drive_manager")
+    for name in ("stop", "move_to_unblock", "move_forward", "move_backward", "rotate_in_place"):
+        assert callable(getattr(driver, name))

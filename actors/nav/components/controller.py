@@ -106,6 +106,11 @@ class Controller(VisionTracking, NavComponent):
 
     plugin = algorithm  # the name the spec's usage example uses
 
+    def set_algorithm(self, algorithm: ControllersID | str) -> bool:
+        """Switch the control algorithm (an event or fallback action); the next step uses it."""
+        self.config.algorithm = algorithm  # type: ignore[assignment]
+        return True
+
     @property
     def direct_sensor(self) -> bool:
         return self.config.use_direct_sensor

@@ -44,7 +44,8 @@ class DriveManagerConfig(NavComponentConfig):
     ``closed_loop``: also require fresh odometry to drive. ``cmd_timeout``, ``odom_timeout``,
     ``sensor_timeout`` (s): older inputs stop the robot. ``smooth_commands``: low-pass filter
     (``smoothing_time_constant`` s) on top of the acceleration limits. ``max_distance`` (m) and
-    ``max_rotation`` (rad): default size of the unblock maneuvers."""
+    ``max_rotation`` (rad): default size of the unblock maneuvers. ``stop_hold_time`` (s): how
+    long ``stop()`` (an event action) holds the robot still whatever the controller sends."""
 
     loop_rate: float = rate_field(20.0)
     closed_loop: bool = field(default=True)
@@ -59,6 +60,7 @@ class DriveManagerConfig(NavComponentConfig):
     max_distance: float = field(default=0.3, validator=in_range(min_value=0.0, max_value=100.0))
     max_rotation: float = field(default=math.pi / 2, validator=in_range(min_value=0.0, max_value=2 * math.pi))
     safety_margin: float = field(default=0.05, validator=in_range(min_value=0.0, max_value=10.0))
+    stop_hold_time: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
 
     def __attrs_post_init__(self) -> None:
         if self.slowdown_zone_distance < self.critical_zone_distance:
@@ -103,6 +105,7 @@ class DriveManager(NavComponent):
         self._stopped_reason = ""
         self._estop: bool | None = None
         self._maneuver: tuple[M.Maneuver, int] | None = None
+        self._held_until = -math.inf
         self._cmd_ages: dict[str, float] = {}
         self._cmd_writers: dict[str, list[int]] = {}
         for name in ("move_forward", "move_backward", "rotate_in_place", "move_to_unblock"):
@@ -218,7 +221,18 @@ class DriveManager(NavComponent):
                     best = min(best, float(msg.data))
         return best
 
+    def stop(self) -> bool:
+        """Stop the robot now and hold it still for ``stop_hold_time`` s, whatever commands
+        arrive meanwhile (an event action: ``Action(method=driver.stop)``); cancels a maneuver."""
+        self._maneuver = None
+        self._held_until = time.monotonic() + self.config.stop_hold_time
+        self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+        return True
+
     def _drive(self) -> None:
+        if time.monotonic() < self._held_until:
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if self.age_of("command") is None and self.age_of("multi_command") is None:
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             self.health_status.set_healthy()

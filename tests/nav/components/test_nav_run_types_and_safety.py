@@ -194,3 +194,46 @@ launcher.bringup()
         assert len(data) >= 20 and np.nanmax(np.abs(data["cmd_vx"])) > 0.05  # it recorded the drive
     finally:
         system.stop()
+
+
+def test_stop_action_holds_the_robot_whatever_the_controller_sends(tmp_path):
+    from emos.core.node import control_socket
+    from emos.core.rpc import RpcClient
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+driver = DriveManager(component_name="driver", config=DriveManagerConfig(stop_hold_time=1.0))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 3.2, 0.0))])
+launcher.kompass(components=[driver], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "driver"])
+    control = Publisher(system.ctx, "/control", M.Twist, publisher_id="test_controller")
+    cmd = Subscriber(system.ctx, "/cmd_vel", M.Twist, queue_size=200)
+    client = RpcClient(control_socket(system.ctx, "driver"))
+    done = threading.Event()
+
+    def drive() -> None:
+        while not done.is_set():
+            control.publish(M.Twist(linear=M.Vector3(x=0.2)))
+            time.sleep(0.05)
+
+    worker = threading.Thread(target=drive, daemon=True)
+    try:
+        worker.start()
+        wait_until(lambda: any(c.linear.x > 0.15 for c in cmd.take()), 10, what="driving")
+        assert client.call("execute_method", method="stop") is True
+        t0 = time.monotonic()
+        cmd.take()
+        time.sleep(0.7)
+        held = cmd.take()
+        assert held and all(c.linear.x == 0.0 for c in held)  # commands kept coming, the robot stood
+        wait_until(lambda: any(c.linear.x > 0.1 for c in cmd.take()), 5, what="driving again after the hold")
+        assert time.monotonic() - t0 >= 0.9
+    finally:
+        done.set()
+        worker.join(2)
+        client.close()
+        control.close(), cmd.close()
+        system.stop()
