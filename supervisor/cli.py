@@ -36,6 +36,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "record": ("emos.supervisor.bench.record", "camera latency to its subscribers with and without `emos record`"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
+    "navloop": ("emos.actors.nav.bench_navloop", "scan to motor command through LocalMapper, Controller and DriveManager processes"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),
