@@ -22,6 +22,7 @@ from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
 from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.faults import PublishFaults, fault_ops
 from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
@@ -103,6 +104,7 @@ class Node:
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
         self._publishers: dict[str, tuple[Publisher, threading.Lock]] = {}
+        self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
@@ -412,6 +414,10 @@ class Node:
             if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
                 raise RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}") from None
             raise KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}") from None
+        if self.publish_faults.active:  # empty unless a chaos run switched a sensor fault on
+            msg = self.publish_faults.apply(name, msg)
+            if msg is None:
+                return
         with lock:  # rings are single-writer; action threads and the loop may both publish
             pub.publish(msg)
 
@@ -492,7 +498,7 @@ class Node:
 
         return {"get_state": get_state, "transition": transition, "update_config": update_config,
                 "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
-                **reconfig_ops(self)}
+                **reconfig_ops(self), **fault_ops(self)}
 
 
 class _Timer:
