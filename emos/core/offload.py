@@ -93,6 +93,14 @@ class StepWorker:
             self._cond.notify()
         return True
 
+    def clear(self) -> int:
+        """Drop every waiting job (counted as dropped); the running one goes on."""
+        with self._cond:
+            n = len(self._jobs)
+            self._jobs.clear()
+            self.dropped += n
+            return n
+
     def wait_idle(self, timeout: float) -> bool:
         with self._cond:
             return self._cond.wait_for(lambda: not self._busy and not self._jobs, timeout)
