@@ -132,6 +132,7 @@ class ModelComponent(BaseComponent):
         self._failover = ModelFailover(self)
         self._worker: StepWorker | None = None
         self._client_ready = False
+        self._resources_ready = False
         self._client_lock = threading.RLock()
         self._last_connect_try = 0.0
         self._errors = _ErrorLog(self.get_logger())
@@ -321,11 +322,8 @@ class ModelComponent(BaseComponent):
 
     def _activate_in_worker(self) -> None:
         """Open the DB and the model client without blocking the loop; report, don't crash."""
-        try:
-            self.activate_resources()
-        except Exception as exc:
-            self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
-            self._errors("activate", "[%s] cannot open its resources: %s", self.component_name, exc)
+        self._resources_ready = False
+        if not self.ensure_resources():
             self._publish_status()
             return
         if self.model_client is None:
@@ -341,9 +339,24 @@ class ModelComponent(BaseComponent):
         self._publish_status()
 
     def activate_resources(self) -> None:
-        """Open heavy resources (DB, local models); runs in the worker thread at activation."""
+        """Open heavy resources (DB, local models); runs in the worker thread at activation.
+        Raising reports COMPONENT_FAILURE; the component lives on and ``resources_ready`` stays
+        False until a later :meth:`ensure_resources` succeeds."""
         if self.db_client is not None:
             self.db_client.initialize()
+
+    def ensure_resources(self) -> bool:
+        """Worker thread: (re)open the resources if activation could not; False if still failing."""
+        if self._resources_ready:
+            return True
+        try:
+            self.activate_resources()
+        except Exception as exc:
+            self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
+            self._errors("activate", "[%s] cannot open its resources: %s", self.component_name, exc)
+            return False
+        self._resources_ready = True
+        return True
 
     def warmup(self) -> None:
         """One throw-away request (subclasses that support it override this)."""
@@ -358,6 +371,7 @@ class ModelComponent(BaseComponent):
             except Exception as exc:
                 self.get_logger().debug("[%s] closing a client: %s", self.component_name, exc)
         self.release_resources()
+        self._resources_ready = False
 
     def release_resources(self) -> None:
         if self.db_client is not None:
@@ -389,6 +403,9 @@ class ModelComponent(BaseComponent):
         raise NotImplementedError
 
     def _run_job(self, job: Callable[[], None]) -> None:
+        if not self.ensure_resources():
+            self._publish_status()
+            return
         try:
             job()
         except ModelClientError as exc:
