@@ -218,14 +218,14 @@ class ModelComponent(BaseComponent):
             client.initialize()
         self._client_ready = True
 
-    def call_model(self, send: Callable[[Any], T], swap_allowed: Callable[[], bool] = lambda: True) -> T:
+    def call_model(self, send: Callable[[Any], T], retry_allowed: Callable[[], bool] = lambda: True) -> T:
         """Run ``send(client)`` on the active client with retries and failover (worker thread)."""
 
         def attempt(client: Any) -> T:
             self._ensure_client()
             return send(self.model_client)
 
-        return self._failover.call(attempt, swap_allowed=swap_allowed)
+        return self._failover.call(attempt, retry_allowed=retry_allowed)
 
     def _on_model_error(self, exc: ModelClientError) -> None:
         self._client_ready = False

@@ -31,7 +31,7 @@ class ModelFailover:
     def __init__(self, component: Any) -> None:
         self.component = component
 
-    def call(self, send: Callable[[Any], T], *, swap_allowed: Callable[[], bool] = lambda: True) -> T:
+    def call(self, send: Callable[[Any], T], *, retry_allowed: Callable[[], bool] = lambda: True) -> T:
         comp = self.component
         after = comp.config.model_failover_after
         tried: set[str] = {comp.model_client_name}
@@ -43,11 +43,13 @@ class ModelFailover:
             except ModelClientError as exc:
                 failures += 1
                 comp._on_model_error(exc)
+                if not retry_allowed():  # e.g. part of a stream already went out: re-sending would repeat it
+                    raise
                 if failures < after:
                     time.sleep(comp.config.model_retry_backoff)
                     continue
                 backup = next((name for name in comp.additional_model_clients if name not in tried), None)
-                if backup is None or not swap_allowed():
+                if backup is None:
                     raise
                 tried.add(backup)
                 comp.get_logger().warning("[%s] %d failure(s) of model client %r (%s); switching to %r",

@@ -232,7 +232,7 @@ class LLM(ModelComponent):
         try:
             # Before the first piece went out, a failed stream can be re-sent (or sent to a backup);
             # after it, re-sending would repeat text downstream has already spoken.
-            self.call_model(send, swap_allowed=lambda: not published)
+            self.call_model(send, retry_allowed=lambda: not published)
         except ModelClientError as exc:
             if published:
                 self.health_status.set_fail_algorithm(algorithm_names=[self.model_client_name],
