@@ -15,6 +15,7 @@
 """
 from __future__ import annotations
 
+import copy
 import threading
 import time
 from typing import Any, Callable, ClassVar, Mapping, Sequence, TypeVar
@@ -77,6 +78,18 @@ class _ErrorLog:
         self._last[key] = now
         suffix = f" (and {repeats} more like it in the last {self.period:.0f} s)" if repeats else ""
         self.logger.error(message + suffix, *args)
+
+
+def _fresh_client(client: Any) -> Any:
+    serialize = getattr(client, "serialize", None)
+    if callable(serialize):
+        from ..clients.base import client_from_serialized
+
+        try:
+            return client_from_serialized(serialize())
+        except Exception:
+            pass
+    return copy.deepcopy(client)
 
 
 def _type_names(types: Sequence[type]) -> str:
@@ -436,6 +449,30 @@ class ModelComponent(BaseComponent):
         self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
         self._errors(f"job:{type(exc).__name__}", "[%s] step failed: %s: %s", self.component_name, type(exc).__name__, exc)
         self._publish_status()
+
+    # ------------------------------------------------------------------ copies (threaded restarts)
+    def __deepcopy__(self, memo: dict) -> "ModelComponent":
+        """A pristine copy for a restart in threaded mode: model clients are rebuilt from their
+        serialized form (live sockets and locks are not copied), runtime state starts empty,
+        and parts that cannot be copied (compiled templates, registered tools) are shared:
+        they are not changed by running."""
+        new = type(self).__new__(type(self))
+        memo[id(self)] = new
+        for key, value in self.__dict__.items():
+            if key == "_clients":
+                new.__dict__[key] = {name: _fresh_client(c) for name, c in value.items()}
+            elif key in ("_node", "_worker"):
+                new.__dict__[key] = None
+            elif key == "_client_lock":
+                new.__dict__[key] = threading.RLock()
+            else:
+                try:
+                    new.__dict__[key] = copy.deepcopy(value, memo)
+                except Exception:
+                    new.__dict__[key] = value
+        new._client_ready = False
+        new._resources_ready = False
+        return new
 
     @property
     def dropped_triggers(self) -> int:
