@@ -175,3 +175,57 @@ def test_complete_agent_routes_sees_and_navigates(tmp_path, recipe_server, recip
     finally:
         probe.close()
         assert system.stop() == 0
+
+
+def test_goto_navigation_reads_the_goal_from_the_map(tmp_path, recipe_server):
+    _seed_map(tmp_path, recipe_server)
+    system, probe = _run(tmp_path, "goto_navigation.py", recipe_server, ["go_to_x"])
+    try:
+        probe.sub("/goal_point", "PoseStamped")
+        probe.pub("/goto_in", M.String(data="Go to the kitchen"))
+        assert _position(probe.collect("/goal_point", "PoseStamped", timeout=60)[0]) == [1.5, 2.5, 0.0]
+    finally:
+        probe.close()
+        assert system.stop() == 0
+
+
+def test_vla_manipulation_commands_the_arm_until_canceled(tmp_path, recipe_server):
+    import threading
+
+    from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
+                                                             VisionLanguageActionResult)
+    from emos.core.services import ActionCanceled, ActionClient
+    from tests.agents.test_agents_component_vla import JOINTS, Arm
+
+    import shutil
+
+    shutil.copytree(RECIPES / "models", tmp_path / "models")  # the recipe reads files beside itself
+    env = {"EMOS_POLICY_PORT": str(recipe_server.lerobot_port)}
+    system = SystemUnderTest(tmp_path, (RECIPES / "vla_manipulation.py").read_text(), duration=120, env=env)
+    system.wait_up(components=["vla_with_smolvla"], timeout=90)
+    probe = Probe(system)
+    arm = Arm(probe)
+    outcome: list = []
+    try:
+        arm.thread.start()
+        client = ActionClient("vla_with_smolvla/vision_language_action", VisionLanguageActionGoal,
+                              VisionLanguageActionFeedback, VisionLanguageActionResult, ctx=system.ctx)
+
+        def run_goal() -> None:
+            try:
+                outcome.append(client.send_goal(VisionLanguageActionGoal(task="pick up the oranges"), goal_id="g1", timeout=60))
+            except ActionCanceled as exc:
+                outcome.append(exc)
+
+        thread = threading.Thread(target=run_goal)
+        thread.start()
+        wait_until(lambda: len(arm.commands) >= 3, 30, what="three joint commands at 3 Hz")
+        assert arm.commands[0].name == JOINTS
+        assert np.allclose(arm.commands[0].position, [0.1, -0.2, 0.3, -0.4, 0.5, 0.9])  # held (no URDF here)
+        assert client.cancel("g1")
+        thread.join(10)
+        assert outcome and isinstance(outcome[0], ActionCanceled)
+    finally:
+        arm.stop()
+        probe.close()
+        assert system.stop() == 0
