@@ -127,3 +127,31 @@ launcher.bringup()
         probe.close()
         primary.stop()
         assert system.stop() == 0
+
+
+def test_a_silent_server_times_out_while_the_heartbeat_keeps_beating(tmp_path):
+    from tests.agents.fixtures.stub_servers import RawServer, silent
+
+    stub = RawServer(silent)  # accepts, reads, never answers
+    system = SystemUnderTest(tmp_path, AGENT_HEADER + f"""
+q = Topic(name="q", msg_type="String")
+slow = LLM(inputs=[q], outputs=[Topic(name="a", msg_type="String")], trigger=q, component_name="slow",
+           model_client=GenericHTTPClient(GenericLLM(name="m", checkpoint="m"), port={stub.port}, inference_timeout=3))
+launcher = Launcher(multi_processing=True, heartbeat_timeout=2.0)
+launcher.add_pkg(components=[slow])
+launcher.bringup()
+""", duration=60).wait_up(components=["slow"], timeout=60)
+    probe = Probe(system)
+    try:
+        pid = system.pid("slow")
+        probe.pub("/q", M.String(data="hello"))
+        wait_until(lambda: "ModelTimeoutError" in probe.status("slow").message, 20, what="the timeout reported")
+        assert probe.status("slow").status == M.ComponentStatus.STATUS_FAILURE_COMPONENT_LEVEL
+        import time
+        time.sleep(4.0)  # longer than the heartbeat timeout, while requests keep timing out
+        assert system.pid("slow") == pid  # never killed as hung
+        assert "missed its heartbeat" not in system.output()
+    finally:
+        probe.close()
+        assert system.stop() == 0
+        stub.close()

@@ -148,3 +148,33 @@ launcher.bringup()
     finally:
         probe.close()
         assert system.stop() == 0
+
+
+def test_vlm_grounding_task_publishes_typed_detections(tmp_path, model_server):
+    system, probe = _system(tmp_path, f"""
+client = OllamaClient(OllamaModel(name="qwen_vl", checkpoint="qwen2.5vl:latest"), port={model_server.port})
+q = Topic(name="q", msg_type="String")
+image = Topic(name="image_raw", msg_type="Image")
+boxes = Topic(name="grounding", msg_type="Detections")
+text = Topic(name="a", msg_type="String")
+vlm = VLM(inputs=[q, image], outputs=[boxes, text], model_client=client, trigger=q, component_name="grounder",
+          config=VLMConfig(task="grounding"))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[vlm])
+launcher.bringup()
+""", ["grounder"])
+    try:
+        probe.sub("/grounding", "Detections"), probe.sub("/a", "String")
+        probe.pub("/image_raw", M.Image.from_numpy(np.zeros((64, 64, 3), np.uint8)))
+        probe.pub("/q", M.String(data="where is the cup in the image?"))
+        (det,) = probe.collect("/grounding", "Detections")
+        assert det.boxes.tolist() == [[12, 20, 40, 60]]
+        assert probe.collect("/a", "String")[0].data == "The cup is at [12, 20, 40, 60]."
+        probe.pub("/q", M.String(data="hello"))  # no box in the answer: an algorithm failure, nothing published
+        wait_until(lambda: probe.status("grounder").status == M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, 15,
+                   what="the unparsable answer reported")
+        assert "grounding output" in probe.status("grounder").message
+        assert probe.drain("/grounding", "Detections") == []
+    finally:
+        probe.close()
+        assert system.stop() == 0
