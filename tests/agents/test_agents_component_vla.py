@@ -53,7 +53,8 @@ from emos.actors.agents import VLA, VLAConfig, LeRobotClient, LeRobotPolicy
 state = Topic(name="joint_states", msg_type="JointState")
 camera1 = Topic(name="camera", msg_type="Image")
 camera2 = Topic(name="wrist_camera", msg_type="Image")
-joints_action = Topic(name="joint_command", msg_type="JointState")
+# A deep ring: the test's arm thread may stall for a second on a loaded machine and must not lose commands.
+joints_action = Topic(name="joint_command", msg_type="JointState", qos_profile={{"queue_size": 100}})
 policy = LeRobotPolicy(name="my_policy", policy_type="smolvla", checkpoint="hold-position",
                        dataset_info_file={str(FIXTURES / "lerobot_info.json")!r}, actions_per_chunk=5)
 client = LeRobotClient(model=policy, port={model_server.lerobot_port})

@@ -201,8 +201,12 @@ class VLA(ModelComponent):
                 if fresh is not None:
                     chunk = fresh
             action = self._action_for(chunk, step)
-            if action is not None:
-                self._publish_action(action)
+            if action is None:  # the policy has produced nothing yet: a timestep is a command sent
+                if time.monotonic() - last_input > cfg.input_timeout:
+                    return VisionLanguageActionResult(success=False, timesteps=step, message="the policy sent no actions")
+                time.sleep(min(period, 0.05))
+                continue
+            self._publish_action(action)
             goal_handle.publish_feedback(VisionLanguageActionFeedback(timestep=step, message=task))
             step += 1
             self.health_status.set_healthy()
