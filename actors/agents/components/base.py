@@ -147,7 +147,6 @@ class ModelComponent(BaseComponent):
         self._client_ready = False
         self._resources_ready = False
         self._client_lock = threading.RLock()
-        self._last_connect_try = 0.0
         self._errors = _ErrorLog(self.get_logger())
 
     # ------------------------------------------------------------------ definition-time checks
@@ -211,7 +210,6 @@ class ModelComponent(BaseComponent):
             old = self.model_client
             self._active_client = model_client_name
             self._client_ready = False
-            self._last_connect_try = 0.0
         try:
             if old is not None:
                 old.close()
@@ -225,7 +223,6 @@ class ModelComponent(BaseComponent):
         client = self.model_client
         if client is None or self._client_ready:
             return
-        self._last_connect_try = time.monotonic()
         client.check_connection()
         if getattr(client, "init_on_activation", True):
             client.initialize()
