@@ -178,3 +178,31 @@ launcher.bringup()
     finally:
         probe.close()
         assert system.stop() == 0
+
+
+def test_chat_history_reaches_the_model_and_the_reset_phrase_clears_it(tmp_path, model_server):
+    system, probe = _system(tmp_path, f"""
+client = OllamaClient(OllamaModel(name="llama", checkpoint="llama3.2:3b"), port={model_server.port})
+q = Topic(name="q", msg_type="String")
+a = Topic(name="a", msg_type="String")
+llm = LLM(inputs=[q], outputs=[a], model_client=client, trigger=q, component_name="chatty",
+          config=LLMConfig(chat_history=True, history_size=4))
+launcher = Launcher(multi_processing=False)
+launcher.add_pkg(components=[llm])
+launcher.bringup()
+""", ["chatty"])
+    try:
+        probe.sub("/a", "String")
+        replies = []
+        for _ in range(4):
+            probe.pub("/q", M.String(data="count turns"))
+            replies.append(probe.collect("/a", "String")[0].data)
+        # history_size=4 keeps two exchanges: the third question is the first to see the window full.
+        assert replies == ["turn 1", "turn 2", "turn 3", "turn 3"]
+        probe.pub("/q", M.String(data="Chat reset."))
+        assert probe.drain("/a", "String") == []  # the reset phrase is not a question
+        probe.pub("/q", M.String(data="count turns"))
+        assert probe.collect("/a", "String")[0].data == "turn 1"
+    finally:
+        probe.close()
+        assert system.stop() == 0

@@ -104,6 +104,15 @@ launcher.bringup()
             time.sleep(0.02)
         (heard_vad,) = probe.collect("/heard_vad", "String", timeout=60)
         assert heard_vad.data.startswith("what is")
+        # say() as an action target: called through the component's control socket.
+        from emos.core.node import control_socket
+        from emos.core.rpc import RpcClient
+
+        with RpcClient(control_socket(system.ctx, "tts")) as rpc:
+            assert rpc.call("execute_method", method="say", args=["hello robot"]) is True
+            said = probe.collect("/audio", "Audio", timeout=60)[0].data.tobytes()
+            assert 0.3 < _wav_seconds(said) < 3.0
+            assert rpc.call("execute_method", method="stop_playback") is True
         # Silence alone produces no text.
         for _ in range(20):
             probe.pub("/mic", M.Audio(data=np.zeros(1024, np.uint8)))

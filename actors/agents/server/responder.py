@@ -11,6 +11,7 @@ A script (YAML or JSON) looks like::
       - match: "(?i)hello"
         reply: "Hello! I am a robot."
     default: "You said: {message}"               # optional; {message} = last user text
+                                                 # ({turns} in replies: user turns in the request)
 
 A rule with ``tool_call`` applies only when the request offers that tool; otherwise the next
 rule is tried. When the last message is a tool result, the reply reports it, so a tool round
@@ -46,18 +47,19 @@ class Rule:
             raise ValueError(f"script rule {self.pattern.pattern!r}: expected exactly one of 'reply' or 'tool_call'")
 
 
-def _fill(value: Any, match: re.Match, message: str) -> Any:
-    """Substitute ``{0}``, ``{1}``... (regex groups) and ``{message}`` into strings, recursively."""
+def _fill(value: Any, match: re.Match, message: str, turns: int = 1) -> Any:
+    """Substitute ``{0}``, ``{1}``... (regex groups), ``{message}`` and ``{turns}`` (user turns
+    in the request: shows whether chat history reached the model) into strings, recursively."""
     if isinstance(value, str):
         groups = [match.group(0), *[g or "" for g in match.groups()]]
         try:
-            return value.format(*groups, message=message)
+            return value.format(*groups, message=message, turns=turns)
         except (IndexError, KeyError) as exc:
             raise ValueError(f"script template {value!r}: unknown placeholder {exc}") from None
     if isinstance(value, dict):
-        return {k: _fill(v, match, message) for k, v in value.items()}
+        return {k: _fill(v, match, message, turns) for k, v in value.items()}
     if isinstance(value, list):
-        return [_fill(v, match, message) for v in value]
+        return [_fill(v, match, message, turns) for v in value]
     return value
 
 
@@ -144,7 +146,8 @@ class ScriptedResponder:
                 call = ToolCall(id=self._next_id(), name=rule.tool_name, arguments=arguments)
                 message = ChatMessage(role="assistant", content=None, tool_calls=[call])
                 return ChatResponse(message=message, finish_reason="tool_calls", usage=self._usage(request, ""), model=model)
-            return self._text(_fill(rule.reply, match, user), request, model)
+            turns = sum(1 for m in request.messages if m.role == "user")
+            return self._text(_fill(rule.reply, match, user, turns), request, model)
         images = sum(len(m.images) for m in request.messages)
         text = self.default.format(message=user, images=images)
         return self._text(text, request, model)
