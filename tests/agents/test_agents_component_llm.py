@@ -4,7 +4,6 @@ from __future__ import annotations
 import socket
 
 import numpy as np
-import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe

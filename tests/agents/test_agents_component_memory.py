@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe

@@ -5,7 +5,6 @@ import io
 import wave
 
 import numpy as np
-import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
