@@ -44,7 +44,8 @@ class ModelComponentConfig(BaseComponentConfig):
     """Options shared by every agent component."""
 
     warmup: bool = field(default=False)
-    """Send one request at activation so the first real one does not pay for model loading."""
+    """LLM/MLLM: send one short chat at activation so the first real request does not pay for
+    model loading. (Local models of Vision and SpeechToText are always loaded at activation.)"""
 
     model_failover_after: int = field(default=2, validator=V.in_range(1, 1000))
     """Consecutive typed client errors on one request before switching to the next of

@@ -48,6 +48,8 @@ class SpeechToTextConfig(ModelComponentConfig):
     speech_buffer_max_ms: int = field(default=30_000, validator=V.in_range(500, 600_000))
     enable_wakeword: bool = field(default=False)
     wakeword: str = field(default="hey jarvis")
+    #: accepted for the spec's recipes: transcripts are published whole (on a StreamingString
+    #: output as one piece marked done), the local speech-to-text cannot stream partial words
     stream: bool = field(default=False)
     max_pending: int = field(default=512, validator=V.in_range(1, 100_000))  # audio chunks are never dropped lightly
 

@@ -32,6 +32,8 @@ class TextToSpeechConfig(ModelComponentConfig):
     buffer_size: int = field(default=20, validator=V.in_range(1, 10_000))
     block_size: int = field(default=1024, validator=V.in_range(16, 1 << 20))
     thread_shutdown_timeout: float = field(default=5.0, validator=V.in_range(0.0, 600.0))
+    #: accepted for the spec's recipes: every text (each streamed piece included) is synthesized
+    #: and played as soon as it arrives, in order, whether or not this is set
     stream: bool = field(default=False)
     voice: str | None = field(default=None)
     speed: float | None = field(default=None)

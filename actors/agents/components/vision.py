@@ -39,7 +39,6 @@ class VisionConfig(ModelComponentConfig):
     input_height: int = field(default=240, validator=V.in_range(32, 8192))
     tracking_distance_threshold: float = field(default=30.0, validator=V.in_range(1e-3, 1e6))
     tracking_max_age: float = field(default=1.0, validator=V.in_range(1e-3, 1e6))
-    enable_visualization: bool = field(default=False)
     #: attach the frame to each Detections/Trackings message (downstream consumers that need
     #: the pixels, e.g. visual trackers, then need no second subscription)
     include_image: bool = field(default=False)
