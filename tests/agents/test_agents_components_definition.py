@@ -130,3 +130,37 @@ def test_wakeword_is_matched_on_the_transcript_and_arms_the_next_utterance():
     assert stt._after_wakeword("hey jarvis") == ""  # the wakeword alone arms...
     assert stt._after_wakeword("bring me the cup") == "bring me the cup"  # ...the next utterance
     assert stt._after_wakeword("and the plate") == ""
+
+
+def test_vla_mapping_limits_and_command_types(tmp_path):
+    from emos.actors.agents import VLA, LeRobotClient, LeRobotPolicy, VLAConfig
+    from emos.actors.agents.components.vla_interface import joint_limits_from_urdf
+
+    info = str(__import__("pathlib").Path(__file__).parent / "fixtures" / "lerobot_info.json")
+    joints = {"shoulder_pan.pos": "Rotation", "shoulder_lift.pos": "Pitch", "elbow_flex.pos": "Elbow",
+              "wrist_flex.pos": "Wrist_Pitch", "wrist_roll.pos": "Wrist_Roll", "gripper.pos": "Jaw"}
+    cams = {"front": Topic(name="camera", msg_type="Image"), "wrist": Topic(name="wrist_camera", msg_type="Image")}
+    state = Topic(name="joint_states", msg_type="JointState")
+    policy = LeRobotPolicy(name="p", checkpoint="x", dataset_info_file=info)
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text('<robot name="r"><joint name="Jaw" type="revolute"><limit lower="0" upper="0.5"/></joint></robot>')
+    assert joint_limits_from_urdf(urdf) == {"Jaw": (0.0, 0.5)}
+    with pytest.raises(ValueError, match=r"the URDF has no limits for joints \['Rotation'"):
+        VLA(inputs=[state, *cams.values()], outputs=[Topic(name="cmd", msg_type="JointState")],
+            model_client=LeRobotClient(policy), component_name="vla",
+            config=VLAConfig(joint_names_map=joints, camera_inputs_map=cams, robot_urdf_file=str(urdf)))
+    with pytest.raises(ValueError, match=r"camera_inputs_map lacks the policy's cameras \['wrist'\]"):
+        VLA(inputs=[state, *cams.values()], outputs=[Topic(name="cmd", msg_type="JointState")],
+            model_client=LeRobotClient(policy), component_name="vla",
+            config=VLAConfig(joint_names_map=joints, camera_inputs_map={"front": cams["front"]}))
+    outputs = [Topic(name="cmd", msg_type="JointState"), Topic(name="traj", msg_type="JointTrajectory"),
+               Topic(name="jog", msg_type="JointJog")]
+    vla = VLA(inputs=[state, *cams.values()], outputs=outputs, model_client=LeRobotClient(policy), component_name="vla",
+              config=VLAConfig(joint_names_map=joints, camera_inputs_map=cams, joint_limits={"Jaw": (0.0, 0.5)}))
+    names, values = list(joints.values()), np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.5])
+    assert vla._cap("Jaw", 0.9) == 0.5 and vla._cap("Rotation", 9.0) == 9.0
+    assert list(vla._command(M.JointState, names, values).position) == list(values)
+    assert list(vla._command(M.JointTrajectory, names, values).points[0].positions) == list(values)
+    assert vla._command(M.JointJog, names, values).joint_names == names
+    with pytest.raises(ValueError, match="termination by 'event' is not available yet"):
+        vla.set_termination_trigger("event")
