@@ -36,12 +36,15 @@ class Launcher:
         max_seconds: float = 10.0,
         strategy: str = "one_for_one",
         stop_timeout: float = 5.0,
+        fallback_reset_after: float = 10.0,
         **kwargs: Any,
     ) -> None:
         """``heartbeat_timeout``: seconds without a status message before a component counts as
         hung and is killed. ``max_restarts`` in ``max_seconds``: restart intensity of every group
         (unless ``add_pkg`` overrides it) and of the root, which restarts whole groups. ``strategy``:
         one_for_one, one_for_all or rest_for_one. ``stop_timeout``: seconds between SIGTERM and SIGKILL.
+        ``fallback_reset_after``: seconds a component must stay healthy before its fallback retry
+        budgets (and a give-up) reset.
         """
         if kwargs:
             raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
@@ -49,21 +52,26 @@ class Launcher:
         self.multi_processing = bool(multi_processing)
         self.activate_all_components_on_start = activate_all_components_on_start
         self.enable_monitoring = enable_monitoring
-        for name, value in (("heartbeat_timeout", heartbeat_timeout), ("max_seconds", max_seconds), ("stop_timeout", stop_timeout)):
+        for name, value in (("heartbeat_timeout", heartbeat_timeout), ("max_seconds", max_seconds), ("stop_timeout", stop_timeout),
+                            ("fallback_reset_after", fallback_reset_after)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
                 raise ValueError(f"Launcher: {name} must be a positive number of seconds, got {value!r}")
         if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
             raise ValueError(f"Launcher: max_restarts must be an int >= 0, got {max_restarts!r}")
         self.heartbeat_timeout = heartbeat_timeout
         self.stop_timeout = stop_timeout
+        self.fallback_reset_after = float(fallback_reset_after)
         self.default_policy = dict(strategy=strategy, max_restarts=max_restarts, max_seconds=max_seconds)
         self._packages: list[Any] = []
-        self._events_actions: list[dict] = []
+        self._events_actions: list[Any] = []  # (Event, [Action]) pairs
         self._fallback_policies: dict[str, Any] = {}
         self.fallback_rate: float | None = None
         self.exit_code: int | None = None
         self.exit_reason = ""
         self.system: Any = None
+        self._shared_wiring: list[tuple[str, dict[str, Any]]] = []
+        self._shared_config: dict[str, Any] = {}
+        self._ui: dict[str, Any] | None = None
 
     def add_pkg(
         self,
@@ -97,7 +105,9 @@ class Launcher:
             for c in components:
                 c.configure(self.config_file)
         if events_actions:
-            self._events_actions.append(events_actions)
+            from emos.supervisor.orchestration import normalize_events_actions
+
+            self._events_actions.extend(normalize_events_actions(events_actions))
         if ros_log_level:
             level = getattr(logging, ros_log_level.upper(), None)
             if not isinstance(level, int):
@@ -118,20 +128,90 @@ class Launcher:
             name=package_name or f"group{len(self._packages)}",
         ))
 
-    # Launcher-wide fallback policies. Events, actions and fallback ladders arrive with their own
-    # issue; the policy is recorded here so recipes that set it keep running meanwhile, and the
-    # supervisor's restart semantics already bring crashed components back.
+    # -- Kompass-style conveniences: shared wiring and robot description ---------------------------
+    def kompass(self, components: Sequence[BaseComponent], multiprocessing: bool | None = None, **kwargs: Any) -> None:
+        """Add navigation components as one group (Kompass' name for ``add_pkg``)."""
+        self.add_pkg(components=components, package_name=kwargs.pop("package_name", "kompass"),
+                     multiprocessing=multiprocessing, **kwargs)
+
+    def inputs(self, **topics: Any) -> None:
+        """Wire an input key for every component that has it: ``launcher.inputs(location=odom)``.
+        Applied at bringup, so components added later get it too; a key no component has fails then."""
+        self._shared_wiring.append(("inputs", topics))
+
+    def outputs(self, **topics: Any) -> None:
+        """Wire an output key for every component that has it."""
+        self._shared_wiring.append(("outputs", topics))
+
+    @property
+    def robot(self) -> Any:
+        return self._shared_config.get("robot")
+
+    @robot.setter
+    def robot(self, value: Any) -> None:
+        """The robot description (``RobotConfig``) given to every component whose config has ``robot``."""
+        self._shared_config["robot"] = value
+
+    @property
+    def frames(self) -> Any:
+        return self._shared_config.get("frames")
+
+    @frames.setter
+    def frames(self, value: Any) -> None:
+        """The coordinate frames (``RobotFrames``) given to every component whose config has ``frames``."""
+        self._shared_config["frames"] = value
+
+    def _apply_shared(self) -> None:
+        from emos.core.keyed import KeyedComponent, key_name
+
+        components = [c for p in self._packages for c in p.components]
+        for role, topics in self._shared_wiring:
+            for raw_key, topic in topics.items():
+                key = key_name(raw_key)
+                takers = [c for c in components if isinstance(c, KeyedComponent) and key in c._allowed(role)]
+                if not takers:
+                    raise ValueError(f"Launcher.{role}({key}=...): no component added to this launcher has the {role[:-1]} key {key!r}")
+                for c in takers:
+                    getattr(c, role)(**{key: topic})
+        for name, value in self._shared_config.items():
+            if value is None:
+                continue
+            for c in components:
+                if hasattr(c.config, name):
+                    setattr(c.config, name, value)  # validated by the component's attrs config
+        for c in components:
+            missing = c.missing_required() if isinstance(c, KeyedComponent) else []
+            if missing:
+                raise ValueError(f"component {c.component_name!r} ({type(c).__name__}) has no topic for required {', '.join(missing)}")
+
+    def enable_ui(self, inputs: Sequence[Any] | None = None, outputs: Sequence[Any] | None = None,
+                  port: int = 5001, host: str = "127.0.0.1", **settings: Any) -> None:
+        """Serve a web page for this recipe: ``outputs`` are shown, ``inputs`` can be sent from it.
+        Local-only by default; any other ``host`` requires the access token printed at start-up
+        (``$EMOS_UI_TOKEN``, or a fresh one). Further ``UIConfig`` fields may be given by name."""
+        from emos.actors.ui.launch import check_ui_request
+
+        self._ui = check_ui_request(inputs, outputs, port, host, settings)
+
+    # Launcher-wide fallback policies: for every component without its own handler of that level
+    # (see emos.core.fallbacks for the order). Run by the supervisor (emos.supervisor.fallback_driver).
+    def _policy(self, key: str, action_name: str, max_retries: int | None) -> None:
+        from emos.supervisor.orchestration import check_policy
+
+        self._fallback_policies[key] = check_policy(key, action_name, max_retries)
+
     def on_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_fail"] = (action_name, max_retries)
+        """Catch-all for every component: ``action_name`` is restart, stop, start or a method name."""
+        self._policy("on_fail", action_name, max_retries)
 
     def on_component_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_component_fail"] = (action_name, max_retries)
+        self._policy("on_component_fail", action_name, max_retries)
 
     def on_algorithm_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_algorithm_fail"] = (action_name, max_retries)
+        self._policy("on_algorithm_fail", action_name, max_retries)
 
     def on_system_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_system_fail"] = (action_name, max_retries)
+        self._policy("on_system_fail", action_name, max_retries)
 
     def bringup(self, duration: float | None = None) -> int:
         """Run until SIGINT/SIGTERM (or ``duration`` seconds); stop in order; return the exit code.
@@ -143,16 +223,24 @@ class Launcher:
 
         if not self._packages:
             raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
-        if self._events_actions or self._fallback_policies:
-            log.warning("events, actions and launcher-wide fallbacks are recorded but not executed yet "
-                        "(supervisor restarts are active)")
+        self._apply_shared()
+        if self._ui is not None:
+            from emos.actors.ui.launch import add_ui
+
+            add_ui(self, self._ui)
+        from emos.supervisor.orchestration import Orchestration
+
+        if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):
+            raise ValueError(f"Launcher.fallback_rate must be a positive number of Hz, got {self.fallback_rate!r}")
+        orchestration = Orchestration(events_actions=list(self._events_actions), policies=dict(self._fallback_policies),
+                                      fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
         options = SystemOptions(
             heartbeat_timeout=self.heartbeat_timeout, stop_timeout=self.stop_timeout, duration=duration or _RUN_DURATION,
             max_restarts=self.default_policy["max_restarts"], max_seconds=self.default_policy["max_seconds"],
         )
-        self.system = System(self._packages, options)
+        self.system = System(self._packages, options, orchestration)
         code = self.system.run()
         self.exit_code, self.exit_reason = code, self.system.exit_reason
         Launcher.last_exit_code = code

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 
 # name -> (module, one-line help). Modules are imported only when their command runs.
@@ -15,21 +17,49 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("emos.supervisor.cli_run", "run a recipe script under the supervisor"),
     "status": ("emos.supervisor.cli_status", "show the live supervision tree of a running system"),
     "topic": ("emos.supervisor.cli_topic", "list, echo, measure or publish topics"),
+    "chaos": ("emos.supervisor.cli_chaos", "inject faults into a running recipe and check that it recovers"),
+    "ls": ("emos.supervisor.cli_ls", "list the recipes on this machine"),
+    "info": ("emos.supervisor.cli_info", "show the sensors and topics a recipe needs, without running it"),
+    "logs": ("emos.supervisor.cli_logs", "list the logs of past runs, or show one"),
+    "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
+    "version": ("emos.supervisor.cli_version", "show the EMOS version"),
+    "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
+    "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),
+    "ui": ("emos.actors.ui.bench", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
 }
 
 # `emos serve NAME`: long-running development services.
 SERVICES: dict[str, tuple[str, str]] = {
     "models": ("emos.actors.agents.server.cli", "local OpenAI- and Ollama-compatible model server"),
+}
+
+
+# Examples for `--help` of commands whose modules do not give their own (``parser.epilog``).
+EXAMPLES: dict[str, str] = {
+    "run": "emos run ui_demo                      # a recipe by name (see `emos ls`)\n"
+           "emos run recipes/sensor_demo.py --duration 20\n"
+           "emos run --duration 30 ui_demo -- --port 5002   # arguments after -- go to the recipe",
+    "status": "emos status\nemos status --watch 1\nemos status --json --run 1234-5678",
+    "topic": "emos topic list\nemos topic echo /odom -n 1\nemos topic hz /camera/rgb\n"
+             "emos topic pub /goal PoseStamped '{\"pose\": {\"position\": {\"x\": 1.0}}}'\n"
+             "emos topic plot /cmd_vel twist.linear.x --duration 20 --output cmd.png",
+    "bench ipc": "emos bench ipc\nemos bench ipc --sizes 64,921600 --json\nemos bench ipc --plot ipc.png",
+    "bench restart": "emos bench restart --kills 50\nemos bench restart --kills 200 --plot restart.png",
+    "bench nav": "emos bench nav\nemos bench nav --json",
+    "bench sim": "emos bench sim\nemos bench sim --json",
+    "bench barn": "emos bench barn\nemos bench barn --json",
+    "bench agents": "emos bench agents\nemos bench agents --json",
+    "serve models": "emos serve models\nemos serve models --help   # address and models",
 }
 
 
@@ -69,7 +99,28 @@ def _chosen_path(argv: list[str]) -> list[str]:
     return words
 
 
+def _terminated(signum: int, frame: object) -> None:
+    # SIGTERM unwinds like Ctrl-C, so every command's `finally` releases what it holds (a
+    # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM.
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; Ctrl-C (130), a closed output pipe (141) and SIGTERM (143) end it quietly."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`emos topic echo ... | head`). Point stdout at
+        # /dev/null so the interpreter's final flush does not complain a second time.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 141
+
+
+def _main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     # Resolve the chosen plug-in first, then let it add its own arguments and parse again.
@@ -80,10 +131,16 @@ def main(argv: list[str] | None = None) -> int:
     if entry is None:
         parser.parse_args(argv)  # prints usage or help and exits
         return 2
+    if entry[0] != COMMANDS["run"][0]:  # `emos run` hands signals to the supervisor instead
+        signal.signal(signal.SIGTERM, _terminated)
     module = importlib.import_module(entry[0])
     # Rebuild a parser whose chosen leaf gets the plug-in's arguments.
     leaf = argparse.ArgumentParser(prog="emos " + " ".join(words[:2] if table else words[:1]), description=entry[1])
     module.add_arguments(leaf)
+    example = EXAMPLES.get(" ".join(words[:2] if table else words[:1]))
+    if example and not leaf.epilog:
+        leaf.formatter_class = argparse.RawDescriptionHelpFormatter
+        leaf.epilog = "examples:\n  " + example.replace("\n", "\n  ")
     args = leaf.parse_args(argv[2 if table is not None else 1 :])
     return int(module.run(args) or 0)
 

@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 from pathlib import Path
+from typing import Iterator
 
 from emos.transport.context import RunContext
 
@@ -27,3 +30,16 @@ def join_run(run_id: str | None) -> RunContext:
     else:
         path = runs[0]
     return RunContext(path.name, Path(path), owner=False)
+
+
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while resources are being created or released, so a Ctrl-C or
+    SIGTERM never lands half way (a FIFO made but not yet known to the code that removes it);
+    a signal that arrived meanwhile is delivered on exit from the block."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)

@@ -6,8 +6,8 @@ import json
 import time
 
 from emos.msgs import codec
-from emos.msgs.registry import resolve
-from emos.supervisor.cli_common import add_run_argument, join_run
+from emos.msgs.registry import canonical_name, resolve
+from emos.supervisor.cli_common import add_run_argument, join_run, signals_deferred
 from emos.transport.pubsub import Publisher, Subscriber, list_topics
 from emos.transport.waker import Waker
 
@@ -35,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("fields", nargs="?", default="{}", help='e.g. \'{"data": 1.5}\'')
     p.add_argument("--rate", type=float, default=0.0, help="publish repeatedly at this rate (Hz)")
     p.add_argument("--count", "-n", type=int, default=1, help="number of messages (0 = until Ctrl-C)")
+    from emos.supervisor import cli_topic_plot
+
+    p = sub.add_parser("plot", help="plot numeric fields over time, live or saved (--output FILE)")
+    add_run_argument(p)
+    cli_topic_plot.add_arguments(p)
 
 
 def _topic_type(ctx, topic: str) -> type:
@@ -72,9 +77,19 @@ def run(args: argparse.Namespace) -> int:
 
             fields = yaml.safe_load(args.fields)
         msg = codec.from_builtin(cls, fields or {})
-        pub = Publisher(ctx, topic, cls)
+        existing = list_topics(ctx).get(topic)
+        if existing is not None and existing["type"] not in ("?", canonical_name(cls)):
+            raise SystemExit(
+                f"emos topic pub: {topic} carries {existing['type']} (publishers: {', '.join(existing['publishers'])}), "
+                f"not {canonical_name(cls)}; its subscribers would reject every message"
+            )
+        pub = None
+        sent = 0
         try:
-            sent = 0
+            # Inside the try: a signal held during construction is delivered as the block ends,
+            # and the ring it made must still be removed by the finally below.
+            with signals_deferred():
+                pub = Publisher(ctx, topic, cls)
             while args.count == 0 or sent < args.count:
                 pub.publish(msg)
                 sent += 1
@@ -83,15 +98,23 @@ def run(args: argparse.Namespace) -> int:
                 time.sleep(1.0 / args.rate if args.rate > 0 else 0.0)
             time.sleep(0.05)  # let subscribers copy the last message before the ring goes away
         finally:
-            pub.close()
+            if pub is not None:
+                with signals_deferred():
+                    pub.close()
         print(f"published {sent} {cls.__name__} on {topic}")
         return 0
     cls = _topic_type(ctx, topic)
-    waker = Waker(ctx)
-    sub = Subscriber(ctx, topic, cls, waker=waker, queue_size=1000)
+    if args.action == "plot":
+        from emos.supervisor import cli_topic_plot
+
+        return cli_topic_plot.run(args, ctx, topic, cls)
     import select
 
+    waker = sub = None
     try:
+        with signals_deferred():
+            waker = Waker(ctx)
+            sub = Subscriber(ctx, topic, cls, waker=waker, queue_size=1000)
         if args.action == "echo":
             seen, t_end = 0, time.monotonic() + args.timeout if args.timeout else None
             while (not args.count or seen < args.count) and (t_end is None or time.monotonic() < t_end):
@@ -119,5 +142,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{topic}: {1 / mean:.2f} Hz  min {min(gaps) * 1e3:.2f} ms  max {max(gaps) * 1e3:.2f} ms  n={len(stamps)}", flush=True)
         return 0
     finally:
-        sub.close()
-        waker.close()
+        with signals_deferred():
+            if sub is not None:
+                sub.close()
+            if waker is not None:
+                waker.close()

@@ -1,15 +1,29 @@
-"""Hang detection: every component's ``<name>/status`` stream is its heartbeat."""
+"""Hang detection: every component's ``<name>/status`` stream is its heartbeat.
+
+Only the component's own process counts. Anyone in the run may publish on ``/<name>/status``
+(``emos topic pub`` does), and a status from elsewhere must not keep a hung component alive.
+So the monitor reads only the ring whose publisher id is the component's name, and only while
+that ring's writer pid is the pid of the incarnation it watches (a process that opens the same
+ring to forge beats takes the writer pid, and the real component then looks silent: a false
+restart, never a masked hang). The ring is the cheapest channel that proves liveness where it
+matters: it is written by the component's event loop after every step, at no extra cost; a
+beat over the control socket would add a system call per beat for the same proof.
+"""
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from typing import Any
 
-from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
 from emos.transport.waker import Waker
+
+log = logging.getLogger("emos.supervisor")
+
+FOREIGN_LOG_PERIOD_S = 10.0  # one warning per component per period about foreign status publishers
 
 
 class HeartbeatMonitor:
@@ -26,12 +40,16 @@ class HeartbeatMonitor:
         self.loop.add_reader(self.waker.fd, self._on_wake)
         self.subs: dict[str, Subscriber] = {}
         self.watched: dict[str, tuple[Any, float]] = {}  # name -> (worker, last heard, monotonic)
+        self.pids: dict[str, int] = {}  # name -> pid whose beats count
         self.status: dict[str, ComponentStatus] = {}
+        self.foreign: dict[str, int] = {}  # name -> status messages ignored (not from the component)
+        self._foreign_logged: dict[str, float] = {}
         self._task = asyncio.ensure_future(self._check_loop())
 
     def watch(self, name: str, worker: Any) -> None:
         if name not in self.subs:
             self.subs[name] = Subscriber(self.ctx, f"/{name}/status", ComponentStatus, waker=self.waker, queue_size=4)
+        self.pids[name] = int(worker.pid or 0)
         self.watched[name] = (worker, time.monotonic())
         self._on_wake()
 
@@ -48,12 +66,33 @@ class HeartbeatMonitor:
         self.waker.drain()
         now = time.monotonic()
         for name, sub in self.subs.items():
-            items = sub.take_raw()
+            self._note_foreign(name, sub)
+            # take_raw_from reads through the subscriber's validated path: a damaged or forged
+            # ring is dropped and logged there and cannot raise here.
+            items, writer_pid = sub.take_raw_from(name)
             if not items:
                 continue
-            self.status[name] = codec.decode(ComponentStatus, items[-1][1])
+            if writer_pid != self.pids.get(name):
+                self._count_foreign(name, len(items), f"ring of {name!r} written by pid {writer_pid}, not by the component's pid {self.pids.get(name)}")
+                continue
+            try:
+                self.status[name] = codec.decode(ComponentStatus, items[-1][1])
+            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the heartbeat task
+                self._count_foreign(name, 1, f"an undecodable status frame ({type(exc).__name__}: {exc})")
             if name in self.watched:
                 self.watched[name] = (self.watched[name][0], now)
+
+    def _note_foreign(self, name: str, sub: Subscriber) -> None:
+        others = [p for p in sub.sources if p != name]
+        if others:
+            self._count_foreign(name, 0, f"publisher(s) {', '.join(sorted(others))}")
+
+    def _count_foreign(self, name: str, count: int, who: str) -> None:
+        self.foreign[name] = self.foreign.get(name, 0) + count
+        now = time.monotonic()
+        if now - self._foreign_logged.get(name, -FOREIGN_LOG_PERIOD_S) >= FOREIGN_LOG_PERIOD_S:
+            self._foreign_logged[name] = now
+            log.warning("[%s] status from %s does not count as its heartbeat: only the component's own process does", name, who)
 
     async def _check_loop(self) -> None:
         while True:

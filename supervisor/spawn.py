@@ -29,6 +29,8 @@ from typing import Any, Callable
 
 import msgpack
 
+from emos.supervisor.reaper import ENV_WORKER_PID, kill_group, kill_worker_trees
+
 log = logging.getLogger("emos.supervisor")
 
 PR_SET_NAME = 15
@@ -159,6 +161,7 @@ class Zygote:
         self.primary: _ZygoteHandle | None = None
         self.spare: _ZygoteHandle | None = None
         self.replacements = 0
+        self._latest: dict[int, int] = {}  # zygote side: index -> pid of the worker it forked last
 
     @property
     def pid(self) -> int:
@@ -267,6 +270,7 @@ class Zygote:
             if req.get("op") == "spawn":
                 try:
                     pid = self._double_fork(lambda: self._worker_main(int(req["index"]), launcher), sock)
+                    self._latest[int(req["index"])] = pid
                     _send(sock, {"pid": pid})
                 except Exception as exc:
                     _send(sock, {"error": f"{type(exc).__name__}: {exc}"})
@@ -286,6 +290,12 @@ class Zygote:
     def _orphaned(self) -> None:
         """The launcher died without stopping us: clean its shared state, then leave."""
         time.sleep(0.3)  # workers got SIGTERM too; let them finish their last writes
+        # Their children did not: end each worker's process group (see reaper.py). Only the
+        # latest incarnations: the launcher killed the groups of earlier ones when they died.
+        try:
+            kill_worker_trees(self._latest.values())
+        except Exception:
+            pass
         if self.janitor is not None:
             try:
                 self.janitor()
@@ -326,6 +336,9 @@ class Zygote:
             os._exit(code)
         try:
             set_process_name(f"emos:{self.names[index]}")
+            # A session (and process group) of our own: everything we start dies with us.
+            os.setsid()
+            os.environ[ENV_WORKER_PID] = str(os.getpid())
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_DFL)
             # Wait to be re-parented to the launcher (the intermediate exits right away), then
@@ -368,8 +381,11 @@ class ExitInfo:
 class ProcessWatch:
     """Resolves a future with :class:`ExitInfo` the moment the process ends (pidfd in the event loop)."""
 
-    def __init__(self, pid: int, loop: asyncio.AbstractEventLoop):
+    def __init__(self, pid: int, loop: asyncio.AbstractEventLoop, group: bool = False):
+        """``group``: the process leads its own process group, which is SIGKILLed when it ends
+        (before it is reaped, so the group id cannot have been reused)."""
         self.pid = pid
+        self.group = group
         self.loop = loop
         self.exited: asyncio.Future[ExitInfo] = loop.create_future()
         self.pidfd = os.pidfd_open(pid)
@@ -378,6 +394,8 @@ class ProcessWatch:
     def _on_ready(self) -> None:
         at = time.monotonic()
         self.loop.remove_reader(self.pidfd)
+        if self.group:
+            kill_group(self.pid, signal.SIGKILL)
         try:
             res = os.waitid(os.P_PIDFD, self.pidfd, os.WEXITED)
         except ChildProcessError:
@@ -394,11 +412,14 @@ class ProcessWatch:
             self.exited.set_result(info)
 
     def send(self, sig: int) -> None:
+        """Signal the process, and its whole group if it leads one; nothing once it is reaped."""
         if self.pidfd >= 0:
             try:
                 signal.pidfd_send_signal(self.pidfd, sig)
             except ProcessLookupError:
                 pass
+            if self.group:
+                kill_group(self.pid, sig)
 
     def close(self) -> None:
         if self.pidfd >= 0:

@@ -20,8 +20,12 @@ from attrs import define, field
 
 from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
-from emos.core.rpc import RpcServer
+from emos.core.rpc import CONTROL_FRAME, RpcServer
+from emos.core.wiring import check_system
+from emos.supervisor.fallback_driver import FallbackDriver
 from emos.supervisor.heartbeat import HeartbeatMonitor
+from emos.supervisor.orchestration import Orchestration, fallback_summary, lifecycle_op, with_monitor
+from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
 from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
@@ -62,14 +66,16 @@ class SystemOptions:
 
 
 class System:
-    def __init__(self, packages: list[Package], options: SystemOptions | None = None):
-        self.packages = packages
+    def __init__(self, packages: list[Package], options: SystemOptions | None = None, orchestration: Orchestration | None = None):
+        self.orchestration = orchestration or Orchestration()
+        self.packages = with_monitor(packages, self.orchestration)
         self.options = options or SystemOptions()
-        self.components: list[BaseComponent] = [c for p in packages for c in p.components]
+        self.components: list[BaseComponent] = [c for p in self.packages for c in p.components]
         names = [c.component_name for c in self.components]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"component names must be unique in a system; repeated: {', '.join(dupes)}")
+        check_system(self.components)  # topic types agree, names fit: before anything starts
         self._pristine: dict[int, BaseComponent] = {}
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=2000)
         self.exit_code = EXIT_OK
@@ -89,6 +95,7 @@ class System:
         self.control_path = self.ctx.run_dir / "supervisor.sock"
         os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
         become_subreaper()
+        self.reaper = OrphanReaper(protected=self._zygote_pids)
         try:
             process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
             if process_indices:
@@ -112,10 +119,15 @@ class System:
         finally:
             if self.zygote is not None:
                 self.zygote.stop()
+            self.reaper.finish()
             removed = self.ctx.remove_everything()
             log.debug("removed %d shared-memory segments", removed)
             set_current(None)
         return self.exit_code
+
+    def _zygote_pids(self) -> list[int]:
+        z = self.zygote
+        return [h.pid for h in (z.primary, z.spare) if h is not None] if z is not None else []
 
     def _mode(self, index: int) -> str:
         i = index
@@ -143,9 +155,11 @@ class System:
         self._stop_requested = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, self._on_signal, sig)
-        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor")
+        self.reaper.install(loop)
+        self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor", max_frame=CONTROL_FRAME)
         await self.control.start()
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
+        self.fallbacks = FallbackDriver(self, self.orchestration, lambda: self.root)
         self.root = self._build_root()
         try:
             try:
@@ -169,10 +183,13 @@ class System:
                 log.error("supervision gave up: %s", result.detail)
             else:
                 self.exit_reason = self.exit_reason or "stopped on request"
+                await self.fallbacks.close()  # no ladder acts on components being shut down
                 await self.root.stop()
         finally:
+            await self.fallbacks.close()
             self.heartbeats.close()
             await self.control.close()
+            self.reaper.uninstall()
 
     async def _stop_after(self, seconds: float) -> None:
         await asyncio.sleep(seconds)
@@ -222,14 +239,21 @@ class System:
     def summary(self) -> str:
         """What happened during the run, per component: restarts and why."""
         exits: collections.Counter[tuple[str, str]] = collections.Counter()
+        failed_starts: collections.Counter[str] = collections.Counter()
         for e in self.events:
             if e["event"] == "exit":
                 exits[(e["child"], e.get("reason", "?"))] += 1
+            elif e["event"] == "start_failed":
+                failed_starts[e["child"]] += 1  # restart attempts (or the first start) that never came up
         lines = [f"EMOS run {self.ctx.run_id}: exit code {self.exit_code} ({self.exit_reason})"]
         for c in self.components:
             name = c.component_name
             reasons = ", ".join(f"{n} {r}" for (child, r), n in sorted(exits.items()) if child == name)
-            lines.append(f"  {name:<24} {'restarted after: ' + reasons if reasons else 'no restarts'}")
+            text = "restarted after: " + reasons if reasons else "no restarts"
+            if failed_starts[name]:
+                text += f"; {failed_starts[name]} start(s) failed during start-up"
+            lines.append(f"  {name:<24} {text}")
+        lines.extend(fallback_summary(self.events, self.components))
         escalations = [e for e in self.events if e["event"] == "escalated"]
         for e in escalations:
             lines.append(f"  escalation in {e['supervisor']}: {e.get('detail', '')}")
@@ -250,7 +274,7 @@ class System:
 
         async def tree(req: dict, stream: Any) -> dict:
             assert self.root is not None
-            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.root.tree()}
+            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.fallbacks.annotate(self.root.tree())}
 
         async def events(req: dict, stream: Any) -> list:
             since = float(req.get("since", 0.0))
@@ -260,7 +284,7 @@ class System:
             self.request_stop(str(req.get("reason", "stopped through the control socket")))
             return True
 
-        return {"hello": hello, "tree": tree, "events": events, "stop": stop}
+        return {"hello": hello, "tree": tree, "events": events, "stop": stop, "lifecycle": lifecycle_op(lambda: self.fallbacks)}
 
 
 def find_runs() -> list[Path]:

@@ -101,7 +101,8 @@ class ProcessWorker(_Incarnation):
     async def start(self) -> "ProcessWorker":
         loop = asyncio.get_running_loop()
         self.pid = self.system.zygote.spawn(self.index)  # type: ignore[union-attr]
-        self.watch = ProcessWatch(self.pid, loop)
+        self.system.reaper.worker_started(self.pid)
+        self.watch = ProcessWatch(self.pid, loop, group=True)
         self.watch.exited.add_done_callback(self._on_exit)
         try:
             await self._bring_up(self.watch.exited)
@@ -114,6 +115,7 @@ class ProcessWorker(_Incarnation):
 
     def _on_exit(self, fut: "asyncio.Future[ExitInfo]") -> None:
         info = fut.result()
+        self.system.reaper.worker_ended(info.pid)
         self.system.heartbeats.unwatch(self.name, self)
         if self._stop_reason == "hang":
             result = Exit("hang", f"pid {info.pid} missed its heartbeat deadline; {info}", info.at)

@@ -23,7 +23,7 @@ _EXPORTS = {
     "Box": ".primitives", "Cylinder": ".primitives", "Wall": ".primitives",
     "MovingObstacle": ".moving",
     "RobotSpec": ".robots", "DriveType": ".robots", "JACKAL": ".robots", "TURTLEBOT3": ".robots",
-    "RACECAR": ".robots", "HOLONOMIC": ".robots", "robot_spec": ".robots",
+    "RACECAR": ".robots", "TURTLEBOT3_WAFFLE_PI": ".robots", "HOLONOMIC": ".robots", "robot_spec": ".robots",
     "SimRobot": ".body", "Contact": ".body",
     "Lidar": ".sensors", "LidarConfig": ".sensors", "ScanReading": ".sensors",
     "Camera": ".sensors", "CameraConfig": ".sensors", "CameraReading": ".sensors",
@@ -32,6 +32,7 @@ _EXPORTS = {
     "demo_house": ".builders", "from_map": ".builders", "from_barn": ".builders",
     "load_barn_worlds": ".barn_worlds", "BarnWorld": ".barn_worlds",
     "render_topdown": ".render",
+    "Simulator": ".component", "SimulatorConfig": ".component",
 }
 
 __all__ = sorted(_EXPORTS)

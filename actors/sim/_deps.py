@@ -43,7 +43,7 @@ def pil_image() -> ModuleType:
     try:
         from PIL import Image
     except ImportError as exc:  # pragma: no cover
-        raise ImportError(f"top-down pictures need Pillow; {_EXTRA_HINT}") from exc
+        raise ImportError(f"simulator pictures (top-down maps, JPEG frames, textures) need Pillow; {_EXTRA_HINT}") from exc
     return Image
 
 

@@ -17,15 +17,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", type=int, default=1, help="BARN world index to use (default 1)")
     parser.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
     parser.add_argument("--json", action="store_true", help='print only {"realtime_factor": x}')
+    parser.add_argument("--worlds-file", default=None, help="BARN worlds.json (default: ../shared/benchmarks/barn/worlds.json)")
+    parser.add_argument("--component", action="store_true",
+                        help="measure the Simulator component in lockstep with a consumer (own processes; "
+                             "demo house, not BARN); --duration is then wall seconds (default 20)")
+    parser.add_argument("--camera", action="store_true", help="with --component: also render a 320x240 camera at 10 Hz")
 
 
-def measure(duration: float = 60.0, world_idx: int = 1) -> dict:
+def measure(duration: float = 60.0, world_idx: int = 1, worlds_file: str | None = None) -> dict:
     from .barn_worlds import BARN_START
     from .builders import from_barn
     from .clock import ClockMode, SimClock
     from .sensors import Lidar, LidarConfig, Odometry, OdometryConfig
 
-    world = from_barn(world_idx, clock=SimClock(dt=0.01, mode=ClockMode.LOCKSTEP))
+    world = from_barn(world_idx, worlds_file, clock=SimClock(dt=0.01, mode=ClockMode.LOCKSTEP))
     try:
         robot = world.add_robot("jackal", BARN_START)
         lidar = world.add_sensor(Lidar(robot, LidarConfig(fov_deg=360.0, beams=720, rate_hz=20.0)))
@@ -47,11 +52,22 @@ def measure(duration: float = 60.0, world_idx: int = 1) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.component:
+        from .bench_component import measure as measure_component, print_table
+
+        duration = 20.0 if args.duration == 60.0 else args.duration
+        result = measure_component(duration, camera=args.camera)
+        if args.json:
+            print(json.dumps({"realtime_factor": round(result["realtime_factor"], 2),
+                              "rates_per_wall_s": {k: round(v["per_wall_s"], 2) for k, v in result["rates"].items()}}))
+        else:
+            print_table(result)
+        return 0
     pinned = None
     if not args.no_pin and hasattr(os, "sched_setaffinity"):
         pinned = min(os.sched_getaffinity(0))
         os.sched_setaffinity(0, {pinned})
-    result = measure(args.duration, args.world)
+    result = measure(args.duration, args.world, args.worlds_file)
     if args.json:
         print(json.dumps({"realtime_factor": round(result["realtime_factor"], 2)}))
         return 0

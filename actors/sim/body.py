@@ -65,9 +65,13 @@ class SimRobot:
     # -- pybullet bodies -------------------------------------------------------------------
     def _create_bodies(self) -> tuple[int, int | None]:
         pb, c, s = _deps.pybullet(), self.world.client, self.spec
-        half = [s.length / 2, s.width / 2, s.height / 2]
-        col = c.createCollisionShape(pb.GEOM_BOX, halfExtents=half)
-        vis = -1 if s.urdf else c.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(s.color))
+        if s.radius > 0:
+            col = c.createCollisionShape(pb.GEOM_CYLINDER, radius=s.radius, height=s.height)
+            vis = -1 if s.urdf else c.createVisualShape(pb.GEOM_CYLINDER, radius=s.radius, length=s.height, rgbaColor=list(s.color))
+        else:
+            half = [s.length / 2, s.width / 2, s.height / 2]
+            col = c.createCollisionShape(pb.GEOM_BOX, halfExtents=half)
+            vis = -1 if s.urdf else c.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(s.color))
         # Mass > 0 so Bullet computes its contacts with static obstacles (static-static pairs
         # are skipped); gravity never acts because the world never integrates dynamics.
         body = c.createMultiBody(baseMass=1.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)

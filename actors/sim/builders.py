@@ -10,7 +10,8 @@ from .primitives import Box, Cylinder, Shape, Wall
 from .world import World
 
 WALL = 0.12
-DOOR = 1.0
+# Wall ends are square and overlap by WALL / 2, so a doorway's clear width is DOOR - WALL (0.98 m).
+DOOR = 1.1
 
 # A 10 x 8 m flat: four rooms, doorways between them, some furniture. Spawn at (1.5, 1.5).
 HOUSE_SPAWN = (1.5, 1.5, 0.0)
@@ -25,9 +26,9 @@ def house_shapes() -> list[Shape]:
 
     shapes: list[Shape] = [
         wall((0, 0), (10, 0)), wall((10, 0), (10, 8)), wall((10, 8), (0, 8)), wall((0, 8), (0, 0)),
-        # Middle wall x=5 with a doorway at y in [3, 4].
-        wall((5, 0), (5, 3)), wall((5, 3 + DOOR), (5, 8)),
-        # Left rooms split at y=4, doorway x in [2, 3]; right rooms split at y=4, doorway x in [7.5, 8.5].
+        # Middle wall x=5 with a doorway at y in [2.7, 2.7 + DOOR] (clear of the walls at y=4).
+        wall((5, 0), (5, 2.7)), wall((5, 2.7 + DOOR), (5, 8)),
+        # Rooms split at y=4, doorways at x in [2, 2 + DOOR] (left) and [7.5, 7.5 + DOOR] (right).
         wall((0, 4), (2, 4)), wall((2 + DOOR, 4), (5, 4)),
         wall((5, 4), (7.5, 4)), wall((7.5 + DOOR, 4), (10, 4)),
     ]

@@ -55,19 +55,23 @@ class RobotSpec:
     urdf: str | None = None  # pybullet_data-relative visual model, if any
     lidar_height: float = attrs.field(default=0.3, converter=float, validator=_pos)
     color: tuple[float, float, float, float] = (0.15, 0.3, 0.8, 1.0)
+    # > 0: the body is a vertical cylinder of this radius (length and width are its diameter).
+    radius: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
 
     def __attrs_post_init__(self) -> None:
         if self.drive is DriveType.OMNI and not (self.max_vy > 0 and self.max_acc_y > 0):
             raise ValueError(f"RobotSpec {self.name!r}: an omni robot needs max_vy and max_acc_y > 0")
         if self.drive is DriveType.ACKERMANN and not (self.wheelbase > 0 and self.max_steer > 0):
             raise ValueError(f"RobotSpec {self.name!r}: an Ackermann robot needs wheelbase and max_steer > 0")
+        if self.radius > 0 and not (abs(self.length - 2 * self.radius) < 1e-9 and abs(self.width - 2 * self.radius) < 1e-9):
+            raise ValueError(f"RobotSpec {self.name!r}: a cylinder robot's length and width must be 2 * radius")
 
     @property
     def circumscribed_radius(self) -> float:
         return math.hypot(self.length / 2, self.width / 2)
 
     def footprint(self) -> np.ndarray:
-        """Footprint corners (4, 2) in the base frame."""
+        """Footprint corners (4, 2) in the base frame (of the bounding box for a cylinder)."""
         hx, hy, c = self.length / 2, self.width / 2, self.center_offset
         return np.array([[c + hx, hy], [c - hx, hy], [c - hx, -hy], [c + hx, -hy]])
 
@@ -84,6 +88,12 @@ TURTLEBOT3 = RobotSpec(
     max_vx=0.22, max_omega=2.84, max_acc_x=2.5, max_acc_omega=3.2, lidar_height=0.2,
     color=(0.2, 0.2, 0.2, 1.0),
 )
+# TurtleBot3 Waffle Pi: 281 x 306 mm, 0.26 m/s, 1.82 rad/s.
+TURTLEBOT3_WAFFLE_PI = RobotSpec(
+    name="turtlebot3_waffle_pi", drive="differential", length=0.281, width=0.306, height=0.141,
+    max_vx=0.26, max_omega=1.82, max_acc_x=2.5, max_acc_omega=3.2, lidar_height=0.17,
+    color=(0.25, 0.25, 0.25, 1.0),
+)
 # pybullet_data's MIT racecar (1:10): base frame on the rear axle, wheelbase 0.325 m; the box
 # covers its links' extent (x from -0.05 to 0.41 m, wheels at +-0.147 m).
 RACECAR = RobotSpec(
@@ -96,7 +106,8 @@ HOLONOMIC = RobotSpec(
     max_vx=1.0, max_vy=1.0, max_omega=2.0, max_acc_x=2.0, max_acc_y=2.0, max_acc_omega=4.0,
     color=(0.2, 0.6, 0.3, 1.0),
 )
-PRESETS: dict[str, RobotSpec] = {s.name: s for s in (JACKAL, TURTLEBOT3, RACECAR, HOLONOMIC)}
+PRESETS: dict[str, RobotSpec] = {s.name: s for s in (JACKAL, TURTLEBOT3, TURTLEBOT3_WAFFLE_PI, RACECAR, HOLONOMIC)}
+PRESETS["turtlebot3_burger"] = TURTLEBOT3  # the TurtleBot3 model's full name
 
 
 def robot_spec(name_or_spec: str | RobotSpec) -> RobotSpec:

@@ -65,6 +65,8 @@ class World:
         self.spawn: tuple[float, float, float] | None = None
         self.barn: Any = None
         self.occupancy_map: Any = None
+        self.dynamics = False  # see enable_dynamics()
+        self.tick_hooks: list[Any] = []  # called with the stamp after every tick's physics (an arm's grasp)
         if ground:
             self.client.setAdditionalSearchPath(_deps.pybullet_data_path())
             self.ground_id = self.client.loadURDF("plane.urdf")
@@ -127,6 +129,16 @@ class World:
         return wall
 
     def _add_mover(self, mover: MovingObstacle) -> None:
+        if hasattr(mover, "create_body"):  # draws itself (a Person's billboard)
+            body = mover.create_body(self.client)
+        else:
+            body = self._mover_body(mover)
+        self.movers.append(mover)
+        self._mover_bodies.append(body)
+        self._body_names[body] = mover.name
+        self._place_movers()
+
+    def _mover_body(self, mover: MovingObstacle) -> int:
         pb, c, shape = _deps.pybullet(), self.client, mover.shape
         if isinstance(shape, Box):
             half = [shape.size[0] / 2, shape.size[1] / 2, shape.height / 2]
@@ -135,11 +147,7 @@ class World:
         else:
             col = c.createCollisionShape(pb.GEOM_CYLINDER, radius=shape.radius, height=shape.height)
             vis = c.createVisualShape(pb.GEOM_CYLINDER, radius=shape.radius, length=shape.height, rgbaColor=list(shape.color))
-        body = c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
-        self.movers.append(mover)
-        self._mover_bodies.append(body)
-        self._body_names[body] = mover.name
-        self._place_movers()
+        return c.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis)
 
     def _bake(self) -> None:
         """Turn pending static shapes into one mesh body per colour."""
@@ -167,12 +175,19 @@ class World:
 
     def add_sensor(self, sensor: Sensor) -> Sensor:
         """Attach ``sensor``; its first reading is taken at the next tick."""
-        if sensor.robot not in self.robots:
+        if sensor.robot is not None and sensor.robot not in self.robots:  # None: fixed in the world
             raise ValueError(f"sensor {sensor.name!r} rides on a robot that is not in this world")
         sensor.bind(self, self.rng())
         self.sensors.append(sensor)
         self._next_due.append(self.clock.now() + self.clock.dt)
         return sensor
+
+    def enable_dynamics(self, gravity: float = -9.81, substeps: int = 4) -> None:
+        """Integrate rigid-body dynamics every tick (table-top manipulation: an arm's motors,
+        falling and grasped objects). Mobile bases stay kinematic: they are re-posed each tick."""
+        self.client.setGravity(0.0, 0.0, gravity)
+        self.client.setPhysicsEngineParameter(fixedTimeStep=self.clock.dt, numSubSteps=int(substeps))
+        self.dynamics = True
 
     # -- stepping ----------------------------------------------------------------------------
     def _place_movers(self) -> None:
@@ -196,7 +211,11 @@ class World:
         dt = self.clock.dt
         for robot in self.robots:
             robot.advance(dt)
+        if self.dynamics:
+            self.client.stepSimulation()
         stamp = self.clock.tick()
+        for hook in self.tick_hooks:
+            hook(stamp)
         self._place_movers()
         if self.robots:
             self.client.performCollisionDetection()

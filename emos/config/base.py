@@ -84,3 +84,7 @@ class BaseComponentConfig(BaseAttrs):
     """Minimum status publication rate (Hz) when idle (Event, Server and ActionServer run types)."""
 
     visualization: bool = field(default=False)
+
+    use_sim_time: bool = field(default=False)
+    """Follow the Simulator's /clock: Timed steps run on simulated time and answer each tick
+    (see :mod:`emos.core.clock`; list the component in the Simulator's ``lockstep_consumers``)."""

@@ -91,20 +91,35 @@ def apply_mapping(config: Any, data: dict[str, Any], source: str, path: str = ""
                 continue
             raise ConfigError(f"{source}: unknown parameter {where!r} for {cls.__name__}; known: {', '.join(sorted(fields))}")
         current = getattr(config, fld.name)
-        if attrs.has(type(current)) and isinstance(value, dict):
+        if attrs.has(type(current)) and isinstance(value, dict) and _is_frozen(current):
+            # A frozen record (e.g. RobotFrames) cannot be changed in place: set an evolved copy.
+            unknown = sorted(set(value) - {f.name for f in attrs.fields(type(current))})
+            if unknown and not ignore_unknown:
+                raise ConfigError(f"{source}: unknown parameter(s) {', '.join(f'{where}.{k}' for k in unknown)} "
+                                  f"for {type(current).__name__}")
+            try:
+                value = attrs.evolve(current, **{k: v for k, v in value.items() if k not in unknown})
+            except Exception as exc:
+                raise ConfigError(f"{source}: {where}: {exc}") from exc
+        elif attrs.has(type(current)) and isinstance(value, dict):
             apply_mapping(current, value, source, where, ignore_unknown)
             continue
-        target = _target_type(fld.type)
-        if target is not None and attrs.has(target) and isinstance(value, dict):
+        elif (target := _target_type(fld.type)) is not None and attrs.has(target) and isinstance(value, dict):
             inner = target() if current is None else current
             apply_mapping(inner, value, source, where, ignore_unknown)
             value = inner
         else:
-            value = _coerce(value, target, source, where)
+            value = _coerce(value, _target_type(fld.type), source, where)
         try:
             setattr(config, fld.name, value)
         except Exception as exc:
             raise ConfigError(f"{source}: {where}: {exc} (expected {_type_name(fld.type)}, got {value!r})") from exc
+
+
+def _is_frozen(obj: Any) -> bool:
+    from attr._make import _frozen_setattrs  # attrs' frozen classes all use this __setattr__
+
+    return type(obj).__setattr__ is _frozen_setattrs
 
 
 def _target_type(tp: Any) -> Any:
@@ -163,3 +178,32 @@ def load_into(config: Any, config_file: str | Path, component_name: str) -> dict
     apply_mapping(config, common, str(config_file), ignore_unknown=True)
     apply_mapping(config, own, str(config_file), path=component_name)
     return topics
+
+
+def section_problems(data: dict[str, Any], component_names: list[str], source: str) -> list[str]:
+    """Sections of a config file that no component will read, each with a hint.
+
+    A misspelled component section, or a parameter written at the top level instead of under
+    ``/**`` or a component, would otherwise be ignored without a word.
+    """
+    import difflib
+
+    problems = []
+    names = sorted(component_names)
+    for key, value in data.items():
+        if key == COMMON_SECTION:
+            continue
+        name = str(key).lstrip("/")
+        if name in component_names:
+            continue
+        if not isinstance(value, dict):
+            problems.append(
+                f"{source}: top-level key {key!r} holds a {type(value).__name__} ({value!r}), not a section; "
+                f"parameters go under {COMMON_SECTION!r} or under a component's name ({', '.join(names)})"
+            )
+            continue
+        close = difflib.get_close_matches(name, names, n=3)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}?" if close else f"components: {', '.join(names)}"
+        problems.append(f"{source}: section {key!r} matches no component of this system and is ignored; {hint}")
+    return problems
+

@@ -13,6 +13,7 @@ def in_range(min_value: float, max_value: float) -> Callable[[Any, attrs.Attribu
         if not min_value <= value <= max_value:
             raise ValueError(f"{type(instance).__name__}.{attribute.name} must be in [{min_value}, {max_value}], got {value!r}")
 
+    check.emos_range = (min_value, max_value)  # type: ignore[attr-defined]  # read by UI forms
     return check
 
 
@@ -23,6 +24,7 @@ def in_(options: Iterable[Any]) -> Callable[[Any, attrs.Attribute, Any], None]:
         if value not in allowed:
             raise ValueError(f"{type(instance).__name__}.{attribute.name} must be one of {allowed}, got {value!r}")
 
+    check.emos_choices = allowed  # type: ignore[attr-defined]  # read by UI forms
     return check
 
 

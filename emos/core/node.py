@@ -18,9 +18,12 @@ from typing import Any, Callable
 
 from emos.config.base import ComponentRunType
 from emos.config.loader import ConfigError
+from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
-from emos.core.rpc import AsyncRpcClient, RpcServer
+from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.reconfig import reconfig_ops
+from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
 from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs import codec
@@ -68,6 +71,8 @@ class Node:
         sleeps (see :mod:`emos.transport.waker`); default ``$EMOS_WAKE_SPIN_US`` or 100 us.
         Threaded mode passes 0: a spinning thread would hold the interpreter lock."""
         self.component = component
+        if wake_spin_us is None:
+            wake_spin_us = getattr(component, "_wake_spin_us", None)  # the Monitor: 0, see supervisor/monitor.py
         self.wake_spin_us = wake_spin_setting() if wake_spin_us is None else wake_spin_us
         self.name = component.component_name
         self.ctx = ctx or current()
@@ -90,6 +95,8 @@ class Node:
         self._control: RpcServer | None = None
         self._supervisor: AsyncRpcClient | None = None
         self._step_kwargs = component._step_accepts_kwargs()
+        self._sim_time: SimTimeDriver | None = None  # config.use_sim_time: steps and answers on /clock
+        self._step_errors = RepeatLimiter()
         self.steps = 0
 
     # ============================================================================ running
@@ -115,7 +122,7 @@ class Node:
         self._waker = Waker(self.ctx, spin_us=self.wake_spin_us)
         loop.add_reader(self._waker.fd, self._on_wake)
         self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
-        self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name)
+        self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name, max_frame=CONTROL_FRAME)
         await self._control.start()
         self._heartbeat = _Timer(loop, 1.0 / self.component.config.heartbeat_rate, self._heartbeat_tick)
         self.publish_status()
@@ -203,6 +210,9 @@ class Node:
         for topic in self.component.in_topics:
             sub = Subscriber(self.ctx, topic.name, topic.msg_type, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
             self._inputs[topic.name] = _Input(topic, sub)
+        if getattr(self.component.config, "use_sim_time", False):
+            assert self._waker is not None
+            self._sim_time = SimTimeDriver(self.ctx, self.name, self._waker, lambda: 1.0 / self.component.config.loop_rate)
         self.component.custom_on_configure()
 
     async def _on_activate(self) -> None:
@@ -210,7 +220,7 @@ class Node:
         comp.custom_on_activate()
         run_type = comp.run_type
         assert self.loop is not None
-        if run_type == ComponentRunType.TIMED:
+        if run_type == ComponentRunType.TIMED and self._sim_time is None:
             self._main_timer = _Timer(self.loop, 1.0 / comp.config.loop_rate, self._run_step)
         elif run_type == ComponentRunType.SERVER:
             req, resp = comp.main_srv_type  # type: ignore[misc]
@@ -269,6 +279,9 @@ class Node:
         for inp in self._inputs.values():
             inp.sub.close()
         self._inputs.clear()
+        if self._sim_time is not None:
+            self._sim_time.close()
+            self._sim_time = None
 
     # ============================================================================ steps and data
     def _run_step(self, **kwargs: Any) -> None:
@@ -281,10 +294,11 @@ class Node:
         except Exception as exc:
             # Catch, don't crash: the process lives on, reports COMPONENT_FAILURE, and fallbacks
             # (or the supervisor, if it never recovers) decide what happens next.
-            self.log.exception("[%s] execution step raised: %s", self.name, exc)
+            log_exception_limited(self.log, self._step_errors, exc, f"[{self.name}] execution step")
             comp.health_status.set_fail_component(component_names=[self.name], message=f"{type(exc).__name__}: {exc}")
         self.steps += 1
-        self.publish_status()
+        if comp._status_every_step:
+            self.publish_status()
 
     def _serve_main(self, request: Any) -> Any:
         response = self.component._main_srv_callback(request)
@@ -302,12 +316,13 @@ class Node:
         for inp in self._inputs.values():
             if inp.sub.has_news():
                 return True
-        return False
+        return self._sim_time is not None and self._sim_time.has_news()
 
     def _take_inputs(self) -> None:
         now = time.time_ns()
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
+        tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
         # Triggers last: a step must see the other inputs that arrived in the same wake-up.
         for name, inp in sorted(self._inputs.items(), key=lambda kv: kv[1].topic in triggers):
             items = inp.sub.take_raw()
@@ -320,6 +335,9 @@ class Node:
                     msg = codec.decode(inp.topic.msg_type, raw_i)
                     inp.decoded = msg if raw_i is inp.raw else inp.decoded
                     self._run_step(msg=msg, topic=inp.topic)
+        if tick is not None and self._sim_time is not None:  # after the inputs that came with the tick
+            timed = active and self.component.run_type == ComponentRunType.TIMED
+            self._sim_time.handle(tick, self._run_step if timed else None)
 
     def _input(self, topic: Topic | str) -> _Input:
         name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
@@ -442,7 +460,8 @@ class Node:
             }
 
         return {"get_state": get_state, "transition": transition, "update_config": update_config,
-                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info}
+                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
+                **reconfig_ops(self)}
 
 
 class _Timer:

@@ -23,7 +23,12 @@ import msgpack
 log = logging.getLogger("emos.rpc")
 
 _LEN = struct.Struct("<I")
-MAX_FRAME = 1 << 30
+# What one frame may hold. The length prefix is read first and the body buffered whole, so the
+# bound is what a peer can make us allocate. Services and actions carry messages (a map, an
+# image) and get MAX_FRAME; control sockets carry small maps (lifecycle, parameters, the tree)
+# and are built with CONTROL_FRAME. Bigger payloads belong on topics (shared memory).
+MAX_FRAME = 64 << 20
+CONTROL_FRAME = 1 << 20
 
 Handler = Callable[[dict, "StreamWriter"], Awaitable[Any]]
 
@@ -45,11 +50,15 @@ def _unpack(body: bytes) -> Any:
     return msgpack.unpackb(body, raw=False, strict_map_key=False)
 
 
-async def read_frame(reader: asyncio.StreamReader) -> Any:
+class FrameTooLarge(RpcConnectionError):
+    """A peer announced a frame above the limit; the connection cannot be resynchronised."""
+
+
+async def read_frame(reader: asyncio.StreamReader, limit: int = MAX_FRAME) -> Any:
     head = await reader.readexactly(4)
     (n,) = _LEN.unpack(head)
-    if n > MAX_FRAME:
-        raise RpcConnectionError(f"frame of {n} B exceeds the limit of {MAX_FRAME} B")
+    if n > limit:
+        raise FrameTooLarge(f"frame of {n} B exceeds the limit of {limit} B")
     return _unpack(await reader.readexactly(n))
 
 
@@ -68,8 +77,9 @@ class StreamWriter:
 class RpcServer:
     """Serves ops on a Unix socket; ``handlers[op](request, stream)`` returns the result."""
 
-    def __init__(self, path: Path, handlers: dict[str, Handler], name: str = "rpc"):
+    def __init__(self, path: Path, handlers: dict[str, Handler], name: str = "rpc", max_frame: int = MAX_FRAME):
         self.path = Path(path)
+        self.max_frame = max_frame
         self.handlers = handlers
         self.name = name
         self._server: asyncio.base_events.Server | None = None
@@ -80,6 +90,8 @@ class RpcServer:
         # Bind under a temporary name and rename once listening: whoever sees the socket file
         # can connect (between bind and listen a connect is refused).
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}")
+        if len(os.fsencode(str(tmp))) > 107:  # sun_path: 108 bytes with the NUL
+            raise ValueError(f"{self.name}: socket path {tmp} is {len(os.fsencode(str(tmp)))} bytes; AF_UNIX allows 107 (use a shorter name)")
         for stale in (tmp, self.path):
             if stale.exists() or stale.is_symlink():
                 stale.unlink()
@@ -97,11 +109,23 @@ class RpcServer:
         try:
             while True:
                 try:
-                    req = await read_frame(reader)
+                    req = await read_frame(reader, self.max_frame)
+                except FrameTooLarge as exc:
+                    log.warning("%s: %s; closing the connection", self.name, exc)
+                    writer.write(pack_frame({"id": None, "ok": False, "error": f"{self.name}: request {exc}; connection closed"}))
+                    return
                 except (asyncio.IncompleteReadError, ConnectionError):
                     return
-                if not isinstance(req, dict) or "op" not in req:
-                    writer.write(pack_frame({"id": None, "ok": False, "error": "malformed request: expected a map with 'op'"}))
+                except (ValueError, TypeError, msgpack.ExtraData) as exc:  # not msgpack at all
+                    writer.write(pack_frame({"id": None, "ok": False, "error": f"malformed request: {exc}"}))
+                    continue
+                if not isinstance(req, dict) or not isinstance(req.get("op"), str):
+                    op = req.get("op") if isinstance(req, dict) else None
+                    rid = req.get("id") if isinstance(req, dict) else None
+                    writer.write(pack_frame({
+                        "id": rid if isinstance(rid, (int, str, type(None))) else None, "ok": False,
+                        "error": f"malformed request: expected a map with a string 'op', got op={op!r}",
+                    }))
                     continue
                 task = asyncio.ensure_future(self._answer(req, writer))
                 self._tasks.add(task)

@@ -9,6 +9,7 @@ from attrs import define, field
 from emos.config.base import BaseAttrs
 from emos.config.qos import QoSConfig
 from emos.msgs.registry import canonical_name, resolve
+from emos.transport.limits import check_topic_name
 
 _NAME_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_~{}]*(/[A-Za-z_{][A-Za-z0-9_{}]*)*$")
 
@@ -23,7 +24,9 @@ def normalize_topic_name(name: str) -> str:
             f"Topic name {name!r} is invalid: use letters, digits and '_', separated by '/', "
             "not starting with a digit and without '//' or a trailing '/'"
         )
-    return name if name.startswith("/") else "/" + name
+    name = name if name.startswith("/") else "/" + name
+    check_topic_name(name)
+    return name
 
 
 def _qos(value: Any) -> QoSConfig:
@@ -78,3 +81,21 @@ class Topic(BaseAttrs):
 
     def __repr__(self) -> str:
         return f"Topic(name={self.name!r}, msg_type={self.type_name!r})"
+
+    # -- event conditions (emos.events.conditions): ``topic.msg.data < 20.0``, ``topic & cond``
+    @property
+    def msg(self) -> Any:
+        """The root of an event condition or action binding over this topic's messages."""
+        from emos.events.conditions import MsgPath
+
+        return MsgPath(self)
+
+    def __and__(self, other: Any) -> Any:
+        from emos.events.conditions import new_message
+
+        return new_message(self) & other
+
+    def __or__(self, other: Any) -> Any:
+        from emos.events.conditions import new_message
+
+        return new_message(self) | other

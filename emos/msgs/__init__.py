@@ -8,7 +8,7 @@ from emos.msgs.control import RGBD, JointJog, JointTrajectory, JointTrajectoryPo
 from emos.msgs.fields import FieldTypeError
 from emos.msgs.geometry import (
     Point, PointStamped, Pose, Pose2D, PoseStamped, PoseWithCovariance, PoseWithCovarianceStamped,
-    Quaternion, Transform, TransformStamped, Twist, TwistStamped, TwistWithCovariance, Vector3, pose_xy_yaw,
+    Quaternion, TFMessage, Transform, TransformStamped, Twist, TwistStamped, TwistWithCovariance, Vector3, pose_xy_yaw,
 )
 from emos.msgs.intelligence import (
     Detections, DetectionsMultiSource, PointsOfInterest, StreamingString, Trackings, TrackingsMultiSource, Video,
@@ -22,7 +22,7 @@ from emos.msgs.sensor import (
 from emos.msgs.status import ComponentStatus
 from emos.msgs.srv import SetBoolRequest, SetBoolResponse, TriggerRequest, TriggerResponse
 from emos.msgs.std import (
-    Bool, Duration, Empty, Float32, Float32MultiArray, Float64, Float64MultiArray, Header, Int32, Int32MultiArray,
+    Bool, Clock, Duration, Empty, Float32, Float32MultiArray, Float64, Float64MultiArray, Header, Int32, Int32MultiArray,
     Int64, MultiArrayDimension, MultiArrayLayout, String, Time, UInt8, UInt8MultiArray,
 )
 

@@ -111,3 +111,10 @@ class TransformStamped(Message):
 def pose_xy_yaw(pose: Pose) -> np.ndarray:
     """(x, y, yaw) of a pose, the planar state navigation works with."""
     return np.array([pose.position.x, pose.position.y, pose.orientation.yaw()])
+
+
+@message_type("tf2_msgs")
+class TFMessage(Message):
+    """A batch of transforms (``/tf``, ``/tf_static``): ``msg.transforms[i].transform.translation.x``."""
+
+    transforms: list = F.message_list(TransformStamped)

@@ -121,3 +121,10 @@ class Int32MultiArray(Message):
 class UInt8MultiArray(Message):
     layout: MultiArrayLayout = F.message(MultiArrayLayout)
     data: np.ndarray = F.bytes_array()
+
+
+@message_type("rosgraph_msgs")
+class Clock(Message):
+    """Simulated time, published on ``/clock`` by the Simulator (see :mod:`emos.core.clock`)."""
+
+    clock: Time = F.message(Time)

@@ -53,14 +53,22 @@ class Waker:
         self.state_path = state_path(ctx, self.token)
         fd = os.open(self.state_path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
         try:
-            os.ftruncate(fd, _STATE_BYTES)
-            self._state_mm = mmap.mmap(fd, _STATE_BYTES)
-        finally:
-            os.close(fd)
-        self._state = memoryview(self._state_mm).cast("Q")
-        os.mkfifo(self.path, 0o600)
-        # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
-        self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
+            try:
+                os.ftruncate(fd, _STATE_BYTES)
+                self._state_mm = mmap.mmap(fd, _STATE_BYTES)
+            finally:
+                os.close(fd)
+            self._state = memoryview(self._state_mm).cast("Q")
+            os.mkfifo(self.path, 0o600)
+            # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
+            self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
+        except BaseException:  # an error or a signal (the CLI turns SIGTERM into SystemExit) half way
+            for path in (self.path, self.state_path):
+                try:
+                    os.unlink(path)
+                except FileNotFoundError:
+                    pass
+            raise
 
     def fileno(self) -> int:
         return self.fd
@@ -188,12 +196,13 @@ class WakeSender:
             state[1].release()
             state[0].close()
 
-    def wake(self, what: bytes = MESSAGE) -> list[int]:
+    def wake(self, what: bytes = MESSAGE, fenced: bool = False) -> list[int]:
         """One byte (``MESSAGE`` or ``ANNOUNCE``) to every FIFO whose reader is not spinning
-        (announcements go to all); returns tokens whose reader is gone."""
+        (announcements go to all); returns tokens whose reader is gone. ``fenced``: the caller
+        has just run a full fence after publishing, so this one is not needed."""
         dead = []
         states = self._states
-        if what == MESSAGE and states:
+        if what == MESSAGE and states and not fenced:
             full_fence()  # our message must be visible before we read who is spinning (module doc)
         for token, fd in self.fds.items():
             if what == MESSAGE:

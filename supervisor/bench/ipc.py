@@ -29,7 +29,7 @@ import sys
 from typing import Any
 
 from emos.core.node import wake_spin_setting
-from emos.supervisor.bench import ipc_common, ipc_oneway, ipc_pingpong
+from emos.supervisor.bench import ipc_common, ipc_component, ipc_oneway, ipc_pingpong
 from emos.supervisor.bench.common import percentiles, table
 
 SIZES = [8, 1024, 65536, 921_600, 8 * 1024 * 1024]
@@ -38,6 +38,7 @@ SIZES = [8, 1024, 65536, 921_600, 8 * 1024 * 1024]
 # 921,600 B a ring of depth 10 cycles 9 MB per direction, past this CPU's 2 MB L2.
 DEFAULT_DEPTH = 2
 TRANSPORTS = ["emos", "mp_queue", "mp_pipe"]
+MODES = ["both", "transport", "component"]
 METHODS = {
     "pingpong": ("half a round trip (ping-pong)", ipc_pingpong.latency_us),
     "oneway": ("one way, paced sender", ipc_oneway.latency_us),
@@ -46,13 +47,17 @@ METHODS = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the machine-readable result")
+    parser.add_argument("--plot", metavar="FILE", help="save p50 latency by payload size and transport as a picture (.png, .svg, .pdf)")
     parser.add_argument("--method", choices=list(METHODS), default="pingpong", help="how latency is measured (default: pingpong, half a round trip)")
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes, comma-separated")
     parser.add_argument("--transports", default=",".join(TRANSPORTS), help=f"comma-separated, from {','.join(TRANSPORTS)}")
     parser.add_argument("--messages", type=int, default=400, help="latency samples per size (fewer for large payloads)")
     parser.add_argument("--throughput-seconds", type=float, default=1.0)
     parser.add_argument("--cpus", default=_default_cpus(), help="pin the two ends to these CPUs, 'A,B', or 'none' (default: the first two CPUs this process may use, each end on its own)")
-    parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, help=f"history depth (KEEP_LAST) of the EMOS rings in the latency test (default {DEFAULT_DEPTH})")
+    parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, help=f"history depth (KEEP_LAST) of the EMOS rings in the transport latency test (default {DEFAULT_DEPTH})")
+    parser.add_argument("--mode", choices=MODES, default="both",
+                        help="transport: the rings under a bare event loop, against multiprocessing; component: ping-pong between two "
+                             "supervised BaseComponents with default QoS (what recipes get); both (default)")
 
 
 def _samples_for(size: int, wanted: int) -> int:
@@ -70,13 +75,19 @@ def measure(transports: list[str], sizes: list[int], messages: int, seconds: flo
             if progress:
                 print(f"  {transport:>8} {size:>9} B: latency ({count} {unit})...", end="", flush=True)
             with ipc_common.placed():
-                lat = latency_us(transport, size, count, depth=depth)
+                try:
+                    lat, mismatches, error = latency_us(transport, size, count, depth=depth), 0, None
+                except ipc_pingpong.SequenceMismatch as exc:  # a result, and an error: reported, not hidden
+                    lat, mismatches, error = [], exc.count, str(exc)
                 got, span, dropped = ipc_oneway.throughput(transport, size, seconds)
             p = percentiles(lat)
             rate = got / span if span > 0 else float("nan")
             if progress:
-                print(f" p50 {p['p50']:.1f} us, p99 {p['p99']:.1f} us; {rate:,.0f} msg/s", flush=True)
-            results.append({"transport": transport, "payload_bytes": size, "p50_us": round(p["p50"], 2), "p99_us": round(p["p99"], 2), "msgs_per_s": round(rate, 1), "dropped": dropped})
+                print(f" p50 {p['p50']:.1f} us, p99 {p['p99']:.1f} us; {rate:,.0f} msg/s" + (f"; ERROR {error}" if error else ""), flush=True)
+            row = {"transport": transport, "payload_bytes": size, "p50_us": round(p["p50"], 2), "p99_us": round(p["p99"], 2), "msgs_per_s": round(rate, 1), "dropped": dropped, "seq_mismatches": mismatches}
+            if error:
+                row["error"] = error
+            results.append(row)
     return results
 
 
@@ -131,15 +142,42 @@ def run(args: argparse.Namespace) -> int:
         return _usage_error(placement)
     ipc_common.PLACEMENT = placement
     label = METHODS[args.method][0]
-    if not args.json:
-        where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
-        print(f"emos bench ipc on {os.cpu_count()} cores ({where}): payloads {sizes}; latency {label}; EMOS depth {args.depth}, wake spin {wake_spin_setting():g} us")
-    results = measure(transports, sizes, args.messages, args.throughput_seconds, args.method, progress=not args.json, depth=args.depth)
+    where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
+    doc: dict[str, Any] = {"mode": args.mode, "method": args.method, "cpus": None if placement is None else list(placement), "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting()}
+    failed = False
+    from emos.supervisor.plotting import check_plot_argument, save_lines
+
+    check_plot_argument(args.plot)
+    if args.mode in ("both", "transport"):
+        if not args.json:
+            print(f"emos bench ipc, transport mode, on {os.cpu_count()} cores ({where}): payloads {sizes}; latency {label}; EMOS depth {args.depth}, wake spin {wake_spin_setting():g} us")
+        results = measure(transports, sizes, args.messages, args.throughput_seconds, args.method, progress=not args.json, depth=args.depth)
+        doc["results"] = results
+        failed = any("error" in r for r in results)
+        if args.plot:
+            save_lines(args.plot, f"emos bench ipc: {label}", "payload (bytes)", "p50 latency (us)",
+                       {t: ([r["payload_bytes"] for r in results if r["transport"] == t], [r["p50_us"] for r in results if r["transport"] == t])
+                        for t in dict.fromkeys(r["transport"] for r in results)}, log=True)
+        if not args.json:
+            _print_transport(results, sizes, label, args.method)
+    if args.mode in ("both", "component"):
+        if not args.json:
+            print(f"\nemos bench ipc, component mode ({where}): two supervised BaseComponents, default QoS (depth {ipc_component.qos_depth()}), half round trips...", flush=True)
+        rows, error = ipc_component.latency(sizes, args.messages, _samples_for)
+        doc["component"] = {"qos_depth": ipc_component.qos_depth(), "results": rows, "error": error}
+        failed = failed or error is not None
+        if not args.json:
+            print(table(rows, [("transport", "path", ""), ("payload_bytes", "bytes", ",d"), ("p50_us", "p50 us", ".1f"), ("p99_us", "p99 us", ".1f"), ("round_trips", "samples", "d"), ("seq_mismatches", "seq errors", "d")]))
+            if error:
+                print(f"ERROR: {error}", file=sys.stderr)
     if args.json:
-        print(json.dumps({"method": args.method, "cpus": None if placement is None else list(placement), "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting(), "results": results}))
-        return 0
+        print(json.dumps(doc))
+    return 1 if failed else 0
+
+
+def _print_transport(results: list[dict[str, Any]], sizes: list[int], label: str, method: str) -> None:
     print()
-    print(f"latency: {label} (--method {args.method}); throughput: one way, sender flat out")
+    print(f"latency: {label} (--method {method}); throughput: one way, sender flat out")
     print(table(results, [("transport", "transport", ""), ("payload_bytes", "bytes", ",d"), ("p50_us", "p50 us", ".1f"), ("p99_us", "p99 us", ".1f"), ("msgs_per_s", "msg/s", ",.0f")]))
     by = {(r["transport"], r["payload_bytes"]): r for r in results}
     print()
@@ -147,4 +185,3 @@ def run(args: argparse.Namespace) -> int:
         e, p = by.get(("emos", size)), by.get(("mp_pipe", size))
         if e and p and e["p50_us"] > 0:
             print(f"  {size:>9} B: pipe p50 / emos p50 = {p['p50_us'] / e['p50_us']:.1f}x")
-    return 0

@@ -45,6 +45,9 @@ def random_payload(size: int) -> np.ndarray:
 
 def _child_main(parent_pid: int, name: str, target: Callable[..., None], args: tuple) -> None:
     set_process_name(name)
+    # Ctrl-C at the terminal reaches the whole foreground group: the benchmark handles it and
+    # stops its helpers in order, so they ignore it rather than each print a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # If the benchmark dies (Ctrl-C, SIGKILL), its helper must not linger.
     if not die_with(parent_pid, signal.SIGTERM):
         os._exit(1)

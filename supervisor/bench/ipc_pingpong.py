@@ -32,6 +32,28 @@ def _round_trip_timeout(size: int, round_trips: int) -> float:
     return 30.0 + round_trips * (0.01 + size / 2e8)
 
 
+SEQ_BYTES = 8
+
+
+class SequenceMismatch(RuntimeError):
+    """Replies that did not carry the sequence number of the ping in flight."""
+
+    def __init__(self, transport: str, size: int, count: int):
+        super().__init__(f"{transport} at {size} B: {count} repl(ies) carried the wrong sequence number")
+        self.count = count
+
+
+def _stamp(payload: np.ndarray, seq: int) -> None:
+    """Write ``seq`` into the first 8 bytes of the payload (payloads under 8 B carry what fits)."""
+    n = min(SEQ_BYTES, payload.nbytes)
+    payload[:n] = np.frombuffer(seq.to_bytes(SEQ_BYTES, "little")[:n], np.uint8)
+
+
+def _seq_matches(reply: np.ndarray, payload: np.ndarray) -> bool:
+    n = min(SEQ_BYTES, payload.nbytes)
+    return reply.nbytes == payload.nbytes and bytes(reply[:n]) == bytes(payload[:n])
+
+
 def _check_echo(data: np.ndarray, payload: np.ndarray, first: bool) -> None:
     if data.nbytes != payload.nbytes:
         raise RuntimeError(f"echo returned {data.nbytes} B for a {payload.nbytes} B payload")
@@ -121,9 +143,12 @@ def _emos_half_rtts(size: int, count: int, depth: int) -> list[float]:
             rtts_ns: list[int] = []
             done = loop.create_future()
             sent_at = 0  # 0: no ping in flight
+            seq = mismatches = 0
 
             def send() -> None:
-                nonlocal sent_at
+                nonlocal sent_at, seq
+                seq += 1
+                _stamp(payload, seq)  # every ping carries its number; the reply must carry it back
                 sent_at = time.perf_counter_ns()
                 pub.publish(msg)
 
@@ -131,12 +156,16 @@ def _emos_half_rtts(size: int, count: int, depth: int) -> list[float]:
                 nonlocal sent_at
                 if done.done():
                     return
+                nonlocal mismatches
                 try:
                     for _, raw, _ in sub.take_raw():
                         echo = codec.decode(UInt8MultiArray, raw)
                         now = time.perf_counter_ns()  # the echo is decoded and usable
                         if sent_at == 0:
                             raise RuntimeError(f"topic {pong}: a reply arrived with no ping in flight")
+                        if not _seq_matches(echo.data, payload):
+                            mismatches += 1  # stale or duplicated: not the reply to this ping
+                            continue
                         rtts_ns.append(now - sent_at)
                         sent_at = 0
                         _check_echo(echo.data, payload, first=len(rtts_ns) == 1)
@@ -164,6 +193,8 @@ def _emos_half_rtts(size: int, count: int, depth: int) -> list[float]:
         ready_r.close()
         remove_topic(ctx, ping)
         remove_topic(ctx, pong)
+    if mismatches:
+        raise SequenceMismatch("emos", size, mismatches)
     return [ns / 2e3 for ns in rtts_ns[total - count :]]
 
 
@@ -183,18 +214,21 @@ def _queue_echo(there: Any, back: Any) -> None:
 def _pipe_half_rtts(size: int, count: int) -> list[float]:
     """One duplex ``multiprocessing.Pipe``; the echo sends back what it received."""
     payload_arr = random_payload(size)
-    payload = payload_arr.tobytes()
     total = warmup_round_trips(count) + count
     mine, theirs = FORK.Pipe(duplex=True)
     proc = start_child(_pipe_echo, (theirs,), "emos:bench-echo")
     theirs.close()  # so a dead echo is an EOFError here, not a hang
     rtts_ns: list[int] = []
+    mismatches = 0
     try:
         for i in range(total):
+            _stamp(payload_arr, i + 1)
+            payload = payload_arr.tobytes()  # before the clock starts
             start = time.perf_counter_ns()
             mine.send(payload)
             reply = np.frombuffer(mine.recv(), dtype=np.uint8)
             rtts_ns.append(time.perf_counter_ns() - start)
+            mismatches += not _seq_matches(reply, payload_arr)
             _check_echo(reply, payload_arr, first=i == 0)
         mine.send(None)
     except EOFError:
@@ -204,21 +238,25 @@ def _pipe_half_rtts(size: int, count: int) -> list[float]:
         mine.close()
     if exit_code != 0:
         raise RuntimeError(f"Pipe echo process exited with code {exit_code}")
+    if mismatches:
+        raise SequenceMismatch("mp_pipe", size, mismatches)
     return [ns / 2e3 for ns in rtts_ns[total - count :]]
 
 
 def _queue_half_rtts(size: int, count: int) -> list[float]:
     """Two ``multiprocessing.Queue``s, there and back."""
     payload_arr = random_payload(size)
-    payload = payload_arr.tobytes()
     total = warmup_round_trips(count) + count
     timeout = _round_trip_timeout(size, 1)
     there, back = FORK.Queue(), FORK.Queue()
     proc = start_child(_queue_echo, (there, back), "emos:bench-echo")
     rtts_ns: list[int] = []
     exit_code: int | None = None
+    mismatches = 0
     try:
         for i in range(total):
+            _stamp(payload_arr, i + 1)
+            payload = payload_arr.tobytes()  # before the clock starts
             start = time.perf_counter_ns()
             there.put(payload)
             try:
@@ -227,6 +265,7 @@ def _queue_half_rtts(size: int, count: int) -> list[float]:
                 raise RuntimeError(f"Queue echo gave no reply in {timeout:.0f} s (exit code {proc.exitcode})") from exc
             reply = np.frombuffer(raw, dtype=np.uint8)
             rtts_ns.append(time.perf_counter_ns() - start)
+            mismatches += not _seq_matches(reply, payload_arr)
             _check_echo(reply, payload_arr, first=i == 0)
         there.put(None)
     finally:
@@ -239,6 +278,8 @@ def _queue_half_rtts(size: int, count: int) -> list[float]:
             q.join_thread()
     if exit_code != 0:
         raise RuntimeError(f"Queue echo process exited with code {exit_code}")
+    if mismatches:
+        raise SequenceMismatch("mp_queue", size, mismatches)
     return [ns / 2e3 for ns in rtts_ns[total - count :]]
 
 

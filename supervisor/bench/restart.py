@@ -31,6 +31,7 @@ SYSTEM = Path(__file__).with_name("restart_system.py")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kills", type=int, default=200)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--plot", metavar="FILE", help="save the detect and recover time distributions as a picture (.png, .svg, .pdf)")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for one recovery")
 
 
@@ -57,8 +58,11 @@ def run(args: argparse.Namespace) -> int:
     if args.kills < 1:
         print("emos bench restart: --kills must be >= 1")
         return 2
+    from emos.supervisor.plotting import check_plot_argument
+
+    check_plot_argument(args.plot)
     env = dict(os.environ, EMOS_BENCH_KILLS=str(args.kills))
-    system = subprocess.Popen([sys.executable, "-m", "emos", "run", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    system = subprocess.Popen([sys.executable, "-m", "emos", "run", "--no-log", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     detect_ms: list[float] = []
     recover_ms: list[float] = []
     try:
@@ -113,6 +117,10 @@ def run(args: argparse.Namespace) -> int:
         "leaked_shm": leaked,
         "zombies": zombies + len(orphans),
     }
+    if args.plot:
+        from emos.supervisor.plotting import save_histograms
+
+        save_histograms(args.plot, f"emos bench restart: {args.kills} kills", "ms", {"kill -> detected": detect_ms, "kill -> publishing again": recover_ms})
     if args.json:
         print(json.dumps(result))
     else:

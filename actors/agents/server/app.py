@@ -31,6 +31,17 @@ def build_app(models: LocalModels) -> tuple[web.Application, RoboMLNodes]:
     return app, nodes
 
 
+class ListenError(OSError):
+    """A listener could not bind; the message names which one and its port."""
+
+
+async def _listen(what: str, host: str, port: int, starting: Any) -> Any:
+    try:
+        return await starting
+    except OSError as exc:
+        raise ListenError(f"cannot listen for {what} on {host}:{port}: {exc.strerror or exc}") from exc
+
+
 async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, resp_port: int | None = None,
                 lerobot_port: int | None = None, ready: Any = None) -> None:
     """Serve until SIGTERM/SIGINT, then close listeners and in-flight connections cleanly."""
@@ -38,13 +49,25 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
     runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=2.0)
     await runner.setup()
     site = web.TCPSite(runner, host, port, reuse_address=True)
-    await site.start()
-    resp = await start_resp_server(nodes, host, resp_port) if resp_port is not None else None
-    policy = None
-    if lerobot_port is not None:
-        from .lerobot_policy import HoldPositionPolicyServer  # grpc threads start only if asked
+    resp = policy = None
+    listening = "HTTP"
+    try:
+        await _listen("HTTP", host, port, site.start())
+        if resp_port is not None:
+            resp = await _listen("RESP", host, resp_port, start_resp_server(nodes, host, resp_port))
+        if lerobot_port is not None:
+            from .lerobot_policy import HoldPositionPolicyServer  # grpc threads start only if asked
 
-        policy = HoldPositionPolicyServer(host, lerobot_port).start()
+            listening = "LeRobot gRPC"
+            policy = HoldPositionPolicyServer(host, lerobot_port).start()
+    except BaseException as exc:
+        # Release what did start, and name the listener that failed (not always --port).
+        if resp is not None:
+            await resp.close()
+        await runner.cleanup()
+        if isinstance(exc, OSError) and not isinstance(exc, ListenError) and listening != "HTTP":
+            raise ListenError(f"cannot listen for {listening} on {host}:{lerobot_port}: {exc}") from exc
+        raise
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):

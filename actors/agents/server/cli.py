@@ -9,12 +9,23 @@ import sys
 __all__ = ["add_arguments", "run"]
 
 
+def port_number(text: str) -> int:
+    """A TCP port for argparse: 1-65535, or 0 for any free port."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number 1-65535 (0 = any free port), got {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 1-65535 (0 = any free port), got {port}")
+    return port
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: local only)")
-    parser.add_argument("--port", type=int, default=8000, help="HTTP/WebSocket port (default 8000; 0 = any free port)")
-    parser.add_argument("--resp-port", type=int, default=None,
+    parser.add_argument("--port", type=port_number, default=8000, help="HTTP/WebSocket port (default 8000; 0 = any free port)")
+    parser.add_argument("--resp-port", type=port_number, default=None,
                         help="also serve RoboML's RESP protocol on this port (default: off)")
-    parser.add_argument("--lerobot-port", type=int, default=None,
+    parser.add_argument("--lerobot-port", type=port_number, default=None,
                         help="also serve a hold-position LeRobot policy over gRPC on this port (default: off)")
     parser.add_argument("--script", default=None, help="YAML/JSON file of scripted chat replies")
     parser.add_argument("--model", action="append", default=[], metavar="NAME",
@@ -25,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    from .app import serve
+    from .app import ListenError, serve
     from .backends import LocalModels
 
     try:
@@ -35,7 +46,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         asyncio.run(serve(models, args.host, args.port, args.resp_port, args.lerobot_port))
-    except OSError as exc:  # port in use, bad interface
-        print(f"emos serve models: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
+    except ListenError as exc:  # port in use, bad interface: the message names the listener
+        print(f"emos serve models: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"emos serve models: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -1,0 +1,217 @@
+"""``SimulatorConfig``: which world, which robot, which sensors at which rates, noise, clock.
+
+Every field is validated when it is set, so a recipe with an unknown world or robot, a map
+file that does not exist or a negative rate fails where it is written, naming the field.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import attrs
+from attrs import define, field
+
+from emos.config.base import BaseComponentConfig
+
+from ..clock import ClockMode
+from ..robots import PRESETS
+
+# Named worlds; a path to a ROS map YAML and "barn:<index>" are accepted too (see worlds.py).
+NAMED_WORLDS = ("house", "house_person", "empty", "tabletop")
+
+
+def _frames_default() -> Any:
+    from emos.actors.nav.robot import RobotFrames
+
+    return RobotFrames()
+
+
+def _frames(value: Any) -> Any:
+    """A RobotFrames, or a mapping of its fields (config files)."""
+    if isinstance(value, dict):
+        from emos.actors.nav.robot import RobotFrames
+
+        try:
+            return RobotFrames(**value)
+        except TypeError as exc:
+            raise ValueError(f"SimulatorConfig.frames: {exc}") from None
+    return value
+
+
+def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    from emos.actors.nav.robot import RobotFrames
+
+    if not isinstance(value, RobotFrames):
+        raise TypeError(f"SimulatorConfig.frames must be a RobotFrames, got {type(value).__name__} {value!r}")
+
+
+def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    """``house``, ``house_person``, ``empty``, ``tabletop`` (the arm), ``barn:<index>`` or a
+    ROS map YAML path."""
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"SimulatorConfig.world must be a world name or a map path, got {value!r}")
+    if value in NAMED_WORLDS:
+        return
+    if value.startswith("barn:"):
+        from ..barn_worlds import load_barn_worlds
+
+        try:
+            idx = int(value.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"SimulatorConfig.world {value!r}: a BARN world is 'barn:<index>', e.g. 'barn:0'") from None
+        worlds = load_barn_worlds()
+        if idx not in worlds:
+            raise ValueError(f"SimulatorConfig.world {value!r}: no BARN world {idx} (indices {min(worlds)}..{max(worlds)})")
+        return
+    if value.endswith((".yaml", ".yml")):
+        from emos.actors.nav.maps.map_yaml import read_map_yaml
+
+        path = Path(value).expanduser()
+        if not path.is_file():
+            raise ValueError(f"SimulatorConfig.world: map file {str(path)!r} does not exist")
+        meta = read_map_yaml(path)  # a malformed YAML fails here, naming the file and key
+        if not Path(meta["image"]).is_file():
+            raise ValueError(f"SimulatorConfig.world: map {str(path)!r} names image {str(meta['image'])!r}, which does not exist")
+        return
+    raise ValueError(f"SimulatorConfig.world: unknown world {value!r}; expected one of {', '.join(NAMED_WORLDS)}, "
+                     "'barn:<index>' or the path of a ROS map YAML")
+
+
+def _check_robot(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    from emos.actors.nav.robot import RobotConfig
+
+    if isinstance(value, RobotConfig):
+        return
+    if not isinstance(value, str) or value not in PRESETS:
+        raise ValueError(f"SimulatorConfig.robot: unknown robot {value!r}; expected one of {', '.join(sorted(PRESETS))} "
+                         "or a RobotConfig")
+
+
+def _rate(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"SimulatorConfig.{attribute.name} must be a rate in Hz > 0, got {value!r}")
+
+
+def _nonneg(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+        raise ValueError(f"SimulatorConfig.{attribute.name} must be a number >= 0, got {value!r}")
+
+
+def _positive(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"SimulatorConfig.{attribute.name} must be a number > 0, got {value!r}")
+
+
+def _spawn(value: Any) -> tuple[float, float, float] | None:
+    if value is None:
+        return None
+    try:
+        x, y, yaw = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"SimulatorConfig.spawn must be (x, y, yaw) or None, got {value!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise ValueError(f"SimulatorConfig.spawn must be finite, got {value!r}")
+    return (x, y, yaw)
+
+
+def _consumers(value: Any) -> list[str]:
+    if isinstance(value, str) or not all(isinstance(v, str) and v for v in value):
+        raise ValueError(f"SimulatorConfig.lockstep_consumers must be a list of component names, got {value!r}")
+    return list(value)
+
+
+def _obstacles(value: Any) -> list:
+    from ..primitives import Box, Cylinder, Wall
+
+    items = list(value)
+    for item in items:
+        if not isinstance(item, (Box, Cylinder, Wall)):
+            raise ValueError(f"SimulatorConfig.obstacles must be Box, Cylinder or Wall objects, got {type(item).__name__} {item!r}")
+    return items
+
+
+def _movers(value: Any) -> list:
+    from ..moving import MovingObstacle
+
+    items = list(value)
+    for item in items:
+        if not isinstance(item, MovingObstacle):
+            raise ValueError(f"SimulatorConfig.moving_obstacles must be MovingObstacle (or Person) objects, "
+                             f"got {type(item).__name__} {item!r}")
+    return items
+
+
+def _int_at_least(low: int) -> Any:
+    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ValueError(f"SimulatorConfig.{attribute.name} must be an integer >= {low}, got {value!r}")
+    return check
+
+
+@define(kw_only=True)
+class SimulatorConfig(BaseComponentConfig):
+    """Parameters of the :class:`Simulator`. Rates are in Hz of *simulated* time."""
+
+    world: str = field(default="house", validator=check_world)
+    robot: Any = field(default="jackal", validator=_check_robot)
+    """A preset name, or a navigation ``RobotConfig`` (``launcher.robot`` sets it at bringup:
+    the simulated robot is then the one navigation plans for, see ``robot_model.py``)."""
+    spawn: tuple[float, float, float] | None = field(default=None, converter=_spawn)
+    """Robot pose (x, y, yaw) in the world frame; None = the world's suggested spawn."""
+    obstacles: list = field(factory=list, converter=_obstacles)
+    """Extra static Box / Cylinder / Wall shapes added to the world (not to its map)."""
+    moving_obstacles: list = field(factory=list, converter=_movers)
+    """MovingObstacle / Person objects walking their waypoints in simulated time."""
+    frames: Any = field(factory=_frames_default, converter=_frames, validator=_check_frames)
+    """Frame names (``RobotFrames``); ``launcher.frames`` overrides them at bringup."""
+
+    physics_rate: float = field(default=100.0, validator=_rate)
+    clock_rate: float = field(default=50.0, validator=_rate)
+    """How often /clock is published; in lockstep, how often the consumers are waited for."""
+    clock_mode: ClockMode = field(default=ClockMode.REALTIME, converter=ClockMode)
+    real_time_factor: float = field(default=1.0, validator=_positive)
+    lockstep_consumers: list[str] = field(factory=list, converter=_consumers)
+    """Components (with ``use_sim_time``) that must answer every /clock tick in lockstep."""
+    command_timeout: float = field(default=0.5, validator=_positive)
+    """Simulated seconds without a new command after which the robot stops (a base's watchdog)."""
+    command_array_step: float = field(default=0.1, validator=_positive)
+    """Seconds each entry of a TwistArray command lasts (the controller's time step)."""
+
+    joint_state_rate: float = field(default=30.0, validator=_rate)
+    """Arm joint states (the ``tabletop`` world)."""
+    odom_rate: float = field(default=50.0, validator=_rate)
+    odom_noise: bool = False
+    """True: wheel odometry with drift (OdometryConfig.noisy); False: ground truth."""
+    scan_rate: float = field(default=10.0, validator=_rate)
+    scan_beams: int = field(default=360, validator=_int_at_least(2))
+    scan_fov_deg: float = field(default=360.0, validator=_positive)
+    scan_range_max: float = field(default=10.0, validator=_positive)
+    scan_noise_std: float = field(default=0.0, validator=_nonneg)
+    camera_rate: float = field(default=10.0, validator=_rate)
+    camera_width: int = field(default=320, validator=_int_at_least(8))
+    camera_height: int = field(default=240, validator=_int_at_least(8))
+    camera_vfov_deg: float = field(default=60.0, validator=_positive)
+    jpeg_quality: int = field(default=85, validator=_int_at_least(1))
+    slip: float = field(default=0.0, validator=_nonneg)
+    actuation_noise: float = field(default=0.0, validator=_nonneg)
+    seed: int = field(default=0, validator=_int_at_least(0))
+    loop_rate: float = field(default=10.0, validator=_rate)
+    """How often the component's own step runs (health reports); physics runs in its own thread."""
+
+    def __attrs_post_init__(self) -> None:
+        self.check_rates()
+
+    def check_rates(self) -> None:
+        ticks = self.physics_rate / self.clock_rate
+        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-6:
+            raise ValueError(f"SimulatorConfig: physics_rate ({self.physics_rate} Hz) must be a whole multiple of "
+                             f"clock_rate ({self.clock_rate} Hz)")
+        if self.scan_fov_deg > 360:
+            raise ValueError(f"SimulatorConfig.scan_fov_deg must be in (0, 360], got {self.scan_fov_deg}")
+        if self.jpeg_quality > 100:
+            raise ValueError(f"SimulatorConfig.jpeg_quality must be in 1..100, got {self.jpeg_quality}")
+
+    @property
+    def ticks_per_clock(self) -> int:
+        return int(round(self.physics_rate / self.clock_rate))

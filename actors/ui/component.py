@@ -1,0 +1,148 @@
+"""``UIComponent``: the web page of a recipe, as a supervised component of its own.
+
+It subscribes to the topics the page shows (each message is handed to its hub, see
+:mod:`emos.actors.ui.streams`), publishes what the user enters on the page, and serves both over
+HTTP and a websocket from its own event loop. ``Launcher.enable_ui`` creates it.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+from emos.actors.ui.config import UIConfig
+from emos.actors.ui.widgets import output_kind
+from emos.core.action_input import ActionInput
+from emos.core.component import BaseComponent
+from emos.io.topic import Topic
+
+
+BIND_RETRY_S = 2.0
+
+
+class UIComponent(BaseComponent):
+    def __init__(
+        self,
+        ui_inputs: Sequence[Topic] = (),
+        ui_outputs: Sequence[Topic] = (),
+        components: Sequence[BaseComponent] = (),
+        ui_actions: Sequence[ActionInput] = (),
+        config: UIConfig | None = None,
+        component_name: str = "ui",
+    ) -> None:
+        """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
+        ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers.
+        ``ui_actions``: actions the page sends goals to (``component.ui_main_action_input``)."""
+        config = config or UIConfig()
+        if not isinstance(config, UIConfig):
+            raise TypeError(f"UIComponent config must be a UIConfig, got {type(config).__name__}")
+        shown, controls = list(ui_outputs), list(ui_inputs)
+        both = sorted({t.name for t in shown} & {t.name for t in controls})
+        if both:
+            # The page would receive its own messages back; say so instead of looping.
+            raise ValueError(f"enable_ui: topic(s) {', '.join(both)} are both inputs and outputs of the UI")
+        super().__init__(component_name=component_name, inputs=shown, outputs=controls, config=config,
+                         trigger=shown if shown else 1.0)
+        self.config: UIConfig
+        self._settings_of = {c.component_name: c.config for c in components if c is not self}
+        for a in ui_actions:
+            if not isinstance(a, ActionInput):
+                raise TypeError(f"UIComponent ui_actions must be ActionInput objects, got {type(a).__name__}")
+        self._actions = {a.name: a for a in ui_actions}
+        self._server: Any = None
+        self._start_task: Any = None
+        self._listening = False
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        from emos.actors.ui.server import UIServer
+        from emos.actors.ui.streams import make_hub
+        from emos.core.node import control_socket
+        from emos.core.services import service_socket
+
+        node = self.node
+        if self.config.nice and not getattr(self, "_reniced", False) and threading.current_thread() is threading.main_thread():
+            self._reniced = True
+            os.nice(self.config.nice)  # our own process (a threaded UI would renice the launcher: not then)
+        hubs, first_map = [], True
+        for t in self.in_topics:
+            kind = output_kind(t.msg_type.__name__)
+            hubs.append(make_hub(t.name, t.msg_type.__name__, kind, self.config, overlay=kind == "map" and not first_map))
+            first_map = first_map and kind != "map"
+        self._hubs = {h.topic: h for h in hubs}
+        self._server = UIServer(
+            self.config, hubs, {t.name: t.msg_type.__name__ for t in self.out_topics}, self._settings_of,
+            publish=self.publish, control_socket=lambda name: Path(control_socket(node.ctx, name)),
+            supervisor_socket=node.supervisor_socket, own_name=self.component_name,
+            actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)),
+        )
+        self._listening = False
+
+    def custom_on_activate(self) -> None:
+        import asyncio
+
+        if self._start_task is None:
+            self._start_task = asyncio.ensure_future(self._serve())
+
+    async def _serve(self) -> None:
+        """Listen and serve. A taken port does not stop the robot: the UI reports the failure
+        (health and a log line naming the address) and tries again every ``BIND_RETRY_S``."""
+        import asyncio
+
+        failures = 0
+        server = self._server
+        while server is not None and server is self._server:
+            try:
+                server.bind()
+                await server.start()
+                break
+            except OSError as exc:
+                failures += 1
+                if failures == 1 or failures % 30 == 0:
+                    self.get_logger().error("[%s] %s (tried %d times; retrying every %g s)", self.component_name, exc, failures, BIND_RETRY_S)
+                self.health_status.set_fail_component(component_names=[self.component_name], message=str(exc))
+                self.node.publish_status()
+                await asyncio.sleep(BIND_RETRY_S)
+        else:
+            return
+        self._listening = True
+        self.health_status.set_healthy()
+        self.get_logger().info("[%s] page at %s", self.component_name, page_url(self.config))
+
+    def custom_on_shutdown(self) -> None:
+        self._stop_server()
+
+    def custom_on_cleanup(self) -> None:
+        self._stop_server()
+
+    def _stop_server(self) -> None:
+        import asyncio
+
+        if self._server is not None:
+            server, self._server = self._server, None
+            server.close_listener()
+            try:
+                asyncio.ensure_future(server.stop())
+            except RuntimeError:  # no loop any more: the listener is closed, the rest goes with the process
+                pass
+        if self._start_task is not None:
+            self._start_task.cancel()
+        self._start_task = None
+        self._listening = False
+
+    # -- every shown message -----------------------------------------------------------------------
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+        if msg is not None and topic is not None:
+            hub = self._hubs.get(topic.name)
+            if hub is not None:
+                hub.push(msg, time.time_ns())
+        if self._listening:
+            self.health_status.set_healthy()
+
+
+def page_url(config: UIConfig) -> str:
+    host = config.host if config.host not in ("0.0.0.0", "::") else "<this machine's address>"
+    host = f"[{host}]" if ":" in host and not host.startswith("<") else host
+    return f"http://{host}:{config.port}/" + (f"?token={config.token}" if config.token else "")

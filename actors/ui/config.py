@@ -1,0 +1,63 @@
+"""The UI component's configuration."""
+from __future__ import annotations
+
+import ipaddress
+
+from attrs import define, field
+
+from emos.config import validators as base_validators
+from emos.config.base import BaseComponentConfig
+
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` only accepts connections from this machine."""
+    if host in LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _check_host(instance: object, attribute: object, value: str) -> None:
+    if not isinstance(value, str) or not value:
+        raise ValueError(f"UIConfig.host must be an address or host name, got {value!r}")
+
+
+@define(kw_only=True)
+class UIConfig(BaseComponentConfig):
+    """Where the page is served and how fast it streams."""
+
+    port: int = field(default=5001, validator=base_validators.in_range(min_value=1, max_value=65535))
+    """TCP port of the page."""
+
+    host: str = field(default="127.0.0.1", validator=_check_host)
+    """Address to listen on. Anything but a loopback address requires the access token."""
+
+    token: str = field(default="")
+    """Access token; set by ``enable_ui`` when ``host`` is not a loopback address."""
+
+    jpeg_quality: int = field(default=80, validator=base_validators.in_range(min_value=10, max_value=100))
+    """JPEG quality of camera streams (10-100)."""
+
+    frames_in_flight: int = field(default=2, validator=base_validators.in_range(min_value=1, max_value=8))
+    """Images sent to a browser before it confirms one: more hides network latency, fewer keeps
+    the picture fresher on a slow browser. Frames that arrive meanwhile are dropped, never queued."""
+
+    max_image_side: int = field(default=1280, validator=base_validators.in_range(min_value=64, max_value=8192))
+    """Images larger than this (either side) are downscaled before encoding."""
+
+    history: int = field(default=200, validator=base_validators.in_range(min_value=1, max_value=10000))
+    """Text and number messages kept per topic for a page that connects later."""
+
+    pose_rate: float = field(default=20.0, validator=base_validators.in_range(min_value=0.5, max_value=100.0))
+    """Maximum rate (Hz) at which latest-value widgets (poses, paths, messages) are refreshed."""
+
+    nice: int = field(default=5, validator=base_validators.in_range(min_value=0, max_value=19))
+    """Scheduling niceness added to the UI's process: the page is best effort, so when the CPU is
+    short the robot's components run first and the page shows fewer frames."""
+
+    title: str = field(default="EMOS")
+    """Page title (the recipe's name by default)."""

@@ -1,0 +1,165 @@
+"""One clock for every component: wall time, or the simulator's time when a Simulator runs.
+
+``now()`` is what component code reads instead of ``time.time()``. It returns:
+
+- in a node whose config has ``use_sim_time=True``: the last ``/clock`` time that node saw;
+- otherwise, if a Simulator publishes ``/clock`` in this run: its latest time (looked up
+  lazily; a missing publisher is looked for again at most once per second);
+- otherwise the wall clock.
+
+Lockstep. A Simulator in ``clock_mode="lockstep"`` publishes ``/clock`` and then waits until
+every component it lists in ``lockstep_consumers`` has *answered* that tick on
+``/clock_ack/<component>``. A node with ``use_sim_time`` answers after it has handled the tick:
+a Timed component runs its step on simulated time (every ``1/loop_rate`` simulated seconds)
+and then answers; other run types answer once the inputs that arrived with the tick are
+handled. Everything the simulator published for a tick is on its rings before the ``/clock``
+message, and a consumer publishes its outputs before its answer, so a consumer always sees
+the whole tick and the simulator always sees the consumer's command: on a loaded machine
+only the wall time changes. (Pipelines of several consumers in one tick are ordered only by
+the order of their answers; put the stage that must see another's output in the next tick.)
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from emos.transport.context import RunContext
+    from emos.transport.waker import Waker
+
+CLOCK_TOPIC = "/clock"
+ACK_PREFIX = "/clock_ack/"
+_RESCAN_S = 1.0
+
+log = logging.getLogger("emos.clock")
+
+
+def ack_topic(component_name: str) -> str:
+    """The topic on which ``component_name`` answers lockstep ticks."""
+    return f"{ACK_PREFIX}{component_name}"
+
+
+def _lock() -> threading.Lock:
+    return threading.Lock()
+
+
+_state_lock = _lock()
+_driven_time: float | None = None  # set by SimTimeDriver: the newest tick a sim-time node saw
+_follower: "_PassiveFollower | None" = None
+
+
+def now() -> float:
+    """Seconds: simulated time when a simulator drives this process, else ``time.time()``."""
+    if _driven_time is not None:
+        return _driven_time
+    follower = _passive_follower()
+    t = follower.time() if follower is not None else None
+    return t if t is not None else time.time()
+
+
+def sim_time() -> float | None:
+    """Simulated time if this process follows a simulator's clock, else None."""
+    if _driven_time is not None:
+        return _driven_time
+    follower = _passive_follower()
+    return follower.time() if follower is not None else None
+
+
+def _passive_follower() -> "_PassiveFollower | None":
+    global _follower
+    if _follower is None:
+        from emos.transport.context import RunContext
+
+        ctx = RunContext.from_env()
+        if ctx is None:
+            return None  # not inside a run: there is no simulator to follow
+        with _state_lock:
+            if _follower is None:
+                _follower = _PassiveFollower(ctx)
+    return _follower
+
+
+class _PassiveFollower:
+    """Reads the newest ``/clock`` message of the run when asked (no wake-ups, no answers)."""
+
+    def __init__(self, ctx: "RunContext") -> None:
+        self.ctx = ctx
+        self._sub: Any = None
+        self._last_look = 0.0
+        self._time: float | None = None
+        self._lock = threading.Lock()
+
+    def time(self) -> float | None:
+        with self._lock:
+            if self._sub is None:
+                if time.monotonic() - self._last_look < _RESCAN_S:
+                    return self._time
+                self._last_look = time.monotonic()
+                from emos.msgs import Clock
+                from emos.transport.pubsub import Subscriber
+
+                sub = Subscriber(self.ctx, CLOCK_TOPIC, Clock, queue_size=1)
+                if not sub.publishers():
+                    sub.close()
+                    return self._time
+                self._sub = sub
+            msg = self._sub.latest()
+            if msg is not None:
+                self._time = msg.clock.to_sec()
+            return self._time
+
+
+class SimTimeDriver:
+    """Drives one node on simulated time and answers its ticks (used by ``Node`` when the
+    component's config has ``use_sim_time``)."""
+
+    def __init__(self, ctx: "RunContext", name: str, waker: "Waker", period: Callable[[], float]) -> None:
+        from emos.msgs import Clock
+        from emos.transport.pubsub import Publisher, Subscriber
+
+        self.name = name
+        self._period = period
+        self._clock_cls = Clock
+        self.sub = Subscriber(ctx, CLOCK_TOPIC, Clock, waker=waker, queue_size=64)
+        self.pub = Publisher(ctx, ack_topic(name), Clock, publisher_id=name, depth=8)
+        self.time: float | None = None
+        self._next_step: float | None = None
+        self.ticks = 0
+
+    def has_news(self) -> bool:
+        return self.sub.has_news()
+
+    def take(self) -> Any | None:
+        """The newest new tick (a ``Clock``), or None. Taken *before* the node's inputs, so
+        every message published before that tick is visible when the inputs are read."""
+        items = self.sub.take()
+        if not items:
+            return None
+        self.ticks += len(items)
+        return items[-1]
+
+    def handle(self, tick: Any, run_step: Callable[[], None] | None) -> None:
+        """Run the Timed step if one is due at ``tick`` (``run_step`` None: not a Timed
+        component, or not active), then answer the tick."""
+        global _driven_time
+        t = tick.clock.to_sec()
+        self.time = t
+        with _state_lock:
+            _driven_time = t
+        if run_step is not None:
+            if self._next_step is None or t < self._next_step - 2 * self._period():
+                self._next_step = t  # the first tick, or time went back (the simulator restarted)
+            if t >= self._next_step - 1e-9:
+                run_step()
+                period = self._period()
+                while self._next_step <= t + 1e-9:  # one step per due tick; missed periods are skipped
+                    self._next_step += period
+        else:
+            self._next_step = None
+        self.pub.publish(tick)
+
+    def close(self) -> None:
+        self.sub.close()
+        self.pub.close()

@@ -1,0 +1,98 @@
+"""A running UI recipe and one headless Chromium shared by a test module."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).parent
+ROOT = HERE.parent.parent
+ARTIFACTS = Path(os.environ.get("EMOS_TEST_ARTIFACTS", ROOT / "test-artifacts")) / "ui"
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+CHROME_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync", "--window-size=1400,1000",
+                # A fake microphone (a beep), allowed without a prompt: the page's recorder is tested.
+                "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_http(port: int, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the recipe exited with code {proc.returncode}: {proc.stdout.read() if proc.stdout else ''}")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+                return
+        except OSError:
+            time.sleep(0.2)
+    raise TimeoutError(f"nothing listens on port {port} after {timeout} s")
+
+
+def start_recipe(recipe: Path, env_extra: dict[str, str], log_path: Path) -> subprocess.Popen:
+    env = dict(os.environ, **env_extra)
+    log = open(log_path, "w")
+    return subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "run", str(recipe)], env=env, stdout=log,
+                            stderr=subprocess.STDOUT, start_new_session=True, cwd=ROOT)
+
+
+def stop_recipe(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5)
+
+
+@pytest.fixture(scope="module")
+def ui_system(tmp_path_factory):
+    """The test recipe running under `emos run`: (port, recorder output file, process)."""
+    tmp = tmp_path_factory.mktemp("ui")
+    port, out = free_port(), tmp / "received.jsonl"
+    proc = start_recipe(HERE / "ui_recipe.py", {"EMOS_UI_TEST_PORT": str(port), "EMOS_UI_TEST_OUT": str(out), "EMOS_HOME": str(tmp / "home")}, tmp / "recipe.log")
+    try:
+        wait_http(port, proc=proc)
+        yield port, out, proc
+    finally:
+        stop_recipe(proc)
+        print((tmp / "recipe.log").read_text()[-3000:])
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
+        pytest.skip("headless Chromium is not installed (scripts/setup.sh --test installs chromium and chromium-driver)")
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    for flag in CHROME_FLAGS:
+        options.add_argument(flag)
+    profile = tempfile.mkdtemp(prefix="emos-chromium-")
+    options.add_argument(f"--user-data-dir={profile}")
+    options.binary_location = CHROMIUM
+    options.set_capability("goog:loggingPrefs", {"performance": "ALL", "browser": "ALL"})
+    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
+    driver.set_page_load_timeout(30)
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
