@@ -16,6 +16,7 @@ import logging
 import time
 from typing import Any
 
+from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
@@ -77,7 +78,7 @@ class HeartbeatMonitor:
                 continue
             try:
                 self.status[name] = codec.decode(ComponentStatus, items[-1][1])
-            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the heartbeat task
+            except codec.DecodeError as exc:  # a bad frame must not kill the heartbeat task
                 self._count_foreign(name, 1, f"an undecodable status frame ({type(exc).__name__}: {exc})")
             if name in self.watched:
                 self.watched[name] = (self.watched[name][0], now)
@@ -95,14 +96,21 @@ class HeartbeatMonitor:
             log.warning("[%s] status from %s does not count as its heartbeat: only the component's own process does", name, who)
 
     async def _check_loop(self) -> None:
+        failures, logged_at = 0, float("-inf")
         while True:
             await asyncio.sleep(self.check_period)
-            self._on_wake()  # in case a wake-up was lost to a full FIFO
-            now = time.monotonic()
-            for name, (worker, last) in list(self.watched.items()):
-                if now - last > self.timeout:
-                    del self.watched[name]
-                    worker.on_hang(now - last)
+            try:
+                self._on_wake()  # in case a wake-up was lost to a full FIFO
+                now = time.monotonic()
+                for name, (worker, last) in list(self.watched.items()):
+                    if now - last > self.timeout:
+                        del self.watched[name]
+                        worker.on_hang(now - last)
+            except Exception:  # noqa: BLE001 - hang detection must outlive any one bad tick
+                failures += 1
+                if time.monotonic() - logged_at >= FOREIGN_LOG_PERIOD_S:
+                    logged_at = time.monotonic()
+                    log.exception("heartbeat check failed (%d time(s) so far); hang detection carries on", failures)
 
     def close(self) -> None:
         self._task.cancel()

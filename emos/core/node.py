@@ -22,6 +22,7 @@ from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
 from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.faults import PublishFaults, fault_ops
 from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
@@ -65,6 +66,24 @@ def wake_spin_setting() -> float:
     return value
 
 
+def process_alive(pid: int) -> bool:
+    """True while ``pid`` runs; a killed process that is not reaped yet (a zombie) is dead."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            state = f.read().rsplit(b")", 1)[-1].split()[0]
+        return state not in (b"Z", b"X")
+    except FileNotFoundError:
+        return False
+    except (OSError, IndexError):  # no /proc: ask the kernel (zombies then count as alive)
+        try:
+            os.kill(pid, 0)
+            return True
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+
+
 class Node:
     def __init__(self, component: BaseComponent, ctx: RunContext | None = None, supervisor_socket: str | None = None, wake_spin_us: float | None = None):
         """``wake_spin_us``: how long the node spins for more messages after a wake-up before it
@@ -85,6 +104,7 @@ class Node:
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
         self._publishers: dict[str, tuple[Publisher, threading.Lock]] = {}
+        self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
@@ -364,6 +384,20 @@ class Node:
         inp = self._input(topic)
         return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
 
+    def publisher_pids(self, topic: Topic | str) -> list[int]:
+        """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
+        return [src.ring.writer_pid for src in list(self._input(topic).sub.sources.values())]
+
+    def publishers_alive(self, topic: Topic | str) -> bool | None:
+        """Whether a process publishing on ``topic`` is alive: None if no publisher was ever seen.
+
+        Lets a consumer tell "the producer died" (stop now) from "it is slow" (wait for the
+        data timeout), e.g. the DriveManager when the controller process is killed."""
+        pids = self.publisher_pids(topic)
+        if not pids:
+            return None
+        return any(pid <= 0 or process_alive(pid) for pid in pids)
+
     def stale_inputs(self) -> list[str]:
         stale = []
         for name, inp in self._inputs.items():
@@ -381,6 +415,10 @@ class Node:
             if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
                 raise RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}") from None
             raise KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}") from None
+        if self.publish_faults.active:  # empty unless a chaos run switched a sensor fault on
+            msg = self.publish_faults.apply(name, msg)
+            if msg is None:
+                return
         with lock:  # rings are single-writer; action threads and the loop may both publish
             pub.publish(msg)
 
@@ -461,7 +499,7 @@ class Node:
 
         return {"get_state": get_state, "transition": transition, "update_config": update_config,
                 "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
-                **reconfig_ops(self)}
+                **reconfig_ops(self), **fault_ops(self)}
 
 
 class _Timer:
