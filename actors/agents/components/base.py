@@ -25,6 +25,7 @@ from attrs import define, field
 from emos.config import validators as V
 from emos.config.base import BaseComponentConfig
 from emos.core.component import BaseComponent
+from emos.core.fallbacks import component_fallback
 from emos.core.offload import StepWorker
 from emos.io.fixed import FixedInput
 from emos.io.topic import Topic
@@ -59,6 +60,10 @@ class ModelComponentConfig(BaseComponentConfig):
 
     reconnect_period: float = field(default=1.0, validator=V.in_range(0.05, 3600.0))
     """Seconds between attempts to reach a model server that was down at activation."""
+
+    fallback_rate: float = field(default=1.0, validator=V.in_range(1e-9, 1e9))
+    """Fallback attempts per second: asking a model server 100 times a second (the default of
+    other components) whether it is back helps nobody."""
 
 
 class _ErrorLog:
@@ -149,6 +154,14 @@ class ModelComponent(BaseComponent):
         self._resources_ready = False
         self._client_lock = threading.RLock()
         self._errors = _ErrorLog(self.get_logger())
+        if "on_component_fail" not in self.fallbacks and "on_fail" not in self.fallbacks:
+            # Default ladder step for an unreachable model server: reconnect in place (a recipe's
+            # own on_component_fail / on_fail replaces it). Without it the launcher's default
+            # would restart the component every 0.25 s until its restart intensity gives up,
+            # which turns a model server that boots after the robot into a dead system.
+            from emos.events.action import Action
+
+            self.on_component_fail(action=Action(self.reconnect_model_client))
 
     # ------------------------------------------------------------------ definition-time checks
     @staticmethod
@@ -346,8 +359,7 @@ class ModelComponent(BaseComponent):
         except ModelClientError as exc:
             self._on_model_error(exc)
             return
-        self.health_status.set_healthy()
-        self._publish_status()
+        self._clear_model_failure()
 
     def activate_resources(self) -> None:
         """Open heavy resources (DB, local models); runs in the worker thread at activation.
@@ -431,6 +443,18 @@ class ModelComponent(BaseComponent):
             return
         worker.submit(self._reconnect_in_worker)
 
+    @component_fallback
+    def reconnect_model_client(self) -> bool:
+        """Fallback action: ask the worker to reach the model server (and reopen the DB) again.
+        Returns at once (it runs on the event loop); True when the component is ready."""
+        worker = self._worker
+        if worker is not None and not worker.busy:
+            if not self._resources_ready:
+                worker.submit(lambda: self.ensure_resources() and self._publish_status())
+            if self.model_client is not None and not self._client_ready:
+                worker.submit(self._reconnect_in_worker)
+        return self._resources_ready and (self.model_client is None or self._client_ready)
+
     def _reconnect_in_worker(self) -> None:
         if self._client_ready:
             return
@@ -440,7 +464,13 @@ class ModelComponent(BaseComponent):
             self._on_model_error(exc)
             return
         self.get_logger().info("[%s] model client %r is reachable", self.component_name, self._active_client)
-        self.health_status.set_healthy()
+        self._clear_model_failure()
+
+    def _clear_model_failure(self) -> None:
+        """The model client works (again): clear a failure it caused, but not a newer report
+        about missing inputs that a step made meanwhile."""
+        if not self.health_status.is_system_fail:
+            self.health_status.set_healthy()
         self._publish_status()
 
     def _on_job_error(self, exc: BaseException) -> None:
