@@ -10,8 +10,8 @@
   :class:`~emos.core.offload.StepWorker` thread: the heartbeat keeps beating while a model thinks;
 - publisher preprocessors per output topic (``add_publisher_preprocessor``) and conversion of
   results into the output topic's message type;
-- ``additional_model_clients`` and ``change_model_client`` with the interim failover hook of
-  :mod:`.failover`.
+- ``additional_model_clients`` and ``change_model_client`` with the request-level failover of
+  :mod:`.failover`, and a default ``on_component_fail`` ladder step that reconnects in place.
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ class ModelComponentConfig(BaseComponentConfig):
 
     model_failover_after: int = field(default=2, validator=V.in_range(1, 1000))
     """Consecutive typed client errors on one request before switching to the next of
-    ``additional_model_clients`` (interim hook until the fallback ladders land)."""
+    ``additional_model_clients`` and re-sending the request being processed."""
 
     model_retry_backoff: float = field(default=0.1, validator=V.in_range(0.0, 60.0))
     """Seconds between two attempts of the same request on the same client."""

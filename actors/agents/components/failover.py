@@ -1,12 +1,11 @@
 """Model fallbacks: retry the current model client, hot-swap to a backup, give up.
 
-INTERIM HOOK. The events/fallbacks issue brings ``on_component_fail`` / ``on_algorithm_fail``
-ladders that run actions such as ``Action(method=llm.change_model_client, args=("backup",))``.
-Until it lands, this small policy does the same inside the component: after
-``model_failover_after`` consecutive typed client errors it calls ``change_model_client`` with
-the next of ``additional_model_clients`` and re-sends the request being processed. When the
-ladders land, the component reports the health status (it already does), the ladder calls
-``change_model_client``, and this class shrinks to the retry of the in-flight request.
+Written as an interim hook while the events/fallbacks ladders were built on another branch; they
+have landed since. The ladders (``on_component_fail`` / ``on_algorithm_fail`` with actions such as
+``Action(method=llm.change_model_client, args=("backup",))``) act after a failure was reported;
+this policy acts inside the request: after ``model_failover_after`` consecutive typed client
+errors it calls ``change_model_client`` with the next of ``additional_model_clients`` and re-sends
+the request being processed, so that request is answered instead of lost.
 """
 from __future__ import annotations
 
