@@ -165,10 +165,13 @@ class World:
         self._pending = []
 
     def add_robot(self, spec: str | RobotSpec = "jackal", pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                  name: str | None = None, slip: float = 0.0, actuation_noise: float = 0.0) -> SimRobot:
+                  name: str | None = None, slip: float = 0.0, actuation_noise: float = 0.0,
+                  drive: Any = None) -> SimRobot:
+        """``drive``: a drive model or its name (``ideal``, ``skid-steer``, ``wheeled``; see
+        actors/sim/dynamics); None = the spec's default (``ideal`` for most presets)."""
         spec = robot_spec(spec)
         name = name or (spec.name if not any(r.name == spec.name for r in self.robots) else f"{spec.name}{len(self.robots)}")
-        robot = SimRobot(self, spec, name, pose, slip=slip, actuation_noise=actuation_noise, rng=self.rng())
+        robot = SimRobot(self, spec, name, pose, slip=slip, actuation_noise=actuation_noise, rng=self.rng(), drive=drive)
         self.robots.append(robot)
         self._body_names[robot.body_id] = name
         return robot
@@ -259,6 +262,8 @@ class World:
 
     def close(self) -> None:
         self.stop()
+        for robot in self.robots:
+            robot.drive.close()  # a wheeled model's private physics client
         try:
             self.client.disconnect()
         except Exception:  # already disconnected
