@@ -68,3 +68,34 @@ def test_wheel_imu_odometry_draws_its_errors_per_episode(make_world):
     assert len(biases) == 5
     with pytest.raises(ValueError, match="gyro_noise"):
         WheelImuOdometryConfig(gyro_noise=-1.0)
+
+
+def test_rays_stopped_at_the_world_bounds_read_the_same_as_full_range_rays(make_world):
+    """The lidar ends its rays where nothing can be hit any more (World.ray_bounds): the
+    readings must be identical to rays cast to the full 30 m."""
+    from emos.actors.sim import MovingObstacle, load_barn_worlds
+    from emos.actors.sim.builders import barn_shapes
+    from emos.actors.sim.primitives import Cylinder
+    from emos.actors.sim.sensors import LidarConfig
+
+    config = LidarConfig(fov_deg=360.0, beams=720, range_max=30.0, rate_hz=50.0)  # no noise
+    scans = []
+    for shortcut in (True, False):
+        world = make_world()
+        world.add(barn_shapes(load_barn_worlds()[1]))
+        world.add(MovingObstacle(Cylinder((0.0, 0.0), 0.3), [(-6.0, 5.0), (3.0, 5.0)], speed=1.0, name="walker"))
+        robot = world.add_robot("jackal-barn", (-2.25, 3.0, 1.57))
+        other = world.add_robot("jackal", (-7.0, 3.0, 0.0))  # outside the obstacle field
+        lidar = world.add_sensor(Lidar(robot, config))
+        if not shortcut:
+            world.ray_bounds = lambda: None
+        else:
+            bounds = world.ray_bounds()
+            assert bounds[0] < -7.2 and bounds[2] > 2.9  # the other robot and the walker's path count
+        world.step(20)
+        scans.append(lidar.latest.ranges)
+        assert other is not None
+    assert np.isfinite(scans[0]).sum() > 300
+    assert np.array_equal(np.isfinite(scans[0]), np.isfinite(scans[1]))
+    ok = np.isfinite(scans[0])
+    assert np.allclose(scans[0][ok], scans[1][ok], atol=1e-4)
