@@ -157,6 +157,7 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     result_file.unlink(missing_ok=True)
     env["EMOS_CHAOS_RESULT"] = str(result_file)
     env["EMOS_CHAOS_SEED"] = str(seed)
+    env["EMOS_CHAOS"] = "1"  # lets the sensor nemesis switch on faults in publish paths (emos.core.faults)
     nemeses: list[tuple[Nemesis, float]] = []
     pending: list[tuple[float, Nemesis]] = []
     system: RunningSystem | None = None

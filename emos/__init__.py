@@ -18,6 +18,11 @@ _LAZY = {
     "ServiceClient": "emos.core.services",
     "ActionClient": "emos.core.services",
     "msgs": "emos.msgs",
+    "Event": "emos.events.event",
+    "Action": "emos.events.action",
+    "component_fallback": "emos.core.fallbacks",
+    "ComponentStatus": "emos.msgs.status",
+    "ComponentServices": "emos.core.reconfig",
 }
 
 __all__ = sorted(_LAZY)

@@ -36,12 +36,15 @@ class Launcher:
         max_seconds: float = 10.0,
         strategy: str = "one_for_one",
         stop_timeout: float = 5.0,
+        fallback_reset_after: float = 10.0,
         **kwargs: Any,
     ) -> None:
         """``heartbeat_timeout``: seconds without a status message before a component counts as
         hung and is killed. ``max_restarts`` in ``max_seconds``: restart intensity of every group
         (unless ``add_pkg`` overrides it) and of the root, which restarts whole groups. ``strategy``:
         one_for_one, one_for_all or rest_for_one. ``stop_timeout``: seconds between SIGTERM and SIGKILL.
+        ``fallback_reset_after``: seconds a component must stay healthy before its fallback retry
+        budgets (and a give-up) reset.
         """
         if kwargs:
             raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
@@ -49,16 +52,18 @@ class Launcher:
         self.multi_processing = bool(multi_processing)
         self.activate_all_components_on_start = activate_all_components_on_start
         self.enable_monitoring = enable_monitoring
-        for name, value in (("heartbeat_timeout", heartbeat_timeout), ("max_seconds", max_seconds), ("stop_timeout", stop_timeout)):
+        for name, value in (("heartbeat_timeout", heartbeat_timeout), ("max_seconds", max_seconds), ("stop_timeout", stop_timeout),
+                            ("fallback_reset_after", fallback_reset_after)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
                 raise ValueError(f"Launcher: {name} must be a positive number of seconds, got {value!r}")
         if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
             raise ValueError(f"Launcher: max_restarts must be an int >= 0, got {max_restarts!r}")
         self.heartbeat_timeout = heartbeat_timeout
         self.stop_timeout = stop_timeout
+        self.fallback_reset_after = float(fallback_reset_after)
         self.default_policy = dict(strategy=strategy, max_restarts=max_restarts, max_seconds=max_seconds)
         self._packages: list[Any] = []
-        self._events_actions: list[dict] = []
+        self._events_actions: list[Any] = []  # (Event, [Action]) pairs
         self._fallback_policies: dict[str, Any] = {}
         self.fallback_rate: float | None = None
         self.exit_code: int | None = None
@@ -100,7 +105,9 @@ class Launcher:
             for c in components:
                 c.configure(self.config_file)
         if events_actions:
-            self._events_actions.append(events_actions)
+            from emos.supervisor.orchestration import normalize_events_actions
+
+            self._events_actions.extend(normalize_events_actions(events_actions))
         if ros_log_level:
             level = getattr(logging, ros_log_level.upper(), None)
             if not isinstance(level, int):
@@ -186,20 +193,25 @@ class Launcher:
 
         self._ui = check_ui_request(inputs, outputs, port, host, settings)
 
-    # Launcher-wide fallback policies. Events, actions and fallback ladders arrive with their own
-    # issue; the policy is recorded here so recipes that set it keep running meanwhile, and the
-    # supervisor's restart semantics already bring crashed components back.
+    # Launcher-wide fallback policies: for every component without its own handler of that level
+    # (see emos.core.fallbacks for the order). Run by the supervisor (emos.supervisor.fallback_driver).
+    def _policy(self, key: str, action_name: str, max_retries: int | None) -> None:
+        from emos.supervisor.orchestration import check_policy
+
+        self._fallback_policies[key] = check_policy(key, action_name, max_retries)
+
     def on_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_fail"] = (action_name, max_retries)
+        """Catch-all for every component: ``action_name`` is restart, stop, start or a method name."""
+        self._policy("on_fail", action_name, max_retries)
 
     def on_component_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_component_fail"] = (action_name, max_retries)
+        self._policy("on_component_fail", action_name, max_retries)
 
     def on_algorithm_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_algorithm_fail"] = (action_name, max_retries)
+        self._policy("on_algorithm_fail", action_name, max_retries)
 
     def on_system_fail(self, action_name: str, max_retries: int | None = None) -> None:
-        self._fallback_policies["on_system_fail"] = (action_name, max_retries)
+        self._policy("on_system_fail", action_name, max_retries)
 
     def bringup(self, duration: float | None = None) -> int:
         """Run until SIGINT/SIGTERM (or ``duration`` seconds); stop in order; return the exit code.
@@ -216,16 +228,19 @@ class Launcher:
             from emos.actors.ui.launch import add_ui
 
             add_ui(self, self._ui)
-        if self._events_actions or self._fallback_policies:
-            log.warning("events, actions and launcher-wide fallbacks are recorded but not executed yet "
-                        "(supervisor restarts are active)")
+        from emos.supervisor.orchestration import Orchestration
+
+        if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):
+            raise ValueError(f"Launcher.fallback_rate must be a positive number of Hz, got {self.fallback_rate!r}")
+        orchestration = Orchestration(events_actions=list(self._events_actions), policies=dict(self._fallback_policies),
+                                      fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
         options = SystemOptions(
             heartbeat_timeout=self.heartbeat_timeout, stop_timeout=self.stop_timeout, duration=duration or _RUN_DURATION,
             max_restarts=self.default_policy["max_restarts"], max_seconds=self.default_policy["max_seconds"],
         )
-        self.system = System(self._packages, options)
+        self.system = System(self._packages, options, orchestration)
         code = self.system.run()
         self.exit_code, self.exit_reason = code, self.system.exit_reason
         Launcher.last_exit_code = code

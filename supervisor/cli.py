@@ -23,12 +23,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "logs": ("emos.supervisor.cli_logs", "list the logs of past runs, or show one"),
     "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
     "version": ("emos.supervisor.cli_version", "show the EMOS version"),
+    "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
+    "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),

@@ -83,10 +83,13 @@ def run(args: argparse.Namespace) -> int:
                 f"emos topic pub: {topic} carries {existing['type']} (publishers: {', '.join(existing['publishers'])}), "
                 f"not {canonical_name(cls)}; its subscribers would reject every message"
             )
-        with signals_deferred():
-            pub = Publisher(ctx, topic, cls)
+        pub = None
+        sent = 0
         try:
-            sent = 0
+            # Inside the try: a signal held during construction is delivered as the block ends,
+            # and the ring it made must still be removed by the finally below.
+            with signals_deferred():
+                pub = Publisher(ctx, topic, cls)
             while args.count == 0 or sent < args.count:
                 pub.publish(msg)
                 sent += 1
@@ -95,8 +98,9 @@ def run(args: argparse.Namespace) -> int:
                 time.sleep(1.0 / args.rate if args.rate > 0 else 0.0)
             time.sleep(0.05)  # let subscribers copy the last message before the ring goes away
         finally:
-            with signals_deferred():
-                pub.close()
+            if pub is not None:
+                with signals_deferred():
+                    pub.close()
         print(f"published {sent} {cls.__name__} on {topic}")
         return 0
     cls = _topic_type(ctx, topic)

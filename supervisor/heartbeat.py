@@ -16,7 +16,6 @@ import logging
 import time
 from typing import Any
 
-from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
@@ -68,13 +67,18 @@ class HeartbeatMonitor:
         now = time.monotonic()
         for name, sub in self.subs.items():
             self._note_foreign(name, sub)
+            # take_raw_from reads through the subscriber's validated path: a damaged or forged
+            # ring is dropped and logged there and cannot raise here.
             items, writer_pid = sub.take_raw_from(name)
             if not items:
                 continue
             if writer_pid != self.pids.get(name):
                 self._count_foreign(name, len(items), f"ring of {name!r} written by pid {writer_pid}, not by the component's pid {self.pids.get(name)}")
                 continue
-            self.status[name] = codec.decode(ComponentStatus, items[-1][1])
+            try:
+                self.status[name] = codec.decode(ComponentStatus, items[-1][1])
+            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the heartbeat task
+                self._count_foreign(name, 1, f"an undecodable status frame ({type(exc).__name__}: {exc})")
             if name in self.watched:
                 self.watched[name] = (self.watched[name][0], now)
 

@@ -22,7 +22,9 @@ from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
 from emos.core.rpc import CONTROL_FRAME, RpcServer
 from emos.core.wiring import check_system
+from emos.supervisor.fallback_driver import FallbackDriver
 from emos.supervisor.heartbeat import HeartbeatMonitor
+from emos.supervisor.orchestration import Orchestration, fallback_summary, lifecycle_op, with_monitor
 from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
 from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
@@ -64,10 +66,11 @@ class SystemOptions:
 
 
 class System:
-    def __init__(self, packages: list[Package], options: SystemOptions | None = None):
-        self.packages = packages
+    def __init__(self, packages: list[Package], options: SystemOptions | None = None, orchestration: Orchestration | None = None):
+        self.orchestration = orchestration or Orchestration()
+        self.packages = with_monitor(packages, self.orchestration)
         self.options = options or SystemOptions()
-        self.components: list[BaseComponent] = [c for p in packages for c in p.components]
+        self.components: list[BaseComponent] = [c for p in self.packages for c in p.components]
         names = [c.component_name for c in self.components]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
@@ -156,6 +159,7 @@ class System:
         self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor", max_frame=CONTROL_FRAME)
         await self.control.start()
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
+        self.fallbacks = FallbackDriver(self, self.orchestration, lambda: self.root)
         self.root = self._build_root()
         try:
             try:
@@ -179,8 +183,10 @@ class System:
                 log.error("supervision gave up: %s", result.detail)
             else:
                 self.exit_reason = self.exit_reason or "stopped on request"
+                await self.fallbacks.close()  # no ladder acts on components being shut down
                 await self.root.stop()
         finally:
+            await self.fallbacks.close()
             self.heartbeats.close()
             await self.control.close()
             self.reaper.uninstall()
@@ -247,6 +253,7 @@ class System:
             if failed_starts[name]:
                 text += f"; {failed_starts[name]} start(s) failed during start-up"
             lines.append(f"  {name:<24} {text}")
+        lines.extend(fallback_summary(self.events, self.components))
         escalations = [e for e in self.events if e["event"] == "escalated"]
         for e in escalations:
             lines.append(f"  escalation in {e['supervisor']}: {e.get('detail', '')}")
@@ -267,7 +274,7 @@ class System:
 
         async def tree(req: dict, stream: Any) -> dict:
             assert self.root is not None
-            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.root.tree()}
+            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.fallbacks.annotate(self.root.tree())}
 
         async def events(req: dict, stream: Any) -> list:
             since = float(req.get("since", 0.0))
@@ -277,7 +284,7 @@ class System:
             self.request_stop(str(req.get("reason", "stopped through the control socket")))
             return True
 
-        return {"hello": hello, "tree": tree, "events": events, "stop": stop}
+        return {"hello": hello, "tree": tree, "events": events, "stop": stop, "lifecycle": lifecycle_op(lambda: self.fallbacks)}
 
 
 def find_runs() -> list[Path]:

@@ -198,6 +198,34 @@ class Supervisor:
                 return
             await self._restart_from(spec)
 
+    async def restart_child(self, cid: str, reason: str, detail: str = "", wait_time: float = 0.0) -> bool:
+        """Restart a running child on request (a fallback or an action), exactly as if it had
+        exited: same strategy, counted against the restart intensity (a breach escalates).
+        Returns False if the child is not running here (stopping, or being restarted already)."""
+        assert self._lock is not None
+        async with self._lock:
+            child = self.running.get(cid)
+            spec = self._spec(cid)
+            if self._stopping or child is None or spec is None:
+                return False
+            await self._stop_child(cid)
+            self._emit("exit", cid, reason=reason, detail=detail or f"restart requested ({reason})", detected_at=time.monotonic())
+            if wait_time > 0:
+                await asyncio.sleep(wait_time)
+            await self._restart_from(spec)
+            return True
+
+    def find(self, cid: str) -> "Supervisor | None":
+        """The (sub-)supervisor whose child ``cid`` is, searching running groups."""
+        if any(s.id == cid for s in self.specs) and not isinstance(self.running.get(cid), Supervisor):
+            return self
+        for child in list(self.running.values()):
+            if isinstance(child, Supervisor):
+                found = child.find(cid)
+                if found is not None:
+                    return found
+        return None
+
     def _intensity_ok(self) -> bool:
         now = time.monotonic()
         self._restarts.append(now)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from emos.config.base import BaseComponentConfig, ComponentRunType
 from emos.config.loader import load_into
+from emos.core.fallbacks import FallbackHooks
 from emos.core.health import Status
 from emos.core.lifecycle import LifecycleState
 from emos.io.topic import Topic
@@ -50,12 +51,13 @@ def _check_topics(component: str, role: str, topics: Sequence[Topic] | None) -> 
     return out
 
 
-class BaseComponent:
-    """A lifecycle-managed, health-reporting component."""
+class BaseComponent(FallbackHooks):
+    """A lifecycle-managed, health-reporting component (fallback hooks: emos.core.fallbacks)."""
 
     # Subclasses with Server / ActionServer run types declare their interface types here.
     main_srv_type: tuple[Any, Any] | None = None  # (request type, response type)
     main_action_type: tuple[Any, Any, Any] | None = None  # (goal, feedback, result)
+    _status_every_step = True  # the Monitor turns this off: its steps are messages, not work
 
     def __init__(
         self,
@@ -91,6 +93,7 @@ class BaseComponent:
         self.main_action_name = main_action_name or f"{component_name}/action"
         self._run_type = ComponentRunType.TIMED
         self._trigger: list[Topic] = []
+        self._event_trigger: Any = None
         self.trigger = trigger
         if run_type is not None:
             self.run_type = run_type
@@ -151,6 +154,12 @@ class BaseComponent:
                 raise ValueError(f"component {self.component_name!r}: a timed trigger is a period in seconds > 0, got {value}")
             self.config.loop_rate = 1.0 / float(value)
             self._run_type = ComponentRunType.TIMED
+            return
+        if getattr(value, "_is_emos_event", False):
+            # Runs one step each time the event fires (the Monitor routes it; see emos.events).
+            self._event_trigger = value
+            self._trigger = []
+            self._run_type = ComponentRunType.EVENT
             return
         topics = [value] if isinstance(value, Topic) else list(value)  # type: ignore[arg-type]
         for t in topics:

@@ -21,6 +21,8 @@ from emos.config.loader import ConfigError
 from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
+from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
 from emos.io.topic import Topic, normalize_topic_name
@@ -69,6 +71,8 @@ class Node:
         sleeps (see :mod:`emos.transport.waker`); default ``$EMOS_WAKE_SPIN_US`` or 100 us.
         Threaded mode passes 0: a spinning thread would hold the interpreter lock."""
         self.component = component
+        if wake_spin_us is None:
+            wake_spin_us = getattr(component, "_wake_spin_us", None)  # the Monitor: 0, see supervisor/monitor.py
         self.wake_spin_us = wake_spin_setting() if wake_spin_us is None else wake_spin_us
         self.name = component.component_name
         self.ctx = ctx or current()
@@ -92,6 +96,7 @@ class Node:
         self._supervisor: AsyncRpcClient | None = None
         self._step_kwargs = component._step_accepts_kwargs()
         self._sim_time: SimTimeDriver | None = None  # config.use_sim_time: steps and answers on /clock
+        self._step_errors = RepeatLimiter()
         self.steps = 0
 
     # ============================================================================ running
@@ -289,10 +294,11 @@ class Node:
         except Exception as exc:
             # Catch, don't crash: the process lives on, reports COMPONENT_FAILURE, and fallbacks
             # (or the supervisor, if it never recovers) decide what happens next.
-            self.log.exception("[%s] execution step raised: %s", self.name, exc)
+            log_exception_limited(self.log, self._step_errors, exc, f"[{self.name}] execution step")
             comp.health_status.set_fail_component(component_names=[self.name], message=f"{type(exc).__name__}: {exc}")
         self.steps += 1
-        self.publish_status()
+        if comp._status_every_step:
+            self.publish_status()
 
     def _serve_main(self, request: Any) -> Any:
         response = self.component._main_srv_callback(request)
@@ -453,7 +459,8 @@ class Node:
             }
 
         return {"get_state": get_state, "transition": transition, "update_config": update_config,
-                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info}
+                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
+                **reconfig_ops(self)}
 
 
 class _Timer:

@@ -81,3 +81,21 @@ class Topic(BaseAttrs):
 
     def __repr__(self) -> str:
         return f"Topic(name={self.name!r}, msg_type={self.type_name!r})"
+
+    # -- event conditions (emos.events.conditions): ``topic.msg.data < 20.0``, ``topic & cond``
+    @property
+    def msg(self) -> Any:
+        """The root of an event condition or action binding over this topic's messages."""
+        from emos.events.conditions import MsgPath
+
+        return MsgPath(self)
+
+    def __and__(self, other: Any) -> Any:
+        from emos.events.conditions import new_message
+
+        return new_message(self) & other
+
+    def __or__(self, other: Any) -> Any:
+        from emos.events.conditions import new_message
+
+        return new_message(self) | other

@@ -8,35 +8,78 @@ A *run* is one supervised system (or one stand-alone process using topics). It o
 
 ``run_id`` is ``<owner pid>-<owner start time>``: a later run can tell a dead owner from a live
 one even if the pid was reused, and removes what the dead one left behind.
+
+Both directories are shared with every other user, who can see run ids and plant names in
+advance. So clean-up touches only regular files of our own uid and reports (never follows,
+never trips over) anything else; the runtime root must be a real directory of ours, mode 0700.
 """
 from __future__ import annotations
 
 import atexit
+import logging
 import os
 import re
 import shutil
+import stat
 import threading
 from pathlib import Path
 from typing import Iterator
 
 import psutil
 
+from emos.transport.trust import rate_limited, remove_owned
+
+log = logging.getLogger("emos.transport")
+
 SHM_DIR = Path("/dev/shm")
 SHM_PREFIX = "emos."
 ENV_RUN_DIR = "EMOS_RUN_DIR"
 ENV_RUN_ID = "EMOS_RUN_ID"
+ENV_RUNTIME_DIR = "EMOS_RUNTIME_DIR"  # overrides where run directories live
+TMP_DIR = Path("/tmp")
 _RUN_ID_RE = re.compile(r"^(\d+)-(\d+)$")
 
 
+class RuntimeDirError(PermissionError):
+    """The directory for run directories cannot be used safely (another user owns or opened it)."""
+
+
 def runtime_root() -> Path:
-    """``$XDG_RUNTIME_DIR/emos`` when it exists (per-user tmpfs), else ``/tmp/emos-<uid>``."""
+    """Where run directories live: ``$EMOS_RUNTIME_DIR`` if set, else ``$XDG_RUNTIME_DIR/emos``
+    when that exists (a per-user tmpfs), else ``/tmp/emos-<euid>``.
+
+    The directory must be a real directory (not a link) owned by us with mode 0700: another
+    user must not be able to plant sockets or FIFOs where we will connect. In ``/tmp`` anyone
+    can create ``emos-<uid>`` first; then we refuse, naming the owner and the way out, rather
+    than run in (or delete) a directory someone else controls.
+    """
+    uid = os.geteuid()
+    explicit = os.environ.get(ENV_RUNTIME_DIR)
     xdg = os.environ.get("XDG_RUNTIME_DIR")
-    root = Path(xdg) / "emos" if xdg and Path(xdg).is_dir() else Path(f"/tmp/emos-{os.getuid()}")
-    root.mkdir(mode=0o700, parents=True, exist_ok=True)
-    st = root.stat()
-    if st.st_uid != os.getuid() or st.st_mode & 0o077:
-        # Another user must not be able to plant sockets or FIFOs where we will connect.
-        raise PermissionError(f"{root} must be owned by uid {os.getuid()} with mode 0700 (is {oct(st.st_mode & 0o777)})")
+    if explicit:
+        root = Path(explicit)
+    elif xdg and Path(xdg).is_dir():
+        root = Path(xdg) / "emos"
+    else:
+        root = TMP_DIR / f"emos-{uid}"
+    try:
+        root.mkdir(mode=0o700, parents=True, exist_ok=True)
+    except FileExistsError:
+        pass  # a file or a dangling link: reported below
+    st = os.lstat(root)
+    problem = None
+    if not stat.S_ISDIR(st.st_mode):
+        problem = "is not a directory" if not stat.S_ISLNK(st.st_mode) else "is a symbolic link"
+    elif st.st_uid != uid:
+        problem = f"is owned by uid {st.st_uid}, not by us (uid {uid})"
+    elif stat.S_IMODE(st.st_mode) != 0o700:
+        problem = f"has mode {oct(stat.S_IMODE(st.st_mode))}, not 0o700"
+    if problem is not None:
+        raise RuntimeDirError(
+            f"the EMOS runtime directory {root} {problem}; another user may have created it to "
+            f"interfere with our runs. Remove it, or set {ENV_RUNTIME_DIR} to a directory of "
+            f"yours with mode 0700 (it is created if missing)"
+        )
     return root
 
 
@@ -123,11 +166,15 @@ class RunContext:
 
     # -- clean-up ------------------------------------------------------------------------------
     def remove_everything(self) -> int:
-        """Unlink every segment and the run directory; returns how many segments were removed."""
+        """Unlink every segment and the run directory; returns how many segments were removed.
+
+        Never raises: what cannot be removed (a name another user planted in our namespace) is
+        logged and skipped, and everything else is still removed.
+        """
         if not self.owner:
             return 0
         removed = remove_segments(self.shm_prefix)
-        shutil.rmtree(self.run_dir, ignore_errors=True)
+        remove_run_dir(self.run_dir)
         return removed
 
 
@@ -167,36 +214,64 @@ def _list_shm() -> Iterator[str]:
 
 
 def remove_segments(prefix: str) -> int:
+    """Unlink our segments named ``<prefix>...``; returns how many. Entries that are not regular
+    files of ours (planted by another user) are left alone with a warning; never raises."""
     removed = 0
     for name in _list_shm():
         if name.startswith(prefix):
-            try:
-                os.unlink(SHM_DIR / name)
+            reason = remove_owned(SHM_DIR / name, mode=None)
+            if reason is None:
                 removed += 1
-            except FileNotFoundError:
-                pass
+            else:
+                rate_limited.warning(f"left:{name}", "clean-up: leaving %s in place: it %s", SHM_DIR / name, reason)
     return removed
 
 
+def remove_run_dir(run_dir: Path) -> bool:
+    """Remove a run directory, carrying on past anything that fails (each failure logged)."""
+
+    def report(_func: object, path: str, exc_info: object) -> None:
+        exc = exc_info[1] if isinstance(exc_info, tuple) else exc_info
+        log.warning("clean-up: cannot remove %s: %s", path, exc)
+
+    if not run_dir.exists():
+        return True
+    shutil.rmtree(run_dir, onerror=report)
+    return not run_dir.exists()
+
+
+def _our_regular_file(path: Path) -> bool:
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    return stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid()
+
+
 def sweep_stale_runs() -> list[str]:
-    """Remove segments and run directories of runs whose owner process is gone."""
+    """Remove segments and run directories of runs whose owner process is gone.
+
+    Only regular files of our own uid count: another user's files and directories (a forged
+    ``emos.1-1.x``) are not ours to judge or remove, and must not stop our run from starting.
+    """
     dead: set[str] = set()
     for name in _list_shm():
         if name.startswith(SHM_PREFIX):
             run_id = name[len(SHM_PREFIX) :].split(".", 1)[0]
-            if not run_is_alive(run_id):
+            if run_id not in dead and _our_regular_file(SHM_DIR / name) and not run_is_alive(run_id):
                 dead.add(run_id)
     try:
-        root = runtime_root()
+        root: Path | None = runtime_root()
         for entry in root.iterdir():
             if _RUN_ID_RE.match(entry.name) and not run_is_alive(entry.name):
                 dead.add(entry.name)
-    except OSError:
+    except OSError as exc:
+        log.warning("clean-up: not sweeping stale run directories: %s", exc)
         root = None
     for run_id in sorted(dead):
         remove_segments(f"{SHM_PREFIX}{run_id}.")
         if root is not None:
-            shutil.rmtree(root / run_id, ignore_errors=True)
+            remove_run_dir(root / run_id)
     return sorted(dead)
 
 

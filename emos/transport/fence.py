@@ -1,9 +1,16 @@
 """A full memory barrier for protocols between processes sharing memory, which Python lacks."""
 from __future__ import annotations
 
+import platform
 import threading
 
 _FENCE_LOCK = threading.Lock()
+
+# Total store order (x86): stores are seen in program order, and so are loads; only a store
+# followed by a load may be reordered. Any other CPU (arm64, POWER, RISC-V) may also reorder two
+# stores or two loads, which the seqlock in ``ring.py`` must then forbid with fences.
+_TOTAL_STORE_ORDER = {"x86_64", "amd64", "i386", "i486", "i586", "i686", "x86"}
+WEAK_ORDERING: bool = platform.machine().lower() not in _TOTAL_STORE_ORDER
 
 
 def full_fence() -> None:

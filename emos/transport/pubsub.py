@@ -6,6 +6,11 @@ nothing but a gap in time. Subscribers find publishers by listing the run's segm
 subscriber with a waker rescans when a publisher announced itself (or left) through it, and at
 least every ``RESCAN_EVERY_NS`` as a safety net; one without a waker rescans when ``/dev/shm``
 changed (its mtime, one ``stat``).
+
+Nothing in ``/dev/shm`` is trusted (see :mod:`emos.transport.trust`): rings are opened through
+one validated path (``Ring.attach``), and a ring that is not ours, does not hold together, or
+turns out damaged while being read is dropped with a rate-limited warning naming the topic and
+segment; the subscriber keeps delivering from every other publisher of the topic.
 """
 from __future__ import annotations
 
@@ -21,8 +26,12 @@ from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
+from emos.transport.fence import full_fence
+from emos.transport.generations import create_generation, latest_own_generation
 from emos.transport.limits import check_topic_name
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
+from emos.transport.screen import SegmentScreen
+from emos.transport.trust import UntrustedFile, rate_limited, remove_owned
 from emos.transport.waker import ANNOUNCE, WakeSender, Waker
 
 log = logging.getLogger("emos.transport")
@@ -34,6 +43,7 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 # time); the periodic rescan bounds how late such a reader finds a new publisher.
 RESCAN_EVERY_NS = 1_000_000_000
 REJECT_LOG_PERIOD_S = 10.0  # a publisher of the wrong type is logged at most this often, with a count
+_SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow can do that once)
 
 
 class TopicTypeError(TypeError):
@@ -77,15 +87,17 @@ class Publisher:
         self._announce()
 
     # -- segment management ----------------------------------------------------------------------
-    def _latest_generation(self) -> int | None:
-        prefix = f"{self.ctx.shm_prefix}{encode_name(self.topic)}.{encode_name(self.publisher_id)}.g"
-        gens = [int(n[len(prefix) :]) for n in os.listdir(SHM_DIR) if n.startswith(prefix) and n[len(prefix) :].isdigit()]
-        return max(gens) if gens else None
-
     def _open_or_create(self) -> R.Ring:
-        gen = self._latest_generation()
+        """Re-open our ring after a restart if it is intact, else start a fresh generation."""
+        gen = latest_own_generation(self.ctx, self.topic, self.publisher_id)
+        first = 0
         if gen is not None:
-            ring = R.Ring.attach(self.ctx.segment_name(self.topic, self.publisher_id, gen))
+            name = self.ctx.segment_name(self.topic, self.publisher_id, gen)
+            try:
+                ring = R.Ring.attach(name, generation=gen)
+                problem = "it was never fully initialised" if ring is None else None
+            except (R.RingError, UntrustedFile) as exc:
+                ring, problem = None, str(exc)
             if ring is not None:
                 if ring.fingerprint != _fingerprint(self.msg_cls):
                     ring.close()
@@ -93,14 +105,24 @@ class Publisher:
                         f"topic {self.topic!r}: publisher {self.publisher_id!r} publishes {self.type_name}, "
                         f"but its existing ring carries {ring.type_name}"
                     )
-                ring.set_writer_pid(os.getpid())
-                return ring
-        ring = R.Ring.create(
-            self.ctx.segment_name(self.topic, self.publisher_id, 0), self.depth, DEFAULT_CAPACITY,
-            _fingerprint(self.msg_cls), self.type_name,
-        )
+                problem = ring.damage()
+                if problem is None:
+                    ring.set_writer_pid(os.getpid())
+                    return ring
+                first = ring.head  # the header itself passed its checks: keep numbering on
+                ring.close()
+            log.warning("topic %s: ring %s of publisher %s is damaged (%s); starting generation %d", self.topic, name, self.publisher_id, problem, gen + 1)
+            left = remove_owned(SHM_DIR / name)
+            if left is not None:
+                log.warning("topic %s: cannot remove damaged ring %s: %s", self.topic, name, left)
+            gen += 1
+        # Subscribers (re-)register from the subscriber directory in _announce, owed from ``first``.
+        ring = self._create_ring(gen or 0, self.depth, DEFAULT_CAPACITY, _fingerprint(self.msg_cls), self.type_name, first)
         ring.set_writer_pid(os.getpid())
         return ring
+
+    def _create_ring(self, generation: int, depth: int, capacity: int, fingerprint: str, type_name: str, first: int) -> R.Ring:
+        return create_generation(self.ctx, self.topic, self.publisher_id, generation, depth, capacity, fingerprint, type_name, first)
 
     def _announce(self) -> None:
         """Register every known subscriber of the topic in our ring and wake them once."""
@@ -118,12 +140,12 @@ class Publisher:
         # Carry the messages still held by the old ring over, under the same numbers, so a
         # subscriber that finds only the new generation (or follows late) loses nothing.
         start = max(old.first, old.head - old.slot_count)
-        new = R.Ring.create(
-            self.ctx.segment_name(self.topic, self.publisher_id, old.generation + 1), old.slot_count, capacity,
-            old.fingerprint, old.type_name, generation=old.generation + 1, first=start,
-        )
+        new = self._create_ring(old.generation + 1, old.slot_count, capacity, old.fingerprint, old.type_name, start)
         for n in range(start, old.head):
-            status, read, stamp = old.read(n)
+            try:
+                status, read, stamp = old.read(n)
+            except R.RingCorrupt:  # scribbled on while we ran: carry an empty message in its place
+                status, read, stamp = R.LAPPED, None, 0
             # Not OK cannot happen for our own completed messages; keep the numbering dense anyway.
             payload = read if status == R.OK and read is not None else bytearray()
             m, buf = new.begin(len(payload))
@@ -131,12 +153,18 @@ class Publisher:
             buf.release()
             new.commit(m, len(payload), stamp)
         new.set_writer_pid(os.getpid())
-        for token in old.waiters()[1]:
-            new.add_waiter(token)
+        for token, mark in old.waiter_marks().items():
+            new.add_waiter(token, mark=max(mark, start))
         old.set_moved_to(new.generation)
         self.ring = new
         old.unlink()
         old.close()
+        # Announce the move: a subscriber that had not found the old generation yet may have
+        # missed both names, since a directory listing that runs while one name is created and
+        # another removed may return neither; the announcement makes it list again, now that
+        # nothing of ours changes. (Without it such a subscriber waited for a wake-up that
+        # never came: the ping-pong bench's start-up hang at sizes that grow the ring.)
+        self._announce()
         log.info("topic %s: ring of %s grew to %d B slots for a %d B message", self.topic, self.publisher_id, new.capacity, nbytes)
 
     # -- publishing ------------------------------------------------------------------------------
@@ -158,10 +186,14 @@ class Publisher:
         finally:
             buf.release()
         ring.commit(n, nbytes, stamp)
+        # Our head store before we read the waiter table: a subscriber registers (stores), then
+        # reads head; with a fence on both sides one of us sees the other, so a subscriber that
+        # registered just now either reads this message or is woken for it (Dekker again).
+        full_fence()
         if ring.q[R._WAITERS_VER] != self._waiters_version:
             self._sync_waiters()
         if self.sender.fds:
-            dead = self.sender.wake()
+            dead = self.sender.wake(fenced=True)
             for token in dead:
                 self._drop_waiter(token)
         return n
@@ -259,13 +291,15 @@ class Subscriber:
         self.waker = waker
         self.sources: dict[str, _Source] = {}
         self.dropped = 0
-        self._created_ns = time.time_ns()
+        self.undecodable = 0  # messages that arrived but did not decode as ``msg_cls``
+        self._created_ns = time.monotonic_ns()
         self._shm_mtime = -1
         self._scanned_at_ns = 0
         self._announcements = -1
         self._scanned_once = False
         self._rejected: dict[str, tuple[int, float, str]] = {}  # segment -> (times seen, last logged, type)
         self._prefix = f"{ctx.shm_prefix}{encode_name(topic)}."
+        self._screen = SegmentScreen(topic, self._prefix, lambda name: parse_segment(ctx, name))
         self._interest: Path | None = None
         if waker is not None:
             self._interest = self.ctx.subscriber_dir(topic) / f"{waker.token:016x}"
@@ -290,46 +324,57 @@ class Subscriber:
             self._announcements = self.waker.announcements
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
+        # A publisher's ring may vanish between our listing and our open (it grew: the next
+        # generation exists before the old one is unlinked), or be listed before it is
+        # initialised: fall back to an older generation, and list again if that vanished too.
+        # Skipping it would lose the wake-up that brought us here (the start-up hang of the
+        # ping-pong bench: the first message went to a generation nobody had found).
         initial = not self._scanned_once
         self._scanned_once = True
-        latest: dict[str, tuple[int, str]] = {}
-        for name in os.listdir(SHM_DIR):
-            if not name.startswith(self._prefix):
-                continue
-            parsed = parse_segment(self.ctx, name)
-            if parsed is None:
-                continue
-            _, pub, gen = parsed
-            if pub not in latest or gen > latest[pub][0]:
-                latest[pub] = (gen, name)
-        for pub, (gen, name) in latest.items():
-            src = self.sources.get(pub)
-            if src is not None and src.ring.name == name:
-                continue
-            if src is not None:
-                # The publisher moved to a bigger ring; ``_follow`` handles it on the next read.
-                continue
-            if name in self._rejected:
-                self._reject(name, pub, None)
-                continue
-            ring = R.Ring.attach(name)
-            if ring is None:
-                continue
-            if not initial and ring.fingerprint != _fingerprint(self.msg_cls):
-                # A publisher that appeared later with the wrong type: that one peer is refused
-                # (logged, rate-limited) and the topic goes on with the others.
-                self._reject(name, pub, ring.type_name)
-                ring.close()
-                continue
-            self._check_type(ring, pub)
-            self._register(ring)
-            self.sources[pub] = _Source(ring, self._start_cursor(ring), pub, name, self.loans)
-        for gone in [n for n in self._rejected if n not in {v[1] for v in latest.values()}]:
+        listed: set[str] = set()
+        for _ in range(_SCAN_ATTEMPTS):
+            found = self._screen.candidates({pub: src.ring.name for pub, src in self.sources.items()})
+            incomplete = False
+            for pub, gens in found.items():
+                listed.update(name for _, name in gens)
+                src = self.sources.get(pub)
+                if src is not None and (src.ring.name == gens[0][1] or src.ring.moved_to or not src.ring.unlinked):
+                    # Up to date, or moved or moving to a bigger ring: ``_follow`` handles that
+                    # on the next read, keeping the cursor (numbers carry over). (Whether our
+                    # ring still exists is asked of its descriptor: a listing can miss it.)
+                    continue
+                if gens[0][1] in self._rejected:
+                    self._reject(gens[0][1], pub, None)
+                    continue
+                ring = None
+                for gen, name in gens:
+                    ring = self._screen.attach(name, gen)
+                    if ring is not None:
+                        break
+                    incomplete = True
+                if ring is None:
+                    continue
+                if not initial and ring.fingerprint != _fingerprint(self.msg_cls):
+                    # A publisher that appeared later with the wrong type: that one peer is refused
+                    # (logged, rate-limited) and the topic goes on with the others.
+                    self._reject(ring.name, pub, ring.type_name)
+                    ring.close()
+                    continue
+                self._check_type(ring, pub)
+                mark = self._register(ring)
+                if src is not None:
+                    # Our ring is gone without moving: the publisher restarted on a fresh
+                    # generation (its old ring was damaged). Numbering may start over.
+                    src.close()
+                self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, ring.name, self.loans)
+            if not incomplete:
+                break
+        for gone in [n for n in self._rejected if n not in listed]:
             del self._rejected[gone]
         # Forget publishers whose ring disappeared (removed at the end of a run).
-        for pub in [p for p in self.sources if p not in latest]:
+        for pub in [p for p in self.sources if p not in found]:
             src = self.sources[pub]
-            if src.ring.moved_to:
+            if src.ring.moved_to or not src.ring.unlinked:
                 continue
             src.close()
             del self.sources[pub]
@@ -345,6 +390,16 @@ class Subscriber:
             )
             logged_at = now
         self._rejected[segment] = (count, logged_at, type_name)
+    def _drop(self, src: _Source, exc: BaseException) -> None:
+        """Stop reading a ring that failed (damaged or forged); other publishers carry on."""
+        if self.sources.get(src.publisher_id) is src:
+            del self.sources[src.publisher_id]
+        name = src.ring.name
+        try:
+            src.close()
+        except Exception as close_exc:  # a ring we give up on must not take the subscriber with it
+            log.debug("topic %s: closing dropped ring %s: %s", self.topic, name, close_exc)
+        self._screen.reject(name, f"dropped while reading: {type(exc).__name__}: {exc}")
 
     def _check_type(self, ring: R.Ring, pub: str) -> None:
         if ring.fingerprint != _fingerprint(self.msg_cls):
@@ -354,31 +409,71 @@ class Subscriber:
                 f"publisher {pub!r} sends {ring.type_name}"
             )
 
-    def _register(self, ring: R.Ring) -> None:
-        if self.waker is not None and not ring.add_waiter(self.waker.token):
+    def _register(self, ring: R.Ring) -> int | None:
+        """Register our wake-up in ``ring``; returns the first message number owed to us."""
+        if self.waker is None:
+            return None
+        if not ring.add_waiter(self.waker.token):
             log.warning("topic %s: ring %s has no free wake-up slot; this subscriber will poll", self.topic, ring.name)
+            return None
+        return ring.mark_of(self.waker.token)
 
-    def _start_cursor(self, ring: R.Ring) -> int:
-        head = ring.head
-        created = int(ring.u64[R._CREATED])
-        if created >= self._created_ns:
-            return ring.first  # a publisher that appeared after us: everything it wrote is new
+    def _start_cursor(self, ring: R.Ring, mark: int | None) -> int:
+        """Where reading a newly found ring starts.
+
+        With a waker, at the mark the ring holds for our token: the publisher registered us
+        when it appeared (so everything it wrote is ours), or we registered ourselves just now
+        (so the next message is). Registration and publishing are ordered by fences on both
+        sides, so no message falls between the mark and the wake-ups. Without a waker, by
+        creation time (a monotonic clock, shared by every process of the machine).
+        """
+        head, first = ring.head, ring.first
         if self.transient_local:
-            return max(ring.first, head - min(self.queue_size, ring.slot_count))
+            return max(first, head - min(self.queue_size, ring.slot_count))
+        if mark is not None:
+            return min(max(mark, first), head)
+        if int(ring.u64[R._CREATED]) >= self._created_ns:
+            return first  # a publisher that appeared after us: everything it wrote is new
         return head
 
-    def _follow(self, src: _Source) -> None:
-        """Switch to the next generation of a ring that grew."""
+    def _follow(self, src: _Source) -> bool:
+        """Switch to the next generation of a ring that grew; ``False`` if the source was dropped."""
         while src.ring.moved_to:
-            name = self.ctx.segment_name(self.topic, src.publisher_id, src.ring.moved_to)
-            new = R.Ring.attach(name)
+            gen = src.ring.moved_to
+            if gen <= src.ring.generation:
+                raise R.RingCorrupt(f"ring {src.ring.name}: says it moved back to generation {gen}")
+            name = self.ctx.segment_name(self.topic, src.publisher_id, gen)
+            new = self._screen.attach(name, gen) or self._newest_after(src)
             if new is None:
-                return
+                self._drop_quietly(src)
+                return False
+            name = new.name
             src.switch_to(new, name, self.loans)
             self._register(new)
             if src.cursor < new.first:
                 self.dropped += new.first - src.cursor
                 src.cursor = new.first
+            elif src.cursor > new.head:
+                raise R.RingCorrupt(f"ring {name}: head {new.head} is behind our cursor {src.cursor}")
+        return True
+
+    def _newest_after(self, src: _Source) -> R.Ring | None:
+        """The publisher's newest generation past ``src``'s: the ring grew again (and the
+        generation it first moved to is gone) before we followed."""
+        found = self._screen.candidates({})
+        for gen, name in found.get(src.publisher_id, []):
+            if gen <= src.ring.generation:
+                break
+            ring = self._screen.attach(name, gen)
+            if ring is not None:
+                return ring
+        return None
+
+    def _drop_quietly(self, src: _Source) -> None:
+        if self.sources.get(src.publisher_id) is src:
+            del self.sources[src.publisher_id]
+        src.close()
+        self._scanned_at_ns = 0  # rescan on the next read
 
     # -- reading -----------------------------------------------------------------------------------
     def take_raw(self) -> list[tuple[int, Any, str]]:
@@ -389,8 +484,11 @@ class Subscriber:
         """
         self.rescan()
         out: list[tuple[int, Any, str]] = []
-        for src in self.sources.values():
-            self._drain(src, out)
+        for src in list(self.sources.values()):
+            try:
+                self._drain(src, out)
+            except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the topic
+                self._drop(src, exc)
         if len(self.sources) > 1:
             out.sort(key=lambda item: item[0])
         if len(out) > self.queue_size:
@@ -406,11 +504,14 @@ class Subscriber:
         """
         self.rescan()
         out: list[tuple[int, Any, str]] = []
-        for pub, src in self.sources.items():
-            if pub == publisher_id:
-                self._drain(src, out)
-            else:
-                src.cursor = max(src.cursor, src.ring.head)
+        for pub, src in list(self.sources.items()):
+            try:
+                if pub == publisher_id:
+                    self._drain(src, out)
+                else:
+                    src.cursor = max(src.cursor, src.ring.head)
+            except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the reader
+                self._drop(src, exc)
         src = self.sources.get(publisher_id)
         return out[-self.queue_size :], (src.ring.writer_pid if src is not None else 0)
 
@@ -432,9 +533,8 @@ class Subscriber:
                     src.cursor += 1
                 else:
                     break  # a writer died mid-message: nothing after it exists yet
-            if not ring.moved_to:
+            if not ring.moved_to or not self._follow(src):
                 return
-            self._follow(src)
 
     def has_news(self) -> bool:
         """Whether a publisher we know has written past our cursor (cheap: for spin loops)."""
@@ -446,36 +546,59 @@ class Subscriber:
 
     def take(self) -> list[Any]:
         """Every new message, decoded, oldest first (at most ``queue_size``)."""
-        return [codec.decode(self.msg_cls, buf) for _, buf, _ in self.take_raw()]
+        return [msg for msg, _, _ in self.take_with_info()]
 
     def take_with_info(self) -> list[tuple[Any, int, str]]:
-        return [(codec.decode(self.msg_cls, buf), stamp, pub) for stamp, buf, pub in self.take_raw()]
+        out = []
+        for stamp, buf, pub in self.take_raw():
+            msg = self._decode(buf, pub)
+            if msg is not None:
+                out.append((msg, stamp, pub))
+        return out
+
+    def _decode(self, buf: Any, pub: str) -> Any | None:
+        """``buf`` decoded, or ``None`` (counted and logged) if it is not a ``msg_cls``."""
+        try:
+            return codec.decode(self.msg_cls, buf)
+        except codec.DecodeError as exc:
+            self.undecodable += 1
+            self._screen.warn.warning(f"decode:{pub}", "topic %s: skipping a message from %s that does not decode (%d so far): %s", self.topic, pub, self.undecodable, exc)
+            return None
 
     def latest_raw(self) -> tuple[int, Any, str] | None:
         """The newest message across publishers, skipping any backlog."""
         self.rescan()
         best: tuple[int, Any, str] | None = None
-        for src in self.sources.values():
-            self._follow(src)
-            ring = src.ring
-            # The newest slot may belong to a writer that died mid-copy; the one before it is
-            # then the newest complete message.
-            for n in (ring.head - 1, ring.head - 2):
-                if n < max(src.cursor, ring.first):
-                    break
-                status, buf, stamp = src.read(n)
-                if status == R.OK and buf is not None:
-                    src.cursor = n + 1
-                    if best is None or stamp > best[0]:
-                        best = (stamp, buf, src.publisher_id)
-                    break
-                if status == R.LAPPED:
-                    break
+        for src in list(self.sources.values()):
+            try:
+                got = self._latest_of(src)
+            except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the topic
+                self._drop(src, exc)
+                continue
+            if got is not None and (best is None or got[0] > best[0]):
+                best = got
         return best
+
+    def _latest_of(self, src: _Source) -> tuple[int, Any, str] | None:
+        if not self._follow(src):
+            return None
+        ring = src.ring
+        # The newest slot may belong to a writer that died mid-copy; the one before it is then
+        # the newest complete message.
+        for n in (ring.head - 1, ring.head - 2):
+            if n < max(src.cursor, ring.first):
+                break
+            status, buf, stamp = src.read(n)
+            if status == R.OK and buf is not None:
+                src.cursor = n + 1
+                return (stamp, buf, src.publisher_id)
+            if status == R.LAPPED:
+                break
+        return None
 
     def latest(self) -> Any | None:
         item = self.latest_raw()
-        return None if item is None else codec.decode(self.msg_cls, item[1])
+        return None if item is None else self._decode(item[1], item[2])
 
     def publishers(self) -> list[str]:
         self.rescan()
@@ -504,8 +627,12 @@ def list_topics(ctx: RunContext) -> dict[str, dict[str, Any]]:
         parsed = parse_segment(ctx, name)
         if parsed is None:
             continue
-        topic, pub, _ = parsed
-        ring = R.Ring.attach(name)
+        topic, pub, gen = parsed
+        try:
+            ring = R.Ring.attach(name, generation=gen)
+        except (R.RingError, UntrustedFile) as exc:
+            rate_limited.warning(f"distrust:{name}", "topic %s: ignoring segment %s: %s", topic, name, exc)
+            continue
         if ring is None:
             continue
         entry = topics.setdefault(topic, {"type": ring.type_name, "publishers": []})

@@ -23,9 +23,19 @@ Seqlock protocol, for message number ``n`` (0, 1, 2, ...):
   never overwritten while the loan lasts.
 
 A writer killed mid-copy leaves ``seq = 2n+1``, the map and ``head`` untouched: readers see no
-new message, never a torn one, and a restarted writer rewrites message ``n``. Apart from the
-two fences the protocol needs only that stores and loads each stay in program order, which
-x86-64 guarantees; the interpreter's own memory fences cover weaker architectures in practice.
+new message, never a torn one, and a restarted writer rewrites message ``n``.
+
+Memory order. Apart from the two handshake fences the protocol needs that the writer's stores
+(``seq`` odd, payload, ``seq`` even, map entry) become visible in that order and that the
+reader's loads (map entry, ``seq``, payload, ``seq``) happen in that order. x86-64 guarantees
+both (total store order). On weakly ordered CPUs (arm64) ``WEAK_ORDERING`` adds a full fence
+at each step that needs one (see ``commit`` and ``read``); docs/runtime.md gives the argument.
+
+Trust. A segment is opened only through :func:`emos.transport.trust.open_owned` (a regular file
+of our uid, mode 0600, no symbolic link), its header is checked for consistency before any
+field is used, and every index read from shared memory afterwards (a slot number from the map,
+a payload length) is checked before it is used: a ring that fails raises :class:`RingCorrupt`,
+never an ``IndexError`` from deep inside, so a subscriber can drop it and carry on.
 
 A message bigger than a slot *grows* the ring: the writer creates generation ``g+1`` with
 larger slots and records it in the old header's ``moved_to``; readers follow.
@@ -40,10 +50,12 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.transport import ring_check
 from emos.transport.context import SHM_DIR
-from emos.transport.fence import full_fence
+from emos.transport.fence import WEAK_ORDERING, full_fence
+from emos.transport.trust import SEGMENT_MODE, open_owned
 
-MAGIC = 0x32474E52534F4D45  # b"EMOSRNG2" little-endian
+MAGIC = 0x33474E52534F4D45  # b"EMOSRNG3" little-endian
 MIN_HEADER = 4096
 SLOT_HEADER = 32
 MAX_WAITERS = 64
@@ -57,8 +69,13 @@ _SLOTS, _DATA_OFF = 28, 29  # physical slot count; byte offset of slot 0
 _WAITERS_IDX = 256 // 8  # MAX_WAITERS u64 tokens
 _PIN_OWNER_IDX = 768 // 8  # LOAN_ENTRIES u64: pid of the reader that claimed the entry, or 0
 _PIN_IDX = _PIN_OWNER_IDX + LOAN_ENTRIES  # LOAN_ENTRIES u64: loaned slot + 1, or 0
-_MAP_IDX = 1024 // 8  # depth u64 map entries
+# MAX_WAITERS u64, beside each token: the first message number owed to that subscriber (the
+# head when it was registered), so one that attaches after a publish still gets that message.
+_MARK_IDX = 1024 // 8
+_MAP_IDX = 1536 // 8  # depth u64 map entries
 _EMPTY = (1 << 48) - 1  # the message number of a map entry that holds nothing yet
+_MAX_HEAD = 1 << 47  # message numbers live in 48 bits of a map entry, _EMPTY excluded
+_MAX_CAPACITY = 1 << 40
 
 # Status of reading one message number.
 NOT_READY = 0  # not written yet, or being written
@@ -73,6 +90,10 @@ class MessageTooLarge(RingError):
     pass
 
 
+class RingCorrupt(RingError):
+    """A segment whose header, message map or slot headers are inconsistent (damaged or forged)."""
+
+
 class TypeMismatch(RingError):
     pass
 
@@ -85,6 +106,7 @@ class Ring:
     """One generation of a ring. Writers use :meth:`create`/:meth:`write`; readers :meth:`attach`/:meth:`read`."""
 
     def __init__(self, name: str, fd: int, mm: mmap.mmap):
+        """Wrap a mapped segment whose header ``ring_check.header_problem`` accepted (or that we created)."""
         self.name = name
         self.fd = fd
         self.mm = mm
@@ -98,8 +120,8 @@ class Ring:
         self.capacity = int(self.u64[_CAPACITY])
         self.physical_slots = int(self.u64[_SLOTS])
         self.data_offset = int(self.u64[_DATA_OFF])
-        self.fingerprint = bytes(mm[_FINGERPRINT_OFF : _FINGERPRINT_OFF + 16]).decode()
-        self.type_name = bytes(mm[_TYPE_OFF : _TYPE_OFF + 128]).rstrip(b"\0").decode()
+        self.fingerprint = bytes(mm[_FINGERPRINT_OFF : _FINGERPRINT_OFF + 16]).decode("ascii", "replace")
+        self.type_name = bytes(mm[_TYPE_OFF : _TYPE_OFF + 128]).rstrip(b"\0").decode("utf-8", "replace")
         self._pending_slot = -1  # writer: the slot claimed by begin(), filled in by commit()
 
     @property
@@ -119,8 +141,10 @@ class Ring:
         data_offset = _align(_MAP_IDX * 8 + 8 * slot_count, MIN_HEADER)
         size = data_offset + stride * physical
         path = SHM_DIR / name
-        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
+        # O_EXCL: never adopt a file someone else put under this name (FileExistsError instead).
+        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_RDWR | os.O_NOFOLLOW | os.O_CLOEXEC, SEGMENT_MODE)
         try:
+            os.fchmod(fd, SEGMENT_MODE)  # exactly: readers refuse any other mode, whatever our umask
             os.ftruncate(fd, size)
             mm = mmap.mmap(fd, size)
         except BaseException:
@@ -135,7 +159,7 @@ class Ring:
         u64[_DATA_OFF] = data_offset
         u64[_HEAD] = first
         u64[_FIRST] = first
-        u64[_CREATED] = time.time_ns()
+        u64[_CREATED] = time.monotonic_ns()  # CLOCK_MONOTONIC: one clock for every process, never steps
         mm[_FINGERPRINT_OFF : _FINGERPRINT_OFF + 16] = fingerprint.encode()[:16].ljust(16, b"\0")
         mm[_TYPE_OFF : _TYPE_OFF + 128] = type_name.encode()[:128].ljust(128, b"\0")
         # Map entry i starts out empty and pointing at slot i: the writer fills slots 0..depth-1
@@ -146,25 +170,40 @@ class Ring:
         return cls(name, fd, mm)
 
     @classmethod
-    def attach(cls, name: str) -> "Ring | None":
-        """Open an existing segment; ``None`` if it vanished or is not initialised yet."""
+    def attach(cls, name: str, generation: int | None = None) -> "Ring | None":
+        """Open an existing segment of ours; ``None`` if it vanished or is not initialised yet.
+
+        Raises :class:`~emos.transport.trust.UntrustedFile` for a file that is not ours and
+        :class:`RingCorrupt` for a header that does not hold together (or whose generation is
+        not ``generation``, the one its name gives).
+        """
         try:
-            fd = os.open(SHM_DIR / name, os.O_RDWR)
+            fd = open_owned(SHM_DIR / name)
         except FileNotFoundError:
             return None
         try:
             size = os.fstat(fd).st_size
-            if size < MIN_HEADER:
+            if size == 0:
                 os.close(fd)
-                return None
+                return None  # just created, not sized yet
+            if size < MIN_HEADER:
+                raise RingCorrupt(f"ring {name}: {size} B is too small for a header")
             mm = mmap.mmap(fd, size)
-        except (OSError, ValueError):
+        except BaseException:
             os.close(fd)
-            return None
-        if int(np.frombuffer(mm, dtype=np.uint64, count=1)[0]) != MAGIC:
+            raise
+        u64 = np.frombuffer(mm, dtype=np.uint64, count=_MAP_IDX)
+        magic = int(u64[_MAGIC])
+        problem = None if magic == MAGIC else "" if magic == 0 else f"bad magic {magic:#x}"
+        if problem is None:
+            problem = ring_check.header_problem(u64, size, generation)
+        del u64
+        if problem is not None:
             mm.close()
             os.close(fd)
-            return None
+            if problem == "":
+                return None  # the creator has not finished (magic is written last)
+            raise RingCorrupt(f"ring {name}: {problem}")
         return cls(name, fd, mm)
 
     def close(self) -> None:
@@ -181,6 +220,11 @@ class Ring:
             pass
         self.mm = None  # type: ignore[assignment]
         os.close(self.fd)
+
+    @property
+    def unlinked(self) -> bool:
+        """Whether the segment's name is gone (the writer removed it); we may still read it."""
+        return os.fstat(self.fd).st_nlink == 0
 
     def unlink(self) -> None:
         try:
@@ -217,8 +261,11 @@ class Ring:
 
     def slot_of(self, n: int) -> int | None:
         """The physical slot the map gives message ``n``, or ``None`` if it holds another one."""
-        entry = self.q[_MAP_IDX + n % self.depth]
-        return entry & 0xFFFF if entry >> 16 == n else None
+        status, slot = self._locate(n)
+        return slot if status == OK else None
+
+    def _corrupt(self, what: str) -> RingCorrupt:
+        return RingCorrupt(f"ring {self.name}: {what}")
 
     # -- writing ---------------------------------------------------------------------------------
     def begin(self, nbytes: int) -> tuple[int, memoryview]:
@@ -229,7 +276,7 @@ class Ring:
         n = q[_HEAD]
         # Reuse the slot of the message this one retires (hot in cache), unless a reader holds it.
         slot = q[_MAP_IDX + n % self.depth] & 0xFFFF
-        if not self._claim(slot, n):
+        if slot >= self.physical_slots or not self._claim(slot, n):
             slot = self._claim_any(n)
         self._pending_slot = slot
         off = self.data_offset + slot * self.stride + SLOT_HEADER
@@ -265,8 +312,14 @@ class Ring:
         idx = self.slot_index(slot)
         q[idx + 1] = nbytes
         q[idx + 2] = stamp_ns
+        if WEAK_ORDERING:
+            full_fence()  # payload, length and stamp before the seq that vouches for them
         q[idx] = 2 * n + 2  # complete
+        if WEAK_ORDERING:
+            full_fence()  # seq before the map entry: a reader following the map must find it even
         q[_MAP_IDX + n % self.depth] = (n << 16) | slot
+        # The map entry and head need no fence: a reader that sees head first finds the entry
+        # not there yet, reports NOT_READY and looks again; nothing is lost or torn.
         q[_HEAD] = n + 1
 
     def write(self, payload: bytes | memoryview, stamp_ns: int | None = None) -> int:
@@ -282,7 +335,10 @@ class Ring:
         entry = self.q[_MAP_IDX + n % self.depth]
         held = entry >> 16
         if held == n:
-            return OK, entry & 0xFFFF
+            slot = entry & 0xFFFF
+            if slot >= self.physical_slots:
+                raise self._corrupt(f"message map entry {n % self.depth} points at slot {slot} of {self.physical_slots}")
+            return OK, slot
         if n < self.q[_FIRST]:
             return LAPPED, -1
         return (NOT_READY if held == _EMPTY or held < n else LAPPED), -1
@@ -295,22 +351,29 @@ class Ring:
         q = self.q
         idx = self.slot_index(slot)
         want = 2 * n + 2
+        if WEAK_ORDERING:
+            full_fence()  # the map entry before seq (see commit)
         if q[idx] != want:
             return LAPPED, None, 0  # the slot was reused after we looked at the map
+        if WEAK_ORDERING:
+            full_fence()  # seq before the length, stamp and payload it vouches for
         length = q[idx + 1]
         stamp = q[idx + 2]
-        if length > self.capacity:
-            return LAPPED, None, 0
         start = (idx << 3) + SLOT_HEADER
         # bytearray(slice) is one malloc + memcpy; bytearray(n) then a slice assignment costs
         # a page fault per 4 KiB on large frames (calloc hands out fresh zero pages).
-        buf = bytearray(self.view[start : start + length])
+        buf = bytearray(self.view[start : start + min(length, self.capacity)])
+        if WEAK_ORDERING:
+            full_fence()  # the copy before the second look at seq
         if q[idx] != want:
             return LAPPED, None, 0
+        if length > self.capacity:
+            # seq held still around the copy, so the writer did not write this: damaged.
+            raise self._corrupt(f"message {n} in slot {slot} claims {length} B, slots hold {self.capacity} B")
         return OK, buf, stamp
 
     def length_of(self, n: int) -> int:
-        """Payload size of message ``n`` if the map still has it, else 0 (a hint: not validated)."""
+        """Payload size of message ``n`` if the map still has it, else 0 (a hint: checked by the read)."""
         status, slot = self._locate(n)
         return self.q[self.slot_index(slot) + 1] if status == OK else 0
 
@@ -327,10 +390,16 @@ class Ring:
         q[_PIN_IDX + entry] = slot + 1
         full_fence()  # the pin must be visible before we check seq (see module doc)
         idx = self.slot_index(slot)
+        seq = q[idx]
+        if WEAK_ORDERING:
+            full_fence()  # seq before the length and payload it vouches for
         length = q[idx + 1]
-        if q[idx] != 2 * n + 2 or length > self.capacity:
+        if seq != 2 * n + 2:
             q[_PIN_IDX + entry] = 0
             return LAPPED, None, 0
+        if length > self.capacity:  # pinned and complete, so the writer did not write this
+            q[_PIN_IDX + entry] = 0
+            raise self._corrupt(f"message {n} in slot {slot} claims {length} B, slots hold {self.capacity} B")
         view = np.frombuffer(self.mm, dtype=np.uint8, count=length, offset=(idx << 3) + SLOT_HEADER)
         view.flags.writeable = False  # other readers share these bytes
         return OK, view, q[idx + 2]
@@ -360,7 +429,11 @@ class Ring:
     def waiters_version(self) -> int:
         return self.q[_WAITERS_VER]
 
-    def add_waiter(self, token: int) -> bool:
+    def add_waiter(self, token: int, mark: int | None = None) -> bool:
+        """Register a wake-up token, owed every message from ``mark`` on (default: the next one).
+
+        A token already registered keeps its mark. ``False`` if the table is full.
+        """
         with self._locked():
             table = self.u64[_WAITERS_IDX : _WAITERS_IDX + MAX_WAITERS]
             if (table == token).any():
@@ -368,9 +441,22 @@ class Ring:
             free = np.flatnonzero(table == 0)
             if not len(free):
                 return False
+            self.u64[_MARK_IDX + free[0]] = self.q[_HEAD] if mark is None else mark
             table[free[0]] = token
             self.u64[_WAITERS_VER] += 1
             return True
+
+    def mark_of(self, token: int) -> int | None:
+        """The first message number owed to ``token`` (see :meth:`add_waiter`), if registered."""
+        with self._locked():
+            hit = np.flatnonzero(self.u64[_WAITERS_IDX : _WAITERS_IDX + MAX_WAITERS] == token)
+            return int(self.u64[_MARK_IDX + hit[0]]) if len(hit) else None
+
+    def waiter_marks(self) -> dict[int, int]:
+        """``{token: mark}`` of every registered token (for carrying them to a new generation)."""
+        with self._locked():
+            tokens = self.u64[_WAITERS_IDX : _WAITERS_IDX + MAX_WAITERS]
+            return {int(t): int(self.u64[_MARK_IDX + i]) for i, t in enumerate(tokens) if t}
 
     def remove_waiter(self, token: int) -> None:
         with self._locked():
@@ -379,6 +465,10 @@ class Ring:
             if hit.any():
                 table[hit] = 0
                 self.u64[_WAITERS_VER] += 1
+
+    def damage(self) -> str | None:
+        """What is wrong with the message map and slot headers, or ``None`` (see :mod:`ring_check`)."""
+        return ring_check.damage(self)
 
 
 class PinTable:
@@ -401,7 +491,7 @@ class PinTable:
                 if len(got) == wanted:
                     break
                 owner = self._q[_PIN_OWNER_IDX + entry]
-                if owner and _alive(owner):
+                if 0 < owner < 1 << 31 and _alive(owner):  # anything else is no live pid
                     continue
                 self._q[_PIN_IDX + entry] = 0  # a dead reader's pin, if any, ends here
                 self._q[_PIN_OWNER_IDX + entry] = me

@@ -196,12 +196,13 @@ class WakeSender:
             state[1].release()
             state[0].close()
 
-    def wake(self, what: bytes = MESSAGE) -> list[int]:
+    def wake(self, what: bytes = MESSAGE, fenced: bool = False) -> list[int]:
         """One byte (``MESSAGE`` or ``ANNOUNCE``) to every FIFO whose reader is not spinning
-        (announcements go to all); returns tokens whose reader is gone."""
+        (announcements go to all); returns tokens whose reader is gone. ``fenced``: the caller
+        has just run a full fence after publishing, so this one is not needed."""
         dead = []
         states = self._states
-        if what == MESSAGE and states:
+        if what == MESSAGE and states and not fenced:
             full_fence()  # our message must be visible before we read who is spinning (module doc)
         for token, fd in self.fds.items():
             if what == MESSAGE:

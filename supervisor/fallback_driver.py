@@ -1,0 +1,232 @@
+"""Fallbacks, run by the supervisor from every component's status stream.
+
+Division of labour with the supervision tree (see docs/runtime.md):
+
+* a process **death** (or a missed heartbeat) is the tree's: restart strategy and intensity;
+* a **reported** failure (the status a live component publishes) is the fallback ladder's.
+  A ``restart`` on a ladder asks the tree to restart the child (``Supervisor.restart_child``), so
+  it counts against the same intensity and a breach escalates as a crash would.
+
+The ladder state (:class:`~emos.core.fallbacks.FallbackTracker`) lives here, not in the component:
+it survives the restarts it causes, and behaves the same for threads and processes. A component
+that gave up shows ``GAVE_UP`` as its health in ``emos status`` until it has been healthy again
+for ``reset_after`` seconds.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from typing import TYPE_CHECKING, Any, Callable
+
+from emos.core.fallbacks import HANDLERS, Fallback, FallbackTracker
+from emos.core.ratelimit import RepeatLimiter
+from emos.events.action import ActionError
+from emos.events.links import ComponentLinks
+from emos.events.runner import ActionRuntime, run_action
+from emos.io.topic import Topic
+from emos.msgs import codec
+from emos.msgs.status import ComponentStatus
+from emos.transport.pubsub import Publisher, Subscriber
+from emos.transport.waker import Waker
+
+if TYPE_CHECKING:
+    from emos.supervisor.orchestration import Orchestration
+    from emos.supervisor.system import System
+
+log = logging.getLogger("emos.fallbacks")
+
+
+class FallbackDriver(ActionRuntime):
+    def __init__(self, system: "System", orchestration: "Orchestration", root: Callable[[], Any]):
+        from emos import actions as A
+
+        self.system = system
+        self.ctx = system.ctx
+        self.log = log
+        self.timeout = orchestration.action_timeout
+        self._root = root
+        self.loop = asyncio.get_running_loop()
+        self.links = ComponentLinks(self.ctx, queue_timeout=orchestration.action_timeout)
+        self.trackers: dict[str, FallbackTracker] = {}
+        self.giveups: dict[str, Fallback | None] = {}
+        self.last_status: dict[str, ComponentStatus] = {}
+        self._not_before: dict[str, float] = {}  # wall time; statuses stamped earlier belong to a past incarnation
+        self._tasks: dict[str, asyncio.Task] = {}
+        # name -> (wall time, event): set by the first status stamped after that time
+        self._fresh: dict[str, tuple[float, asyncio.Event]] = {}
+        self._publishers: dict[str, Publisher] = {}
+        self._errors = RepeatLimiter()
+        self.waker = Waker(self.ctx)
+        self.loop.add_reader(self.waker.fd, self._on_wake)
+        self.subs: dict[str, Subscriber] = {}
+        for comp in system.components:
+            name = comp.component_name
+            own = comp.fallbacks
+            handlers = orchestration.handlers_for(comp)
+            # launcher.fallback_rate paces the launcher-wide policies (and the default restart);
+            # a component's own handlers keep its config.fallback_rate.
+            own_handlers = any(k in own for k in HANDLERS)
+            rate = comp.config.fallback_rate if own_handlers or not orchestration.fallback_rate else orchestration.fallback_rate
+            self.trackers[name] = FallbackTracker(handlers, own.get("on_giveup"), Fallback(A.restart(component=comp), None, f"{name} default"),
+                                                  rate, reset_after=orchestration.reset_after)
+            self.subs[name] = Subscriber(self.ctx, comp.status_topic.name, ComponentStatus, waker=self.waker, queue_size=4)
+        self._poll = asyncio.ensure_future(self._poll_loop())
+        self._closed = False
+
+    # -- status intake --------------------------------------------------------------------------
+    def _on_wake(self) -> None:
+        self.waker.drain()
+        for name, sub in self.subs.items():
+            # Only the component's own status ring counts (its publisher id is its name): a
+            # stray publisher on <name>/status must not drive its fallbacks.
+            items = [item for item in sub.take_raw() if item[2] == name]
+            if not items:
+                continue
+            try:
+                status = codec.decode(ComponentStatus, items[-1][1], copy=True)
+            except Exception as exc:
+                self._report(name, "status decode", exc)
+                continue
+            if status.header.stamp.to_sec() < self._not_before.get(name, 0.0):
+                continue
+            self.last_status[name] = status
+            waiting = self._fresh.get(name)
+            if waiting is not None and status.header.stamp.to_sec() >= waiting[0]:
+                del self._fresh[name]
+                waiting[1].set()
+            tracker = self.trackers[name]
+            tracker.observe(status.status)
+            if tracker.failing and not tracker.gave_up and name not in self._tasks:
+                self._tasks[name] = asyncio.ensure_future(self._ladder(name))
+
+    async def _poll_loop(self) -> None:
+        while True:  # a lost wake-up (full FIFO) must not stall a ladder; healthy timers need ticks too
+            await asyncio.sleep(0.1)
+            self._on_wake()
+
+    async def _ladder(self, name: str) -> None:
+        tracker = self.trackers[name]
+        try:
+            while tracker.failing and not tracker.gave_up:
+                wait = tracker.wait_s()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                    continue
+                decision = tracker.next()
+                if decision is None:
+                    return
+                if decision["kind"] == "giveup":
+                    await self._give_up(name, decision)
+                    return
+                action = decision["action"]
+                of = decision["of"]
+                self._record(name, "fallback", handler=decision["handler"], action=action.describe(), step=decision["step"] + 1,
+                             steps=decision["steps"], attempt=decision["try"], of=of if of is not None else "unlimited",
+                             level=tracker.level.name)
+                # Judge an action on this component by the status it publishes afterwards (a
+                # component action publishes one when it returns; a restarted one at start-up),
+                # not by the failure that was already on the stream.
+                on_self = action.component == name
+                restarting = on_self and action.kind == "lifecycle" and action.kwargs.get("op") == "restart"
+                fresh = asyncio.Event()
+                if on_self:
+                    self._fresh[name] = (time.time(), fresh)
+                try:
+                    result = await asyncio.wait_for(run_action(action, self), self.timeout + 30.0)
+                    if result is True and not restarting:
+                        log.info("[%s] fallback %s reports recovery", name, action.describe())
+                    if on_self:
+                        await asyncio.wait_for(fresh.wait(), self.timeout if restarting else 1.0)
+                except Exception as exc:
+                    self._report(name, action.describe(), exc)
+                finally:
+                    self._fresh.pop(name, None)
+                await asyncio.sleep(tracker.period)
+        finally:
+            self._tasks.pop(name, None)
+
+    async def _give_up(self, name: str, decision: dict) -> None:
+        tracker = self.trackers[name]
+        self._record(name, "gave_up", handler=decision["handler"], level=tracker.level.name)
+        log.error("[%s] fallbacks exhausted (%s, %s): giving up%s", name, decision["handler"], tracker.level.name,
+                  "; running on_giveup" if decision["actions"] else "")
+        for action in decision["actions"]:
+            try:
+                await asyncio.wait_for(run_action(action, self), self.timeout + 30.0)
+            except Exception as exc:
+                self._report(name, f"on_giveup {action.describe()}", exc)
+
+    def _report(self, name: str, what: str, exc: BaseException) -> None:
+        now_log, _, suppressed = self._errors.hit((name, what, type(exc).__name__))
+        if now_log:
+            log.error("[%s] fallback action %s failed: %s: %s%s", name, what, type(exc).__name__, exc,
+                      f" (and {suppressed} more times)" if suppressed else "")
+
+    def _record(self, name: str, event: str, **extra: Any) -> None:
+        self.system._record({"t": time.monotonic(), "wall": time.time(), "supervisor": "fallbacks", "child": name, "event": event, **extra})
+        log.info("[%s] %s %s", name, event, " ".join(f"{k}={v}" for k, v in extra.items()))
+
+    # -- ActionRuntime --------------------------------------------------------------------------
+    async def call_component(self, component: str, op: str, timeout: float, **payload: Any) -> Any:
+        return await self.links.call(component, op, timeout, **payload)
+
+    async def lifecycle(self, component: str, op: str, wait_time: float = 0.0) -> Any:
+        """start / stop (lifecycle transitions) or restart (through the supervision tree)."""
+        if op in ("start", "stop"):
+            return await self.links.call(component, "transition", self.timeout, transition="activate" if op == "start" else "deactivate")
+        if op != "restart":
+            raise ActionError(f"unknown lifecycle operation {op!r} (start, stop, restart)")
+        deadline = time.monotonic() + self.timeout
+        while True:
+            root = self._root()
+            sup = root.find(component) if root is not None else None
+            if sup is not None:
+                self._not_before[component] = time.time()
+                if await sup.restart_child(component, reason="restart_requested", detail=f"restart of {component} requested by an action or fallback", wait_time=wait_time):
+                    return True
+            if time.monotonic() >= deadline:
+                raise ActionError(f"cannot restart {component!r}: it is not running (stopping, or its group is being restarted)")
+            await asyncio.sleep(0.05)
+
+    def publish(self, topic: Topic, msg: Any) -> None:
+        pub = self._publishers.get(topic.name)
+        if pub is None:
+            pub = self._publishers[topic.name] = Publisher(self.ctx, topic.name, topic.msg_type, publisher_id="emos_fallbacks", depth=topic.qos_profile.queue_size)
+        pub.publish(msg)
+
+    def latest(self, topic: str) -> Any | None:
+        return None  # fallback actions take static arguments (bindings are for events)
+
+    # -- reporting ------------------------------------------------------------------------------
+    def annotate(self, tree: dict) -> dict:
+        """Mark components that gave up in a ``tree`` answer (``emos status``)."""
+        if tree.get("kind") == "worker":
+            tracker = self.trackers.get(tree.get("name", ""))
+            if tracker is not None:
+                tree["fallback_attempts"] = tracker.attempts
+                if tracker.gave_up:
+                    tree["fallback"] = f"gave up ({tracker.gave_up_on} on {tracker.level.name})"
+                    tree["health"] = "GAVE_UP"
+        for child in tree.get("children", []):
+            self.annotate(child)
+        return tree
+
+    def gave_up(self) -> list[str]:
+        return [n for n, t in self.trackers.items() if t.gave_up]
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._poll.cancel()
+        for task in list(self._tasks.values()):
+            task.cancel()
+        self.cancel_periodic()
+        self.loop.remove_reader(self.waker.fd)
+        for sub in self.subs.values():
+            sub.close()
+        for pub in self._publishers.values():
+            pub.close()
+        self.waker.close()
+        await self.links.close()

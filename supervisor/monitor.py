@@ -1,0 +1,190 @@
+"""The Monitor: evaluates the recipe's events and runs their actions.
+
+It is a supervised component like any other (``emos_monitor`` in ``emos status``): forked from the
+zygote in multi-process mode (so it holds the recipe's functions and objects as the recipe built
+them), a thread in threaded mode. It subscribes to exactly the topics the events and the action
+bindings need (component status topics included when a condition reads them), keeps the latest
+message of each on a :class:`~emos.events.event.Blackboard`, evaluates the events that read a
+topic when a message arrives on it, and for each firing runs its actions in order, as one task:
+two events firing at once run concurrently. Component actions go over the components' control
+sockets and run inside them; recipe functions run in a worker thread here; lifecycle actions go to
+the supervisor. An action that raises or times out is logged (event, action, component) and never
+stops the Monitor. If the Monitor dies the supervisor restarts it; ``handle_once`` events that
+fired are recorded in the run directory first, so they stay fired.
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import time
+from typing import Any
+
+from emos.core.component import BaseComponent
+from emos.core.ratelimit import RepeatLimiter
+from emos.core.rpc import AsyncRpcClient
+from emos.events.action import Action
+from emos.events.event import Blackboard, Event, EventTracker
+from emos.events.links import ComponentLinks
+from emos.events.runner import ActionRuntime, prepare, run_action
+from emos.io.topic import Topic
+
+MONITOR_NAME = "emos_monitor"
+
+
+class Monitor(BaseComponent):
+    # No spinning after a wake-up: the actions a message fires are sent on the next turn of the
+    # event loop, which a spin would delay, and a spinning Monitor competes for the CPU with the
+    # components it watches.
+    _wake_spin_us = 0.0
+
+    def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0):
+        self._entries = entries
+        self._action_timeout = action_timeout
+        topics: dict[str, Topic] = {}
+        outputs: dict[str, Topic] = {}
+        for event, actions in entries:
+            topics.update(event.topics)
+            for a in actions:
+                topics.update(a.bound_topics)
+                if a.predefined == "publish_message":
+                    topic = a.kwargs["topic"].value  # a Literal: the topic itself, not a binding
+                    outputs[topic.name] = topic
+        super().__init__(component_name=MONITOR_NAME, inputs=list(topics.values()), outputs=list(outputs.values()))
+        if topics:
+            self.trigger = list(topics.values())
+        else:
+            self.run_type = "Event"
+        self._status_every_step = False  # a flood of event messages must not flood the status topic
+
+    def __deepcopy__(self, memo: dict) -> "Monitor":
+        # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
+        return Monitor(self._entries, self._action_timeout)
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def custom_on_activate(self) -> None:
+        node = self.node
+        self._fired_path = node.ctx.run_dir / "monitor_fired.json"
+        fired = self._load_fired()
+        self.board = Blackboard({t.name: t.data_timeout for t in self.in_topics})
+        self.trackers = [EventTracker(e.to_dict(), fired_before=i in fired) for i, (e, _) in enumerate(self._entries)]
+        self.by_topic: dict[str, list[int]] = {}
+        for i, tr in enumerate(self.trackers):
+            for t in tr.topics:
+                self.by_topic.setdefault(t, []).append(i)
+        self.runtime = MonitorRuntime(self)
+        self._errors = RepeatLimiter()
+        self._tasks: set[asyncio.Task] = set()
+        self.stats = {"fired": 0, "actions_ok": 0, "actions_failed": 0}
+        self.get_logger().info("[%s] watching %d events on %d topics", self.component_name, len(self._entries), len(self.in_topics))
+
+    def custom_on_deactivate(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        self.runtime.cancel_periodic()
+
+    def _load_fired(self) -> set[int]:
+        try:
+            return set(json.loads(self._fired_path.read_text()))
+        except FileNotFoundError:
+            return set()
+        except (OSError, ValueError) as exc:
+            self.get_logger().error("[%s] cannot read %s (%s): handle_once events may fire again", self.component_name, self._fired_path, exc)
+            return set()
+
+    def _record_fired(self, index: int) -> None:
+        fired = self._load_fired() | {index}
+        tmp = self._fired_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(sorted(fired)))
+        os.replace(tmp, self._fired_path)
+
+    # -- evaluation -----------------------------------------------------------------------------
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+        if topic is None:
+            return
+        now = time.monotonic()
+        # Freshness counts from the publish stamp, not from our receipt: a message that waited in
+        # a ring (a restarted Monitor reading old messages) must not pass for fresh data.
+        age = self.input_age(topic)
+        self.board.put(topic.name, msg, now - age if age is not None and age > 0 else now)
+        interested = self.by_topic.get(topic.name, ())
+        if not interested:
+            return
+        cache: dict[str, Any] = {}  # each topic's freshness is looked up once per message, not per leaf
+
+        def fresh(name: str) -> Any:
+            if name not in cache:
+                cache[name] = self.board.fresh(name, now)
+            return cache[name]
+
+        for i in interested:
+            try:
+                if self.trackers[i].check(topic.name, self.board, now, fresh):
+                    self._fire(i, topic.name, msg)
+            except Exception as exc:  # one broken event must not stop the others (or restart us)
+                log_now, _, suppressed = self._errors.hit((i, "evaluate", type(exc).__name__))
+                if log_now:
+                    self.get_logger().error("[%s] event %r on %s: %s: %s%s", self.component_name, self._entries[i][0], topic.name,
+                                            type(exc).__name__, exc, f" (and {suppressed} more times)" if suppressed else "")
+        self.health_status.set_healthy()
+
+    def _fire(self, index: int, topic: str, msg: Any) -> None:
+        event, actions = self._entries[index]
+        if event.handle_once:
+            self._record_fired(index)  # before acting: a Monitor killed mid-action must not fire it twice
+        self.stats["fired"] += 1
+        prepared = [prepare(a, self.board.latest) for a in actions]  # bindings resolve at fire time
+        task = asyncio.ensure_future(self._run(index, actions, prepared, topic, msg))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _run(self, index: int, actions: list[Action], prepared: list, topic: str, msg: Any) -> None:
+        event = self._entries[index][0]
+        for k, (action, args) in enumerate(zip(actions, prepared)):
+            try:
+                # Every path of run_action has its own deadline (RPC, worker thread, service call),
+                # so no extra wait_for task sits on the hot path of an event.
+                await run_action(action, self.runtime, topic, msg, args)
+                self.stats["actions_ok"] += 1
+            except asyncio.CancelledError:
+                raise
+            except BaseException as exc:
+                self.stats["actions_failed"] += 1
+                what = "timed out" if isinstance(exc, (asyncio.TimeoutError, TimeoutError)) else f"failed: {type(exc).__name__}: {exc}"
+                log_now, _, suppressed = self._errors.hit((index, k, type(exc).__name__))
+                if log_now:
+                    more = f" (and {suppressed} more times)" if suppressed else ""
+                    self.get_logger().error("[%s] event %r: action %d/%d %s (component %s) %s%s", self.component_name, event, k + 1,
+                                            len(actions), action.describe(), action.component or "-", what, more)
+
+    def monitor_stats(self) -> dict:
+        """Counts since this Monitor started (``emos component call emos_monitor execute_method``)."""
+        return dict(self.stats, events=len(self._entries), fire_counts=[t.fire_count for t in self.trackers])
+
+
+class MonitorRuntime(ActionRuntime):
+    def __init__(self, monitor: Monitor):
+        self.monitor = monitor
+        self.ctx = monitor.node.ctx
+        self.log = monitor.get_logger()
+        self.timeout = monitor._action_timeout
+        self.links = ComponentLinks(self.ctx, queue_timeout=monitor._action_timeout)
+
+    async def call_component(self, component: str, op: str, timeout: float, **payload: Any) -> Any:
+        return await self.links.call(component, op, timeout, **payload)
+
+    async def lifecycle(self, component: str, op: str, wait_time: float = 0.0) -> Any:
+        sock = self.monitor.node.supervisor_socket
+        if not sock:
+            raise RuntimeError("no supervisor to send the lifecycle request to")
+        client = AsyncRpcClient(sock)
+        try:
+            return await client.call("lifecycle", component=component, request=op, wait_time=wait_time, timeout=self.timeout + wait_time + 30.0)
+        finally:
+            await client.close()
+
+    def publish(self, topic: Topic, msg: Any) -> None:
+        self.monitor.publish(topic, msg)
+
+    def latest(self, topic: str) -> Any | None:
+        return self.monitor.board.latest(topic)
