@@ -16,6 +16,7 @@ import logging
 import time
 from typing import Any
 
+from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
