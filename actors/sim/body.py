@@ -187,7 +187,7 @@ class SimRobot:
             self.pose = self._previous.copy()
             self.twist = np.zeros(3)
             self.wheel_twist = np.zeros(3)
-            self.drive.halt()
+            self.drive.halt(self.pose)
             self._place()
         step = math.dist(self.trail[-1], self.pose[:2])
         if step > 0.02:  # keep the trail light: one point per 2 cm

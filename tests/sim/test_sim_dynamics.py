@@ -172,6 +172,13 @@ def test_wheeled_jackal_drives_in_a_world_and_stops_at_an_obstacle(make_world):
     # Touched where the front wheels / chassis meet the cylinder: 2.0 - 0.2 - 0.229 m.
     assert robot.pose[0] == pytest.approx(2.0 - 0.2 - 0.229, abs=0.06)
     assert abs(robot.pose[1]) < 0.05
+    # The wheeled simulation restarts at rest where the World put the robot back: backing off works.
+    touched_at = robot.pose[0]
+    for _ in range(100):
+        robot.command(-0.5, 0.0, 0.0)
+        world.step()
+    assert touched_at - robot.pose[0] > 0.25
+    assert not robot.contacts
 
 
 def test_official_collision_shape_is_the_chassis_and_the_wheels(make_world):

@@ -35,8 +35,8 @@ class DriveModel:
         """Advance ``dt`` s toward ``command`` (vx, vy, omega); return (body twist, wheel twist)."""
         raise NotImplementedError
 
-    def halt(self) -> None:
-        """The body was stopped by a contact: every velocity state is zero now."""
+    def halt(self, pose: np.ndarray) -> None:
+        """The body was stopped by a contact and put back at ``pose``: at rest there now."""
 
     def close(self) -> None:
         """Release what the model holds (a private physics client)."""

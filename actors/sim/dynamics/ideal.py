@@ -26,7 +26,7 @@ class IdealDrive(DriveModel):
     def reset(self, pose: np.ndarray) -> None:
         self._wheels = np.zeros(3)
 
-    def halt(self) -> None:
+    def halt(self, pose: np.ndarray) -> None:
         self._wheels = np.zeros(3)
 
     def step(self, command: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -104,9 +104,9 @@ class SkidSteerDrive(DriveModel):
             self.yaw_gain = float(self.rng.uniform(low, high))
 
     def reset(self, pose: np.ndarray) -> None:
-        self.halt()
+        self.halt(pose)
 
-    def halt(self) -> None:
+    def halt(self, pose: np.ndarray) -> None:
         self._controller[:] = 0.0
         self._wheels[:] = 0.0
         self._body[:] = 0.0

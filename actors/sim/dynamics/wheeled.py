@@ -136,9 +136,8 @@ class WheeledJackal(DriveModel):
             c.stepSimulation()
         self._pose = self._read_pose()
 
-    def halt(self) -> None:
-        if self._client is not None:
-            self.reset(self._pose)
+    def halt(self, pose: np.ndarray) -> None:
+        self.reset(pose)
 
     def _read_pose(self) -> np.ndarray:
         (x, y, _), q = self._client.getBasePositionAndOrientation(self._body)
