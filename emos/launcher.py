@@ -193,6 +193,15 @@ class Launcher:
 
         self._ui = check_ui_request(inputs, outputs, port, host, settings)
 
+    def enable_foxglove(self, port: int = 8765, host: str = "127.0.0.1", **config: Any) -> None:
+        """Serve every topic live to Foxglove on ``ws://host:port``, from a supervised component
+        (``foxglove_bridge``) in its own process. ``config``: more ``FoxgloveConfig`` fields
+        (``topics``, ``exclude``, ``loop_rate``, ``distribution``)."""
+        from emos.actors.viz import FoxgloveBridgeComponent, FoxgloveConfig
+
+        bridge = FoxgloveBridgeComponent(config=FoxgloveConfig(host=host, port=port, **config))
+        self.add_pkg(components=[bridge], package_name="foxglove", multiprocessing=True)
+
     # Launcher-wide fallback policies: for every component without its own handler of that level
     # (see emos.core.fallbacks for the order). Run by the supervisor (emos.supervisor.fallback_driver).
     def _policy(self, key: str, action_name: str, max_retries: int | None) -> None:

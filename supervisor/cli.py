@@ -24,6 +24,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "service": ("emos.supervisor.cli_service", "run a recipe as a systemd service: create, remove, status"),
     "version": ("emos.supervisor.cli_version", "show the EMOS version"),
     "component": ("emos.supervisor.cli_component", "list components, show one, or call its reconfiguration services"),
+    "record": ("emos.supervisor.cli_record", "record a running system's topics into an MCAP file"),
+    "play": ("emos.supervisor.cli_play", "publish an MCAP recording into a running system, with its timing"),
+    "viz": ("emos.supervisor.cli_viz", "serve a running system's topics to Foxglove over its WebSocket protocol"),
 }
 
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
@@ -31,7 +34,9 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
     "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
+    "record": ("emos.supervisor.bench.record", "camera latency to its subscribers with and without `emos record`"),
     "nav": ("emos.actors.nav.bench", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
+    "navloop": ("emos.actors.nav.bench_navloop", "scan to motor command through LocalMapper, Controller and DriveManager processes"),
     "sim": ("emos.actors.sim.bench", "simulation speed relative to real time"),
     "barn": ("emos.actors.sim.barn", "BARN navigation benchmark"),
     "agents": ("emos.actors.agents.bench", "semantic routing and vector-store query times"),
@@ -60,6 +65,12 @@ EXAMPLES: dict[str, str] = {
     "bench barn": "emos bench barn\nemos bench barn --json",
     "bench agents": "emos bench agents\nemos bench agents --json",
     "serve models": "emos serve models\nemos serve models --help   # address and models",
+    "record": "emos record -o run.mcap                  # every topic, until Ctrl-C\n"
+              "emos record /camera/rgb /scan -o two.mcap --duration 10\n"
+              "emos record -o nav.mcap -x '/*/status' --compression zstd",
+    "play": "emos play run.mcap\nemos play run.mcap --rate 2 --loop --topics /scan",
+    "viz": "emos viz                                  # ws://127.0.0.1:8765 for Foxglove\nemos viz /scan '/camera/*' --port 8766",
+    "bench record": "emos bench record\nemos bench record --pairs 4 --window 8 --against hz   # control",
 }
 
 

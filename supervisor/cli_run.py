@@ -6,7 +6,6 @@ import math
 import os
 import runpy
 import sys
-from pathlib import Path
 
 EXIT_NO_BRINGUP = 5  # the supervisor's own codes: 3 gave up, 4 a component failed to start
 

@@ -78,7 +78,7 @@ class HeartbeatMonitor:
                 continue
             try:
                 self.status[name] = codec.decode(ComponentStatus, items[-1][1])
-            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the heartbeat task
+            except codec.DecodeError as exc:  # a bad frame must not kill the heartbeat task
                 self._count_foreign(name, 1, f"an undecodable status frame ({type(exc).__name__}: {exc})")
             if name in self.watched:
                 self.watched[name] = (self.watched[name][0], now)

@@ -84,6 +84,9 @@ class KeyedComponent(BaseComponent):
 
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {}
     allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {}
+    #: other names a key answers to (``{"map": "global_map"}``): one shared enum of keys can
+    #: then name the same role on the component that publishes it and the one that reads it.
+    key_aliases: ClassVar[Mapping[str, str]] = {}
 
     def __init__(
         self,
@@ -195,8 +198,13 @@ class KeyedComponent(BaseComponent):
             out[key] = [] if default is None else (list(default) if isinstance(default, list) else [default])
         return out
 
-    def _topics_of(self, role: str, key: Any) -> list[Topic]:
+    def _key(self, role: str, key: Any) -> str:
         name = key_name(key)
+        alias = self.key_aliases.get(name)
+        return alias if alias is not None and name not in self._allowed(role) and alias in self._allowed(role) else name
+
+    def _topics_of(self, role: str, key: Any) -> list[Topic]:
+        name = self._key(role, key)
         if name not in self._keyed[role]:
             raise UnknownTopicKey(
                 f"component {self.component_name!r} ({type(self).__name__}) has no {role[:-1]} key {name!r}; "
@@ -212,7 +220,7 @@ class KeyedComponent(BaseComponent):
         allowed = self._allowed(role)
         staged: dict[str, list[Topic]] = {}
         for raw_key, value in topics.items():
-            key = key_name(raw_key)
+            key = self._key(role, raw_key)
             spec = allowed.get(key)
             if spec is None:
                 raise UnknownTopicKey(

@@ -65,6 +65,24 @@ def wake_spin_setting() -> float:
     return value
 
 
+def process_alive(pid: int) -> bool:
+    """True while ``pid`` runs; a killed process that is not reaped yet (a zombie) is dead."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            state = f.read().rsplit(b")", 1)[-1].split()[0]
+        return state not in (b"Z", b"X")
+    except FileNotFoundError:
+        return False
+    except (OSError, IndexError):  # no /proc: ask the kernel (zombies then count as alive)
+        try:
+            os.kill(pid, 0)
+            return True
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+
+
 class Node:
     def __init__(self, component: BaseComponent, ctx: RunContext | None = None, supervisor_socket: str | None = None, wake_spin_us: float | None = None):
         """``wake_spin_us``: how long the node spins for more messages after a wake-up before it
@@ -362,6 +380,20 @@ class Node:
     def age(self, topic: Topic | str) -> float | None:
         inp = self._input(topic)
         return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
+
+    def publisher_pids(self, topic: Topic | str) -> list[int]:
+        """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
+        return [src.ring.writer_pid for src in list(self._input(topic).sub.sources.values())]
+
+    def publishers_alive(self, topic: Topic | str) -> bool | None:
+        """Whether a process publishing on ``topic`` is alive: None if no publisher was ever seen.
+
+        Lets a consumer tell "the producer died" (stop now) from "it is slow" (wait for the
+        data timeout), e.g. the DriveManager when the controller process is killed."""
+        pids = self.publisher_pids(topic)
+        if not pids:
+            return None
+        return any(pid <= 0 or process_alive(pid) for pid in pids)
 
     def stale_inputs(self) -> list[str]:
         stale = []

@@ -67,7 +67,7 @@ def test_summary_rates():
 
 
 def test_builtin_navigator_solves_a_real_barn_world():
-    from emos.actors.sim.navigation import GridNavigator
+    from emos.actors.nav.navigator import GridNavigator
 
     world = load_barn_worlds()[3]
     r = run_episode(world, GridNavigator())
@@ -116,9 +116,9 @@ def test_every_shipped_world_keeps_a_route_through_the_navigators_soft_band():
     """The built-in navigator makes gaps narrower than half-width + lethal_bias expensive;
     with the whole map known, every shipped world must still have a route that avoids them."""
     from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START
-    from emos.actors.sim.navigation.builtin import GridNavigator
-    from emos.actors.sim.navigation.costfield import CostField
-    from emos.actors.sim.navigation.grid import HitGrid
+    from emos.actors.nav.navigator import GridNavigator
+    from emos.actors.nav.planning.costfield import CostField
+    from emos.actors.nav.mapping import HitGrid
     from emos.actors.sim.robots import JACKAL
 
     band = JACKAL.width / 2 + GridNavigator().lethal_bias

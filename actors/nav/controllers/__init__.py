@@ -1,4 +1,5 @@
 """Local controllers: path followers (Pure Pursuit, Stanley, DWA, DVZ) and vision followers."""
+from .arc_sampler import ArcSampler, ArcSamplerConfig
 from .base import ControllersID, ControlResult, ControlStatus
 from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
@@ -11,6 +12,8 @@ from .vision_rgbd import VisionRGBDFollower, VisionRGBDFollowerConfig
 from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 
 __all__ = [
+    "ArcSampler",
+    "ArcSamplerConfig",
     "CONTROLLERS",
     "make_controller",
     "ControllersID",

@@ -23,6 +23,7 @@ class ControllersID(str, enum.Enum):
     PURE_PURSUIT = "PurePursuit"
     VISION_IMG = "VisionRGBFollower"
     VISION_DEPTH = "VisionRGBDFollower"
+    ARC_SAMPLER = "ArcSampler"  # sampled constant-velocity arcs scored by cost-to-go (BARN's local planner)
 
     @classmethod
     def from_any(cls, value: "ControllersID | str") -> "ControllersID":

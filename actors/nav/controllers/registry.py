@@ -4,6 +4,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..robot import RobotConfig
+from .arc_sampler import ArcSampler, ArcSamplerConfig
 from .base import ControllersID
 from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
@@ -22,6 +23,7 @@ CONTROLLERS: dict[ControllersID, tuple[type, type]] = {
     ControllersID.PURE_PURSUIT: (PurePursuit, PurePursuitConfig),
     ControllersID.VISION_IMG: (VisionRGBFollower, VisionRGBFollowerConfig),
     ControllersID.VISION_DEPTH: (VisionRGBDFollower, VisionRGBDFollowerConfig),
+    ControllersID.ARC_SAMPLER: (ArcSampler, ArcSamplerConfig),
 }
 
 

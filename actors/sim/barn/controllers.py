@@ -1,20 +1,21 @@
-"""Controllers the BARN harness can drive with (``--controller NAME``)."""
+"""Navigators the BARN harness can drive with (``--controller NAME``); all of them live in
+``emos.actors.nav.navigator``: the simulator only simulates."""
 from __future__ import annotations
 
 from typing import Callable
 
-from ..navigation.interface import Navigator
+from emos.actors.nav.navigator import Navigator
 
 
 def _builtin() -> Navigator:
-    from ..navigation.builtin import GridNavigator
+    from emos.actors.nav.navigator import GridNavigator
 
     return GridNavigator()
 
 
 def _navcore(name: str) -> Callable[[], Navigator]:
     def factory() -> Navigator:
-        from .navcore import NavCoreNavigator
+        from emos.actors.nav.navigator import NavCoreNavigator
 
         return NavCoreNavigator(name)
 
@@ -23,7 +24,7 @@ def _navcore(name: str) -> Callable[[], Navigator]:
 
 # name -> (factory, one-line description). Factories import lazily.
 def _builtin_carve() -> Navigator:
-    from ..navigation.builtin import GridNavigator
+    from emos.actors.nav.navigator import GridNavigator
 
     nav = GridNavigator(carve_range=4.0, localize=False)
     nav.name = "builtin-carve"
@@ -31,7 +32,7 @@ def _builtin_carve() -> Navigator:
 
 
 def _builtin_odom() -> Navigator:
-    from ..navigation.builtin import GridNavigator
+    from emos.actors.nav.navigator import GridNavigator
 
     nav = GridNavigator(localize=False)
     nav.name = "builtin-odom"

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import attrs
 import numpy as np
@@ -11,7 +12,7 @@ import numpy as np
 from ..barn_worlds import BARN_GOAL, BARN_GOAL_RADIUS, BARN_START, BARN_TIME_LIMIT, BarnWorld
 from ..builders import from_barn
 from ..clock import ClockMode, SimClock
-from ..navigation.interface import Navigator, NavTask, Observation
+from emos.actors.nav.navigator import Navigator, NavTask, Observation
 from ..robots import JACKAL, RobotSpec
 from ..sensors import Lidar, LidarConfig, Odometry, OdometryConfig
 
@@ -61,6 +62,17 @@ def score_run(entry: BarnWorld, reached: bool, collided: bool, time_s: float, ru
     return EpisodeResult(entry.idx, success, collided, timeout, float(time_s), entry.metric(success, time_s))
 
 
+def nav_robot(spec: RobotSpec) -> Any:
+    """The navigation core's description of a simulated robot (box footprint, limits)."""
+    from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
+
+    return RobotConfig(
+        model_type="DIFFERENTIAL_DRIVE", geometry_type="BOX", geometry_params=np.array([spec.length, spec.width, spec.height]),
+        ctrl_vx_limits=LinearCtrlLimits(max_vel=spec.max_vx, max_acc=spec.max_acc_x, max_decel=spec.max_acc_x),
+        ctrl_omega_limits=AngularCtrlLimits(max_vel=spec.max_omega, max_acc=spec.max_acc_omega, max_decel=spec.max_acc_omega),
+    )
+
+
 def run_episode(entry: BarnWorld, navigator: Navigator, rules: BarnRules = BarnRules(), seed: int = 0,
                 png_path: str | Path | None = None) -> EpisodeResult:
     """Drive the Jackal from start to goal in lock-step with the sim clock (faster than real time)."""
@@ -71,7 +83,8 @@ def run_episode(entry: BarnWorld, navigator: Navigator, rules: BarnRules = BarnR
         lidar = world.add_sensor(Lidar(robot, rules.lidar))
         odom = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=rules.control_rate_hz,
                                                                noisy=rules.noisy_odometry)))
-        navigator.reset(NavTask(rules.robot, rules.start, rules.goal, rules.goal_radius, rules.lidar, rules.control_rate_hz))
+        navigator.reset(NavTask(nav_robot(rules.robot), rules.start, rules.goal, rules.goal_radius,
+                                (*rules.lidar.mount_xy, rules.lidar.mount_yaw), rules.control_rate_hz, rules.robot.center_offset))
         ticks_per_control = max(1, int(round(1.0 / (rules.control_rate_hz * rules.physics_dt))))
         max_ticks = int(math.ceil(rules.time_limit / rules.physics_dt))
         world.step()  # first sensor readings

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from .. import _deps
-from .grid import HitGrid
+from ..maps.edt import euclidean_distance_transform
+from .hit_grid import HitGrid
 
 
 def compose(correction: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -42,7 +42,7 @@ class ScanMatcher:
 
     def _likelihood(self, grid: HitGrid) -> np.ndarray:
         if self._field is None or self._field_version != grid.version:
-            dist = _deps.scipy_ndimage().distance_transform_edt(~grid.occupied) * grid.resolution
+            dist = euclidean_distance_transform(grid.occupied, grid.resolution)
             self._field = np.exp(-0.5 * (dist / self.sigma) ** 2).astype(np.float32)
             self._field_version = grid.version
         return self._field

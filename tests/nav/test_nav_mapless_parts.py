@@ -1,31 +1,10 @@
+"""The mapless navigator's parts (moved from the simulator): cost field, obstacle memory,
+scan matching, arc sampler config."""
 import numpy as np
 import pytest
 
-from emos.actors.sim import Box, World, render_topdown
-from emos.actors.sim.navigation.costfield import CostField, lattice_edges
-from emos.actors.sim.navigation.grid import HitGrid
-
-
-def test_topdown_png_shows_obstacles_trail_plan_and_goal(tmp_path, make_world):
-    world = make_world()
-    world.add(Box((2.0, 0.0), (1.0, 1.0)))
-    robot = world.add_robot("jackal", (-2.0, 0.0, 0.0))
-    robot.command(1.0)
-    world.step(150)
-    path = tmp_path / "pic.png"
-    img = render_topdown(world, path, plan=[(-2, -1), (3, -1)], goal=(3.0, 2.0), goal_radius=0.5,
-                         bounds=(-3, -3, 4, 3), pixels_per_m=20)
-    assert path.is_file()
-    arr = np.asarray(img)
-    assert arr.shape == (120, 140, 3)
-
-    def at(x, y):
-        return arr[int((3 - y) * 20), int((x + 3) * 20)]
-
-    assert at(2.0, 0.0).tolist() == [90, 90, 100]  # obstacle
-    assert at(-1.5, 0.0).tolist() == [30, 90, 220]  # trail
-    assert at(0.0, -1.0).tolist() == [40, 170, 60]  # plan
-    assert at(3.0, 2.0).tolist() == [220, 40, 40]  # goal cross
+from emos.actors.nav.mapping import HitGrid
+from emos.actors.nav.planning.costfield import CostField, lattice_edges
 
 
 def test_costfield_routes_around_a_wall_through_its_gap():
@@ -68,14 +47,6 @@ def test_virtual_blocks_close_plans_but_are_not_obstacle_points():
     assert grid.blocked()[0].sum() == 1
 
 
-def test_gui_request_without_a_display_runs_headless(monkeypatch, caplog):
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    with World(gui=True) as world:
-        assert not world.gui
-    assert "no display" in caplog.text
-
-
 def test_carving_clears_ghosts_crossed_by_beams_but_keeps_grazed_obstacles():
     grid = HitGrid((0, 0, 4, 4), 0.05)
     grid.insert(np.array([[2.0, 1.0], [2.0, 2.06]]))  # a ghost on the beam line, a point 6 cm off it
@@ -90,7 +61,7 @@ def test_carving_clears_ghosts_crossed_by_beams_but_keeps_grazed_obstacles():
 
 
 def test_scan_matcher_recovers_a_pose_offset():
-    from emos.actors.sim.navigation.localize import ScanMatcher, compose, correction_between
+    from emos.actors.nav.mapping import ScanMatcher, compose, correction_between
 
     rng = np.random.default_rng(0)
     # An L-shaped room corner plus a few posts, remembered in the grid.
@@ -117,7 +88,7 @@ def test_scan_matcher_recovers_a_pose_offset():
 
 @pytest.mark.parametrize("kwargs", [dict(speeds=1), dict(horizon=0), dict(margin=-0.1), dict(step=float("nan"))])
 def test_arc_config_rejects_bad_values(kwargs):
-    from emos.actors.sim.navigation.arcs import ArcConfig
+    from emos.actors.nav.controllers.arcs import ArcConfig
 
     with pytest.raises(ValueError, match="ArcConfig"):
         ArcConfig(**kwargs)

@@ -10,7 +10,15 @@ import math
 
 import numpy as np
 
-from .. import _deps
+
+
+def _scipy():
+    try:
+        from scipy import ndimage
+        from scipy.sparse import csgraph, csr_matrix
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("the cost-to-go planner needs scipy: pip install 'emos[nav]'") from exc
+    return ndimage, csgraph, csr_matrix
 
 
 def lattice_edges(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -62,8 +70,7 @@ class CostField:
         rather than to cell centres, so a gap narrower than the robot is not opened (or a wide
         one closed) by grid rounding.
         """
-        ndimage, csgraph = _deps.scipy_ndimage(), _deps.scipy_csgraph()
-        from scipy.sparse import csr_matrix
+        ndimage, csgraph, csr_matrix = _scipy()
 
         n = self.shape[0] * self.shape[1]
         if occupied.any():

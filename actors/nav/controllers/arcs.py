@@ -1,4 +1,4 @@
-"""Local planner: sample constant-velocity arcs, reject those whose footprint would touch a
+"""Arc sampler (local planner): sample constant-velocity arcs, reject those whose footprint would touch a
 known obstacle point, score the rest by cost-to-go (a dynamic-window search).
 
 All candidates are checked at once with numpy: (arcs, time samples, points) arrays.
@@ -11,7 +11,8 @@ from typing import Callable
 import attrs
 import numpy as np
 
-from ..robots import RobotSpec
+from ..kinematics import integrate
+from ..robot import RobotConfig, RobotGeometry
 
 
 def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
@@ -45,12 +46,35 @@ class ArcConfig:
     reverse_cost: float = 1.0  # extra cost of backing up, so it is only chosen to get unstuck
 
 
+@attrs.define(frozen=True)
+class BoxFootprint:
+    """The footprint the arc checks use: a box (``length`` x ``width``) whose centre is
+    ``center_offset`` ahead of the base frame; round robots use their bounding square."""
+
+    length: float
+    width: float
+    center_offset: float = 0.0
+
+    @classmethod
+    def of(cls, robot: RobotConfig, center_offset: float = 0.0) -> "BoxFootprint":
+        if robot.geometry_type is RobotGeometry.Type.BOX:
+            return cls(float(robot.geometry_params[0]), float(robot.geometry_params[1]), center_offset)
+        return cls(2.0 * robot.radius, 2.0 * robot.radius, center_offset)
+
+    @property
+    def circumscribed_radius(self) -> float:
+        return math.hypot(self.length / 2, self.width / 2)
+
+
 class ArcPlanner:
-    def __init__(self, spec: RobotSpec, config: ArcConfig | None = None) -> None:
-        self.spec = spec
+    """Samples (v, omega) arcs within the robot's limits and picks the best clear one."""
+
+    def __init__(self, robot: RobotConfig, config: ArcConfig | None = None, center_offset: float = 0.0) -> None:
+        self.robot = robot
+        self.spec = spec = BoxFootprint.of(robot, center_offset)
         self.cfg = cfg = config or ArcConfig()
-        vmax = min(cfg.max_speed, spec.max_vx)
-        wmax = min(cfg.max_turn, spec.max_omega)
+        vmax = min(cfg.max_speed, robot.ctrl_vx_limits.max_vel)
+        wmax = min(cfg.max_turn, robot.ctrl_omega_limits.max_vel)
         speeds = np.linspace(0.0, vmax, cfg.speeds)
         if cfg.reverse_speed > 0:
             speeds = np.concatenate([[-min(cfg.reverse_speed, vmax)], speeds])
@@ -62,11 +86,10 @@ class ArcPlanner:
             swept = abs(v) * cfg.horizon + np.abs(turns) * cfg.horizon * spec.circumscribed_radius
             n = max(2, int(math.ceil(swept.max() / cfg.step)))
             t = cfg.horizon * np.arange(1, n + 1) / n
-            wt = turns[:, None] * t[None, :]
-            straight = np.abs(turns) < 1e-6
-            safe_w = np.where(straight, 1.0, turns)[:, None]
-            dx = np.where(straight[:, None], v * t, v * np.sin(wt) / safe_w)
-            dy = np.where(straight[:, None], 0.0, v * (1 - np.cos(wt)) / safe_w)
+            # Poses along each arc, relative to the start: the kinematics' closed-form arcs.
+            commands = np.stack([np.full_like(turns, v), np.zeros_like(turns), turns], axis=-1)
+            rel = integrate(np.zeros(3), commands[:, None, :], t[None, :])  # (turns, n, 3)
+            dx, dy, wt = rel[..., 0], rel[..., 1], rel[..., 2]
             reach = abs(v) * cfg.horizon + spec.circumscribed_radius + abs(spec.center_offset) + cfg.margin + 0.05
             self.groups.append((v, turns, dx.astype(np.float32), dy.astype(np.float32),
                                 np.cos(wt).astype(np.float32), np.sin(wt).astype(np.float32), wt, reach))

@@ -1,6 +1,6 @@
-"""Adapter: drive BARN with the navigation core's local controllers (``emos.actors.nav``).
+"""The mapless navigator's global layer with one of the path followers as local controller.
 
-The global layer is the simulator's own (lidar obstacle memory, Dijkstra cost-to-go, plan,
+The global layer is the mapless navigator's (lidar obstacle memory, Dijkstra cost-to-go, plan,
 stuck recovery); each control step hands the plan and the nearby obstacle points to one of
 the navigation core's path followers (DWA, PurePursuit, Stanley, DVZ) and applies its command.
 """
@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 
-from ..navigation.builtin import GridNavigator
-from ..navigation.interface import NavTask, Observation
+from .mapless import GridNavigator
+from .interface import NavTask, Observation
 
-# --controller name -> class names in emos.actors.nav.controllers (controller, config).
+# navigator name -> class names in emos.actors.nav.controllers (controller, config).
 NAVCORE_CONTROLLERS = {
     "navcore-dwa": ("DWA", "DWAConfig"),
     "navcore-purepursuit": ("PurePursuit", "PurePursuitConfig"),
@@ -22,33 +22,19 @@ NAVCORE_CONTROLLERS = {
 }
 
 
-def _nav_core():
-    try:
-        from emos.actors.nav import controllers
-        from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
-    except ImportError as exc:
-        raise ImportError(f"the navcore-* BARN controllers need the navigation core (emos.actors.nav): {exc}") from exc
-    return controllers, RobotConfig, LinearCtrlLimits, AngularCtrlLimits
-
-
 class NavCoreNavigator:
     def __init__(self, name: str) -> None:
         if name not in NAVCORE_CONTROLLERS:
-            raise ValueError(f"unknown navigation-core controller {name!r}; expected one of {sorted(NAVCORE_CONTROLLERS)}")
+            raise ValueError(f"unknown local controller {name!r}; expected one of {sorted(NAVCORE_CONTROLLERS)}")
         self.name = name
         self._global = GridNavigator()
         self.plan: np.ndarray | None = None
         self._tracked: np.ndarray | None = None
 
     def reset(self, task: NavTask) -> None:
-        controllers, RobotConfig, Linear, Angular = _nav_core()
-        spec = task.robot
-        robot = RobotConfig(
-            model_type="DIFFERENTIAL_DRIVE", geometry_type="BOX",
-            geometry_params=np.array([spec.length, spec.width, spec.height]),
-            ctrl_vx_limits=Linear(max_vel=spec.max_vx, max_acc=spec.max_acc_x, max_decel=spec.max_acc_x),
-            ctrl_omega_limits=Angular(max_vel=spec.max_omega, max_acc=spec.max_acc_omega, max_decel=spec.max_acc_omega),
-        )
+        from .. import controllers
+
+        robot = task.robot
         cls_name, cfg_name = NAVCORE_CONTROLLERS[self.name]
         config = getattr(controllers, cfg_name)(control_time_step=1.0 / task.control_rate_hz,
                                                  goal_dist_tolerance=min(0.5, task.goal_radius))

@@ -1,18 +1,18 @@
-"""The simulator's own navigator: lidar-built obstacle memory (scans aligned to it by scan
+"""The mapless navigator: lidar-built obstacle memory (scans aligned to it by scan
 matching), Dijkstra cost-to-go from the goal (global plan), and a sampled-arc local planner.
 No map is given; it only sees the world through its lidar and odometry, as a BARN entry would.
 """
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from .arcs import ArcConfig, ArcPlanner
-from .costfield import CostField
-from .grid import HitGrid
+from ..controllers.arcs import ArcConfig, ArcPlanner
+from ..mapping import HitGrid, ScanMatcher, compose, correction_between
+from ..planning.costfield import CostField
 from .interface import NavTask, Observation
-from .localize import ScanMatcher, compose, correction_between
 
 UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has no path
 
@@ -50,7 +50,7 @@ class GridNavigator:
 
     def reset(self, task: NavTask) -> None:
         self.task = task
-        spec = task.robot
+        spec = self.arcs_footprint(task)
         sx, sy, _ = task.start
         gx, gy = task.goal
         m = self.window_margin
@@ -66,7 +66,7 @@ class GridNavigator:
         soft = spec.width / 2 + self.lethal_bias
         self.field = CostField(self.grid.shape, self.resolution, hard, inflation_radius=soft + 0.45,
                                soft_radius=soft)
-        self.arcs = ArcPlanner(spec, self.arc_config)
+        self.arcs = ArcPlanner(task.robot, self.arc_config, task.center_offset)
         self._goal_cell = self._cell((gx, gy))
         self._planned_version = -1
         self._last_plan = -math.inf
@@ -77,6 +77,12 @@ class GridNavigator:
         self._correction = np.zeros(3)  # map <- odometry
         self._matcher = ScanMatcher() if self.localize else None
         self.plan = None
+
+    @staticmethod
+    def arcs_footprint(task: NavTask) -> Any:
+        from ..controllers.arcs import BoxFootprint
+
+        return BoxFootprint.of(task.robot, task.center_offset)
 
     def _cell(self, xy: tuple[float, float]) -> tuple[int, int]:
         rows, cols, _ = self.grid.cell_of(np.array([xy]))
@@ -113,11 +119,11 @@ class GridNavigator:
     def _insert_scan(self, obs: Observation) -> None:
         """Place the scan with the robot's own pose estimate (odometry) and the lidar mount,
         never with the simulator's ground truth; carve free space along the beams first."""
-        lidar, scan = self.task.lidar, obs.scan  # type: ignore[union-attr]
+        mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
+        scan = obs.scan
         x, y, yaw = obs.pose
-        mx, my = lidar.mount_xy
         c, s = math.cos(yaw), math.sin(yaw)
-        sx, sy, syaw = x + c * mx - s * my, y + s * mx + c * my, yaw + lidar.mount_yaw
+        sx, sy, syaw = x + c * mx - s * my, y + s * mx + c * my, yaw + myaw
         angles = syaw + scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))  # type: ignore[union-attr]
         d = np.c_[np.cos(angles), np.sin(angles)]
         r = scan.ranges.astype(float)  # type: ignore[union-attr]
@@ -136,10 +142,9 @@ class GridNavigator:
             return obs
         guess = compose(self._correction, obs.pose)
         if obs.scan is not None:
-            lidar = self.task.lidar  # type: ignore[union-attr]
-            mx, my = lidar.mount_xy
+            mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
             p = obs.scan.points()
-            cm, sm = math.cos(lidar.mount_yaw), math.sin(lidar.mount_yaw)
+            cm, sm = math.cos(myaw), math.sin(myaw)
             local = np.c_[mx + cm * p[:, 0] - sm * p[:, 1], my + sm * p[:, 0] + cm * p[:, 1]]
             pose, best, at_guess = self._matcher.match(self.grid, guess, local)
             if best > at_guess + 0.01:
@@ -168,7 +173,7 @@ class GridNavigator:
     def step(self, obs: Observation) -> tuple[float, float, float]:
         obs = self.localized(obs)
         recovering = self.update(obs)
-        reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.task.robot.circumscribed_radius + 0.3  # type: ignore[union-attr]
+        reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.arcs.spec.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
         choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None)
         if choice is None:
@@ -198,7 +203,7 @@ class GridNavigator:
         seg = np.linalg.norm(np.diff(self.plan, axis=0), axis=1)
         ahead = self.plan[: int(np.searchsorted(np.cumsum(seg), 2.5)) + 1]
         # Never block the ground the robot stands on: that would box it in for good.
-        keep_out = self.task.robot.circumscribed_radius + 0.15  # type: ignore[union-attr]
+        keep_out = self.arcs.spec.circumscribed_radius + 0.15  # type: ignore[union-attr]
         ahead = ahead[np.hypot(ahead[:, 0] - obs.pose[0], ahead[:, 1] - obs.pose[1]) > keep_out]
         if len(ahead) == 0:
             return

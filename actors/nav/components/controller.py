@@ -1,0 +1,329 @@
+"""``Controller``: follows the global plan (or a vision target) with any algorithm of
+:data:`~emos.actors.nav.controllers.registry.CONTROLLERS`, chosen by ``ControllersID``.
+
+Obstacles come straight from the scanner (``direct_sensor`` True: ``sensor_data``, a LaserScan
+or a PointCloud2) or from the LocalMapper's grid (False: ``local_map``). Both inputs are
+subscribed when they have topics, so ``use_direct_sensor`` can be switched at run time (an
+event action may do it when the mapper fails). Run types: Timed (follow the latest ``plan``)
+or ActionServer (``ControlPath``: follow a given path until it is reached or cancelled); with a
+``vision_tracking``/``vision_detections`` input, a ``<name>/track_vision_target`` action too.
+No path, no valid trajectory or a blocked robot is reported as an ALGORITHM failure; a missing
+or stale input as a SYSTEM failure, and the robot is then sent a zero command.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import attrs
+import numpy as np
+from attrs import define, field
+
+from emos.config.base import ComponentRunType
+from emos.config.validators import in_, in_range
+from emos.core.keyed import AllowedTopic
+from emos.io.topic import Topic
+from emos.msgs.control import TwistArray
+from emos.msgs.geometry import TwistStamped
+from emos.msgs.std import Header, Time
+from emos.msgs.sensor import LaserScan
+
+from ..controllers import ControllersID, ControlResult, ControlStatus
+from ..controllers.registry import CONTROLLERS, make_controller
+from .base import NavComponent, NavComponentConfig, rate_field
+from .controller_vision import VisionTracking
+from .convert import BadInput, grid2d_of, path_msg, path_of, points_of, scan_of, twist_msg
+from .interfaces import ControlPathFeedback, ControlPathGoal, ControlPathResult
+
+__all__ = ["Controller", "ControllerConfig"]
+
+_FAILURES = (ControlStatus.BLOCKED, ControlStatus.NO_PATH, ControlStatus.LOST)
+
+
+def _algorithm(value: Any) -> str:
+    return ControllersID.from_any(value).value
+
+
+@define(kw_only=True)
+class ControllerConfig(NavComponentConfig):
+    """``algorithm``: a ``ControllersID`` (or its name). ``control_time_step`` (s) between the
+    commands of a computed sequence. ``ctrl_publish_type``: "Sequence" (each command on
+    ``command`` in its time step), "Array" (the whole sequence on ``multi_command``) or
+    "Parallel" (both). ``use_direct_sensor``: obstacles from ``sensor_data`` (True) or
+    ``local_map`` (False). ``sensor_timeout`` / ``location_timeout`` (s): older inputs stop the robot.
+    Point clouds: only points between ``cloud_min_height`` (above the floor) and
+    ``cloud_max_height`` (default: the robot's height) are obstacles."""
+
+    loop_rate: float = rate_field(10.0)
+    algorithm: str = field(default=ControllersID.DWA.value, converter=_algorithm, on_setattr=attrs.setters.convert)
+    control_time_step: float = field(default=0.1, validator=in_range(min_value=1e-3, max_value=10.0))
+    ctrl_publish_type: str = field(default="Sequence", validator=in_(("Sequence", "Array", "Parallel")))
+    use_direct_sensor: bool = field(default=True)
+    sensor_timeout: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e3))
+    location_timeout: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e3))
+    cloud_min_height: float = field(default=0.05, validator=in_range(min_value=-100.0, max_value=100.0))
+    cloud_max_height: float | None = field(default=None)
+
+
+class Controller(VisionTracking, NavComponent):
+    allowed_inputs = {
+        "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path")),
+        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
+        "sensor_data": AllowedTopic(types=("LaserScan", "PointCloud2"), default=Topic(name="/scan", msg_type="LaserScan")),
+        "local_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/occupancy_layer", msg_type="OccupancyGrid")),
+        "vision_tracking": AllowedTopic(types=("Trackings", "Detections")),
+        "vision_detections": AllowedTopic(types=("Detections", "Trackings")),
+        "depth_camera_info": AllowedTopic(types=("CameraInfo",)),
+        "depth_image": AllowedTopic(types=("Image",)),
+    }
+    allowed_outputs = {
+        "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
+        "multi_command": AllowedTopic(types=("TwistArray",), default=Topic(name="/control_list", msg_type="TwistArray")),
+        "interpolation": AllowedTopic(types=("Path",), default=Topic(name="/interpolated_path", msg_type="Path")),
+        "local_plan": AllowedTopic(types=("Path",), default=Topic(name="/local_path", msg_type="Path")),
+        "tracked_point": AllowedTopic(types=("PoseStamped", "Odometry", "Pose", "Detections"), default=Topic(name="/tracked_point", msg_type="PoseStamped")),
+    }
+    main_action_type = (ControlPathGoal, ControlPathFeedback, ControlPathResult)
+    config: ControllerConfig
+
+    def __init__(self, component_name: str, config: ControllerConfig | None = None, **kwargs: Any) -> None:
+        super().__init__(component_name, config=config, **kwargs)
+        self._algorithms_config: Any = None
+
+    @classmethod
+    def config_class(cls) -> type[ControllerConfig]:
+        return ControllerConfig
+
+    # -- recipe API --------------------------------------------------------------------------------------
+    @property
+    def algorithm(self) -> ControllersID:
+        return ControllersID.from_any(self.config.algorithm)
+
+    @algorithm.setter
+    def algorithm(self, value: ControllersID | str) -> None:
+        self.config.algorithm = value  # type: ignore[assignment]
+
+    plugin = algorithm  # the name the spec's usage example uses
+
+    def set_algorithm(self, algorithm: ControllersID | str) -> bool:
+        """Switch the control algorithm (an event or fallback action); the next step uses it."""
+        self.config.algorithm = algorithm  # type: ignore[assignment]
+        return True
+
+    @property
+    def direct_sensor(self) -> bool:
+        return self.config.use_direct_sensor
+
+    @direct_sensor.setter
+    def direct_sensor(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise TypeError(f"component {self.component_name!r}: direct_sensor must be True or False, got {value!r}")
+        self.config.use_direct_sensor = value
+
+    @property
+    def algorithms_config(self) -> Any:
+        return self._algorithms_config
+
+    @algorithms_config.setter
+    def algorithms_config(self, value: Any) -> None:
+        """The algorithm's own config (``DWAConfig``, ``VisionRGBFollowerConfig``, ...)."""
+        known = {cfg_cls: cid for cid, (_, cfg_cls) in CONTROLLERS.items()}
+        if type(value) not in known:
+            raise TypeError(f"component {self.component_name!r}: algorithms_config must be one of "
+                            f"{', '.join(c.__name__ for c in known)}, got {type(value).__name__}")
+        self._algorithms_config = value
+
+    # -- lifecycle --------------------------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        if self.run_type == ComponentRunType.EVENT and not self._trigger:
+            key = "sensor_data" if self.config.use_direct_sensor else "local_map"
+            self._trigger = [self.get_in_topic(key)]
+        self._follower: Any = None
+        self._follower_id: str | None = None
+        self._plan_stamp: Any = None
+        self._finished_stamp: Any = None
+        self._sequence: tuple[np.ndarray, int] | None = None
+        self._last_cmd = np.zeros(3)
+        self._action_active = False
+        self.configure_vision()
+
+    def custom_on_activate(self) -> None:
+        if self.config.ctrl_publish_type != "Array":
+            # Later commands of a computed sequence go out in their own time steps.
+            self.create_timer(self.config.control_time_step, self._sequence_tick)
+
+    def _make_follower(self) -> Any:
+        cid = self.algorithm
+        if self._follower is None or self._follower_id != cid.value:
+            cfg = self._algorithms_config if isinstance(self._algorithms_config, CONTROLLERS[cid][1]) else None
+            if cfg is None:
+                cfg = CONTROLLERS[cid][1]()
+                if hasattr(cfg, "control_time_step"):
+                    cfg.control_time_step = self.config.control_time_step
+            self._follower = make_controller(cid, self.config.robot, cfg)
+            self._follower_id = cid.value
+            self._plan_stamp = None  # a new follower has no path yet
+        return self._follower
+
+    # -- inputs ------------------------------------------------------------------------------------------
+    def obstacles(self) -> Any:
+        """The obstacle input of this step (robot frame), or raise BadInput naming the topic."""
+        key = "sensor_data" if self.config.use_direct_sensor else "local_map"
+        topic = self.get_in_topic(key)
+        if topic is None:
+            raise BadInput(f"{key}: no topic (use_direct_sensor={self.config.use_direct_sensor})")
+        msg = self.get_input(topic)
+        age = self.input_age(topic)
+        if msg is None:
+            raise BadInput(f"no message on {topic.name} yet")
+        if age is not None and age > self.config.sensor_timeout:
+            raise BadInput(f"{topic.name} is stale: last message {age:.2f} s ago")
+        self._source_stamp = msg.header.stamp  # a TwistStamped command carries its data's time
+        if key == "local_map":
+            return grid2d_of(msg), key
+        if isinstance(msg, LaserScan):
+            return scan_of(msg), key
+        pts = points_of(msg)
+        top = self.config.cloud_max_height if self.config.cloud_max_height is not None else self.config.robot.height
+        return pts[(pts[:, 2] >= self.config.cloud_min_height) & (pts[:, 2] <= top)], key
+
+    # -- path following ----------------------------------------------------------------------------------
+    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+        if self._action_active or self.tracking_active:
+            return  # an action drives the robot now
+        plan = self.latest("plan")
+        if plan is None or len(plan.poses) == 0:
+            # Nothing to follow: hold the robot; the health keeps the last report (a failed
+            # action stays visible to fallbacks until the controller has something new to do).
+            self.publish_stop()
+            return
+        stamp = (plan.header.stamp.sec, plan.header.stamp.nanosec, len(plan.poses))
+        if stamp == self._finished_stamp:
+            # This plan is done: hold the robot (a fresh zero command, so the DriveManager
+            # sees a live controller) until a new plan arrives.
+            self.publish_stop()
+            self.health_status.set_healthy()
+            return
+        result = self.follow(plan, stamp)
+        if result is not None and result.status is ControlStatus.GOAL_REACHED:
+            self._finished_stamp = stamp
+
+    def follow(self, plan: Any, stamp: Any) -> ControlResult | None:
+        """One control step along ``plan``; publishes the commands; None on missing input."""
+        follower = self._make_follower()
+        if self.algorithm in (ControllersID.VISION_IMG, ControllersID.VISION_DEPTH):
+            self.fail_algorithm(self.algorithm.value, "a vision follower tracks targets (track_vision_target action), not paths")
+            self.publish_stop()
+            return None
+        state = self.robot_state(self.config.location_timeout)
+        if state is None:
+            self.publish_stop()
+            return None
+        pose, velocity = state
+        velocity = self._last_cmd if velocity is None else velocity
+        try:
+            obstacles, key = self.obstacles()
+        except BadInput as exc:
+            self.fail_input("sensor_data" if self.config.use_direct_sensor else "local_map", str(exc))
+            self.publish_stop()
+            return None
+        if stamp != self._plan_stamp:
+            try:
+                follower.set_path(path_of(plan))
+            except (BadInput, ValueError) as exc:
+                self.fail_input("plan", str(exc))
+                self.publish_stop()
+                return None
+            self._plan_stamp = stamp
+            out = self.get_out_topic("interpolation")
+            if out is not None:
+                self.publish(out, path_msg(follower.path.poses()[:: max(1, len(follower.path) // 500)], self.config.frames.world))
+        follower.sensor_pose = (0.0, 0.0, 0.0) if key == "local_map" else tuple(getattr(follower, "scan_pose", (0.0, 0.0, 0.0)))
+        result = follower.compute(pose, velocity, obstacles)
+        self.publish_result(result)
+        if result.status in _FAILURES:
+            self.fail_algorithm(self.algorithm.value, f"{result.status.value}: no valid trajectory" if result.status is ControlStatus.BLOCKED else result.status.value)
+        else:
+            self.health_status.set_healthy()
+        return result
+
+    # -- publishing ---------------------------------------------------------------------------------------
+    def publish_result(self, result: ControlResult) -> None:
+        cmds = np.asarray(result.commands, dtype=np.float64).reshape(-1, 3)
+        kind = self.config.ctrl_publish_type
+        if kind in ("Sequence", "Parallel"):
+            self._publish_command(cmds[0])
+            self._sequence = (cmds, 1) if len(cmds) > 1 else None
+        if kind in ("Array", "Parallel"):
+            out = self.get_out_topic("multi_command")
+            if out is not None:
+                lin = np.zeros((len(cmds), 3))
+                ang = np.zeros((len(cmds), 3))
+                lin[:, :2], ang[:, 2] = cmds[:, :2], cmds[:, 2]
+                self.publish(out, TwistArray(linear_velocities=lin, angular_velocities=ang))
+        self._last_cmd = cmds[0]
+        local = self.get_out_topic("local_plan")
+        if local is not None and len(result.local_plan):
+            self.publish(local, path_msg(np.asarray(result.local_plan).reshape(-1, 3), self.config.frames.world))
+
+    def _publish_command(self, cmd: np.ndarray) -> None:
+        out = self.get_out_topic("command")
+        if out is None:
+            return
+        msg = twist_msg(cmd)
+        if out.msg_type is TwistStamped:
+            # Stamped with the time of the sensor data it was computed from (its age downstream).
+            stamp = getattr(self, "_source_stamp", None) or Time.now()
+            msg = TwistStamped(header=Header(stamp=stamp, frame_id=self.config.frames.robot_base), twist=msg)
+        self.publish(out, msg)
+
+    def publish_stop(self) -> None:
+        self._sequence = None
+        self._last_cmd = np.zeros(3)
+        self._publish_command(np.zeros(3))
+
+    def _sequence_tick(self) -> None:
+        if self._sequence is None:
+            return
+        cmds, i = self._sequence
+        if i >= len(cmds) or i * self.config.control_time_step >= 1.0 / self.config.loop_rate:
+            self._sequence = None  # the next step computes a fresh sequence
+            return
+        self._publish_command(cmds[i])
+        self._last_cmd = cmds[i]
+        self._sequence = (cmds, i + 1)
+
+    # -- ControlPath action -------------------------------------------------------------------------------
+    def _main_action_callback(self, goal_handle: Any) -> ControlPathResult:
+        goal: ControlPathGoal = goal_handle.goal
+        given = goal.path if len(goal.path.poses) else None
+        period = 1.0 / self.config.loop_rate
+        self._action_active = True
+        failing_since: float | None = None
+        try:
+            while True:
+                if goal_handle.is_cancel_requested:
+                    self.publish_stop()
+                    return ControlPathResult(success=False, message="cancelled")
+                plan = given if given is not None else self.latest("plan")
+                if plan is None or len(plan.poses) == 0:
+                    self.publish_stop()
+                    time.sleep(period)
+                    continue
+                stamp = "goal" if given is not None else (plan.header.stamp.sec, plan.header.stamp.nanosec, len(plan.poses))
+                result = self.follow(plan, stamp)
+                self.node.publish_status()
+                if result is not None:
+                    left = self._follower.progress.remaining if self._follower.progress is not None else math.nan
+                    goal_handle.publish_feedback(ControlPathFeedback(distance_left=float(left), status=result.status.value))
+                    if result.status is ControlStatus.GOAL_REACHED:
+                        self.publish_stop()
+                        return ControlPathResult(success=True, message="goal reached")
+                    failing_since = (failing_since or time.monotonic()) if result.status in _FAILURES else None
+                    if failing_since is not None and time.monotonic() - failing_since > 10.0:
+                        self.publish_stop()
+                        return ControlPathResult(success=False, message=f"{result.status.value} for 10 s")
+                time.sleep(period)
+        finally:
+            self._action_active = False

@@ -1,0 +1,132 @@
+"""Vision target following for the :class:`Controller`: the ``track_vision_target`` action.
+
+Created when the controller has a ``vision_tracking`` (or ``vision_detections``) input. A goal
+names a label; every control period the box of the best detection with that label goes to the
+VisionRGBFollower (image size from the detection's image or the camera info) or, for
+``VisionRGBDFollower``, with the depth image (``depth_image`` input or the detection's own
+depth image) and the intrinsics of ``depth_camera_info``. The action ends when the target is
+lost for good (search timed out or disabled) or the goal is cancelled.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..controllers import BoundingBox, CameraIntrinsics, ControllersID, ControlStatus
+from ..controllers.registry import CONTROLLERS, make_controller
+from .convert import BadInput, pose_stamped
+from .interfaces import TrackVisionTargetFeedback, TrackVisionTargetGoal, TrackVisionTargetResult
+
+__all__ = ["VisionTracking"]
+
+_DEPTH_ENCODINGS = ("16UC1", "32FC1", "mono16")
+
+
+class VisionTracking:
+    """Mixin of the Controller (uses its inputs, config and publishing helpers)."""
+
+    def configure_vision(self) -> None:
+        self._tracking = False
+        self._vision_key = next((k for k in ("vision_tracking", "vision_detections") if self.get_in_topic(k) is not None), None)  # type: ignore[attr-defined]
+        if self._vision_key is not None:
+            name = f"{self.component_name}/track_vision_target"  # type: ignore[attr-defined]
+            self.create_action_server(name, TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult, self._track_target)  # type: ignore[attr-defined]
+
+    @property
+    def tracking_active(self) -> bool:
+        return getattr(self, "_tracking", False)
+
+    def _target_box(self, label: str) -> tuple[BoundingBox | None, Any]:
+        msg = self.latest(self._vision_key)  # type: ignore[attr-defined]
+        if msg is None or self.age_of(self._vision_key) > self.config.sensor_timeout:  # type: ignore[attr-defined]
+            return None, msg
+        labels = list(msg.labels)
+        idx = [i for i, lab in enumerate(labels) if lab == label]
+        if not idx:
+            return None, msg
+        scores = getattr(msg, "scores", None)
+        best = max(idx, key=lambda i: float(scores[i])) if scores is not None and len(scores) == len(labels) else idx[0]
+        x1, y1, x2, y2 = (float(v) for v in msg.boxes[best])
+        width, height = self._image_size(msg)
+        if x2 <= x1 or y2 <= y1:
+            return None, msg
+        return BoundingBox(x1, y1, x2 - x1, y2 - y1, width, height), msg
+
+    def _image_size(self, msg: Any) -> tuple[int, int]:
+        image = getattr(msg, "image", None)
+        if image is not None and image.width and image.height:
+            return int(image.width), int(image.height)
+        info = self.latest("depth_camera_info")  # type: ignore[attr-defined]
+        if info is not None and info.width and info.height:
+            return int(info.width), int(info.height)
+        raise BadInput(f"{self.topic_name(self._vision_key)}: detections carry no image and no depth_camera_info is given: the image size is unknown")  # type: ignore[attr-defined]
+
+    def _depth(self, msg: Any) -> np.ndarray | None:
+        image = self.latest("depth_image")  # type: ignore[attr-defined]
+        if image is None and msg is not None and getattr(msg, "image", None) is not None and msg.image.encoding in _DEPTH_ENCODINGS:
+            image = msg.image
+        return None if image is None else image.to_numpy()
+
+    def _vision_follower(self) -> Any:
+        cid = self.algorithm  # type: ignore[attr-defined]
+        if cid not in (ControllersID.VISION_IMG, ControllersID.VISION_DEPTH):
+            cid = ControllersID.VISION_IMG
+        cfg = self._algorithms_config if isinstance(self._algorithms_config, CONTROLLERS[cid][1]) else CONTROLLERS[cid][1]()  # type: ignore[attr-defined]
+        if cid is ControllersID.VISION_DEPTH:
+            info = self.latest("depth_camera_info")  # type: ignore[attr-defined]
+            if info is None:
+                raise BadInput("VisionRGBDFollower needs the depth_camera_info input (camera intrinsics); none received")
+            return cid, make_controller(cid, self.config.robot, cfg, intrinsics=CameraIntrinsics(info.fx, info.fy, info.cx, info.cy))  # type: ignore[attr-defined]
+        return cid, make_controller(cid, self.config.robot, cfg)  # type: ignore[attr-defined]
+
+    def _track_target(self, goal_handle: Any) -> TrackVisionTargetResult:
+        goal: TrackVisionTargetGoal = goal_handle.goal
+        if not goal.label:
+            return TrackVisionTargetResult(success=False, message="TrackVisionTarget goal needs a label")
+        try:
+            cid, follower = self._vision_follower()
+        except BadInput as exc:
+            self.fail_input("depth_camera_info", str(exc))  # type: ignore[attr-defined]
+            return TrackVisionTargetResult(success=False, message=str(exc))
+        if goal.search_timeout > 0 and hasattr(follower, "search"):
+            follower.search.timeout = float(goal.search_timeout)
+        period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
+        self._tracking = True
+        try:
+            while not goal_handle.is_cancel_requested:
+                try:
+                    box, msg = self._target_box(goal.label)
+                except BadInput as exc:
+                    self.fail_input(self._vision_key, str(exc))  # type: ignore[attr-defined]
+                    self.publish_stop()  # type: ignore[attr-defined]
+                    return TrackVisionTargetResult(success=False, message=str(exc))
+                state = self.robot_state(self.config.location_timeout) if cid is ControllersID.VISION_DEPTH else None  # type: ignore[attr-defined]
+                if cid is ControllersID.VISION_DEPTH:
+                    if state is None:
+                        self.publish_stop()  # type: ignore[attr-defined]
+                        time.sleep(period)
+                        continue
+                    pose, vel = state
+                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, self._depth(msg))  # type: ignore[attr-defined]
+                else:
+                    result = follower.compute(box, self._last_cmd)  # type: ignore[attr-defined]
+                self.publish_result(result)  # type: ignore[attr-defined]
+                tracked = self.get_out_topic("tracked_point")  # type: ignore[attr-defined]
+                if box is not None and tracked is not None and tracked.msg_type.__name__ == "PoseStamped" and len(result.local_plan):
+                    end = np.asarray(result.local_plan)[-1]
+                    self.publish(tracked, pose_stamped(end[0], end[1], end[2], self.config.frames.world))  # type: ignore[attr-defined]
+                goal_handle.publish_feedback(TrackVisionTargetFeedback(status=result.status.value, target_visible=box is not None))
+                if result.status is ControlStatus.LOST:
+                    self.publish_stop()  # type: ignore[attr-defined]
+                    self.fail_algorithm(cid.value, f"target {goal.label!r} lost")  # type: ignore[attr-defined]
+                    self.node.publish_status()  # type: ignore[attr-defined]
+                    return TrackVisionTargetResult(success=False, message=f"target {goal.label!r} lost")
+                self.health_status.set_healthy()  # type: ignore[attr-defined]
+                self.node.publish_status()  # type: ignore[attr-defined]
+                time.sleep(period)
+            self.publish_stop()  # type: ignore[attr-defined]
+            return TrackVisionTargetResult(success=True, message="cancelled")
+        finally:
+            self._tracking = False

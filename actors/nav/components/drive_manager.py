@@ -1,0 +1,348 @@
+"""``DriveManager``: the last gate before the motors.
+
+Every command from the controller goes through the safety zones (emergency stop, slowdown),
+the velocity/acceleration limits and the optional smoothing of :class:`DriveSafety`. A
+watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
+the command input goes stale or its publisher process died, when odometry goes stale
+(``closed_loop``), or when the scan goes stale: the robot never drives on old information.
+The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
+``move_to_unblock``) are methods (for event actions) and Trigger services.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+from attrs import define, field
+
+from emos.config.validators import in_range
+from emos.core.keyed import AllowedTopic
+from emos.io.topic import Topic
+from emos.msgs.geometry import TwistStamped
+from emos.msgs.sensor import LaserScan
+from emos.msgs.srv import TriggerRequest, TriggerResponse
+from emos.msgs.std import Bool, Header, Time
+
+from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig
+from ..safety import maneuvers as M
+from ..safety.zones import ZoneCheck
+from .base import NavComponent, NavComponentConfig, rate_field
+from .convert import BadInput, scan_of, twist_msg, twist_of
+
+__all__ = ["DriveManager", "DriveManagerConfig"]
+
+
+def _seconds(lo: float = 1e-3, hi: float = 1e3) -> Any:
+    return in_range(min_value=lo, max_value=hi)
+
+
+@define(kw_only=True)
+class DriveManagerConfig(NavComponentConfig):
+    """Zones in metres beyond the footprint (``critical_zone_angle``: full cone, degrees).
+    ``closed_loop``: also require fresh odometry to drive. ``cmd_timeout``, ``odom_timeout``,
+    ``sensor_timeout`` (s): older inputs stop the robot. ``smooth_commands``: low-pass filter
+    (``smoothing_time_constant`` s) on top of the acceleration limits. ``max_distance`` (m) and
+    ``max_rotation`` (rad): default size of the unblock maneuvers. ``stop_hold_time`` (s): how
+    long ``stop()`` (an event action) holds the robot still whatever the controller sends."""
+
+    loop_rate: float = rate_field(20.0)
+    closed_loop: bool = field(default=True)
+    critical_zone_distance: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=100.0))
+    critical_zone_angle: float = field(default=90.0, validator=in_range(min_value=0.0, max_value=360.0))
+    slowdown_zone_distance: float = field(default=0.3, validator=in_range(min_value=0.0, max_value=100.0))
+    smooth_commands: bool = field(default=False)
+    smoothing_time_constant: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=100.0))
+    cmd_timeout: float = field(default=0.3, validator=_seconds())
+    odom_timeout: float = field(default=0.5, validator=_seconds())
+    sensor_timeout: float = field(default=0.5, validator=_seconds())
+    max_distance: float = field(default=0.3, validator=in_range(min_value=0.0, max_value=100.0))
+    max_rotation: float = field(default=math.pi / 2, validator=in_range(min_value=0.0, max_value=2 * math.pi))
+    safety_margin: float = field(default=0.05, validator=in_range(min_value=0.0, max_value=10.0))
+    stop_hold_time: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
+
+    def __attrs_post_init__(self) -> None:
+        if self.slowdown_zone_distance < self.critical_zone_distance:
+            raise ValueError(f"DriveManagerConfig: slowdown_zone_distance ({self.slowdown_zone_distance}) must be >= "
+                             f"critical_zone_distance ({self.critical_zone_distance})")
+
+
+class DriveManager(NavComponent):
+    allowed_inputs = {
+        "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
+        "multi_command": AllowedTopic(types=("TwistArray",), default=Topic(name="/control_list", msg_type="TwistArray")),
+        "sensor_data": AllowedTopic(types=("LaserScan", "Float64", "Float32"), default=Topic(name="/scan", msg_type="LaserScan"), number=11),
+        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry")),
+    }
+    allowed_outputs = {
+        "robot_command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/cmd_vel", msg_type="Twist"), required=True),
+        "emergency_stop": AllowedTopic(types=("Bool",), default=Topic(name="/emergency_stop", msg_type="Bool")),
+    }
+    config: DriveManagerConfig
+
+    def __init__(self, component_name: str, config: DriveManagerConfig | None = None, **kwargs: Any) -> None:
+        super().__init__(component_name, config=config, **kwargs)
+        # Event run type by default: commands are passed on as they arrive (no added latency);
+        # the watchdog timer runs beside at loop_rate. Timed also works (commands wait for a tick).
+        if "trigger" not in kwargs and "run_type" not in kwargs:
+            self.trigger = [t for t in (self.get_in_topic("command"), self.get_in_topic("multi_command")) if t is not None]
+
+    @classmethod
+    def config_class(cls) -> type[DriveManagerConfig]:
+        return DriveManagerConfig
+
+    # -- lifecycle -----------------------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        cfg = self.config
+        zones = SafetyZonesConfig(critical_zone_distance=cfg.critical_zone_distance, critical_zone_angle=cfg.critical_zone_angle,
+                                  slowdown_zone_distance=cfg.slowdown_zone_distance)
+        filt = CommandFilterConfig(control_time_step=1.0 / cfg.loop_rate, smooth_commands=cfg.smooth_commands,
+                                   smoothing_time_constant=cfg.smoothing_time_constant)
+        self._safety = DriveSafety(cfg.robot, zones, filt)
+        self._command = np.zeros(3)
+        self._sent_at = time.monotonic()
+        self._stopped_reason = ""
+        self._estop: bool | None = None
+        self._maneuver: tuple[M.Maneuver, int] | None = None
+        self._held_until = -math.inf
+        self._cmd_ages: dict[str, float] = {}
+        self._cmd_writers: dict[str, list[int]] = {}
+        for name in ("move_forward", "move_backward", "rotate_in_place", "move_to_unblock"):
+            self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
+
+    def custom_on_activate(self) -> None:
+        if self.run_type.value == "Event":
+            self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
+
+    def _trigger_service(self, name: str) -> Any:
+        def serve(request: TriggerRequest) -> TriggerResponse:
+            ok, message = getattr(self, f"_{name}")()
+            return TriggerResponse(success=ok, message=message)
+
+        return serve
+
+    # -- the command path ------------------------------------------------------------------------------
+    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+        # Event: a command arrived. Timed: the main timer (which also plays maneuvers).
+        if msg is None:
+            self._watchdog()
+        elif self._maneuver is None:
+            self._drive()
+
+    def _watchdog(self) -> None:
+        if self._maneuver is not None:
+            self._play_maneuver()
+            return
+        self._drive()
+
+    def _latest_command(self) -> tuple[np.ndarray, float, str] | None:
+        """(command, age s, key) of the newest of ``command`` / ``multi_command``; None if none."""
+        best = None
+        for key in ("command", "multi_command"):
+            age = self.age_of(key)
+            if age is not None and (best is None or age < best[1]):
+                best = (key, age)
+        if best is None:
+            return None
+        key, age = best
+        msg = self.latest(key)
+        if key == "multi_command":
+            if len(msg.linear_velocities) == 0:
+                raise BadInput("multi_command: empty TwistArray")
+            cmd = np.array([msg.linear_velocities[0, 0], msg.linear_velocities[0, 1], msg.angular_velocities[0, 2]])
+            if not np.all(np.isfinite(cmd)):
+                raise BadInput(f"multi_command: NaN/inf velocity {cmd.tolist()}")
+        else:
+            cmd = twist_of(msg)
+        return cmd, age, key
+
+    def _blocking_reason(self) -> tuple[str, str] | None:
+        """(input key, reason) when the robot must not drive now, else None; sets the command."""
+        cfg = self.config
+        try:
+            latest = self._latest_command()
+        except BadInput as exc:
+            return "command", str(exc)
+        if latest is None:
+            return None  # nothing asked of the robot yet: it stands still, and that is no failure
+        cmd, age, key = latest
+        src = self.latest(key)
+        self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
+        if age > cfg.cmd_timeout:
+            return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
+        if not self._publisher_alive(key, age):
+            return key, f"the process that published the last command on {self.topic_name(key)} died"
+        self._command = cmd
+        if cfg.closed_loop:
+            odom_age = self.age_of("location")
+            if odom_age is None or odom_age > cfg.odom_timeout:
+                what = "no odometry yet" if odom_age is None else f"odometry is {odom_age:.2f} s old (odom_timeout {cfg.odom_timeout:g} s)"
+                return "location", what
+        return None
+
+    def _publisher_alive(self, key: str, age: float) -> bool:
+        """Is the process that sent the current command still running? A restarted publisher
+        (same ring, new pid) does not revive a command its dead predecessor sent."""
+        from emos.core.node import process_alive
+
+        topic = self.get_in_topic(key)
+        published_at = time.time() - age  # of the current message; commands are >= 1 ms apart
+        if published_at > self._cmd_ages.get(key, -math.inf) + 1e-3:  # a newer message: note who can have sent it
+            self._cmd_writers[key] = [pid for pid in self.node.publisher_pids(topic) if pid <= 0 or process_alive(pid)]
+            self._cmd_ages[key] = published_at
+        writers = self._cmd_writers.get(key)
+        return not writers or any(pid <= 0 or process_alive(pid) for pid in writers)
+
+    def _obstacles(self) -> tuple[Any, str]:
+        """The latest scan (and any range sensors) as obstacles; None with a reason when stale."""
+        scan_msg, reason = None, ""
+        for topic in self.get_in_topics("sensor_data"):
+            if topic.msg_type is LaserScan:
+                age = self.input_age(topic)
+                if age is None or age > self.config.sensor_timeout:
+                    return None, f"{topic.name}: " + ("no scan yet" if age is None else f"scan is {age:.2f} s old")
+                scan_msg = self.get_input(topic)
+        if scan_msg is None:
+            return None, "no LaserScan among the sensor_data inputs"
+        try:
+            return scan_of(scan_msg), reason
+        except BadInput as exc:
+            return None, str(exc)
+
+    def _range_sensors_min(self) -> float:
+        """Nearest reading (m beyond the footprint) of Float range sensors, inf if none."""
+        best = math.inf
+        for topic in self.get_in_topics("sensor_data"):
+            if topic.msg_type is not LaserScan:
+                msg = self.get_input(topic)
+                age = self.input_age(topic)
+                if msg is not None and age is not None and age <= self.config.sensor_timeout and math.isfinite(msg.data) and msg.data >= 0:
+                    best = min(best, float(msg.data))
+        return best
+
+    def stop(self) -> bool:
+        """Stop the robot now and hold it still for ``stop_hold_time`` s, whatever commands
+        arrive meanwhile (an event action: ``Action(method=driver.stop)``); cancels a maneuver."""
+        self._maneuver = None
+        self._held_until = time.monotonic() + self.config.stop_hold_time
+        self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+        return True
+
+    def _drive(self) -> None:
+        if time.monotonic() < self._held_until:
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
+        if self.age_of("command") is None and self.age_of("multi_command") is None:
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            self.health_status.set_healthy()
+            return
+        blocked = self._blocking_reason()
+        if blocked is not None:
+            key, reason = blocked
+            self.fail_input(key, f"robot stopped: {reason}")
+            self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
+            self.node.publish_status()
+            return
+        obstacles, why = self._obstacles()
+        if obstacles is None:
+            self.fail_input("sensor_data", f"robot stopped: {why}")
+            self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
+            self.node.publish_status()
+            return
+        out, check = self._safety.step(self._command, obstacles)
+        near = self._range_sensors_min()
+        if near <= self.config.critical_zone_distance and abs(self._command[0]) > 1e-9:
+            out, check = np.zeros(3), ZoneCheck(0.0, near)
+            self._safety.filter.reset(np.zeros(3))
+        self._send(out, check)
+        if self.health_status.is_system_fail or (self.health_status.is_algorithm_fail and not check.emergency_stop):
+            self.health_status.set_healthy()
+        if check.emergency_stop:
+            self.fail_algorithm("emergency_stop", f"obstacle {check.min_distance:.3f} m ahead, inside the critical zone")
+
+    def _send(self, cmd: np.ndarray, check: ZoneCheck, stop: bool = False) -> None:
+        if stop:
+            self._safety.filter.reset(np.zeros(3))
+        topic = self.get_out_topic("robot_command")
+        msg = twist_msg(cmd)
+        if topic.msg_type is TwistStamped:
+            # A stamped command keeps the time of the data behind it; otherwise: now.
+            stamp = getattr(self, "_command_stamp", None) if not stop else None
+            msg = TwistStamped(header=Header(stamp=stamp or Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
+        self.publish(topic, msg)
+        self._sent_at = time.monotonic()
+        estop = bool(check.emergency_stop) and not stop
+        estop_topic = self.get_out_topic("emergency_stop")
+        if estop_topic is not None and estop != self._estop:
+            self.publish(estop_topic, Bool(data=estop))
+            self._estop = estop
+
+    # -- unblock maneuvers ------------------------------------------------------------------------------
+    def _start(self, maneuver: M.Maneuver) -> tuple[bool, str]:
+        if not maneuver.feasible or maneuver.commands.shape[0] == 0:
+            self.fail_algorithm(maneuver.name, f"not possible: {maneuver.reason}")
+            return False, maneuver.reason
+        self._maneuver = (maneuver, 0)
+        self._safety.filter.reset(np.zeros(3))
+        return True, f"{maneuver.name}: {maneuver.commands.shape[0]} steps"
+
+    def _scan_for_maneuver(self) -> Any:
+        obstacles, why = self._obstacles()
+        if obstacles is None:
+            raise BadInput(f"maneuvers need a fresh scan: {why}")
+        return obstacles
+
+    def _run(self, build: Any) -> tuple[bool, str]:
+        try:
+            return self._start(build(self._scan_for_maneuver()))
+        except BadInput as exc:
+            self.fail_input("sensor_data", str(exc))
+            return False, str(exc)
+
+    def _move_forward(self) -> tuple[bool, str]:
+        return self._run(lambda s: M.move_forward(self.config.robot, s, self.config.max_distance, 1.0 / self.config.loop_rate, self.config.safety_margin))
+
+    def _move_backward(self) -> tuple[bool, str]:
+        return self._run(lambda s: M.move_backward(self.config.robot, s, self.config.max_distance, 1.0 / self.config.loop_rate, self.config.safety_margin))
+
+    def _rotate_in_place(self) -> tuple[bool, str]:
+        return self._run(lambda s: M.rotate_in_place(self.config.robot, s, self.config.max_rotation, 1.0 / self.config.loop_rate, self.config.safety_margin))
+
+    def _move_to_unblock(self) -> tuple[bool, str]:
+        return self._run(lambda s: M.move_to_unblock(self.config.robot, s, self.config.max_distance, self.config.max_rotation,
+                                                      1.0 / self.config.loop_rate, self.config.safety_margin))
+
+    def move_forward(self) -> bool:
+        """Drive forward up to ``max_distance`` m if the way is clear (an event action)."""
+        return self._move_forward()[0]
+
+    def move_backward(self) -> bool:
+        return self._move_backward()[0]
+
+    def rotate_in_place(self) -> bool:
+        return self._rotate_in_place()[0]
+
+    def move_to_unblock(self) -> bool:
+        """Forward, backward or a rotation: the first that frees the robot (an event action)."""
+        return self._move_to_unblock()[0]
+
+    def _play_maneuver(self) -> None:
+        assert self._maneuver is not None
+        maneuver, i = self._maneuver
+        if i >= maneuver.commands.shape[0]:
+            self._maneuver = None
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf))
+            return
+        cmd = maneuver.commands[i]
+        obstacles, _ = self._obstacles()
+        check = ZoneCheck(1.0, math.inf)
+        if obstacles is not None and abs(cmd[0]) > 1e-9:
+            cmd, check = self._safety.zones.limit(cmd, obstacles)
+        if obstacles is None or check.emergency_stop:
+            self._maneuver = None
+            self._send(np.zeros(3), check, stop=True)
+            self.fail_algorithm(maneuver.name, "aborted: " + ("scan went stale" if obstacles is None else "obstacle in the critical zone"))
+            return
+        self._maneuver = (maneuver, i + 1)
+        self._send(cmd, check)

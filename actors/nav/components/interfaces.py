@@ -1,0 +1,145 @@
+"""Request, goal, feedback and result types of the navigation services and actions
+(the ``kompass_interfaces`` of the ROS original, as EMOS messages)."""
+from __future__ import annotations
+
+from emos.msgs import fields as F
+from emos.msgs.geometry import PoseStamped
+from emos.msgs.nav import Path
+from emos.msgs.registry import Message, message_type
+
+_PKG = "kompass_interfaces"
+
+
+# -- Planner: PlanPath (service and action) ------------------------------------------------------
+@message_type(_PKG, name="PlanPath_Request")
+class PlanPathRequest(Message):
+    """``any_heading``: plan to (x, y) and arrive at whatever heading is shortest."""
+
+    goal: PoseStamped = F.message(PoseStamped)
+    any_heading: bool = F.boolean(True)
+
+
+@message_type(_PKG, name="PlanPath_Response")
+class PlanPathResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+    plan: Path = F.message(Path)
+
+
+@message_type(_PKG, name="PlanPath_Feedback")
+class PlanPathFeedback(Message):
+    distance_to_goal: float = F.float64()
+    plan_length: float = F.float64()
+
+
+@message_type(_PKG, name="PlanPath_Result")
+class PlanPathResult(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+    plan: Path = F.message(Path)
+
+
+# -- Controller: ControlPath and TrackVisionTarget (actions) -------------------------------------
+@message_type(_PKG, name="ControlPath_Goal")
+class ControlPathGoal(Message):
+    """``path``: the path to follow; empty: follow the latest message on the ``plan`` input."""
+
+    path: Path = F.message(Path)
+
+
+@message_type(_PKG, name="ControlPath_Feedback")
+class ControlPathFeedback(Message):
+    distance_left: float = F.float64()
+    status: str = F.string()
+
+
+@message_type(_PKG, name="ControlPath_Result")
+class ControlPathResult(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+
+
+@message_type(_PKG, name="TrackVisionTarget_Goal")
+class TrackVisionTargetGoal(Message):
+    """Follow the detection labelled ``label``; ``search_radius`` (m) and ``search_timeout`` (s)
+    of 0 keep the follower's configured search behaviour."""
+
+    label: str = F.string()
+    search_radius: float = F.float64()
+    search_timeout: float = F.float64()
+
+
+@message_type(_PKG, name="TrackVisionTarget_Feedback")
+class TrackVisionTargetFeedback(Message):
+    status: str = F.string()
+    target_visible: bool = F.boolean()
+
+
+@message_type(_PKG, name="TrackVisionTarget_Result")
+class TrackVisionTargetResult(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+
+
+# -- MapServer: Save2dMapToFile (service) ----------------------------------------------------------
+@message_type(_PKG, name="Save2dMapToFile_Request")
+class SaveMapRequest(Message):
+    """``file_location``: folder (default: the config's); ``file_name``: stem of the YAML/PGM pair."""
+
+    file_location: str = F.string()
+    file_name: str = F.string()
+
+
+@message_type(_PKG, name="Save2dMapToFile_Response")
+class SaveMapResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+    path: str = F.string()
+
+
+# -- MotionServer: MotionRecording (action) --------------------------------------------------------
+@message_type(_PKG, name="MotionRecording_Goal")
+class MotionRecordingGoal(Message):
+    """Record command and odometry every ``timestep`` s for ``duration`` s into a CSV."""
+
+    duration: float = F.float64(10.0)
+    timestep: float = F.float64(0.1)
+    name: str = F.string()
+
+
+@message_type(_PKG, name="MotionRecording_Feedback")
+class MotionRecordingFeedback(Message):
+    samples: int = F.integer()
+
+
+@message_type(_PKG, name="MotionRecording_Result")
+class MotionRecordingResult(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+    file: str = F.string()
+
+
+# -- Planner: path files and recording (services) ------------------------------------------------------
+@message_type(_PKG, name="PathFromToFile_Request")
+class PathFromToFileRequest(Message):
+    file_location: str = F.string()
+    file_name: str = F.string()
+
+
+@message_type(_PKG, name="PathFromToFile_Response")
+class PathFromToFileResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()
+
+
+@message_type(_PKG, name="StartPathRecording_Request")
+class StartPathRecordingRequest(Message):
+    """Record the robot's location every ``recording_time_step`` s until the next save."""
+
+    recording_time_step: float = F.float64(0.1)
+
+
+@message_type(_PKG, name="StartPathRecording_Response")
+class StartPathRecordingResponse(Message):
+    success: bool = F.boolean()
+    message: str = F.string()

@@ -1,0 +1,145 @@
+"""``LocalMapper``: the ego-centric occupancy grid around the robot, from its laser scans."""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from attrs import define, field
+
+from emos.config.base import ComponentRunType
+from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
+from emos.config.validators import in_range
+from emos.core.keyed import AllowedTopic
+from emos.io.topic import Topic
+
+from ..local_map import LocalMapper as GridBuilder
+from ..local_map import MapConfig
+from ..mapping import MemoryMapper
+from .base import NavComponent, NavComponentConfig, rate_field
+from .convert import BadInput, grid_msg, pose_of, pose_stamped, scan_of
+
+__all__ = ["LocalMapper", "LocalMapperConfig"]
+
+
+def _map_config(value: Any) -> MapConfig:
+    if isinstance(value, MapConfig):
+        return value
+    if isinstance(value, dict):
+        return MapConfig(**value)
+    raise TypeError(f"LocalMapperConfig.map_params: expected a MapConfig, got {type(value).__name__}")
+
+
+def _bounds(value: Any) -> tuple[float, float, float, float] | None:
+    if value is None:
+        return None
+    vals = tuple(float(v) for v in value)
+    if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or not (vals[2] > vals[0] and vals[3] > vals[1]):
+        raise ValueError(f"mapping_bounds: expected finite (xmin, ymin, xmax, ymax) with max > min, got {value!r}")
+    return vals  # type: ignore[return-value]
+
+
+def _sensor_pose(value: Any) -> tuple[float, float, float]:
+    vals = tuple(float(v) for v in value)
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"sensor_pose: expected finite (x, y, yaw) of the sensor on the robot, got {value!r}")
+    return vals  # type: ignore[return-value]
+
+
+@define(kw_only=True)
+class LocalMapperConfig(NavComponentConfig):
+    """``map_params``: window size and resolution around the robot. ``keep_memory``: cells the
+    latest scan does not see keep what earlier scans saw (rolled with the robot's odometry), so
+    obstacles that leave a narrow field of view are not forgotten. ``sensor_pose``: (x, y, yaw)
+    of the scanner on the robot.
+
+    Mapping mode (``mapping_bounds`` = (xmin, ymin, xmax, ymax) of a world window): every scan
+    is also added to an obstacle memory over that window, at the odometry pose corrected by
+    matching the scan against the memory (``scan_matching``). The memory is published on the
+    ``mapping`` output (an OccupancyGrid in ``frames.world``, every ``map_publish_period`` s;
+    a Planner can take it as its map) and the corrected pose on ``localized_pose``."""
+
+    loop_rate: float = rate_field(10.0)
+    map_params: MapConfig = field(factory=MapConfig, converter=_map_config)
+    keep_memory: bool = field(default=False)
+    sensor_pose: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), converter=_sensor_pose)
+    mapping_bounds: tuple[float, float, float, float] | None = field(default=None, converter=_bounds)
+    scan_matching: bool = field(default=True)
+    mapping_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
+    map_publish_period: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
+
+
+class LocalMapper(NavComponent):
+    """Publishes the grid (robot frame, ``frames.robot_base``) on ``local_map``.
+
+    Timed (default, ``loop_rate``) or Event: with ``run_type = "Event"`` every scan is mapped as
+    it arrives (the low-latency choice; the trigger defaults to the ``sensor_data`` topic).
+    """
+
+    allowed_inputs = {
+        "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
+        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry")),
+    }
+    allowed_outputs = {
+        "local_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/occupancy_layer", msg_type="OccupancyGrid"), required=True),
+        "mapping": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/memory", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL))),
+        "localized_pose": AllowedTopic(types=("PoseStamped",), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
+    }
+    config: LocalMapperConfig
+
+    @classmethod
+    def config_class(cls) -> type[LocalMapperConfig]:
+        return LocalMapperConfig
+
+    def custom_on_configure(self) -> None:
+        if self.run_type == ComponentRunType.EVENT and not self._trigger:
+            self._trigger = [self.get_in_topic("sensor_data")]
+        self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
+        cfg = self.config
+        self._memory = None
+        if cfg.mapping_bounds is not None:
+            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching)
+        self._memory_published = -math.inf
+
+    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+        scan_msg = msg if msg is not None else self.latest("sensor_data")
+        if scan_msg is None:
+            self.fail_input("sensor_data", f"no scan on {self.topic_name('sensor_data')} yet")
+            return
+        try:
+            scan = scan_of(scan_msg)
+        except BadInput as exc:
+            self.fail_input("sensor_data", str(exc))
+            return
+        pose = None
+        if self.config.keep_memory or self._memory is not None:
+            loc = self.latest("location")
+            if loc is None:
+                self.fail_input("location", f"keep_memory needs odometry on {self.topic_name('location')}")
+                return
+            try:
+                pose = pose_of(loc)
+            except BadInput as exc:
+                self.fail_input("location", str(exc))
+                return
+        grid = self._builder.update(scan, pose)
+        o = self._builder.origin
+        out = grid_msg(grid, self.config.map_params.resolution, (o[0], o[1], 0.0), self.config.frames.robot_base)
+        out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
+        self.publish(self.get_out_topic("local_map"), out)
+        if self._memory is not None:
+            self._update_memory(scan, pose)
+        self.health_status.set_healthy()
+
+    def _update_memory(self, scan: Any, odom_pose: Any) -> None:
+        corrected = self._memory.update(scan, odom_pose)
+        world = self.config.frames.world
+        out = self.get_out_topic("localized_pose")
+        if out is not None:
+            self.publish(out, pose_stamped(corrected[0], corrected[1], corrected[2], world))
+        now = time.monotonic()
+        out = self.get_out_topic("mapping")
+        if out is not None and now - self._memory_published >= self.config.map_publish_period:
+            grid = self._memory.grid
+            self.publish(out, grid_msg(self._memory.occupancy(), grid.resolution, (grid.origin[0], grid.origin[1], 0.0), world))
+            self._memory_published = now

@@ -1,0 +1,258 @@
+"""``Planner``: global paths on the map, from the robot's location to a goal.
+
+Run types (all four): Timed re-plans from the current location to the last goal every
+``1/loop_rate`` s; Event plans when a goal arrives on ``goal_point``; Server answers
+``PlanPath`` requests on ``<name>/service``; ActionServer takes a ``PlanPath`` goal on
+``<name>/action`` and keeps re-planning until the robot is within ``distance_tolerance`` of it
+(or the goal is cancelled). The plan is published on ``plan`` and ``reached_end`` goes True
+when the robot arrives. Plans can be saved, loaded and recorded (:mod:`.planner_paths`). A goal inside an obstacle, off the map or unreachable is an ALGORITHM
+failure (the message says which); no map or no location is a SYSTEM failure naming the topic.
+
+Planning runs on a worker thread, so a long query never stalls the component's heartbeat.
+"""
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import math
+import threading
+import time
+from typing import Any
+
+import attrs
+import numpy as np
+from attrs import define, field
+
+from emos.config.base import ComponentRunType
+from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
+from emos.config.validators import in_range
+from emos.core.keyed import AllowedTopic
+from emos.io.topic import Topic
+from emos.msgs.nav import Path
+from emos.msgs.std import Bool, Header, Time
+
+from ..planning import OMPLConfig
+from .base import NavComponent, NavComponentConfig, rate_field
+from .convert import BadInput, goal_of, grid_map_of, path_msg
+from .interfaces import PlanPathFeedback, PlanPathRequest, PlanPathResponse, PlanPathResult
+from .planner_paths import PathFiles
+from .planners import check_planner_id, make_global_planner
+
+__all__ = ["Planner", "PlannerConfig"]
+
+
+def _ompl(value: Any) -> OMPLConfig:
+    if isinstance(value, OMPLConfig):
+        return value
+    if isinstance(value, dict):
+        return OMPLConfig.from_dict(value)
+    raise TypeError(f"PlannerConfig.ompl: expected an OMPLConfig or a mapping, got {type(value).__name__}")
+
+
+@define(kw_only=True)
+class PlannerConfig(NavComponentConfig):
+    """``planner_id``: an OMPL geometric planner (``"ompl.geometric.RRTConnect"``, ...) or a
+    grid planner (``"CostToGo"``). ``ompl``: the OMPL settings (timeouts, thresholds, planner
+    parameters). ``distance_tolerance`` (m): the robot counts as arrived within it."""
+
+    loop_rate: float = rate_field(1.0)
+    planner_id: str = field(default="ompl.geometric.KPIECE1", validator=lambda i, a, v: check_planner_id(v))
+    ompl: OMPLConfig = field(factory=OMPLConfig, converter=_ompl, on_setattr=attrs.setters.convert)
+    distance_tolerance: float = field(default=0.15, validator=in_range(min_value=1e-3, max_value=100.0))
+    planning_timeout: float = field(default=5.0, validator=in_range(min_value=1e-3, max_value=1e4))
+
+
+class _MainInterface:
+    """What ``ui_main_action_input`` names when the goal does not come from a topic."""
+
+    def __init__(self, name: str, kind: str, types: tuple) -> None:
+        self.name, self.kind, self.types = name, kind, types
+
+    def __repr__(self) -> str:
+        return f"{self.kind}({self.name!r}, {self.types[0].__name__})"
+
+
+class Planner(PathFiles, NavComponent):
+    allowed_inputs = {
+        "map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
+        "goal_point": AllowedTopic(types=("PointStamped", "PoseStamped", "Odometry"), default=Topic(name="/goal", msg_type="PointStamped")),
+        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
+    }
+    allowed_outputs = {
+        "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path"), required=True),
+        "reached_end": AllowedTopic(types=("Bool",), default=Topic(name="/reached_end", msg_type="Bool")),
+    }
+    main_srv_type = (PlanPathRequest, PlanPathResponse)
+    main_action_type = (PlanPathRequest, PlanPathFeedback, PlanPathResult)
+    config: PlannerConfig
+
+    @classmethod
+    def config_class(cls) -> type[PlannerConfig]:
+        return PlannerConfig
+
+    @property
+    def ui_main_action_input(self) -> Any:
+        """Where a UI sends goals: the ``goal_point`` topic (Timed, Event), else the main
+        service or action with its request type."""
+        if self.run_type == ComponentRunType.SERVER:
+            return _MainInterface(self.main_srv_name, "service", self.main_srv_type)  # type: ignore[arg-type]
+        if self.run_type == ComponentRunType.ACTION_SERVER:
+            return _MainInterface(self.main_action_name, "action", self.main_action_type)  # type: ignore[arg-type]
+        return self.get_in_topic("goal_point")
+
+    # -- lifecycle ---------------------------------------------------------------------------------------
+    def custom_on_configure(self) -> None:
+        if self.run_type == ComponentRunType.EVENT and not self._trigger:
+            self._trigger = [self.get_in_topic("goal_point")]
+        self._algo = make_global_planner(self.config.planner_id, self.config.robot, self.config.ompl)
+        self._lock = threading.Lock()  # one query at a time on the planner
+        self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.component_name}-plan")
+        self._inflight: concurrent.futures.Future | None = None
+        self._map_key: Any = None
+        self._goal: np.ndarray | None = None
+        self._goal_key: Any = None
+        self._reached = False
+        self.last_plan: np.ndarray | None = None
+        self.create_path_services()
+
+    def custom_on_deactivate(self) -> None:
+        self._algo.cancel()
+
+    def custom_on_shutdown(self) -> None:
+        if hasattr(self, "_pool"):
+            self._algo.cancel()
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+    # -- planning ------------------------------------------------------------------------------------------
+    def _ensure_map(self) -> bool:
+        msg = self.latest("map")
+        if msg is None:
+            self.fail_input("map", f"no map on {self.topic_name('map')} yet")
+            return False
+        key = (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.info.width, msg.info.height)
+        if key != self._map_key:
+            try:
+                grid = grid_map_of(msg)
+            except (BadInput, ValueError) as exc:
+                self.fail_input("map", f"{self.topic_name('map')}: {exc}")
+                return False
+            self._algo.set_map(grid)
+            self._map_key = key
+        return True
+
+    def plan_once(self, goal: np.ndarray) -> tuple[bool, str, np.ndarray]:
+        """Plan from the current location to ``goal``; publishes the plan. (ok, message, path)."""
+        with self._lock:
+            state = self.robot_state()
+            if state is None or not self._ensure_map():
+                return False, self.health_status.message, np.zeros((0, 3))
+            start = state[0]
+            try:
+                result = self._algo.plan(start, goal, timeout=self.config.planning_timeout)
+            except ValueError as exc:  # a goal (or the robot) off the map
+                self.fail_algorithm(self.config.planner_id, str(exc))
+                return False, str(exc), np.zeros((0, 3))
+            if not result.solved:
+                msg = f"{result.status}: {result.message}"
+                self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {msg}")
+                return False, msg, np.zeros((0, 3))
+            self.last_plan = result.path
+            self.publish(self.get_out_topic("plan"), path_msg(result.path, self.config.frames.world))
+            self.health_status.set_healthy()
+            return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path
+
+    def _distance_to_goal(self) -> float:
+        state = self.robot_state()
+        if state is None or self._goal is None:
+            return math.inf
+        return float(math.hypot(state[0][0] - self._goal[0], state[0][1] - self._goal[1]))
+
+    def _check_reached(self) -> bool:
+        if self._goal is not None and not self._reached and self._distance_to_goal() <= self.config.distance_tolerance:
+            self._reached = True
+            out = self.get_out_topic("reached_end")
+            if out is not None:
+                self.publish(out, Bool(data=True))
+            self.health_status.set_healthy()
+        return self._reached
+
+    def _take_goal(self, msg: Any) -> None:
+        try:
+            goal = goal_of(msg)
+        except BadInput as exc:
+            self.fail_input("goal_point", str(exc))
+            return
+        key = tuple(np.round(goal, 6))
+        if key != self._goal_key:
+            self._goal, self._goal_key, self._reached = goal, key, False
+            out = self.get_out_topic("reached_end")
+            if out is not None:
+                self.publish(out, Bool(data=False))
+
+    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+        goal_msg = msg if msg is not None else self.latest("goal_point")
+        if goal_msg is not None:
+            self._take_goal(goal_msg)
+        if self._goal is None or self._check_reached():
+            return
+        if self._inflight is not None and not self._inflight.done():
+            return  # the previous query is still running
+        self._inflight = self._pool.submit(self._plan_in_worker, self._goal.copy())
+
+    def _plan_in_worker(self, goal: np.ndarray) -> None:
+        try:
+            self.plan_once(goal)
+        except Exception as exc:  # reported, never lost in the pool
+            self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
+            self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
+        if self._node is not None:
+            self.node.publish_status()
+
+    # -- Server and ActionServer ----------------------------------------------------------------------------
+    @staticmethod
+    def _request_goal(request: PlanPathRequest) -> np.ndarray:
+        p = request.goal.pose
+        goal = np.array([p.position.x, p.position.y] + ([] if request.any_heading else [p.orientation.yaw()]))
+        if not np.all(np.isfinite(goal)):
+            raise BadInput(f"goal: NaN/inf coordinates {goal.tolist()}")
+        return goal
+
+    def _main_srv_callback(self, request: PlanPathRequest) -> Any:
+        async def serve() -> PlanPathResponse:
+            try:
+                goal = self._request_goal(request)
+            except BadInput as exc:
+                return PlanPathResponse(success=False, message=str(exc))
+            loop = asyncio.get_running_loop()
+            ok, message, path = await loop.run_in_executor(self._pool, self.plan_once, goal)
+            self.node.publish_status()
+            plan = path_msg(path, self.config.frames.world) if ok else Path(header=Header(stamp=Time.now(), frame_id=self.config.frames.world))
+            return PlanPathResponse(success=ok, message=message, plan=plan)
+
+        return serve()
+
+    def _main_action_callback(self, goal_handle: Any) -> PlanPathResult:
+        try:
+            goal = self._request_goal(goal_handle.goal)
+        except BadInput as exc:
+            return PlanPathResult(success=False, message=str(exc))
+        self._goal, self._goal_key, self._reached = goal, tuple(goal), False
+        period = 1.0 / self.config.loop_rate
+        last = PlanPathResult(success=False, message="cancelled")
+        while not goal_handle.is_cancel_requested:
+            if self._check_reached():
+                plan = path_msg(self.last_plan, self.config.frames.world) if self.last_plan is not None else Path()
+                return PlanPathResult(success=True, message="goal reached", plan=plan)
+            ok, message, path = self.plan_once(goal)
+            self.node.publish_status()
+            length = float(np.sum(np.hypot(*np.diff(path[:, :2], axis=0).T))) if ok and len(path) > 1 else math.nan
+            goal_handle.publish_feedback(PlanPathFeedback(distance_to_goal=self._distance_to_goal(), plan_length=length))
+            if not ok and self.health_status.is_algorithm_fail:
+                return PlanPathResult(success=False, message=message)
+            deadline = time.monotonic() + period
+            while time.monotonic() < deadline and not goal_handle.is_cancel_requested:
+                if self._check_reached():
+                    break
+                time.sleep(min(0.05, period))
+        self._goal = None
+        return last

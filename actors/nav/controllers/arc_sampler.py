@@ -1,0 +1,124 @@
+"""The arc sampler as a path follower (``ControllersID.ARC_SAMPLER``).
+
+Every step samples constant (v, omega) arcs within the robot's limits (:class:`ArcPlanner`),
+drops those whose box footprint would come within ``margin`` of an obstacle point, and scores
+the rest by a cost-to-go and a clearance penalty. The cost-to-go is a :class:`CostField`
+(Dijkstra around the obstacles seen) over a window around the robot, towards the point of the
+path ``path_window`` metres ahead: arcs that lead round an obstacle score better than standing
+in front of it, which a plain distance-to-path cost would not see. It is the local planner of
+the mapless BARN navigator, usable by the Controller like any other algorithm.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import attrs
+import numpy as np
+
+from ..kinematics import integrate_sequence
+from ..planning.costfield import CostField
+from ..robot import RobotConfig
+from .arcs import ArcConfig, ArcPlanner
+from .base import ControlResult, ControlStatus, FollowerConfig
+from .follower import PathFollower
+from .sensors import ObstacleInput
+
+__all__ = ["ArcSampler", "ArcSamplerConfig"]
+
+
+def _arc_config(value: object) -> ArcConfig:
+    if isinstance(value, ArcConfig):
+        return value
+    if isinstance(value, dict):
+        return ArcConfig(**value)
+    raise TypeError(f"ArcSamplerConfig.arcs: expected an ArcConfig, got {type(value).__name__}")
+
+
+@attrs.define
+class ArcSamplerConfig(FollowerConfig):
+    """``arcs``: the sampling (horizon, speeds, turns, margins, clearance weights).
+    ``path_window`` (m): how far ahead on the path the cost-to-go leads. ``final_approach``
+    (m): closer than this to the end of the path the robot steers straight at it (sampled
+    arcs with a look-ahead cannot stop on a point)."""
+
+    arcs: ArcConfig = attrs.field(factory=lambda: ArcConfig(max_speed=2.0, reverse_speed=0.0), converter=_arc_config)
+    path_window: float = attrs.field(default=2.5, converter=float)
+    field_resolution: float = attrs.field(default=0.1, converter=float)
+    final_approach: float = attrs.field(default=0.6, converter=float)
+
+
+class ArcSampler(PathFollower):
+    config: ArcSamplerConfig
+
+    def __init__(self, robot: RobotConfig, config: ArcSamplerConfig | None = None) -> None:
+        super().__init__(robot, config or ArcSamplerConfig())
+        self.arcs = ArcPlanner(robot, self.config.arcs)
+
+    def _local_field(self, pose: np.ndarray, points: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Cost-to-go over a square window around the robot, to the path point ahead."""
+        assert self.path is not None and self.progress is not None
+        cfg, res = self.config, self.config.field_resolution
+        half = cfg.path_window + 0.5
+        origin = pose[:2] - half
+        n = int(math.ceil(2 * half / res))
+        carrot_i = int(self.path.index_at(self.path.s[self.progress.index] + cfg.path_window))
+        carrot = self.path.points[carrot_i]
+        left = float(self.path.length - self.path.s[carrot_i])
+        occupied = np.zeros((n, n), dtype=bool)
+        ij = np.floor((points - origin) / res).astype(int)
+        inside = np.all((ij >= 0) & (ij < n), axis=1)
+        occupied[ij[inside, 1], ij[inside, 0]] = True
+        width = self.arcs.spec.width
+        hard = max(width / 2 - 0.5 * res, 0.05)
+        soft = width / 2 + 0.08
+        field = CostField((n, n), res, hard, inflation_radius=soft + 0.45, soft_radius=soft)
+        gc = np.clip(np.floor((carrot - origin) / res).astype(int), 0, n - 1)
+        field.compute(occupied, (int(gc[1]), int(gc[0])))
+        ctg = field.ctg_filled
+
+        def cost_to_go(xy: np.ndarray) -> np.ndarray:
+            cells = np.floor((xy - origin) / res).astype(int)
+            ok = np.all((cells >= 0) & (cells < n), axis=1)
+            c = np.clip(cells, 0, n - 1)
+            out = np.where(ok, ctg[c[:, 1], c[:, 0]], np.hypot(*(xy - carrot).T) + 5.0)
+            return np.where(np.isfinite(out), out, 1e3) + left
+
+        return cost_to_go
+
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+        pose = np.asarray(pose, dtype=np.float64).reshape(3)
+        if self.path is None or self.progress is None:
+            return self._no_path(pose)
+        self.progress.update(pose)
+        if self.goal_reached(pose):
+            return self._done(pose)
+        points = self.world_obstacles(pose, obstacles)
+        dt = self.config.control_time_step
+        if self.progress.remaining < self.config.final_approach:
+            return self._final_approach(pose, dt)
+        choice = self.arcs.choose(pose, points, self._local_field(pose, points))
+        if choice is None or choice == (0.0, 0.0):
+            # No clear arc, or standing still scores best: no trajectory makes progress.
+            return ControlResult.stop(pose, ControlStatus.BLOCKED)
+        v, w = choice
+        speed_cap = self.desired_speed()  # brake towards the end of the path
+        if v > speed_cap:
+            w *= speed_cap / max(v, 1e-9)
+            v = speed_cap
+        cmd = np.array([[v, 0.0, w]])
+        steps = max(1, int(math.ceil(self.config.arcs.horizon / dt)))
+        plan = integrate_sequence(pose, np.repeat(cmd, steps, axis=0), dt)[0]
+        return ControlResult(cmd, plan, ControlStatus.RUNNING)
+
+    def _final_approach(self, pose: np.ndarray, dt: float) -> ControlResult:
+        assert self.path is not None
+        end = self.path.points[-1]
+        error = self.heading_error(pose[2], math.atan2(end[1] - pose[1], end[0] - pose[0]))
+        if self.needs_rotation(error):
+            cmd = self.rotate_command(error)
+        else:
+            w_max = self.robot.ctrl_omega_limits.max_vel
+            cmd = np.array([self.desired_speed() * max(0.0, math.cos(error)), 0.0, float(np.clip(-2.0 * error, -w_max, w_max))])
+        plan = integrate_sequence(pose, cmd[None, None, :], dt)[0]
+        return ControlResult(cmd[None, :], plan, ControlStatus.RUNNING)

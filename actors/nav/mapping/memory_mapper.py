@@ -1,0 +1,65 @@
+"""Mapping with scan matching: an obstacle memory over a fixed world window, built from scans
+placed at the odometry pose corrected by matching each scan against the memory so far.
+
+The pieces of the mapless navigator's global layer (``HitGrid``, ``ScanMatcher``), usable on
+their own: the LocalMapper's mapping mode runs this and publishes the memory as a map and the
+corrected pose, so a Planner can plan on what the robot has seen.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..controllers.sensors import LaserScan2D
+from .hit_grid import HitGrid
+from .scan_matching import ScanMatcher, compose, correction_between
+
+__all__ = ["MemoryMapper"]
+
+
+class MemoryMapper:
+    """``update(scan, odom_pose)`` -> corrected pose; ``grid`` holds the obstacle memory.
+
+    ``bounds`` (xmin, ymin, xmax, ymax) of the world window (m); ``sensor_pose`` (x, y, yaw) of
+    the scanner on the robot; ``scan_matching`` False trusts odometry. ``carve_range`` > 0 (m)
+    clears remembered cells that beams pass through (moved obstacles, drift ghosts).
+    """
+
+    def __init__(self, bounds: tuple[float, float, float, float], resolution: float = 0.05,
+                 sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0), scan_matching: bool = True,
+                 carve_range: float = 0.0) -> None:
+        self.grid = HitGrid(bounds, resolution)
+        self.sensor_pose = sensor_pose
+        self.matcher = ScanMatcher() if scan_matching else None
+        self.carve_range = float(carve_range)
+        self.correction = np.zeros(3)  # map <- odometry
+
+    def update(self, scan: LaserScan2D, odom_pose: np.ndarray) -> np.ndarray:
+        odom_pose = np.asarray(odom_pose, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(odom_pose)):
+            raise ValueError(f"odom_pose: expected finite (x, y, yaw), got {odom_pose.tolist()}")
+        mx, my, myaw = self.sensor_pose
+        cm, sm = math.cos(myaw), math.sin(myaw)
+        p = scan.points()  # sensor frame, finite hits only
+        local = np.c_[mx + cm * p[:, 0] - sm * p[:, 1], my + sm * p[:, 0] + cm * p[:, 1]]
+        pose = compose(self.correction, odom_pose)
+        if self.matcher is not None and len(local):
+            matched, best, at_guess = self.matcher.match(self.grid, pose, local)
+            if best > at_guess + 0.01:
+                self.correction = correction_between(matched, odom_pose)
+                pose = matched
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        if self.carve_range > 0:
+            sx, sy, syaw = pose[0] + c * mx - s * my, pose[1] + s * mx + c * my, pose[2] + myaw
+            angles = syaw + scan.beam_angles()
+            r = scan.ranges
+            usable = ~np.isnan(r)
+            length = np.where(np.isfinite(r), np.minimum(r, self.carve_range) - 1.5 * self.grid.resolution, self.carve_range)
+            self.grid.carve((sx, sy), np.c_[np.cos(angles), np.sin(angles)][usable], np.maximum(length[usable], 0.0))
+        self.grid.insert(np.c_[pose[0] + c * local[:, 0] - s * local[:, 1], pose[1] + s * local[:, 0] + c * local[:, 1]])
+        return pose
+
+    def occupancy(self) -> np.ndarray:
+        """The memory as int8 cells: 100 where a beam ended, 0 elsewhere (rows = y)."""
+        return np.where(self.grid.occupied, 100, 0).astype(np.int8)

@@ -1,0 +1,4 @@
+"""Live views of a running system: the Foxglove bridge component."""
+from emos.actors.viz.foxglove import FoxgloveBridgeComponent, FoxgloveConfig
+
+__all__ = ["FoxgloveBridgeComponent", "FoxgloveConfig"]

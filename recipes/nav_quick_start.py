@@ -1,0 +1,76 @@
+"""Simulation quick start: the spec's navigation stack driving the simulated robot in the house.
+
+    emos run recipes/nav_quick_start.py
+    # then, from another terminal, send a goal (x, y in metres, map frame):
+    emos topic pub /goal PointStamped '{"header": {"frame_id": "map"}, "point": {"x": 7.0, "y": 2.5}}'
+    emos topic echo /reached_end
+
+The spec's recipe runs against Webots or Gazebo; here the ``Simulator`` component (pybullet,
+headless) is the robot and the house, and the MapServer reads the same house as a ROS map.
+Watch the robot with ``emos topic echo /odometry/filtered`` and the components with
+``emos status``. (The spec's ``launcher.enable_ui`` arrives with the web UI component.)
+"""
+import numpy as np
+
+from emos import Launcher, Topic
+from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components import (
+    Controller, DriveManager, DriveManagerConfig, LocalMapper, LocalMapperConfig, MapServer, MapServerConfig,
+    Planner, PlannerConfig,
+)
+from emos.actors.nav.controllers import ControllersID
+from emos.actors.sim import Simulator, SimulatorConfig
+from emos.actors.sim.data import HOUSE_MAP
+
+# Setup your robot configuration
+my_robot = RobotConfig(
+    model_type=RobotType.DIFFERENTIAL_DRIVE,
+    geometry_type=RobotGeometry.Type.CYLINDER,
+    geometry_params=np.array([0.1, 0.3]),
+    ctrl_vx_limits=LinearCtrlLimits(max_vel=0.4, max_acc=1.5, max_decel=2.5),
+    ctrl_omega_limits=AngularCtrlLimits(max_vel=0.4, max_acc=2.0, max_decel=2.0, max_steer=np.pi / 3),
+)
+
+# Configure the Global Planner
+planner_config = PlannerConfig(loop_rate=1.0)
+planner = Planner(component_name="planner", config=planner_config)
+planner.run_type = "Timed"
+
+# Configure the motion controller
+controller = Controller(component_name="controller")
+controller.algorithm = ControllersID.PURE_PURSUIT
+controller.direct_sensor = False  # Get local perception from a "map" instead (from the local mapper)
+
+# Configure the Drive Manager (direct commands sent to the robot)
+driver_config = DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0, slowdown_zone_distance=0.3)
+driver = DriveManager(component_name="drive_manager", config=driver_config)
+driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
+
+# Configure a Local Mapper
+local_mapper_config = LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05))
+local_mapper = LocalMapper(component_name="mapper", config=local_mapper_config)
+
+# Configure the global Map Server (the house the simulator builds, as a ROS map)
+map_server_config = MapServerConfig(loop_rate=1.0, map_file_path=str(HOUSE_MAP), grid_resolution=0.5, pc_publish_row=False)
+map_server = MapServer(component_name="global_map_server", config=map_server_config)
+
+# The simulated robot (instead of Webots / Gazebo)
+odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
+sim = Simulator("sim", config=SimulatorConfig(world="house", spawn=(1.5, 1.5, 0.0)))
+sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
+sim.outputs(odom=odom_topic)
+
+# Setup the launcher
+launcher = Launcher()
+launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
+launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
+
+# Get odom from the simulator for all components
+launcher.inputs(location=odom_topic)
+
+# Set the robot config for all components (and the simulated robot)
+launcher.robot = my_robot
+launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+
+# Run the Recipe
+launcher.bringup()

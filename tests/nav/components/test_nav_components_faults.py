@@ -1,0 +1,166 @@
+"""Bad input and faults on the navigation components, in real processes: NaN/inf and empty
+scans, missing and malformed map files; and the MotionServer's recorded tests."""
+from __future__ import annotations
+
+import csv
+import math
+import time
+
+import numpy as np
+import pytest
+
+from emos import msgs as M
+from emos.core.health import HealthLevel
+from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
+
+HEADER = """
+from emos.actors.nav.components import *
+from emos.actors.nav import MapConfig
+from tests.nav.components.fake_base import FakeBase
+"""
+
+
+def _system(tmp_path, body, components, **kw):
+    return SystemUnderTest(tmp_path, HEADER + body, env={"PYTHONPATH": str(REPO)}, **kw).wait_up(timeout=60, components=components)
+
+
+def _scan(ranges):
+    return M.LaserScan(angle_min=-math.pi, angle_max=math.pi, angle_increment=2 * math.pi / max(len(ranges), 1),
+                       range_min=0.05, range_max=10.0, ranges=np.asarray(ranges, dtype=np.float32))
+
+
+def test_mapper_reports_empty_scans_and_ignores_nan_inf_beams(tmp_path):
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(map_params=MapConfig(width=2.0, height=2.0, resolution=0.1)))
+mapper.run_type = "Event"
+launcher = Launcher(multi_processing=True)
+launcher.kompass(components=[mapper], multiprocessing=True)
+launcher.bringup()
+""", ["mapper"])
+    scan_pub = Publisher(system.ctx, "/scan", M.LaserScan, publisher_id="test_scan")
+    status = Subscriber(system.ctx, "/mapper/status", M.ComponentStatus, queue_size=50)
+    grid = Subscriber(system.ctx, "/local_map/occupancy_layer", M.OccupancyGrid)
+    try:
+        scan_pub.publish(_scan([]))
+        st = wait_until(lambda: next((s for s in reversed(status.take()) if s.status == HealthLevel.SYSTEM_FAILURE), None), 10,
+                        what="SYSTEM failure for an empty scan")
+        assert "empty LaserScan" in st.message and "/scan" in st.src_topics
+        ranges = np.full(360, 1.0)
+        ranges[::3] = np.nan
+        ranges[1::3] = np.inf
+        ranges[5] = -np.inf
+        scan_pub.publish(_scan(ranges))
+        msg = wait_until(lambda: next(iter(grid.take()[-1:]), None), 10, what="a local map from a NaN/inf scan")
+        g = msg.grid()
+        assert g.shape == (20, 20) and (g == 100).any() and (g == 0).any()
+        wait_until(lambda: any(s.status == HealthLevel.HEALTHY for s in status.take()), 5, what="healthy again")
+    finally:
+        scan_pub.close(), status.close(), grid.close()
+        system.stop()
+
+
+@pytest.mark.parametrize("content, expect", [(None, "does not exist"), ("image: room.pgm\nresolution: [", "invalid YAML")])
+def test_map_server_missing_or_malformed_file_names_it(tmp_path, content, expect):
+    path = tmp_path / "bad_map.yaml"
+    if content is not None:
+        path.write_text(content)
+    system = SystemUnderTest(tmp_path, HEADER + f"""
+ms = MapServer(component_name="map_server", config=MapServerConfig(map_file_path={str(path)!r}))
+launcher = Launcher(multi_processing=True)
+launcher.kompass(components=[ms], multiprocessing=True)
+launcher.bringup()
+""", env={"PYTHONPATH": str(REPO)})
+    code = system.wait_exit(timeout=60)
+    assert code != 0
+    out = system.output()
+    assert str(path) in out and expect in out
+
+
+def test_motion_server_step_test_records_csv_and_plot(tmp_path):
+    folder = tmp_path / "tests"
+    system = _system(tmp_path, f"""
+ms = MotionServer(component_name="motion", config=MotionServerConfig(test_period=1.5, run_circle_test=False,
+                  step_test_velocity=0.3, step_test_duration=0.8, tests_folder={str(folder)!r}))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.0))])
+launcher.kompass(components=[ms], multiprocessing=True)
+launcher.bringup()
+""", ["base", "motion"])
+    try:
+        csv_file = wait_until(lambda: next(iter(folder.glob("*.csv")), None) if folder.exists() else None, 20, what="the step test CSV")
+        wait_until(lambda: csv_file.with_suffix(".png").exists(), 10, what="the plot")
+        time.sleep(0.2)
+        rows = list(csv.DictReader(open(csv_file)))
+        assert len(rows) >= 8
+        moving = [r for r in rows if float(r["t"]) < 0.7 and float(r["t"]) > 0.3]
+        assert moving and all(abs(float(r["cmd_vx"]) - 0.3) < 1e-9 for r in moving)
+        assert max(float(r["vx"]) for r in rows) > 0.25  # the base followed
+        assert float(rows[-1]["x"]) > 1.1
+    finally:
+        system.stop()
+
+
+def test_local_mapper_mapping_mode_publishes_memory_and_pose(tmp_path):
+    from emos.transport.pubsub import Subscriber
+
+    system = _system(tmp_path, """
+mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(mapping_bounds=(-0.5, -0.5, 6.5, 4.5), map_publish_period=0.5))
+mapper.run_type = "Event"
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.3))])
+launcher.kompass(components=[mapper], multiprocessing=True)
+launcher.bringup()
+""", ["base", "mapper"])
+    memory = Subscriber(system.ctx, "/local_map/memory", M.OccupancyGrid, transient_local=True)
+    pose = Subscriber(system.ctx, "/local_map/pose", M.PoseStamped)
+    try:
+        grid = wait_until(lambda: next(iter(memory.take()[-1:]), None), 15, what="the obstacle memory")
+        g = grid.grid()
+        assert grid.header.frame_id == "map" and g.shape == (100, 140) and (g == 100).sum() > 100
+        p = wait_until(lambda: next(iter(pose.take()[-1:]), None), 10, what="the localized pose")
+        assert abs(p.pose.position.x - 1.0) < 0.05 and abs(p.pose.position.y - 1.0) < 0.05
+    finally:
+        memory.close(), pose.close()
+        system.stop()
+
+
+def test_controller_on_a_point_cloud_ignores_the_floor_and_stops_for_a_wall(tmp_path):
+    from emos.actors.nav.components.convert import path_msg
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+controller = Controller(component_name="controller", config=ControllerConfig(algorithm="DWA", use_direct_sensor=True))
+controller.inputs(sensor_data=Topic(name="/cloud", msg_type="PointCloud2"))
+launcher = Launcher(multi_processing=True)
+launcher.kompass(components=[controller], multiprocessing=True)
+launcher.bringup()
+""", ["controller"])
+    cloud_pub = Publisher(system.ctx, "/cloud", M.PointCloud2, publisher_id="test_cloud")
+    odom_pub = Publisher(system.ctx, "/odom", M.Odometry, publisher_id="test_odom")
+    plan_pub = Publisher(system.ctx, "/plan", M.Path, publisher_id="test_plan")
+    cmd = Subscriber(system.ctx, "/control", M.Twist, queue_size=100)
+    gx, gy = np.meshgrid(np.linspace(-1, 3, 41), np.linspace(-1, 1, 21))
+    floor = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    wall = np.c_[np.full(21, 0.35), np.linspace(-1, 1, 21), np.full(21, 0.15)]
+    try:
+        def feed(points, seconds):
+            end = time.monotonic() + seconds
+            plan_pub.publish(path_msg(np.c_[np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], "map"))
+            while time.monotonic() < end:
+                odom = M.Odometry()
+                odom.pose.pose.orientation.w = 1.0
+                odom_pub.publish(odom)
+                cloud_pub.publish(M.PointCloud2.from_xyz(points))
+                time.sleep(0.05)
+            return cmd.take()
+
+        moving = feed(floor, 2.0)
+        assert max(c.linear.x for c in moving) > 0.1  # the floor is not an obstacle
+        blocked = feed(np.r_[floor, wall], 2.0)
+        assert blocked and max(c.linear.x for c in blocked[-5:]) < 0.05  # a wall 0.25 m ahead is
+    finally:
+        for x in (cloud_pub, odom_pub, plan_pub, cmd):
+            x.close()
+        system.stop()
