@@ -54,6 +54,18 @@ class TrialSpec:
     compute_speed: float = attrs.field(default=1.0, validator=_rate)
     """How fast the robot's computer is relative to this machine's thread CPU time."""
     time_limit: float = attrs.field(default=BARN_TIME_LIMIT, validator=_rate)
+    goal_radius: float = attrs.field(default=BARN_GOAL_RADIUS, validator=_rate)
+    noisy_odometry: bool = False
+    """Ideal configuration only: drifting wheel odometry with ``slip`` instead of ground truth
+    (the old ``--noisy-odometry`` variant; the realistic configuration has its own)."""
+    slip: float = attrs.field(default=0.02, converter=float)
+
+    def __attrs_post_init__(self) -> None:
+        if self.noisy_odometry and not self.ideal:
+            raise ValueError("TrialSpec.noisy_odometry is a variant of the ideal configuration (ideal=True); the "
+                             "realistic one always navigates on wheel + IMU odometry")
+        if not 0.0 <= self.slip < 1.0:
+            raise ValueError(f"TrialSpec.slip must be in [0, 1), got {self.slip!r}")
 
     @property
     def robot_name(self) -> str:
@@ -105,10 +117,12 @@ def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = Trial
     else:
         raise TypeError(f"build_trial needs a BarnWorld or a DynaWorld, got {type(entry).__name__}")
     try:
-        robot = world.add_robot(spec.robot_name, start)
+        slip = spec.slip if spec.noisy_odometry else 0.0
+        robot = world.add_robot(spec.robot_name, start, slip=slip)
         lidar = world.add_sensor(Lidar(robot, spec.lidar))
         if spec.ideal:
-            odometry = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=spec.control_rate_hz)))
+            odometry = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=spec.control_rate_hz,
+                                                                       noisy=spec.noisy_odometry)))
         else:
             odometry = world.add_sensor(WheelImuOdometry(robot, JACKAL_ODOMETRY))
         return TrialWorld(world_key(entry), world, robot, lidar, odometry, start, goal, entry.path_length)
@@ -117,13 +131,12 @@ def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = Trial
         raise
 
 
-def run_trial(trial: TrialWorld, policy: Policy, spec: TrialSpec = TrialSpec(), seed: int = 0,
-              goal_radius: float = BARN_GOAL_RADIUS) -> Trial:
+def run_trial(trial: TrialWorld, policy: Policy, spec: TrialSpec = TrialSpec(), seed: int = 0) -> Trial:
     """Drive ``trial`` with ``policy`` until the protocol ends it; the world stays open."""
     world, robot = trial.world, trial.robot
     dt = world.clock.dt
     ticks_per_control = max(1, int(round(1.0 / (spec.control_rate_hz * dt))))
-    monitor = TrialMonitor(trial.start[:2], trial.goal, goal_radius, spec.time_limit)
+    monitor = TrialMonitor(trial.start[:2], trial.goal, spec.goal_radius, spec.time_limit)
     deadline = ControlDeadline(1.0 / spec.control_rate_hz, dt, spec.compute_speed)
     pending: list[tuple[int, np.ndarray]] = []  # (tick at which it acts, command)
     world.step()  # first readings
