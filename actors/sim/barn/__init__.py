@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="world file (default: BARN's ../shared/benchmarks/barn/worlds.json beside the repo; "
                              "with --dynabarn the shipped moving-obstacle set)")
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
-    parser.add_argument("--split", default=None, choices=("tune", "report"),
-                        help="only the worlds to tune on (index %% 5 != 0) or to report apart (index %% 5 == 0)")
+    parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
+                        help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
     parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
                         help="navigation controller to drive with")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
@@ -72,8 +72,8 @@ def _load(args: argparse.Namespace) -> tuple[dict, list[int]]:
     from ..barn_worlds import parse_indices
 
     indices = parse_indices(args.worlds) if args.worlds else list(worlds)
-    if args.split is not None:
-        indices = [i for i in indices if (i % 5 == 0) == (args.split == "report")]
+    if args.split != "all":
+        indices = [i for i in indices if (i % 5 == 0) == (args.split == "test")]
     return worlds, indices
 
 
