@@ -43,6 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the ideal robot: kinematic, ground-truth odometry, free compute (the first benchmark)")
     parser.add_argument("--robot", default="jackal-barn", choices=("jackal-barn", "jackal-wheeled"),
                         help="robot of the realistic configuration (default jackal-barn: skid-steer model)")
+    parser.add_argument("--free-compute", action="store_true",
+                        help="do not charge the navigator's compute time (reproducible runs, no deadline accounting)")
     parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
                         help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
@@ -84,7 +86,8 @@ def _rules(args: argparse.Namespace) -> BarnRules:
         raise ValueError("--noisy-odometry is a variant of --ideal (the realistic configuration has wheel + IMU odometry)")
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
-    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry)
+    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry,
+                     charge_compute=not args.free_compute)
 
 
 def run(args: argparse.Namespace) -> int:
