@@ -95,6 +95,25 @@ class PublishFaults:
         return msg
 
 
+def fault_ops(node: Any) -> dict[str, Any]:
+    """Control-socket operations ``inject_fault`` and ``clear_fault`` for the chaos suite."""
+
+    async def inject_fault(req: dict, stream: Any) -> dict[str, Any]:
+        topic = req.get("topic")
+        outputs = {t.name: t for t in node.component.out_topics}
+        if topic not in outputs:
+            raise FaultInjectionError(f"component {node.name!r} publishes no {topic!r}; its outputs: {', '.join(sorted(outputs)) or 'none'}")
+        params = req.get("params") or {}
+        if not isinstance(params, dict):
+            raise FaultInjectionError("inject_fault expects 'params': a map")
+        return node.publish_faults.set(topic, outputs[topic].msg_type, str(req.get("mode")), **params)
+
+    async def clear_fault(req: dict, stream: Any) -> int:
+        return node.publish_faults.clear(req.get("topic"))
+
+    return {"inject_fault": inject_fault, "clear_fault": clear_fault}
+
+
 def _jumped(msg: Any, dx: float, dy: float) -> Any:
     pose_holder = msg.pose  # Odometry.pose is a PoseWithCovariance; PoseStamped.pose a Pose
     pose = pose_holder.pose if hasattr(pose_holder, "pose") else pose_holder
@@ -105,4 +124,4 @@ def _jumped(msg: Any, dx: float, dy: float) -> Any:
     return attrs.evolve(msg, pose=new_pose)
 
 
-__all__ = ["FaultInjectionError", "MODES", "PublishFaults", "injection_enabled"]
+__all__ = ["FaultInjectionError", "MODES", "PublishFaults", "fault_ops", "injection_enabled"]

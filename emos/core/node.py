@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from emos.config.base import ComponentRunType
-from emos.config.loader import ConfigError
 from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
 from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.faults import PublishFaults, fault_ops
 from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
@@ -103,6 +103,7 @@ class Node:
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
         self._publishers: dict[str, tuple[Publisher, threading.Lock]] = {}
+        self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
@@ -412,6 +413,10 @@ class Node:
             if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
                 raise RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}") from None
             raise KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}") from None
+        if self.publish_faults.active:  # empty unless a chaos run switched a sensor fault on
+            msg = self.publish_faults.apply(name, msg)
+            if msg is None:
+                return
         with lock:  # rings are single-writer; action threads and the loop may both publish
             pub.publish(msg)
 
@@ -458,19 +463,6 @@ class Node:
         async def transition(req: dict, stream: Any) -> str:
             return (await self.transition(req["transition"])).value
 
-        async def update_config(req: dict, stream: Any) -> dict:
-            values = req.get("values") or {}
-            if not isinstance(values, dict):
-                raise ConfigError("update_config expects 'values': a map of parameter names to values")
-            self.component.config.update(**values)
-            self.on_config_changed()
-            return self.component.config.asdict()
-
-        async def configure_from_file(req: dict, stream: Any) -> dict:
-            self.component.configure(str(req["path"]))
-            self.on_config_changed()
-            return self.component.config.asdict()
-
         async def execute_method(req: dict, stream: Any) -> Any:
             name = req.get("method", "")
             if not isinstance(name, str) or name.startswith("_") or not callable(getattr(self.component, name, None)):
@@ -490,9 +482,12 @@ class Node:
                 "config": self.component.config.asdict(),
             }
 
-        return {"get_state": get_state, "transition": transition, "update_config": update_config,
-                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
-                **reconfig_ops(self)}
+        reconfig = reconfig_ops(self)
+        return {"get_state": get_state, "transition": transition,
+                # The runtime's original name for a validated parameter update, kept as an alias.
+                "update_config": reconfig["update_config_parameters"],
+                "execute_method": execute_method, "exit": exit_, "info": info,
+                **reconfig, **fault_ops(self)}
 
 
 class _Timer:
