@@ -342,7 +342,8 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
-        for name, inp in list(self._inputs.items()):
+        # Triggers last: a step must see the other inputs that arrived in the same wake-up.
+        for name, inp in sorted(self._inputs.items(), key=lambda kv: kv[1].topic in triggers):
             items = inp.sub.take_raw()
             if not items:
                 continue
