@@ -1,8 +1,15 @@
 """``emos bench barn``: the BARN navigation benchmark in the simulator.
 
-Runs the selected worlds under the challenge rules (start, goal, 1 m radius, 100 s limit,
-collision = failure, official metric) with the Jackal-sized robot and its lidar, in lock-step
-with the simulation clock, and prints a row per world and a summary (or JSON with ``--json``).
+Runs the selected worlds under the challenge rules (start, goal, 1 m radius, 100 s on the
+official clock that starts after 0.1 m of motion, collision = failure, official metric), each
+with ``--seeds`` seeds (different sensor noise, odometry errors and yaw gain), in lock-step
+with the simulation clock, and prints a row per world and the summary over all trials (or
+JSON with ``--json``).
+
+Realistic by default: the ``jackal-barn`` robot (calibrated skid-steer drive, official
+collision shape), the Jackal laser, wheel + IMU odometry, the navigator's compute time
+charged. ``--ideal``: the kinematic robot with ground-truth odometry of the first benchmark.
+``--robot jackal-wheeled``: pybullet wheels. ``--dynabarn``: the moving-obstacle set.
 """
 from __future__ import annotations
 
@@ -20,36 +27,76 @@ __all__ = ["BarnRules", "EpisodeResult", "add_arguments", "run", "run_episode", 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds-file", type=Path, default=None,
-                        help="BARN world file (default: ../shared/benchmarks/barn/worlds.json beside the repo)")
+                        help="world file (default: BARN's ../shared/benchmarks/barn/worlds.json beside the repo; "
+                             "with --dynabarn the shipped moving-obstacle set)")
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
+    parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
+                        help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
     parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
                         help="navigation controller to drive with")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
-    parser.add_argument("--seed", type=int, default=0, help="simulation seed")
+    parser.add_argument("--seeds", type=int, default=10, help="trials per world, each with its own noise and yaw gain "
+                                                              "(default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="base of the trial seeds (default 0)")
+    parser.add_argument("--ideal", action="store_true",
+                        help="the ideal robot: kinematic, ground-truth odometry, free compute (the first benchmark)")
+    parser.add_argument("--robot", default="jackal-barn", choices=("jackal-barn", "jackal-wheeled"),
+                        help="robot of the realistic configuration (default jackal-barn: skid-steer model)")
+    parser.add_argument("--free-compute", action="store_true",
+                        help="do not charge the navigator's compute time (reproducible runs, no deadline accounting)")
+    parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
-                        help="navigate on drifting wheel odometry with 2%% slip instead of ground truth (harder)")
+                        help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
 
 
-def summarize(results: list[EpisodeResult]) -> dict:
-    n = len(results)
-    if n == 0:
-        return {"success_rate": 0.0, "collision_rate": 0.0, "timeout_rate": 0.0, "mean_metric": 0.0}
-    return {
-        "success_rate": round(sum(r.success for r in results) / n, 4),
-        "collision_rate": round(sum(r.collided for r in results) / n, 4),
-        "timeout_rate": round(sum(r.timeout for r in results) / n, 4),
-        "mean_metric": round(sum(r.metric for r in results) / n, 4),
-    }
+def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
+    """Rates and mean scores over all trials (the official report), plus ``seeds`` per world."""
+    from ..barn_protocol import summarize_trials
+
+    s = summarize_trials(results)  # type: ignore[arg-type]  (same fields as a Trial)
+    out = {key: s[key] for key in ("success_rate", "collision_rate", "timeout_rate", "mean_metric", "metric_4t",
+                                   "deadline_misses", "mean_time_s")}
+    if seeds is not None:
+        out["seeds"] = seeds
+    return out
+
+
+def _load(args: argparse.Namespace) -> tuple[dict, list[int]]:
+    if args.dynabarn:
+        from ..dynabarn import load_dynabarn
+
+        worlds: dict = load_dynabarn(args.worlds_file)
+    else:
+        from ..barn_worlds import load_barn_worlds
+
+        worlds = load_barn_worlds(args.worlds_file)
+    from ..barn_worlds import parse_indices
+
+    indices = parse_indices(args.worlds) if args.worlds else list(worlds)
+    if args.split != "all":
+        indices = [i for i in indices if (i % 5 == 0) == (args.split == "test")]
+    return worlds, indices
+
+
+def _rules(args: argparse.Namespace) -> BarnRules:
+    if args.ideal and args.robot != "jackal-barn":
+        raise ValueError("--robot chooses the robot of the realistic configuration; it cannot go with --ideal")
+    if args.noisy_odometry and not args.ideal:
+        raise ValueError("--noisy-odometry is a variant of --ideal (the realistic configuration has wheel + IMU odometry)")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry,
+                     charge_compute=not args.free_compute)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..barn_worlds import load_barn_worlds, parse_indices
+    from ..barn_protocol import trial_seed
     from .controllers import make_controller
 
     try:
-        worlds = load_barn_worlds(args.worlds_file)
-        indices = parse_indices(args.worlds) if args.worlds else list(worlds)
+        rules = _rules(args)
+        worlds, indices = _load(args)
     except (FileNotFoundError, ValueError) as exc:
         print(f"emos bench barn: {exc}", file=sys.stderr)
         return 2
@@ -62,32 +109,48 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos bench barn: none of the selected worlds is in the file "
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
-    rules = BarnRules(noisy_odometry=args.noisy_odometry)
+    name = "DynaBARN-style" if args.dynabarn else "BARN"
+    config = "ideal (kinematic, true odometry)" if rules.ideal else f"realistic ({rules.robot}, laser, wheel+IMU odometry)"
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
     if not args.json:
-        print(f"BARN: {len(indices)} worlds, controller {args.controller}, lock-step sim clock")
-        print(f"{'world':>5} {'result':<9} {'time_s':>7} {'metric':>7} {'dist_m':>7} {'wall_s':>7}  detail")
+        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, lock-step")
+        print(f"{'world':>5} {'success':>7} {'collide':>7} {'timeout':>7} {'time_s':>7} {'metric':>7} {'m_4t':>6} "
+              f"{'misses':>6} {'wall_s':>7}  first failure")
     for idx in indices:
-        png = args.png / f"barn_{idx:03d}.png" if args.png else None
-        navigator = make_controller(args.controller)
-        r = run_episode(worlds[idx], navigator, rules, seed=args.seed, png_path=png)
-        results.append(r)
+        key = f"dynabarn:{idx}" if args.dynabarn else idx
+        rows = []
+        for k in range(args.seeds):
+            seed = trial_seed(key, k, base=args.seed)
+            png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
+            rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
+        results.extend(rows)
         if not args.json:
-            status = "success" if r.success else ("collision" if r.collided else "timeout")
-            print(f"{r.idx:>5} {status:<9} {r.time_s:>7.2f} {r.metric:>7.3f} {r.distance_m:>7.2f} {r.wall_s:>7.2f}  {r.reason}",
-                  flush=True)
-    summary = summarize(results)
+            s = summarize(rows)
+            fail = next((f"seed {k}: {r.reason}" for k, r in enumerate(rows) if not r.success), "")
+            mean_t = f"{s['mean_time_s']:>7.2f}" if s["mean_time_s"] is not None else f"{'-':>7}"
+            print(f"{idx:>5} {s['success_rate']:>7.2f} {s['collision_rate']:>7.2f} {s['timeout_rate']:>7.2f} {mean_t} "
+                  f"{s['mean_metric']:>7.3f} {s['metric_4t']:>6.3f} {s['deadline_misses']:>6} "
+                  f"{sum(r.wall_s for r in rows):>7.1f}  {fail}", flush=True)
+    summary = summarize(results, args.seeds)
     if args.json:
         print(json.dumps({"worlds": [r.as_json() for r in results], "summary": summary}))
         return 0
-    ok = [r for r in results if r.success]
-    sim_total = sum(r.time_s for r in results)
     wall_total = time.perf_counter() - wall0
     print()
-    print(f"worlds {len(results)}  success {summary['success_rate']:.3f}  collision {summary['collision_rate']:.3f}  "
-          f"timeout {summary['timeout_rate']:.3f}  mean metric {summary['mean_metric']:.4f}")
-    if ok:
-        print(f"mean time of successful runs {sum(r.time_s for r in ok) / len(ok):.2f} s")
-    print(f"simulated {sim_total:.1f} s in {wall_total:.1f} s wall ({sim_total / max(wall_total, 1e-9):.1f}x real time)")
+    _print_summary("all", summary, len(results))
+    if not args.dynabarn:
+        # The issue's split: tune on idx % 5 != 0, report idx % 5 == 0 apart.
+        for label, part in (("idx % 5 != 0", [r for r in results if r.idx % 5 != 0]),
+                            ("idx % 5 == 0", [r for r in results if r.idx % 5 == 0])):
+            if part:
+                _print_summary(label, summarize(part), len(part))
+    print(f"wall {wall_total:.1f} s for {len(results)} trials")
     return 0
+
+
+def _print_summary(label: str, s: dict, n: int) -> None:
+    mean_t = f"{s['mean_time_s']:.2f} s" if s.get("mean_time_s") is not None else "-"
+    print(f"{label:<13} trials {n:>5}  success {s['success_rate']:.3f}  collision {s['collision_rate']:.3f}  "
+          f"timeout {s['timeout_rate']:.3f}  mean time {mean_t}  metric {s['mean_metric']:.4f}  "
+          f"metric_4t {s['metric_4t']:.4f}  deadline misses {s['deadline_misses']}")
