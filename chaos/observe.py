@@ -70,7 +70,10 @@ class StatusObserver(threading.Thread):
                 zombies = self.system.zombie_pids()
                 # Still a zombie a second later: nobody is reaping it (a transient one is a death
                 # caught in the instant before the supervisor's reap).
-                self.max_zombies = max(self.max_zombies, len(zombies & self._zombies_before))
+                lasting = zombies & self._zombies_before
+                self.max_zombies = max(self.max_zombies, len(lasting))
+                if lasting:
+                    self.history.add("note", "zombie", pids=sorted(lasting), parents=self.system.parents_of(lasting))
                 self._zombies_before = zombies
                 next_zombie_check = now + 1.0
             self.halt.wait(self.interval)

@@ -17,7 +17,8 @@ Outputs go to ``$EMOS_NAV_OUT`` (default ``./point_navigation_out``).
 
 The Mission may itself be killed and restarted (the chaos suite does): it keeps its progress
 (current goal, results, driven path, start time) in ``mission.json`` in the run directory and a
-restarted Mission resumes from there instead of sending the robot back to the first goal.
+restarted Mission resumes from there instead of sending the robot back to the first goal. It
+repeats the current goal every 2 s, so a restarted Planner (which starts without one) gets it.
 Under ``emos chaos run`` (``EMOS_CHAOS_RESULT`` set) it also writes
 ``{"goals", "goals_reached", "collisions", "late_s"}`` to that file for the chaos runner;
 ``late_s`` is the mission time beyond ``EMOS_NAV_NOMINAL_S`` (the fault-free time), null if unset.
@@ -174,6 +175,11 @@ class Mission(BaseComponent):
             if math.dist((end.x, end.y), goal) < 0.2:  # the first plan to this goal
                 self.plans.append((self.index, [(q.pose.position.x, q.pose.position.y) for q in plan.poses]))
         left = math.dist(pose, goal)
+        if now - self.goal_sent_at >= 2.0 and now - getattr(self, "goal_repeated_at", 0.0) >= 2.0:
+            # A restarted Planner starts without a goal (a topic keeps no message for late
+            # subscribers): repeat the current one; the Planner ignores a goal it already has.
+            self.goal_repeated_at = now
+            self.publish(self.goal, PointStamped(header=Header(frame_id="map"), point=Point(x=goal[0], y=goal[1])))
         if now - self.last_print >= 1.0:
             self.last_print = now
             self._save()

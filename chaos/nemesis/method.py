@@ -32,12 +32,8 @@ class MethodFault(Nemesis):
 
     def start(self) -> Record | None:
         assert self.system is not None and self.system.run_dir is not None
-        from emos.core.node import control_socket
-        from emos.transport.context import RunContext
-
-        ctx = RunContext(self.system.run_id or "", self.system.run_dir, owner=False)
         try:
-            with RpcClient(control_socket(ctx, self.component), timeout=2.0) as rpc:
+            with RpcClient(self.system.control_socket(self.component), timeout=2.0) as rpc:
                 rpc.call("execute_method", method=self.method, args=self.args, kwargs={})
         except (OSError, ConnectionError, TimeoutError):
             return None  # restarting: nothing to hit now
