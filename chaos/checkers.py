@@ -94,15 +94,19 @@ def _moving(values: list[tuple[float, float]], after: float, eps: float) -> floa
     return next((t for t, speed in values if t > after and speed > eps), None)
 
 
-def moving_again(history: History, commands: list[tuple[float, float]], eps: float = 1e-3) -> list[float | None]:
-    """For each fault (history order): ms from the fault (or its end, for lasting faults) to the
-    first command that moves the robot; None if the robot never moved again in the run."""
+def moving_again(history: History, commands: list[tuple[float, float]], outcomes: list[FaultOutcome], eps: float = 1e-3) -> list[float | None]:
+    """For each fault: ms from the fault (from its end for the lasting faults the robot must ride
+    out, ``healthy``) to the first command that moves the robot after the fault's recovery; None
+    if the robot never moved again in the run (or the fault never recovered)."""
     ends = {r.detail.get("fault_t"): r.t for r in history.of("fault_end")}
-    out = []
-    for f in history.of("fault"):
-        base = ends.get(f.t, f.t)
-        at = _moving(commands, base, eps)
-        out.append(None if at is None else round((at - base) * 1e3, 1))
+    out: list[float | None] = []
+    for o in outcomes:
+        start = ends.get(o.t, o.t) if o.expects == "healthy" else o.t
+        if o.expects != "none" and o.recover_ms is None:
+            out.append(None)
+            continue
+        at = _moving(commands, start + (o.recover_ms or 0.0) / 1e3, eps)
+        out.append(None if at is None else round((at - start) * 1e3, 1))
     return out
 
 

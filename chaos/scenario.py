@@ -275,7 +275,7 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     if motion_topic and not motion_topic.startswith("/"):
         motion_topic = "/" + motion_topic
     commands = list(topic_obs.commands.get(motion_topic, [])) if topic_obs and motion_topic else []
-    moving = moving_again(history, commands) if motion_topic else [None] * len(outcomes)
+    moving = moving_again(history, commands, outcomes) if motion_topic else [None] * len(outcomes)
     result: dict[str, Any] = {
         "scenario": sc.name, "seed": seed, "run_id": system.run_id, "exit_code": exit_code,
         "faults": len(outcomes), "recovered": sum(o.recovered for o in outcomes),

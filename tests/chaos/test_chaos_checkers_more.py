@@ -67,11 +67,15 @@ def test_stop_on_stale_flags_a_moving_command_after_the_timeout_only():
     assert v["fault_t"] == 10.0 and v["command_t"] == 11.0 and v["late_s"] == 1.0
 
 
-def test_moving_again_is_measured_from_the_end_of_a_lasting_fault():
-    h = _history([Record(1.0, "fault", "kill", {"expects": "restart"}),
-                  Record(3.0, "fault", "sensor", {"expects": "healthy"}), Record(4.0, "fault_end", "sensor", {"fault_t": 3.0})])
-    assert moving_again(h, [(1.5, 0.0), (1.8, 0.2), (4.5, 0.3)]) == [800.0, 500.0]
-    assert moving_again(h, [(1.5, 0.0)]) == [None, None]
+def test_moving_again_counts_from_the_fault_or_the_end_of_a_ridden_out_fault_and_after_recovery():
+    h = _history([Record(1.0, "status", "planner", {"pid": 5, "health": "HEALTHY"}),
+                  Record(1.0, "fault", "kill", {"target": "planner", "pid": 5, "expects": "restart"}),
+                  Record(1.6, "status", "planner", {"pid": 6, "health": "HEALTHY"}),
+                  Record(3.0, "fault", "sensor", {"target": "planner", "expects": "healthy"}), Record(4.0, "fault_end", "sensor", {"fault_t": 3.0})])
+    outcomes = judge_faults(h, {})
+    # the command at 1.5 s was sent before the planner was back: not the recovery of motion
+    assert moving_again(h, [(1.5, 0.2), (1.8, 0.2), (4.5, 0.3)], outcomes) == [800.0, 500.0]
+    assert moving_again(h, [(1.5, 0.0)], outcomes) == [None, None]
 
 
 def test_recover_needs_a_failure_then_healthy_and_its_witness():
