@@ -46,6 +46,15 @@ def test_escalation_short_gives_up_with_exit_code_3_and_nothing_left(tmp_path):
     assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0}
 
 
+def test_kill_soak_short_recovers_every_kill_and_leaks_nothing(tmp_path):
+    proc, summary = _chaos(tmp_path, "kill-soak")
+    assert summary is not None, proc.stderr[-3000:]
+    run = _runs(tmp_path)[0]
+    assert proc.returncode == 0, run["problems"]
+    assert summary["faults"] >= 10 and summary["recovered"] == summary["faults"]
+    assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0} and summary["corrupt"] == 0
+
+
 def test_fallback_ladder_short_walks_the_declared_ladder_for_every_break(tmp_path):
     proc, summary = _chaos(tmp_path, "fallback-ladder")
     assert summary is not None, proc.stderr[-3000:]
