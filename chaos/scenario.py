@@ -36,7 +36,7 @@ fault stopped the robot within ``stale_within`` s (violations fail the run). A r
 its own (the workload finished) can cut the last faults short: those are reported as ``cut``
 and not judged.
 
-Workloads that have goals (navigation) write ``{"goals": n, "goals_reached": n, "collisions": n}``
+Workloads that have goals (navigation) write ``{"goals": n, "goals_reached": n, "collisions": n, "late_s": x}``
 as JSON to the file named by ``EMOS_CHAOS_RESULT``; the runner reads it after the run.
 """
 from __future__ import annotations
