@@ -49,8 +49,8 @@ def _status_timeline(history: History) -> dict[str, list[Record]]:
 
 def judge_faults(history: History, arrivals: dict[str, list[float]], grace_s: float = 3.0) -> list[FaultOutcome]:
     timeline = _status_timeline(history)
-    exits = [r.t for r in history.of("exit")]
-    ended_at = exits[0] if exits else None
+    exits = [r.t for r in history.of("exit")]  # the system's exit, and when the workload finished
+    ended_at = min(exits) if exits else None
     ends = {r.detail.get("fault_t"): r.t for r in history.of("fault_end")}
     outcomes = []
     for f in history.of("fault"):
@@ -116,6 +116,7 @@ def stops_on_stale(history: History, commands: list[tuple[float, float]], within
     ends = {r.detail.get("fault_t"): r.t for r in history.of("fault_end")}
     exits = [r.t for r in history.of("exit")]
     problems = []
+    exits = [min(exits)] if exits else []
     for f in history.of("fault"):
         if not f.detail.get("stale"):
             continue

@@ -40,9 +40,10 @@ class History:
             self._records.append(record)
         return record
 
-    def records_event(self, t: float, event: str, detail: dict[str, Any]) -> Record:
-        """A supervisor event (kind ``event``, name = the event) at its own time ``t``."""
-        record = Record(round(t, 4), "event", event, detail)
+    def records_event(self, t: float, event: str, detail: dict[str, Any], kind: str = "event") -> Record:
+        """A record observed after the fact at its own time ``t``: a supervisor event (kind
+        ``event``, name = the event), or the moment the workload finished (kind ``exit``)."""
+        record = Record(round(t, 4), kind, event, detail)
         with self._lock:
             self._records.append(record)
         return record

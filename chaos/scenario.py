@@ -269,6 +269,16 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     leaks = system.leaks()
     status_obs = observers[0]
     topic_obs = observers[1] if len(observers) > 1 else None
+    workload: dict[str, Any] = {}
+    workload_error = None
+    if result_file.is_file():
+        # When the workload wrote its result it had finished and was ending the run: faults
+        # after that point may not get to recover (the checker reports them as cut).
+        history.records_event(result_file.stat().st_mtime - history.wall_t0, "workload", {}, kind="exit")
+        try:
+            workload = json.loads(result_file.read_text())
+        except (OSError, ValueError) as exc:
+            workload_error = f"{result_file}: {exc}"
     outcomes = judge_faults(history, dict(topic_obs.arrivals) if topic_obs else {}, grace_s=sc.heartbeat_timeout + 2.0)
     recover = [o.recover_ms for o in outcomes if o.recover_ms is not None and o.expects != "none"]
     motion_topic = sc.motion.get("topic") if sc.motion else None
@@ -295,12 +305,10 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
         "corrupt": sum(topic_obs.corrupt.values()) if topic_obs else 0,
         "log": str(system.log_path),
     }
-    if result_file.is_file():
-        try:
-            workload = json.loads(result_file.read_text())
-            result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s")})
-        except (OSError, ValueError) as exc:
-            result["workload_error"] = f"{result_file}: {exc}"
+    if workload:
+        result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s")})
+    if workload_error:
+        result["workload_error"] = workload_error
     if "fallback_ladder" in sc.expect:
         result["ladder"] = check_ladder(history, parse_spec(sc.expect["fallback_ladder"], str(sc.source)))
     result["problems"] = verdict(result, sc.expect)
