@@ -235,14 +235,10 @@ class TermDeafComponent(_Targeted):
         from emos.core.rpc import RpcClient
 
         assert self.system is not None and self.system.run_dir is not None
-        hit = self.pick()
+        hit = self.signal_target(signal.SIGSTOP)
         if hit is None:
             return None
         name, pid = hit
-        try:
-            os.kill(pid, signal.SIGSTOP)
-        except ProcessLookupError:
-            return None
         self._pid = pid
         record = self._fault(target=name, pid=pid)
         with RpcClient(self.system.run_dir / "supervisor.sock", timeout=2.0) as rpc:
