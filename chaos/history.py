@@ -17,7 +17,7 @@ from attrs import asdict, define, field
 @define
 class Record:
     t: float
-    kind: str  # "fault", "fault_end", "status", "note", "exit"
+    kind: str  # "fault", "fault_end", "status", "event" (the supervisor's), "note", "exit"
     name: str  # the nemesis for faults, the component for status, free text otherwise
     detail: dict[str, Any] = field(factory=dict)
 
@@ -36,6 +36,14 @@ class History:
 
     def add(self, kind: str, name: str, **detail: Any) -> Record:
         record = Record(round(self.now(), 4), kind, name, detail)
+        with self._lock:
+            self._records.append(record)
+        return record
+
+    def records_event(self, t: float, event: str, detail: dict[str, Any], kind: str = "event") -> Record:
+        """A record observed after the fact at its own time ``t``: a supervisor event (kind
+        ``event``, name = the event), or the moment the workload finished (kind ``exit``)."""
+        record = Record(round(t, 4), kind, event, detail)
         with self._lock:
             self._records.append(record)
         return record

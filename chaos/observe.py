@@ -2,11 +2,15 @@
 
 * :class:`StatusObserver` polls the supervision tree (the same data as ``emos status``) and
   records every change of a component's pid, lifecycle state or health, and the launcher's
-  zombie children.
+  zombie children. It also copies the supervisor's event log (the control socket's ``events``:
+  exits, restarts, fallback attempts, give-ups) into the history as ``event`` records, on the
+  history's clock (both are CLOCK_MONOTONIC), for checkers such as the fallback ladder's.
 * :class:`TopicObserver` subscribes to topics from outside, like ``emos topic echo``, and
   records message arrivals. Messages stamped ``<seq>:<crc32>`` in ``header.frame_id`` (as the
   sensor demo and the chaos workloads stamp them) have their payload checksum verified, so a
-  corrupt delivery is counted, never guessed.
+  corrupt delivery is counted, never guessed. For velocity commands (``Twist``) it also keeps
+  each command's size (``|vx| + |vy| + |omega|``), so checkers can tell a stopped robot from a
+  moving one.
 """
 from __future__ import annotations
 
@@ -36,10 +40,16 @@ class StatusObserver(threading.Thread):
         self.errors = 0
         self._last: dict[str, tuple[Any, ...]] = {}
         self._zombies_before: set[int] = set()
+        self._events_since = 0.0
+        self._seen_events: set[tuple[Any, ...]] = set()
 
     def run(self) -> None:
         next_zombie_check = 0.0
+        next_events = 0.0
         while not self.halt.is_set() and self.system.alive:
+            if time.monotonic() >= next_events:
+                self._copy_events()
+                next_events = time.monotonic() + 0.5
             try:
                 tree = self.system.tree(timeout=1.0)["tree"]
             except Exception:  # the supervisor may be busy restarting a group: count, keep going
@@ -60,10 +70,36 @@ class StatusObserver(threading.Thread):
                 zombies = self.system.zombie_pids()
                 # Still a zombie a second later: nobody is reaping it (a transient one is a death
                 # caught in the instant before the supervisor's reap).
-                self.max_zombies = max(self.max_zombies, len(zombies & self._zombies_before))
+                lasting = zombies & self._zombies_before
+                self.max_zombies = max(self.max_zombies, len(lasting))
+                if lasting:
+                    self.history.add("note", "zombie", pids=sorted(lasting), parents=self.system.parents_of(lasting))
                 self._zombies_before = zombies
                 next_zombie_check = now + 1.0
             self.halt.wait(self.interval)
+
+
+    def _copy_events(self) -> None:
+        from emos.core.rpc import RpcClient
+
+        try:
+            with RpcClient(self.system.run_dir / "supervisor.sock", timeout=1.0) as rpc:  # type: ignore[operator]
+                events = rpc.call("events", since=self._events_since)
+        except Exception:  # busy or going down: the next poll gets them (``since`` is inclusive)
+            self.errors += 1
+            return
+        for e in events:
+            key = (e.get("t"), e.get("child"), e.get("event"))
+            if key in self._seen_events:
+                continue
+            self._seen_events.add(key)
+            self._events_since = max(self._events_since, float(e.get("t", 0.0)))
+            detail = {k: v for k, v in e.items() if k not in ("t", "event")}
+            self.history.records_event(float(e.get("t", 0.0)) - self.history.t0, str(e.get("event")), detail)
+
+    def finish(self) -> None:
+        """One last copy of the event log while the supervisor still answers."""
+        self._copy_events()
 
 
 class TopicObserver(threading.Thread):
@@ -78,6 +114,7 @@ class TopicObserver(threading.Thread):
         self.corrupt: dict[str, int] = defaultdict(int)
         self.errors: dict[str, int] = defaultdict(int)
         self.arrivals: dict[str, list[float]] = defaultdict(list)  # history times, for rates and recovery
+        self.commands: dict[str, list[tuple[float, float]]] = defaultdict(list)  # (time, command size) of Twist topics
 
     def run(self) -> None:
         from emos.transport.pubsub import Subscriber
@@ -110,7 +147,11 @@ class TopicObserver(threading.Thread):
 
     def _check(self, topic: str, msg: Any) -> None:
         self.received[topic] += 1
-        self.arrivals[topic].append(self.history.now())
+        now = self.history.now()
+        self.arrivals[topic].append(now)
+        linear, angular = getattr(msg, "linear", None), getattr(msg, "angular", None)
+        if linear is not None and angular is not None:
+            self.commands[topic].append((now, abs(linear.x) + abs(linear.y) + abs(angular.z)))
         header = getattr(msg, "header", None)
         match = _STAMP.match(getattr(header, "frame_id", "") or "")
         if match is None:

@@ -11,6 +11,7 @@ A scenario is a YAML file (the shipped ones are in ``emos/chaos/scenarios/``)::
     cooldown: 6                        # quiet seconds after the last one
     heartbeat_timeout: 2.0             # what the recipe uses (bounds hang recovery)
     topics: {/camera/rgb: Image, /scan: LaserScan}   # watched; stamped payloads CRC-checked
+    env: {EMOS_NAV_OUT: "{out}/nav-{seed}"}           # for the recipe; {out} {seed} substituted
     proxies: [{name: model, upstream: "127.0.0.1:8000"}]  # exported as EMOS_CHAOS_PROXY_MODEL
     schedule:
       every: 2.0                       # seconds between faults, +- jitter
@@ -19,10 +20,23 @@ A scenario is a YAML file (the shipped ones are in ``emos/chaos/scenarios/``)::
       nemeses:
         - {kind: kill, target: random}
         - {kind: hang, target: camera, duration: 3}
+    motion: {topic: /cmd_vel, stale_within: 0.55}  # robots: the drive's command topic (Twist),
+                                       # and the consumer's data timeout + one control period
     expect: {exit_code: 0, recover_ms_p95: 1000}
     short: {duration: 12}              # overrides for `--short` (CI)
 
-Workloads that have goals (navigation) write ``{"goals": n, "goals_reached": n, "collisions": n}``
+``expect`` keys: ``exit_code`` (0), ``all_recovered`` (true), ``max_zombies`` (0),
+``recover_ms_p95`` (all faults), ``recover_ms_p95_kill`` / ``recover_ms_p95_hang`` (by kind),
+``min_faults``, ``goal_reached`` (every goal of the workload), ``fallback_ladder`` (the ladder
+the fallback checker expects: see :mod:`emos.chaos.ladder`).
+
+With ``motion`` the runner watches the command topic and adds, per fault, the time until the
+robot was commanded to move again (``moving_ms``), and checks that every stale-making sensor
+fault stopped the robot within ``stale_within`` s (violations fail the run). A run that ends on
+its own (the workload finished) can cut the last faults short: those are reported as ``cut``
+and not judged.
+
+Workloads that have goals (navigation) write ``{"goals": n, "goals_reached": n, "collisions": n, "late_s": x}``
 as JSON to the file named by ``EMOS_CHAOS_RESULT``; the runner reads it after the run.
 """
 from __future__ import annotations
@@ -36,8 +50,9 @@ from typing import Any, Callable
 import yaml
 from attrs import define, field
 
-from emos.chaos.checkers import judge_faults, percentiles, verdict
+from emos.chaos.checkers import judge_faults, moving_again, percentiles, stops_on_stale, verdict
 from emos.chaos.history import History
+from emos.chaos.ladder import check_ladder, parse_spec
 from emos.chaos.nemesis import FaultProxy, Nemesis, NemesisError, ProxyFault, make
 from emos.chaos.nemesis.base import Compose
 from emos.chaos.observe import StatusObserver, TopicObserver
@@ -80,6 +95,7 @@ class Scenario:
     order: str = "random"
     nemeses: list[tuple[dict[str, Any], float]] = field(factory=list)
     expect: dict[str, Any] = field(factory=dict)
+    motion: dict[str, Any] = field(factory=dict)
 
     @classmethod
     def load(cls, name_or_path: str | Path, short: bool = False) -> "Scenario":
@@ -102,7 +118,7 @@ class Scenario:
             schedule_over = overrides.pop("schedule", {}) or {}
             data.update(overrides)
             data["schedule"] = {**(data.get("schedule") or {}), **schedule_over}
-        known = {"name", "description", "recipe", "duration", "warmup", "cooldown", "heartbeat_timeout", "topics", "env", "proxies", "schedule", "expect"}
+        known = {"name", "description", "recipe", "duration", "warmup", "cooldown", "heartbeat_timeout", "topics", "env", "proxies", "schedule", "expect", "motion"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ScenarioError(f"{path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
@@ -122,9 +138,16 @@ class Scenario:
         order = schedule.get("order", "random")
         if order not in ("random", "cycle"):
             raise ScenarioError(f"{path}: schedule.order must be random or cycle, got {order!r}")
+        motion = data.get("motion") or {}
+        if motion and (not isinstance(motion, dict) or not isinstance(motion.get("topic"), str) or set(motion) - {"topic", "stale_within"}):
+            raise ScenarioError(f"{path}: motion must be a mapping {{topic: <Twist topic>, stale_within: <s>}}, got {motion!r}")
+        if motion:
+            _number(motion, "stale_within", 0.5, f"{path}: motion")
         for key in ("topics", "env", "expect"):
             if not isinstance(data.get(key) or {}, dict):
                 raise ScenarioError(f"{path}: {key} must be a mapping")
+        if "fallback_ladder" in (data.get("expect") or {}):
+            parse_spec(data["expect"]["fallback_ladder"], f"{path}: expect")
         return cls(
             name=str(data.get("name", path.stem)), source=path, recipe=_find_recipe(str(data["recipe"]), path),
             description=str(data.get("description", "")),
@@ -133,7 +156,7 @@ class Scenario:
             topics={str(k): str(v) for k, v in (data.get("topics") or {}).items()},
             env={str(k): str(v) for k, v in (data.get("env") or {}).items()}, proxies=list(data.get("proxies") or []),
             every=_number(schedule, "every", 2.0, f"{path}: schedule", 0.05), jitter=_number(schedule, "jitter", 0.0, f"{path}: schedule"),
-            order=order, nemeses=nemeses, expect=dict(data.get("expect") or {}),
+            order=order, nemeses=nemeses, expect=dict(data.get("expect") or {}), motion=dict(motion),
         )
 
 
@@ -151,7 +174,8 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     rng = random.Random(seed)
     history = History()
     proxies: dict[str, FaultProxy] = {}
-    env = dict(sc.env)
+    # {out} and {seed} in env values: per-run output places for the workload (e.g. its log folder)
+    env = {k: v.replace("{out}", str(out_dir)).replace("{seed}", str(seed)) for k, v in sc.env.items()}
     result_file = out_dir / f"workload-{seed}.json"
     result_file.unlink(missing_ok=True)
     env["EMOS_CHAOS_RESULT"] = str(result_file)
@@ -181,7 +205,10 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
         history.add("note", "started", run_id=system.run_id)
         status = StatusObserver(system, history)
         observers.append(status)
-        topics = TopicObserver(system, history, sc.topics) if sc.topics else None
+        watched = dict(sc.topics)
+        if sc.motion:
+            watched.setdefault(sc.motion["topic"], "Twist")
+        topics = TopicObserver(system, history, watched) if watched else None
         if topics is not None:
             observers.append(topics)
         for o in observers:
@@ -226,6 +253,8 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
             if n.active is not None:
                 n.stop()
         exit_code = None
+        if system is not None and system.alive and observers:
+            observers[0].finish()  # the supervisor's last events, while it still answers
         if system is not None:
             exit_code = system.stop() if system.alive else system.wait(30)
         for o in observers:
@@ -239,16 +268,35 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     leaks = system.leaks()
     status_obs = observers[0]
     topic_obs = observers[1] if len(observers) > 1 else None
-    outcomes = judge_faults(history, dict(topic_obs.arrivals) if topic_obs else {})
+    workload: dict[str, Any] = {}
+    workload_error = None
+    if result_file.is_file():
+        # When the workload wrote its result it had finished and was ending the run: faults
+        # after that point may not get to recover (the checker reports them as cut).
+        history.records_event(result_file.stat().st_mtime - history.wall_t0, "workload", {}, kind="exit")
+        try:
+            workload = json.loads(result_file.read_text())
+        except (OSError, ValueError) as exc:
+            workload_error = f"{result_file}: {exc}"
+    outcomes = judge_faults(history, dict(topic_obs.arrivals) if topic_obs else {}, grace_s=sc.heartbeat_timeout + 2.0)
     recover = [o.recover_ms for o in outcomes if o.recover_ms is not None and o.expects != "none"]
+    motion_topic = sc.motion.get("topic") if sc.motion else None
+    if motion_topic and not motion_topic.startswith("/"):
+        motion_topic = "/" + motion_topic
+    commands = list(topic_obs.commands.get(motion_topic, [])) if topic_obs and motion_topic else []
+    moving = moving_again(history, commands, outcomes) if motion_topic else [None] * len(outcomes)
     result: dict[str, Any] = {
         "scenario": sc.name, "seed": seed, "run_id": system.run_id, "exit_code": exit_code,
         "faults": len(outcomes), "recovered": sum(o.recovered for o in outcomes),
         "recover_ms": percentiles(recover),
         "recover_ms_by_kind": {k: percentiles([o.recover_ms for o in outcomes if o.nemesis == k and o.recover_ms is not None])
                                for k in sorted({o.nemesis for o in outcomes})},
+        "cut": sum(o.cut for o in outcomes),
         "outcomes": [{"t": o.t, "nemesis": o.nemesis, "target": o.target, "expects": o.expects,
-                      "recovered": o.recovered, "recover_ms": o.recover_ms} for o in outcomes],
+                      "recovered": o.recovered, "recover_ms": o.recover_ms, "cut": o.cut, "moving_ms": m}
+                     for o, m in zip(outcomes, moving)],
+        "moving_ms": percentiles([m for m in moving if m is not None]),
+        "stale_violations": stops_on_stale(history, commands, float(sc.motion.get("stale_within", 0.5))) if motion_topic else [],
         "leaks": {k: leaks[k] for k in ("shm", "procs", "dirs")}, "leak_detail": leaks["detail"],
         "zombies": status_obs.max_zombies,
         "received": dict(topic_obs.received) if topic_obs else {},
@@ -256,12 +304,12 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
         "corrupt": sum(topic_obs.corrupt.values()) if topic_obs else 0,
         "log": str(system.log_path),
     }
-    if result_file.is_file():
-        try:
-            workload = json.loads(result_file.read_text())
-            result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s")})
-        except (OSError, ValueError) as exc:
-            result["workload_error"] = f"{result_file}: {exc}"
+    if workload:
+        result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s")})
+    if workload_error:
+        result["workload_error"] = workload_error
+    if "fallback_ladder" in sc.expect:
+        result["ladder"] = check_ladder(history, parse_spec(sc.expect["fallback_ladder"], str(sc.source)))
     result["problems"] = verdict(result, sc.expect)
     result["passed"] = not result["problems"]
     (out_dir / f"history-{seed}.json").write_text(history.to_json())

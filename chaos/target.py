@@ -125,6 +125,16 @@ class RunningSystem:
         with RpcClient(self.run_dir / "supervisor.sock", timeout=timeout) as rpc:
             return rpc.call("tree")
 
+    def control_socket(self, component: str) -> Path:
+        """A component's control socket. Built from the path alone: constructing a RunContext
+        creates the run's folders, which would resurrect the run directory of a run that just
+        ended (the leak check then finds it)."""
+        from emos.transport.context import encode_name
+
+        if self.run_dir is None or not self.alive:
+            raise ConnectionError("the system under test is not running")
+        return self.run_dir / "ctl" / f"{encode_name(component)}.sock"
+
     def workers(self) -> dict[str, dict[str, Any]]:
         return {w["name"]: w for w in iter_workers(self.tree()["tree"])}
 
@@ -164,6 +174,17 @@ class RunningSystem:
                     out.add(child.pid)
             except psutil.Error:
                 pass
+        return out
+
+    def parents_of(self, pids: set[int]) -> dict[int, str]:
+        """``pid -> "<parent pid> <parent name>"`` (to name who fails to reap a zombie)."""
+        out = {}
+        for pid in pids:
+            try:
+                parent = psutil.Process(pid).parent()
+                out[pid] = f"{parent.pid} {parent.name()}" if parent else "?"
+            except psutil.Error:
+                out[pid] = "gone"
         return out
 
     def segments(self) -> list[str]:

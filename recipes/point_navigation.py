@@ -14,6 +14,14 @@ arrives (``reached_end``) sends the next goal. At the end it writes ``summary.js
 recipe draws ``point_navigation.png`` (map, plans, driven path). Exit code 0 only when both
 goals were reached without a collision; 1 otherwise (a time limit of ``MISSION_TIMEOUT`` s).
 Outputs go to ``$EMOS_NAV_OUT`` (default ``./point_navigation_out``).
+
+The Mission may itself be killed and restarted (the chaos suite does): it keeps its progress
+(current goal, results, driven path, start time) in ``mission.json`` in the run directory and a
+restarted Mission resumes from there instead of sending the robot back to the first goal. It
+repeats the current goal every 2 s, so a restarted Planner (which starts without one) gets it.
+Under ``emos chaos run`` (``EMOS_CHAOS_RESULT`` set) it also writes
+``{"goals", "goals_reached", "collisions", "late_s"}`` to that file for the chaos runner;
+``late_s`` is the mission time beyond ``EMOS_NAV_NOMINAL_S`` (the fault-free time), null if unset.
 """
 import json
 import math
@@ -105,12 +113,43 @@ class Mission(BaseComponent):
         self.min_clearance = math.inf
         self.last_print = 0.0
         self.done = False
+        self.state_file = self.node.ctx.run_dir / "mission.json"
+        self.resumed = False
+        self._resume()
+
+    # -- progress survives a restart of this component (CLOCK_MONOTONIC is shared by processes) --
+    def _resume(self) -> None:
+        try:
+            state = json.loads(self.state_file.read_text())
+        except FileNotFoundError:
+            return
+        except (OSError, ValueError) as exc:
+            print(f"[mission] cannot read {self.state_file} ({exc}): starting from the first goal", flush=True)
+            return
+        self.t0, self.index, self.goal_sent_at = state["t0"], state["index"], state["goal_sent_at"]
+        self.results, self.driven, self.plans = state["results"], [tuple(p) for p in state["driven"]], state["plans"]
+        self.min_clearance = state["min_clearance"] if state["min_clearance"] is not None else math.inf
+        self.resumed = True
+        print(f"[mission] restarted: resuming at goal {self.index + 1}/{len(GOALS)}", flush=True)
+        if 0 <= self.index < len(GOALS):  # the planner may have lost the goal too (it may have been killed with us)
+            x, y = GOALS[self.index]
+            self.publish(self.goal, PointStamped(header=Header(frame_id="map"), point=Point(x=x, y=y)))
+
+    def _save(self) -> None:
+        state = {"t0": self.t0, "index": self.index, "goal_sent_at": getattr(self, "goal_sent_at", self.t0),
+                 "results": self.results, "driven": self.driven, "plans": self.plans,
+                 "min_clearance": None if math.isinf(self.min_clearance) else self.min_clearance}
+        tmp = self.state_file.with_suffix(".tmp")
+        tmp.write_text(json.dumps(state))
+        os.replace(tmp, self.state_file)
 
     def _send_next(self) -> None:
+        self.resumed = False
         self.index += 1
         x, y = GOALS[self.index]
         self.goal_sent_at = time.monotonic()
         self.publish(self.goal, PointStamped(header=Header(frame_id="map"), point=Point(x=x, y=y)))
+        self._save()
         print(f"[mission] goal {self.index + 1}/{len(GOALS)}: ({x:.2f}, {y:.2f})", flush=True)
 
     def _execution_step(self) -> None:
@@ -136,14 +175,24 @@ class Mission(BaseComponent):
             if math.dist((end.x, end.y), goal) < 0.2:  # the first plan to this goal
                 self.plans.append((self.index, [(q.pose.position.x, q.pose.position.y) for q in plan.poses]))
         left = math.dist(pose, goal)
+        if now - self.goal_sent_at >= 2.0 and now - getattr(self, "goal_repeated_at", 0.0) >= 2.0:
+            # A restarted Planner starts without a goal (a topic keeps no message for late
+            # subscribers): repeat the current one; the Planner ignores a goal it already has.
+            self.goal_repeated_at = now
+            self.publish(self.goal, PointStamped(header=Header(frame_id="map"), point=Point(x=goal[0], y=goal[1])))
         if now - self.last_print >= 1.0:
             self.last_print = now
+            self._save()
             speed = odom.twist.twist.linear.x
             health = " ".join(f"{t.name.split('/')[1]}={self._health(t)}" for t in self.statuses)
             print(f"[mission] t={now - self.t0:5.1f}s goal {self.index + 1}: {left:5.2f} m left, "
                   f"{speed:4.2f} m/s | {health}", flush=True)
         reached = self.get_input(self.reached)
-        if reached is not None and reached.data and left <= 0.3 and self.input_age(self.reached) < now - self.goal_sent_at + 1e-3:
+        said_reached = reached is not None and reached.data and left <= 0.3 and self.input_age(self.reached) < now - self.goal_sent_at + 1e-3
+        # The planner says "reached" once; a Mission restarted since the goal was sent may have
+        # missed it, so it judges arrival as the planner does (within its distance_tolerance).
+        if said_reached or (self.resumed and left <= planner.config.distance_tolerance):
+            self.resumed = False
             self.results.append({"goal": goal, "reached": True, "time_s": round(now - self.goal_sent_at, 1)})
             print(f"[mission] goal {self.index + 1} reached in {now - self.goal_sent_at:.1f} s", flush=True)
             if self.index + 1 < len(GOALS):
@@ -180,6 +229,11 @@ class Mission(BaseComponent):
         os.makedirs(OUT_DIR, exist_ok=True)
         with open(os.path.join(OUT_DIR, "summary.json"), "w") as f:
             json.dump(dict(summary, driven=self.driven, plans=self.plans), f)
+        if os.environ.get("EMOS_CHAOS_RESULT"):  # the chaos runner's workload result
+            nominal = os.environ.get("EMOS_NAV_NOMINAL_S")
+            with open(os.environ["EMOS_CHAOS_RESULT"], "w") as f:
+                json.dump({"goals": len(GOALS), "goals_reached": sum(summary["reached"]), "collisions": int(summary["collided"]),
+                           "late_s": None if not nominal else round(summary["time_s"] - float(nominal), 1)}, f)
         print("[mission] " + json.dumps(summary), flush=True)
         client = RpcClient(os.environ["EMOS_SUPERVISOR_SOCKET"])  # end the whole run
         try:

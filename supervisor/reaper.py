@@ -120,8 +120,9 @@ class OrphanReaper:
     before the run started (a recipe's own helpers) are never touched.
     """
 
-    def __init__(self, protected: Callable[[], Iterable[int]] = tuple):
+    def __init__(self, protected: Callable[[], Iterable[int]] = tuple, on_sweep: Callable[[], None] | None = None):
         self.protected = protected
+        self.on_sweep = on_sweep  # the launcher's check of its protected zygotes, every tick
         self.preexisting = set(_children(os.getpid()))
         self.live: set[int] = set()  # pids (= group ids) of running process workers
         self.groups: set[int] = set()  # every worker group of this run, for attributing zombies
@@ -139,6 +140,8 @@ class OrphanReaper:
 
     def _tick(self) -> None:
         try:
+            if self.on_sweep is not None:
+                self.on_sweep()
             self.sweep()
         except Exception:  # never let a /proc surprise stop the sweeps
             log.exception("orphan sweep failed")

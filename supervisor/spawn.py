@@ -207,6 +207,25 @@ class Zygote:
         if self.primary is not None:
             self.spare = self._clone(self.primary)
 
+    def replace_dead(self) -> None:
+        """Notice a zygote that died between spawns (the launcher's sweep calls this): reap it
+        now, so it is no zombie until the next restart, and have a spare ready again."""
+        for handle in (self.primary, self.spare):
+            if handle is None:
+                continue
+            try:
+                done, _ = os.waitpid(handle.pid, os.WNOHANG)
+            except ChildProcessError:
+                done = handle.pid  # reaped by someone already: gone all the same
+            if not done:
+                continue
+            if handle is self.primary:
+                self._replace_primary("died")  # discard() finds it already reaped
+            else:
+                log.error("spare zygote %d died; cloning a new one", handle.pid)
+                handle.sock.close()
+                self.spare = self._clone(self.primary) if self.primary is not None else None
+
     def spawn(self, index: int) -> int:
         """Fork worker ``index``; returns its pid (soon a child of this process).
 

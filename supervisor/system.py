@@ -94,7 +94,7 @@ class System:
         self.control_path = self.ctx.run_dir / "supervisor.sock"
         os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
         become_subreaper()
-        self.reaper = OrphanReaper(protected=self._zygote_pids)
+        self.reaper = OrphanReaper(protected=self._zygote_pids, on_sweep=lambda: self.zygote.replace_dead() if self.zygote else None)
         try:
             process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
             if process_indices:

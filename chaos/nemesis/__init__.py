@@ -2,14 +2,18 @@
 from __future__ import annotations
 
 from emos.chaos.nemesis.base import Compose, Nemesis, NemesisError
-from emos.chaos.nemesis.process import HangComponent, KillComponent, KillGroup, KillZygote, StarveComponent
+from emos.chaos.nemesis.method import MethodFault
+from emos.chaos.nemesis.process import (
+    HangComponent, KillComponent, KillGroup, KillMonitor, KillZygote, StarveComponent, TermDeafComponent,
+)
 from emos.chaos.nemesis.proxy import FaultProxy, ProxyFault
 from emos.chaos.nemesis.sensor import SensorFault
 from emos.chaos.nemesis.shm import DeleteSegment, ScribbleSegment
 
 CATALOGUE: dict[str, type[Nemesis]] = {
     cls.kind: cls
-    for cls in (KillComponent, HangComponent, StarveComponent, KillZygote, KillGroup, ProxyFault, ScribbleSegment, DeleteSegment, SensorFault)
+    for cls in (KillComponent, HangComponent, StarveComponent, KillZygote, KillGroup, ProxyFault, ScribbleSegment, DeleteSegment, SensorFault,
+                TermDeafComponent, KillMonitor, MethodFault)
 }
 
 

@@ -218,3 +218,48 @@ class KillGroup(Nemesis):
         self.active = None
         time.sleep(0)  # records share one instant; the checker judges each component
         return records[0] if records else None
+
+
+class TermDeafComponent(_Targeted):
+    """A process that does not answer SIGTERM: the target is frozen (SIGSTOP, so the SIGTERM of a
+    polite stop stays pending) and the supervisor is asked to restart it through its control
+    socket. The stop must escalate to SIGKILL after the stop timeout (or the hang be caught by the
+    heartbeat first), and a new process must come up; a supervisor that waits forever on the
+    SIGTERM fails the check."""
+
+    kind = "term_deaf"
+    summary = "freeze a component, then ask the supervisor to restart it (its SIGTERM goes unanswered)"
+    expects = "restart"
+
+    def start(self) -> Record | None:
+        from emos.core.rpc import RpcClient
+
+        assert self.system is not None and self.system.run_dir is not None
+        hit = self.signal_target(signal.SIGSTOP)
+        if hit is None:
+            return None
+        name, pid = hit
+        self._pid = pid
+        record = self._fault(target=name, pid=pid)
+        with RpcClient(self.system.run_dir / "supervisor.sock", timeout=2.0) as rpc:
+            rpc.call("lifecycle", component=name, request="restart", wait=False)
+        return record
+
+    def stop(self) -> None:
+        if self.active is not None:
+            try:
+                os.kill(self._pid, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+        super().stop()
+
+
+class KillMonitor(KillComponent):
+    """SIGKILL the Monitor (``emos_monitor``, the component that evaluates events); it must be
+    restarted and its events armed again (``handle_once`` events stay spent)."""
+
+    kind = "kill_monitor"
+    summary = "SIGKILL the events Monitor (emos_monitor)"
+
+    def __init__(self, signal: str = "SIGKILL", **params: Any) -> None:
+        super().__init__(target="emos_monitor", signal=signal, **params)

@@ -31,11 +31,7 @@ class SensorFault(Nemesis):
 
     def _call(self, op: str, **req: Any) -> Any:
         assert self.system is not None and self.system.run_dir is not None
-        from emos.core.node import control_socket
-        from emos.transport.context import RunContext
-
-        ctx = RunContext(self.system.run_id or "", self.system.run_dir, owner=False)
-        with RpcClient(control_socket(ctx, self.component), timeout=2.0) as rpc:
+        with RpcClient(self.system.control_socket(self.component), timeout=2.0) as rpc:
             return rpc.call(op, **req)
 
     def start(self) -> Record | None:

@@ -46,8 +46,40 @@ def test_escalation_short_gives_up_with_exit_code_3_and_nothing_left(tmp_path):
     assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0}
 
 
+def test_kill_soak_short_recovers_every_kill_and_leaks_nothing(tmp_path):
+    proc, summary = _chaos(tmp_path, "kill-soak")
+    assert summary is not None, proc.stderr[-3000:]
+    run = _runs(tmp_path)[0]
+    assert proc.returncode == 0, run["problems"]
+    assert summary["faults"] >= 10 and summary["recovered"] == summary["faults"]
+    assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0} and summary["corrupt"] == 0
+
+
+def test_fallback_ladder_short_walks_the_declared_ladder_for_every_break(tmp_path):
+    proc, summary = _chaos(tmp_path, "fallback-ladder")
+    assert summary is not None, proc.stderr[-3000:]
+    run = _runs(tmp_path)[0]
+    assert proc.returncode == 0, run["problems"]
+    ladder = run["ladder"]
+    assert ladder["violations"] == [] and ladder["complete"] >= 2 and ladder["attempts"] >= 10
+    kinds = {o["nemesis"] for o in run["outcomes"]}
+    assert {"method", "kill_monitor", "term_deaf"} <= kinds and all(o["recovered"] for o in run["outcomes"])
+    assert run["received"]["/alarms"] >= 2  # the Monitor's event fired, also after the Monitor was killed
+
+
+def test_point_navigation_short_reaches_both_goals_under_faults(tmp_path):
+    proc, summary = _chaos(tmp_path, "point-navigation", timeout=300)
+    assert summary is not None, proc.stderr[-3000:]
+    run = _runs(tmp_path)[0]
+    assert proc.returncode == 0, run["problems"]
+    assert run["goals"] == 2 and run["goals_reached"] == 2 and run["collisions"] == 0
+    assert run["faults"] >= 5 and run["recovered"] + run["cut"] == run["faults"]
+    assert run["stale_violations"] == [] and run["received"]["/cmd_vel"] > 100
+    assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0}
+
+
 def test_every_shipped_scenario_loads():
-    assert {"sensor-kills", "escalation"} <= set(shipped_scenarios())
+    assert {"sensor-kills", "escalation", "kill-soak", "point-navigation", "fallback-ladder"} <= set(shipped_scenarios())
     for name in shipped_scenarios():
         assert Scenario.load(name).nemeses
         assert Scenario.load(name, short=True).duration <= Scenario.load(name).duration

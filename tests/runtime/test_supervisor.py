@@ -283,6 +283,28 @@ launcher.bringup()
     assert system.leftovers() == []
 
 
+def test_a_zygote_that_dies_between_restarts_is_reaped_and_replaced_at_once(tmp_path):
+    system = SystemUnderTest(tmp_path, recipe("""
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[steady("w")])
+launcher.bringup()
+""")).wait_up(components=["w"])
+    try:
+        zygotes = wait_until(lambda: len(_zygotes(system)) == 2 and _zygotes(system), what="primary and spare zygotes")
+        for z in zygotes:  # the primary, then the spare that replaced it
+            os.kill(z.pid, signal.SIGKILL)
+            # No component restarts meanwhile: the launcher must notice by itself, not at the next spawn.
+            wait_until(lambda: not psutil.pid_exists(z.pid) and len(_zygotes(system)) == 2, timeout=10,
+                       what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
+        assert not {z.pid for z in zygotes} & {z.pid for z in _zygotes(system)}
+        pid = system.pid("w")
+        os.kill(pid, signal.SIGKILL)
+        system.wait_new_pid("w", pid, timeout=15)  # and restarts still work
+    finally:
+        assert system.stop() == 0
+    assert system.leftovers() == []
+
+
 def test_a_frozen_launcher_resumes_without_false_hang_verdicts(tmp_path):
     system = SystemUnderTest(tmp_path, recipe("""
 launcher = Launcher(multi_processing=True, heartbeat_timeout=0.5)
