@@ -117,7 +117,12 @@ class RunContext:
         self._owner_pid = os.getpid() if owner else -1
         self.shm_prefix = f"{SHM_PREFIX}{run_id}."
         for sub in ("wake", "subs", "ctl", "srv"):
-            (run_dir / sub).mkdir(mode=0o700, parents=True, exist_ok=True)
+            if owner:
+                (run_dir / sub).mkdir(mode=0o700, parents=True, exist_ok=True)
+            elif run_dir.is_dir():
+                # A process joining a run never creates its directory: an observer of a run that
+                # has just ended must not bring the removed directory back.
+                (run_dir / sub).mkdir(mode=0o700, exist_ok=True)
 
     @property
     def owner(self) -> bool:
