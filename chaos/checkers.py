@@ -176,4 +176,8 @@ def verdict(result: dict[str, Any], expect: dict[str, Any]) -> list[str]:
                         f"first: {v['topic']} stalled at {v['fault_t']:.1f}s, command {v['speed']} at +{v['late_s']} s")
     if result.get("collisions"):
         problems.append(f"{result['collisions']} collision(s)")
+    if result.get("unanswered"):
+        problems.append(f"{len(result['unanswered'])} request(s) never answered, first: {result['unanswered'][0]}")
+    if expect.get("min_requests") and (result.get("requests") or 0) < expect["min_requests"]:
+        problems.append(f"only {result.get('requests') or 0} request(s) made, expected >= {expect['min_requests']}")
     return problems

@@ -31,6 +31,8 @@ def aggregate(results: list[dict[str, Any]]) -> dict[str, Any]:
         "leaks": {k: sum(r["leaks"][k] for r in results) for k in ("shm", "procs", "dirs")},
         "zombies": max((r["zombies"] for r in results), default=0),
         "corrupt": sum(r["corrupt"] for r in results),
+        **({"answer_ms_at_fault": percentiles([v for r in results for v in r["answer_ms_at_fault"]["values"]])}
+           if any("answer_ms_at_fault" in r for r in results) else {}),
     }
 
 

@@ -56,6 +56,7 @@ from emos.chaos.ladder import check_ladder, parse_spec
 from emos.chaos.nemesis import FaultProxy, Nemesis, NemesisError, ProxyFault, make
 from emos.chaos.nemesis.base import Compose
 from emos.chaos.observe import StatusObserver, TopicObserver
+from emos.chaos.services import Service
 from emos.chaos.target import RunningSystem
 
 SHIPPED = Path(__file__).with_name("scenarios")
@@ -90,6 +91,7 @@ class Scenario:
     topics: dict[str, str] = field(factory=dict)
     env: dict[str, str] = field(factory=dict)
     proxies: list[dict[str, Any]] = field(factory=list)
+    services: list[dict[str, Any]] = field(factory=list)
     every: float = 2.0
     jitter: float = 0.0
     order: str = "random"
@@ -118,7 +120,7 @@ class Scenario:
             schedule_over = overrides.pop("schedule", {}) or {}
             data.update(overrides)
             data["schedule"] = {**(data.get("schedule") or {}), **schedule_over}
-        known = {"name", "description", "recipe", "duration", "warmup", "cooldown", "heartbeat_timeout", "topics", "env", "proxies", "schedule", "expect", "motion"}
+        known = {"name", "description", "recipe", "duration", "warmup", "cooldown", "heartbeat_timeout", "topics", "env", "proxies", "services", "schedule", "expect", "motion"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ScenarioError(f"{path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
@@ -154,7 +156,7 @@ class Scenario:
             duration=_number(data, "duration", 30.0, str(path), 1.0), warmup=_number(data, "warmup", 3.0, str(path)),
             cooldown=_number(data, "cooldown", 5.0, str(path)), heartbeat_timeout=_number(data, "heartbeat_timeout", 2.0, str(path)),
             topics={str(k): str(v) for k, v in (data.get("topics") or {}).items()},
-            env={str(k): str(v) for k, v in (data.get("env") or {}).items()}, proxies=list(data.get("proxies") or []),
+            env={str(k): str(v) for k, v in (data.get("env") or {}).items()}, proxies=list(data.get("proxies") or []), services=list(data.get("services") or []),
             every=_number(schedule, "every", 2.0, f"{path}: schedule", 0.05), jitter=_number(schedule, "jitter", 0.0, f"{path}: schedule"),
             order=order, nemeses=nemeses, expect=dict(data.get("expect") or {}), motion=dict(motion),
         )
@@ -174,6 +176,7 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     rng = random.Random(seed)
     history = History()
     proxies: dict[str, FaultProxy] = {}
+    services: list[Service] = []
     # {out} and {seed} in env values: per-run output places for the workload (e.g. its log folder)
     env = {k: v.replace("{out}", str(out_dir)).replace("{seed}", str(seed)) for k, v in sc.env.items()}
     result_file = out_dir / f"workload-{seed}.json"
@@ -186,8 +189,22 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
     system: RunningSystem | None = None
     observers: list[Any] = []
     try:
+        for spec in sc.services:
+            service = Service(spec, out_dir)
+            progress(f"[{sc.name} seed {seed}] starting service {service.name} on {service.address}")
+            services.append(service)
+            service.start()
+            env[f"EMOS_CHAOS_SERVICE_{service.name.upper()}"] = service.address
+        by_name = {s.name: s.address for s in services}
         for p in sc.proxies:
-            proxy = FaultProxy(str(p.get("name")), str(p.get("upstream")), str(p.get("listen", "127.0.0.1:0")))
+            upstream = str(p.get("upstream"))
+            if upstream.startswith("service:"):
+                if upstream[8:] not in by_name:
+                    raise ScenarioError(f"{sc.source}: proxy {p.get('name')!r} fronts unknown service {upstream[8:]!r}; services: {', '.join(by_name) or 'none'}")
+                upstream = by_name[upstream[8:]]
+            proxy = FaultProxy(str(p.get("name")), upstream, str(p.get("listen", "127.0.0.1:0")))
+            for toxic, params in (p.get("toxics") or {}).items():  # standing toxics, e.g. a slow link
+                proxy.set_toxic(str(toxic), **(params or {}))
             host, port = proxy.start()
             proxies[proxy.name] = proxy
             env[f"EMOS_CHAOS_PROXY_{proxy.name.upper()}"] = f"{host}:{port}"
@@ -262,6 +279,8 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
             o.join(timeout=5)
         for proxy in proxies.values():
             proxy.stop()
+        for service in services:
+            service.stop()
     assert system is not None
     history.add("exit", "system", code=exit_code)
     time.sleep(0.2)  # let the kernel finish tearing down the last processes before counting leaks
@@ -305,11 +324,18 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
         "log": str(system.log_path),
     }
     if workload:
-        result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s")})
+        result.update({k: workload.get(k) for k in ("goals", "goals_reached", "collisions", "late_s", "requests", "answered", "unanswered", "answer_ms")})
     if workload_error:
         result["workload_error"] = workload_error
     if "fallback_ladder" in sc.expect:
         result["ladder"] = check_ladder(history, parse_spec(sc.expect["fallback_ladder"], str(sc.source)))
+    if result.get("answer_ms"):
+        # Time to answer the requests in flight when a fault struck (asked from 1.5 s before it
+        # to 1 s after): what a user waiting on the robot sees when its model server drops.
+        at_fault = [ms for f in history.of("fault") for asked, ms in result["answer_ms"]
+                    if history.wall_t0 + f.t - 1.5 <= asked <= history.wall_t0 + f.t + 1.0]
+        result["answer_ms_at_fault"] = percentiles(at_fault) | {"n": len(at_fault), "values": at_fault}
+        result["answer_ms"] = percentiles([ms for _, ms in result["answer_ms"]]) | {"n": len(result["answer_ms"])}
     result["problems"] = verdict(result, sc.expect)
     result["passed"] = not result["problems"]
     (out_dir / f"history-{seed}.json").write_text(history.to_json())
