@@ -1,0 +1,134 @@
+"""Topics between two runs over Zenoh only: images and scans cross with no shared segment, the
+stream resumes when the publishing run is killed and restarted, and foreign payloads on the
+topic's key are dropped with a log line while the subscriber keeps delivering."""
+import json
+import os
+import socket
+import time
+import uuid
+
+import pytest
+
+from emos.transport.context import SHM_DIR
+from tests.runtime.helpers import SystemUnderTest, wait_until
+
+zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
+
+CAMERA = """
+class Camera(BaseComponent):
+    def custom_on_activate(self):
+        self.n = 0
+    def _execution_step(self):
+        self.n += 1
+        img = M.Image(height=480, width=640, encoding="rgb8", step=1920, data=np.full(921600, self.n % 251, dtype=np.uint8))
+        img.header.frame_id = f"run{os.environ['SIDE']}-{self.n}"
+        self.publish(self.out_topics[0], img)
+        self.publish(self.out_topics[1], M.LaserScan(ranges=np.full(360, float(self.n), dtype=np.float32)))
+        self.health_status.set_healthy()
+
+cam = Camera(component_name="camera", outputs=[Topic(name="cam", msg_type="Image"), Topic(name="scan", msg_type="LaserScan")])
+cam.config.loop_rate = 20
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[cam])
+launcher.bringup()
+"""
+
+VIEWER = """
+class Viewer(BaseComponent):
+    def custom_on_activate(self):
+        self.seen = []
+    def _execution_step(self):
+        img, scan = self.node.latest("cam"), self.node.latest("scan")
+        if img is not None and scan is not None:
+            ok = img.width == 640 and img.data.nbytes == 921600 and bool((img.data == img.data[0]).all()) and scan.ranges.shape == (360,)
+            if ok and (not self.seen or self.seen[-1] != img.header.frame_id):
+                self.seen.append(img.header.frame_id)
+                with open("seen.json.tmp", "w") as f:
+                    json.dump(self.seen[-50:], f)
+                os.replace("seen.json.tmp", "seen.json")
+        self.health_status.set_healthy()
+
+import json
+viewer = Viewer(component_name="viewer", inputs=[Topic(name="cam", msg_type="Image"), Topic(name="scan", msg_type="LaserScan")])
+viewer.config.loop_rate = 20
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[viewer])
+launcher.bringup()
+"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _config(path, listen: int, connect: int) -> str:
+    # Loopback only, no multicast scouting: the two runs find each other by their endpoints and
+    # nothing else on this shared machine joins in.
+    path.write_text(json.dumps({
+        "mode": "peer",
+        "listen": {"endpoints": [f"tcp/127.0.0.1:{listen}"]},
+        "connect": {"endpoints": [f"tcp/127.0.0.1:{connect}"]},
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+    }))
+    return str(path)
+
+
+def _seen(folder) -> list[str]:
+    try:
+        return json.loads((folder / "seen.json").read_text())
+    except (FileNotFoundError, ValueError):
+        return []
+
+
+def _segments_of(system) -> list[str]:
+    return [n for n in os.listdir(SHM_DIR) if system.ctx is not None and n.startswith(system.ctx.shm_prefix)]
+
+
+def test_two_runs_exchange_images_and_scans_over_zenoh_and_resume_after_a_kill(tmp_path):
+    group = f"t{uuid.uuid4().hex[:10]}"
+    port_a, port_b = _free_port(), _free_port()
+    dirs = {name: tmp_path / name for name in ("a", "a2", "b")}
+    for d in dirs.values():
+        d.mkdir()
+    env_common = {"EMOS_NET_GROUP": group, "EMOS_NET_TOPICS": "/cam,/scan"}
+    env_a = {**env_common, "SIDE": "A", "EMOS_ZENOH_CONFIG": _config(tmp_path / "a.json5", port_a, port_b)}
+    env_b = {**env_common, "EMOS_ZENOH_CONFIG": _config(tmp_path / "b.json5", port_b, port_a)}
+
+    viewer = SystemUnderTest(dirs["b"], VIEWER, env=env_b).wait_up(components=["viewer"], timeout=60)
+    camera = SystemUnderTest(dirs["a"], CAMERA, env=env_a).wait_up(components=["camera"], timeout=60)
+    assert camera.ctx.run_id != viewer.ctx.run_id
+    try:
+        wait_until(lambda: len(_seen(dirs["b"])) >= 5, timeout=60, what="images from run A over Zenoh")
+        # Only Zenoh carried them: neither run has a ring for /cam or /scan.
+        for system in (camera, viewer):
+            assert not [n for n in _segments_of(system) if ".cam." in n or ".scan." in n], _segments_of(system)
+
+        # A foreign payload on the topic's key, and a frame of the wrong type: dropped and logged.
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port_b}"]))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        with zenoh.open(conf) as intruder:
+            time.sleep(0.5)
+            for payload in (b"not an emos frame", b"EMZ1" + b"\x00" * 8 + b"\x10\x00\x00\x00" + b"f" * 16, os.urandom(4096)):
+                intruder.put(f"emos/{group}/cam", payload)
+        wait_until(lambda: "dropping a payload on key emos/" + group + "/cam" in viewer.output(), timeout=20, what="the foreign payload's log line")
+        count = len(_seen(dirs["b"]))
+        wait_until(lambda: len(_seen(dirs["b"])) > count + 3, timeout=30, what="delivery to go on after the foreign payloads")
+        assert viewer.state("viewer") == "active"
+
+        # Kill the publishing run outright and start it again: the stream resumes.
+        camera.kill_all()
+        time.sleep(1.0)
+        before = _seen(dirs["b"])[-1]
+        env_a2 = {**env_a, "SIDE": "A2"}
+        camera = SystemUnderTest(dirs["a2"], CAMERA, env=env_a2).wait_up(components=["camera"], timeout=60)
+        wait_until(lambda: any(s.startswith("runA2-") for s in _seen(dirs["b"])), timeout=60, what="images from the restarted run")
+        assert before.startswith("runA-")
+        assert viewer.state("viewer") == "active"
+    finally:
+        camera.stop()
+        assert viewer.stop() == 0
+    assert viewer.leftovers() == []
