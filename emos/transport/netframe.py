@@ -42,9 +42,14 @@ def frame_prefix(fingerprint: str, publisher_id: str) -> tuple[bytes, int]:
     return fp + pub + b"\0" * _pad(head), head + _pad(head)
 
 
-def write_frame(enc: codec.Encoded, stamp_ns: int, fingerprint: str, publisher_id: str, prefix: bytes, start: int) -> bytearray:
-    """One frame holding ``enc`` (one copy of the message, straight into the frame)."""
-    frame = bytearray(start + enc.nbytes)
+def write_frame(enc: codec.Encoded, stamp_ns: int, fingerprint: str, publisher_id: str, prefix: bytes, start: int, reuse: bytearray | None = None) -> bytearray:
+    """One frame holding ``enc`` (one copy of the message, straight into the frame).
+
+    ``reuse``: the previous frame, overwritten if it has the right size. Zenoh copies a frame
+    when it is put, so the buffer is free again at once; reusing it spares the page faults of
+    fresh memory on every message (6-7 ms per 8 MiB frame on this VM, 7x the copy itself)."""
+    size = start + enc.nbytes
+    frame = reuse if reuse is not None and len(reuse) == size else bytearray(size)
     _HEADER.pack_into(frame, 0, MAGIC, stamp_ns, len(fingerprint), len(publisher_id.encode()))
     frame[_HEADER.size : start] = prefix
     view = memoryview(frame)

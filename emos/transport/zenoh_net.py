@@ -124,6 +124,7 @@ class ZenohPublisher:
         self.publisher_id = publisher_id or f"pid{os.getpid()}-{id(self):x}"
         self.key = topic_key(topic, group)
         self._prefix, self._start = frame_prefix(self.fingerprint, self.publisher_id)
+        self._frame: bytearray | None = None
         sess = session(config_path)
         # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
         self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
@@ -138,7 +139,8 @@ class ZenohPublisher:
             raise TopicTypeError(f"topic {self.topic!r} carries {self.type_name}, got {type(msg).__name__}")
         if self._pub is None:
             raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
-        frame = write_frame(codec.encode(msg), time.time_ns(), self.fingerprint, self.publisher_id, self._prefix, self._start)
+        # Publishing is single-threaded per publisher (the node holds its lock), so one buffer.
+        frame = self._frame = write_frame(codec.encode(msg), time.time_ns(), self.fingerprint, self.publisher_id, self._prefix, self._start, self._frame)
         self._pub.put(frame)
         self.sent += 1
         return self.sent - 1
@@ -169,7 +171,9 @@ class ZenohSubscriber:
         self.dropped = 0  # taken off the full queue to make room
         self.rejected = 0  # frames that were not a decodable message of our type
         self.undecodable = 0
-        self._queue: collections.deque[tuple[int, memoryview, str]] = collections.deque()
+        # (stamp, payload, publisher, decoded message): take() hands out the message decoded
+        # here, take_raw() the payload (the node decodes lazily, as from a ring).
+        self._queue: collections.deque[tuple[int, memoryview, str, Any]] = collections.deque()
         self._lock = threading.Lock()
         self._notify = notify
         self._closed = False
@@ -184,7 +188,7 @@ class ZenohSubscriber:
         try:
             data = sample.payload.to_bytes()
             stamp, pub, payload = read_frame(data, self.fingerprint)
-            codec.decode(self.msg_cls, payload)  # reject now what the node could not decode later
+            msg = codec.decode(self.msg_cls, payload)  # reject now what the node could not decode later
         except (BadFrame, codec.DecodeError) as exc:
             self._reject(str(sample.key_expr), exc)
             return
@@ -198,7 +202,7 @@ class ZenohSubscriber:
             if len(queue) >= self.queue_size:
                 queue.popleft()
                 self.dropped += 1
-            queue.append((stamp, payload, pub))
+            queue.append((stamp, payload, pub, msg))
             self._publishers.add(pub)
             if self._notify is not None:
                 try:
@@ -214,11 +218,14 @@ class ZenohSubscriber:
         )
 
     # -- reading (the node's thread) --------------------------------------------------------------
-    def take_raw(self) -> list[tuple[int, Any, str]]:
+    def _take_all(self) -> list[tuple[int, Any, str, Any]]:
         with self._lock:
             out = list(self._queue)
             self._queue.clear()
         return out
+
+    def take_raw(self) -> list[tuple[int, Any, str]]:
+        return [item[:3] for item in self._take_all()]
 
     def latest_raw(self) -> tuple[int, Any, str] | None:
         with self._lock:
@@ -226,17 +233,19 @@ class ZenohSubscriber:
                 return None
             item = self._queue[-1]
             self._queue.clear()
-        return item
+        return item[:3]
 
     def has_news(self) -> bool:
         return bool(self._queue)
 
     def take(self) -> list[Any]:
-        return [codec.decode(self.msg_cls, raw) for _, raw, _ in self.take_raw()]
+        return [item[3] for item in self._take_all()]
 
     def latest(self) -> Any | None:
-        item = self.latest_raw()
-        return None if item is None else codec.decode(self.msg_cls, item[1])
+        with self._lock:
+            item = self._queue[-1] if self._queue else None
+            self._queue.clear()
+        return None if item is None else item[3]
 
     def publishers(self) -> list[str]:
         return sorted(self._publishers)
