@@ -1,9 +1,13 @@
 """Topics between two runs over Zenoh only: images and scans cross with no shared segment, the
 stream resumes when the publishing run is killed and restarted, and foreign payloads on the
 topic's key are dropped with a log line while the subscriber keeps delivering."""
+import contextlib
 import json
 import os
+import shutil
 import socket
+import subprocess
+import sys
 import time
 import uuid
 
@@ -63,13 +67,13 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _config(path, listen: int, connect: int) -> str:
-    # Loopback only, no multicast scouting: the two runs find each other by their endpoints and
-    # nothing else on this shared machine joins in.
+def _config(path, listen: str, connect: str) -> str:
+    # Explicit endpoints, no multicast scouting: the two runs find each other by their endpoints
+    # and nothing else on this shared machine joins in.
     path.write_text(json.dumps({
         "mode": "peer",
-        "listen": {"endpoints": [f"tcp/127.0.0.1:{listen}"]},
-        "connect": {"endpoints": [f"tcp/127.0.0.1:{connect}"]},
+        "listen": {"endpoints": [f"tcp/{listen}"]},
+        "connect": {"endpoints": [f"tcp/{connect}"]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
     }))
     return str(path)
@@ -86,18 +90,81 @@ def _segments_of(system) -> list[str]:
     return [n for n in os.listdir(SHM_DIR) if system.ctx is not None and n.startswith(system.ctx.shm_prefix)]
 
 
-def test_two_runs_exchange_images_and_scans_over_zenoh_and_resume_after_a_kill(tmp_path):
+def _run(cmd: list[str]) -> None:
+    subprocess.run(cmd, check=True, capture_output=True, timeout=10)
+
+
+@contextlib.contextmanager
+def _namespaces():
+    """Two network namespaces joined by a private veth pair (10.254.16.1 and .2/30, which exist
+    only inside them): ``(prefix A, prefix B, address A, address B)``. Skips without root."""
+    if os.geteuid() != 0 or shutil.which("ip") is None:
+        pytest.skip("separate network namespaces need root and iproute2")
+    tag = uuid.uuid4().hex[:6]
+    ns_a, ns_b, veth_a, veth_b = f"emos-{tag}-a", f"emos-{tag}-b", f"ez{tag}a", f"ez{tag}b"
+    made = []
+    try:
+        for ns in (ns_a, ns_b):
+            _run(["ip", "netns", "add", ns])
+            made.append(ns)
+        _run(["ip", "link", "add", veth_a, "netns", ns_a, "type", "veth", "peer", "name", veth_b, "netns", ns_b])
+        for ns, dev, addr in ((ns_a, veth_a, "10.254.16.1/30"), (ns_b, veth_b, "10.254.16.2/30")):
+            _run(["ip", "-n", ns, "addr", "add", addr, "dev", dev])
+            _run(["ip", "-n", ns, "link", "set", dev, "up"])
+            _run(["ip", "-n", ns, "link", "set", "lo", "up"])
+    except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as exc:
+        for ns in made:
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+        pytest.skip(f"cannot set up network namespaces here: {exc}")
+    try:
+        yield ["ip", "netns", "exec", ns_a], ["ip", "netns", "exec", ns_b], "10.254.16.1", "10.254.16.2"
+    finally:
+        for ns in made:  # deleting a namespace removes its end of the veth pair, and so the pair
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+@contextlib.contextmanager
+def _loopback():
+    yield [], [], "127.0.0.1", "127.0.0.1"
+
+
+def _intrude(prefix: list[str], endpoint: str, key: str) -> None:
+    """Put a foreign payload, a frame header with garbage after it and random bytes on ``key``,
+    from a Zenoh client in the subscriber's network (namespace)."""
+    script = (
+        "import json, os, sys, time, zenoh\n"
+        "conf = zenoh.Config()\n"
+        "conf.insert_json5('mode', '\"client\"')\n"
+        "conf.insert_json5('connect/endpoints', json.dumps([sys.argv[1]]))\n"
+        "conf.insert_json5('scouting/multicast/enabled', 'false')\n"
+        "with zenoh.open(conf) as s:\n"
+        "    time.sleep(0.5)\n"
+        "    for p in (b'not an emos frame', b'EMZ1' + bytes(8) + b'\\x10\\x00\\x00\\x00' + b'f' * 16, os.urandom(4096)):\n"
+        "        s.put(sys.argv[2], p)\n"
+        "    time.sleep(0.3)\n"
+    )
+    subprocess.run([*prefix, sys.executable, "-c", script, f"tcp/{endpoint}", key], check=True, timeout=30)
+
+
+@pytest.mark.parametrize("network", ["loopback", "namespaces"])
+def test_two_runs_exchange_images_and_scans_over_zenoh_and_resume_after_a_kill(tmp_path, network):
+    with (_namespaces() if network == "namespaces" else _loopback()) as (prefix_a, prefix_b, addr_a, addr_b):
+        _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b)
+
+
+def _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b):
     group = f"t{uuid.uuid4().hex[:10]}"
     port_a, port_b = _free_port(), _free_port()
+    end_a, end_b = f"{addr_a}:{port_a}", f"{addr_b}:{port_b}"
     dirs = {name: tmp_path / name for name in ("a", "a2", "b")}
     for d in dirs.values():
         d.mkdir()
     env_common = {"EMOS_NET_GROUP": group, "EMOS_NET_TOPICS": "/cam,/scan"}
-    env_a = {**env_common, "SIDE": "A", "EMOS_ZENOH_CONFIG": _config(tmp_path / "a.json5", port_a, port_b)}
-    env_b = {**env_common, "EMOS_ZENOH_CONFIG": _config(tmp_path / "b.json5", port_b, port_a)}
+    env_a = {**env_common, "SIDE": "A", "EMOS_ZENOH_CONFIG": _config(tmp_path / "a.json5", end_a, end_b)}
+    env_b = {**env_common, "EMOS_ZENOH_CONFIG": _config(tmp_path / "b.json5", end_b, end_a)}
 
-    viewer = SystemUnderTest(dirs["b"], VIEWER, env=env_b).wait_up(components=["viewer"], timeout=60)
-    camera = SystemUnderTest(dirs["a"], CAMERA, env=env_a).wait_up(components=["camera"], timeout=60)
+    viewer = SystemUnderTest(dirs["b"], VIEWER, env=env_b, prefix=prefix_b).wait_up(components=["viewer"], timeout=60)
+    camera = SystemUnderTest(dirs["a"], CAMERA, env=env_a, prefix=prefix_a).wait_up(components=["camera"], timeout=60)
     assert camera.ctx.run_id != viewer.ctx.run_id
     try:
         wait_until(lambda: len(_seen(dirs["b"])) >= 5, timeout=60, what="images from run A over Zenoh")
@@ -106,14 +173,7 @@ def test_two_runs_exchange_images_and_scans_over_zenoh_and_resume_after_a_kill(t
             assert not [n for n in _segments_of(system) if ".cam." in n or ".scan." in n], _segments_of(system)
 
         # A foreign payload on the topic's key, and a frame of the wrong type: dropped and logged.
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"client"')
-        conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port_b}"]))
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        with zenoh.open(conf) as intruder:
-            time.sleep(0.5)
-            for payload in (b"not an emos frame", b"EMZ1" + b"\x00" * 8 + b"\x10\x00\x00\x00" + b"f" * 16, os.urandom(4096)):
-                intruder.put(f"emos/{group}/cam", payload)
+        _intrude(prefix_b, end_b, f"emos/{group}/cam")
         wait_until(lambda: "dropping a payload on key emos/" + group + "/cam" in viewer.output(), timeout=20, what="the foreign payload's log line")
         count = len(_seen(dirs["b"]))
         wait_until(lambda: len(_seen(dirs["b"])) > count + 3, timeout=30, what="delivery to go on after the foreign payloads")
@@ -124,7 +184,7 @@ def test_two_runs_exchange_images_and_scans_over_zenoh_and_resume_after_a_kill(t
         time.sleep(1.0)
         before = _seen(dirs["b"])[-1]
         env_a2 = {**env_a, "SIDE": "A2"}
-        camera = SystemUnderTest(dirs["a2"], CAMERA, env=env_a2).wait_up(components=["camera"], timeout=60)
+        camera = SystemUnderTest(dirs["a2"], CAMERA, env=env_a2, prefix=prefix_a).wait_up(components=["camera"], timeout=60)
         wait_until(lambda: any(s.startswith("runA2-") for s in _seen(dirs["b"])), timeout=60, what="images from the restarted run")
         assert before.startswith("runA-")
         assert viewer.state("viewer") == "active"
