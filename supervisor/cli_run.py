@@ -26,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-log", action="store_true", help="do not keep a copy of the output in ~/emos/logs")
     parser.add_argument("--zenoh", metavar="CONFIG", default=None, help="Zenoh configuration file (mode, endpoints) for topics across hosts")
     parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
+    parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
@@ -71,6 +72,10 @@ def _network_options(args: argparse.Namespace) -> str | None:
         if not os.path.isfile(path):
             return f"--zenoh {args.zenoh!r}: no such Zenoh configuration file"
         os.environ[ENV_ZENOH_CONFIG] = path
+    if args.net_services is not None:
+        from emos.transport.select import ENV_NET_SERVICES
+
+        os.environ[ENV_NET_SERVICES] = args.net_services
     if args.net_topics is not None:
         os.environ[ENV_NET_TOPICS] = args.net_topics
         try:

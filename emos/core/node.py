@@ -31,7 +31,7 @@ from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext, current, encode_name
 from emos.transport.pubsub import Publisher
-from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_subscriber
+from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_server_bridge, open_subscriber
 from emos.transport.waker import DEFAULT_SPIN_US, Waker
 
 ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
@@ -111,7 +111,7 @@ class Node:
         self._last_status_ns = 0
         self._main_timer: _Timer | None = None
         self._timers: list["_Timer"] = []
-        self._servers: list[ServiceServer | ActionServer] = []
+        self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
         self._extra_servers: list[tuple[str, tuple]] = []
         self._control: RpcServer | None = None
         self._supervisor: AsyncRpcClient | None = None
@@ -261,6 +261,9 @@ class Node:
     async def _start_server(self, server: ServiceServer | ActionServer) -> None:
         await server.start()
         self._servers.append(server)
+        bridge = open_server_bridge(self.ctx, server)  # only when the run shares it over Zenoh
+        if bridge is not None:
+            self._servers.append(bridge)
 
     async def _on_deactivate(self) -> None:
         await self._stop_activity()

@@ -21,6 +21,7 @@ from typing import Any, Callable, Protocol
 from emos.transport.context import RunContext
 
 ENV_NET_TOPICS = "EMOS_NET_TOPICS"
+ENV_NET_SERVICES = "EMOS_NET_SERVICES"  # services and actions shared over Zenoh: see emos.transport.zenoh_rpc
 TRANSPORTS = ("auto", "shm", "zenoh")
 
 
@@ -92,6 +93,19 @@ def open_subscriber(ctx: RunContext, topic: Any, waker: Any = None, queue_size: 
     from emos.transport.pubsub import Subscriber
 
     return Subscriber(ctx, topic.name, topic.msg_type, waker=waker, queue_size=queue_size, transient_local=transient_local)
+
+
+def open_server_bridge(ctx: RunContext, server: Any) -> Any | None:
+    """A Zenoh queryable in front of a started service or action server, if the run shares it
+    over the network (``$EMOS_NET_SERVICES``); ``None`` otherwise. It has ``async close()``."""
+    if not os.environ.get(ENV_NET_SERVICES, "").strip():
+        return None
+    from emos.core.services import ActionServer
+    from emos.transport.zenoh_rpc import NetServiceBridge, shared_over_network
+
+    if not shared_over_network(server.name):
+        return None
+    return NetServiceBridge(ctx, server.name, "action" if isinstance(server, ActionServer) else "service")
 
 
 def list_topics(ctx: RunContext, network: bool | None = None) -> dict[str, dict[str, Any]]:

@@ -24,6 +24,7 @@ so :func:`list_topics` can discover the topics of every host in the group.
 from __future__ import annotations
 
 import collections
+import json
 import logging
 import os
 import re
@@ -86,19 +87,44 @@ def session(config_path: str | None = None) -> Any:
         sess = _sessions.get(path)
         if sess is None or sess.is_closed():
             zenoh = _zenoh()
-            if path:
-                if not os.path.isfile(path):
-                    raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
-                try:
-                    conf = zenoh.Config.from_file(path)
-                except Exception as exc:  # zenoh.ZError: say which file
-                    raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
-            else:
-                conf = zenoh.Config()
-            sess = zenoh.open(conf)
+            conf = _load_config(zenoh, path)
+            try:
+                sess = zenoh.open(conf)
+            except Exception as exc:  # zenoh.ZError
+                # Every process of a run reads the same file; only the first can bind a fixed
+                # listening port. The others listen on a port of the kernel's choosing and still
+                # reach the other hosts through the configured ``connect`` endpoints.
+                ephemeral = _ephemeral_listen(zenoh, path) if "Address already in use" in str(exc) else None
+                if ephemeral is None:
+                    raise
+                log.info("Zenoh: %s; this process listens on %s instead", str(exc).split(" at ")[0], ephemeral.get_json("listen/endpoints"))
+                sess = zenoh.open(ephemeral)
             _sessions[path] = sess
             log.info("Zenoh session %s opened (%s)", sess.info.zid(), path or "default configuration")
         return sess
+
+
+def _load_config(zenoh: Any, path: str) -> Any:
+    if not path:
+        return zenoh.Config()
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
+    try:
+        return zenoh.Config.from_file(path)
+    except Exception as exc:  # zenoh.ZError: say which file
+        raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
+
+
+def _ephemeral_listen(zenoh: Any, path: str) -> Any | None:
+    """The configuration of ``path`` with every fixed listening port replaced by 0, or None."""
+    if not path:
+        return None
+    conf = _load_config(zenoh, path)
+    endpoints = json.loads(conf.get_json("listen/endpoints"))
+    if not isinstance(endpoints, list) or not endpoints:
+        return None
+    conf.insert_json5("listen/endpoints", json.dumps([re.sub(r":\d+(?=($|[?#]))", ":0", str(e), count=1) for e in endpoints]))
+    return conf
 
 
 def close_sessions() -> None:

@@ -192,3 +192,79 @@ def _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b):
         camera.stop()
         assert viewer.stop() == 0
     assert viewer.leftovers() == []
+
+
+def test_a_service_and_an_action_served_over_zenoh_to_a_process_outside_the_run(tmp_path):
+    """The serving run shares its service and action over Zenoh; this test process, in no run
+    and with no access to its sockets' directory in the client's code path, calls them."""
+    from emos import msgs as M
+    from emos.core.services import ActionCanceled
+    from emos.transport import zenoh_net
+    from emos.transport.zenoh_rpc import NetActionClient, NetServiceClient, RemoteServiceError, ServiceUnavailable
+    from tests.runtime.test_component import SERVICES_RECIPE
+
+    group = f"t{uuid.uuid4().hex[:10]}"
+    port_server, port_client = _free_port(), _free_port()
+    env = {"EMOS_NET_GROUP": group, "EMOS_NET_SERVICES": "adder/service,/counter/action",
+           "EMOS_ZENOH_CONFIG": _config(tmp_path / "server.json5", f"127.0.0.1:{port_server}", f"127.0.0.1:{port_client}")}
+    client_conf = _config(tmp_path / "client.json5", f"127.0.0.1:{port_client}", f"127.0.0.1:{port_server}")
+    system = SystemUnderTest(tmp_path, SERVICES_RECIPE, env=env).wait_up(components=["adder", "counter"], timeout=60)
+    old_group = os.environ.get("EMOS_NET_GROUP")
+    os.environ["EMOS_NET_GROUP"] = group
+    try:
+        srv = NetServiceClient("/adder/service", "SetBool_Request", "SetBool_Response", timeout=5.0, config_path=client_conf)
+
+        def call():
+            try:
+                return srv.call(M.SetBoolRequest(data=True))
+            except ServiceUnavailable:
+                return None
+
+        reply = wait_until(call, timeout=30, what="the service over Zenoh")
+        assert reply.success is True and f"pid {system.pid('adder')}" in reply.message
+
+        action = NetActionClient("/counter/action", "Int64", "Int64", "String", config_path=client_conf)
+
+        def reachable():
+            try:
+                return action.cancel("no-such-goal") is False  # answered: the server is there
+            except ServiceUnavailable:
+                return False
+
+        wait_until(reachable, timeout=30, what="the action over Zenoh")
+        feedback = []
+        result = action.send_goal(M.Int64(data=5), feedback_callback=lambda fb: feedback.append(fb.data), timeout=30)
+        assert result.data == "counted to 5" and feedback == [0, 1, 2, 3, 4]
+
+        outcome = {}
+        import threading
+
+        def long_goal():
+            try:
+                outcome["r"] = action.send_goal(M.Int64(data=500), goal_id="long", timeout=60)
+            except Exception as exc:  # noqa: BLE001 - the test inspects it
+                outcome["r"] = exc
+
+        t = threading.Thread(target=long_goal)
+        t.start()
+        wait_until(lambda: action.cancel("long") is True, timeout=20, what="the remote cancel")
+        t.join(30)
+        assert isinstance(outcome["r"], ActionCanceled)
+
+        # A malformed query gets an error reply naming the problem; the bridge keeps serving.
+        sess = zenoh_net.session(client_conf)
+        replies = list(sess.get(f"emos/{group}/_srv_/adder/service", payload=b"\xc1 not msgpack", timeout=10))
+        assert replies and replies[0].ok is None
+        with pytest.raises(RemoteServiceError, match="not msgpack"):
+            from emos.transport.zenoh_rpc import _unpack_reply
+
+            _unpack_reply("service", replies[0])
+        assert srv.call(M.SetBoolRequest(data=False)).message.startswith("call ")
+    finally:
+        zenoh_net.close_sessions()
+        if old_group is None:
+            os.environ.pop("EMOS_NET_GROUP", None)
+        else:
+            os.environ["EMOS_NET_GROUP"] = old_group
+        assert system.stop() == 0
+    assert system.leftovers() == []
