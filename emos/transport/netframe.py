@@ -60,6 +60,18 @@ def write_frame(enc: codec.Encoded, stamp_ns: int, fingerprint: str, publisher_i
     return frame
 
 
+_names: dict[bytes, str] = {}  # publisher names seen, decoded once (bounded below)
+
+
+def _name(raw: bytes) -> str:
+    name = _names.get(raw)
+    if name is None:
+        name = raw.decode()  # UnicodeDecodeError: the caller's BadFrame
+        if len(_names) < 4096:
+            _names[raw] = name
+    return name
+
+
 def read_frame(data: Any, fingerprint: str) -> tuple[int, str, memoryview]:
     """``(stamp_ns, publisher_id, payload)`` of a frame carrying messages of ``fingerprint``.
 
@@ -77,10 +89,10 @@ def read_frame(data: Any, fingerprint: str) -> tuple[int, str, memoryview]:
     if start > len(view):
         raise BadFrame(f"a {len(view)} B frame announces a {start} B header")
     try:
-        fp = bytes(view[_HEADER.size : _HEADER.size + fp_len]).decode()
-        pub = bytes(view[_HEADER.size + fp_len : head]).decode()
+        pub = _name(bytes(view[_HEADER.size + fp_len : head]))
+        if bytes(view[_HEADER.size : _HEADER.size + fp_len]) != fingerprint.encode():
+            fp = bytes(view[_HEADER.size : _HEADER.size + fp_len]).decode(errors="replace")
+            raise BadFrame(f"publisher {pub[:60]!r} sends type fingerprint {fp[:40]!r}, this subscriber expects {fingerprint}")
     except UnicodeDecodeError as exc:
         raise BadFrame(f"names are not UTF-8: {exc}") from None
-    if fp != fingerprint:
-        raise BadFrame(f"publisher {pub[:60]!r} sends type fingerprint {fp[:40]!r}, this subscriber expects {fingerprint}")
     return stamp, pub, view[start:].toreadonly()

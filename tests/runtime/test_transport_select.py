@@ -37,7 +37,8 @@ def test_a_frame_round_trips_with_its_arrays_aligned_and_a_reused_buffer():
     (lambda f: b"XXXX" + f[4:], "not an EMOS frame"),
     (lambda f: f[:12] + struct.pack("<HH", 60000, 3) + f[16:], "exceed"),
     (lambda f: f[:12] + struct.pack("<HH", 900, 900) + f[16:40], "announces"),
-    (lambda f: f[:16] + b"\xff" * 16 + f[32:], "UTF-8"),
+    (lambda f: f[:32] + b"\xff\xfe\xfd" + f[35:], "UTF-8"),  # the publisher name "cam"
+    (lambda f: f[:16] + b"\xff" * 16 + f[32:], "type fingerprint"),
 ])
 def test_malformed_frames_are_refused_with_the_reason(mangle, reason):
     frame = _frame(LaserScan(ranges=np.ones(4, dtype=np.float32)))
