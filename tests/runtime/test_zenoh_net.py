@@ -172,6 +172,16 @@ def _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b):
         for system in (camera, viewer):
             assert not [n for n in _segments_of(system) if ".cam." in n or ".scan." in n], _segments_of(system)
 
+        # Discovery across the network: `emos topic list --network` in run B's network, no run of its own.
+        client = tmp_path / "client.json5"
+        client.write_text(json.dumps({"mode": "client", "connect": {"endpoints": [f"tcp/{end_b}"]}, "scouting": {"multicast": {"enabled": False}}}))
+        listed = subprocess.run([*prefix_b, sys.executable, "-m", "emos", "topic", "list", "--network", str(client), "--json"],
+                                capture_output=True, text=True, timeout=60, env={**os.environ, "EMOS_NET_GROUP": group})
+        assert listed.returncode == 0, listed.stderr
+        topics = json.loads(listed.stdout)
+        assert topics["/cam"]["publishers"] == ["camera"] and topics["/cam"]["type"].endswith("Image"), topics
+        assert topics["/scan"]["type"].endswith("LaserScan")
+
         # A foreign payload on the topic's key, and a frame of the wrong type: dropped and logged.
         _intrude(prefix_b, end_b, f"emos/{group}/cam")
         wait_until(lambda: "dropping a payload on key emos/" + group + "/cam" in viewer.output(), timeout=20, what="the foreign payload's log line")
