@@ -76,15 +76,16 @@ def topic_key(topic: str, group: str | None = None) -> str:
 
 
 # ------------------------------------------------------------------------------------ sessions
-_sessions: dict[str, Any] = {}
+_sessions: dict[tuple[int, str], Any] = {}  # (pid, config path): a forked child opens its own
 _sessions_lock = threading.Lock()
 
 
 def session(config_path: str | None = None) -> Any:
     """This process's Zenoh session for ``config_path`` (default ``$EMOS_ZENOH_CONFIG``)."""
     path = config_path if config_path is not None else os.environ.get(ENV_ZENOH_CONFIG, "")
+    key = (os.getpid(), path)
     with _sessions_lock:
-        sess = _sessions.get(path)
+        sess = _sessions.get(key)
         if sess is None or sess.is_closed():
             zenoh = _zenoh()
             conf = _load_config(zenoh, path)
@@ -99,7 +100,7 @@ def session(config_path: str | None = None) -> Any:
                     raise
                 log.info("Zenoh: %s; this process listens on %s instead", str(exc).split(" at ")[0], ephemeral.get_json("listen/endpoints"))
                 sess = zenoh.open(ephemeral)
-            _sessions[path] = sess
+            _sessions[key] = sess
             log.info("Zenoh session %s opened (%s)", sess.info.zid(), path or "default configuration")
         return sess
 
@@ -130,7 +131,9 @@ def _ephemeral_listen(zenoh: Any, path: str) -> Any | None:
 def close_sessions() -> None:
     """Close every session of this process (end of a run, tests)."""
     with _sessions_lock:
-        for sess in _sessions.values():
+        for (pid, _), sess in _sessions.items():
+            if pid != os.getpid():
+                continue  # inherited through fork: its threads are not ours to stop
             try:
                 sess.close()
             except Exception as exc:  # noqa: BLE001 - closing must go on for the others

@@ -86,6 +86,18 @@ def _seen(folder) -> list[str]:
         return []
 
 
+def _last_frame(folder) -> int:
+    """The camera's counter in the newest image the viewer saw (the file keeps the last 50)."""
+    seen = _seen(folder)
+    return int(seen[-1].rsplit("-", 1)[1]) if seen else 0
+
+
+def _walk(node):
+    yield node
+    for child in node.get("children", []):
+        yield from _walk(child)
+
+
 def _segments_of(system) -> list[str]:
     return [n for n in os.listdir(SHM_DIR) if system.ctx is not None and n.startswith(system.ctx.shm_prefix)]
 
@@ -185,8 +197,8 @@ def _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b):
         # A foreign payload on the topic's key, and a frame of the wrong type: dropped and logged.
         _intrude(prefix_b, end_b, f"emos/{group}/cam")
         wait_until(lambda: "dropping a payload on key emos/" + group + "/cam" in viewer.output(), timeout=20, what="the foreign payload's log line")
-        count = len(_seen(dirs["b"]))
-        wait_until(lambda: len(_seen(dirs["b"])) > count + 3, timeout=30, what="delivery to go on after the foreign payloads")
+        last = _last_frame(dirs["b"])
+        wait_until(lambda: _last_frame(dirs["b"]) > last + 3, timeout=30, what="delivery to go on after the foreign payloads")
         assert viewer.state("viewer") == "active"
 
         # Kill the publishing run outright and start it again: the stream resumes.
@@ -204,7 +216,7 @@ def _exchange(tmp_path, prefix_a, prefix_b, addr_a, addr_b):
     assert viewer.leftovers() == []
 
 
-def test_a_service_and_an_action_served_over_zenoh_to_a_process_outside_the_run(tmp_path):
+def test_a_service_and_an_action_served_over_zenoh_to_a_process_outside_the_run(tmp_path, capsys):
     """The serving run shares its service and action over Zenoh; this test process, in no run
     and with no access to its sockets' directory in the client's code path, calls them."""
     from emos import msgs as M
@@ -260,6 +272,22 @@ def test_a_service_and_an_action_served_over_zenoh_to_a_process_outside_the_run(
         wait_until(lambda: action.cancel("long") is True, timeout=20, what="the remote cancel")
         t.join(30)
         assert isinstance(outcome["r"], ActionCanceled)
+
+        # The supervisor's status, from outside the run: what `emos status --remote` prints.
+        import argparse
+
+        from emos.supervisor import cli_status
+
+        def remote_tree():
+            capsys.readouterr()
+            code = cli_status.run(argparse.Namespace(remote=client_conf, json=True, watch=0.0, run=None))
+            runs = json.loads(capsys.readouterr().out)
+            return code == 0 and runs
+
+        runs = wait_until(remote_tree, timeout=30, what="the run's status over Zenoh")
+        assert [r["run_id"] for r in runs] == [system.ctx.run_id]
+        workers = {n["name"]: n for n in _walk(runs[0]["tree"]) if n.get("kind") == "worker"}
+        assert workers["adder"]["pid"] == system.pid("adder") and workers["counter"]["state"] == "active"
 
         # A malformed query gets an error reply naming the problem; the bridge keeps serving.
         sess = zenoh_net.session(client_conf)
