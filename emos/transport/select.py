@@ -46,6 +46,53 @@ class TopicSubscriber(Protocol):
     def close(self) -> None: ...
 
 
+def use_network(zenoh_config: str | None = None, topics: str | list[str] | None = None, services: str | list[str] | None = None, group: str | None = None) -> None:
+    """The recipe's way to what ``emos run --zenoh CONFIG --net-topics ... --net-services ...``
+    does; call it before ``Launcher.bringup()`` (component processes inherit it).
+
+    ``topics`` / ``services``: ``"all"`` or names; ``group`` keeps robots on one network apart.
+    Everything is checked here, so a typo fails before anything starts."""
+    from emos.transport.zenoh_net import ENV_NET_GROUP, ENV_ZENOH_CONFIG, net_group
+
+    def names(value: str | list[str], what: str) -> str:
+        if isinstance(value, str):
+            return value
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+            raise TypeError(f"use_network: {what} must be 'all' or a list of names, got {value!r}")
+        return ",".join(value)
+
+    if zenoh_config is not None:
+        path = os.path.abspath(os.path.expanduser(zenoh_config))
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"use_network: Zenoh configuration file {zenoh_config!r} does not exist")
+        os.environ[ENV_ZENOH_CONFIG] = path
+    if group is not None:
+        previous = os.environ.get(ENV_NET_GROUP)
+        os.environ[ENV_NET_GROUP] = group
+        try:
+            net_group()
+        except ValueError as exc:
+            if previous is None:
+                os.environ.pop(ENV_NET_GROUP)
+            else:
+                os.environ[ENV_NET_GROUP] = previous
+            raise ValueError(f"use_network: group: {exc}") from None
+    if topics is not None:
+        value = names(topics, "topics")
+        previous = os.environ.get(ENV_NET_TOPICS)
+        os.environ[ENV_NET_TOPICS] = value
+        try:
+            net_topics_option()  # raises on a bad name
+        except ValueError:
+            if previous is None:
+                os.environ.pop(ENV_NET_TOPICS)
+            else:
+                os.environ[ENV_NET_TOPICS] = previous
+            raise
+    if services is not None:
+        os.environ[ENV_NET_SERVICES] = names(services, "services")
+
+
 def net_topics_option() -> tuple[bool, frozenset[str]]:
     """``(all topics, named topics)`` from ``$EMOS_NET_TOPICS``."""
     raw = os.environ.get(ENV_NET_TOPICS, "").strip()

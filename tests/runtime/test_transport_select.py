@@ -101,3 +101,24 @@ def test_local_topics_get_the_shared_memory_classes_themselves(ctx, monkeypatch)
     finally:
         sub.close()
         pub.close()
+
+
+def test_use_network_sets_the_run_options_and_checks_them(tmp_path, monkeypatch):
+    import emos
+
+    for var in (select.ENV_NET_TOPICS, select.ENV_NET_SERVICES, "EMOS_ZENOH_CONFIG", "EMOS_NET_GROUP"):
+        monkeypatch.delenv(var, raising=False)
+    conf = tmp_path / "z.json5"
+    conf.write_text("{}")
+    emos.use_network(zenoh_config=str(conf), topics=["/scan", "camera/rgb"], services="all", group="lab-1")
+    assert os.environ["EMOS_ZENOH_CONFIG"] == str(conf) and os.environ["EMOS_NET_GROUP"] == "lab-1"
+    assert select.transport_of("/camera/rgb") == "zenoh" and select.transport_of("/odom") == "shm"
+    assert os.environ[select.ENV_NET_SERVICES] == "all"
+    with pytest.raises(FileNotFoundError, match="nowhere.json5"):
+        emos.use_network(zenoh_config=str(tmp_path / "nowhere.json5"))
+    with pytest.raises(ValueError, match="group"):
+        emos.use_network(group="has space")
+    assert os.environ["EMOS_NET_GROUP"] == "lab-1"
+    with pytest.raises(ValueError, match="EMOS_NET_TOPICS"):
+        emos.use_network(topics=["bad//name"])
+    assert select.transport_of("/scan") == "zenoh"  # the earlier choice stands
