@@ -24,6 +24,9 @@ _LAZY = {
     "component_fallback": "emos.core.fallbacks",
     "ComponentStatus": "emos.msgs.status",
     "ComponentServices": "emos.core.reconfig",
+    "use_network": "emos.transport.select",
+    "NetServiceClient": "emos.transport.zenoh_rpc",
+    "NetActionClient": "emos.transport.zenoh_rpc",
 }
 
 __all__ = sorted(_LAZY)

@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # `emos bench NAME`: one module per benchmark, owned by the part it measures.
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.supervisor.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
+    "net": ("emos.supervisor.bench.net", "topic latency between two runs over Zenoh: EMOS against raw eclipse-zenoh"),
     "restart": ("emos.supervisor.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
     "events": ("emos.supervisor.bench.events", "event-to-action and failure-to-fallback latencies"),
     "record": ("emos.supervisor.bench.record", "camera latency to its subscribers with and without `emos record`"),

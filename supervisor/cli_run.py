@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recipe", help="recipe name (see `emos ls`) or path of the recipe script")
     parser.add_argument("--duration", type=_seconds, default=None, help="stop by itself after this many seconds")
     parser.add_argument("--no-log", action="store_true", help="do not keep a copy of the output in ~/emos/logs")
+    parser.add_argument("--zenoh", metavar="CONFIG", default=None, help="Zenoh configuration file (mode, endpoints) for topics across hosts")
+    parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
+    parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
@@ -43,6 +46,10 @@ def run(args: argparse.Namespace) -> int:
 
     launcher_mod._RUN_DURATION = args.duration
     os.environ["EMOS_RUN_CLI"] = "1"
+    problem = _network_options(args)
+    if problem:
+        print(f"emos run: {problem}", file=sys.stderr)
+        return 2
     sys.argv = [str(path), *args.args]
     sys.path.insert(0, str(path.resolve().parent))
     launcher_mod.Launcher.last_exit_code = None
@@ -53,3 +60,26 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos run: {path} finished without bringing anything up: it never called Launcher.bringup()", file=sys.stderr)
         return EXIT_NO_BRINGUP
     return code
+
+
+def _network_options(args: argparse.Namespace) -> str | None:
+    """Export ``--zenoh`` / ``--net-topics`` to the run (components inherit the environment)."""
+    from emos.transport.select import ENV_NET_TOPICS, net_topics_option
+    from emos.transport.zenoh_net import ENV_ZENOH_CONFIG
+
+    if args.zenoh is not None:
+        path = os.path.abspath(args.zenoh)
+        if not os.path.isfile(path):
+            return f"--zenoh {args.zenoh!r}: no such Zenoh configuration file"
+        os.environ[ENV_ZENOH_CONFIG] = path
+    if args.net_services is not None:
+        from emos.transport.select import ENV_NET_SERVICES
+
+        os.environ[ENV_NET_SERVICES] = args.net_services
+    if args.net_topics is not None:
+        os.environ[ENV_NET_TOPICS] = args.net_topics
+        try:
+            net_topics_option()
+        except ValueError as exc:
+            return f"--net-topics: {exc}"
+    return None

@@ -16,6 +16,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_run_argument(parser)
     parser.add_argument("--json", action="store_true", help="print the tree as JSON")
     parser.add_argument("--watch", type=float, default=0.0, metavar="S", help="refresh every S seconds")
+    parser.add_argument("--remote", metavar="ZENOH_CONFIG", nargs="?", const="", default=None,
+                        help="the runs of every host in the Zenoh group ($EMOS_NET_GROUP) that were started with --zenoh, "
+                             "through this Zenoh configuration file (default: $EMOS_ZENOH_CONFIG); needs no local run")
 
 
 def _cpu_percent(pids: list[int], interval: float = 0.25) -> dict[int, float]:
@@ -72,7 +75,30 @@ def render(data: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _remote(args: argparse.Namespace) -> int:
+    from emos.transport.zenoh_net import close_sessions
+    from emos.transport.zenoh_status import remote_status
+
+    try:
+        while True:
+            runs = remote_status(args.remote or None)
+            if args.json:
+                print(json.dumps(runs, indent=2), flush=True)
+            elif not runs:
+                print("no run of this Zenoh group answered", flush=True)
+            else:
+                print("\n\n".join(f"{d['key']}\n{render(d)}" for d in runs), flush=True)
+            if not args.watch:
+                return 0 if runs else 1
+            time.sleep(args.watch)
+            print()
+    finally:
+        close_sessions()
+
+
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "remote", None) is not None:
+        return _remote(args)
     ctx = join_run(args.run)
     while True:
         data = snapshot(ctx)

@@ -17,6 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("list", help="topics, their types, publishers and subscribers")
     add_run_argument(p)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--network", metavar="ZENOH_CONFIG", nargs="?", const="", default=None,
+                   help="only the topics published over Zenoh by any host of the group ($EMOS_NET_GROUP), "
+                        "through this Zenoh configuration file (default: $EMOS_ZENOH_CONFIG); needs no local run")
     p = sub.add_parser("echo", help="print messages as they arrive")
     add_run_argument(p)
     p.add_argument("topic")
@@ -49,6 +52,15 @@ def _topic_type(ctx, topic: str) -> type:
     return resolve(info["type"])
 
 
+def _print_topics(topics: dict, as_json: bool) -> int:
+    if as_json:
+        print(json.dumps(topics, indent=2))
+    else:
+        for name, info in sorted(topics.items()):
+            print(f"{name:<40} {info['type']:<40} pubs={len(info['publishers'])} subs={info.get('subscribers', 0)}")
+    return 0
+
+
 def _short(value, n: int):
     if isinstance(value, dict):
         return {k: _short(v, n) for k, v in value.items()}
@@ -58,6 +70,14 @@ def _short(value, n: int):
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "list" and getattr(args, "network", None) is not None:
+        from emos.transport.zenoh_net import close_sessions, list_topics as network_topics
+
+        try:
+            topics = network_topics(config_path=args.network or None)
+        finally:
+            close_sessions()
+        return _print_topics(topics, args.json)
     ctx = join_run(args.run)
     if args.action == "list":
         topics = list_topics(ctx)

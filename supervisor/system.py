@@ -157,6 +157,9 @@ class System:
         self.reaper.install(loop)
         self.control = RpcServer(self.control_path, self._control_ops(), name="supervisor", max_frame=CONTROL_FRAME)
         await self.control.start()
+        from emos.transport.zenoh_status import start_status_bridge, stop_status_bridge
+
+        status_bridge = start_status_bridge(self.ctx.run_dir, self.ctx.run_id)  # `emos status --remote`; None unless the run uses Zenoh
         self.heartbeats = HeartbeatMonitor(self.ctx, self.options.heartbeat_timeout)
         self.fallbacks = FallbackDriver(self, self.orchestration, lambda: self.root)
         self.root = self._build_root()
@@ -188,6 +191,7 @@ class System:
             await self.fallbacks.close()
             self.heartbeats.close()
             await self.control.close()
+            stop_status_bridge(status_bridge)
             self.reaper.uninstall()
 
     async def _stop_after(self, seconds: float) -> None:

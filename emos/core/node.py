@@ -29,7 +29,8 @@ from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext, current, encode_name
-from emos.transport.pubsub import Publisher, Subscriber
+from emos.transport.pubsub import Publisher
+from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_server_bridge, open_subscriber
 from emos.transport.waker import DEFAULT_SPIN_US, Waker
 
 ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
@@ -43,7 +44,7 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 class _Input:
     __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns")
 
-    def __init__(self, topic: Topic, sub: Subscriber):
+    def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
         self.raw: bytearray | None = None
         self.stamp_ns = 0
@@ -102,14 +103,14 @@ class Node:
         self._stop: asyncio.Event | None = None
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
-        self._publishers: dict[str, tuple[Publisher, threading.Lock]] = {}
+        self._publishers: dict[str, tuple[TopicPublisher, threading.Lock]] = {}
         self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
         self._main_timer: _Timer | None = None
         self._timers: list["_Timer"] = []
-        self._servers: list[ServiceServer | ActionServer] = []
+        self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
         self._extra_servers: list[tuple[str, tuple]] = []
         self._control: RpcServer | None = None
         self._supervisor: AsyncRpcClient | None = None
@@ -224,10 +225,10 @@ class Node:
 
     async def _on_configure(self) -> None:
         for topic in self.component.out_topics:
-            pub = Publisher(self.ctx, topic.name, topic.msg_type, publisher_id=self.name, depth=topic.qos_profile.queue_size)
+            pub = open_publisher(self.ctx, topic, publisher_id=self.name, depth=topic.qos_profile.queue_size)
             self._publishers[topic.name] = (pub, threading.Lock())
         for topic in self.component.in_topics:
-            sub = Subscriber(self.ctx, topic.name, topic.msg_type, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
+            sub = open_subscriber(self.ctx, topic, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
             self._inputs[topic.name] = _Input(topic, sub)
         if getattr(self.component.config, "use_sim_time", False):
             assert self._waker is not None
@@ -259,6 +260,9 @@ class Node:
     async def _start_server(self, server: ServiceServer | ActionServer) -> None:
         await server.start()
         self._servers.append(server)
+        bridge = open_server_bridge(self.ctx, server)  # only when the run shares it over Zenoh
+        if bridge is not None:
+            self._servers.append(bridge)
 
     async def _on_deactivate(self) -> None:
         await self._stop_activity()
@@ -385,7 +389,7 @@ class Node:
 
     def publisher_pids(self, topic: Topic | str) -> list[int]:
         """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
-        return [src.ring.writer_pid for src in list(self._input(topic).sub.sources.values())]
+        return self._input(topic).sub.writer_pids()
 
     def publishers_alive(self, topic: Topic | str) -> bool | None:
         """Whether a process publishing on ``topic`` is alive: None if no publisher was ever seen.

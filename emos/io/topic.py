@@ -56,6 +56,16 @@ class Topic(BaseAttrs):
     msg_type: type = field(converter=_msg_type)
     qos_profile: QoSConfig = field(factory=QoSConfig, converter=_qos)
     data_timeout: float = field(default=0.0)
+    # "auto" (the run option decides, shared memory unless `emos run --net-topics`), "shm" or
+    # "zenoh" (across hosts): see emos.transport.select.
+    transport: str = field(default="auto")
+
+    @transport.validator
+    def _check_transport(self, attribute: Any, value: Any) -> None:
+        from emos.transport.select import TRANSPORTS
+
+        if value not in TRANSPORTS:
+            raise ValueError(f"Topic {self.name!r}: transport must be one of {TRANSPORTS}, got {value!r}")
 
     @data_timeout.validator
     def _check_timeout(self, attribute: Any, value: Any) -> None:
@@ -73,7 +83,10 @@ class Topic(BaseAttrs):
         return hash((self.name, self.msg_type))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "msg_type": self.type_name, "qos_profile": self.qos_profile.asdict(), "data_timeout": self.data_timeout}
+        out = {"name": self.name, "msg_type": self.type_name, "qos_profile": self.qos_profile.asdict(), "data_timeout": self.data_timeout}
+        if self.transport != "auto":  # only when set: dicts of existing recipes stay as they were
+            out["transport"] = self.transport
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Topic":

@@ -604,6 +604,10 @@ class Subscriber:
         self.rescan()
         return sorted(self.sources)
 
+    def writer_pids(self) -> list[int]:
+        """Process ids of the publishers found (0 where a ring records none)."""
+        return [src.ring.writer_pid for src in list(self.sources.values())]
+
     def close(self) -> None:
         for src in self.sources.values():
             if self.waker is not None:

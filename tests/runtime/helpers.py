@@ -47,11 +47,12 @@ def kill_leftover_systems() -> None:
 class SystemUnderTest:
     """A recipe running under ``emos run`` in its own process."""
 
-    def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None):
+    def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None, prefix: list[str] | None = None):
+        """``prefix``: a command that execs the rest in place (``ip netns exec NS``), keeping the pid."""
         _STARTED.append(self)
         self.script = tmp_path / "recipe.py"
         self.script.write_text(RECIPE_HEADER + textwrap.dedent(body))
-        cmd = [sys.executable, "-m", "emos", "run", str(self.script)]
+        cmd = [*(prefix or []), sys.executable, "-m", "emos", "run", str(self.script)]
         if duration:
             cmd += ["--duration", str(duration)]
         self.log_path = tmp_path / "system.log"

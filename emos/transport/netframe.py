@@ -1,0 +1,98 @@
+"""The frame of one EMOS message on a network transport (Zenoh), and its defensive reader.
+
+A frame is a small fixed header, the message type's fingerprint, the publisher's name, then the
+message itself in EMOS's own encoding (msgpack metadata + raw, aligned arrays; see
+:mod:`emos.msgs.codec`), byte for byte what a shared-memory ring holds::
+
+    "EMZ1" | stamp_ns u64 | fingerprint length u16 | publisher length u16 | fingerprint | publisher | padding to 8 | payload
+
+The payload starts 8-byte aligned within the frame, so the arrays in it can be viewed in place.
+Anything can arrive on a key expression (another program, another version, a forged sender), so
+:func:`read_frame` checks every length against the frame before it slices, and the caller then
+decodes the payload as the expected type before it hands the message on.
+"""
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+from emos.msgs import codec
+
+MAGIC = b"EMZ1"
+_HEADER = struct.Struct("<4sQHH")
+MAX_NAME_BYTES = 1024  # fingerprints are 16 hex digits; publisher names are component names
+
+
+class BadFrame(ValueError):
+    """Bytes on a key expression that are not an EMOS frame of the expected type."""
+
+
+def _pad(n: int) -> int:
+    return (-n) % 8
+
+
+def frame_prefix(fingerprint: str, publisher_id: str) -> tuple[bytes, int]:
+    """The constant part of a publisher's frames after the header, and the header's length.
+
+    Computed once per publisher: only the stamp changes from message to message."""
+    fp, pub = fingerprint.encode(), publisher_id.encode()
+    if len(fp) > MAX_NAME_BYTES or len(pub) > MAX_NAME_BYTES:
+        raise ValueError(f"publisher {publisher_id[:40]!r}: names on the network are at most {MAX_NAME_BYTES} bytes")
+    head = _HEADER.size + len(fp) + len(pub)
+    return fp + pub + b"\0" * _pad(head), head + _pad(head)
+
+
+def write_frame(enc: codec.Encoded, stamp_ns: int, fingerprint: str, publisher_id: str, prefix: bytes, start: int, reuse: bytearray | None = None) -> bytearray:
+    """One frame holding ``enc`` (one copy of the message, straight into the frame).
+
+    ``reuse``: the previous frame, overwritten if it has the right size. Zenoh copies a frame
+    when it is put, so the buffer is free again at once; reusing it spares the page faults of
+    fresh memory on every message (6-7 ms per 8 MiB frame on this VM, 7x the copy itself)."""
+    size = start + enc.nbytes
+    frame = reuse if reuse is not None and len(reuse) == size else bytearray(size)
+    _HEADER.pack_into(frame, 0, MAGIC, stamp_ns, len(fingerprint), len(publisher_id.encode()))
+    frame[_HEADER.size : start] = prefix
+    view = memoryview(frame)
+    try:
+        enc.write_into(view[start:])
+    finally:
+        view.release()
+    return frame
+
+
+_names: dict[bytes, str] = {}  # publisher names seen, decoded once (bounded below)
+
+
+def _name(raw: bytes) -> str:
+    name = _names.get(raw)
+    if name is None:
+        name = raw.decode()  # UnicodeDecodeError: the caller's BadFrame
+        if len(_names) < 4096:
+            _names[raw] = name
+    return name
+
+
+def read_frame(data: Any, fingerprint: str) -> tuple[int, str, memoryview]:
+    """``(stamp_ns, publisher_id, payload)`` of a frame carrying messages of ``fingerprint``.
+
+    Raises :class:`BadFrame` saying what is wrong; never reads outside ``data``."""
+    view = memoryview(data)
+    if len(view) < _HEADER.size:
+        raise BadFrame(f"{len(view)} B is shorter than a frame header ({_HEADER.size} B)")
+    magic, stamp, fp_len, pub_len = _HEADER.unpack_from(view, 0)
+    if magic != MAGIC:
+        raise BadFrame(f"not an EMOS frame (starts with {bytes(magic)!r})")
+    if fp_len > MAX_NAME_BYTES or pub_len > MAX_NAME_BYTES:
+        raise BadFrame(f"names of {fp_len} and {pub_len} B exceed {MAX_NAME_BYTES} B")
+    head = _HEADER.size + fp_len + pub_len
+    start = head + _pad(head)
+    if start > len(view):
+        raise BadFrame(f"a {len(view)} B frame announces a {start} B header")
+    try:
+        pub = _name(bytes(view[_HEADER.size + fp_len : head]))
+        if bytes(view[_HEADER.size : _HEADER.size + fp_len]) != fingerprint.encode():
+            fp = bytes(view[_HEADER.size : _HEADER.size + fp_len]).decode(errors="replace")
+            raise BadFrame(f"publisher {pub[:60]!r} sends type fingerprint {fp[:40]!r}, this subscriber expects {fingerprint}")
+    except UnicodeDecodeError as exc:
+        raise BadFrame(f"names are not UTF-8: {exc}") from None
+    return stamp, pub, view[start:].toreadonly()

@@ -1,0 +1,319 @@
+"""Topics across hosts over Zenoh: the network implementation of the transport interface.
+
+A topic marked for the network (see :mod:`emos.transport.select`) is published to and
+subscribed from the Zenoh key expression ``emos/<group>/<topic>`` (``/scan`` of group
+``lab`` is ``emos/lab/scan``), each sample one frame of :mod:`emos.transport.netframe`: the
+same msgpack + raw-array encoding as a shared-memory ring, behind a small header naming the
+type fingerprint and the publisher. ``<group>`` (``$EMOS_NET_GROUP``, default ``default``)
+keeps robots that share a network apart.
+
+One Zenoh session per process and configuration file, opened on first use and shared by every
+topic of the process. Its mode (peer or client), endpoints and scouting come from the Zenoh
+configuration file (``$EMOS_ZENOH_CONFIG``, set by ``emos run --zenoh CONFIG``); without one,
+Zenoh's defaults (peer mode, multicast scouting) apply.
+
+Zenoh delivers samples on its own threads. A subscriber checks each one there (a frame of the
+expected type that decodes; anything else is dropped with a rate-limited warning naming the
+key), appends it to a bounded queue (``queue_size``, oldest dropped and counted) and calls its
+``notify`` (the node's waker: one byte to the FIFO its uvloop watches). The node then takes
+from the queue on its own thread, exactly as it reads a ring.
+
+Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
+so :func:`list_topics` can discover the topics of every host in the group.
+"""
+from __future__ import annotations
+
+import collections
+import json
+import logging
+import os
+import re
+import threading
+import time
+from typing import Any, Callable
+
+from emos.msgs import codec
+from emos.msgs.registry import canonical_name
+from emos.transport.context import encode_name
+from emos.transport.netframe import BadFrame, frame_prefix, read_frame, write_frame
+from emos.transport.trust import RateLimitedLog
+
+log = logging.getLogger("emos.transport.zenoh")
+ENV_ZENOH_CONFIG = "EMOS_ZENOH_CONFIG"
+ENV_NET_GROUP = "EMOS_NET_GROUP"
+DEFAULT_GROUP = "default"
+KEY_ROOT = "emos"
+_PUB_MARK = "_pub_"
+_GROUP_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
+_warn = RateLimitedLog(log, interval=10.0)
+
+
+class NetUnavailable(RuntimeError):
+    """A topic was marked for the network but Zenoh cannot be used."""
+
+
+def _zenoh() -> Any:
+    try:
+        import zenoh
+    except ImportError:
+        raise NetUnavailable("topics over the network need Zenoh: pip install 'emos[net]' (eclipse-zenoh)") from None
+    return zenoh
+
+
+def net_group() -> str:
+    group = os.environ.get(ENV_NET_GROUP, DEFAULT_GROUP)
+    if not _GROUP_RE.match(group):
+        raise ValueError(f"${ENV_NET_GROUP} must be letters, digits, '_' or '-', got {group!r}")
+    return group
+
+
+def topic_key(topic: str, group: str | None = None) -> str:
+    """The Zenoh key expression of ``topic``: ``emos/<group>/<topic without its leading '/'>``."""
+    name = topic.strip("/")
+    if not name or any(ch in name for ch in "*$?#@") or "//" in name:
+        raise ValueError(f"topic {topic!r} cannot be a Zenoh key expression (no '*', '$', '?', '#', '@' or empty parts)")
+    return f"{KEY_ROOT}/{group or net_group()}/{name}"
+
+
+# ------------------------------------------------------------------------------------ sessions
+_sessions: dict[tuple[int, str], Any] = {}  # (pid, config path): a forked child opens its own
+_sessions_lock = threading.Lock()
+
+
+def session(config_path: str | None = None) -> Any:
+    """This process's Zenoh session for ``config_path`` (default ``$EMOS_ZENOH_CONFIG``)."""
+    path = config_path if config_path is not None else os.environ.get(ENV_ZENOH_CONFIG, "")
+    key = (os.getpid(), path)
+    with _sessions_lock:
+        sess = _sessions.get(key)
+        if sess is None or sess.is_closed():
+            zenoh = _zenoh()
+            conf = _load_config(zenoh, path)
+            try:
+                sess = zenoh.open(conf)
+            except Exception as exc:  # zenoh.ZError
+                # Every process of a run reads the same file; only the first can bind a fixed
+                # listening port. The others listen on a port of the kernel's choosing and still
+                # reach the other hosts through the configured ``connect`` endpoints.
+                ephemeral = _ephemeral_listen(zenoh, path) if "Address already in use" in str(exc) else None
+                if ephemeral is None:
+                    raise
+                log.info("Zenoh: %s; this process listens on %s instead", str(exc).split(" at ")[0], ephemeral.get_json("listen/endpoints"))
+                sess = zenoh.open(ephemeral)
+            _sessions[key] = sess
+            log.info("Zenoh session %s opened (%s)", sess.info.zid(), path or "default configuration")
+        return sess
+
+
+def _load_config(zenoh: Any, path: str) -> Any:
+    if not path:
+        return zenoh.Config()
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
+    try:
+        return zenoh.Config.from_file(path)
+    except Exception as exc:  # zenoh.ZError: say which file
+        raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
+
+
+def _ephemeral_listen(zenoh: Any, path: str) -> Any | None:
+    """The configuration of ``path`` with every fixed listening port replaced by 0, or None."""
+    if not path:
+        return None
+    conf = _load_config(zenoh, path)
+    endpoints = json.loads(conf.get_json("listen/endpoints"))
+    if not isinstance(endpoints, list) or not endpoints:
+        return None
+    conf.insert_json5("listen/endpoints", json.dumps([re.sub(r":\d+(?=($|[?#]))", ":0", str(e), count=1) for e in endpoints]))
+    return conf
+
+
+def close_sessions() -> None:
+    """Close every session of this process (end of a run, tests)."""
+    with _sessions_lock:
+        for (pid, _), sess in _sessions.items():
+            if pid != os.getpid():
+                continue  # inherited through fork: its threads are not ours to stop
+            try:
+                sess.close()
+            except Exception as exc:  # noqa: BLE001 - closing must go on for the others
+                log.debug("closing a Zenoh session: %s", exc)
+        _sessions.clear()
+
+
+# ------------------------------------------------------------------------------------ endpoints
+class ZenohPublisher:
+    """Publishes one topic's messages to its key expression."""
+
+    def __init__(self, topic: str, msg_cls: type, publisher_id: str | None = None, config_path: str | None = None, group: str | None = None):
+        zenoh = _zenoh()
+        self.topic, self.msg_cls = topic, msg_cls
+        self.type_name = canonical_name(msg_cls)
+        self.fingerprint: str = msg_cls._emos_fingerprint  # type: ignore[attr-defined]
+        self.publisher_id = publisher_id or f"pid{os.getpid()}-{id(self):x}"
+        self.key = topic_key(topic, group)
+        self._prefix, self._start = frame_prefix(self.fingerprint, self.publisher_id)
+        self._frame: bytearray | None = None
+        sess = session(config_path)
+        # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
+        self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
+        token_key = f"{self.key}/{_PUB_MARK}/{encode_name(self.type_name)}/{encode_name(self.publisher_id)}"
+        self._token = sess.liveliness().declare_token(token_key)
+        self.sent = 0
+
+    def publish(self, msg: Any) -> int:
+        if not isinstance(msg, self.msg_cls):
+            from emos.transport.pubsub import TopicTypeError
+
+            raise TopicTypeError(f"topic {self.topic!r} carries {self.type_name}, got {type(msg).__name__}")
+        if self._pub is None:
+            raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
+        # Publishing is single-threaded per publisher (the node holds its lock), so one buffer.
+        frame = self._frame = write_frame(codec.encode(msg), time.time_ns(), self.fingerprint, self.publisher_id, self._prefix, self._start, self._frame)
+        self._pub.put(frame)
+        self.sent += 1
+        return self.sent - 1
+
+    def close(self) -> None:
+        for thing in (self._token, self._pub):
+            if thing is not None:
+                try:
+                    thing.undeclare()
+                except Exception as exc:  # noqa: BLE001 - the session may be gone already
+                    log.debug("topic %s: undeclaring: %s", self.topic, exc)
+        self._token = self._pub = None
+
+
+class ZenohSubscriber:
+    """Receives one topic from every publisher on its key expression, on any host of the group.
+
+    The same reading interface as :class:`emos.transport.pubsub.Subscriber` (``take_raw``,
+    ``latest_raw``, ``has_news``, ``take``, ``latest``, ``close``), so a node reads either alike.
+    ``notify`` is called (on a Zenoh thread) after each accepted message.
+    """
+
+    def __init__(self, topic: str, msg_cls: type, notify: Callable[[], None] | None = None, queue_size: int = 10, transient_local: bool = False, config_path: str | None = None, group: str | None = None):
+        self.topic, self.msg_cls = topic, msg_cls
+        self.fingerprint: str = msg_cls._emos_fingerprint  # type: ignore[attr-defined]
+        self.key = topic_key(topic, group)
+        self.queue_size = max(int(queue_size), 1)
+        self.dropped = 0  # taken off the full queue to make room
+        self.rejected = 0  # frames that were not a decodable message of our type
+        self.undecodable = 0
+        # (stamp, payload, publisher, decoded message): take() hands out the message decoded
+        # here, take_raw() the payload (the node decodes lazily, as from a ring).
+        self._queue: collections.deque[tuple[int, memoryview, str, Any]] = collections.deque()
+        self._lock = threading.Lock()
+        self._notify = notify
+        self._closed = False
+        self._publishers: set[str] = set()
+        if transient_local:
+            _warn.warning(f"tl:{topic}", "topic %s: TRANSIENT_LOCAL is not kept over Zenoh; a late subscriber receives only new messages", topic)
+        self._sub = session(config_path).declare_subscriber(self.key, self._on_sample)
+
+    def _on_sample(self, sample: Any) -> None:
+        """On a Zenoh thread: check, queue, wake. Nothing raised here may escape (it would be
+        lost in Zenoh's thread and the subscriber would look alive while deaf)."""
+        try:
+            data = sample.payload.to_bytes()
+            stamp, pub, payload = read_frame(data, self.fingerprint)
+            msg = codec.decode(self.msg_cls, payload)  # reject now what the node could not decode later
+        except (BadFrame, codec.DecodeError) as exc:
+            self._reject(str(sample.key_expr), exc)
+            return
+        except Exception as exc:  # noqa: BLE001 - a foreign payload must never kill delivery
+            self._reject(str(sample.key_expr), exc)
+            return
+        with self._lock:
+            if self._closed:
+                return
+            queue = self._queue
+            if len(queue) >= self.queue_size:
+                queue.popleft()
+                self.dropped += 1
+            queue.append((stamp, payload, pub, msg))
+            self._publishers.add(pub)
+            if self._notify is not None:
+                try:
+                    self._notify()
+                except Exception as exc:  # noqa: BLE001
+                    _warn.warning(f"notify:{self.topic}", "topic %s: waking the reader failed: %s", self.topic, exc)
+
+    def _reject(self, key: str, exc: BaseException) -> None:
+        self.rejected += 1
+        _warn.warning(
+            f"reject:{self.key}", "topic %s: dropping a payload on key %s that is not a %s (%d so far): %s: %s",
+            self.topic, key, canonical_name(self.msg_cls), self.rejected, type(exc).__name__, exc,
+        )
+
+    # -- reading (the node's thread) --------------------------------------------------------------
+    def _take_all(self) -> list[tuple[int, Any, str, Any]]:
+        with self._lock:
+            out = list(self._queue)
+            self._queue.clear()
+        return out
+
+    def take_raw(self) -> list[tuple[int, Any, str]]:
+        return [item[:3] for item in self._take_all()]
+
+    def latest_raw(self) -> tuple[int, Any, str] | None:
+        with self._lock:
+            if not self._queue:
+                return None
+            item = self._queue[-1]
+            self._queue.clear()
+        return item[:3]
+
+    def has_news(self) -> bool:
+        return bool(self._queue)
+
+    def take(self) -> list[Any]:
+        return [item[3] for item in self._take_all()]
+
+    def latest(self) -> Any | None:
+        with self._lock:
+            item = self._queue[-1] if self._queue else None
+            self._queue.clear()
+        return None if item is None else item[3]
+
+    def publishers(self) -> list[str]:
+        return sorted(self._publishers)
+
+    def writer_pids(self) -> list[int]:
+        """Remote processes have no pid here: 0 per publisher seen (counted as alive)."""
+        return [0] * len(self._publishers)
+
+    def close(self) -> None:
+        with self._lock:  # after this no Zenoh thread touches ``notify`` (the waker may close next)
+            self._closed = True
+            self._queue.clear()
+        sub, self._sub = self._sub, None
+        if sub is not None:
+            try:
+                sub.undeclare()
+            except Exception as exc:  # noqa: BLE001 - the session may be gone already
+                log.debug("topic %s: undeclaring: %s", self.topic, exc)
+
+
+# ------------------------------------------------------------------------------------ discovery
+def list_topics(group: str | None = None, config_path: str | None = None, timeout: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Topics published over Zenoh in ``group`` by any host: ``{topic: {"type", "publishers"}}``."""
+    from emos.transport.context import decode_name
+
+    group = group or net_group()
+    root = f"{KEY_ROOT}/{group}/"
+    topics: dict[str, dict[str, Any]] = {}
+    replies = session(config_path).liveliness().get(f"{root}**", timeout=timeout)
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        key = str(reply.ok.key_expr)
+        parts = key[len(root):].split("/")
+        if len(parts) < 4 or parts[-3] != _PUB_MARK:
+            continue
+        topic = "/" + "/".join(parts[:-3])
+        entry = topics.setdefault(topic, {"type": decode_name(parts[-2]).lstrip("/"), "publishers": [], "transport": "zenoh"})
+        pub = decode_name(parts[-1]).lstrip("/")
+        if pub not in entry["publishers"]:
+            entry["publishers"].append(pub)
+    return topics

@@ -1,0 +1,236 @@
+"""``emos bench net``: topic latency and throughput between two runs over Zenoh, EMOS's Zenoh
+transport against raw ``eclipse-zenoh`` pub/sub carrying the same bytes, measured the same way
+in the same run.
+
+Two processes, each with its own Zenoh session (peer mode, each listening on a loopback port
+and connecting to the other's, no multicast scouting: TCP over 127.0.0.1, as between hosts),
+and no shared memory between them. Both transports use the same hand-off a node uses: Zenoh's
+callback thread queues the sample and writes one byte to a pipe, the main thread wakes on the
+pipe, takes the sample, and answers.
+
+* ``emos-zenoh``: :class:`ZenohPublisher` / :class:`ZenohSubscriber` with a ``UInt8MultiArray``
+  of ``payload_bytes``: encode into a frame, put; on the other side check the frame, decode
+  (the array is a view), and the echo re-publishes the decoded message.
+* ``zenoh``: ``session.declare_publisher(...).put(bytes)`` and a callback subscriber; the echo
+  puts the received bytes back.
+
+Latency: half a ping-pong round trip (``time.perf_counter_ns`` on the sender). Throughput:
+payload bytes per second of those round trips (both directions), which is what a request/
+reply stream of that size sustains. The two transports alternate size by size, so machine load
+hits both alike.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import queue
+import select
+import socket
+import sys
+import tempfile
+import time
+import uuid
+from typing import Any
+
+import numpy as np
+
+from emos.supervisor.bench.common import percentiles, table
+
+SIZES = [8, 921_600, 8 * 1024 * 1024]
+TRANSPORTS = ["emos-zenoh", "zenoh"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print the machine-readable result")
+    parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes, comma-separated")
+    parser.add_argument("--messages", type=int, default=300, help="round trips per size and transport (fewer for large payloads)")
+    parser.add_argument("--rounds", type=int, default=3, help="alternations of the two transports per size (samples are pooled)")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _config_file(folder: str, name: str, listen: int, connect: int) -> str:
+    path = os.path.join(folder, f"{name}.json5")
+    with open(path, "w") as f:
+        json.dump({
+            "mode": "peer",
+            "listen": {"endpoints": [f"tcp/127.0.0.1:{listen}"]},
+            "connect": {"endpoints": [f"tcp/127.0.0.1:{connect}"]},
+            "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        }, f)
+    return path
+
+
+class _Inbox:
+    """A queue filled on Zenoh's threads, with a pipe the main thread blocks on."""
+
+    def __init__(self) -> None:
+        self.items: "queue.SimpleQueue[Any]" = queue.SimpleQueue()
+        self.rfd, self.wfd = os.pipe()
+        os.set_blocking(self.wfd, False)
+
+    def notify(self) -> None:
+        try:
+            os.write(self.wfd, b"\x01")
+        except BlockingIOError:
+            pass
+
+    def put(self, item: Any) -> None:
+        self.items.put(item)
+        self.notify()
+
+    def wait(self, timeout: float) -> bool:
+        ready, _, _ = select.select([self.rfd], [], [], timeout)
+        if ready:
+            os.read(self.rfd, 4096)
+        return bool(ready)
+
+
+class _End:
+    """One side of one transport: ``send(payload)``, ``take() -> payloads``, and its inbox."""
+
+    def __init__(self, config: str, group: str, transport: str, side: str):
+        from emos.msgs import UInt8MultiArray
+        from emos.transport import zenoh_net
+
+        self.inbox = _Inbox()
+        out_topic, in_topic = ("/bench/ping", "/bench/pong") if side == "ping" else ("/bench/pong", "/bench/ping")
+        if transport == "emos-zenoh":
+            self._pub = zenoh_net.ZenohPublisher(out_topic, UInt8MultiArray, publisher_id=side, config_path=config, group=group)
+            self._sub = zenoh_net.ZenohSubscriber(in_topic, UInt8MultiArray, notify=self.inbox.notify, queue_size=64, config_path=config, group=group)
+            self.send, self.take = self._pub.publish, self._sub.take
+            return
+        zenoh = zenoh_net._zenoh()
+        sess = zenoh_net.session(config)
+        self._pub = sess.declare_publisher(f"rawbench/{group}{out_topic}", congestion_control=zenoh.CongestionControl.DROP)
+        self._sub = sess.declare_subscriber(f"rawbench/{group}{in_topic}", lambda sample: self.inbox.put(sample.payload.to_bytes()))
+        self.send, self.take = self._pub.put, self._take_raw
+
+    def _take_raw(self) -> list:
+        got = []
+        while True:
+            try:
+                got.append(self.inbox.items.get_nowait())
+            except queue.Empty:
+                return got
+
+
+def _echo_main(config: str, group: str, ready: Any) -> None:
+    """The other run: echo every message of both transports until killed."""
+    ends = [_End(config, group, t, "pong") for t in TRANSPORTS]
+    by_fd = {end.inbox.rfd: end for end in ends}
+    ready.set()
+    while True:
+        readable, _, _ = select.select(list(by_fd), [], [], 1.0)
+        for fd in readable:
+            os.read(fd, 4096)
+            end = by_fd[fd]
+            for msg in end.take():
+                end.send(msg)
+
+
+def _round_trips(end: _End, payload: Any, count: int, timeout: float = 2.0) -> tuple[list[float], int]:
+    """Half round trips in microseconds, and how many got no echo within ``timeout`` (a full
+    Zenoh queue drops rather than blocks). The first few (warm-up) are not counted."""
+    samples, lost = [], 0
+    clock = time.perf_counter_ns
+    for i in range(count + 3):
+        t0 = clock()
+        end.send(payload)
+        got: list = []
+        deadline = time.monotonic() + timeout
+        while not got:
+            if not end.inbox.wait(max(deadline - time.monotonic(), 0.0)):
+                break
+            got = end.take()
+        t1 = clock()
+        if not got:
+            lost += 1
+            time.sleep(0.2)
+            end.take()  # a late echo must not answer the next ping
+            if lost > max(count // 4, 3):
+                raise TimeoutError(f"{lost} of {i + 1} messages got no echo within {timeout} s")
+        elif i >= 3:
+            samples.append((t1 - t0) / 2000.0)
+    return samples, lost
+
+
+def _messages_for(size: int, messages: int) -> int:
+    if size >= 4 * 1024 * 1024:
+        return max(messages // 10, 10)
+    if size >= 512 * 1024:
+        return max(messages // 3, 20)
+    return messages
+
+
+def measure(sizes: list[int], messages: int, rounds: int) -> list[dict[str, Any]]:
+    from emos.msgs import UInt8MultiArray
+    from emos.transport import zenoh_net
+
+    group = f"bench{uuid.uuid4().hex[:8]}"
+    folder = tempfile.mkdtemp(prefix="emos-bench-net-")
+    port_ping, port_pong = _free_port(), _free_port()
+    ping_conf = _config_file(folder, "ping", port_ping, port_pong)
+    pong_conf = _config_file(folder, "pong", port_pong, port_ping)
+    spawn = mp.get_context("spawn")  # a fresh interpreter: no Zenoh session or thread inherited
+    ready = spawn.Event()
+    echo = spawn.Process(target=_echo_main, args=(pong_conf, group, ready), name="emos-bench-net-echo", daemon=True)
+    echo.start()
+    results = []
+    try:
+        if not ready.wait(60):
+            raise RuntimeError("the echo process did not come up within 60 s")
+        ends = {t: _End(ping_conf, group, t, "ping") for t in TRANSPORTS}
+        time.sleep(0.5)  # let the two sessions connect and match subscriptions
+        for size in sizes:
+            data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+            payloads = {"emos-zenoh": UInt8MultiArray(data=data), "zenoh": data.tobytes()}
+            samples: dict[str, list[float]] = {t: [] for t in TRANSPORTS}
+            lost = {t: 0 for t in TRANSPORTS}
+            count = max(_messages_for(size, messages) // rounds, 5)
+            for _ in range(rounds):
+                for t in TRANSPORTS:
+                    got, missing = _round_trips(ends[t], payloads[t], count)
+                    samples[t] += got
+                    lost[t] += missing
+            for t in TRANSPORTS:
+                pct = percentiles(samples[t], (50, 95))
+                mean_rtt_s = 2 * sum(samples[t]) / len(samples[t]) / 1e6
+                results.append({
+                    "transport": t, "payload_bytes": size, "p50_us": round(pct["p50"], 1), "p95_us": round(pct["p95"], 1),
+                    "samples": len(samples[t]), "lost": lost[t], "mb_per_s": round(2 * size / mean_rtt_s / 1e6, 2),
+                })
+    finally:
+        echo.kill()
+        echo.join(5)
+        zenoh_net.close_sessions()
+    return results
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
+    except ValueError:
+        print(f"emos bench net: --sizes must be byte counts separated by ',', got {args.sizes!r}", file=sys.stderr)
+        return 2
+    if not sizes or min(sizes) < 1 or args.messages < 1 or args.rounds < 1:
+        print("emos bench net: sizes, --messages and --rounds must be >= 1", file=sys.stderr)
+        return 2
+    results = measure(sizes, args.messages, args.rounds)
+    for size in sizes:
+        raw = next(r for r in results if r["transport"] == "zenoh" and r["payload_bytes"] == size)
+        for r in results:
+            if r["payload_bytes"] == size and r["transport"] == "emos-zenoh":
+                r["overhead_p50_pct"] = round(100.0 * (r["p50_us"] - raw["p50_us"]) / raw["p50_us"], 1)
+    if args.json:
+        print(json.dumps({"method": "pingpong over Zenoh, TCP on 127.0.0.1, two processes", "results": results}))
+        return 0
+    print(table(results, [("transport", "transport", "s"), ("payload_bytes", "bytes", "d"), ("p50_us", "p50 us", ".1f"),
+                          ("p95_us", "p95 us", ".1f"), ("mb_per_s", "MB/s", ".1f"), ("overhead_p50_pct", "EMOS overhead %", ".1f")]))
+    return 0
