@@ -189,43 +189,79 @@ def test_goto_navigation_reads_the_goal_from_the_map(tmp_path, recipe_server):
         assert system.stop() == 0
 
 
-def test_vla_manipulation_commands_the_arm_until_canceled(tmp_path, recipe_server):
+def _sim_status(system: SystemUnderTest) -> dict:
+    from emos.core.node import control_socket
+    from emos.core.rpc import RpcClient
+
+    client = RpcClient(control_socket(system.ctx, "sim"))
+    try:
+        return client.call("execute_method", method="sim_status", timeout=10.0)
+    finally:
+        client.close()
+
+
+def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_server):
+    """The recipe's VLA drives the Simulator's table-top arm: its commands reach the arm, and
+    as the stand-in policy holds the observed pose, an arm pushed elsewhere is held there."""
+    import shutil
     import threading
 
     from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
                                                              VisionLanguageActionResult)
     from emos.core.services import ActionCanceled, ActionClient
-    from tests.agents.test_agents_component_vla import JOINTS, Arm
 
-    import shutil
-
+    joints = ["Rotation", "Pitch", "Elbow", "Wrist_Pitch", "Wrist_Roll", "Jaw"]
     shutil.copytree(RECIPES / "models", tmp_path / "models")  # the recipe reads files beside itself
     env = {"EMOS_POLICY_PORT": str(recipe_server.lerobot_port)}
     system = SystemUnderTest(tmp_path, (RECIPES / "vla_manipulation.py").read_text(), duration=120, env=env)
-    system.wait_up(components=["vla_with_smolvla"], timeout=90)
+    system.wait_up(components=["sim", "vla_with_smolvla"], timeout=90)
     probe = Probe(system)
-    arm = Arm(probe)
     outcome: list = []
     try:
-        arm.thread.start()
+        states, commands = probe.sub("/joint_states", "JointState"), probe.sub("/joint_command", "JointState")
+        start = wait_until(states.latest, 30, what="the arm's joint states")
+        assert list(start.name) == joints
+        ready = dict(zip(start.name, start.position))
         client = ActionClient("vla_with_smolvla/vision_language_action", VisionLanguageActionGoal,
                               VisionLanguageActionFeedback, VisionLanguageActionResult, ctx=system.ctx)
+        before = _sim_status(system)["commands"]
 
         def run_goal() -> None:
             try:
-                outcome.append(client.send_goal(VisionLanguageActionGoal(task="pick up the oranges"), goal_id="g1", timeout=60))
+                outcome.append(client.send_goal(VisionLanguageActionGoal(task="pick up the oranges"), goal_id="g1", timeout=90))
             except ActionCanceled as exc:
                 outcome.append(exc)
 
         thread = threading.Thread(target=run_goal)
         thread.start()
-        wait_until(lambda: len(arm.commands) >= 3, 30, what="three joint commands at 3 Hz")
-        assert arm.commands[0].name == JOINTS
-        assert np.allclose(arm.commands[0].position, [0.1, -0.2, 0.3, -0.4, 0.5, 0.9])  # held (no URDF here)
+        sent: list = []
+
+        def vla_commands(count: int) -> bool:
+            sent.extend(c for c in commands.take() if len(c.name) == len(joints))  # not the test's own push
+            return len(sent) >= count
+
+        wait_until(lambda: vla_commands(3), 45, what="three VLA joint commands")
+        assert list(sent[0].name) == joints
+        # The policy holds the observed pose: the commands are the arm's ready pose.
+        assert np.allclose(sent[0].position, [ready[j] for j in joints], atol=0.05)
+        wait_until(lambda: _sim_status(system)["commands"] >= before + 3, 10, what="the simulator receiving the commands")
+        # Push the Rotation joint to 0.8 rad (a second source, e.g. an operator's teleop) for 2 s.
+        push_until = time.monotonic() + 2.0
+        while time.monotonic() < push_until:
+            probe.pub("/joint_command", M.JointState(name=["Rotation"], position=np.array([0.8])))
+            time.sleep(0.05)
+        moved = wait_until(lambda: (m := states.latest()) is not None and abs(m.position[0] - 0.8) < 0.05 and m, 10,
+                           what="the arm turned to 0.8 rad")
+        assert abs(moved.position[1] - ready["Pitch"]) < 0.05  # the other joints kept their pose
+        # The VLA observes the new pose and commands it: the loop holds the arm there.
+        sent.clear()
+        wait_until(lambda: vla_commands(3), 15, what="three more VLA joint commands")
+        assert all(abs(c.position[0] - 0.8) < 0.08 for c in sent[-2:])
+        time.sleep(1.0)
+        assert abs(states.latest().position[0] - 0.8) < 0.08
         assert client.cancel("g1")
-        thread.join(10)
+        thread.join(15)
         assert outcome and isinstance(outcome[0], ActionCanceled)
     finally:
-        arm.stop()
         probe.close()
         assert system.stop() == 0
