@@ -265,3 +265,33 @@ def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_
     finally:
         probe.close()
         assert system.stop() == 0
+
+
+def test_event_driven_vla_stops_the_player_on_the_referees_yes(tmp_path, recipe_server):
+    """The referee (VLM, every 10 s) answers YES; the Event on its verdict ends the player's goal
+    as a success, long before its max_timesteps failsafe."""
+    import shutil
+
+    from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
+                                                             VisionLanguageActionResult)
+    from emos.core.services import ActionClient
+
+    shutil.copytree(RECIPES / "models", tmp_path / "models")  # the recipe reads files beside itself
+    env = {"EMOS_POLICY_PORT": str(recipe_server.lerobot_port), "EMOS_MODELS_PORT": str(recipe_server.port)}
+    system = SystemUnderTest(tmp_path, (RECIPES / "event_driven_vla.py").read_text(), duration=120, env=env)
+    system.wait_up(components=["sim", "vla_player", "vlm_referee"], timeout=90)
+    probe = Probe(system)
+    try:
+        verdicts = probe.sub("/referee/verdict", "String")
+        wait_until(probe.sub("/joint_states", "JointState").latest, 30, what="the arm's joint states")
+        client = ActionClient("vla_player/vision_language_action", VisionLanguageActionGoal,
+                              VisionLanguageActionFeedback, VisionLanguageActionResult, ctx=system.ctx)
+        result = client.send_goal(VisionLanguageActionGoal(task="pick up the oranges"), goal_id="g1", timeout=90)
+        assert result.success, result.message
+        assert result.message.startswith("stop event after")
+        assert 1 <= result.timesteps < 400  # the referee asks every 10 s; the failsafe is 80 s at 5 Hz
+        assert any(v.data == "YES" for v in verdicts.take())
+        assert _sim_status(system)["commands"] >= result.timesteps  # the player's commands reached the arm
+    finally:
+        probe.close()
+        assert system.stop() == 0
