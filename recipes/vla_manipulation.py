@@ -4,15 +4,20 @@ SO-101-like arm from its joint states and two cameras.
     emos serve models --lerobot-port 8080 &      # stand-in policy server (holds the arm's pose)
     emos run recipes/vla_manipulation.py         # then send a goal to vla_with_smolvla/vision_language_action
 
-The arm (or the simulator) publishes ``joint_states``, ``camera`` and ``wrist_camera`` and
-follows ``joint_command``. Offline, the policy server is the deterministic stand-in of
-``emos serve models`` and the dataset description ships beside this recipe.
+The ``Simulator``'s table-top world (pybullet: the arm, three oranges, a bowl) stands in for
+the spec's Isaac Sim scene: it publishes ``joint_states``, ``camera`` and ``wrist_camera`` and
+follows ``joint_command``. On a real arm, drop the simulator: its driver publishes and
+follows the same topics (set ``EMOS_ARM_URDF`` to the arm's URDF for the joint caps).
+Offline, the policy server is the deterministic stand-in of ``emos serve models`` and the
+dataset description ships beside this recipe.
 """
 import os
 from pathlib import Path
 
 from emos import Launcher, Topic
 from emos.actors.agents import VLA, LeRobotClient, LeRobotPolicy, VLAConfig
+from emos.actors.sim import Simulator, SimulatorConfig
+from emos.actors.sim.arm import ARM_URDF
 
 HERE = Path(__file__).resolve().parent
 POLICY_PORT = int(os.environ.get("EMOS_POLICY_PORT", "8080"))
@@ -49,8 +54,8 @@ config = VLAConfig(
     action_sending_rate=3,  # Hz: How often we publish commands
     joint_names_map=joints_map,
     camera_inputs_map=camera_map,
-    # URDF for safety capping and joint limit verification, when the robot provides one
-    robot_urdf_file=os.environ.get("EMOS_ARM_URDF") or None,
+    # URDF for safety capping and joint limit verification (the simulated arm's own by default)
+    robot_urdf_file=os.environ.get("EMOS_ARM_URDF") or str(ARM_URDF),
 )
 
 vla = VLA(
@@ -62,6 +67,13 @@ vla = VLA(
 )
 vla.set_termination_trigger("timesteps", max_timesteps=50)
 
+# --- The simulated arm (instead of Isaac Sim / the real robot) ---
+# Cameras at the policy's observation rate: a CPU render costs ~55 ms per frame here.
+sim = Simulator("sim", config=SimulatorConfig(world="tabletop", camera_rate=3.0))
+sim.inputs(joint_command=joints_action)
+sim.outputs(joint_states=state, camera=camera1, wrist_camera=camera2)
+
 launcher = Launcher()
-launcher.add_pkg(components=[vla])
+launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
+launcher.add_pkg(components=[vla], package_name="manipulation", multiprocessing=True)
 launcher.bringup()

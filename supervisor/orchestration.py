@@ -47,9 +47,11 @@ class Orchestration:
     action_timeout: float = 10.0
 
     def all_events(self, components: Sequence[BaseComponent]) -> list[tuple[Event, list[Action]]]:
-        """Recipe events plus one per component whose trigger is an Event (it runs a step)."""
+        """Recipe events, the events components bring along (a VLA's stop event), and one per
+        component whose trigger is an Event (it runs a step)."""
         entries = list(self.events_actions)
         for c in components:
+            entries.extend(getattr(c, "_own_events_actions", ()))
             event = getattr(c, "_event_trigger", None)
             if event is not None:
                 entries.append((event, [step_action(c)]))

@@ -97,3 +97,60 @@ launcher.bringup()
         arm.stop()
         probe.close()
         assert system.stop() == 0
+
+
+def test_vla_event_termination_stops_the_running_goal_and_keeps_the_failsafe(tmp_path, model_server):
+    """Termination by event: with no firing the goal runs into max_timesteps (a failure); a
+    firing during a goal ends it (a success); a firing from before a goal does not end it."""
+    system = SystemUnderTest(tmp_path, AGENT_HEADER + f"""
+from emos import Event
+from emos.actors.agents import VLA, VLAConfig, LeRobotClient, LeRobotPolicy
+state = Topic(name="joint_states", msg_type="JointState")
+camera1 = Topic(name="camera", msg_type="Image")
+camera2 = Topic(name="wrist_camera", msg_type="Image")
+verdict = Topic(name="verdict", msg_type="String")
+policy = LeRobotPolicy(name="my_policy", policy_type="smolvla", checkpoint="hold-position",
+                       dataset_info_file={str(FIXTURES / "lerobot_info.json")!r}, actions_per_chunk=5)
+client = LeRobotClient(model=policy, port={model_server.lerobot_port})
+joints_map = {{"shoulder_pan.pos": "Rotation", "shoulder_lift.pos": "Pitch", "elbow_flex.pos": "Elbow",
+              "wrist_flex.pos": "Wrist_Pitch", "wrist_roll.pos": "Wrist_Roll", "gripper.pos": "Jaw"}}
+config = VLAConfig(observation_sending_rate=10, action_sending_rate=10, joint_names_map=joints_map,
+                   camera_inputs_map={{"front": camera1, "wrist": camera2}})
+vla = VLA(inputs=[state, camera1, camera2], outputs=[Topic(name="joint_command", msg_type="JointState")],
+          model_client=client, config=config, component_name="vla")
+vla.set_termination_trigger("event", stop_event=Event(verdict.msg.data.contains("YES")), max_timesteps=30)
+launcher = Launcher()
+launcher.add_pkg(components=[vla])
+launcher.bringup()
+""", duration=120).wait_up(components=["vla"], timeout=60)
+    probe = Probe(system)
+    arm = Arm(probe)
+    try:
+        arm.thread.start()
+        from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
+                                                                 VisionLanguageActionResult)
+        from emos.core.services import ActionClient
+
+        client = ActionClient("vla/vision_language_action", VisionLanguageActionGoal,
+                              VisionLanguageActionFeedback, VisionLanguageActionResult, ctx=system.ctx)
+        goal = VisionLanguageActionGoal(task="pick up the oranges")
+        probe.pub("/verdict", M.String(data="NO"))  # does not match: no firing
+        result = client.send_goal(goal, goal_id="g1", timeout=60)
+        assert not result.success and result.timesteps == 30
+        assert result.message == "max_timesteps (30) reached before the stop event fired"
+        probe.pub("/verdict", M.String(data="YES"))  # fires with no goal running
+        time.sleep(1.0)
+        outcome: list = []
+        feedback: list[int] = []
+        thread = threading.Thread(target=lambda: outcome.append(client.send_goal(
+            goal, goal_id="g2", feedback_callback=lambda f: feedback.append(f.timestep), timeout=60)))
+        thread.start()
+        wait_until(lambda: len(feedback) >= 5, 30, what="five timesteps of the second goal")  # the old firing did not end it
+        probe.pub("/verdict", M.String(data="YES, they are"))
+        thread.join(30)
+        assert outcome and outcome[0].success and outcome[0].message.startswith("stop event after")
+        assert 5 <= outcome[0].timesteps < 30
+    finally:
+        arm.stop()
+        probe.close()
+        assert system.stop() == 0

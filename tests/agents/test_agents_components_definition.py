@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from emos import FixedInput, Topic
+from emos import Event, FixedInput, Topic
 from emos import msgs as M
 from emos.actors.agents import (LLM, MLLM, VLM, ChromaClient, ChromaDB, LLMConfig, MapEncoding, MapLayer, OllamaClient,
                                 OllamaModel, Route, SemanticRouter, SpeechToTextConfig, Vision, VisionConfig)
@@ -162,5 +162,19 @@ def test_vla_mapping_limits_and_command_types(tmp_path):
     assert list(vla._command(M.JointState, names, values).position) == list(values)
     assert list(vla._command(M.JointTrajectory, names, values).points[0].positions) == list(values)
     assert vla._command(M.JointJog, names, values).joint_names == names
-    with pytest.raises(ValueError, match="termination by 'event' is not available yet"):
+    with pytest.raises(TypeError, match=r"set_termination_trigger\('event'\) needs stop_event=Event"):
         vla.set_termination_trigger("event")
+    with pytest.raises(ValueError, match="'keyboard' needs an interactive terminal"):
+        vla.set_termination_trigger("keyboard")
+    with pytest.raises(ValueError, match="stop_event is only used with mode='event'"):
+        vla.set_termination_trigger("timesteps", stop_event=Event(state))
+    verdict = Topic(name="verdict", msg_type="String")
+    success = Event(verdict.msg.data.contains("YES"))
+    vla.set_termination_trigger("event", stop_event=success, max_timesteps=400)
+    assert vla.termination == {"mode": "event", "max_timesteps": 400}
+    [(event, [action])] = vla._own_events_actions
+    assert event is success and action.component == "vla" and action.method_name == "stop_on_event"
+    from supervisor.orchestration import Orchestration  # the launcher hands the stop event to the Monitor
+    assert (success, [action]) in Orchestration().all_events([vla])
+    vla.set_termination_trigger("timesteps", max_timesteps=5)
+    assert vla._own_events_actions == [] and vla.termination == {"mode": "timesteps", "max_timesteps": 5}

@@ -5,8 +5,9 @@ goal runs, the component sends observations (joint states mapped to the policy's
 by ``joint_names_map``, camera frames by ``camera_inputs_map``, and the task) at
 ``observation_sending_rate``, and publishes the policy's actions, mapped back to the robot's
 joint names and capped to its joint limits, at ``action_sending_rate``. The goal ends after
-``max_timesteps`` (``set_termination_trigger("timesteps", ...)``), on cancel, or when the inputs
-go silent for ``input_timeout`` seconds.
+``max_timesteps`` (``set_termination_trigger("timesteps", ...)``), when a stop Event fires
+(``set_termination_trigger("event", stop_event=...)``: success, with ``max_timesteps`` as the
+failsafe), on cancel, or when the inputs go silent for ``input_timeout`` seconds.
 """
 from __future__ import annotations
 
@@ -92,6 +93,10 @@ class VLA(ModelComponent):
         self._check_policy(config)
         self.limits = self._limits(config)
         self.termination = {"mode": "timesteps", "max_timesteps": config.max_timesteps}
+        # (Event, [Action]) pairs this component needs the Monitor to run (its stop event); the
+        # Launcher's orchestration collects them with the recipe's own events.
+        self._own_events_actions: list[tuple[Any, list[Any]]] = []
+        self._stop_event_at: float | None = None  # monotonic time of the last stop-event firing
 
     # ------------------------------------------------------------------ definition-time checks
     def _check_policy(self, config: VLAConfig) -> None:
@@ -131,17 +136,34 @@ class VLA(ModelComponent):
         return limits
 
     def set_termination_trigger(self, mode: str = "timesteps", max_timesteps: int | None = None, stop_event: Any = None) -> None:
-        """How a goal ends: ``"timesteps"`` after ``max_timesteps``. ``"event"`` needs the events
-        module and ``"keyboard"`` a terminal; both are refused here with the reason."""
-        if mode == "timesteps":
-            steps = self.config.max_timesteps if max_timesteps is None else max_timesteps
-            self.config.max_timesteps = steps  # validated by the config
-            self.termination = {"mode": mode, "max_timesteps": steps}
-        elif mode in ("event", "keyboard"):
-            raise ValueError(f"component {self.component_name!r}: termination by {mode!r} is not available yet "
-                             "(it needs the events module); use 'timesteps', or cancel the goal")
-        else:
+        """How a goal ends: ``"timesteps"`` after ``max_timesteps``; ``"event"`` when
+        ``stop_event`` (an :class:`emos.Event`) fires, a success, with ``max_timesteps`` as the
+        failsafe (a failure). ``"keyboard"`` needs a terminal and is refused with the reason."""
+        if mode not in ("timesteps", "event", "keyboard"):
             raise ValueError(f"component {self.component_name!r}: termination trigger must be 'timesteps', 'event' or 'keyboard', got {mode!r}")
+        if mode == "keyboard":
+            raise ValueError(f"component {self.component_name!r}: termination by 'keyboard' needs an interactive terminal, "
+                             "which components run under the supervisor do not have; use 'timesteps' or 'event', or cancel the goal")
+        if mode == "event" and not getattr(stop_event, "_is_emos_event", False):
+            raise TypeError(f"component {self.component_name!r}: set_termination_trigger('event') needs stop_event=Event(...), "
+                            f"got {type(stop_event).__name__} {stop_event!r}")
+        if mode == "timesteps" and stop_event is not None:
+            raise ValueError(f"component {self.component_name!r}: stop_event is only used with mode='event'")
+        steps = self.config.max_timesteps if max_timesteps is None else max_timesteps
+        self.config.max_timesteps = steps  # validated by the config
+        self.termination = {"mode": mode, "max_timesteps": steps}
+        if mode == "event":
+            from emos.events.action import Action
+
+            self._own_events_actions = [(stop_event, [Action(self.stop_on_event)])]
+        else:
+            self._own_events_actions = []
+
+    def stop_on_event(self) -> None:
+        """Run by the Monitor (inside this component) when the stop event fires: the running
+        goal, if any, ends as a success at its next timestep."""
+        self._stop_event_at = time.monotonic()
+        self.get_logger().info("[%s] stop event fired: the running goal, if any, ends", self.component_name)
 
     def prepare(self, inputs: dict[str, Any], trigger: Topic | None) -> None:
         return None  # an action server: goals, not triggers, drive it
@@ -184,10 +206,13 @@ class VLA(ModelComponent):
         observe_every = max(1, round(cfg.action_sending_rate / cfg.observation_sending_rate))
         chunk: ActionChunk | None = None
         step, last_input = 0, time.monotonic()
-        next_at = time.monotonic()
+        started = next_at = time.monotonic()
+        by_event = self.termination["mode"] == "event"
         while step < max_steps:
             if goal_handle.is_cancel_requested:
                 return VisionLanguageActionResult(success=False, timesteps=step, message="canceled")
+            if by_event and self._stop_event_at is not None and self._stop_event_at >= started:
+                return VisionLanguageActionResult(success=True, timesteps=step, message=f"stop event after {step} timesteps")
             if step % observe_every == 0 or chunk is None:
                 observation = self._observation(self._inputs_now(), task, step)
                 if isinstance(observation, str):
@@ -212,6 +237,9 @@ class VLA(ModelComponent):
             self.health_status.set_healthy()
             next_at += period
             time.sleep(max(0.0, next_at - time.monotonic()))
+        if by_event:
+            return VisionLanguageActionResult(success=False, timesteps=step,
+                                              message=f"max_timesteps ({step}) reached before the stop event fired")
         return VisionLanguageActionResult(success=True, timesteps=step, message=f"{step} timesteps")
 
     @staticmethod
