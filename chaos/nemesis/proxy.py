@@ -84,6 +84,7 @@ class FaultProxy:
     # -- the proxy (its own loop) -----------------------------------------------------------------
     def _run(self) -> None:
         loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)  # this thread's own loop (gather at shutdown looks it up)
         self._loop = loop
         try:
             self._server = loop.run_until_complete(asyncio.start_server(self._handle, *self.listen))
@@ -99,7 +100,8 @@ class FaultProxy:
             pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
             for t in pending:  # connections still being pumped end here, not as "destroyed" tasks
                 t.cancel()
-            loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+            if pending:
+                loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
             loop.close()
 
     def _cut_open_connections(self) -> None:
