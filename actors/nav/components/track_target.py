@@ -39,17 +39,18 @@ class StartVisionTracking(BaseComponent):
         self.action_name = f"{controller_name}/track_vision_target"
         self.goal = TrackVisionTargetGoal(label=label, search_radius=float(search_radius), search_timeout=float(search_timeout))
         self.connect_timeout = float(connect_timeout)
-        self._stop = threading.Event()
+        self._stop: threading.Event | None = None  # made at activation (keeps the component copyable)
         self._thread: threading.Thread | None = None
         self.result: TrackVisionTargetResult | None = None
 
     def custom_on_activate(self) -> None:
-        self._stop.clear()
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"{self.component_name}-goal", daemon=True)
         self._thread.start()
 
     def custom_on_deactivate(self) -> None:
-        self._stop.set()  # a goal in flight ends with the controller (it stops the robot itself)
+        if self._stop is not None:
+            self._stop.set()  # a goal in flight ends with the controller (it stops the robot itself)
 
     def _execution_step(self, **kwargs: Any) -> None:
         pass
@@ -57,22 +58,24 @@ class StartVisionTracking(BaseComponent):
     def _run(self) -> None:
         from emos.core.services import ActionClient
 
+        stop = self._stop
+        assert stop is not None
         client = ActionClient(self.action_name, TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult)
         deadline = time.monotonic() + self.connect_timeout
         last_error = ""
-        while not self._stop.is_set():
+        while not stop.is_set():
             try:
                 self.get_logger().info("[%s] sending %s goal (label %r)", self.component_name, self.action_name, self.goal.label)
                 self.result = client.send_goal(self.goal, feedback_callback=self._feedback)
-                self.get_logger().info("[%s] %s ended: success=%s, %s", self.component_name, self.action_name,
-                                       self.result.success, self.result.message)
+                log = self.get_logger().info if self.result.success else self.get_logger().warning
+                log("[%s] %s ended: success=%s, %s", self.component_name, self.action_name, self.result.success, self.result.message)
                 return
             except RpcConnectionError as exc:  # the controller is not serving yet
                 last_error = str(exc)
                 if time.monotonic() > deadline:
                     break
-                self._stop.wait(0.5)
-        if not self._stop.is_set():
+                stop.wait(0.5)
+        if not stop.is_set():
             message = f"action {self.action_name} not reachable within {self.connect_timeout:.0f} s: {last_error}"
             self.get_logger().error("[%s] %s", self.component_name, message)
             self.health_status.set_fail_system(message=message)
