@@ -100,6 +100,7 @@ class VisionTracking:
             follower.search.timeout = float(goal.search_timeout)
         period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
         self._tracking = True
+        last_msg = None  # the detections message the depth follower measured last
         try:
             while not goal_handle.is_cancel_requested:
                 try:
@@ -116,7 +117,9 @@ class VisionTracking:
                         continue
                     pose, vel = state
                     depth = self._depth(msg, follower.config.depth_conversion_factor)
-                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth)  # type: ignore[attr-defined]
+                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth,
+                                              new_measurement=msg is not last_msg)
+                    last_msg = msg  # type: ignore[attr-defined]
                 else:
                     result = follower.compute(box, self._last_cmd)  # type: ignore[attr-defined]
                 self.publish_result(result)  # type: ignore[attr-defined]

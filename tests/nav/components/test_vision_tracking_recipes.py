@@ -71,7 +71,7 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
         system.stop()
 
 
-@pytest.mark.parametrize("recipe,detections", [("vision_tracking_rgb.py", "/detections")])
+@pytest.mark.parametrize("recipe,detections", [("vision_tracking_rgb.py", "/detections"), ("vision_tracking_depth.py", "/detections")])
 def test_robot_turns_with_the_walking_person_and_keeps_its_distance(tmp_path, recipe, detections):
     r = _follow(tmp_path, recipe, detections)
     info = (f"bearing error mean {r['err'].mean():.2f} max {r['err'].max():.2f} rad; unfollowed bearing mean "
