@@ -71,15 +71,17 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
         system.stop()
 
 
-@pytest.mark.parametrize("recipe,detections", [("vision_tracking_rgb.py", "/detections"), ("vision_tracking_depth.py", "/detections")])
-def test_robot_turns_with_the_walking_person_and_keeps_its_distance(tmp_path, recipe, detections):
+# swing: how far (rad) the person's bearing from the robot's start pose goes either side
+@pytest.mark.parametrize("recipe,detections,swing", [("vision_tracking_rgb.py", "/detections", 0.45),
+                                                     ("vision_tracking_depth.py", "/detections", 0.3)])
+def test_robot_turns_with_the_walking_person_and_keeps_its_distance(tmp_path, recipe, detections, swing):
     r = _follow(tmp_path, recipe, detections)
     info = (f"bearing error mean {r['err'].mean():.2f} max {r['err'].max():.2f} rad; unfollowed bearing mean "
             f"{r['static'].mean():.2f}; distance {r['dist'].min():.2f}..{r['dist'].max():.2f} m; "
             f"yaw {r['yaw'].min():.2f}..{r['yaw'].max():.2f}\n{r['log']}")
     print(info.splitlines()[0])
-    assert r["static"].max() > 0.45, info  # unfollowed, the person would reach the image border ...
-    assert r["yaw"].max() - r["yaw"].min() > 0.35, info  # ... but the robot turned both ways with it,
+    assert r["static"].max() > swing, info  # unfollowed, the person would go this far off-centre ...
+    assert r["yaw"].max() - r["yaw"].min() > swing, info  # ... but the robot turned both ways with it,
     assert r["err"].max() < 0.35, info  # kept it well inside the view (half width ~0.66 rad),
     assert r["err"].mean() < 0.7 * r["static"].mean(), info  # nearer the centre than standing still would
     assert 1.0 < r["dist"].min() and r["dist"].max() < 3.5, info  # and at a bounded distance
