@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 from typing import Any
 
 from emos.config.base import BaseComponentConfig
@@ -50,25 +51,35 @@ class StartVisionTracking(BaseComponent):
 
     def custom_on_deactivate(self) -> None:
         if self._stop is not None:
-            self._stop.set()  # a goal in flight ends with the controller (it stops the robot itself)
+            self._stop.set()
+        client, goal_id = getattr(self, "_client", None), getattr(self, "_goal_id", None)
+        if client is not None and goal_id is not None and self.result is None:
+            try:  # a goal in flight is cancelled: the controller stops the robot
+                client.cancel(goal_id)
+            except (RpcConnectionError, OSError) as exc:  # the controller is gone already
+                self.get_logger().info("[%s] cancelling %s: %s", self.component_name, self.action_name, exc)
 
     def _execution_step(self, **kwargs: Any) -> None:
         pass
 
     def _run(self) -> None:
-        from emos.core.services import ActionClient
+        from emos.core.services import ActionCanceled, ActionClient
 
         stop = self._stop
         assert stop is not None
         client = ActionClient(self.action_name, TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult)
+        self._client, self._goal_id, self.result = client, uuid.uuid4().hex, None
         deadline = time.monotonic() + self.connect_timeout
         last_error = ""
         while not stop.is_set():
             try:
                 self.get_logger().info("[%s] sending %s goal (label %r)", self.component_name, self.action_name, self.goal.label)
-                self.result = client.send_goal(self.goal, feedback_callback=self._feedback)
+                self.result = client.send_goal(self.goal, feedback_callback=self._feedback, goal_id=self._goal_id)
                 log = self.get_logger().info if self.result.success else self.get_logger().warning
                 log("[%s] %s ended: success=%s, %s", self.component_name, self.action_name, self.result.success, self.result.message)
+                return
+            except ActionCanceled:
+                self.get_logger().info("[%s] %s goal cancelled", self.component_name, self.action_name)
                 return
             except RpcConnectionError as exc:  # the controller is not serving yet
                 last_error = str(exc)
