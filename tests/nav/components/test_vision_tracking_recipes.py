@@ -86,3 +86,17 @@ def test_robot_turns_with_the_walking_person_and_keeps_its_distance(tmp_path, re
     assert r["err"].mean() < 0.7 * r["static"].mean(), info  # nearer the centre than standing still would
     assert 1.0 < r["dist"].min() and r["dist"].max() < 3.5, info  # and at a bounded distance
     assert "lost" not in r["log"], info  # the tracking action never gave up
+
+
+def test_start_vision_tracking_rejects_bad_definitions():
+    from emos.actors.nav.components.track_target import StartVisionTracking
+
+    with pytest.raises(ValueError, match="label"):
+        StartVisionTracking(component_name="start", controller_name="controller", label="")
+    with pytest.raises(ValueError, match="controller_name"):
+        StartVisionTracking(component_name="start", controller_name="", label="person")
+    with pytest.raises(ValueError, match="connect_timeout"):
+        StartVisionTracking(component_name="start", controller_name="controller", label="person", connect_timeout=0)
+    start = StartVisionTracking(component_name="start", controller_name="my_controller", label="person", search_timeout=5)
+    assert start.action_name == "my_controller/track_vision_target"
+    assert (start.goal.label, start.goal.search_timeout) == ("person", 5.0)
