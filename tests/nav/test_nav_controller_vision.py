@@ -164,3 +164,20 @@ def test_rgbd_config_validation():
         VisionRGBDFollowerConfig(target_distance=-1.0)
     with pytest.raises(ValueError, match="depth_conversion_factor"):
         VisionRGBDFollowerConfig(depth_conversion_factor=0.0)
+
+
+def test_rgbd_follower_measures_a_detection_once_while_the_robot_turns():
+    """A detector slower than the control loop hands the same box over several steps. Projected
+    again with the robot's newer heading, that old box would put the (still) target wherever the
+    robot turned to; measured once, the target stays where it was seen."""
+    follower = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, VisionRGBDFollowerConfig(target_distance=2.0))
+    pose = np.zeros(3)
+    box, depth = camera(pose, (2.0, 0.6))
+    follower.compute(pose, np.zeros(3), box, depth)
+    seen = follower.tracker.position.copy()
+    np.testing.assert_allclose(seen, [2.0, 0.6], atol=0.05)
+    turned = np.array([0.0, 0.0, 0.3])  # the robot turned towards it; the box is the old one
+    follower.compute(turned, np.zeros(3), box, depth, new_measurement=False)
+    np.testing.assert_allclose(follower.tracker.position, seen, atol=1e-9)
+    follower.compute(turned, np.zeros(3), box, depth, new_measurement=True)  # re-measured: it moves
+    assert np.hypot(*(follower.tracker.position - seen)) > 0.1

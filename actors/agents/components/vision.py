@@ -5,6 +5,11 @@ Detections come from the model client's detector (e.g. a ``VisionModel`` on Robo
 inside the component's process. Frames are taken latest-first: while a frame is being
 processed only the newest one waits, older ones are dropped and counted, so a slow detector
 never builds a backlog. Trackings outputs get ids and pixel velocities from a centroid tracker.
+
+An ``RGBD`` input is detected on its colour image and its depth image travels with the
+detections (``Detections.image``), so a depth follower needs no second, unsynchronised
+subscription. With ``include_image`` the frame travels with them (a compressed frame decoded
+to rgb8), so consumers know the image size and can read the pixels.
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ from attrs import define, field
 from emos.config import validators as V
 from emos.io.topic import Topic
 from emos.msgs import intelligence as I
+from emos.msgs.control import RGBD
 from emos.msgs.sensor import Image
 
 from ..logic.tracking import CentroidTracker
@@ -46,7 +52,7 @@ class VisionConfig(ModelComponentConfig):
 
 class Vision(ModelComponent):
     CONFIG_CLASS: ClassVar[type] = VisionConfig
-    ALLOWED_INPUTS: ClassVar[tuple[type, ...]] = IMAGE_TYPES
+    ALLOWED_INPUTS: ClassVar[tuple[type, ...]] = IMAGE_TYPES + (RGBD,)
     ALLOWED_OUTPUTS: ClassVar[tuple[type, ...]] = DETECTION_OUTPUTS
     PENDING_POLICY: ClassVar[str] = "latest"
     MODEL_OPTIONAL: ClassVar[bool] = True
@@ -89,7 +95,8 @@ class Vision(ModelComponent):
             if t.name not in inputs:
                 continue
             try:
-                frames.append((t.name, image_of(inputs[t.name], t.name), inputs[t.name]))
+                msg = inputs[t.name]
+                frames.append((t.name, image_of(msg.rgb if isinstance(msg, RGBD) else msg, t.name), msg))
             except ImageInputError as exc:
                 self.health_status.set_fail_system(topic_names=[t.name], message=str(exc))
                 self._errors(f"image:{t.name}", "[%s] %s", self.component_name, exc)
@@ -129,7 +136,7 @@ class Vision(ModelComponent):
         detections, trackings = [], []
         for (name, arr, msg), result in zip(frames, results):
             header = getattr(msg, "header", None) or header_now()
-            image = msg if (self.config.include_image and isinstance(msg, Image)) else None
+            image = _attached_image(msg, arr, header, self.config.include_image)
             detections.append(I.Detections(header=header, scores=result.scores, labels=result.labels, boxes=result.boxes, image=image))
             if any(issubclass(t.msg_type, (I.Trackings, I.TrackingsMultiSource)) for t in self.out_topics):
                 tr = self._trackers[name].update(result.boxes, result.labels, stamp)
@@ -144,6 +151,16 @@ class Vision(ModelComponent):
                 self.publish_output(topic, trackings[0])
             elif topic.msg_type is I.TrackingsMultiSource:
                 self.publish_output(topic, I.TrackingsMultiSource(header=header_now(), trackings=trackings))
+
+
+def _attached_image(msg: Any, rgb: np.ndarray, header: Any, include_image: bool) -> Image | None:
+    """The image that travels with the detections of ``msg``: an RGBD's depth (always), else the
+    frame itself if ``include_image`` (a compressed one as the rgb8 pixels that were detected on)."""
+    if isinstance(msg, RGBD):
+        return msg.depth
+    if not include_image:
+        return None
+    return msg if isinstance(msg, Image) else Image.from_numpy(rgb, encoding="rgb8", header=header)
 
 
 def _filter(result: Detection2D, keep: set[str]) -> Detection2D:

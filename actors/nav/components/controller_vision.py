@@ -63,11 +63,17 @@ class VisionTracking:
             return int(info.width), int(info.height)
         raise BadInput(f"{self.topic_name(self._vision_key)}: detections carry no image and no depth_camera_info is given: the image size is unknown")  # type: ignore[attr-defined]
 
-    def _depth(self, msg: Any) -> np.ndarray | None:
+    def _depth(self, msg: Any, conversion_factor: float) -> np.ndarray | None:
+        """The depth image in the units the follower's ``depth_conversion_factor`` turns into
+        metres. Integer depth (16UC1, mono16) is the camera's raw units (usually mm), taken as it
+        is; 32FC1 is already metres (REP 118), so it is divided by the factor to come out right."""
         image = self.latest("depth_image")  # type: ignore[attr-defined]
         if image is None and msg is not None and getattr(msg, "image", None) is not None and msg.image.encoding in _DEPTH_ENCODINGS:
             image = msg.image
-        return None if image is None else image.to_numpy()
+        if image is None:
+            return None
+        depth = image.to_numpy()
+        return depth / conversion_factor if image.encoding == "32FC1" else depth
 
     def _vision_follower(self) -> Any:
         cid = self.algorithm  # type: ignore[attr-defined]
@@ -94,6 +100,7 @@ class VisionTracking:
             follower.search.timeout = float(goal.search_timeout)
         period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
         self._tracking = True
+        last_msg = None  # the detections message the depth follower measured last
         try:
             while not goal_handle.is_cancel_requested:
                 try:
@@ -109,7 +116,10 @@ class VisionTracking:
                         time.sleep(period)
                         continue
                     pose, vel = state
-                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, self._depth(msg))  # type: ignore[attr-defined]
+                    depth = self._depth(msg, follower.config.depth_conversion_factor)
+                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth,
+                                              new_measurement=msg is not last_msg)
+                    last_msg = msg  # type: ignore[attr-defined]
                 else:
                     result = follower.compute(box, self._last_cmd)  # type: ignore[attr-defined]
                 self.publish_result(result)  # type: ignore[attr-defined]

@@ -131,6 +131,7 @@ class VisionRGBDFollower:
         self.distance: float | None = cfg.target_distance
         self.sensor_pose = sensor_offset(cfg.sensor_position_to_robot, cfg.sensor_rotation_to_robot)
         self._detour_side = 1.0
+        self._since_measurement = 0.0
 
     def _target_world(self, box: BoundingBox, depth: np.ndarray, pose: np.ndarray) -> np.ndarray | None:
         body = target_from_depth(box, depth, self.intrinsics, self.config.depth_conversion_factor)
@@ -143,10 +144,18 @@ class VisionRGBDFollower:
         return np.array([pose[0] + c * rx - s * ry, pose[1] + s * rx + c * ry])
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, target: BoundingBox | None,
-                depth_image: np.ndarray | None, obstacles: ObstacleInput = None) -> ControlResult:
+                depth_image: np.ndarray | None, obstacles: ObstacleInput = None, new_measurement: bool = True) -> ControlResult:
+        """One control step. ``new_measurement=False`` says ``target`` is the detection already
+        used in an earlier step (the detector runs slower than the control loop): it is not
+        measured again, as projecting an old box with the robot's newer pose would move the
+        target with the robot's own turning; the target's predicted position is followed."""
         cfg = self.config
         pose, velocity = robot_state(pose, velocity)
         dt = cfg.control_time_step
+        self._since_measurement += dt
+        if target is not None and depth_image is not None and not new_measurement and self.tracker.position is not None:
+            predicted = self.tracker.predict(dt)
+            return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
         measured = None
         if target is not None and depth_image is not None:
             measured = self._target_world(target, depth_image, pose)
@@ -159,7 +168,8 @@ class VisionRGBDFollower:
             cmds = ramp_commands(self.robot, velocity, cmd[None], dt, cfg.control_horizon)[0]
             return ControlResult(cmds, integrate_sequence(pose, cmds, dt)[0], status)
         self.tracker.predict(dt)
-        position = self.tracker.update(measured, dt)
+        position = self.tracker.update(measured, self._since_measurement)  # velocity over the time between measurements
+        self._since_measurement = 0.0
         local = measured - pose[:2]
         self.search.seen(math.sin(wrap_angle(math.atan2(local[1], local[0]) - pose[2])))
         if self.distance is None:
