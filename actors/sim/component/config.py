@@ -60,7 +60,12 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
             idx = int(value.split(":", 1)[1])
         except ValueError:
             raise ValueError(f"SimulatorConfig.world {value!r}: a BARN world is 'barn:<index>', e.g. 'barn:0'") from None
-        worlds = load_barn_worlds(getattr(instance, "barn_source", None))
+        source = getattr(instance, "barn_source", None)
+        try:
+            worlds = load_barn_worlds(source)
+        except (FileNotFoundError, ValueError) as exc:
+            raise ValueError(f"SimulatorConfig.world {value!r}: cannot read the BARN worlds "
+                             f"(barn_source {source!r}): {exc}") from None
         if idx not in worlds:
             raise ValueError(f"SimulatorConfig.world {value!r}: no BARN world {idx} (indices {min(worlds)}..{max(worlds)})")
         return
