@@ -29,12 +29,13 @@ class BarnWorld:
         return barn_metric(success, time_s, self.path_length)
 
 
-def barn_metric(success: bool, time_s: float, path_length: float) -> float:
-    """Official score of one run: success * T / clip(t, 2T, 8T) with T = path_length / 2 m/s."""
+def barn_metric(success: bool, time_s: float, path_length: float, low: float = 2.0) -> float:
+    """Official score of one run: success * T / clip(t, 2T, 8T) with T = path_length / 2 m/s.
+    ``low=4`` is the 2022-23 rule (clip from 4T: best score 0.25)."""
     if not success:
         return 0.0
     optimal = path_length / BARN_TOP_SPEED
-    return optimal / float(np.clip(time_s, 2 * optimal, 8 * optimal))
+    return optimal / float(np.clip(time_s, low * optimal, 8 * optimal))
 
 
 def repo_root() -> Path:

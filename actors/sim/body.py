@@ -8,9 +8,10 @@ import attrs
 import numpy as np
 
 from . import _deps
-from .robots import RobotSpec, accelerate, feasible_command, integrate
+from .robots import RobotSpec, feasible_command, integrate
 
 if TYPE_CHECKING:
+    from .dynamics.base import DriveModel
     from .world import World
 
 # The collision box floats this far above the floor so it never touches the ground plane.
@@ -32,20 +33,31 @@ def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
 
 
 class SimRobot:
-    """A robot in a World. ``command(vx, vy, omega)`` sets the velocity target; each tick the
-    world limits, perturbs and integrates it, then checks contacts.
+    """A robot in a World. ``command(vx, vy, omega)`` sets the velocity target; each tick its
+    drive model (``actors/sim/dynamics``) turns it into motion, which is integrated; then the
+    world checks contacts.
 
-    ``slip`` is the fraction of wheel motion lost to the ground (the body moves less than the
-    encoders report, so wheel odometry drifts); ``actuation_noise`` is the relative standard
-    deviation of a per-tick random error on the achieved velocity.
+    ``drive`` is a :class:`DriveModel` or its name; None = the spec's ``default_drive``. For
+    the ideal drive, ``slip`` is the fraction of wheel motion lost to the ground (the body
+    moves less than the encoders report, so wheel odometry drifts) and ``actuation_noise`` the
+    relative standard deviation of a per-tick random error on the achieved velocity.
     """
 
     def __init__(self, world: "World", spec: RobotSpec, name: str, pose: tuple[float, float, float],
-                 slip: float = 0.0, actuation_noise: float = 0.0, rng: np.random.Generator | None = None) -> None:
+                 slip: float = 0.0, actuation_noise: float = 0.0, rng: np.random.Generator | None = None,
+                 drive: "DriveModel | str | None" = None) -> None:
+        from .dynamics import IdealDrive, make_drive
+
         if not 0.0 <= slip < 1.0:
             raise ValueError(f"SimRobot slip must be in [0, 1), got {slip!r}")
         if actuation_noise < 0:
             raise ValueError(f"SimRobot actuation_noise must be >= 0, got {actuation_noise!r}")
+        drive = drive if drive is not None else spec.default_drive
+        if drive == "ideal":
+            drive = IdealDrive(slip, actuation_noise)
+        elif slip or actuation_noise:
+            raise ValueError(f"SimRobot slip and actuation_noise belong to the ideal drive; drive {drive!r} models its own")
+        self.drive = make_drive(drive)
         self.world, self.spec, self.name = world, spec, name
         self.slip, self.actuation_noise = float(slip), float(actuation_noise)
         self.rng = rng if rng is not None else np.random.default_rng(0)
@@ -55,17 +67,22 @@ class SimRobot:
         self.twist = np.zeros(3)  # achieved body twist (ground truth)
         self.wheel_twist = np.zeros(3)  # what the wheels turn at (what encoders see)
         self._command = np.zeros(3)
+        self._command_stamp = -math.inf
         self.collided = False  # ever touched anything
         self.contacts: list[Contact] = []  # contacts of the last tick
         self.trail: list[tuple[float, float]] = [(float(pose[0]), float(pose[1]))]
         self.distance_travelled = 0.0
         self.body_id, self.visual_id = self._create_bodies()
+        self.drive.bind(spec, self.rng)
+        self.drive.reset(self.pose)
         self._place()
 
     # -- pybullet bodies -------------------------------------------------------------------
     def _create_bodies(self) -> tuple[int, int | None]:
         pb, c, s = _deps.pybullet(), self.world.client, self.spec
-        if s.radius > 0:
+        if s.collision:
+            col, vis = self._compound_shape()
+        elif s.radius > 0:
             col = c.createCollisionShape(pb.GEOM_CYLINDER, radius=s.radius, height=s.height)
             vis = -1 if s.urdf else c.createVisualShape(pb.GEOM_CYLINDER, radius=s.radius, length=s.height, rgbaColor=list(s.color))
         else:
@@ -86,6 +103,34 @@ class SimRobot:
                 c.setCollisionFilterGroupMask(visual, link, 0, 0)
         return body, visual
 
+    def _compound_shape(self) -> tuple[int, int]:
+        """Collision and visual shapes of the spec's parts, relative to a base at half height."""
+        pb, c, s = _deps.pybullet(), self.world.client, self.spec
+        axle = c.getQuaternionFromEuler([math.pi / 2, 0.0, 0.0])  # cylinder axis (z) onto y
+        kinds, dims, positions, orientations = [], [], [], []
+        for part in s.collision:
+            x, y, z = part.center
+            positions.append([x, y, z - s.height / 2 - GROUND_CLEARANCE])  # parts stay where the spec puts them
+            if part.kind == "box":
+                kinds.append(pb.GEOM_BOX)
+                dims.append(dict(halfExtents=[v / 2 for v in part.size]))
+                orientations.append([0, 0, 0, 1])
+            else:
+                kinds.append(pb.GEOM_CYLINDER)
+                dims.append(dict(radius=part.size[0], height=part.size[1]))
+                orientations.append(axle)
+        col = c.createCollisionShapeArray(
+            shapeTypes=kinds, radii=[d.get("radius", 0.0) for d in dims],
+            halfExtents=[d.get("halfExtents", [0, 0, 0]) for d in dims], lengths=[d.get("height", 0.0) for d in dims],
+            collisionFramePositions=positions, collisionFrameOrientations=orientations)
+        vis = -1
+        if not s.urdf:
+            vis = c.createVisualShapeArray(
+                shapeTypes=kinds, radii=[d.get("radius", 0.0) for d in dims],
+                halfExtents=[d.get("halfExtents", [0, 0, 0]) for d in dims], lengths=[d.get("height", 0.0) for d in dims],
+                visualFramePositions=positions, visualFrameOrientations=orientations, rgbaColors=[list(s.color)] * len(kinds))
+        return col, vis
+
     def _place(self) -> None:
         c, (x, y, yaw), s = self.world.client, self.pose, self.spec
         cx, cy = x + s.center_offset * math.cos(yaw), y + s.center_offset * math.sin(yaw)
@@ -100,6 +145,7 @@ class SimRobot:
         if not np.all(np.isfinite(values)):
             raise ValueError(f"SimRobot.command needs finite (vx, vy, omega), got {values.tolist()!r}")
         self._command = feasible_command(self.spec, *values)
+        self._command_stamp = self.world.clock.now()
 
     @property
     def commanded(self) -> np.ndarray:
@@ -111,6 +157,8 @@ class SimRobot:
         self.twist[:] = 0.0
         self.wheel_twist[:] = 0.0
         self._command[:] = 0.0
+        self._command_stamp = -math.inf
+        self.drive.reset(self.pose)
         self.collided = False
         self.contacts = []
         self.trail = [(float(self.pose[0]), float(self.pose[1]))]
@@ -120,12 +168,12 @@ class SimRobot:
     def advance(self, dt: float) -> None:
         """Move one tick (called by the World before it checks contacts)."""
         self._previous = self.pose.copy()
-        self.wheel_twist = accelerate(self.spec, self.wheel_twist, self._command, dt)
-        actual = self.wheel_twist * (1.0 - self.slip)
-        if self.actuation_noise > 0 and np.any(actual):
-            actual = actual * (1.0 + self.actuation_noise * self.rng.standard_normal(3))
-        self.twist = actual
-        self.pose = integrate(self.pose, actual, dt)
+        command = self._command
+        timeout = self.drive.command_timeout
+        if timeout is not None and self.world.clock.now() - self._command_stamp > timeout + 1e-9:
+            command = np.zeros(3)  # the base's watchdog: a stale command is a stop
+        self.twist, self.wheel_twist = self.drive.step(command, dt)
+        self.pose = integrate(self.pose, self.twist, dt)
         self._place()
 
     def resolve_contacts(self, stamp: float, points: list[Any], names: dict[int, str]) -> None:
@@ -137,8 +185,9 @@ class SimRobot:
         if touching:
             self.collided = True
             self.pose = self._previous.copy()
-            self.twist[:] = 0.0
-            self.wheel_twist[:] = 0.0
+            self.twist = np.zeros(3)
+            self.wheel_twist = np.zeros(3)
+            self.drive.halt(self.pose)
             self._place()
         step = math.dist(self.trail[-1], self.pose[:2])
         if step > 0.02:  # keep the trail light: one point per 2 cm

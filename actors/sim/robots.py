@@ -33,6 +33,29 @@ def _pos(instance: object, attribute: attrs.Attribute, value: float) -> None:
 
 
 @attrs.define(frozen=True)
+class CollisionPart:
+    """One piece of a compound collision shape, in the base frame (z from the floor): a box
+    (``size`` = length, width, height) or a wheel (a cylinder whose axis is the y axis,
+    ``size`` = radius, width, unused)."""
+
+    kind: str = attrs.field(validator=attrs.validators.in_(("box", "wheel")))
+    center: tuple[float, float, float] = attrs.field(converter=lambda v: tuple(float(x) for x in v))
+    size: tuple[float, float, float] = attrs.field(converter=lambda v: tuple(float(x) for x in v))
+
+    def __attrs_post_init__(self) -> None:
+        if len(self.center) != 3 or len(self.size) != 3 or not all(math.isfinite(v) for v in self.center):
+            raise ValueError(f"CollisionPart needs a 3D center and size, got {self.center!r}, {self.size!r}")
+        if any(v <= 0 for v in (self.size if self.kind == "box" else self.size[:2])):
+            raise ValueError(f"CollisionPart {self.kind} size must be positive, got {self.size!r}")
+
+    def extent(self) -> tuple[float, float]:
+        """Half extents (x, y) of the part's footprint."""
+        if self.kind == "box":
+            return self.size[0] / 2, self.size[1] / 2
+        return self.size[0], self.size[1] / 2
+
+
+@attrs.define(frozen=True)
 class RobotSpec:
     """What a simulated robot is: footprint box, drive and limits (SI units)."""
 
@@ -57,6 +80,11 @@ class RobotSpec:
     color: tuple[float, float, float, float] = (0.15, 0.3, 0.8, 1.0)
     # > 0: the body is a vertical cylinder of this radius (length and width are its diameter).
     radius: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    # Non-empty: the collision shape is these parts (the official Jackal: chassis box and four
+    # wheels), centred on the base frame; length and width must be their bounding box.
+    collision: tuple[CollisionPart, ...] = attrs.field(default=(), converter=tuple)
+    # The drive model a robot of this spec gets unless told otherwise (see actors/sim/dynamics).
+    default_drive: str = "ideal"
 
     def __attrs_post_init__(self) -> None:
         if self.drive is DriveType.OMNI and not (self.max_vy > 0 and self.max_acc_y > 0):
@@ -65,6 +93,12 @@ class RobotSpec:
             raise ValueError(f"RobotSpec {self.name!r}: an Ackermann robot needs wheelbase and max_steer > 0")
         if self.radius > 0 and not (abs(self.length - 2 * self.radius) < 1e-9 and abs(self.width - 2 * self.radius) < 1e-9):
             raise ValueError(f"RobotSpec {self.name!r}: a cylinder robot's length and width must be 2 * radius")
+        if self.collision:
+            hx = max(abs(p.center[0]) + p.extent()[0] for p in self.collision)
+            hy = max(abs(p.center[1]) + p.extent()[1] for p in self.collision)
+            if abs(2 * hx - self.length) > 1e-6 or abs(2 * hy - self.width) > 1e-6:
+                raise ValueError(f"RobotSpec {self.name!r}: length x width must be the collision parts' bounding box "
+                                 f"({2 * hx:.4f} x {2 * hy:.4f} m)")
 
     @property
     def circumscribed_radius(self) -> float:
@@ -106,7 +140,21 @@ HOLONOMIC = RobotSpec(
     max_vx=1.0, max_vy=1.0, max_omega=2.0, max_acc_x=2.0, max_acc_y=2.0, max_acc_omega=4.0,
     color=(0.2, 0.6, 0.3, 1.0),
 )
-PRESETS: dict[str, RobotSpec] = {s.name: s for s in (JACKAL, TURTLEBOT3, TURTLEBOT3_WAFFLE_PI, RACECAR, HOLONOMIC)}
+# The Jackal as the BARN simulator models it: the official description's collision shape (a
+# 0.42 x 0.31 m chassis box and four wheels, r 0.098 m, 0.04 m wide, at (+-0.131, +-0.1878) m;
+# the fenders do not collide), the diff-drive controller's limits, and a drive model:
+# ``jackal-barn`` the calibrated skid-steer model, ``jackal-wheeled`` pybullet wheels.
+JACKAL_WHEEL_RADIUS = 0.098
+JACKAL_COLLISION = (
+    CollisionPart("box", (0.0, 0.0, JACKAL_WHEEL_RADIUS), (0.42, 0.31, 0.184)),
+    *(CollisionPart("wheel", (sx * 0.131, sy * 0.1878, JACKAL_WHEEL_RADIUS), (JACKAL_WHEEL_RADIUS, 0.04, 0.0))
+      for sx in (1, -1) for sy in (1, -1)),
+)
+JACKAL_BARN = attrs.evolve(JACKAL, name="jackal-barn", length=2 * (0.131 + JACKAL_WHEEL_RADIUS), width=2 * (0.1878 + 0.02),
+                           height=0.184 + JACKAL_WHEEL_RADIUS, collision=JACKAL_COLLISION, default_drive="skid-steer")
+JACKAL_WHEELED = attrs.evolve(JACKAL_BARN, name="jackal-wheeled", default_drive="wheeled")
+PRESETS: dict[str, RobotSpec] = {s.name: s for s in (JACKAL, JACKAL_BARN, JACKAL_WHEELED, TURTLEBOT3, TURTLEBOT3_WAFFLE_PI,
+                                                     RACECAR, HOLONOMIC)}
 PRESETS["turtlebot3_burger"] = TURTLEBOT3  # the TurtleBot3 model's full name
 
 

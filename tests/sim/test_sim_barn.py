@@ -30,11 +30,14 @@ def _empty(path_length, cylinders=()):
 
 
 @pytest.mark.parametrize("path_length", [1.0, 4.0, 10.0])
-def test_a_scripted_run_is_scored_by_the_official_formula(path_length):
-    r = run_episode(_empty(path_length), Straight(1.0))
-    # 9 m from the start (y = 3) to the goal circle (y = 12) at 1 m/s, plus the short ramp-up.
+@pytest.mark.parametrize("ideal", [False, True])
+def test_a_scripted_run_is_scored_by_the_official_formula(path_length, ideal):
+    r = run_episode(_empty(path_length), Straight(1.0), BarnRules(ideal=ideal))
+    # 9 m from the start (y = 3) to the goal circle (y = 12) at 1 m/s; the official clock
+    # starts after the first 0.1 m (the skid-steer base gets there later, then drives the same).
     assert r.success and not r.collided and not r.timeout
-    assert r.time_s == pytest.approx(9.03, abs=0.05)
+    assert r.time_s == pytest.approx(8.95, abs=0.05)
+    assert (r.yaw_gain is None) == ideal
     t_opt = path_length / 2.0
     assert r.metric == pytest.approx(t_opt / min(max(r.time_s, 2 * t_opt), 8 * t_opt))
     assert r.metric == pytest.approx(barn_metric(True, r.time_s, path_length))
@@ -62,8 +65,9 @@ def test_not_arriving_in_time_is_a_timeout():
 
 def test_summary_rates():
     res = [run_episode(_empty(10.0), Straight(1.0)), run_episode(_empty(10.0), Straight(0.0), BarnRules(time_limit=1.0))]
-    s = summarize(res)
-    assert s == {"success_rate": 0.5, "collision_rate": 0.0, "timeout_rate": 0.5, "mean_metric": 0.25}
+    s = summarize(res, seeds=1)
+    assert s == {"success_rate": 0.5, "collision_rate": 0.0, "timeout_rate": 0.5, "mean_metric": 0.25, "metric_4t": 0.125,
+                 "deadline_misses": 0, "mean_time_s": pytest.approx(res[0].time_s, abs=1e-3), "seeds": 1}
 
 
 def test_builtin_navigator_solves_a_real_barn_world():
@@ -84,15 +88,32 @@ def test_cli_json_output_has_exactly_the_documented_shape(tmp_path):
     path = tmp_path / "w.json"
     path.write_text(json.dumps({"5": {"cylinders": [], "path_length": 10.0},
                                 "6": {"cylinders": [[-2.25, y] for y in np.arange(4.2, 6, 0.15).tolist()], "path_length": 12.0}}))
-    out = _cli("--worlds-file", str(path), "--worlds", "5-6", "--json", "--png", str(tmp_path / "png"))
+    out = _cli("--in-process", "--worlds-file", str(path), "--worlds", "5-6", "--seeds", "2", "--json", "--png",
+               str(tmp_path / "png"))
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)  # nothing but JSON on stdout
     assert set(data) == {"worlds", "summary"}
-    assert [w["idx"] for w in data["worlds"]] == [5, 6]
-    assert set(data["worlds"][0]) == {"idx", "success", "collided", "timeout", "time_s", "metric"}
-    assert set(data["summary"]) == {"success_rate", "collision_rate", "timeout_rate", "mean_metric"}
+    assert [w["idx"] for w in data["worlds"]] == [5, 5, 6, 6]  # a row per trial: world x seed
+    assert set(data["worlds"][0]) == {"idx", "success", "collided", "timeout", "time_s", "metric", "seed", "metric_4t",
+                                      "deadline_misses"}
+    assert data["worlds"][0]["seed"] != data["worlds"][1]["seed"]
+    assert set(data["summary"]) == {"success_rate", "collision_rate", "timeout_rate", "mean_metric", "metric_4t",
+                                    "deadline_misses", "mean_time_s", "seeds"}
+    assert data["summary"]["seeds"] == 2
     assert data["worlds"][0]["success"] is True
-    assert (tmp_path / "png" / "barn_005.png").is_file() and (tmp_path / "png" / "barn_006.png").is_file()
+    assert sorted(p.name for p in (tmp_path / "png").iterdir()) == ["barn_005_s0.png", "barn_005_s1.png",
+                                                                    "barn_006_s0.png", "barn_006_s1.png"]
+
+
+def test_cli_ideal_and_dynabarn_options(tmp_path):
+    out = _cli("--worlds", "3", "--seeds", "1", "--ideal", "--robot", "jackal-wheeled")
+    assert out.returncode == 2 and "cannot go with --ideal" in out.stderr
+    out = _cli("--worlds", "3", "--noisy-odometry")
+    assert out.returncode == 2 and "variant of --ideal" in out.stderr
+    out = _cli("--in-process", "--dynabarn", "--worlds", "2", "--seeds", "1", "--json")
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    assert [w["idx"] for w in data["worlds"]] == [2] and data["summary"]["seeds"] == 1
 
 
 def test_cli_reports_a_missing_world_file_clearly(tmp_path):

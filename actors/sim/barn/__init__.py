@@ -1,14 +1,22 @@
 """``emos bench barn``: the BARN navigation benchmark in the simulator.
 
-Runs the selected worlds under the challenge rules (start, goal, 1 m radius, 100 s limit,
-collision = failure, official metric) with the Jackal-sized robot and its lidar, in lock-step
-with the simulation clock, and prints a row per world and a summary (or JSON with ``--json``).
+Runs the selected worlds under the challenge rules (start, goal, 1 m radius, 100 s on the
+official clock that starts after 0.1 m of motion, collision = failure, official metric), each
+with ``--seeds`` seeds (different sensor noise, odometry errors and yaw gain), in lock-step
+with the simulation clock, and prints a row per world and the summary over all trials (or
+JSON with ``--json``).
 
-By default each world runs through the product: the Simulator and the navigation components
-as supervised processes (:mod:`.stack`, :mod:`.process`), scored by a referee in the harness.
-``--in-process`` drives a navigator object in this process instead (fast, for development).
-Worlds come from ``--worlds-file``, else ``--barn-repo`` (a clone of the official repository,
-all 300 worlds), else the 250 shipped in the package.
+Realistic by default: the ``jackal-barn`` robot (calibrated skid-steer drive, official
+collision shape), the Jackal laser, wheel + IMU odometry, the navigator's compute time
+charged. ``--ideal``: the kinematic robot with ground-truth odometry of the first benchmark.
+``--robot jackal-wheeled``: pybullet wheels. ``--dynabarn``: the moving-obstacle set.
+
+Through the product by default: each trial runs the Simulator and the navigation components
+as supervised processes (:mod:`.stack`, :mod:`.process`), scored by a referee in the harness
+that alone reads the ground truth. ``--in-process`` drives a navigator object in this process
+instead (the fast path for development). BARN worlds come from ``--worlds-file``, else
+``--barn-repo`` (a clone of the official repository: all 300 worlds), else the 250 shipped in
+the package.
 """
 from __future__ import annotations
 
@@ -27,143 +35,184 @@ __all__ = ["BarnRules", "EpisodeResult", "add_arguments", "run", "run_episode", 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds-file", type=Path, default=None,
-                        help="BARN worlds JSON file (default: the 250 worlds shipped in the package)")
+                        help="world file (default: the 250 BARN worlds shipped in the package; "
+                             "with --dynabarn the shipped moving-obstacle set)")
     parser.add_argument("--barn-repo", type=Path, default=None, metavar="PATH",
                         help="read world_<i>.world and path_files/path_<i>.npy from a clone of "
                              "github.com/Daffan/the-barn-challenge (all 300 worlds)")
-    parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
-    parser.add_argument("--split", default="all", choices=SPLITS,
-                        help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
     parser.add_argument("--in-process", action="store_true",
-                        help="drive a navigator object in this process (fast path for development) instead of the "
-                             "Simulator and navigation components as supervised processes")
+                        help="drive a navigator object in this process (the fast path for development) instead of "
+                             "the Simulator and the navigation components as supervised processes")
+    parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
+    parser.add_argument("--split", default=None, choices=("tune", "report"),
+                        help="only the worlds to tune on (index %% 5 != 0) or to report apart (index %% 5 == 0)")
     parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
                         help="navigation controller to drive with")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
-    parser.add_argument("--seed", type=int, default=0, help="simulation seed")
+    parser.add_argument("--seeds", type=int, default=10, help="trials per world, each with its own noise and yaw gain "
+                                                              "(default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="base of the trial seeds (default 0)")
+    parser.add_argument("--ideal", action="store_true",
+                        help="the ideal robot: kinematic, ground-truth odometry, free compute (the first benchmark)")
+    parser.add_argument("--robot", default="jackal-barn", choices=("jackal-barn", "jackal-wheeled"),
+                        help="robot of the realistic configuration (default jackal-barn: skid-steer model)")
+    parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
-                        help="navigate on drifting wheel odometry with 2%% slip instead of ground truth (harder)")
+                        help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
 
 
-SPLITS = ("all", "tune", "test")
+def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
+    """Rates and mean scores over all trials (the official report), plus ``seeds`` per world."""
+    from ..barn_protocol import summarize_trials
+
+    s = summarize_trials(results)  # type: ignore[arg-type]  (same fields as a Trial)
+    out = {key: s[key] for key in ("success_rate", "collision_rate", "timeout_rate", "mean_metric", "metric_4t",
+                                   "deadline_misses", "mean_time_s")}
+    if seeds is not None:
+        out["seeds"] = seeds
+    return out
 
 
-def in_split(idx: int, split: str) -> bool:
-    """Tune on the worlds ``idx % 5 != 0``; report separately on ``idx % 5 == 0``."""
-    return split == "all" or (idx % 5 == 0) == (split == "test")
+def _load(args: argparse.Namespace) -> tuple[dict, list[int]]:
+    if args.dynabarn:
+        from ..dynabarn import load_dynabarn
+
+        worlds: dict = load_dynabarn(args.worlds_file)
+    else:
+        from ..barn_worlds import load_barn_worlds
+
+        worlds = load_barn_worlds(_barn_source(args))
+    from ..barn_worlds import parse_indices
+
+    indices = parse_indices(args.worlds) if args.worlds else list(worlds)
+    if args.split is not None:
+        indices = [i for i in indices if (i % 5 == 0) == (args.split == "report")]
+    return worlds, indices
 
 
-def summarize(results: list[EpisodeResult]) -> dict:
-    n = len(results)
-    if n == 0:
-        return {"success_rate": 0.0, "collision_rate": 0.0, "timeout_rate": 0.0, "mean_metric": 0.0}
-    return {
-        "success_rate": round(sum(r.success for r in results) / n, 4),
-        "collision_rate": round(sum(r.collided for r in results) / n, 4),
-        "timeout_rate": round(sum(r.timeout for r in results) / n, 4),
-        "mean_metric": round(sum(r.metric for r in results) / n, 4),
-    }
+def _barn_source(args: argparse.Namespace) -> Path | None:
+    """--worlds-file, else --barn-repo, else None (the packaged worlds)."""
+    if args.worlds_file is not None and args.barn_repo is not None:
+        raise ValueError("give --worlds-file or --barn-repo, not both")
+    if args.barn_repo is not None and args.dynabarn:
+        raise ValueError("--barn-repo reads BARN worlds; it cannot go with --dynabarn")
+    source = args.worlds_file if args.worlds_file is not None else args.barn_repo
+    return None if source is None else Path(source).expanduser().resolve()
+
+
+def _rules(args: argparse.Namespace) -> BarnRules:
+    if args.ideal and args.robot != "jackal-barn":
+        raise ValueError("--robot chooses the robot of the realistic configuration; it cannot go with --ideal")
+    if args.noisy_odometry and not args.ideal:
+        raise ValueError("--noisy-odometry is a variant of --ideal (the realistic configuration has wheel + IMU odometry)")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..barn_worlds import load_barn_worlds, parse_indices
+    from ..barn_protocol import trial_seed
+    from .controllers import make_controller
 
-    if args.worlds_file is not None and args.barn_repo is not None:
-        print("emos bench barn: give --worlds-file or --barn-repo, not both", file=sys.stderr)
-        return 2
-    source = args.worlds_file if args.worlds_file is not None else args.barn_repo
-    if not args.in_process and args.png is not None:
-        print("emos bench barn: --png draws the in-process run; add --in-process", file=sys.stderr)
-        return 2
     try:
-        worlds = load_barn_worlds(source)
-        indices = parse_indices(args.worlds) if args.worlds else list(worlds)
+        rules = _rules(args)
+        worlds, indices = _load(args)
     except (FileNotFoundError, ValueError) as exc:
         print(f"emos bench barn: {exc}", file=sys.stderr)
         return 2
     missing = [i for i in indices if i not in worlds]
-    indices = [i for i in indices if i in worlds and in_split(i, args.split)]
+    indices = [i for i in indices if i in worlds]
     if missing:
         # The shipped file holds 250 of 300 worlds (no multiples of 6): ranges skip the gaps.
         print(f"emos bench barn: skipping {len(missing)} world(s) not in the file: {missing}", file=sys.stderr)
     if not indices:
         print(f"emos bench barn: none of the selected worlds is in the file "
-              f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)}, split {args.split})", file=sys.stderr)
+              f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
-    rules = BarnRules(noisy_odometry=args.noisy_odometry)
     if args.in_process:
-        episode = _in_process_episode(worlds, rules, args)
-        mode = ""  # the in-process output stays as it always was
+        mode = ""
     else:
         try:
-            episode = _process_episode(worlds, rules, args, None if source is None else str(Path(source).resolve()))
+            episode = _process_episode(worlds, rules, args)
         except ValueError as exc:
             print(f"emos bench barn: {exc}", file=sys.stderr)
             return 2
         mode = "supervised processes, "
+    name = "DynaBARN-style" if args.dynabarn else "BARN"
+    config = "ideal (kinematic, true odometry)" if rules.ideal else f"realistic ({rules.robot}, laser, wheel+IMU odometry)"
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
     if not args.json:
-        print(f"BARN: {len(indices)} worlds, controller {args.controller}, {mode}lock-step sim clock")
-        print(f"{'world':>5} {'result':<9} {'time_s':>7} {'metric':>7} {'dist_m':>7} {'wall_s':>7}  detail")
+        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, {mode}lock-step")
+        print(f"{'world':>5} {'success':>7} {'collide':>7} {'timeout':>7} {'time_s':>7} {'metric':>7} {'m_4t':>6} "
+              f"{'misses':>6} {'wall_s':>7}  first failure")
     for n, idx in enumerate(indices, 1):
-        r = episode(idx)
-        results.append(r)
-        status = "success" if r.success else ("collision" if r.collided else "timeout")
+        key = f"dynabarn:{idx}" if args.dynabarn else idx
+        rows = []
+        for k in range(args.seeds):
+            seed = trial_seed(key, k, base=args.seed)
+            if args.in_process:
+                png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
+                rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
+            else:
+                rows.append(episode(idx, seed))
+        results.extend(rows)
+        if args.json and not args.in_process:  # slow enough to want progress; stdout stays pure JSON
+            ok = sum(r.success for r in rows)
+            print(f"barn: world {idx} ({n}/{len(indices)}) {ok}/{len(rows)} success, "
+                  f"{sum(r.wall_s for r in rows):.1f} s wall", file=sys.stderr, flush=True)
         if not args.json:
-            print(f"{r.idx:>5} {status:<9} {r.time_s:>7.2f} {r.metric:>7.3f} {r.distance_m:>7.2f} {r.wall_s:>7.2f}  {r.reason}",
-                  flush=True)
-        elif not args.in_process:  # slow enough to want a progress line; stdout stays pure JSON
-            print(f"barn: world {idx} ({n}/{len(indices)}) {status} {r.time_s:.2f} s, {r.wall_s:.1f} s wall",
-                  file=sys.stderr, flush=True)
-    summary = summarize(results)
+            s = summarize(rows)
+            fail = next((f"seed {k}: {r.reason}" for k, r in enumerate(rows) if not r.success), "")
+            mean_t = f"{s['mean_time_s']:>7.2f}" if s["mean_time_s"] is not None else f"{'-':>7}"
+            print(f"{idx:>5} {s['success_rate']:>7.2f} {s['collision_rate']:>7.2f} {s['timeout_rate']:>7.2f} {mean_t} "
+                  f"{s['mean_metric']:>7.3f} {s['metric_4t']:>6.3f} {s['deadline_misses']:>6} "
+                  f"{sum(r.wall_s for r in rows):>7.1f}  {fail}", flush=True)
+    summary = summarize(results, args.seeds)
     if args.json:
         print(json.dumps({"worlds": [r.as_json() for r in results], "summary": summary}))
         return 0
-    ok = [r for r in results if r.success]
-    sim_total = sum(r.time_s for r in results)
     wall_total = time.perf_counter() - wall0
     print()
-    print(f"worlds {len(results)}  success {summary['success_rate']:.3f}  collision {summary['collision_rate']:.3f}  "
-          f"timeout {summary['timeout_rate']:.3f}  mean metric {summary['mean_metric']:.4f}")
-    if args.split == "all":
-        for split in ("tune", "test"):
-            part = [r for r in results if in_split(r.idx, split)]
-            if part and len(part) < len(results):
-                s = summarize(part)
-                print(f"  {split} worlds (idx % 5 {'!=' if split == 'tune' else '=='} 0): {len(part)}  "
-                      f"success {s['success_rate']:.3f}  mean metric {s['mean_metric']:.4f}")
-    if ok:
-        print(f"mean time of successful runs {sum(r.time_s for r in ok) / len(ok):.2f} s")
-    print(f"simulated {sim_total:.1f} s in {wall_total:.1f} s wall ({sim_total / max(wall_total, 1e-9):.1f}x real time)")
+    _print_summary("all", summary, len(results))
+    if not args.dynabarn:
+        # The issue's split: tune on idx % 5 != 0, report idx % 5 == 0 apart.
+        for label, part in (("idx % 5 != 0", [r for r in results if r.idx % 5 != 0]),
+                            ("idx % 5 == 0", [r for r in results if r.idx % 5 == 0])):
+            if part:
+                _print_summary(label, summarize(part), len(part))
+    print(f"wall {wall_total:.1f} s for {len(results)} trials")
     return 0
 
 
-def _in_process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -> Callable[[int], EpisodeResult]:
-    from .controllers import make_controller
-
-    def episode(idx: int) -> EpisodeResult:
-        png = args.png / f"barn_{idx:03d}.png" if args.png else None
-        return run_episode(worlds[idx], make_controller(args.controller), rules, seed=args.seed, png_path=png)
-
-    return episode
+def _print_summary(label: str, s: dict, n: int) -> None:
+    mean_t = f"{s['mean_time_s']:.2f} s" if s.get("mean_time_s") is not None else "-"
+    print(f"{label:<13} trials {n:>5}  success {s['success_rate']:.3f}  collision {s['collision_rate']:.3f}  "
+          f"timeout {s['timeout_rate']:.3f}  mean time {mean_t}  metric {s['mean_metric']:.4f}  "
+          f"metric_4t {s['metric_4t']:.4f}  deadline misses {s['deadline_misses']}")
 
 
-def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace,
-                     source: str | None) -> Callable[[int], EpisodeResult]:
+def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -> Callable[[int, int], EpisodeResult]:
+    """One trial through the supervised processes, as ``episode(world index, seed)``."""
     from .process import SystemFailed, run_episode_process
     from .stack import StackOptions
 
+    if args.dynabarn:
+        raise ValueError("--dynabarn runs in-process only for now; add --in-process")
+    if args.png is not None:
+        raise ValueError("--png draws the in-process run; add --in-process")
+    source = _barn_source(args)
     StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
 
-    def episode(idx: int) -> EpisodeResult:
-        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, barn_source=source, seed=args.seed)
+    def episode(idx: int, seed: int) -> EpisodeResult:
+        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
+                                           barn_source=None if source is None else str(source))
         try:
             return run_episode_process(worlds[idx], opts)
         except SystemFailed as exc:
-            # One broken world must not end a 250-world run: it counts as a failure, loudly.
-            print(f"emos bench barn: world {idx}: system failure: {exc}", file=sys.stderr, flush=True)
-            return EpisodeResult(idx, False, False, True, 0.0, 0.0, reason="system failure (see stderr)")
+            # One broken system must not end a 250-world run: it counts as a failure, loudly.
+            print(f"emos bench barn: world {idx} seed {seed}: system failure: {exc}", file=sys.stderr, flush=True)
+            return EpisodeResult(idx, False, False, True, 0.0, 0.0, seed=seed, reason="system failure (see stderr)")
 
     return episode

@@ -3,8 +3,9 @@ recipe :mod:`.stack` generates), scored by a referee that lives in the harness o
 
 The referee reads the Simulator's ground-truth output (true pose after every physics tick) and
 its ``sim_status`` (the sticky collision flag) over the component's control socket; nothing of
-either reaches the navigation stack. The episode clock starts at the simulated time the goal is
-given (the stack's start-up, before it has a goal, is not the robot's driving time).
+either reaches the navigation stack. It judges with the protocol's ``TrialMonitor`` (official
+timer from the first 0.1 m of motion), on simulated time counted from when the goal is given
+(the stack's start-up, before it has a goal, is not the robot's driving time).
 """
 from __future__ import annotations
 
@@ -18,7 +19,8 @@ from typing import Any
 
 import attrs
 
-from ..barn_worlds import BarnWorld
+from ..barn_protocol import TrialMonitor
+from ..barn_worlds import BARN_GOAL, BARN_START, BarnWorld
 from .harness import EpisodeResult, score_run
 from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, SIM_NAME, StackOptions, recipe_source
 
@@ -49,7 +51,7 @@ def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: floa
                     keep_log.write_bytes(log_path.read_bytes())
     reached, collided, t, distance, reason = outcome
     result = score_run(entry, reached, collided, t, opts.rules)
-    return attrs.evolve(result, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason)
+    return attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason)
 
 
 def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: StackOptions,
@@ -68,11 +70,12 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
     truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
+    monitor = TrialMonitor(BARN_START[:2], BARN_GOAL, rules.goal_radius, rules.time_limit)
     try:
-        # The episode starts at the simulated time the goal is given.
-        t0 = _latest_stamp(truth, proc, log_path)
-        goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=rules.goal[0], y=rules.goal[1]))
-        last_pose: tuple[float, float] | None = None
+        t0 = _latest_stamp(truth, proc, log_path)  # the trial starts when the goal is given
+        goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=BARN_GOAL[0], y=BARN_GOAL[1]))
+        last_xy: tuple[float, float] | None = None
+        last_t = 0.0
         distance = 0.0
         goal_sent = 0.0
         next_poll = 0.0
@@ -83,27 +86,34 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
                 goal.header.stamp = M.Time.from_sec(t0)
                 goal_pub.publish(goal)
                 goal_sent = now
+            collided = False
+            if now >= next_poll:
+                status = sim.execute_method("sim_status")
+                collided = bool(status.get("collided"))
+                next_poll = now + COLLISION_POLL_S
             for msg in truth.take():
                 t = msg.header.stamp.to_sec()
                 if t < t0:
                     continue
                 p = msg.pose.pose.position
                 xy = (p.x, p.y)
-                if last_pose is not None:
-                    distance += math.dist(xy, last_pose)
-                last_pose = xy
-                if math.dist(xy, rules.goal) <= rules.goal_radius:
-                    collided = bool(sim.execute_method("sim_status").get("collided"))
-                    return True, collided, t - t0, distance, "collision" if collided else "goal"
-                if t - t0 >= rules.time_limit:
-                    return False, False, t - t0, distance, "time limit"
-            if now >= next_poll:
-                status = sim.execute_method("sim_status")
-                if status.get("collided"):
-                    t = float(status.get("sim_time", t0)) - t0
-                    x, y = status.get("pose", (math.nan, math.nan))[:2]
-                    return False, True, t, distance, f"collision near ({x:.2f}, {y:.2f})"
-                next_poll = now + COLLISION_POLL_S
+                if last_xy is not None:
+                    distance += math.dist(xy, last_xy)
+                last_xy, last_t = xy, t - t0
+                outcome = monitor.update(last_t, xy, False)
+                if outcome is not None:
+                    break
+            if monitor.outcome is None and collided:
+                monitor.update(last_t, last_xy or BARN_START[:2], True)
+            outcome = monitor.outcome
+            if outcome is not None:
+                if outcome.reached and sim.execute_method("sim_status").get("collided"):
+                    # A touch between the last poll and the goal still fails the trial.
+                    return False, True, outcome.time_s, distance, "collision (before reaching the goal)"
+                reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else
+                                                         f"collision near ({last_xy[0]:.2f}, {last_xy[1]:.2f})"
+                                                         if last_xy else "collision")
+                return outcome.reached, outcome.collided, outcome.time_s, distance, reason
             if proc.poll() is not None:
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{_tail(log_path)}")
             if now > deadline:

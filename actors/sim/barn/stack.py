@@ -22,6 +22,9 @@ from typing import Any
 
 import attrs
 
+from ..barn_worlds import BARN_GOAL, BARN_START
+from ..jackal import JACKAL_ODOMETRY
+from ..robots import PRESETS
 from .harness import BarnRules, nav_robot
 
 GROUND_TRUTH_TOPIC = "/barn/ground_truth"
@@ -42,8 +45,9 @@ PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
 
 @attrs.define(frozen=True)
 class StackOptions:
-    """One world's system. ``rules`` carries the robot model and sensor configuration (robot,
-    lidar, odometry noise, rates), so other robot models plug in there."""
+    """One trial's system. ``rules`` (the harness's TrialSpec) carries the robot model and the
+    sensor configuration (ideal or realistic, robot, odometry, rates): the same choices as
+    in-process."""
 
     world: int
     rules: BarnRules = BarnRules()
@@ -76,23 +80,28 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
 
     rules = opts.rules
     lidar = rules.lidar
+    spec = PRESETS[rules.robot_name]
     # One fixed frame: odometry starts at the start pose in world coordinates (as the robot is
     # told where it starts), so the memory, the plan and the poses share it.
     frames = RobotFrames(world="map", odom="map")
-    robot = nav_robot(rules.robot)
-    lockstep = list(NAV_COMPONENTS)
+    robot = nav_robot(spec)
+    if rules.ideal:  # the kinematic Jackal, a UST-10-like lidar, true or drifting wheel odometry
+        sensors: dict[str, Any] = dict(
+            odometry_mode="wheel" if rules.noisy_odometry else "truth", odom_rate=rules.control_rate_hz * 2,
+            slip=rules.slip if rules.noisy_odometry else 0.0, scan_rate=lidar.rate_hz, scan_beams=lidar.beams,
+            scan_fov_deg=lidar.fov_deg, scan_range_max=lidar.range_max, scan_noise_std=lidar.noise_std)
+    else:  # the robot preset's drive model, the Jackal's laser, wheel + IMU odometry
+        sensors = dict(odometry_mode="wheel-imu", odom_rate=JACKAL_ODOMETRY.rate_hz, scan_preset="jackal")
     sim = Simulator(SIM_NAME, config=SimulatorConfig(
-        world=f"barn:{opts.world}", barn_source=opts.barn_source, robot=rules.robot.name, spawn=rules.start,
+        world=f"barn:{opts.world}", barn_source=opts.barn_source, robot=rules.robot_name, spawn=BARN_START,
         frames=frames, physics_rate=1.0 / rules.physics_dt, clock_rate=opts.clock_rate, clock_mode="lockstep",
-        lockstep_consumers=lockstep, odom_rate=rules.control_rate_hz * 2, odom_noise=rules.noisy_odometry,
-        slip=rules.slip if rules.noisy_odometry else 0.0, scan_rate=lidar.rate_hz, scan_beams=lidar.beams,
-        scan_fov_deg=lidar.fov_deg, scan_range_max=lidar.range_max, scan_noise_std=lidar.noise_std, seed=opts.seed))
+        lockstep_consumers=list(NAV_COMPONENTS), seed=opts.seed, **sensors))
     # Nothing that carries the true pose reaches the stack: no /tf (its world -> odom link is
     # computed from the true pose), no map; ground truth on a topic only the referee reads.
     sim.outputs(tf=None, ground_truth=Topic(name=GROUND_TRUTH_TOPIC, msg_type="Odometry"))
 
-    sx, sy, _ = rules.start
-    gx, gy = rules.goal
+    sx, sy, _ = BARN_START
+    gx, gy = BARN_GOAL
     m = opts.window_margin
     bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
     pose_topic = Topic(name="/local_map/pose", msg_type="PoseStamped")
@@ -133,15 +142,11 @@ def bringup(opts: StackOptions) -> int:
 def recipe_source(opts: StackOptions) -> str:
     """The recipe file ``emos run`` executes for one world."""
     fields = {a.name: getattr(opts, a.name) for a in attrs.fields(StackOptions) if a.name != "rules"}
-    r = opts.rules
-    rules = {a.name: getattr(r, a.name) for a in attrs.fields(BarnRules) if a.name not in ("robot", "lidar")}
+    rules = attrs.asdict(opts.rules)
     return (
         "from emos.actors.sim.barn.stack import StackOptions, bringup\n"
         "from emos.actors.sim.barn.harness import BarnRules\n"
-        "from emos.actors.sim.robots import PRESETS\n"
-        "from emos.actors.sim.sensors import LidarConfig\n"
-        f"rules = BarnRules(robot=PRESETS[{r.robot.name!r}], lidar=LidarConfig(**{attrs.asdict(r.lidar)!r}), **{rules!r})\n"
-        f"bringup(StackOptions(rules=rules, **{fields!r}))\n"
+        f"bringup(StackOptions(rules=BarnRules(**{rules!r}), **{fields!r}))\n"
     )
 
 

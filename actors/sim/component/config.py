@@ -17,7 +17,8 @@ from emos.config.base import BaseComponentConfig
 from ..clock import ClockMode
 from ..robots import PRESETS
 
-# Named worlds; a path to a ROS map YAML and "barn:<index>" are accepted too (see worlds.py).
+# Named worlds; a path to a ROS map YAML, "barn:<index>" and "dynabarn:<index>" are accepted
+# too (see worlds.py).
 NAMED_WORLDS = ("house", "house_person", "empty", "tabletop")
 
 
@@ -47,8 +48,8 @@ def _check_frames(instance: Any, attribute: attrs.Attribute, value: Any) -> None
 
 
 def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    """``house``, ``house_person``, ``empty``, ``tabletop`` (the arm), ``barn:<index>`` or a
-    ROS map YAML path."""
+    """``house``, ``house_person``, ``empty``, ``tabletop`` (the arm), ``barn:<index>``,
+    ``dynabarn:<index>`` or a ROS map YAML path."""
     if not isinstance(value, str) or not value.strip():
         raise ValueError(f"SimulatorConfig.world must be a world name or a map path, got {value!r}")
     if value in NAMED_WORLDS:
@@ -69,6 +70,17 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
         if idx not in worlds:
             raise ValueError(f"SimulatorConfig.world {value!r}: no BARN world {idx} (indices {min(worlds)}..{max(worlds)})")
         return
+    if value.startswith("dynabarn:"):
+        from ..dynabarn import load_dynabarn
+
+        try:
+            idx = int(value.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"SimulatorConfig.world {value!r}: a DynaBARN world is 'dynabarn:<index>', e.g. 'dynabarn:0'") from None
+        worlds = load_dynabarn()
+        if idx not in worlds:
+            raise ValueError(f"SimulatorConfig.world {value!r}: no DynaBARN world {idx} (indices {min(worlds)}..{max(worlds)})")
+        return
     if value.endswith((".yaml", ".yml")):
         from emos.actors.nav.maps.map_yaml import read_map_yaml
 
@@ -80,7 +92,7 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
             raise ValueError(f"SimulatorConfig.world: map {str(path)!r} names image {str(meta['image'])!r}, which does not exist")
         return
     raise ValueError(f"SimulatorConfig.world: unknown world {value!r}; expected one of {', '.join(NAMED_WORLDS)}, "
-                     "'barn:<index>' or the path of a ROS map YAML")
+                     "'barn:<index>', 'dynabarn:<index>' or the path of a ROS map YAML")
 
 
 def _barn_source(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
@@ -99,6 +111,13 @@ def _check_robot(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
     if not isinstance(value, str) or value not in PRESETS:
         raise ValueError(f"SimulatorConfig.robot: unknown robot {value!r}; expected one of {', '.join(sorted(PRESETS))} "
                          "or a RobotConfig")
+
+
+def _optional_choice(*choices: str) -> Any:
+    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+        if value is not None and value not in choices:
+            raise ValueError(f"SimulatorConfig.{attribute.name} must be None or one of {', '.join(choices)}, got {value!r}")
+    return check
 
 
 def _rate(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
@@ -199,6 +218,16 @@ class SimulatorConfig(BaseComponentConfig):
     odom_rate: float = field(default=50.0, validator=_rate)
     odom_noise: bool = False
     """True: wheel odometry with drift (OdometryConfig.noisy); False: ground truth."""
+    odometry_mode: str | None = field(default=None, validator=_optional_choice("truth", "wheel", "wheel-imu"))
+    """None: from ``odom_noise``. ``truth``, ``wheel`` (= odom_noise), or ``wheel-imu``: wheel
+    odometry with an IMU's yaw (sensors/wheel_imu.py), what a real base's estimator gives."""
+    drive: str | None = field(default=None, validator=_optional_choice("ideal", "skid-steer", "wheeled"))
+    """The robot's drive model (actors/sim/dynamics); None = the robot preset's (``jackal-barn``:
+    skid-steer, ``jackal-wheeled``: wheeled, the others: ideal). A drive's own command
+    watchdog (0.25 s for the Jackal models) applies when shorter than ``command_timeout``."""
+    scan_preset: str | None = field(default=None, validator=_optional_choice("jackal"))
+    """``jackal``: the BARN Jackal's laser (sensors in jackal.py: 720 beams over +-2.356 rad,
+    0.1-30 m, 50 Hz, 1 cm noise, 0.055 m ahead) instead of the ``scan_*`` fields."""
     scan_rate: float = field(default=10.0, validator=_rate)
     scan_beams: int = field(default=360, validator=_int_at_least(2))
     scan_fov_deg: float = field(default=360.0, validator=_positive)

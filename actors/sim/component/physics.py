@@ -21,6 +21,7 @@ from ..clock import ClockMode
 from ..sensors.camera import Camera
 from ..sensors.lidar import Lidar
 from ..sensors.odometry import Odometry
+from ..sensors.wheel_imu import WheelImuOdometry
 from ..msgs import header
 from .commands import CommandFollower, joint_targets
 from .config import SimulatorConfig
@@ -45,7 +46,10 @@ class PhysicsLoop(threading.Thread):
         self.outputs, self._publish = outputs, publish
         self.map_grid = map_grid
         self.component_name = name
-        self.follower = CommandFollower(cfg.command_timeout, cfg.command_array_step)
+        # The base's own watchdog (0.25 s on the Jackal drive models) when it is the shorter.
+        drive_timeout = setup.robot.drive.command_timeout if setup.robot is not None else None
+        timeout = min(cfg.command_timeout, drive_timeout) if drive_timeout is not None else cfg.command_timeout
+        self.follower = CommandFollower(timeout, cfg.command_array_step)
         self.lockstep = cfg.clock_mode is ClockMode.LOCKSTEP
         self._stop_event = threading.Event()
         self.error: BaseException | None = None
@@ -157,7 +161,7 @@ class PhysicsLoop(threading.Thread):
 
     def _send_reading(self, sensor: Any, reading: Any) -> None:
         setup, frames = self.setup, self.cfg.frames
-        if isinstance(sensor, Odometry):
+        if isinstance(sensor, (Odometry, WheelImuOdometry)):
             if "odom" in self.outputs:
                 self._send("odom", reading.to_msg())
             if "tf" in self.outputs:

@@ -10,7 +10,8 @@ from ..barn_worlds import BARN_START
 from ..body import SimRobot
 from ..builders import demo_house, from_barn, from_map
 from ..clock import ClockMode, SimClock
-from ..sensors import Camera, CameraConfig, Lidar, LidarConfig, Odometry, OdometryConfig
+from ..jackal import JACKAL_LASER, JACKAL_ODOMETRY
+from ..sensors import Camera, CameraConfig, Lidar, LidarConfig, Odometry, OdometryConfig, WheelImuOdometry
 from ..world import World
 from .config import SimulatorConfig
 from .robot_model import resolve_robot
@@ -25,7 +26,7 @@ class SimSetup:
 
     world: World
     robot: SimRobot | None
-    odometry: Odometry | None
+    odometry: Odometry | WheelImuOdometry | None
     lidar: Lidar | None
     camera: Camera | None
     arm: Any = None
@@ -62,6 +63,10 @@ def _named_world(cfg: SimulatorConfig) -> World:
         world = World(name="empty", **kwargs)
         world.spawn = EMPTY_SPAWN
         return world
+    if name.startswith("dynabarn:"):
+        from ..dynabarn import from_dynabarn
+
+        return from_dynabarn(int(name.split(":", 1)[1]), **kwargs)
     if name.startswith("barn:"):
         world = from_barn(int(name.split(":", 1)[1]), worlds_file=cfg.barn_source, **kwargs)
         world.spawn = BARN_START
@@ -96,15 +101,14 @@ def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool, want_w
         if getattr(world, "arm", None) is not None:
             return _arm_setup(cfg, world, want_camera, want_wrist)
         spawn = cfg.spawn or world.spawn or EMPTY_SPAWN
-        robot = world.add_robot(resolve_robot(cfg.robot), spawn, slip=cfg.slip, actuation_noise=cfg.actuation_noise)
+        robot = world.add_robot(resolve_robot(cfg.robot), spawn, slip=cfg.slip, actuation_noise=cfg.actuation_noise,
+                                drive=cfg.drive)
         frames = cfg.frames
-        odom = Odometry(robot, OdometryConfig(rate_hz=cfg.odom_rate, noisy=cfg.odom_noise,
-                                              frame_id=frames.odom, child_frame_id=frames.robot_base))
+        odom = _odometry(cfg, robot)
         world.add_sensor(odom)
         lidar = None
         if want_scan:
-            lidar = Lidar(robot, LidarConfig(fov_deg=cfg.scan_fov_deg, beams=cfg.scan_beams, range_max=cfg.scan_range_max,
-                                             noise_std=cfg.scan_noise_std, rate_hz=cfg.scan_rate, frame_id=frames.scan))
+            lidar = Lidar(robot, _lidar_config(cfg))
             world.add_sensor(lidar)
         camera = None
         if want_camera:
@@ -114,6 +118,23 @@ def build_setup(cfg: SimulatorConfig, want_scan: bool, want_camera: bool, want_w
     except BaseException:
         world.close()
         raise
+
+
+def _odometry(cfg: SimulatorConfig, robot: SimRobot) -> Odometry | WheelImuOdometry:
+    frames = cfg.frames
+    mode = cfg.odometry_mode or ("wheel" if cfg.odom_noise else "truth")
+    if mode == "wheel-imu":
+        return WheelImuOdometry(robot, attrs.evolve(JACKAL_ODOMETRY, rate_hz=cfg.odom_rate, frame_id=frames.odom,
+                                                    child_frame_id=frames.robot_base))
+    return Odometry(robot, OdometryConfig(rate_hz=cfg.odom_rate, noisy=mode == "wheel",
+                                          frame_id=frames.odom, child_frame_id=frames.robot_base))
+
+
+def _lidar_config(cfg: SimulatorConfig) -> LidarConfig:
+    if cfg.scan_preset == "jackal":
+        return attrs.evolve(JACKAL_LASER, frame_id=cfg.frames.scan)
+    return LidarConfig(fov_deg=cfg.scan_fov_deg, beams=cfg.scan_beams, range_max=cfg.scan_range_max,
+                       noise_std=cfg.scan_noise_std, rate_hz=cfg.scan_rate, frame_id=cfg.frames.scan)
 
 
 def _arm_setup(cfg: SimulatorConfig, world: World, want_camera: bool, want_wrist: bool) -> SimSetup:

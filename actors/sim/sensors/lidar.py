@@ -112,16 +112,33 @@ class Lidar(Sensor):
         c, s = math.cos(yaw), math.sin(yaw)
         return x + c * mx - s * my, y + s * mx + c * my, yaw + self.config.mount_yaw
 
+    def _reach(self, sx: float, sy: float, d: np.ndarray) -> np.ndarray:
+        """Each ray's length: the range, or less where it leaves everything it could hit."""
+        cfg = self.config
+        bounds = self.world.ray_bounds() if hasattr(self.world, "ray_bounds") else None  # type: ignore[union-attr]
+        full = np.full(len(d), cfg.range_max)
+        if bounds is None:
+            return full
+        xmin, ymin, xmax, ymax = bounds
+        if not (xmin <= sx <= xmax and ymin <= sy <= ymax):
+            return full  # a sensor outside the box (fixed in the world): no shortcut
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tx = np.where(d[:, 0] > 0, (xmax - sx) / d[:, 0], np.where(d[:, 0] < 0, (xmin - sx) / d[:, 0], np.inf))
+            ty = np.where(d[:, 1] > 0, (ymax - sy) / d[:, 1], np.where(d[:, 1] < 0, (ymin - sy) / d[:, 1], np.inf))
+        # A little beyond the box so a surface on its edge is still hit.
+        return np.clip(np.minimum(tx, ty) + 0.05, cfg.range_min + 1e-3, cfg.range_max)
+
     def read(self, stamp: float) -> ScanReading:
         cfg = self.config
         sx, sy, _ = self.sensor_pose()
         angles = self._local_angles + self.robot.pose[2]
         d = np.c_[np.cos(angles), np.sin(angles)]
         n = len(angles)
+        reach = self._reach(sx, sy, d)
         start = np.empty((n, 3))
         end = np.empty((n, 3))
         start[:, :2] = (sx, sy) + d * cfg.range_min
-        end[:, :2] = (sx, sy) + d * cfg.range_max
+        end[:, :2] = (sx, sy) + d * reach[:, None]
         start[:, 2] = end[:, 2] = self._z
         client = self.world.client  # type: ignore[union-attr]
         # numpy arrays go straight in (no tolist); zip(*) splits the result columns in C.
@@ -129,7 +146,7 @@ class Lidar(Sensor):
         ids, _, fractions, _, _ = zip(*results)
         hit = np.array(ids) >= 0
         frac = np.array(fractions)
-        ranges = cfg.range_min + frac * (cfg.range_max - cfg.range_min)
+        ranges = cfg.range_min + frac * (reach - cfg.range_min)
         if cfg.noise_std > 0:
             ranges = ranges + self.rng.normal(0.0, cfg.noise_std, n)
             ranges = np.maximum(ranges, cfg.range_min)
