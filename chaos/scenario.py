@@ -28,7 +28,6 @@ as JSON to the file named by ``EMOS_CHAOS_RESULT``; the runner reads it after th
 from __future__ import annotations
 
 import json
-import os
 import random
 import time
 from pathlib import Path

@@ -11,6 +11,7 @@ _LAZY = {
     "Launcher": "emos.launcher",
     "BaseComponent": "emos.core.component",
     "Topic": "emos.io.topic",
+    "FixedInput": "emos.io.fixed",
     "QoSConfig": "emos.config.qos",
     "BaseComponentConfig": "emos.config.base",
     "ComponentRunType": "emos.config.base",

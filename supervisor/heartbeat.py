@@ -96,14 +96,21 @@ class HeartbeatMonitor:
             log.warning("[%s] status from %s does not count as its heartbeat: only the component's own process does", name, who)
 
     async def _check_loop(self) -> None:
+        failures, logged_at = 0, float("-inf")
         while True:
             await asyncio.sleep(self.check_period)
-            self._on_wake()  # in case a wake-up was lost to a full FIFO
-            now = time.monotonic()
-            for name, (worker, last) in list(self.watched.items()):
-                if now - last > self.timeout:
-                    del self.watched[name]
-                    worker.on_hang(now - last)
+            try:
+                self._on_wake()  # in case a wake-up was lost to a full FIFO
+                now = time.monotonic()
+                for name, (worker, last) in list(self.watched.items()):
+                    if now - last > self.timeout:
+                        del self.watched[name]
+                        worker.on_hang(now - last)
+            except Exception:  # noqa: BLE001 - hang detection must outlive any one bad tick
+                failures += 1
+                if time.monotonic() - logged_at >= FOREIGN_LOG_PERIOD_S:
+                    logged_at = time.monotonic()
+                    log.exception("heartbeat check failed (%d time(s) so far); hang detection carries on", failures)
 
     def close(self) -> None:
         self._task.cancel()

@@ -10,7 +10,6 @@ import asyncio
 import collections
 import logging
 import os
-import shutil
 import signal
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
 from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
-from emos.transport.context import RunContext, remove_segments, set_current
+from emos.transport.context import RunContext, remove_run_dir, remove_segments, set_current
 
 log = logging.getLogger("emos.supervisor")
 
@@ -104,7 +103,7 @@ class System:
                 self.zygote = Zygote(
                     [self._process_target(i) for i in range(len(self.components))],
                     [c.component_name for c in self.components],
-                    janitor=lambda: (remove_segments(prefix), shutil.rmtree(run_dir, ignore_errors=True)),
+                    janitor=lambda: (remove_segments(prefix), remove_run_dir(run_dir)),
                 )
                 self.zygote.start()
             for i, c in enumerate(self.components):

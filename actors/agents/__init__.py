@@ -48,6 +48,12 @@ _LAZY: dict[str, str] = {
     **{name: ".clients" for name in _CLIENTS},
     "ChromaDB": ".db",
     "ChromaClient": ".db",
+    # components and their configs (recipes: ``from emos.actors.agents import LLM, LLMConfig``)
+    **{name: ".components" for name in (
+        "LLM", "LLMConfig", "MLLM", "VLM", "MLLMConfig", "VLMConfig", "Vision", "VisionConfig",
+        "SpeechToText", "SpeechToTextConfig", "TextToSpeech", "TextToSpeechConfig", "SemanticRouter",
+        "SemanticRouterConfig", "Route", "MapEncoding", "MapConfig", "MapLayer", "VideoMessageMaker",
+        "VideoMessageMakerConfig", "VLA", "VLAConfig")},
 }
 
 

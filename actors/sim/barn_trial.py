@@ -54,6 +54,10 @@ class TrialSpec:
     compute_speed: float = attrs.field(default=1.0, validator=_rate)
     """How fast the robot's computer is relative to this machine's thread CPU time."""
     time_limit: float = attrs.field(default=BARN_TIME_LIMIT, validator=_rate)
+    charge_compute: bool = True
+    """Realistic configuration: delay each command by the policy's measured compute time. The
+    charge varies a little with the machine (a tick more or less), so charged runs are not
+    bit-reproducible; False gives reproducible runs (and no deadline accounting)."""
     goal_radius: float = attrs.field(default=BARN_GOAL_RADIUS, validator=_rate)
     noisy_odometry: bool = False
     """Ideal configuration only: drifting wheel odometry with ``slip`` instead of ground truth
@@ -77,7 +81,7 @@ class TrialSpec:
 
     @property
     def charges_compute(self) -> bool:
-        return not self.ideal
+        return self.charge_compute and not self.ideal
 
 
 @attrs.define(eq=False)

@@ -102,7 +102,10 @@ class UIComponent(BaseComponent):
                 failures += 1
                 if failures == 1 or failures % 30 == 0:
                     self.get_logger().error("[%s] %s (tried %d times; retrying every %g s)", self.component_name, exc, failures, BIND_RETRY_S)
-                self.health_status.set_fail_component(component_names=[self.component_name], message=str(exc))
+                # An address held by someone else is an external fault (SYSTEM_FAILURE), not a
+                # broken UI: a COMPONENT_FAILURE would make the supervisor restart it in a loop
+                # until the restart intensity stopped the whole robot.
+                self.health_status.set_fail_system(message=str(exc))
                 self.node.publish_status()
                 await asyncio.sleep(BIND_RETRY_S)
         else:

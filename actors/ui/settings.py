@@ -122,7 +122,7 @@ async def apply_config_change(control_socket: Path, component: str, values: dict
     (the component keeps its old values), or ``ConnectionError`` if it is not reachable."""
     client = AsyncRpcClient(control_socket)
     try:
-        return await client.call("update_config", timeout=timeout, values=values)
+        return await client.call("update_config_parameters", timeout=timeout, values=values)  # the reconfiguration service
     except RpcError as exc:
         raise SettingRefused(f"{component}: {exc}") from None
     except (RpcConnectionError, OSError) as exc:

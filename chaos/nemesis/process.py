@@ -55,6 +55,17 @@ class _Targeted(Nemesis):
         pid = workers.get(name) if name else None
         return (name, pid) if name and pid else None
 
+    def signal_target(self, sig: signal.Signals) -> tuple[str, int] | None:
+        """Pick a target and send it ``sig``; None when nothing (alive) was there to hit."""
+        hit = self.pick()
+        if hit is None:
+            return None
+        try:
+            os.kill(hit[1], sig)
+        except ProcessLookupError:
+            return None
+        return hit
+
 
 class KillComponent(_Targeted):
     kind = "kill"
@@ -66,14 +77,10 @@ class KillComponent(_Targeted):
         self.sig = _signal(signal)
 
     def start(self) -> Record | None:
-        hit = self.pick()
+        hit = self.signal_target(self.sig)
         if hit is None:
             return None
         name, pid = hit
-        try:
-            os.kill(pid, self.sig)
-        except ProcessLookupError:
-            return None
         record = self._fault(target=name, pid=pid, signal=self.sig.name)
         self.active = None  # nothing lasts: a kill has no stop
         return record
@@ -89,14 +96,10 @@ class HangComponent(_Targeted):
     expects = "restart"
 
     def start(self) -> Record | None:
-        hit = self.pick()
+        hit = self.signal_target(signal.SIGSTOP)
         if hit is None:
             return None
         name, pid = hit
-        try:
-            os.kill(pid, signal.SIGSTOP)
-        except ProcessLookupError:
-            return None
         self._pid = pid
         return self._fault(target=name, pid=pid)
 

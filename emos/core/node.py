@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any, Callable
 
 from emos.config.base import ComponentRunType
-from emos.config.loader import ConfigError
 from emos.core.clock import SimTimeDriver
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
@@ -343,7 +342,8 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
-        for name, inp in list(self._inputs.items()):
+        # Triggers last: a step must see the other inputs that arrived in the same wake-up.
+        for name, inp in sorted(self._inputs.items(), key=lambda kv: kv[1].topic in triggers):
             items = inp.sub.take_raw()
             if not items:
                 continue
@@ -464,19 +464,6 @@ class Node:
         async def transition(req: dict, stream: Any) -> str:
             return (await self.transition(req["transition"])).value
 
-        async def update_config(req: dict, stream: Any) -> dict:
-            values = req.get("values") or {}
-            if not isinstance(values, dict):
-                raise ConfigError("update_config expects 'values': a map of parameter names to values")
-            self.component.config.update(**values)
-            self.on_config_changed()
-            return self.component.config.asdict()
-
-        async def configure_from_file(req: dict, stream: Any) -> dict:
-            self.component.configure(str(req["path"]))
-            self.on_config_changed()
-            return self.component.config.asdict()
-
         async def execute_method(req: dict, stream: Any) -> Any:
             name = req.get("method", "")
             if not isinstance(name, str) or name.startswith("_") or not callable(getattr(self.component, name, None)):
@@ -496,9 +483,12 @@ class Node:
                 "config": self.component.config.asdict(),
             }
 
-        return {"get_state": get_state, "transition": transition, "update_config": update_config,
-                "configure_from_file": configure_from_file, "execute_method": execute_method, "exit": exit_, "info": info,
-                **reconfig_ops(self), **fault_ops(self)}
+        reconfig = reconfig_ops(self)
+        return {"get_state": get_state, "transition": transition,
+                # The runtime's original name for a validated parameter update, kept as an alias.
+                "update_config": reconfig["update_config_parameters"],
+                "execute_method": execute_method, "exit": exit_, "info": info,
+                **reconfig, **fault_ops(self)}
 
 
 class _Timer:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 
 import pytest
 
@@ -13,7 +12,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 from emos.actors.agents.db import ChromaClient, ChromaDB
 from emos.actors.agents.logic.router import Route, SemanticRouterConfig, VectorRouter
 
-DATA = Path(__file__).parent / "data"
+from emos.actors.agents.data import DATA_DIR as DATA  # noqa: E402  (shipped in the package)
 
 
 def load_labeled_set() -> tuple[dict[str, Route], str, list[tuple[str, str]]]:

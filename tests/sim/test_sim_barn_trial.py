@@ -91,3 +91,10 @@ def test_bad_spec_is_refused():
         TrialSpec(robot="turtlebot3")
     with pytest.raises(ValueError, match="control_rate_hz"):
         TrialSpec(control_rate_hz=0.0)
+
+
+def test_free_compute_runs_are_reproducible():
+    spec = TrialSpec(charge_compute=False)
+    a, _ = _run(EMPTY, straight(1.0), spec, seed=5)
+    b, _ = _run(EMPTY, straight(1.0), spec, seed=5)
+    assert a == b and a.control_steps == 0

@@ -39,11 +39,13 @@ def test_taken_port_is_reported_and_retried_while_the_robot_runs(tmp_path):
             assert proc.poll() is None, log.read_text()
             time.sleep(0.2)
         assert run_id, log.read_text()
-        while time.monotonic() < deadline and _health(run_id).get("ui") != "COMPONENT_FAILURE":
+        while time.monotonic() < deadline and _health(run_id).get("ui") != "SYSTEM_FAILURE":
             time.sleep(0.3)
         health = _health(run_id)
-        assert health == {"talker": "HEALTHY", "ui": "COMPONENT_FAILURE"}, health
+        assert health == {"talker": "HEALTHY", "ui": "SYSTEM_FAILURE"}, health
         assert f"the UI cannot listen on 127.0.0.1:{port}: Address already in use" in log.read_text()
+        time.sleep(3.0)  # longer than the supervisor's failure debounce: nothing may restart the UI
+        assert _health(run_id) == {"talker": "HEALTHY", "ui": "SYSTEM_FAILURE"}
         holder.close()
         while time.monotonic() < deadline:
             try:

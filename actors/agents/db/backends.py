@@ -6,6 +6,7 @@ Both take pre-computed embeddings and return Chroma's raw column-oriented dicts,
 """
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -21,6 +22,11 @@ class CollectionMissing(LookupError):
     pass
 
 
+#: chromadb keeps one shared system per path and creating it is not thread-safe: components
+#: running as threads of one process open their stores under this lock.
+_OPEN_LOCK = threading.Lock()
+
+
 class EmbeddedBackend:
     """``chromadb.PersistentClient`` in this process, persisted under ``db.path``."""
 
@@ -34,9 +40,10 @@ class EmbeddedBackend:
 
         self._errors = errors
         # anonymized_telemetry off: a robot must not try to phone home.
-        self._client = chromadb.PersistentClient(
-            path=db.path, settings=Settings(anonymized_telemetry=False, allow_reset=True),
-            tenant=db.tenant, database=db.database)
+        with _OPEN_LOCK:
+            self._client = chromadb.PersistentClient(
+                path=db.path, settings=Settings(anonymized_telemetry=False, allow_reset=True),
+                tenant=db.tenant, database=db.database)
         self._collections: dict[str, Any] = {}
 
     def heartbeat(self) -> None:

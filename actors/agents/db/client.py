@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import re
+import threading
 import uuid
 from typing import Any, Sequence
 
@@ -46,13 +47,23 @@ class ChromaClient:
         self.db = db
         self._embedder = embedder
         self._backend: EmbeddedBackend | HTTPBackend | None = None
+        self._lock = threading.RLock()
+        self._users = 0
 
     # ------------------------------------------------------------------ lifecycle
     def initialize(self) -> None:
-        """Open the store (and check a server answers). Idempotent."""
-        if self._backend is None:
-            self._backend = HTTPBackend(self.db) if self.db.is_server else EmbeddedBackend(self.db)
-        self._backend.heartbeat()
+        """Open the store (and check a server answers). Each successful call is balanced by one
+        :meth:`deinitialize`: components sharing one client (threads of one process) keep it
+        open until the last of them lets go."""
+        with self._lock:
+            self._open_backend().heartbeat()
+            self._users += 1
+
+    def _open_backend(self) -> EmbeddedBackend | HTTPBackend:
+        with self._lock:
+            if self._backend is None:
+                self._backend = HTTPBackend(self.db) if self.db.is_server else EmbeddedBackend(self.db)
+            return self._backend
 
     def check_connection(self) -> None:
         """Raise ModelConnectionError (or ModelTimeoutError) if the store cannot be reached."""
@@ -67,9 +78,11 @@ class ChromaClient:
                                        client="ChromaClient") from exc
 
     def deinitialize(self) -> None:
-        if self._backend is not None:
-            self._backend.close()
-            self._backend = None
+        with self._lock:
+            self._users = max(0, self._users - 1)
+            if self._backend is not None and self._users == 0:
+                self._backend.close()
+                self._backend = None
 
     @property
     def embedder(self) -> Embedder:
@@ -183,10 +196,8 @@ class ChromaClient:
 
     # ------------------------------------------------------------------ helpers
     def _store(self) -> EmbeddedBackend | HTTPBackend:
-        if self._backend is None:
-            self.initialize()
-        assert self._backend is not None
-        return self._backend
+        # Used without initialize() (scripts, tests): opened on first use, closed by deinitialize().
+        return self._backend if self._backend is not None else self._open_backend()
 
     def _open(self, name: str, distance: str | None, create: bool) -> Any:
         _check_name(name)
@@ -224,6 +235,8 @@ class ChromaClient:
         self.db = state["db"]
         self._embedder = None
         self._backend = None
+        self._lock = threading.RLock()
+        self._users = 0
 
 
 def _texts(what: str, values: Sequence[str]) -> list[str]:

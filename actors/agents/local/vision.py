@@ -111,6 +111,10 @@ class LocalDetector:
         return sorted(out, key=lambda d: -d.score)
 
     def _people(self, cv2, grey: np.ndarray) -> list[Detection]:
+        win_w, win_h = self._hog.winSize
+        if grey.shape[0] < win_h or grey.shape[1] < win_w:
+            # No person fits; and OpenCV's HOG segfaults on images smaller than its window.
+            return []
         rects, weights = self._hog.detectMultiScale(grey, winStride=(4, 4), padding=(8, 8), scale=1.05)
         if len(rects) == 0:
             return []

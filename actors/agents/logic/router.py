@@ -51,7 +51,7 @@ class Route:
 #: Default ``maximum_distance`` per distance function. All three equal a cosine similarity of
 #: 0.25 for L2-normalized embeddings (squared L2 = 2 * (1 - cos); ip and cosine = 1 - cos).
 #: Chosen on principle (a clearly related query), then checked on the labeled set in
-#: tests/agents/data: 0.4 squared-L2 (cos 0.8) sent most paraphrases to the default route.
+#: emos.actors.agents.data: 0.4 squared-L2 (cos 0.8) sent most paraphrases to the default route.
 DEFAULT_MAXIMUM_DISTANCE = {"l2": 1.5, "ip": 0.75, "cosine": 0.75}
 
 

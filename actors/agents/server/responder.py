@@ -6,9 +6,12 @@ A script (YAML or JSON) looks like::
     rules:
       - match: "(?i)go to the (\\w+)"            # regex searched in the last user message
         tool_call: {name: go_to, arguments: {place: "{1}"}}   # {1} = first regex group
+      - match: "at \\[([-\\d.]+), ([-\\d.]+)\\]"           # numbers: a JSON template, parsed after filling
+        tool_call: {name: go_to_point, arguments_json: '{{"position": [{1}, {2}]}}'}
       - match: "(?i)hello"
         reply: "Hello! I am a robot."
     default: "You said: {message}"               # optional; {message} = last user text
+                                                 # ({turns} in replies: user turns in the request)
 
 A rule with ``tool_call`` applies only when the request offers that tool; otherwise the next
 rule is tried. When the last message is a tool result, the reply reports it, so a tool round
@@ -16,6 +19,7 @@ trip is testable. Same input, same output: tests and chaos runs can assert on re
 """
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from typing import Any, Iterator
@@ -36,24 +40,26 @@ class Rule:
     reply: str | None = None
     tool_name: str | None = None
     tool_arguments: dict = attrs.field(factory=dict)
+    tool_arguments_json: str | None = None
 
     def __attrs_post_init__(self) -> None:
         if (self.reply is None) == (self.tool_name is None):
             raise ValueError(f"script rule {self.pattern.pattern!r}: expected exactly one of 'reply' or 'tool_call'")
 
 
-def _fill(value: Any, match: re.Match, message: str) -> Any:
-    """Substitute ``{0}``, ``{1}``... (regex groups) and ``{message}`` into strings, recursively."""
+def _fill(value: Any, match: re.Match, message: str, turns: int = 1) -> Any:
+    """Substitute ``{0}``, ``{1}``... (regex groups), ``{message}`` and ``{turns}`` (user turns
+    in the request: shows whether chat history reached the model) into strings, recursively."""
     if isinstance(value, str):
         groups = [match.group(0), *[g or "" for g in match.groups()]]
         try:
-            return value.format(*groups, message=message)
+            return value.format(*groups, message=message, turns=turns)
         except (IndexError, KeyError) as exc:
             raise ValueError(f"script template {value!r}: unknown placeholder {exc}") from None
     if isinstance(value, dict):
-        return {k: _fill(v, match, message) for k, v in value.items()}
+        return {k: _fill(v, match, message, turns) for k, v in value.items()}
     if isinstance(value, list):
-        return [_fill(v, match, message) for v in value]
+        return [_fill(v, match, message, turns) for v in value]
     return value
 
 
@@ -84,8 +90,13 @@ def load_script(source: str | Path | dict | None) -> tuple[list[Rule], str, list
         call = raw.get("tool_call")
         if call is not None and (not isinstance(call, dict) or not call.get("name")):
             raise ValueError(f"responder script rule {i}: tool_call needs a 'name'")
+        if call is not None and call.get("arguments") and call.get("arguments_json"):
+            raise ValueError(f"responder script rule {i}: tool_call takes 'arguments' or 'arguments_json', not both")
+        arguments_json = (call or {}).get("arguments_json")
+        if arguments_json is not None and not isinstance(arguments_json, str):
+            raise ValueError(f"responder script rule {i}: arguments_json must be a string (a JSON template)")
         rules.append(Rule(pattern, reply=raw.get("reply"), tool_name=call and call["name"],
-                          tool_arguments=(call or {}).get("arguments") or {}))
+                          tool_arguments=(call or {}).get("arguments") or {}, tool_arguments_json=arguments_json))
     models = data.get("models") or []
     if not isinstance(models, list) or not all(isinstance(m, str) for m in models):
         raise ValueError("responder script: 'models' must be a list of names")
@@ -124,10 +135,19 @@ class ScriptedResponder:
             if rule.tool_name is not None:
                 if rule.tool_name not in offered:
                     continue
-                call = ToolCall(id=self._next_id(), name=rule.tool_name, arguments=_fill(rule.tool_arguments, match, user))
+                if rule.tool_arguments_json is not None:
+                    filled = _fill(rule.tool_arguments_json, match, user)
+                    try:
+                        arguments = json.loads(filled)
+                    except ValueError:
+                        raise ValueError(f"script rule {rule.pattern.pattern!r}: arguments_json filled to invalid JSON {filled!r}") from None
+                else:
+                    arguments = _fill(rule.tool_arguments, match, user)
+                call = ToolCall(id=self._next_id(), name=rule.tool_name, arguments=arguments)
                 message = ChatMessage(role="assistant", content=None, tool_calls=[call])
                 return ChatResponse(message=message, finish_reason="tool_calls", usage=self._usage(request, ""), model=model)
-            return self._text(_fill(rule.reply, match, user), request, model)
+            turns = sum(1 for m in request.messages if m.role == "user")
+            return self._text(_fill(rule.reply, match, user, turns), request, model)
         images = sum(len(m.images) for m in request.messages)
         text = self.default.format(message=user, images=images)
         return self._text(text, request, model)

@@ -22,6 +22,7 @@ from ..robot import RobotConfig
 from .arcs import ArcConfig, ArcPlanner
 from .base import ControlResult, ControlStatus, FollowerConfig
 from .follower import PathFollower
+from .response import ResponseConfig, YawGainEstimator
 from .sensors import ObstacleInput
 
 __all__ = ["ArcSampler", "ArcSamplerConfig"]
@@ -35,6 +36,14 @@ def _arc_config(value: object) -> ArcConfig:
     raise TypeError(f"ArcSamplerConfig.arcs: expected an ArcConfig, got {type(value).__name__}")
 
 
+def _response(value: object) -> ResponseConfig | None:
+    if value is None or isinstance(value, ResponseConfig):
+        return value
+    if isinstance(value, dict):
+        return ResponseConfig(**value)
+    raise TypeError(f"ArcSamplerConfig.response: expected a ResponseConfig, a dict or None, got {type(value).__name__}")
+
+
 @attrs.define
 class ArcSamplerConfig(FollowerConfig):
     """``arcs``: the sampling (horizon, speeds, turns, margins, clearance weights).
@@ -44,6 +53,10 @@ class ArcSamplerConfig(FollowerConfig):
 
     arcs: ArcConfig = attrs.field(factory=lambda: ArcConfig(max_speed=2.0, reverse_speed=0.0), converter=_arc_config)
     path_window: float = attrs.field(default=2.5, converter=float)
+    response: ResponseConfig | None = attrs.field(default=None, converter=_response)
+    """A response model (``response.py``): check and score the arcs the base achieves from
+    its measured velocity, with its yaw gain estimated online, and a margin growing with
+    speed (a skid-steer base that turns less than commanded). None: commanded arcs."""
     field_resolution: float = attrs.field(default=0.1, converter=float)
     final_approach: float = attrs.field(default=0.6, converter=float)
 
@@ -53,7 +66,10 @@ class ArcSampler(PathFollower):
 
     def __init__(self, robot: RobotConfig, config: ArcSamplerConfig | None = None) -> None:
         super().__init__(robot, config or ArcSamplerConfig())
-        self.arcs = ArcPlanner(robot, self.config.arcs)
+        self.arcs = ArcPlanner(robot, self.config.arcs, response=self.config.response)
+        self._gain = (YawGainEstimator(self.config.response, self.config.control_time_step)
+                      if self.config.response is not None else None)
+        self._last_turn = 0.0
 
     def _local_field(self, pose: np.ndarray, points: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """Cost-to-go over a square window around the robot, to the path point ahead."""
@@ -97,11 +113,17 @@ class ArcSampler(PathFollower):
         dt = self.config.control_time_step
         if self.progress.remaining < self.config.final_approach:
             return self._final_approach(pose, dt)
-        choice = self.arcs.choose(pose, points, self._local_field(pose, points))
+        twist, gain = None, None
+        if self._gain is not None:
+            twist = np.asarray(velocity, dtype=float).reshape(3)
+            gain = self._gain.update(self._last_turn, float(twist[0]), float(twist[2]))
+        choice = self.arcs.choose(pose, points, self._local_field(pose, points), twist=twist, yaw_gain=gain)
         if choice is None or choice == (0.0, 0.0):
             # No clear arc, or standing still scores best: no trajectory makes progress.
+            self._last_turn = 0.0
             return ControlResult.stop(pose, ControlStatus.BLOCKED)
         v, w = choice
+        self._last_turn = w
         speed_cap = self.desired_speed()  # brake towards the end of the path
         if v > speed_cap:
             w *= speed_cap / max(v, 1e-9)

@@ -6,13 +6,16 @@ All candidates are checked at once with numpy: (arcs, time samples, points) arra
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import attrs
 import numpy as np
 
 from ..kinematics import integrate
 from ..robot import RobotConfig, RobotGeometry
+
+if TYPE_CHECKING:
+    from .response import ResponseConfig
 
 
 def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
@@ -69,8 +72,12 @@ class BoxFootprint:
 class ArcPlanner:
     """Samples (v, omega) arcs within the robot's limits and picks the best clear one."""
 
-    def __init__(self, robot: RobotConfig, config: ArcConfig | None = None, center_offset: float = 0.0) -> None:
+    def __init__(self, robot: RobotConfig, config: ArcConfig | None = None, center_offset: float = 0.0,
+                 response: "ResponseConfig | None" = None) -> None:
         self.robot = robot
+        # None: arcs are the commanded ones. Set: checked and scored as the base achieves them
+        # (see response.py), when choose() is given the measured twist and the yaw gain.
+        self.response = response
         self.spec = spec = BoxFootprint.of(robot, center_offset)
         self.cfg = cfg = config or ArcConfig()
         vmax = min(cfg.max_speed, robot.ctrl_vx_limits.max_vel)
@@ -81,7 +88,8 @@ class ArcPlanner:
         turns = np.linspace(-wmax, wmax, cfg.turns)
         # One group of arcs per speed: slow arcs need fewer samples and see fewer points,
         # which keeps the (arcs, samples, points) arrays small.
-        self.groups = []
+        self.groups: list = []
+        self._times: list[np.ndarray] = []
         for v in speeds:
             swept = abs(v) * cfg.horizon + np.abs(turns) * cfg.horizon * spec.circumscribed_radius
             n = max(2, int(math.ceil(swept.max() / cfg.step)))
@@ -93,10 +101,25 @@ class ArcPlanner:
             reach = abs(v) * cfg.horizon + spec.circumscribed_radius + abs(spec.center_offset) + cfg.margin + 0.05
             self.groups.append((v, turns, dx.astype(np.float32), dy.astype(np.float32),
                                 np.cos(wt).astype(np.float32), np.sin(wt).astype(np.float32), wt, reach))
+            self._times.append(t)
         self.v = np.repeat(speeds, len(turns))
         self.w = np.tile(turns, len(speeds))
 
-    def clearances(self, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    def achieved_groups(self, twist: np.ndarray, gain: float) -> list:
+        """The arc groups as the base achieves them from ``twist`` (v, vy, omega) with yaw gain
+        ``gain`` under the response model (same layout as ``self.groups``)."""
+        from .response import achieved_arcs
+
+        assert self.response is not None
+        v0, w0 = float(twist[0]), float(twist[2])
+        out = []
+        for (v, turns, *_rest, reach), t in zip(self.groups, self._times):
+            dx, dy, wt = achieved_arcs(v, turns, t, v0, w0, gain, self.response)
+            out.append((v, turns, dx.astype(np.float32), dy.astype(np.float32), np.cos(wt).astype(np.float32),
+                        np.sin(wt).astype(np.float32), wt, reach + abs(v0) * self.cfg.horizon))
+        return out
+
+    def clearances(self, pose: np.ndarray, points: np.ndarray, groups: list | None = None) -> np.ndarray:
         """Smallest footprint-to-point gap (m, Chebyshev-like, < 0 = overlap) along each arc."""
         spec = self.spec
         x0, y0, th0 = pose
@@ -107,7 +130,7 @@ class ArcPlanner:
         px_all = (c0 * rel[:, 0] + s0 * rel[:, 1]).astype(np.float32)
         py_all = (-s0 * rel[:, 0] + c0 * rel[:, 1]).astype(np.float32)
         d2 = px_all**2 + py_all**2
-        for v, turns, dx, dy, ct, st, _, reach in self.groups:
+        for v, turns, dx, dy, ct, st, _, reach in (self.groups if groups is None else groups):
             near = d2 <= reach * reach
             if not near.any():
                 out.append(np.full(len(turns), np.inf))
@@ -132,22 +155,31 @@ class ArcPlanner:
         return float(np.min(np.maximum(np.abs(lx) - self.spec.length / 2, np.abs(ly) - self.spec.width / 2)))
 
     def choose(self, pose: np.ndarray, points: np.ndarray, cost_to_go: Callable[[np.ndarray], np.ndarray],
-               reverse_cost: float | None = None) -> tuple[float, float] | None:
+               reverse_cost: float | None = None, twist: np.ndarray | None = None,
+               yaw_gain: float | None = None) -> tuple[float, float] | None:
         """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is.
-        ``reverse_cost`` overrides the configured cost of backing up (recovery makes it < 0)."""
+        ``reverse_cost`` overrides the configured cost of backing up (recovery makes it < 0).
+        With a response model, ``twist`` (measured) and ``yaw_gain``: arcs as achieved, and a
+        margin that grows with speed."""
         cfg = self.cfg
         reverse_cost = cfg.reverse_cost if reverse_cost is None else reverse_cost
-        clearance = self.clearances(pose, points)
+        groups = None
+        margin = np.full(len(self.v), cfg.margin)
+        if self.response is not None and twist is not None:
+            gain = self.response.prior_gain if yaw_gain is None else yaw_gain
+            groups = self.achieved_groups(np.asarray(twist, dtype=float), gain)
+            margin = margin + self.response.speed_margin * np.abs(self.v)
+        clearance = self.clearances(pose, points, groups)
         # Already closer than the margin (sensor noise, a tight squeeze): accept any arc that
         # does not get closer still, so the robot can always back or turn away.
         here = self._here_clearance(pose, points)
-        ok = clearance > min(cfg.margin, here - 1e-3)
+        ok = clearance > np.minimum(margin, here - 1e-3)
         if not ok.any():
             return None
         x0, y0, th0 = pose
         c0, s0 = math.cos(th0), math.sin(th0)
         ends = []
-        for v, turns, dx, dy, _, _, wt, _ in self.groups:
+        for v, turns, dx, dy, _, _, wt, _ in (self.groups if groups is None else groups):
             ex = x0 + c0 * dx[:, -1] - s0 * dy[:, -1]
             ey = y0 + s0 * dx[:, -1] + c0 * dy[:, -1]
             ends.append(np.c_[ex, ey, th0 + wt[:, -1]])

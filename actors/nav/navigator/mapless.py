@@ -32,7 +32,7 @@ class GridNavigator:
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
                  arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3,
                  recovery_time: float = 2.0, lethal_bias: float = 0.08, carve_range: float = 0.0,
-                 localize: bool = True) -> None:
+                 localize: bool = True, response: Any = None) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
         self.stuck_time, self.stuck_progress, self.recovery_time = stuck_time, stuck_progress, recovery_time
         self.lethal_bias = lethal_bias
@@ -44,6 +44,10 @@ class GridNavigator:
         # Scan matching against the obstacle memory corrects odometry drift. With ground-truth
         # odometry it changes nothing that matters (same BARN scores), so it is on by default.
         self.localize = localize
+        # A ResponseConfig (controllers/response.py): plan with the arcs the base achieves
+        # (yaw gain estimated from the measured yaw rate, lag, traction, speed-dependent
+        # margin) instead of the commanded ones. None: commanded arcs.
+        self.response = response
         self.arc_config = arc_config
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
@@ -66,7 +70,13 @@ class GridNavigator:
         soft = spec.width / 2 + self.lethal_bias
         self.field = CostField(self.grid.shape, self.resolution, hard, inflation_radius=soft + 0.45,
                                soft_radius=soft)
-        self.arcs = ArcPlanner(task.robot, self.arc_config, task.center_offset)
+        self.arcs = ArcPlanner(task.robot, self.arc_config, task.center_offset, response=self.response)
+        self._gain = None
+        if self.response is not None:
+            from ..controllers.response import YawGainEstimator
+
+            self._gain = YawGainEstimator(self.response, 1.0 / task.control_rate_hz)
+        self._last_command = (0.0, 0.0)
         self._goal_cell = self._cell((gx, gy))
         self._planned_version = -1
         self._last_plan = -math.inf
@@ -175,12 +185,18 @@ class GridNavigator:
         recovering = self.update(obs)
         reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.arcs.spec.circumscribed_radius + 0.3  # type: ignore[union-attr]
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
-        choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None)
+        gain = None
+        if self._gain is not None:
+            gain = self._gain.update(self._last_command[1], float(obs.twist[0]), float(obs.twist[2]))
+        choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None,
+                                  twist=obs.twist if self._gain is not None else None, yaw_gain=gain)
         if choice is None:
             # Boxed in: no arc is clear, not even turning or backing up. Stand still; the
             # stuck detector will block this route and the field will send us elsewhere.
+            self._last_command = (0.0, 0.0)
             return (0.0, 0.0, 0.0)
         v, w = choice
+        self._last_command = (v, w)
         return (v, 0.0, w)
 
     def _stuck(self, obs: Observation) -> bool:

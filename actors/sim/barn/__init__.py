@@ -44,8 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drive a navigator object in this process (the fast path for development) instead of "
                              "the Simulator and the navigation components as supervised processes")
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
-    parser.add_argument("--split", default=None, choices=("tune", "report"),
-                        help="only the worlds to tune on (index %% 5 != 0) or to report apart (index %% 5 == 0)")
+    parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
+                        help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
     parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
                         help="navigation controller to drive with")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
@@ -57,6 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the ideal robot: kinematic, ground-truth odometry, free compute (the first benchmark)")
     parser.add_argument("--robot", default="jackal-barn", choices=("jackal-barn", "jackal-wheeled"),
                         help="robot of the realistic configuration (default jackal-barn: skid-steer model)")
+    parser.add_argument("--free-compute", action="store_true",
+                        help="do not charge the navigator's compute time (reproducible runs, no deadline accounting)")
     parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
                         help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
@@ -86,8 +88,8 @@ def _load(args: argparse.Namespace) -> tuple[dict, list[int]]:
     from ..barn_worlds import parse_indices
 
     indices = parse_indices(args.worlds) if args.worlds else list(worlds)
-    if args.split is not None:
-        indices = [i for i in indices if (i % 5 == 0) == (args.split == "report")]
+    if args.split != "all":
+        indices = [i for i in indices if (i % 5 == 0) == (args.split == "test")]
     return worlds, indices
 
 
@@ -108,7 +110,8 @@ def _rules(args: argparse.Namespace) -> BarnRules:
         raise ValueError("--noisy-odometry is a variant of --ideal (the realistic configuration has wheel + IMU odometry)")
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
-    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry)
+    return BarnRules(ideal=args.ideal, robot=args.robot, noisy_odometry=args.noisy_odometry,
+                     charge_compute=not args.free_compute)
 
 
 def run(args: argparse.Namespace) -> int:

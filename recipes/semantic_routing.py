@@ -1,0 +1,103 @@
+"""Semantic routing (foundation recipe): a router sends each question either to a general LLM
+or to the Go-to-X LLM, by the meaning of the question (vector mode).
+
+    emos serve models --script recipes/models/responder.yaml &
+    emos run recipes/semantic_routing.py
+"""
+import json
+import os
+from typing import Optional
+
+import numpy as np
+
+from emos import Launcher, Topic
+from emos.actors.agents import (LLM, ChromaClient, ChromaDB, LLMConfig, OllamaClient, OllamaModel, Route,
+                                SemanticRouter, SemanticRouterConfig)
+
+MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
+
+llama = OllamaModel(name="llama", checkpoint="llama3.2:3b")
+llama_client = OllamaClient(llama, port=MODELS_PORT)
+
+chroma = ChromaDB(embeddings="ollama", checkpoint="all-minilm", ollama_port=MODELS_PORT)
+chroma_client = ChromaClient(db=chroma)
+
+llm_in = Topic(name="text_in_llm", msg_type="String")
+llm_out = Topic(name="text_out_llm", msg_type="String")
+
+llm = LLM(
+    inputs=[llm_in],
+    outputs=[llm_out],
+    model_client=llama_client,
+    trigger=llm_in,
+    component_name="generic_llm",
+)
+
+goto_in = Topic(name="goto_in", msg_type="String")
+goal_point = Topic(name="goal_point", msg_type="PoseStamped")
+
+config = LLMConfig(
+    enable_rag=True,
+    collection_name="map",
+    distance_func="l2",
+    n_results=1,
+    add_metadata=True,
+)
+
+goto = LLM(
+    inputs=[goto_in],
+    outputs=[goal_point],
+    model_client=llama_client,
+    db_client=chroma_client,
+    trigger=goto_in,
+    config=config,
+    component_name="go_to_x",
+)
+
+goto.set_component_prompt(
+    template="""From the given metadata, extract coordinates and provide
+the coordinates in the following json format:\n {"position": coordinates}"""
+)
+
+
+def llm_answer_to_goal_point(output: str) -> Optional[np.ndarray]:
+    # errata: rfind (the last '}'), and a position that is a list or a "x, y, z" string
+    json_string = output[output.find("{") : output.rfind("}") + 1]
+    try:
+        json_dict = json.loads(json_string)
+        position = json_dict["position"]
+        if isinstance(position, list):
+            return np.array(position, dtype=np.float64).ravel()
+        return np.fromstring(position, sep=",", dtype=np.float64)
+    except Exception:
+        return
+
+
+goto.add_publisher_preprocessor(goal_point, llm_answer_to_goal_point)
+
+query_topic = Topic(name="question", msg_type="String")
+
+goto_route = Route(
+    routes_to=goto_in,
+    samples=["Go to the door", "Go to the kitchen", "Get me a glass", "Fetch a ball", "Go to hallway"],
+)
+
+llm_route = Route(
+    routes_to=llm_in,
+    samples=["What is the capital of France?", "Is there life on Mars?", "How many tablespoons in a cup?",
+             "How are you today?", "Whats up?"],
+)
+
+router_config = SemanticRouterConfig(router_name="go-to-router", distance_func="l2")
+router = SemanticRouter(
+    inputs=[query_topic],
+    routes=[llm_route, goto_route],
+    default_route=llm_route,
+    config=router_config,
+    db_client=chroma_client,  # Vector mode requires db_client
+    component_name="router",
+)
+
+launcher = Launcher()
+launcher.add_pkg(components=[llm, goto, router])
+launcher.bringup()
