@@ -23,4 +23,4 @@ def _packages() -> tuple[list[str], dict[str, str]]:
 
 
 packages, package_dir = _packages()
-setup(packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css"]})
+setup(packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css", "LICENSE"]})

@@ -44,16 +44,24 @@ def repo_root() -> Path:
 
 
 def default_worlds_file() -> Path:
-    return repo_root().parent / "shared" / "benchmarks" / "barn" / "worlds.json"
+    """The 250 worlds shipped inside the package (``actors/sim/data/barn/worlds.json``)."""
+    from .data.barn import PACKAGED_WORLDS
+
+    return PACKAGED_WORLDS
 
 
 def load_barn_worlds(path: str | Path | None = None) -> dict[int, BarnWorld]:
-    """All worlds of a BARN world file, by index."""
-    path = Path(path) if path is not None else default_worlds_file()
+    """All worlds of a BARN source, by index: a world file (JSON, the packaged one when
+    ``path`` is None) or a directory, read as a clone of the official repository (all 300
+    worlds, see :mod:`emos.actors.sim.barn_repo`)."""
+    path = Path(path).expanduser() if path is not None else default_worlds_file()
+    if path.is_dir():
+        from .barn_repo import load_barn_repo
+
+        return load_barn_repo(path)
     if not path.is_file():
-        raise FileNotFoundError(
-            f"BARN world file not found: {path} (expected ../shared/benchmarks/barn/worlds.json "
-            "beside the repository, or pass --worlds-file)")
+        raise FileNotFoundError(f"BARN world file not found: {path} (a worlds JSON file or a clone of the "
+                                "BARN repository was expected)")
     try:
         raw = json.loads(path.read_text())
     except json.JSONDecodeError as exc:

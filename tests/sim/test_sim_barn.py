@@ -88,7 +88,8 @@ def test_cli_json_output_has_exactly_the_documented_shape(tmp_path):
     path = tmp_path / "w.json"
     path.write_text(json.dumps({"5": {"cylinders": [], "path_length": 10.0},
                                 "6": {"cylinders": [[-2.25, y] for y in np.arange(4.2, 6, 0.15).tolist()], "path_length": 12.0}}))
-    out = _cli("--worlds-file", str(path), "--worlds", "5-6", "--seeds", "2", "--json", "--png", str(tmp_path / "png"))
+    out = _cli("--in-process", "--worlds-file", str(path), "--worlds", "5-6", "--seeds", "2", "--json", "--png",
+               str(tmp_path / "png"))
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)  # nothing but JSON on stdout
     assert set(data) == {"worlds", "summary"}
@@ -109,7 +110,7 @@ def test_cli_ideal_and_dynabarn_options(tmp_path):
     assert out.returncode == 2 and "cannot go with --ideal" in out.stderr
     out = _cli("--worlds", "3", "--noisy-odometry")
     assert out.returncode == 2 and "variant of --ideal" in out.stderr
-    out = _cli("--dynabarn", "--worlds", "2", "--seeds", "1", "--json")
+    out = _cli("--in-process", "--dynabarn", "--worlds", "2", "--seeds", "1", "--json")
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
     assert [w["idx"] for w in data["worlds"]] == [2] and data["summary"]["seeds"] == 1

@@ -10,6 +10,13 @@ Realistic by default: the ``jackal-barn`` robot (calibrated skid-steer drive, of
 collision shape), the Jackal laser, wheel + IMU odometry, the navigator's compute time
 charged. ``--ideal``: the kinematic robot with ground-truth odometry of the first benchmark.
 ``--robot jackal-wheeled``: pybullet wheels. ``--dynabarn``: the moving-obstacle set.
+
+Through the product by default: each trial runs the Simulator and the navigation components
+as supervised processes (:mod:`.stack`, :mod:`.process`), scored by a referee in the harness
+that alone reads the ground truth. ``--in-process`` drives a navigator object in this process
+instead (the fast path for development). BARN worlds come from ``--worlds-file``, else
+``--barn-repo`` (a clone of the official repository: all 300 worlds), else the 250 shipped in
+the package.
 """
 from __future__ import annotations
 
@@ -18,6 +25,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 from .controllers import CONTROLLERS
 from .harness import BarnRules, EpisodeResult, run_episode, score_run
@@ -27,8 +35,14 @@ __all__ = ["BarnRules", "EpisodeResult", "add_arguments", "run", "run_episode", 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds-file", type=Path, default=None,
-                        help="world file (default: BARN's ../shared/benchmarks/barn/worlds.json beside the repo; "
+                        help="world file (default: the 250 BARN worlds shipped in the package; "
                              "with --dynabarn the shipped moving-obstacle set)")
+    parser.add_argument("--barn-repo", type=Path, default=None, metavar="PATH",
+                        help="read world_<i>.world and path_files/path_<i>.npy from a clone of "
+                             "github.com/Daffan/the-barn-challenge (all 300 worlds)")
+    parser.add_argument("--in-process", action="store_true",
+                        help="drive a navigator object in this process (the fast path for development) instead of "
+                             "the Simulator and the navigation components as supervised processes")
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
     parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
                         help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
@@ -70,13 +84,23 @@ def _load(args: argparse.Namespace) -> tuple[dict, list[int]]:
     else:
         from ..barn_worlds import load_barn_worlds
 
-        worlds = load_barn_worlds(args.worlds_file)
+        worlds = load_barn_worlds(_barn_source(args))
     from ..barn_worlds import parse_indices
 
     indices = parse_indices(args.worlds) if args.worlds else list(worlds)
     if args.split != "all":
         indices = [i for i in indices if (i % 5 == 0) == (args.split == "test")]
     return worlds, indices
+
+
+def _barn_source(args: argparse.Namespace) -> Path | None:
+    """--worlds-file, else --barn-repo, else None (the packaged worlds)."""
+    if args.worlds_file is not None and args.barn_repo is not None:
+        raise ValueError("give --worlds-file or --barn-repo, not both")
+    if args.barn_repo is not None and args.dynabarn:
+        raise ValueError("--barn-repo reads BARN worlds; it cannot go with --dynabarn")
+    source = args.worlds_file if args.worlds_file is not None else args.barn_repo
+    return None if source is None else Path(source).expanduser().resolve()
 
 
 def _rules(args: argparse.Namespace) -> BarnRules:
@@ -109,22 +133,38 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos bench barn: none of the selected worlds is in the file "
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
+    if args.in_process:
+        mode = ""
+    else:
+        try:
+            episode = _process_episode(worlds, rules, args)
+        except ValueError as exc:
+            print(f"emos bench barn: {exc}", file=sys.stderr)
+            return 2
+        mode = "supervised processes, "
     name = "DynaBARN-style" if args.dynabarn else "BARN"
     config = "ideal (kinematic, true odometry)" if rules.ideal else f"realistic ({rules.robot}, laser, wheel+IMU odometry)"
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
     if not args.json:
-        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, lock-step")
+        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, {mode}lock-step")
         print(f"{'world':>5} {'success':>7} {'collide':>7} {'timeout':>7} {'time_s':>7} {'metric':>7} {'m_4t':>6} "
               f"{'misses':>6} {'wall_s':>7}  first failure")
-    for idx in indices:
+    for n, idx in enumerate(indices, 1):
         key = f"dynabarn:{idx}" if args.dynabarn else idx
         rows = []
         for k in range(args.seeds):
             seed = trial_seed(key, k, base=args.seed)
-            png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
-            rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
+            if args.in_process:
+                png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
+                rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
+            else:
+                rows.append(episode(idx, seed))
         results.extend(rows)
+        if args.json and not args.in_process:  # slow enough to want progress; stdout stays pure JSON
+            ok = sum(r.success for r in rows)
+            print(f"barn: world {idx} ({n}/{len(indices)}) {ok}/{len(rows)} success, "
+                  f"{sum(r.wall_s for r in rows):.1f} s wall", file=sys.stderr, flush=True)
         if not args.json:
             s = summarize(rows)
             fail = next((f"seed {k}: {r.reason}" for k, r in enumerate(rows) if not r.success), "")
@@ -154,3 +194,28 @@ def _print_summary(label: str, s: dict, n: int) -> None:
     print(f"{label:<13} trials {n:>5}  success {s['success_rate']:.3f}  collision {s['collision_rate']:.3f}  "
           f"timeout {s['timeout_rate']:.3f}  mean time {mean_t}  metric {s['mean_metric']:.4f}  "
           f"metric_4t {s['metric_4t']:.4f}  deadline misses {s['deadline_misses']}")
+
+
+def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -> Callable[[int, int], EpisodeResult]:
+    """One trial through the supervised processes, as ``episode(world index, seed)``."""
+    from .process import SystemFailed, run_episode_process
+    from .stack import StackOptions
+
+    if args.dynabarn:
+        raise ValueError("--dynabarn runs in-process only for now; add --in-process")
+    if args.png is not None:
+        raise ValueError("--png draws the in-process run; add --in-process")
+    source = _barn_source(args)
+    StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
+
+    def episode(idx: int, seed: int) -> EpisodeResult:
+        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
+                                           barn_source=None if source is None else str(source))
+        try:
+            return run_episode_process(worlds[idx], opts)
+        except SystemFailed as exc:
+            # One broken system must not end a 250-world run: it counts as a failure, loudly.
+            print(f"emos bench barn: world {idx} seed {seed}: system failure: {exc}", file=sys.stderr, flush=True)
+            return EpisodeResult(idx, False, False, True, 0.0, 0.0, seed=seed, reason="system failure (see stderr)")
+
+    return episode

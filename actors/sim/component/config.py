@@ -61,7 +61,12 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
             idx = int(value.split(":", 1)[1])
         except ValueError:
             raise ValueError(f"SimulatorConfig.world {value!r}: a BARN world is 'barn:<index>', e.g. 'barn:0'") from None
-        worlds = load_barn_worlds()
+        source = getattr(instance, "barn_source", None)
+        try:
+            worlds = load_barn_worlds(source)
+        except (FileNotFoundError, ValueError) as exc:
+            raise ValueError(f"SimulatorConfig.world {value!r}: cannot read the BARN worlds "
+                             f"(barn_source {source!r}): {exc}") from None
         if idx not in worlds:
             raise ValueError(f"SimulatorConfig.world {value!r}: no BARN world {idx} (indices {min(worlds)}..{max(worlds)})")
         return
@@ -88,6 +93,14 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
         return
     raise ValueError(f"SimulatorConfig.world: unknown world {value!r}; expected one of {', '.join(NAMED_WORLDS)}, "
                      "'barn:<index>', 'dynabarn:<index>' or the path of a ROS map YAML")
+
+
+def _barn_source(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
+    if value is None:
+        return
+    if not isinstance(value, str) or not Path(value).expanduser().exists():
+        raise ValueError(f"SimulatorConfig.barn_source must be None or the path of a BARN worlds JSON file or "
+                         f"repository clone, got {value!r}")
 
 
 def _check_robot(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
@@ -173,6 +186,9 @@ class SimulatorConfig(BaseComponentConfig):
     """Parameters of the :class:`Simulator`. Rates are in Hz of *simulated* time."""
 
     world: str = field(default="house", validator=check_world)
+    barn_source: str | None = field(default=None, validator=_barn_source)
+    """Where ``barn:<index>`` worlds come from: None = the 250 worlds shipped in the package,
+    else a worlds JSON file or a clone of the BARN repository (all 300)."""
     robot: Any = field(default="jackal", validator=_check_robot)
     """A preset name, or a navigation ``RobotConfig`` (``launcher.robot`` sets it at bringup:
     the simulated robot is then the one navigation plans for, see ``robot_model.py``)."""

@@ -126,6 +126,8 @@ class PhysicsLoop(threading.Thread):
                     self.setup.robot.command(*self.follower.target(self.sim_time))
                 for sensor, reading in world.step():
                     self._send_reading(sensor, reading)
+                if "ground_truth" in self.outputs and self.setup.robot is not None:
+                    self._send("ground_truth", self._ground_truth())
                 if not self.lockstep and cfg.clock_mode is ClockMode.REALTIME:
                     target = wall_start + (world.clock.ticks - start_ticks) * dt / cfg.real_time_factor
                     delay = target - time.monotonic()
@@ -143,6 +145,14 @@ class PhysicsLoop(threading.Thread):
     def _send(self, key: str, msg: Any) -> None:
         self._publish(key, msg)
         self.published[key] = self.published.get(key, 0) + 1
+
+    def _ground_truth(self) -> Any:
+        from ..msgs import odometry_to_msg
+        from ..sensors.odometry import OdometryReading
+
+        robot, frames = self.setup.robot, self.cfg.frames
+        (x, y, yaw), (vx, vy, w) = (float(v) for v in robot.pose), (float(v) for v in robot.twist)
+        return odometry_to_msg(OdometryReading(self.sim_time, frames.world, frames.robot_base, x, y, yaw, vx, vy, w))
 
     def _send_clock(self) -> None:
         self.clock_ticks += 1
@@ -198,7 +208,7 @@ class PhysicsLoop(threading.Thread):
         """Lockstep: block until every consumer answered the current tick; False when stopping."""
         t = self.sim_time
         started = time.monotonic()
-        warned_at = started
+        warned_at = republished_at = started
         while True:
             for name, sub in self._ack_subs.items():
                 for msg in sub.take():
@@ -213,7 +223,10 @@ class PhysicsLoop(threading.Thread):
             ready, _, _ = select.select([self._waker.fd], [], [], WAIT_SLICE_S)
             if ready:
                 self._waker.drain()
-            else:
+            # Measured in time, not by a quiet select: other traffic that shares the waker
+            # (commands a DriveManager keeps sending) must not suppress the republish.
+            if time.monotonic() - republished_at >= WAIT_SLICE_S:
+                republished_at = time.monotonic()
                 # Nobody answered for a while: a consumer may have joined after the tick was
                 # published (subscribers only see later messages), so publish it again.
                 if "clock" in self.outputs:

@@ -22,9 +22,13 @@ camera_info         CameraInfo                                   None
 depth_camera_info   CameraInfo                                   None
 rgbd                RGBD                                         None
 map                 OccupancyGrid                                None
+ground_truth        Odometry (true pose, world frame, each tick) None
 joint_states        JointState (the arm)                         None
 wrist_camera        Image or CompressedImage (the arm)           None
 =================== ============================================ ==============================
+
+``ground_truth`` (off by default) is the robot's true pose and velocity in ``frames.world``
+after every physics tick, for a referee or an evaluation harness, never for the robot's stack.
 
 Frames come from ``config.frames`` (``launcher.frames`` sets it at bringup): odometry is
 ``frames.odom -> frames.robot_base``, the scan is stamped ``frames.scan``, the camera
@@ -68,6 +72,9 @@ class Simulator(KeyedComponent):
         "depth_camera_info": AllowedTopic(types=("CameraInfo",)),
         "rgbd": AllowedTopic(types=("RGBD",)),
         "map": AllowedTopic(types=("OccupancyGrid",)),
+        # For referees and evaluation harnesses only: the robot's true pose. A navigation
+        # stack must not subscribe to it (a real robot has no such topic).
+        "ground_truth": AllowedTopic(types=("Odometry",)),
         "joint_states": AllowedTopic(types=("JointState",)),
         "wrist_camera": AllowedTopic(types=("Image", "CompressedImage")),
     }

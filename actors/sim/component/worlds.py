@@ -68,7 +68,7 @@ def _named_world(cfg: SimulatorConfig) -> World:
 
         return from_dynabarn(int(name.split(":", 1)[1]), **kwargs)
     if name.startswith("barn:"):
-        world = from_barn(int(name.split(":", 1)[1]), **kwargs)
+        world = from_barn(int(name.split(":", 1)[1]), worlds_file=cfg.barn_source, **kwargs)
         world.spawn = BARN_START
         return world
     world = from_map(name, **kwargs)

@@ -1,0 +1,192 @@
+"""Process mode of ``emos bench barn``: one supervised system per world (``emos run`` of the
+recipe :mod:`.stack` generates), scored by a referee that lives in the harness only.
+
+The referee reads the Simulator's ground-truth output (true pose after every physics tick) and
+its ``sim_status`` (the sticky collision flag) over the component's control socket; nothing of
+either reaches the navigation stack. It judges with the protocol's ``TrialMonitor`` (official
+timer from the first 0.1 m of motion), on simulated time counted from when the goal is given
+(the stack's start-up, before it has a goal, is not the robot's driving time).
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import attrs
+
+from ..barn_protocol import TrialMonitor
+from ..barn_worlds import BARN_GOAL, BARN_START, BarnWorld
+from .harness import EpisodeResult, score_run
+from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, SIM_NAME, StackOptions, recipe_source
+
+STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes slowly
+COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
+
+
+class SystemFailed(RuntimeError):
+    """The system of one world did not come up or died; the message carries its log's tail."""
+
+
+def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: float = 600.0,
+                        keep_log: Path | None = None) -> EpisodeResult:
+    """Run one world through the processes and score it under ``opts.rules``."""
+    wall0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix=f"emos-barn-{entry.idx}-") as tmp:
+        recipe = Path(tmp) / "barn_recipe.py"
+        recipe.write_text(recipe_source(opts))
+        log_path = Path(tmp) / "system.log"
+        with open(log_path, "wb") as log:
+            proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(recipe)], stdout=log,
+                                    stderr=subprocess.STDOUT, cwd=tmp)
+            try:
+                outcome = _referee(proc, log_path, entry, opts, wall_timeout)
+            finally:
+                _stop(proc)
+                if keep_log is not None:
+                    keep_log.write_bytes(log_path.read_bytes())
+    reached, collided, t, distance, reason = outcome
+    result = score_run(entry, reached, collided, t, opts.rules)
+    return attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason)
+
+
+def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: StackOptions,
+             wall_timeout: float) -> tuple[bool, bool, float, float, str]:
+    from emos import msgs as M
+    from emos.core.reconfig import ComponentServices
+    from emos.core.rpc import RpcClient
+    from emos.transport.context import RunContext
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    rules = opts.rules
+    run_dir = _wait_run_dir(proc, log_path)
+    ctx = RunContext(run_dir.name, run_dir, owner=False)
+    with RpcClient(run_dir / "supervisor.sock") as rpc:
+        _wait_active(rpc, proc, log_path, (SIM_NAME, *NAV_COMPONENTS))
+    truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
+    goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
+    sim = ComponentServices(SIM_NAME, ctx)
+    monitor = TrialMonitor(BARN_START[:2], BARN_GOAL, rules.goal_radius, rules.time_limit)
+    try:
+        t0 = _latest_stamp(truth, proc, log_path)  # the trial starts when the goal is given
+        goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=BARN_GOAL[0], y=BARN_GOAL[1]))
+        last_xy: tuple[float, float] | None = None
+        last_t = 0.0
+        distance = 0.0
+        goal_sent = 0.0
+        next_poll = 0.0
+        deadline = time.monotonic() + wall_timeout
+        while True:
+            now = time.monotonic()
+            if now - goal_sent > 1.0:  # repeated: a subscriber that joined late still gets it
+                goal.header.stamp = M.Time.from_sec(t0)
+                goal_pub.publish(goal)
+                goal_sent = now
+            collided = False
+            if now >= next_poll:
+                status = sim.execute_method("sim_status")
+                collided = bool(status.get("collided"))
+                next_poll = now + COLLISION_POLL_S
+            for msg in truth.take():
+                t = msg.header.stamp.to_sec()
+                if t < t0:
+                    continue
+                p = msg.pose.pose.position
+                xy = (p.x, p.y)
+                if last_xy is not None:
+                    distance += math.dist(xy, last_xy)
+                last_xy, last_t = xy, t - t0
+                outcome = monitor.update(last_t, xy, False)
+                if outcome is not None:
+                    break
+            if monitor.outcome is None and collided:
+                monitor.update(last_t, last_xy or BARN_START[:2], True)
+            outcome = monitor.outcome
+            if outcome is not None:
+                if outcome.reached and sim.execute_method("sim_status").get("collided"):
+                    # A touch between the last poll and the goal still fails the trial.
+                    return False, True, outcome.time_s, distance, "collision (before reaching the goal)"
+                reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else
+                                                         f"collision near ({last_xy[0]:.2f}, {last_xy[1]:.2f})"
+                                                         if last_xy else "collision")
+                return outcome.reached, outcome.collided, outcome.time_s, distance, reason
+            if proc.poll() is not None:
+                raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{_tail(log_path)}")
+            if now > deadline:
+                raise SystemFailed(f"world {entry.idx}: no result within {wall_timeout:.0f} s wall:\n{_tail(log_path)}")
+            time.sleep(0.005)
+    finally:
+        truth.close()
+        goal_pub.close()
+
+
+def _latest_stamp(truth: Any, proc: subprocess.Popen, log_path: Path, timeout: float = 60.0) -> float:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        items = truth.take()
+        if items:
+            return items[-1].header.stamp.to_sec()
+        if proc.poll() is not None:
+            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
+        time.sleep(0.01)
+    raise SystemFailed(f"no ground truth on {GROUND_TRUTH_TOPIC} within {timeout:.0f} s:\n{_tail(log_path)}")
+
+
+def _wait_run_dir(proc: subprocess.Popen, log_path: Path, timeout: float = STARTUP_TIMEOUT_S) -> Path:
+    from emos.transport.context import runtime_root
+
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
+        for d in runtime_root().iterdir():
+            if d.name.startswith(f"{proc.pid}-") and (d / "supervisor.sock").exists():
+                return d
+        time.sleep(0.05)
+    raise SystemFailed(f"the system did not come up within {timeout:.0f} s:\n{_tail(log_path)}")
+
+
+def _wait_active(rpc: Any, proc: subprocess.Popen, log_path: Path, components: tuple[str, ...],
+                 timeout: float = STARTUP_TIMEOUT_S) -> None:
+    end = time.monotonic() + timeout
+    states: dict[str, str] = {}
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
+        states.clear()
+
+        def walk(node: dict) -> None:
+            if "state" in node and "name" in node:
+                states[node["name"]] = node["state"]
+            for child in node.get("children", []):
+                walk(child)
+
+        try:
+            walk(rpc.call("tree")["tree"])
+        except (OSError, ConnectionError, KeyError):
+            pass
+        if all(states.get(c) == "active" for c in components):
+            return
+        time.sleep(0.1)
+    raise SystemFailed(f"components not active within {timeout:.0f} s ({states}):\n{_tail(log_path)}")
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _tail(path: Path, lines: int = 40) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError as exc:
+        return f"(no log: {exc})"

@@ -1,0 +1,154 @@
+"""The system ``emos bench barn`` runs per world in process mode: the Simulator (the world, the
+robot, its lidar and odometry, lock-step clock) and the navigation components configured as the
+built-in navigator is, each in its own process under the supervisor.
+
+    LocalMapper (mapping mode: lidar obstacle memory + scan matching; localized pose)
+      -> Planner (CostToGo on that memory, towards /goal)
+      -> Controller (ArcSampler by default, on the local map)
+      -> DriveManager (safety zones, limits) -> /cmd_vel -> Simulator
+
+The stack sees only what a robot would: the scan, the odometry the simulated robot's wheels
+give (ground truth unless ``noisy_odometry``: the rules' choice, as in-process) and the goal.
+The Simulator's transform tree (its world -> odom link is computed from the true pose), its map
+and its ground-truth output are never wired to a navigation component; ground truth goes to
+the harness's referee only (:data:`GROUND_TRUTH_TOPIC`).
+
+:func:`build_system` returns the components without starting anything (tests inspect it);
+:func:`bringup` is what the generated recipe calls.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import attrs
+
+from ..barn_worlds import BARN_GOAL, BARN_START
+from ..jackal import JACKAL_ODOMETRY
+from ..robots import PRESETS
+from .harness import BarnRules, nav_robot
+
+GROUND_TRUTH_TOPIC = "/barn/ground_truth"
+GOAL_TOPIC = "/goal"
+NAV_COMPONENTS = ("mapper", "planner", "controller", "driver")
+SIM_NAME = "sim"
+
+# --controller name (as in-process) -> (ControllersID value, scan matching in the mapper)
+PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
+    "builtin": ("ArcSampler", True),
+    "builtin-odom": ("ArcSampler", False),
+    "navcore-dwa": ("DWA", True),
+    "navcore-purepursuit": ("PurePursuit", True),
+    "navcore-stanley": ("Stanley", True),
+    "navcore-dvz": ("DVZ", True),
+}
+
+
+@attrs.define(frozen=True)
+class StackOptions:
+    """One trial's system. ``rules`` (the harness's TrialSpec) carries the robot model and the
+    sensor configuration (ideal or realistic, robot, odometry, rates): the same choices as
+    in-process."""
+
+    world: int
+    rules: BarnRules = BarnRules()
+    algorithm: str = "ArcSampler"
+    scan_matching: bool = True
+    barn_source: str | None = None
+    seed: int = 0
+    clock_rate: float = 50.0
+    window_margin: float = 3.0  # m around start and goal mapped (as the built-in navigator's memory)
+
+    @classmethod
+    def for_controller(cls, name: str, **kwargs: Any) -> "StackOptions":
+        try:
+            algorithm, matching = PROCESS_CONTROLLERS[name]
+        except KeyError:
+            raise ValueError(f"controller {name!r} has no process-mode stack; choose from {sorted(PROCESS_CONTROLLERS)} "
+                             "or run it with --in-process") from None
+        return cls(algorithm=algorithm, scan_matching=matching, **kwargs)
+
+
+def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
+    """(simulator, [mapper, planner, controller, driver]), configured, nothing started."""
+    from emos.actors.nav import MapConfig
+    from emos.actors.nav.components import (Controller, ControllerConfig, DriveManager, DriveManagerConfig, LocalMapper,
+                                            LocalMapperConfig, Planner, PlannerConfig)
+    from emos.actors.nav.robot import RobotFrames
+    from emos.io.topic import Topic
+
+    from ..component import Simulator, SimulatorConfig
+
+    rules = opts.rules
+    lidar = rules.lidar
+    spec = PRESETS[rules.robot_name]
+    # One fixed frame: odometry starts at the start pose in world coordinates (as the robot is
+    # told where it starts), so the memory, the plan and the poses share it.
+    frames = RobotFrames(world="map", odom="map")
+    robot = nav_robot(spec)
+    if rules.ideal:  # the kinematic Jackal, a UST-10-like lidar, true or drifting wheel odometry
+        sensors: dict[str, Any] = dict(
+            odometry_mode="wheel" if rules.noisy_odometry else "truth", odom_rate=rules.control_rate_hz * 2,
+            slip=rules.slip if rules.noisy_odometry else 0.0, scan_rate=lidar.rate_hz, scan_beams=lidar.beams,
+            scan_fov_deg=lidar.fov_deg, scan_range_max=lidar.range_max, scan_noise_std=lidar.noise_std)
+    else:  # the robot preset's drive model, the Jackal's laser, wheel + IMU odometry
+        sensors = dict(odometry_mode="wheel-imu", odom_rate=JACKAL_ODOMETRY.rate_hz, scan_preset="jackal")
+    sim = Simulator(SIM_NAME, config=SimulatorConfig(
+        world=f"barn:{opts.world}", barn_source=opts.barn_source, robot=rules.robot_name, spawn=BARN_START,
+        frames=frames, physics_rate=1.0 / rules.physics_dt, clock_rate=opts.clock_rate, clock_mode="lockstep",
+        lockstep_consumers=list(NAV_COMPONENTS), seed=opts.seed, **sensors))
+    # Nothing that carries the true pose reaches the stack: no /tf (its world -> odom link is
+    # computed from the true pose), no map; ground truth on a topic only the referee reads.
+    sim.outputs(tf=None, ground_truth=Topic(name=GROUND_TRUTH_TOPIC, msg_type="Odometry"))
+
+    sx, sy, _ = BARN_START
+    gx, gy = BARN_GOAL
+    m = opts.window_margin
+    bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
+    pose_topic = Topic(name="/local_map/pose", msg_type="PoseStamped")
+    memory_topic = Topic(name="/local_map/memory", msg_type="OccupancyGrid")
+    common = dict(robot=robot, frames=frames, use_sim_time=True)
+    mount = (*lidar.mount_xy, lidar.mount_yaw)
+    mapper = LocalMapper("mapper", config=LocalMapperConfig(
+        map_params=MapConfig(width=6.0, height=6.0, resolution=0.05), keep_memory=True, sensor_pose=mount,
+        mapping_bounds=bounds, scan_matching=opts.scan_matching, map_publish_period=0.0, **common))
+    mapper.run_type = "Event"
+    mapper.outputs(mapping=memory_topic, localized_pose=pose_topic)
+    planner = Planner("planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0, **common))
+    planner.inputs(map=memory_topic, goal_point=Topic(name=GOAL_TOPIC, msg_type="PointStamped"), location=pose_topic)
+    controller = Controller("controller", config=ControllerConfig(
+        algorithm=opts.algorithm, loop_rate=rules.control_rate_hz, control_time_step=1.0 / rules.control_rate_hz,
+        use_direct_sensor=False, **common))
+    controller.inputs(location=pose_topic)
+    control = Topic(name="/control", msg_type="Twist")
+    controller.outputs(command=control)
+    driver = DriveManager("driver", config=DriveManagerConfig(
+        critical_zone_distance=0.02, slowdown_zone_distance=0.05, **common))
+    driver.inputs(command=control)
+    driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
+    return sim, [mapper, planner, controller, driver]
+
+
+def bringup(opts: StackOptions) -> int:
+    """Run the system under the supervisor until stopped (the generated recipe's body)."""
+    from emos import Launcher
+
+    sim, nav = build_system(opts)
+    launcher = Launcher(multi_processing=True)
+    launcher.add_pkg(components=[sim])
+    launcher.kompass(components=nav, multiprocessing=True)
+    return launcher.bringup()
+
+
+def recipe_source(opts: StackOptions) -> str:
+    """The recipe file ``emos run`` executes for one world."""
+    fields = {a.name: getattr(opts, a.name) for a in attrs.fields(StackOptions) if a.name != "rules"}
+    rules = attrs.asdict(opts.rules)
+    return (
+        "from emos.actors.sim.barn.stack import StackOptions, bringup\n"
+        "from emos.actors.sim.barn.harness import BarnRules\n"
+        f"bringup(StackOptions(rules=BarnRules(**{rules!r}), **{fields!r}))\n"
+    )
+
+
+__all__ = ["GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "SIM_NAME", "StackOptions",
+           "build_system", "bringup", "recipe_source"]

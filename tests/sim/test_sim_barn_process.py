@@ -1,0 +1,51 @@
+"""``emos bench barn`` through the product: the Simulator and the navigation components as
+supervised processes, scored by the harness's referee; and what the stack is (not) given."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from emos.actors.sim.barn.harness import BarnRules
+from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, StackOptions, build_system
+from tests.runtime.helpers import REPO
+
+
+def test_the_stack_never_receives_true_poses():
+    for rules in (BarnRules(), BarnRules(ideal=True), BarnRules(ideal=True, noisy_odometry=True)):
+        sim, nav = build_system(StackOptions(world=3, rules=rules))
+        outputs = {key: sim.get_out_topic(key) for key in sim.allowed_outputs}
+        # The transform tree's world -> odom link is computed from the true pose: not published.
+        assert outputs["tf"] is None and outputs["map"] is None
+        assert outputs["ground_truth"].name == GROUND_TRUTH_TOPIC
+        truth = {GROUND_TRUTH_TOPIC, "/tf"}
+        for comp in nav:
+            names = {t.name for t in comp.in_topics}
+            assert not names & truth, (comp.component_name, names)
+            assert comp.config.use_sim_time  # lock-step consumers, in simulated time
+        # Odometry is what the robot's wheels (and IMU) give: never the truth, except in the
+        # ideal configuration, whose point is ground-truth odometry (as in-process).
+        expected = "wheel-imu" if not rules.ideal else ("wheel" if rules.noisy_odometry else "truth")
+        assert sim.config.odometry_mode == expected
+        assert sim.config.clock_mode.value == "lockstep"
+        assert sorted(sim.config.lockstep_consumers) == sorted(c.component_name for c in nav)
+
+
+def test_barn_world_through_supervised_processes():
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds", "3", "--seeds", "1", "--json"], cwd=REPO,
+                         capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    result = json.loads(out.stdout)
+    assert set(result) == {"worlds", "summary"}
+    (world,) = result["worlds"]
+    # The same shape as in-process.
+    assert set(world) == {"idx", "success", "collided", "timeout", "time_s", "metric", "seed", "metric_4t",
+                          "deadline_misses"}
+    assert set(result["summary"]) == {"success_rate", "collision_rate", "timeout_rate", "mean_metric", "metric_4t",
+                                      "deadline_misses", "mean_time_s", "seeds"}
+    assert world["idx"] == 3 and world["success"], out.stderr[-3000:]
+    assert 2.0 < world["time_s"] < 30.0 and world["metric"] > 0.25
+    assert result["summary"]["success_rate"] == 1.0
+    assert "barn: world 3 (1/1) 1/1 success" in out.stderr  # the progress line
