@@ -9,7 +9,9 @@ The recipe points its model client at the proxy (the runner exports
 * ``slicer``: chunks cut into ``average_size`` bytes with ``delay_ms`` between slices;
 * ``timeout``: data stops flowing; the connection is closed after ``timeout_ms`` (0 = never);
 * ``reset_peer``: the connection is reset (RST) ``timeout_ms`` after it opens;
-* ``garbage``: the server's answer is replaced by random bytes of the same length.
+* ``garbage``: the server's answer is replaced by random bytes of the same length;
+* ``http_error``: every request is answered by the proxy itself with HTTP ``status`` (default
+  503) and a JSON error body, as an overloaded or misconfigured model server would.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from typing import Any
 from emos.chaos.history import Record
 from emos.chaos.nemesis.base import Nemesis, NemesisError
 
-TOXICS = ("down", "latency", "bandwidth", "slicer", "timeout", "reset_peer", "garbage")
+TOXICS = ("down", "latency", "bandwidth", "slicer", "timeout", "reset_peer", "garbage", "http_error")
 
 
 def parse_address(text: str, what: str) -> tuple[str, int]:
@@ -68,7 +70,7 @@ class FaultProxy:
         if toxic not in TOXICS:
             raise NemesisError(f"proxy {self.name!r}: unknown toxic {toxic!r}; toxics: {', '.join(TOXICS)}")
         self.toxics[toxic] = params
-        if toxic in ("down", "reset_peer", "timeout", "garbage") and self._loop is not None:
+        if toxic in ("down", "reset_peer", "timeout", "garbage", "http_error") and self._loop is not None:
             # Faults that concern the connection must hit the ones already open, not only new ones.
             self._loop.call_soon_threadsafe(self._cut_open_connections)
 
@@ -113,6 +115,10 @@ class FaultProxy:
         if "down" in self.toxics:
             _reset(client_w)
             return
+        error = self.toxics.get("http_error")
+        if error is not None:
+            await self._answer_http_error(client_r, client_w, int(error.get("status", 503)))
+            return
         try:
             server_r, server_w = await asyncio.open_connection(*self.upstream)
         except OSError:
@@ -132,6 +138,22 @@ class FaultProxy:
             for w in (client_w, server_w):
                 self._writers.discard(w)
                 w.close()
+
+    async def _answer_http_error(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, status: int) -> None:
+        """Read one request head and answer it with ``status``; the upstream is never contacted."""
+        try:
+            await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), timeout=5.0)
+        except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, asyncio.TimeoutError, ConnectionError):
+            pass
+        body = b'{"error": "injected by the EMOS chaos proxy"}'
+        head = (f"HTTP/1.1 {status} Injected Error\r\nContent-Type: application/json\r\n"
+                f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n").encode()
+        try:
+            writer.write(head + body)
+            await writer.drain()
+        except ConnectionError:
+            pass
+        writer.close()
 
     async def _reset_after(self, seconds: float, *writers: asyncio.StreamWriter) -> None:
         await asyncio.sleep(seconds)

@@ -91,3 +91,16 @@ def test_bad_configuration_is_named():
     p = FaultProxy("m", "127.0.0.1:80")
     with pytest.raises(NemesisError, match="unknown toxic 'lag'.*latency"):
         p.set_toxic("lag")
+
+
+def test_http_error_answers_without_the_upstream(proxy):
+    proxy.set_toxic("http_error", status=503)
+    with socket.create_connection(proxy.address, timeout=5) as s:
+        s.sendall(b"POST /api/chat HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\n\r\n{}")
+        answer = b""
+        while chunk := s.recv(4096):
+            answer += chunk
+    assert answer.startswith(b"HTTP/1.1 503") and b"chaos proxy" in answer
+    proxy.remove_toxic("http_error")
+    got, _ = _roundtrip(proxy.address, b"hello")
+    assert got == b"hello"
