@@ -107,7 +107,11 @@ def test_use_network_sets_the_run_options_and_checks_them(tmp_path, monkeypatch)
     import emos
 
     for var in (select.ENV_NET_TOPICS, select.ENV_NET_SERVICES, "EMOS_ZENOH_CONFIG", "EMOS_NET_GROUP"):
-        monkeypatch.delenv(var, raising=False)
+        # setenv first so monkeypatch records the variable and removes what use_network sets: a
+        # bare delenv of an absent variable records nothing, and EMOS_NET_TOPICS=/scan leaked into
+        # every later test (their Simulators then sent /scan over Zenoh only).
+        monkeypatch.setenv(var, "")
+        monkeypatch.delenv(var)
     conf = tmp_path / "z.json5"
     conf.write_text("{}")
     emos.use_network(zenoh_config=str(conf), topics=["/scan", "camera/rgb"], services="all", group="lab-1")
