@@ -105,7 +105,8 @@ class Monitor(BaseComponent):
         now = time.monotonic()
         # Freshness counts from the publish stamp, not from our receipt: a message that waited in
         # a ring (a restarted Monitor reading old messages) must not pass for fresh data.
-        age = self.input_age(topic)
+        stamp = self.node.trigger_stamp_ns
+        age = (time.time_ns() - stamp) / 1e9 if stamp is not None else self.input_age(topic)
         self.board.put(topic.name, msg, now - age if age is not None and age > 0 else now)
         interested = self.by_topic.get(topic.name, ())
         if not interested:

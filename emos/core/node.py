@@ -103,6 +103,9 @@ class Node:
         self._stop: asyncio.Event | None = None
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
+        # Publish stamp of the message that triggered the running step (None outside one): the
+        # input's latest stamp may be newer when the step works through a backlog.
+        self.trigger_stamp_ns: int | None = None
         self._publishers: dict[str, tuple[TopicPublisher, threading.Lock]] = {}
         self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
@@ -346,18 +349,29 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
-        # Triggers last: a step must see the other inputs that arrived in the same wake-up.
-        for name, inp in sorted(self._inputs.items(), key=lambda kv: kv[1].topic in triggers):
+        # Every input's latest message first: a step must see the other inputs that arrived in
+        # the same wake-up. Then one step per triggering message, all trigger topics merged in
+        # publish order: a component (the Monitor above all) that was descheduled and wakes to a
+        # backlog on two topics must not read all of one before the other, or it would pair
+        # one topic's newest message with the other's oldest, a state that never existed.
+        backlog: list[tuple[int, int, _Input, bytes]] = []
+        for inp in self._inputs.values():
             items = inp.sub.take_raw()
             if not items:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
             if active and inp.topic in triggers:
-                for stamp_i, raw_i, _ in items:
-                    msg = codec.decode(inp.topic.msg_type, raw_i)
-                    inp.decoded = msg if raw_i is inp.raw else inp.decoded
-                    self._run_step(msg=msg, topic=inp.topic)
+                backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
+        backlog.sort(key=lambda item: item[:2])  # by stamp; within a stamp, as read
+        for stamp_i, _, inp, raw_i in backlog:
+            msg = codec.decode(inp.topic.msg_type, raw_i)
+            inp.decoded = msg if raw_i is inp.raw else inp.decoded
+            self.trigger_stamp_ns = stamp_i
+            try:
+                self._run_step(msg=msg, topic=inp.topic)
+            finally:
+                self.trigger_stamp_ns = None
         if tick is not None and self._sim_time is not None:  # after the inputs that came with the tick
             timed = active and self.component.run_type == ComponentRunType.TIMED
             self._sim_time.handle(tick, self._run_step if timed else None)

@@ -135,6 +135,12 @@ class EventTracker:
             value = self._evaluate(fresh or (lambda t: board.fresh(t, now)), trigger_topic)
         truth = value is True
         if self.spec["on_change"]:
+            # An edge is false -> true over *known* values. Unknown (an input missing or stale)
+            # neither fires nor re-arms the edge: otherwise a Monitor that was descheduled for
+            # longer than a data_timeout would read one topic's backlog before the other's,
+            # see the other as stale for one message, and fire the same event a second time.
+            if value is None:
+                return False
             rising = truth and not self.last_value
             self.last_value = truth
             return self._decide(rising, now)

@@ -44,8 +44,10 @@ class Scenario(BaseComponent):
         distance = 0.25 if 1.0 <= t < 3.0 else 3.0
         o = Odometry()
         o.twist.twist.linear.x = speed
-        self.publish(odom, o)
+        # Radar before odometry: at 3 s the robot speeds up as the obstacle goes; the other order
+        # would briefly be "fast and close" (the Monitor sees messages in publish order).
         self.publish(radar, Float32(data=distance))
+        self.publish(odom, o)
         self.publish(lidar, Float32(data=distance + 0.5))
         self.publish(bumper, Bool(data=t >= 4.0))
         self.publish(battery, Float32(data=50.0))

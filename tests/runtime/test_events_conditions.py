@@ -159,6 +159,16 @@ def test_on_change_handle_once_and_keep_event_delay():
     assert results == [True, False, False, True, False, True]
 
 
+def test_on_change_edges_are_over_known_values_a_stale_input_does_not_rearm():
+    tr, board = tracker(Event(battery.msg.data < 20.0, on_change=True))  # data_timeout 0.5 s
+    fired = []
+    for at, now, v in [(0.0, 0.0, 10), (0.0, 1.0, 10), (1.1, 1.1, 10), (1.2, 1.2, 30), (1.3, 1.3, 10)]:
+        board.put("/battery", Float32(data=v), at=at)
+        fired.append(tr.check("/battery", board, now=now))
+    # true, unknown (stale), true again: one firing; then a known false re-arms it
+    assert fired == [True, False, False, False, True]
+
+
 def test_bare_topic_on_change_compares_content_not_stamps():
     terrain = Topic(name="terrain", msg_type="String")
     tr, board = tracker(Event(terrain, on_change=True))

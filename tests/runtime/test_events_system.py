@@ -431,3 +431,46 @@ launcher.bringup()
     assert sut.state("emos_monitor") == "active"
     assert not [e for e in sut.events() if e["event"] == "exit"]  # nobody died or was restarted
     sut.stop()
+
+
+def test_a_backlog_on_several_trigger_topics_is_stepped_in_publish_order(tmp_path):
+    """A component that wakes to messages waiting on two trigger topics steps through them in
+    the order they were published, not all of one topic then all of the other (which would
+    pair one topic's newest message with the other's oldest: a state that never existed)."""
+    body = """
+a = Topic(name="order_a", msg_type="Int32")
+b = Topic(name="order_b", msg_type="Int32")
+
+class Source(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[a, b], **kw)
+        self.config.loop_rate = 20.0
+        self.n = 0
+    def _execution_step(self):
+        for _ in range(4):  # a burst, alternating topics
+            self.n += 1
+            self.publish(a if self.n % 2 else b, M.Int32(data=self.n))
+
+class Sink(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(inputs=[a, b], trigger=[a, b], **kw)
+        self.seen = 0
+    def _execution_step(self, msg=None, topic=None):
+        self.seen += 1
+        with open("order.txt", "a") as f:
+            f.write(f"{topic.name} {msg.data}\\n")
+        if self.seen % 10 == 1:
+            time.sleep(0.2)  # descheduled: several bursts wait on both rings
+
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[Source(component_name="source"), Sink(component_name="sink")])
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source", "sink"])
+    order = tmp_path / "order.txt"
+    wait_until(lambda: order.exists() and len(order.read_text().split("\n")) > 200, 30, what="200 steps of the sink")
+    sut.stop()
+    rows = [line.split() for line in order.read_text().splitlines() if line.strip()]
+    values = [int(v) for _, v in rows]
+    assert all(name == ("/order_a" if v % 2 else "/order_b") for (name, _), v in zip(rows, values)), rows[:20]
+    assert values == sorted(values), [v for v, w in zip(values, values[1:]) if w < v][:10]
