@@ -37,6 +37,7 @@ class Launcher:
         strategy: str = "one_for_one",
         stop_timeout: float = 5.0,
         fallback_reset_after: float = 10.0,
+        monitor_nice: int = 5,
         **kwargs: Any,
     ) -> None:
         """``heartbeat_timeout``: seconds without a status message before a component counts as
@@ -44,7 +45,9 @@ class Launcher:
         (unless ``add_pkg`` overrides it) and of the root, which restarts whole groups. ``strategy``:
         one_for_one, one_for_all or rest_for_one. ``stop_timeout``: seconds between SIGTERM and SIGKILL.
         ``fallback_reset_after``: seconds a component must stay healthy before its fallback retry
-        budgets (and a give-up) reset.
+        budgets (and a give-up) reset. ``monitor_nice``: niceness (0-19) added to the Monitor's
+        process in multi-process runs, so that evaluating events yields the CPU to the components
+        that read the same topics (0 keeps it at the components' priority).
         """
         if kwargs:
             raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
@@ -58,6 +61,9 @@ class Launcher:
                 raise ValueError(f"Launcher: {name} must be a positive number of seconds, got {value!r}")
         if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
             raise ValueError(f"Launcher: max_restarts must be an int >= 0, got {max_restarts!r}")
+        if isinstance(monitor_nice, bool) or not isinstance(monitor_nice, int) or not 0 <= monitor_nice <= 19:
+            raise ValueError(f"Launcher: monitor_nice must be an int in 0..19, got {monitor_nice!r}")
+        self.monitor_nice = monitor_nice
         self.heartbeat_timeout = heartbeat_timeout
         self.stop_timeout = stop_timeout
         self.fallback_reset_after = float(fallback_reset_after)
@@ -242,7 +248,8 @@ class Launcher:
         if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):
             raise ValueError(f"Launcher.fallback_rate must be a positive number of Hz, got {self.fallback_rate!r}")
         orchestration = Orchestration(events_actions=list(self._events_actions), policies=dict(self._fallback_policies),
-                                      fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after)
+                                      fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after,
+                                      monitor_nice=self.monitor_nice)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
         options = SystemOptions(

@@ -21,6 +21,7 @@ import time
 from typing import Any
 
 from emos.core.component import BaseComponent
+from emos.core.priority import lower_priority
 from emos.core.ratelimit import RepeatLimiter
 from emos.core.rpc import AsyncRpcClient
 from emos.events.action import Action
@@ -38,9 +39,10 @@ class Monitor(BaseComponent):
     # components it watches.
     _wake_spin_us = 0.0
 
-    def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0):
+    def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0):
         self._entries = entries
         self._action_timeout = action_timeout
+        self._nice = nice
         topics: dict[str, Topic] = {}
         outputs: dict[str, Topic] = {}
         for event, actions in entries:
@@ -59,10 +61,13 @@ class Monitor(BaseComponent):
 
     def __deepcopy__(self, memo: dict) -> "Monitor":
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
-        return Monitor(self._entries, self._action_timeout)
+        return Monitor(self._entries, self._action_timeout, self._nice)
 
     # -- lifecycle ------------------------------------------------------------------------------
     def custom_on_activate(self) -> None:
+        # The Monitor wakes on the same messages as the components that read them; evaluating
+        # many events per message must not delay those readers when the cores are short.
+        lower_priority(self._nice, self.component_name)
         node = self.node
         self._fired_path = node.ctx.run_dir / "monitor_fired.json"
         fired = self._load_fired()

@@ -6,8 +6,6 @@ HTTP and a websocket from its own event loop. ``Launcher.enable_ui`` creates it.
 """
 from __future__ import annotations
 
-import os
-import threading
 import time
 from pathlib import Path
 from typing import Any, Sequence
@@ -58,14 +56,13 @@ class UIComponent(BaseComponent):
     # -- lifecycle -------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
         from emos.actors.ui.server import UIServer
+        from emos.core.priority import lower_priority
         from emos.actors.ui.streams import make_hub
         from emos.core.node import control_socket
         from emos.core.services import service_socket
 
         node = self.node
-        if self.config.nice and not getattr(self, "_reniced", False) and threading.current_thread() is threading.main_thread():
-            self._reniced = True
-            os.nice(self.config.nice)  # our own process (a threaded UI would renice the launcher: not then)
+        lower_priority(self.config.nice, self.component_name)  # best effort: the robot's components run first
         hubs, first_map = [], True
         for t in self.in_topics:
             kind = output_kind(t.msg_type.__name__)

@@ -38,6 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=int, default=300, help="trigger messages per event configuration")
     parser.add_argument("--failures", type=int, default=40, help="failures per fallback measurement")
     parser.add_argument("--rate", type=float, default=50.0, help="trigger messages per second")
+    parser.add_argument("--rounds", type=int, default=3, help="the event configurations take turns this many times (samples are split between rounds)")
+    parser.add_argument("--monitor-nice", type=int, default=5, help="the Launcher's monitor_nice for the systems measured (default: %(default)s, the Launcher's default)")
     parser.add_argument("--json", action="store_true")
 
 
@@ -105,8 +107,8 @@ class _Run:
             self.proc.wait()
 
 
-def _events(n_events: int, samples: int, rate: float) -> dict[str, list[float]]:
-    run = _Run({"EMOS_BENCH_MODE": "events", "EMOS_BENCH_EVENTS": str(n_events)})
+def _events(n_events: int, samples: int, rate: float, firing: bool = True) -> dict[str, list[float]]:
+    run = _Run({"EMOS_BENCH_MODE": "events", "EMOS_BENCH_EVENTS": str(n_events), "EMOS_BENCH_FIRING": "1" if firing else "0"})
     try:
         run.wait_active(["listener", "target"] + (["emos_monitor"] if n_events else []))
         topic_sub, event_sub = run.sub("/bench/topic_ns", Int64), run.sub("/bench/event_ns", Int64)
@@ -123,7 +125,7 @@ def _events(n_events: int, samples: int, rate: float) -> dict[str, list[float]]:
             def done() -> bool:
                 got_t.extend(m.data / 1e6 for m in topic_sub.take())
                 got_e.extend(m.data / 1e6 for m in event_sub.take())
-                return bool(got_t) and (bool(got_e) or not n_events)
+                return bool(got_t) and (bool(got_e) or not (n_events and firing))
 
             run.wait(done, 2.0)
             if i >= 10:  # warm-up
@@ -179,24 +181,38 @@ def _p(values: list[float]) -> dict[str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.samples < 10 or args.failures < 5 or args.rate <= 0:
-        print("emos bench events: --samples >= 10, --failures >= 5 and --rate > 0 please", file=sys.stderr)
+    if args.samples < 10 or args.failures < 5 or args.rate <= 0 or args.rounds < 1 or not 0 <= args.monitor_nice <= 19:
+        print("emos bench events: --samples >= 10, --failures >= 5, --rate > 0, --rounds >= 1 and --monitor-nice 0..19 please", file=sys.stderr)
         return 2
-    measured = {n: _events(n, args.samples, args.rate) for n in (0, 10, 100)}
+    os.environ["EMOS_BENCH_MONITOR_NICE"] = str(args.monitor_nice)  # read by the measured systems
+    # The configurations take turns, round after round, so that a change in the machine's load
+    # during the run falls on all of them alike (they are compared with each other).
+    configs = {"events_0": (0, True), "events_10": (10, True), "events_100": (100, True), "armed_100": (100, False)}
+    measured: dict[str, dict[str, list[float]]] = {k: {"topic": [], "event": []} for k in configs}
+    per_round = max(10, args.samples // args.rounds)
+    for r in range(args.rounds):
+        for key, (n, firing) in configs.items():
+            if not args.json:
+                print(f"round {r + 1}/{args.rounds}: {key}", file=sys.stderr, flush=True)
+            got = _events(n, per_round, args.rate, firing)
+            for k in ("topic", "event"):
+                measured[key][k].extend(got[k])
     fallback = _fallbacks("fallback", args.failures)
     recover = _fallbacks("recover", args.failures)
     result = {
-        "event_ms": {f"events_{n}": _p(measured[n]["event"]) for n in (10, 100)},
-        "topic_ms": {f"events_{n}": _p(measured[n]["topic"]) for n in (0, 10, 100)},
+        "event_ms": {k: _p(measured[k]["event"]) for k in ("events_10", "events_100")},
+        "topic_ms": {k: _p(measured[k]["topic"]) for k in configs},
+        "monitor_nice": args.monitor_nice,
         "fallback_ms": _p(fallback),
         "recover_ms": _p(recover),
-        "samples": {"event": {f"events_{n}": len(measured[n]["event"]) for n in (10, 100)}, "fallback": len(fallback), "recover": len(recover)},
+        "samples": {"event": {k: len(measured[k]["event"]) for k in ("events_10", "events_100")}, "topic": {k: len(measured[k]["topic"]) for k in configs}, "fallback": len(fallback), "recover": len(recover)},
     }
     if args.json:
         print(json.dumps(result))
         return 0
     rows = [{"what": f"event -> action, {n} events", **result["event_ms"][f"events_{n}"]} for n in (10, 100)]
     rows += [{"what": f"topic -> subscriber, {n} events", **result["topic_ms"][f"events_{n}"]} for n in (0, 10, 100)]
+    rows += [{"what": "topic -> subscriber, 100 armed, none firing", **result["topic_ms"]["armed_100"]}]
     rows += [{"what": "failure -> fallback action", **result["fallback_ms"]}, {"what": "failure -> healthy via restart", **result["recover_ms"]}]
     print(table(rows, [("what", "latency", "s"), ("p50", "p50 ms", ".3f"), ("p95", "p95 ms", ".3f")]))
     return 0

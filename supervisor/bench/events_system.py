@@ -4,6 +4,7 @@ EMOS_BENCH_MODE=events, EMOS_BENCH_EVENTS=N: ``listener`` is an ordinary subscri
 /bench/trigger and reports each message's latency on /bench/topic_ns; N events are armed on the
 trigger topic, one of which fires for every message and calls ``target.hit`` (another process),
 whose first line reports the latency on /bench/event_ns. The others are evaluated and stay false.
+EMOS_BENCH_FIRING=0: the N events are armed and evaluated on every message, none fires.
 
 EMOS_BENCH_MODE=fallback: ``faulty`` reports COMPONENT_FAILURE when told to on /bench/fail; its
 ``on_component_fail`` fallback (a method of its own) reports the failure-to-action time on
@@ -18,6 +19,7 @@ from emos.msgs import Int64
 
 MODE = os.environ.get("EMOS_BENCH_MODE", "events")
 N_EVENTS = int(os.environ.get("EMOS_BENCH_EVENTS", "10"))
+FIRING = os.environ.get("EMOS_BENCH_FIRING", "1") != "0"
 
 trigger = Topic(name="/bench/trigger", msg_type="Int64")
 topic_ns = Topic(name="/bench/topic_ns", msg_type="Int64")
@@ -48,14 +50,16 @@ class Faulty(BaseComponent):
         return True
 
 
-launcher = Launcher(multi_processing=True, max_restarts=100000, max_seconds=1.0)
+launcher = Launcher(multi_processing=True, max_restarts=100000, max_seconds=1.0,
+                    monitor_nice=int(os.environ.get("EMOS_BENCH_MONITOR_NICE", "5")))
 if MODE == "events":
     listener = Listener(component_name="listener", inputs=[trigger], outputs=[topic_ns], trigger=trigger)
     target = Target(component_name="target", outputs=[event_ns])
     events = {}
     if N_EVENTS:
-        events[Event(trigger)] = Action(target.hit, args=(trigger.msg.data,))
-        for k in range(N_EVENTS - 1):
+        if FIRING:
+            events[Event(trigger)] = Action(target.hit, args=(trigger.msg.data,))
+        for k in range(N_EVENTS - 1 if FIRING else N_EVENTS):
             events[Event((trigger.msg.data < -k - 1) | (trigger.msg.data == -k))] = Action(target.hit, args=(trigger.msg.data,))
     launcher.add_pkg(components=[listener, target], events_actions=events or None)
 else:
