@@ -26,8 +26,15 @@ launcher.bringup()
 """
 
 
+def _ctrl_c_as_at_a_terminal() -> None:
+    # A background job of a non-interactive shell (`pytest ... &`) inherits SIGINT ignored, and a
+    # Python started that way keeps ignoring it: give the child a terminal's default back.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _emos(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "emos", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+    return subprocess.Popen([sys.executable, "-m", "emos", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_ctrl_c_as_at_a_terminal, **kw)
 
 
 @pytest.fixture
@@ -155,7 +162,7 @@ def test_ctrl_c_at_the_terminal_ends_emos_bench_quietly_with_its_helpers(mode):
     token = f"bench-{os.getpid()}-{mode}"
     bench = subprocess.Popen(
         [sys.executable, "-m", "emos", "bench", "ipc", "--mode", mode, "--sizes", "8", "--messages", "200000", "--transports", "emos"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_ctrl_c_as_at_a_terminal,
         env={**os.environ, "EMOS_HARDENING_TOKEN": token},
     )
     try:
