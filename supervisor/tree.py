@@ -106,6 +106,10 @@ class Supervisor:
         self.restart_counts: collections.Counter[str] = collections.Counter()
         self._restarts: collections.deque[float] = collections.deque()
         self._lock: asyncio.Lock | None = None
+        # one_for_one restarts touch one child each, so each takes only that child's lock: a
+        # SIGTERM-deaf child being stopped for up to its shutdown time must not hold up the
+        # restart of a sibling that died meanwhile. The other strategies take the group's lock.
+        self._child_locks: dict[str, asyncio.Lock] = {}
         self._stopping = False
         self._watchers: dict[str, asyncio.Task] = {}
         self.exited: asyncio.Future[Exit] | None = None
@@ -153,13 +157,24 @@ class Supervisor:
             return
         await self._on_exit(cid, child, result)
 
+    def _restart_lock(self, cid: str) -> asyncio.Lock:
+        """The lock a restart of ``cid`` holds: the child's own under one_for_one, else the group's."""
+        assert self._lock is not None
+        if self.strategy != Strategy.ONE_FOR_ONE:
+            return self._lock
+        return self._child_locks.setdefault(cid, asyncio.Lock())
+
     async def stop(self, timeout: float | None = None) -> Exit:
         """Stop every child in reverse start order, then finish with reason ``shutdown``."""
         assert self._lock is not None and self.exited is not None
         self._stopping = True
         async with self._lock:
             for spec in reversed(self.specs):
-                if spec.id in self.running:
+                if self.strategy == Strategy.ONE_FOR_ONE:
+                    async with self._restart_lock(spec.id):  # a restart of it in flight finishes first
+                        if spec.id in self.running:
+                            await self._stop_child(spec.id)
+                elif spec.id in self.running:
                     await self._stop_child(spec.id)
         if not self.exited.done():
             self.exited.set_result(Exit("shutdown", f"supervisor {self.name} stopped"))
@@ -182,8 +197,7 @@ class Supervisor:
 
     # ------------------------------------------------------------------ restarts
     async def _on_exit(self, cid: str, child: Child, result: Exit) -> None:
-        assert self._lock is not None
-        async with self._lock:
+        async with self._restart_lock(cid):
             if self._stopping or self.running.get(cid) is not child:
                 return  # we stopped it ourselves (shutdown or strategy), or it was replaced
             del self.running[cid]
@@ -202,8 +216,7 @@ class Supervisor:
         """Restart a running child on request (a fallback or an action), exactly as if it had
         exited: same strategy, counted against the restart intensity (a breach escalates).
         Returns False if the child is not running here (stopping, or being restarted already)."""
-        assert self._lock is not None
-        async with self._lock:
+        async with self._restart_lock(cid):
             child = self.running.get(cid)
             spec = self._spec(cid)
             if self._stopping or child is None or spec is None:
@@ -250,9 +263,14 @@ class Supervisor:
                 if not self._intensity_ok():
                     await self._escalate(f"more than {self.max_restarts} restarts in {self.max_seconds:g} s (last: {failed.id})")
                     return
+                if self._stopping:
+                    return  # the group is being stopped or escalated meanwhile (see _restart_lock)
                 self.restart_counts[spec.id] += 1
                 try:
                     await self._start_child(spec)
+                    if self._stopping:  # escalated by a sibling while this one was starting
+                        await self._stop_child(spec.id)
+                        return
                     self._emit("restarted", spec.id, count=self.restart_counts[spec.id])
                     break
                 except Exception as exc:

@@ -170,6 +170,34 @@ launcher.bringup()
     assert system.leftovers() == []
 
 
+def test_a_sibling_killed_while_a_sigterm_deaf_child_is_being_restarted_is_not_held_up(tmp_path):
+    """one_for_one: the restart of a child that ignores SIGTERM takes its whole stop timeout;
+    a sibling that dies meanwhile is restarted at once, not after it (Erlang's supervisor, and
+    ours before, serialised them)."""
+    system = SystemUnderTest(tmp_path, recipe("""
+class Deaf(Steady):
+    def custom_on_activate(self):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+launcher = Launcher(multi_processing=True, stop_timeout=4.0)
+launcher.add_pkg(components=[steady("a"), Deaf(component_name="deaf")])
+launcher.bringup()
+""")).wait_up(components=["a", "deaf"])
+    try:
+        pids = _pids(system, ["a", "deaf"])
+        system.rpc.call("lifecycle", component="deaf", request="restart", wait=False)
+        time.sleep(0.5)  # the restart has begun: deaf got its SIGTERM and is being waited for (4 s)
+        os.kill(pids["a"], signal.SIGKILL)
+        system.wait_new_pid("a", pids["a"], timeout=30)
+        system.wait_new_pid("deaf", pids["deaf"], timeout=30)
+        lines = system.output().splitlines()
+        a_back = next(i for i, line in enumerate(lines) if "] a restarted" in line)
+        deaf_killed = next(i for i, line in enumerate(lines) if "did not stop within 4.0 s of SIGTERM" in line)
+        assert a_back < deaf_killed, "\n".join(lines[-40:])
+    finally:
+        assert system.stop() == 0
+    assert system.leftovers() == []
+
+
 def test_killing_the_launcher_takes_the_whole_tree_and_its_memory_with_it(tmp_path):
     system = SystemUnderTest(tmp_path, recipe("""
 class Pub(Steady):
