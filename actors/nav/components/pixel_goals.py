@@ -134,6 +134,7 @@ class PixelGoals:
         where = f"goal_point {name('goal_point')} ({type(msg).__name__})"
         key = "goal_point"
         try:
+            pixel_targets(msg, where)  # a message that names no pixel is reported as such first
             depth = depth_in_metres(getattr(msg, "image", None), self.config.depth_conversion_factor, where)  # type: ignore[attr-defined]
             key = "depth_camera_info"
             info = self.latest(key)  # type: ignore[attr-defined]
