@@ -191,3 +191,8 @@ def test_bad_pixel_goals_are_named():
         camera_on_base(TransformTree(), "base_link", "cam", "tf /tf")
     with pytest.raises(BadInput, match="no frame_id"):
         camera_on_base(TransformTree(), "base_link", "", "tf /tf")
+    looped = TransformTree()
+    looped.set("a", "b", np.eye(4))
+    looped.set("b", "a", np.eye(4))
+    with pytest.raises(BadInput, match="tf /tf: transform tree has a cycle"):
+        camera_on_base(looped, "base_link", "a", "tf /tf")

@@ -113,7 +113,10 @@ def camera_on_base(tree: TransformTree, base_frame: str, camera_frame: str, wher
     """The camera's transform on the base (4x4) from the transform tree."""
     if not camera_frame:
         raise BadInput(f"{where}: the depth image has no frame_id, so the camera's place on the robot is unknown")
-    matrix = tree.lookup(base_frame, camera_frame)
+    try:
+        matrix = tree.lookup(base_frame, camera_frame)
+    except ValueError as exc:  # a malformed tree (a cycle)
+        raise BadInput(f"{where}: {exc}") from None
     if matrix is None:
         raise BadInput(f"{where}: no transform from {base_frame!r} to the camera frame {camera_frame!r} in the transform tree")
     return matrix
