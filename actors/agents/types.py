@@ -299,6 +299,9 @@ class ChatRequest:
     temperature: float | None = attrs.field(default=None, validator=_optional_number(0.0, 2.0))
     max_tokens: int | None = attrs.field(default=None, validator=_optional_number(1, 10**7))
     options: dict = attrs.field(factory=dict, validator=_dict_of_str_keys)
+    #: the VLM planning task ("pointing", "affordance", "trajectory", "grounding", "general") for
+    #: servers whose planning models take it (RoboML's PlanningInput); other protocols ignore it
+    task: str | None = attrs.field(default=None, validator=attrs.validators.optional(attrs.validators.instance_of(str)))
 
     def __attrs_post_init__(self) -> None:
         if not self.messages:

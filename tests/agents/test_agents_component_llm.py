@@ -179,6 +179,48 @@ launcher.bringup()
         assert system.stop() == 0
 
 
+def test_vlm_grounds_on_an_rgbd_input_and_sends_the_depth_with_the_boxes(tmp_path, model_server):
+    """RoboBrain 2.0 over RoboML with task="grounding": the server grounds the description in
+    the colour image (its people detector); the Detections carry the RGBD frame's depth image."""
+    from tests.agents.test_agents_local_models import _figure
+
+    system, probe = _system(tmp_path, f"""
+from emos.actors.agents import RoboBrain2, RoboMLHTTPClient
+client = RoboMLHTTPClient(RoboBrain2(name="robobrain"), port={model_server.port})
+q = Topic(name="q", msg_type="String")
+rgbd = Topic(name="rgbd0", msg_type="RGBD")
+boxes = Topic(name="grounding", msg_type="Detections")
+vlm = VLM(inputs=[q, rgbd], outputs=[boxes], model_client=client, trigger=q, component_name="grounder",
+          config=VLMConfig(task="grounding"))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[vlm])
+launcher.bringup()
+""", ["grounder"])
+    try:
+        probe.sub("/grounding", "Detections")
+        figure = _figure()  # 300 x 400, a person drawn around x = 150
+        header = M.Header(stamp=M.Time(sec=12, nanosec=5), frame_id="camera/depth")
+        depth = M.Image.from_numpy(np.full(figure.shape[:2], 2.5, np.float32), encoding="32FC1", header=header)
+        info = M.CameraInfo.from_intrinsics(300, 400, 300.0, 300.0, 149.5, 199.5, header=header)
+        probe.pub("/rgbd0", M.RGBD(header=header, rgb=M.Image.from_numpy(figure), depth=depth,
+                                   rgb_camera_info=info, depth_camera_info=info))
+        probe.pub("/q", M.String(data="person"))
+        (det,) = probe.collect("/grounding", "Detections")
+        x1, y1, x2, y2 = det.boxes[0]
+        assert x1 < 150 < x2 and y1 < 120 < y2
+        assert det.image is not None and det.image.encoding == "32FC1" and det.image.header.frame_id == "camera/depth"
+        assert det.image.to_numpy().shape == figure.shape[:2] and float(det.image.to_numpy()[0, 0]) == 2.5
+        assert (det.header.stamp.sec, det.header.frame_id) == (12, "camera/depth")  # about that frame
+        probe.pub("/q", M.String(data="the red cup"))  # nothing the detector knows: no box, an algorithm failure
+        wait_until(lambda: probe.status("grounder").status == M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, 15,
+                   what="the empty grounding reported")
+        assert "grounding output: expected at least one box" in probe.status("grounder").message
+        assert probe.drain("/grounding", "Detections") == []
+    finally:
+        probe.close()
+        assert system.stop() == 0
+
+
 def test_chat_history_reaches_the_model_and_the_reset_phrase_clears_it(tmp_path, model_server):
     system, probe = _system(tmp_path, f"""
 client = OllamaClient(OllamaModel(name="llama", checkpoint="llama3.2:3b"), port={model_server.port})

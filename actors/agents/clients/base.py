@@ -175,7 +175,7 @@ class ModelClient:
         if not request.stream:
             request = ChatRequest(
                 messages=request.messages, tools=request.tools, stream=True, temperature=request.temperature,
-                max_tokens=request.max_tokens, options=request.options,
+                max_tokens=request.max_tokens, options=request.options, task=request.task,
             )
         return self.inference(request)
 

@@ -8,7 +8,10 @@ Every reply is ``{"output": ...}``.
 from __future__ import annotations
 
 import base64
+import json
 from typing import Any
+
+import msgpack
 
 from ..errors import MalformedResponseError, ModelClientError
 from ..types import (
@@ -63,6 +66,8 @@ def build_payload(request: Any, kind: str, *, raw_bytes: bool = False) -> dict[s
         }
         if images:
             payload["images"] = images
+        if request.task:  # RoboML's PlanningInput (RoboBrain 2.0): the model answers in the task's structure
+            payload["task"] = request.task
         return payload
     if kind == "tts":
         payload = {"query": request.text, "get_bytes": raw_bytes}
@@ -86,6 +91,15 @@ def parse_output(body: Any, kind: str, model: str, ctx: dict) -> Any:
 
 def parse_value(output: Any, kind: str, model: str, ctx: dict) -> Any:
     if kind == "chat":
+        if isinstance(output, bytes):  # a structured planning answer over msgpack (WebSocket)
+            try:
+                output = msgpack.unpackb(output, raw=False)
+            except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError):
+                raise MalformedResponseError("text or a structured planning answer", output[:60], **ctx) from None
+        if isinstance(output, list):
+            # Planning models (RoboBrain 2.0 on RoboML) answer a task with its structure, e.g.
+            # grounding boxes [[x1, y1, x2, y2], ...]; as JSON text the VLM's task parser reads it.
+            output = json.dumps(output)
         if not isinstance(output, str):
             raise MalformedResponseError("text output", output, **ctx)
         return ChatResponse(message=ChatMessage(role="assistant", content=output), finish_reason="stop", model=model)

@@ -104,6 +104,18 @@ class LocalModels:
     # ------------------------------------------------------------------ detection
     def detect(self, image: np.ndarray, threshold: float) -> dict[str, Any]:
         """People and faces with OpenCV's packaged detectors (the local Vision model)."""
+        found = self._detections(image, threshold)
+        return {"bboxes": [list(d.box) for d in found], "labels": [d.label for d in found],
+                "scores": [float(d.score) for d in found]}
+
+    def ground(self, image: np.ndarray, description: str, threshold: float = 0.5) -> list[list[float]]:
+        """Boxes (xyxy, best first) of what ``description`` names, by the local detector
+        (``local/grounding.py``): the stand-in for a planning VLM's grounding."""
+        from ..local.grounding import ground
+
+        return ground(self._detections(image, threshold), description)
+
+    def _detections(self, image: np.ndarray, threshold: float) -> list[Any]:
         with self._lock:
             if self._detector is None:
                 try:
@@ -113,6 +125,4 @@ class LocalModels:
                     self._detector = LocalDetector(threshold=0.0)
                 except ImportError as exc:
                     raise BackendUnavailable(f"no local detector: {exc}") from None
-        found = [d for d in self._detector.detect(image) if d.score >= threshold]
-        return {"bboxes": [list(d.box) for d in found], "labels": [d.label for d in found],
-                "scores": [float(d.score) for d in found]}
+        return [d for d in self._detector.detect(image) if d.score >= threshold]

@@ -32,6 +32,8 @@ KINDS = {
     "VisionModel": "detect",
 }
 RESERVED = {"v1", "api", "add_node", "remove_node"}
+#: planning tasks the local server answers with its detector (see ``_planning``)
+PLANNING_TASKS = ("grounding", "pointing")
 
 
 class NodeError(Exception):
@@ -108,6 +110,9 @@ class RoboMLNodes:
         query = data["query"]
         if not isinstance(query, list) or not query:
             raise ValueError("'query' must be a non-empty list of {role, content} messages")
+        task = data.get("task")
+        if task not in (None, "general"):
+            return self._planning(node, task, query, data)
         messages = [ChatMessage(role=m["role"], content=m.get("content")) for m in query]
         images = [ImageData.coerce(i) for i in data.get("images") or []]
         if images:  # RoboML attaches the images to the last user turn
@@ -138,3 +143,26 @@ class RoboMLNodes:
             raise ValueError("'images' must be a non-empty list")
         threshold = float(data.get("threshold", 0.5))
         return {"output": [self.models.detect(_decode_image(img), threshold) for img in images]}
+
+    def _planning(self, node: dict, task: Any, query: list, data: dict) -> dict:
+        """A planning task (RoboML's PlanningInput), answered in its structure as RoboML's
+        RoboBrain2 node does: grounding boxes ``[[x1, y1, x2, y2], ...]``, pointing points
+        ``[[x, y], ...]``. The local detector grounds the description (``local/grounding.py``)."""
+        if task not in PLANNING_TASKS:
+            raise NodeError(501, f"task {task!r}: the local model server answers the planning tasks {PLANNING_TASKS} "
+                                 "(with its detector); others need a planning model such as RoboBrain 2.0 on RoboML")
+        if data.get("stream"):
+            raise ValueError(f"task {task!r}: a planning task answers with a structure, it cannot stream")
+        images = data.get("images") or []
+        if not isinstance(images, list) or not images:
+            raise ValueError(f"task {task!r} needs an image in 'images'")
+        last = query[-1]
+        description = last.get("content") if isinstance(last, dict) else None
+        if not isinstance(description, str) or not description.strip():
+            raise ValueError(f"task {task!r}: the last message must hold the description as text")
+        boxes = self.models.ground(_decode_image(images[-1]), description)
+        if task == "pointing":
+            from ..local.grounding import box_centres
+
+            return {"output": box_centres(boxes)}
+        return {"output": boxes}

@@ -8,6 +8,10 @@ Run types (all four): Timed re-plans from the current location to the last goal 
 when the robot arrives. Plans can be saved, loaded and recorded (:mod:`.planner_paths`). A goal inside an obstacle, off the map or unreachable is an ALGORITHM
 failure (the message says which); no map or no location is a SYSTEM failure naming the topic.
 
+A goal on ``goal_point`` may also be a ``Detections`` or ``PointsOfInterest`` message with its depth
+image (from a detector or VLM on an RGBD stream): it becomes a world goal through the camera
+intrinsics (``depth_camera_info``), the transform tree (``tf``) and the location (:mod:`.pixel_goals`).
+
 Planning runs on a worker thread, so a long query never stalls the component's heartbeat.
 """
 from __future__ import annotations
@@ -35,6 +39,7 @@ from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, goal_of, grid_map_of, path_msg
 from .interfaces import PlanPathFeedback, PlanPathRequest, PlanPathResponse, PlanPathResult
+from .pixel_goals import PIXEL_GOAL_TYPES, PixelGoals, is_pixel_goal
 from .planner_paths import PathFiles
 from .planners import check_planner_id, make_global_planner
 
@@ -60,6 +65,8 @@ class PlannerConfig(NavComponentConfig):
     ompl: OMPLConfig = field(factory=OMPLConfig, converter=_ompl, on_setattr=attrs.setters.convert)
     distance_tolerance: float = field(default=0.15, validator=in_range(min_value=1e-3, max_value=100.0))
     planning_timeout: float = field(default=5.0, validator=in_range(min_value=1e-3, max_value=1e4))
+    #: metres per unit of an integer (16UC1, mono16) depth image of a pixel goal; 32FC1 is metres
+    depth_conversion_factor: float = field(default=1e-3, validator=in_range(min_value=1e-9, max_value=1e3))
 
 
 class _MainInterface:
@@ -72,11 +79,15 @@ class _MainInterface:
         return f"{self.kind}({self.name!r}, {self.types[0].__name__})"
 
 
-class Planner(PathFiles, NavComponent):
+class Planner(PixelGoals, PathFiles, NavComponent):
     allowed_inputs = {
         "map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
-        "goal_point": AllowedTopic(types=("PointStamped", "PoseStamped", "Odometry"), default=Topic(name="/goal", msg_type="PointStamped")),
+        "goal_point": AllowedTopic(types=("PointStamped", "PoseStamped", "Odometry") + PIXEL_GOAL_TYPES, default=Topic(name="/goal", msg_type="PointStamped")),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
+        # For goals in pixels (Detections, PointsOfInterest with their depth image): the camera's
+        # intrinsics and the transform tree that places the camera on the robot.
+        "depth_camera_info": AllowedTopic(types=("CameraInfo",), default=Topic(name="/camera/aligned_depth_to_color/camera_info", msg_type="CameraInfo")),
+        "tf": AllowedTopic(types=("TFMessage",), default=Topic(name="/tf", msg_type="TFMessage")),
     }
     allowed_outputs = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path"), required=True),
@@ -177,11 +188,16 @@ class Planner(PathFiles, NavComponent):
         return self._reached
 
     def _take_goal(self, msg: Any) -> None:
-        try:
-            goal = goal_of(msg)
-        except BadInput as exc:
-            self.fail_input("goal_point", str(exc))
-            return
+        if is_pixel_goal(msg):
+            goal = self.pixel_goal(msg)
+            if goal is None:
+                return
+        else:
+            try:
+                goal = goal_of(msg)
+            except BadInput as exc:
+                self.fail_input("goal_point", str(exc))
+                return
         key = tuple(np.round(goal, 6))
         if key != self._goal_key:
             self._goal, self._goal_key, self._reached = goal, key, False

@@ -9,7 +9,7 @@ import numpy as np
 from ..robot import RobotConfig
 from .base import ControlStatus
 
-__all__ = ["BoundingBox", "CameraIntrinsics", "TargetSearch"]
+__all__ = ["BoundingBox", "CameraIntrinsics", "TargetSearch", "median_depth"]
 
 
 def _positive(instance, attribute, value) -> None:
@@ -56,6 +56,23 @@ class CameraIntrinsics:
         """Pixels and depth (m) -> points in the optical frame (x right, y down, z forward)."""
         z = np.asarray(depth, dtype=np.float64)
         return np.stack([(np.asarray(u) - self.cx) * z / self.fx, (np.asarray(v) - self.cy) * z / self.fy, z], axis=-1)
+
+
+def median_depth(depth_image: np.ndarray, u: float, v: float, half_width: float, half_height: float) -> float | None:
+    """Median of the valid depths (finite, > 0) in the window of ``half_width`` x ``half_height``
+    pixels around (u, v), clipped to the image; None when the window holds no valid depth.
+
+    The median over a window, not the pixel under the point, ignores depth holes and the
+    background that a box's edges or a slightly-off point catch.
+    """
+    depth = np.asarray(depth_image)
+    if depth.ndim != 2:
+        raise ValueError(f"depth_image: expected a 2D array, got shape {depth.shape}")
+    r0, r1 = int(max(0, math.floor(v - half_height))), int(min(depth.shape[0], math.ceil(v + half_height)))
+    c0, c1 = int(max(0, math.floor(u - half_width))), int(min(depth.shape[1], math.ceil(u + half_width)))
+    patch = depth[r0:r1, c0:c1].astype(np.float64)
+    valid = patch[np.isfinite(patch) & (patch > 0)]
+    return float(np.median(valid)) if valid.size else None
 
 
 class TargetSearch:

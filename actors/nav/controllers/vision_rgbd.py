@@ -26,7 +26,7 @@ from .clearance import nearby_obstacles, pose_clearance, voxel_downsample
 from .detour import detour_reference
 from .dwa import dwa_samples, vec3, vec4
 from .sensors import ObstacleInput, obstacle_points, sensor_offset
-from .vision_common import BoundingBox, CameraIntrinsics, TargetSearch
+from .vision_common import BoundingBox, CameraIntrinsics, TargetSearch, median_depth
 
 __all__ = ["VisionRGBDFollowerConfig", "VisionRGBDFollower", "target_from_depth"]
 
@@ -77,18 +77,11 @@ def target_from_depth(box: BoundingBox, depth_image: np.ndarray, intrinsics: Cam
     Uses the median of the valid depths (finite, > 0) in the central half of the box, which
     ignores background pixels at the box edges and depth holes.
     """
-    depth = np.asarray(depth_image)
-    if depth.ndim != 2:
-        raise ValueError(f"depth_image: expected a 2D array, got shape {depth.shape}")
     u0, v0 = box.center
-    hw, hh = 0.25 * box.width, 0.25 * box.height
-    r0, r1 = int(max(0, math.floor(v0 - hh))), int(min(depth.shape[0], math.ceil(v0 + hh)))
-    c0, c1 = int(max(0, math.floor(u0 - hw))), int(min(depth.shape[1], math.ceil(u0 + hw)))
-    patch = depth[r0:r1, c0:c1].astype(np.float64) * depth_conversion_factor
-    valid = patch[np.isfinite(patch) & (patch > 0)]
-    if valid.size == 0:
+    raw = median_depth(depth_image, u0, v0, 0.25 * box.width, 0.25 * box.height)
+    if raw is None:
         return None
-    z = float(np.median(valid))
+    z = raw * depth_conversion_factor
     optical = intrinsics.back_project(u0, v0, z)
     # Optical (x right, y down, z forward) -> body (x forward, y left, z up).
     return np.array([optical[2], -optical[0], -optical[1]])

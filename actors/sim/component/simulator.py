@@ -191,11 +191,15 @@ class Simulator(KeyedComponent):
 
     # -- introspection (for tests, benchmarks and `emos` CLI's execute_method) --------------------
     def sim_status(self) -> dict:
-        """Simulated time, clock ticks, messages published per key, robot pose, wait time."""
+        """Simulated time, clock ticks, messages published per key, robot pose, moving obstacles' poses, wait time."""
         physics, setup = self.physics, self.setup
         out: dict = {"running": physics is not None and physics.is_alive()}
         if setup is not None:
             out["sim_time"] = setup.world.clock.now()
+            if setup.world.movers:  # where each moving obstacle (a walking person, ...) is now
+                now = setup.world.clock.now()
+                out["movers"] = [{"name": getattr(m, "name", type(m).__name__), "pose": list(m.pose_at(now))}
+                                 for m in setup.world.movers]
             if setup.robot is not None:
                 out["pose"] = [float(v) for v in setup.robot.pose]
                 out["collided"] = bool(setup.robot.collided)
