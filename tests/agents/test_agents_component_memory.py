@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
@@ -68,7 +69,7 @@ def test_map_encoding_stores_layers_in_chroma_and_survives_a_corrupt_store(tmp_p
     db_dir = tmp_path / "chroma"
     bad_dir = tmp_path / "corrupt"
     bad_dir.mkdir()
-    # (A read-only directory cannot be tested here: the tests run as root, who writes anyway.)
+    # (A read-only directory: see the next test.)
     (bad_dir / "chroma.sqlite3").write_bytes(b"this is not an sqlite database" * 100)
     system = SystemUnderTest(tmp_path, HEADER + f"""
 detections = Topic(name="detections", msg_type="Detections")
@@ -115,6 +116,53 @@ launcher.bringup()
     assert docs["cup, chair"]["coordinates"][:2] == [2.25, 3.25]  # 0.5 m cells
     assert docs["cup, chair"]["temporal_change"] is True
     client.deinitialize()
+
+
+def test_map_encoding_on_a_read_only_store_reports_it_and_keeps_running(tmp_path, model_server):
+    """Root writes through any mode, so the system runs without the capabilities that let it
+    (``setpriv``): as an ordinary user on a robot whose map directory was left read-only."""
+    import os
+    import shutil
+    import subprocess
+
+    from emos.actors.agents import ChromaClient, ChromaDB
+
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to drop the capability that ignores file modes")
+    store = tmp_path / "readonly_store"
+    db = ChromaDB(path=str(store), embeddings="ollama", checkpoint="all-minilm", ollama_port=model_server.port)
+    client = ChromaClient(db=db)
+    client.initialize()
+    client.add("map", ["kitchen"], embeddings=np.ones((1, 384)))
+    client.deinitialize()
+    subprocess.run(["chmod", "-R", "a-w", str(store)], check=True)
+    try:
+        system = SystemUnderTest(tmp_path, HEADER + f"""
+room = Topic(name="introspection_answer", msg_type="String")
+position = Topic(name="odom", msg_type="Odometry")
+map_topic = Topic(name="map", msg_type="OccupancyGrid")
+mapper = MapEncoding(layers=[MapLayer(subscribes_to=room)], position=position, map_topic=map_topic,
+                     db_client=ChromaClient(db=ChromaDB(path={str(store)!r}, embeddings="ollama", checkpoint="all-minilm",
+                                                        ollama_port={model_server.port})),
+                     trigger=0.5, component_name="readonly_map")
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[mapper])
+launcher.bringup()
+""", duration=120, prefix=["setpriv", "--bounding-set", "-dac_override,-dac_read_search,-fowner", "--"]).wait_up(
+            components=["readonly_map"], timeout=60)
+        probe = Probe(system)
+        try:
+            wait_until(lambda: probe.status("readonly_map").status == M.ComponentStatus.STATUS_FAILURE_COMPONENT_LEVEL, 30,
+                       what="the read-only store reported")
+            pid = system.pid("readonly_map")
+            wait_until(lambda: f"cannot open the embedded store at {str(store)!r}" in system.output(), 30, what="the store named in the log: " + system.output()[-1500:])
+            assert "readonly database" in system.output()
+        finally:
+            probe.close()
+            assert system.pid("readonly_map") == pid  # reported, not crashed
+            assert system.stop() == 0
+    finally:
+        subprocess.run(["chmod", "-R", "u+w", str(store)], check=True)
 
 
 def test_video_message_maker_cuts_on_motion(tmp_path):

@@ -6,6 +6,7 @@ Both take pre-computed embeddings and return Chroma's raw column-oriented dicts,
 """
 from __future__ import annotations
 
+import logging
 import threading
 from typing import Any
 
@@ -27,6 +28,20 @@ class CollectionMissing(LookupError):
 _OPEN_LOCK = threading.Lock()
 
 
+def _forget_failed_store(path: str) -> None:
+    """Chroma caches one System per path before starting it: when starting fails (a read-only
+    or corrupt directory) the broken System stays cached and every later open of that path gets
+    it, failing with unrelated AttributeErrors. Drop it, so a retry fails (or succeeds) afresh."""
+    try:
+        from chromadb.api.shared_system_client import SharedSystemClient
+        from chromadb.config import Settings
+
+        identifier = SharedSystemClient._get_identifier_from_settings(Settings(is_persistent=True, persist_directory=path))
+        SharedSystemClient._identifier_to_system.pop(identifier, None)
+    except (ImportError, AttributeError, ValueError) as exc:  # another chromadb version: nothing cached the same way
+        logging.getLogger("emos.agents.db").debug("cannot clear chromadb's cache for %s: %s", path, exc)
+
+
 class EmbeddedBackend:
     """``chromadb.PersistentClient`` in this process, persisted under ``db.path``."""
 
@@ -41,9 +56,13 @@ class EmbeddedBackend:
         self._errors = errors
         # anonymized_telemetry off: a robot must not try to phone home.
         with _OPEN_LOCK:
-            self._client = chromadb.PersistentClient(
-                path=db.path, settings=Settings(anonymized_telemetry=False, allow_reset=True),
-                tenant=db.tenant, database=db.database)
+            try:
+                self._client = chromadb.PersistentClient(
+                    path=db.path, settings=Settings(anonymized_telemetry=False, allow_reset=True),
+                    tenant=db.tenant, database=db.database)
+            except Exception:
+                _forget_failed_store(db.path)
+                raise
         self._collections: dict[str, Any] = {}
 
     def heartbeat(self) -> None:

@@ -56,7 +56,18 @@ class ChromaClient:
         :meth:`deinitialize`: components sharing one client (threads of one process) keep it
         open until the last of them lets go."""
         with self._lock:
-            self._open_backend().heartbeat()
+            try:
+                self._open_backend().heartbeat()
+            except (ModelConnectionError, ImportError):
+                raise
+            except Exception as exc:
+                if self.db.is_server:
+                    raise
+                # Name the store: Chroma's own message ("attempt to write a readonly database")
+                # does not say which of a robot's directories it means.
+                self._backend = None
+                raise ModelConnectionError(f"cannot open the embedded store at {self.db.path!r} ({exc})",
+                                           client="ChromaClient") from exc
             self._users += 1
 
     def _open_backend(self) -> EmbeddedBackend | HTTPBackend:
@@ -67,15 +78,7 @@ class ChromaClient:
 
     def check_connection(self) -> None:
         """Raise ModelConnectionError (or ModelTimeoutError) if the store cannot be reached."""
-        try:
-            self.initialize()
-        except (ModelConnectionError, ImportError):
-            raise
-        except Exception as exc:
-            if self.db.is_server:
-                raise
-            raise ModelConnectionError(f"cannot open the embedded store at {self.db.path!r} ({exc})",
-                                       client="ChromaClient") from exc
+        self.initialize()
 
     def deinitialize(self) -> None:
         with self._lock:
