@@ -58,3 +58,15 @@ class Probe:
             p.close()
         for s in self.subs.values():
             s.close()
+
+
+def sim_status(system: SystemUnderTest, component: str = "sim") -> dict:
+    """The running Simulator's ``sim_status`` (commands received, collisions, movers' poses)."""
+    from emos.core.node import control_socket
+    from emos.core.rpc import RpcClient
+
+    client = RpcClient(control_socket(system.ctx, component))
+    try:
+        return client.call("execute_method", method="sim_status", timeout=10.0)
+    finally:
+        client.close()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.agents.components_helpers import Probe
+from tests.agents.components_helpers import Probe, sim_status
 from tests.agents.fixtures.server_process import start_server
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
@@ -24,17 +24,6 @@ def server():
     proc.stop()
 
 
-def _sim_status(system: SystemUnderTest) -> dict:
-    from emos.core.node import control_socket
-    from emos.core.rpc import RpcClient
-
-    client = RpcClient(control_socket(system.ctx, "sim"))
-    try:
-        return client.call("execute_method", method="sim_status", timeout=10.0)
-    finally:
-        client.close()
-
-
 def test_planning_models_recipe_grounds_the_person_and_drives_to_it(tmp_path, server):
     system = SystemUnderTest(tmp_path, (RECIPES / "planning_models.py").read_text(), duration=150,
                              env={"EMOS_MODELS_PORT": str(server.port), "HOME": str(tmp_path)})
@@ -44,8 +33,8 @@ def test_planning_models_recipe_grounds_the_person_and_drives_to_it(tmp_path, se
         odom, plans = probe.sub("/odom", "Odometry"), probe.sub("/plan", "Path")
         # The person's true place, from the running world (it walks 0.2 m into place, then stands).
         def person_standing():
-            movers = _sim_status(system).get("movers", [])
-            return movers[0]["pose"][:2] if movers and _sim_status(system)["sim_time"] > 2.0 else None
+            movers = sim_status(system).get("movers", [])
+            return movers[0]["pose"][:2] if movers and sim_status(system)["sim_time"] > 2.0 else None
 
         person = wait_until(person_standing, 30, interval=0.5, what="the person in the world")
         start = wait_until(odom.latest, 30, what="odometry").pose.pose.position
@@ -74,7 +63,7 @@ def test_planning_models_recipe_grounds_the_person_and_drives_to_it(tmp_path, se
             return msg is not None and math.dist((msg.pose.pose.position.x, msg.pose.pose.position.y), person) < far - 1.0
 
         wait_until(closer, 40, interval=0.2, what="the robot 1 m closer to the person")
-        assert not _sim_status(system).get("collided", False)
+        assert not sim_status(system).get("collided", False)
     finally:
         probe.close()
         assert system.stop() == 0

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from emos import msgs as M
-from tests.agents.components_helpers import Probe
+from tests.agents.components_helpers import Probe, sim_status
 from tests.agents.fixtures.server_process import start_server
 from tests.agents.test_agents_local_models import _figure
 from tests.runtime.helpers import SystemUnderTest, wait_until
@@ -189,17 +189,6 @@ def test_goto_navigation_reads_the_goal_from_the_map(tmp_path, recipe_server):
         assert system.stop() == 0
 
 
-def _sim_status(system: SystemUnderTest) -> dict:
-    from emos.core.node import control_socket
-    from emos.core.rpc import RpcClient
-
-    client = RpcClient(control_socket(system.ctx, "sim"))
-    try:
-        return client.call("execute_method", method="sim_status", timeout=10.0)
-    finally:
-        client.close()
-
-
 def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_server):
     """The recipe's VLA drives the Simulator's table-top arm: its commands reach the arm, and
     as the stand-in policy holds the observed pose, an arm pushed elsewhere is held there."""
@@ -224,7 +213,7 @@ def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_
         ready = dict(zip(start.name, start.position))
         client = ActionClient("vla_with_smolvla/vision_language_action", VisionLanguageActionGoal,
                               VisionLanguageActionFeedback, VisionLanguageActionResult, ctx=system.ctx)
-        before = _sim_status(system)["commands"]
+        before = sim_status(system)["commands"]
 
         def run_goal() -> None:
             try:
@@ -244,7 +233,7 @@ def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_
         assert list(sent[0].name) == joints
         # The policy holds the observed pose: the commands are the arm's ready pose.
         assert np.allclose(sent[0].position, [ready[j] for j in joints], atol=0.05)
-        wait_until(lambda: _sim_status(system)["commands"] >= before + 3, 10, what="the simulator receiving the commands")
+        wait_until(lambda: sim_status(system)["commands"] >= before + 3, 10, what="the simulator receiving the commands")
         # A second source (an operator's teleop, say) pushes the Rotation joint to 0.8 rad at 20 Hz
         # until the arm is there, and 1 s longer so that the VLA observes it settled.
         def push() -> None:
@@ -301,7 +290,7 @@ def test_event_driven_vla_stops_the_player_on_the_referees_yes(tmp_path, recipe_
         assert any(v.data == "YES" for v in verdicts.take())
         # The player's commands reached the arm. Not all of them: on this loaded machine the
         # simulator has counted 43-49 of 50 (see the branch report); the arm test checks the loop.
-        assert _sim_status(system)["commands"] >= result.timesteps // 2
+        assert sim_status(system)["commands"] >= result.timesteps // 2
     finally:
         probe.close()
         assert system.stop() == 0
