@@ -106,6 +106,7 @@ class Node:
         # Publish stamp of the message that triggered the running step (None outside one): the
         # input's latest stamp may be newer when the step works through a backlog.
         self.trigger_stamp_ns: int | None = None
+        self._deferred: list[tuple[int, int, _Input, bytes]] = []  # triggering messages for the next pass (see _take_inputs)
         self._publishers: dict[str, tuple[TopicPublisher, threading.Lock]] = {}
         self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
@@ -354,7 +355,7 @@ class Node:
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
         # backlog on two topics must not read all of one before the other, or it would pair
         # one topic's newest message with the other's oldest, a state that never existed.
-        backlog: list[tuple[int, int, _Input, bytes]] = []
+        backlog, self._deferred = (self._deferred if active else []), []
         for inp in self._inputs.values():
             items = inp.sub.take_raw()
             if not items:
@@ -363,6 +364,15 @@ class Node:
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
             if active and inp.topic in triggers:
                 backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
+        if len(triggers) > 1 and backlog:
+            # A message stamped while the rings were being read may have an earlier-stamped
+            # sibling on a ring read before it was written: it waits for the next pass (at once).
+            took = time.time_ns()
+            self._deferred = [item for item in backlog if now <= item[0] <= took]
+            if self._deferred:
+                backlog = [item for item in backlog if not now <= item[0] <= took]
+                assert self.loop is not None
+                self.loop.call_soon(self._take_inputs)
         backlog.sort(key=lambda item: item[:2])  # by stamp; within a stamp, as read
         for stamp_i, _, inp, raw_i in backlog:
             msg = codec.decode(inp.topic.msg_type, raw_i)

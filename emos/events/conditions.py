@@ -450,104 +450,12 @@ def render(tree: Mapping) -> str:
 
 
 # ============================================================================ compiled evaluation
-# The Monitor evaluates every armed event on every message of its topics: the tree is compiled
-# once into closures (same semantics as :func:`evaluate`, which stays the reference), so 100
-# armed events cost tens of microseconds per message instead of hundreds.
 Compiled = Callable[[Callable[[str], Any], "str | None"], "bool | None"]
 
 
-def _compile_path(path: Mapping) -> Callable[[Any], Any]:
-    steps = path["steps"]
-    if steps and all("f" in s and not s["map"] for s in steps):
-        import operator
-
-        getter = operator.attrgetter(".".join(s["f"] for s in steps))
-
-        def simple(msg: Any) -> Any:
-            try:
-                value = getter(msg)
-            except AttributeError:  # an unset optional message on the way
-                return None
-            if isinstance(value, np.ndarray):
-                return value.tolist()
-            if isinstance(value, np.generic):
-                return value.item()
-            return value
-
-        return simple
-    return lambda msg: resolve_path(path, msg)
-
-
 def compile_condition(tree: Mapping) -> Compiled:
-    op = tree["op"]
-    if op in ("and", "or"):
-        parts = [compile_condition(a) for a in tree["args"]]
-        stop, other = (False, True) if op == "and" else (True, False)
+    """The condition as one generated function (see :mod:`emos.events.compiled`); same results
+    as :func:`evaluate`, about ten times faster per armed event."""
+    from emos.events.compiled import compile_tree
 
-        def combine(fresh: Callable[[str], Any], trigger: str | None) -> bool | None:
-            unknown = False
-            for part in parts:
-                r = part(fresh, trigger)
-                if r is stop:
-                    return stop
-                if r is None:
-                    unknown = True
-            return None if unknown else other
-
-        return combine
-    if op == "not":
-        inner = compile_condition(tree["arg"])
-
-        def negate(fresh: Callable[[str], Any], trigger: str | None) -> bool | None:
-            r = inner(fresh, trigger)
-            return None if r is None else not r
-
-        return negate
-    if op == "new_msg":
-        topic = tree["topic"]
-
-        def new_msg(fresh: Callable[[str], Any], trigger: str | None) -> bool | None:
-            if trigger == topic:
-                return True
-            return False if fresh(topic) is not None else None
-
-        return new_msg
-    topic = tree["path"]["topic"]
-    get = _compile_path(tree["path"])
-    test = _compile_leaf(tree)
-
-    def leaf(fresh: Callable[[str], Any], trigger: str | None) -> bool | None:
-        msg = fresh(topic)
-        if msg is None:
-            return None
-        value = get(msg)
-        if value is _MISSING:
-            return None
-        try:
-            return test(value)
-        except TypeError:
-            return None
-
-    return leaf
-
-
-def _compile_leaf(tree: Mapping) -> Callable[[Any], bool]:
-    import operator
-
-    op = tree["op"]
-    if op == "cmp":
-        fn = {"==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge}[tree["cmp"]]
-        const = tree["value"]
-        return lambda v: bool(fn(v, const))
-    if op == "is_true":
-        return bool
-    if op == "is_false":
-        return operator.not_
-    values = tree.get("values")
-    if op in ("in", "not_in"):
-        try:
-            pool: Any = frozenset(values)
-        except TypeError:  # unhashable values (lists): fall back to a list scan
-            pool = list(values)
-        return (lambda v: v in pool) if op == "in" else (lambda v: v not in pool)
-    return lambda v: _leaf(tree, v)
+    return compile_tree(tree)

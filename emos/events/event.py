@@ -112,6 +112,7 @@ class EventTracker:
         self.tree = spec["condition"]["tree"]
         self._evaluate = compile_condition(self.tree)
         self.topics = topics_of(self.tree)
+        self._whole_topic, self._on_change = bool(spec["whole_topic"]), bool(spec["on_change"])
         self.fired_once = fired_before
         self.last_value = False
         self.last_content: Any = None
@@ -122,11 +123,11 @@ class EventTracker:
         """``fresh``: optional ``topic -> fresh message or None`` computed once per message for
         all events (the Monitor's fast path); by default read from ``board`` at ``now``."""
         now = time.monotonic() if now is None else now
-        if self.spec["whole_topic"]:
+        if self._whole_topic:
             if trigger_topic not in self.topics:
                 return False
             value: bool | None = True
-            if self.spec["on_change"]:
+            if self._on_change:
                 content = message_content(board.latest(trigger_topic))
                 value = content != self.last_content
                 self.last_content = content
@@ -134,17 +135,17 @@ class EventTracker:
         else:
             value = self._evaluate(fresh or (lambda t: board.fresh(t, now)), trigger_topic)
         truth = value is True
-        if self.spec["on_change"]:
-            # An edge is false -> true over *known* values. Unknown (an input missing or stale)
-            # neither fires nor re-arms the edge: otherwise a Monitor that was descheduled for
-            # longer than a data_timeout would read one topic's backlog before the other's,
-            # see the other as stale for one message, and fire the same event a second time.
-            if value is None:
-                return False
-            rising = truth and not self.last_value
-            self.last_value = truth
-            return self._decide(rising, now)
-        return self._decide(truth, now)
+        if not self._on_change:
+            return truth and self._decide(True, now)  # most events are false on most messages
+        # on_change: an edge is false -> true over *known* values. Unknown (an input missing or
+        # stale) neither fires nor re-arms the edge: otherwise a Monitor descheduled for longer
+        # than a data_timeout, reading one topic's backlog before another's, would see the
+        # other as stale for one message and fire the same event a second time.
+        if value is None:
+            return False
+        rising = truth and not self.last_value
+        self.last_value = truth
+        return self._decide(rising, now)
 
     def _decide(self, fire: bool, now: float) -> bool:
         if not fire or (self.spec["handle_once"] and self.fired_once):

@@ -202,3 +202,16 @@ def test_compiled_conditions_agree_with_the_reference_evaluator():
         for world in worlds:
             for trigger in (None, "/mode", "/battery"):
                 assert fast(world.get, trigger) == evaluate(tree, world.get, trigger), (cond, world.keys(), trigger)
+
+
+def test_a_condition_too_wide_to_compile_is_still_evaluated():
+    from functools import reduce
+
+    from emos.events.conditions import compile_condition
+
+    wide = reduce(lambda a, b: a | b, [battery.msg.data == float(k) for k in range(150)])  # 150 nested blocks
+    tree = wide.to_dict()["tree"]
+    fn = compile_condition(tree)
+    for value in (7.0, 500.0):
+        world = {"/battery": Float32(data=value)}
+        assert fn(world.get, "/battery") == evaluate(tree, world.get, "/battery") == (value < 150)
