@@ -8,8 +8,9 @@ message itself in EMOS's own encoding (msgpack metadata + raw, aligned arrays; s
 
 The payload starts 8-byte aligned within the frame, so the arrays in it can be viewed in place.
 Anything can arrive on a key expression (another program, another version, a forged sender), so
-:func:`read_frame` checks every length against the frame before it slices, and the caller then
-decodes the payload as the expected type before it hands the message on.
+:func:`read_frame` checks every length against the frame before it slices; the body is decoded
+(and, if it does not decode, dropped) by whoever needs the message, once (see
+:class:`emos.transport.zenoh_net.ZenohSubscriber`).
 """
 from __future__ import annotations
 

@@ -12,11 +12,12 @@ topic of the process. Its mode (peer or client), endpoints and scouting come fro
 configuration file (``$EMOS_ZENOH_CONFIG``, set by ``emos run --zenoh CONFIG``); without one,
 Zenoh's defaults (peer mode, multicast scouting) apply.
 
-Zenoh delivers samples on its own threads. A subscriber checks each one there (a frame of the
-expected type that decodes; anything else is dropped with a rate-limited warning naming the
+Zenoh delivers samples on its own threads. A subscriber checks each frame there (magic,
+lengths, type fingerprint; anything else is dropped with a rate-limited warning naming the
 key), appends it to a bounded queue (``queue_size``, oldest dropped and counted) and calls its
 ``notify`` (the node's waker: one byte to the FIFO its uvloop watches). The node then takes
-from the queue on its own thread, exactly as it reads a ring.
+from the queue on its own thread, as it reads a ring, and decodes each message it uses once,
+through :meth:`ZenohSubscriber.decode_payload` (a body that does not decode is dropped there).
 
 Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
 so :func:`list_topics` can discover the topics of every host in the group.
