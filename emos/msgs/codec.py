@@ -273,9 +273,9 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
             start = base + offset
             if start + nbytes > end:
                 raise DecodeError("array runs past the end of the frame")
-            arr = np.frombuffer(view, dtype=dtype, count=count, offset=start)
-            if len(shape) != 1:
-                arr = arr.reshape(shape)
+            # The array constructor with positional arguments: half the cost of frombuffer's
+            # keywords plus a reshape, for the same read-only view (bounds checked above).
+            arr = np.ndarray(shape, dtype, view, start)
             return arr.copy() if copy else arr
 
         tree = msgpack.unpackb(view[4 : 4 + meta_len], ext_hook=ext_hook, raw=False, strict_map_key=False)
