@@ -207,6 +207,7 @@ class ZenohSubscriber:
         self.queue_size = max(int(queue_size), 1)
         self.dropped = 0  # taken off the full queue to make room
         self.rejected = 0  # payloads that were not a frame, or not a decodable message, of our type
+        self.undecodable = 0  # of those, well-framed ones whose body did not decode (as Subscriber's)
         # (stamp, payload, publisher), payload a read-only view of the bytes Zenoh delivered.
         self._queue: collections.deque[tuple[int, memoryview, str]] = collections.deque()
         self._lock = threading.Lock()  # the queue: held for an append or a drain, never while waking
@@ -262,6 +263,7 @@ class ZenohSubscriber:
         try:
             return codec.decode(self.msg_cls, payload)
         except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
+            self.undecodable += 1
             self._reject(self.key, exc)
             return None
 

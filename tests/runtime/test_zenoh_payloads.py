@@ -131,6 +131,7 @@ def test_foreign_mistyped_and_undecodable_payloads_are_dropped_with_a_log_naming
         # Only the real message reaches the reader; nothing was raised on either thread.
         assert len(got) == 1 and got[0].ranges.tolist() == [7.0] * 5
         assert _wait(lambda: sub.rejected == len(bad)), f"rejected {sub.rejected} of {len(bad)}"
+        assert sub.undecodable == 2  # the two well-framed bodies, refused on the reader's thread
         lines = [r.getMessage() for r in caplog.records if "dropping a payload" in r.getMessage()]
         assert lines and all(f"on key {key}" in line and "/scan" in line for line in lines)
         # The first refusal is logged; the rest within 10 s are counted into a later line.
