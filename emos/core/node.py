@@ -26,11 +26,10 @@ from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
 from emos.io.topic import Topic, normalize_topic_name
-from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
 from emos.transport.context import RunContext, current, encode_name
 from emos.transport.pubsub import Publisher
-from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_server_bridge, open_subscriber
+from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_server_bridge, open_subscriber, payload_decoder
 from emos.transport.waker import DEFAULT_SPIN_US, Waker
 
 ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
@@ -42,10 +41,11 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 
 
 class _Input:
-    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns")
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode")
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
+        self.decode = payload_decoder(sub, topic.msg_type)  # None from it: a network payload dropped (logged)
         self.raw: bytearray | None = None
         self.stamp_ns = 0
         self.received_ns = 0
@@ -375,7 +375,9 @@ class Node:
                 self.loop.call_soon(self._take_inputs)
         backlog.sort(key=lambda item: item[:2])  # by stamp; within a stamp, as read
         for stamp_i, _, inp, raw_i in backlog:
-            msg = codec.decode(inp.topic.msg_type, raw_i)
+            msg = inp.decode(raw_i)
+            if msg is None:
+                continue
             inp.decoded = msg if raw_i is inp.raw else inp.decoded
             self.trigger_stamp_ns = stamp_i
             try:
@@ -404,7 +406,9 @@ class Node:
             inp.stamp_ns, inp.raw, _ = item
             inp.received_ns = time.time_ns()
         if inp.decoded is None:
-            inp.decoded = codec.decode(inp.topic.msg_type, inp.raw)
+            inp.decoded = inp.decode(inp.raw)
+            if inp.decoded is None:
+                inp.raw = None  # a malformed network payload, dropped: as if it had not come
         return inp.decoded
 
     def age(self, topic: Topic | str) -> float | None:

@@ -12,11 +12,12 @@ topic of the process. Its mode (peer or client), endpoints and scouting come fro
 configuration file (``$EMOS_ZENOH_CONFIG``, set by ``emos run --zenoh CONFIG``); without one,
 Zenoh's defaults (peer mode, multicast scouting) apply.
 
-Zenoh delivers samples on its own threads. A subscriber checks each one there (a frame of the
-expected type that decodes; anything else is dropped with a rate-limited warning naming the
+Zenoh delivers samples on its own threads. A subscriber checks each frame there (magic,
+lengths, type fingerprint; anything else is dropped with a rate-limited warning naming the
 key), appends it to a bounded queue (``queue_size``, oldest dropped and counted) and calls its
 ``notify`` (the node's waker: one byte to the FIFO its uvloop watches). The node then takes
-from the queue on its own thread, exactly as it reads a ring.
+from the queue on its own thread, as it reads a ring, and decodes each message it uses once,
+through :meth:`ZenohSubscriber.decode_payload` (a body that does not decode is dropped there).
 
 Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
 so :func:`list_topics` can discover the topics of every host in the group.
@@ -35,7 +36,7 @@ from typing import Any, Callable
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport.context import encode_name
-from emos.transport.netframe import BadFrame, frame_prefix, read_frame, write_frame
+from emos.transport.netframe import FrameWriter, read_frame
 from emos.transport.trust import RateLimitedLog
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -152,8 +153,7 @@ class ZenohPublisher:
         self.fingerprint: str = msg_cls._emos_fingerprint  # type: ignore[attr-defined]
         self.publisher_id = publisher_id or f"pid{os.getpid()}-{id(self):x}"
         self.key = topic_key(topic, group)
-        self._prefix, self._start = frame_prefix(self.fingerprint, self.publisher_id)
-        self._frame: bytearray | None = None
+        self._frames = FrameWriter(self.fingerprint, self.publisher_id)
         sess = session(config_path)
         # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
         self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
@@ -168,9 +168,9 @@ class ZenohPublisher:
             raise TopicTypeError(f"topic {self.topic!r} carries {self.type_name}, got {type(msg).__name__}")
         if self._pub is None:
             raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
-        # Publishing is single-threaded per publisher (the node holds its lock), so one buffer.
-        frame = self._frame = write_frame(codec.encode(msg), time.time_ns(), self.fingerprint, self.publisher_id, self._prefix, self._start, self._frame)
-        self._pub.put(frame)
+        # Publishing is single-threaded per publisher (the node holds its lock), so one writer;
+        # Zenoh copies the frame on put, so its buffer is free again when put returns.
+        self._pub.put(self._frames.frame(codec.encode(msg), time.time_ns()))
         self.sent += 1
         return self.sent - 1
 
@@ -188,22 +188,30 @@ class ZenohSubscriber:
     """Receives one topic from every publisher on its key expression, on any host of the group.
 
     The same reading interface as :class:`emos.transport.pubsub.Subscriber` (``take_raw``,
-    ``latest_raw``, ``has_news``, ``take``, ``latest``, ``close``), so a node reads either alike.
-    ``notify`` is called (on a Zenoh thread) after each accepted message.
+    ``latest_raw``, ``has_news``, ``take``, ``latest``, ``close``), so a node reads either alike,
+    plus :meth:`decode_payload`, the guarded decode a node uses for ``take_raw``'s payloads.
+    ``notify`` is called (on a Zenoh thread) after each accepted frame.
+
+    Work is split so that a message is decoded once, where it is used: Zenoh's thread checks only
+    the frame (:func:`read_frame`: magic, lengths, type fingerprint, about 1 us) and queues the
+    payload; the reader's thread decodes it, and a payload whose body does not decode is dropped
+    there with the same rate-limited warning. Zenoh's thread holds no lock while it wakes the
+    reader, so the woken thread never waits for it.
     """
 
     def __init__(self, topic: str, msg_cls: type, notify: Callable[[], None] | None = None, queue_size: int = 10, transient_local: bool = False, config_path: str | None = None, group: str | None = None):
         self.topic, self.msg_cls = topic, msg_cls
         self.fingerprint: str = msg_cls._emos_fingerprint  # type: ignore[attr-defined]
+        self._fp = self.fingerprint.encode()
         self.key = topic_key(topic, group)
         self.queue_size = max(int(queue_size), 1)
         self.dropped = 0  # taken off the full queue to make room
-        self.rejected = 0  # frames that were not a decodable message of our type
-        self.undecodable = 0
-        # (stamp, payload, publisher, decoded message): take() hands out the message decoded
-        # here, take_raw() the payload (the node decodes lazily, as from a ring).
-        self._queue: collections.deque[tuple[int, memoryview, str, Any]] = collections.deque()
-        self._lock = threading.Lock()
+        self.rejected = 0  # payloads that were not a frame, or not a decodable message, of our type
+        self.undecodable = 0  # of those, well-framed ones whose body did not decode (as Subscriber's)
+        # (stamp, payload, publisher), payload a read-only view of the bytes Zenoh delivered.
+        self._queue: collections.deque[tuple[int, memoryview, str]] = collections.deque()
+        self._lock = threading.Lock()  # the queue: held for an append or a drain, never while waking
+        self._waking: list[bool] = []  # one entry per callback between its queueing and its wake-up call
         self._notify = notify
         self._closed = False
         self._publishers: set[str] = set()
@@ -212,18 +220,14 @@ class ZenohSubscriber:
         self._sub = session(config_path).declare_subscriber(self.key, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
-        """On a Zenoh thread: check, queue, wake. Nothing raised here may escape (it would be
-        lost in Zenoh's thread and the subscriber would look alive while deaf)."""
+        """On a Zenoh thread: check the frame, queue, wake. Nothing raised here may escape (it
+        would be lost in Zenoh's thread and the subscriber would look alive while deaf)."""
         try:
-            data = sample.payload.to_bytes()
-            stamp, pub, payload = read_frame(data, self.fingerprint)
-            msg = codec.decode(self.msg_cls, payload)  # reject now what the node could not decode later
-        except (BadFrame, codec.DecodeError) as exc:
+            stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
+        except Exception as exc:  # noqa: BLE001 - BadFrame, or anything a foreign payload provokes
             self._reject(str(sample.key_expr), exc)
             return
-        except Exception as exc:  # noqa: BLE001 - a foreign payload must never kill delivery
-            self._reject(str(sample.key_expr), exc)
-            return
+        waking = self._waking
         with self._lock:
             if self._closed:
                 return
@@ -231,13 +235,19 @@ class ZenohSubscriber:
             if len(queue) >= self.queue_size:
                 queue.popleft()
                 self.dropped += 1
-            queue.append((stamp, payload, pub, msg))
-            self._publishers.add(pub)
+            queue.append((stamp, payload, pub))
+            waking.append(True)  # see close(): we may wake the reader until we pop this
+        try:
+            if pub not in self._publishers:
+                self._publishers.add(pub)
             if self._notify is not None:
-                try:
-                    self._notify()
-                except Exception as exc:  # noqa: BLE001
-                    _warn.warning(f"notify:{self.topic}", "topic %s: waking the reader failed: %s", self.topic, exc)
+                # No lock is held here: the woken reader must never wait for this thread,
+                # which needs the interpreter lock back after its wake-up write.
+                self._notify()
+        except Exception as exc:  # noqa: BLE001
+            _warn.warning(f"notify:{self.topic}", "topic %s: waking the reader failed: %s", self.topic, exc)
+        finally:
+            waking.pop()
 
     def _reject(self, key: str, exc: BaseException) -> None:
         self.rejected += 1
@@ -246,15 +256,27 @@ class ZenohSubscriber:
             self.topic, key, canonical_name(self.msg_cls), self.rejected, type(exc).__name__, exc,
         )
 
+    def decode_payload(self, payload: Any) -> Any | None:
+        """The message in a payload of :meth:`take_raw`, or ``None`` (logged and counted as
+        rejected) if its body does not decode as this topic's type: only its frame was checked
+        on arrival, and anyone on the network can send a well-framed lie."""
+        try:
+            return codec.decode(self.msg_cls, payload)
+        except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
+            self.undecodable += 1
+            self._reject(self.key, exc)
+            return None
+
     # -- reading (the node's thread) --------------------------------------------------------------
-    def _take_all(self) -> list[tuple[int, Any, str, Any]]:
+    def take_raw(self) -> list[tuple[int, Any, str]]:
+        """Every queued ``(stamp_ns, payload, publisher)``, oldest first; decode each with
+        :meth:`decode_payload` (frames are checked, bodies are not)."""
+        if not self._queue:
+            return []
         with self._lock:
             out = list(self._queue)
             self._queue.clear()
         return out
-
-    def take_raw(self) -> list[tuple[int, Any, str]]:
-        return [item[:3] for item in self._take_all()]
 
     def latest_raw(self) -> tuple[int, Any, str] | None:
         with self._lock:
@@ -262,19 +284,24 @@ class ZenohSubscriber:
                 return None
             item = self._queue[-1]
             self._queue.clear()
-        return item[:3]
+        return item
 
     def has_news(self) -> bool:
         return bool(self._queue)
 
     def take(self) -> list[Any]:
-        return [item[3] for item in self._take_all()]
+        """Every queued message, decoded, oldest first; bodies that do not decode are dropped."""
+        decode = self.decode_payload
+        return [msg for msg in (decode(payload) for _, payload, _ in self.take_raw()) if msg is not None]
 
     def latest(self) -> Any | None:
-        with self._lock:
-            item = self._queue[-1] if self._queue else None
-            self._queue.clear()
-        return None if item is None else item[3]
+        """The newest queued message that decodes (older ones are discarded), or ``None``."""
+        items = self.take_raw()
+        while items:
+            msg = self.decode_payload(items.pop()[1])
+            if msg is not None:
+                return msg
+        return None
 
     def publishers(self) -> list[str]:
         return sorted(self._publishers)
@@ -284,9 +311,16 @@ class ZenohSubscriber:
         return [0] * len(self._publishers)
 
     def close(self) -> None:
-        with self._lock:  # after this no Zenoh thread touches ``notify`` (the waker may close next)
+        # After this returns no Zenoh thread calls ``notify`` (the caller may close the waker,
+        # and so its descriptor, next): a callback checks ``_closed`` and registers in
+        # ``_waking`` under the lock, so once we have set it only those already registered can
+        # still wake the reader, and we wait for them (a wake-up takes microseconds).
+        with self._lock:
             self._closed = True
             self._queue.clear()
+        deadline = time.monotonic() + 2.0
+        while self._waking and time.monotonic() < deadline:
+            time.sleep(0.0005)
         sub, self._sub = self._sub, None
         if sub is not None:
             try:

@@ -9,8 +9,9 @@ callback thread queues the sample and writes one byte to a pipe, the main thread
 pipe, takes the sample, and answers.
 
 * ``emos-zenoh``: :class:`ZenohPublisher` / :class:`ZenohSubscriber` with a ``UInt8MultiArray``
-  of ``payload_bytes``: encode into a frame, put; on the other side check the frame, decode
-  (the array is a view), and the echo re-publishes the decoded message.
+  of ``payload_bytes``: encode into a frame, put; on the other side check the frame on Zenoh's
+  thread, decode on the main thread (``take()``; the array is a view), and the echo
+  re-publishes the decoded message.
 * ``zenoh``: ``session.declare_publisher(...).put(bytes)`` and a callback subscriber; the echo
   puts the received bytes back.
 

@@ -141,8 +141,10 @@ def _loopback():
 
 
 def _intrude(prefix: list[str], endpoint: str, key: str) -> None:
-    """Put a foreign payload, a frame header with garbage after it and random bytes on ``key``,
-    from a Zenoh client in the subscriber's network (namespace)."""
+    """Put a foreign payload, a frame header with garbage after it, random bytes, and a frame
+    of the right type whose body does not decode (it passes the check on Zenoh's thread and
+    must be dropped where the node decodes it) on ``key``, from a Zenoh client in the
+    subscriber's network (namespace)."""
     script = (
         "import json, os, sys, time, zenoh\n"
         "conf = zenoh.Config()\n"
@@ -151,11 +153,15 @@ def _intrude(prefix: list[str], endpoint: str, key: str) -> None:
         "conf.insert_json5('scouting/multicast/enabled', 'false')\n"
         "with zenoh.open(conf) as s:\n"
         "    time.sleep(0.5)\n"
-        "    for p in (b'not an emos frame', b'EMZ1' + bytes(8) + b'\\x10\\x00\\x00\\x00' + b'f' * 16, os.urandom(4096)):\n"
+        "    fp = sys.argv[3].encode()\n"
+        "    framed = b'EMZ1' + bytes(8) + len(fp).to_bytes(2, 'little') + b'\\x00\\x00' + fp + (3).to_bytes(4, 'little') + b'\\xc1' * 4\n"
+        "    for p in (b'not an emos frame', b'EMZ1' + bytes(8) + b'\\x10\\x00\\x00\\x00' + b'f' * 16, os.urandom(4096), framed):\n"
         "        s.put(sys.argv[2], p)\n"
         "    time.sleep(0.3)\n"
     )
-    subprocess.run([*prefix, sys.executable, "-c", script, f"tcp/{endpoint}", key], check=True, timeout=30)
+    from emos.msgs import Image
+
+    subprocess.run([*prefix, sys.executable, "-c", script, f"tcp/{endpoint}", key, Image._emos_fingerprint], check=True, timeout=30)
 
 
 @pytest.mark.parametrize("network", ["loopback", "namespaces"])

@@ -1,0 +1,189 @@
+"""The Zenoh transport's payload path in one process, over a real Zenoh session: frames are
+checked on Zenoh's thread and decoded once on the reader's, so a foreign, mis-typed or
+well-framed but undecodable payload is dropped with a log line naming the key (never raised to
+the reader), and arrays of every size come back byte for byte."""
+import json
+import logging
+import socket
+import struct
+import threading
+import time
+import uuid
+
+import numpy as np
+import pytest
+
+from emos.msgs import Image, LaserScan, UInt8MultiArray, codec
+from emos.transport import select
+from emos.transport.netframe import FrameWriter, frame_prefix, read_frame, write_frame
+
+zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
+from emos.transport import zenoh_net  # noqa: E402
+
+
+@pytest.fixture
+def net(tmp_path):
+    """A Zenoh configuration of its own (loopback, no scouting) and a fresh group."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    conf = tmp_path / "zenoh.json5"
+    conf.write_text(json.dumps({
+        "mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]},
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+    }))
+    yield str(conf), f"t{uuid.uuid4().hex[:10]}"
+    zenoh_net.close_sessions()
+
+
+class _Wakes:
+    def __init__(self):
+        self.count = 0
+        self.event = threading.Event()
+
+    def __call__(self):
+        self.count += 1
+        self.event.set()
+
+
+def _wait(cond, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+def _warm_up(pub, sub, msg) -> None:
+    """Publish until the subscriber hears (Zenoh matches the two asynchronously), then let the
+    extra copies land and drop them all."""
+    assert _wait(lambda: (pub.publish(msg), sub.has_news())[1]), f"no delivery on {sub.key}"
+    time.sleep(0.3)
+    sub.take()
+
+
+def _well_framed(cls, body: bytes, publisher: str = "forger") -> bytes:
+    """A frame with a correct header and ``cls``'s fingerprint around an arbitrary body."""
+    fp = cls._emos_fingerprint
+    prefix, start = frame_prefix(fp, publisher)
+    head = b"EMZ1" + struct.pack("<QHH", 1, len(fp), len(publisher)) + prefix
+    assert len(head) == start
+    return head + body
+
+
+@pytest.mark.parametrize("size", [8, 921_600, 8 * 1024 * 1024])
+def test_arrays_of_every_size_round_trip_byte_exact_and_a_reused_frame_never_leaks(net, size):
+    conf, group = net
+    wakes = _Wakes()
+    sub = zenoh_net.ZenohSubscriber("/blob", UInt8MultiArray, notify=wakes, queue_size=4, config_path=conf, group=group)
+    pub = zenoh_net.ZenohPublisher("/blob", UInt8MultiArray, publisher_id="writer", config_path=conf, group=group)
+    try:
+        rng = np.random.default_rng(size)
+        sent = [rng.integers(0, 256, size, dtype=np.uint8) for _ in range(3)]
+        _warm_up(pub, sub, UInt8MultiArray(data=np.zeros(size, np.uint8)))
+        for data in sent:  # large frames reuse one buffer: each must arrive as it was put
+            pub.publish(UInt8MultiArray(data=data))
+        got = []
+        assert _wait(lambda: (got.extend(sub.take()), len(got) >= 3)[1]), f"got {len(got)} of 3"
+        assert [m.data.tobytes() for m in got] == [d.tobytes() for d in sent]
+        assert all(m.data.dtype == np.uint8 and m.data.shape == (size,) for m in got)
+        assert sub.publishers() == ["writer"] and sub.rejected == 0 and wakes.count >= 4
+    finally:
+        pub.close()
+        sub.close()
+
+
+def test_small_frames_joined_equal_the_frames_written_into_a_buffer():
+    img = Image(height=2, width=3, encoding="mono8", step=3, data=np.arange(6, dtype=np.uint8))
+    fp = Image._emos_fingerprint
+    prefix, start = frame_prefix(fp, "camera")
+    joined = FrameWriter(fp, "camera").frame(codec.encode(img), 99)
+    assert isinstance(joined, bytes)  # the small-frame path
+    assert joined == bytes(write_frame(codec.encode(img), 99, fp, "camera", prefix, start))
+    stamp, pub, payload = read_frame(joined, fp)
+    assert (stamp, pub) == (99, "camera") and codec.decode(Image, payload).data.tolist() == list(range(6))
+
+
+def test_foreign_mistyped_and_undecodable_payloads_are_dropped_with_a_log_naming_the_key(net, caplog):
+    conf, group = net
+    wakes = _Wakes()
+    sub = zenoh_net.ZenohSubscriber("/scan", LaserScan, notify=wakes, config_path=conf, group=group)
+    pub = zenoh_net.ZenohPublisher("/scan", LaserScan, publisher_id="lidar", config_path=conf, group=group)
+    sess = zenoh_net.session(conf)
+    key = zenoh_net.topic_key("/scan", group)
+    other_fp = Image._emos_fingerprint
+    bad = {
+        "foreign bytes": b"not an emos frame at all",
+        "another type": bytes(FrameWriter(other_fp, "camera").frame(codec.encode(Image(height=1, width=1, encoding="mono8", step=1, data=np.zeros(1, np.uint8))), 5)),
+        "metadata longer than the frame": _well_framed(LaserScan, struct.pack("<I", 10_000) + b"\x93" * 4),
+        "body that is not msgpack": _well_framed(LaserScan, struct.pack("<I", 3) + b"\xc1\xc1\xc1\0"),
+        "body of the wrong shape": _well_framed(LaserScan, codec.encode(UInt8MultiArray(data=np.zeros(3, np.uint8))).to_bytes()),
+    }
+    try:
+        caplog.set_level(logging.WARNING, logger="emos.transport.zenoh")
+        _warm_up(pub, sub, LaserScan(ranges=np.ones(3, np.float32)))
+        for payload in bad.values():
+            sess.put(key, payload)
+        pub.publish(LaserScan(ranges=np.full(5, 7.0, np.float32)))
+        got = []
+        assert _wait(lambda: (got.extend(sub.take()), bool(got))[1])
+        # Only the real message reaches the reader; nothing was raised on either thread.
+        assert len(got) == 1 and got[0].ranges.tolist() == [7.0] * 5
+        assert _wait(lambda: sub.rejected == len(bad)), f"rejected {sub.rejected} of {len(bad)}"
+        assert sub.undecodable == 2  # the two well-framed bodies, refused on the reader's thread
+        lines = [r.getMessage() for r in caplog.records if "dropping a payload" in r.getMessage()]
+        assert lines and all(f"on key {key}" in line and "/scan" in line for line in lines)
+        # The first refusal is logged; the rest within 10 s are counted into a later line.
+        assert len(lines) < len(bad)
+    finally:
+        pub.close()
+        sub.close()
+
+
+def test_a_node_decodes_network_payloads_through_the_guard_and_ring_payloads_as_before(net):
+    conf, group = net
+    sub = zenoh_net.ZenohSubscriber("/scan", LaserScan, config_path=conf, group=group)
+    try:
+        decode = select.payload_decoder(sub, LaserScan)
+        good = codec.encode(LaserScan(ranges=np.arange(4, dtype=np.float32))).to_bytes()
+        assert decode(memoryview(good)).ranges.tolist() == [0, 1, 2, 3]
+        assert decode(memoryview(struct.pack("<I", 3) + b"\xc1\xc1\xc1\0")) is None  # dropped, not raised
+        assert sub.rejected == 1
+    finally:
+        sub.close()
+
+    class RingLike:  # a subscriber without decode_payload: the shared-memory rings
+        pass
+
+    plain = select.payload_decoder(RingLike(), LaserScan)
+    assert plain(good).ranges.tolist() == [0, 1, 2, 3]
+    with pytest.raises(codec.DecodeError):
+        plain(struct.pack("<I", 3) + b"\xc1\xc1\xc1\0")
+
+
+def test_latest_skips_an_undecodable_newest_payload_and_close_stops_the_wake_ups(net):
+    conf, group = net
+    wakes = _Wakes()
+    sub = zenoh_net.ZenohSubscriber("/scan", LaserScan, notify=wakes, config_path=conf, group=group)
+    pub = zenoh_net.ZenohPublisher("/scan", LaserScan, publisher_id="lidar", config_path=conf, group=group)
+    sess = zenoh_net.session(conf)
+    try:
+        _warm_up(pub, sub, LaserScan(ranges=np.ones(2, np.float32)))
+        pub.publish(LaserScan(ranges=np.full(2, 3.0, np.float32)))
+        sess.put(zenoh_net.topic_key("/scan", group), _well_framed(LaserScan, struct.pack("<I", 3) + b"\xc1\xc1\xc1\0"))
+        assert _wait(lambda: sub.rejected == 0 and len(sub._queue) == 2)
+        msg = sub.latest()  # the newest is garbage: the one before it is the latest message
+        assert msg is not None and msg.ranges.tolist() == [3.0, 3.0] and sub.rejected == 1
+    finally:
+        pub.close()
+        sub.close()
+    before = wakes.count
+    pub2 = zenoh_net.ZenohPublisher("/scan", LaserScan, publisher_id="late", config_path=conf, group=group)
+    try:
+        for _ in range(5):
+            pub2.publish(LaserScan(ranges=np.ones(2, np.float32)))
+        time.sleep(0.3)
+        assert wakes.count == before and not sub.has_news()
+    finally:
+        pub2.close()
