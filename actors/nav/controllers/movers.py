@@ -17,9 +17,10 @@ import attrs
 import numpy as np
 
 if TYPE_CHECKING:
+    from ..mapping.tracking import TrackerConfig
     from .arcs import ArcPlanner
 
-__all__ = ["PredictedMovers", "PredictionConfig"]
+__all__ = ["MoverConfig", "PredictedMovers", "PredictionConfig"]
 
 
 def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
@@ -35,6 +36,39 @@ class PredictionConfig:
     margin_rate: float = attrs.field(default=0.1, validator=_nonneg)  # m per s of prediction
     safe_clearance: float = attrs.field(default=0.5, validator=_nonneg)  # closer to a mover costs extra
     weight: float = attrs.field(default=2.0, validator=_nonneg)  # cost per m inside safe_clearance
+
+
+def _tracker_config(value: object) -> "TrackerConfig":
+    from ..mapping.tracking import TrackerConfig
+
+    if isinstance(value, TrackerConfig):
+        return value
+    if isinstance(value, dict):
+        return TrackerConfig(**value)
+    raise TypeError(f"MoverConfig.tracker: expected a TrackerConfig or a dict, got {type(value).__name__}")
+
+
+def _prediction_config(value: object) -> PredictionConfig:
+    if isinstance(value, PredictionConfig):
+        return value
+    if isinstance(value, dict):
+        return PredictionConfig(**value)
+    raise TypeError(f"MoverConfig.prediction: expected a PredictionConfig or a dict, got {type(value).__name__}")
+
+
+def _default_tracker() -> "TrackerConfig":
+    from ..mapping.tracking import TrackerConfig
+
+    return TrackerConfig()
+
+
+@attrs.define(frozen=True)
+class MoverConfig:
+    """Moving-obstacle handling for an arc planner: how scans are tracked (``mapping.tracking``)
+    and how the tracks are predicted and checked (``PredictionConfig``)."""
+
+    tracker: "TrackerConfig" = attrs.field(factory=_default_tracker, converter=_tracker_config)
+    prediction: PredictionConfig = attrs.field(factory=PredictionConfig, converter=_prediction_config)
 
 
 @attrs.define(frozen=True, eq=False)

@@ -22,10 +22,10 @@ from typing import Any
 import attrs
 import numpy as np
 
-from ..controllers.movers import PredictedMovers, PredictionConfig
+from ..controllers.movers import MoverConfig, PredictedMovers
 from ..mapping import compose, correction_between
 from ..mapping.evidence import EvidenceGrid
-from ..mapping.tracking import ScanTracker, TrackerConfig
+from ..mapping.tracking import ScanTracker
 from .interface import NavTask, Observation
 from .mapless import GridNavigator
 
@@ -39,8 +39,7 @@ def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
 
 @attrs.define(frozen=True)
 class DynamicConfig:
-    tracker: TrackerConfig = attrs.field(factory=TrackerConfig)
-    prediction: PredictionConfig = attrs.field(factory=PredictionConfig)
+    movers: MoverConfig = attrs.field(factory=MoverConfig)  # tracking and predicted arc checks
     evidence_cap: int = attrs.field(default=4, validator=attrs.validators.ge(1))  # scans of hits a cell holds
     free_range: float = attrs.field(default=8.0, validator=_nonneg)  # m of each beam that decays the memory
     wait_radius: float = attrs.field(default=3.0, validator=_nonneg)  # a mover this near: waiting, not stuck
@@ -58,7 +57,7 @@ class DynamicGridNavigator(GridNavigator):
         self.dynamic = dynamic or DynamicConfig()
 
     def reset(self, task: NavTask) -> None:
-        self.tracker = ScanTracker(self.dynamic.tracker)
+        self.tracker = ScanTracker(self.dynamic.movers.tracker)
         super().reset(task)
 
     def make_grid(self, bounds: tuple[float, float, float, float]) -> EvidenceGrid:
@@ -120,7 +119,7 @@ class DynamicGridNavigator(GridNavigator):
         centres, velocities, radii = self.tracker.movers(obs.stamp)
         if len(centres) == 0:
             return None
-        return PredictedMovers(centres, velocities, radii, self.dynamic.prediction)
+        return PredictedMovers(centres, velocities, radii, self.dynamic.movers.prediction)
 
     def _stuck(self, obs: Observation) -> bool:
         """Standing aside for a mover is not being stuck: the progress clock restarts."""
