@@ -185,3 +185,25 @@ def test_arc_sampler_with_movers_waits_for_a_crosser_that_the_static_check_runs_
     assert ControlStatus.BLOCKED not in statuses  # waiting is running
     _, static_gap, _ = _crossing_run(None)
     assert static_gap < 0.0  # without prediction the crosser hits it
+
+
+def test_memory_mapper_with_evidence_forgets_a_moved_obstacle_and_keeps_walls():
+    from emos.actors.nav.controllers.sensors import LaserScan2D
+    from emos.actors.nav.mapping import MemoryMapper
+
+    def scan(circles):
+        r, _ = cast((0.0, 0.0, 0.0), circles, WALLS)
+        return LaserScan2D(ranges=r, angle_min=float(ANGLES[0]), angle_increment=INC, range_max=30.0)
+
+    for cap, forgets in ((3, True), (None, False)):
+        mapper = MemoryMapper((-1.0, -4.0, 12.0, 4.0), 0.05, scan_matching=False, evidence_cap=cap)
+        for _ in range(3):
+            mapper.update(scan([(4.0, 0.0, 0.25)]), np.zeros(3))
+        for _ in range(8):
+            mapper.update(scan([]), np.zeros(3))
+        rows, cols, _ = mapper.grid.cell_of(np.array([[3.76, 0.0], [5.0, 2.99]]))
+        assert mapper.grid.occupied[rows[0] - 1: rows[0] + 2, cols[0] - 1: cols[0] + 2].any() != forgets
+        wall = mapper.grid.occupied[rows[1] - 1: rows[1] + 2, cols[1] - 20: cols[1] + 20]
+        assert wall.any(axis=0).sum() >= 20  # the wall (x 4-6 m; beams hit 27 of its 40 columns) stays
+    with pytest.raises(ValueError, match="not both"):
+        MemoryMapper((0.0, 0.0, 1.0, 1.0), carve_range=2.0, evidence_cap=3)
