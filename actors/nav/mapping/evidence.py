@@ -36,16 +36,32 @@ class EvidenceGrid(HitGrid):
         self.tolerance = 0.5 * self.resolution if tolerance is None else float(tolerance)
         self.evidence = np.zeros(self.shape, dtype=np.int16)
         self.free_stamp = np.full(self.shape, -np.inf, dtype=np.float64)
+        self.since = np.full(self.shape, np.inf, dtype=np.float64)  # when a cell became occupied
 
-    def insert(self, points: np.ndarray) -> int:
-        """Mark hit points (N, 2); each cell hit by this batch gains one unit of evidence."""
+    def insert(self, points: np.ndarray, stamp: float = 0.0) -> int:
+        """Mark hit points (N, 2) seen at ``stamp``; each cell hit by this batch gains one unit
+        of evidence."""
+        if len(points) == 0:
+            return 0
+        rows, cols, inside = self.cell_of(points)
+        flat = np.unique(rows[inside] * self.shape[1] + cols[inside])
+        r, c = np.divmod(flat, self.shape[1])
+        fresh = ~self.occupied[r, c]
         new = super().insert(points)
-        if len(points):
-            rows, cols, inside = self.cell_of(points)
-            flat = np.unique(rows[inside] * self.shape[1] + cols[inside])
-            r, c = np.divmod(flat, self.shape[1])
-            self.evidence[r, c] = np.minimum(self.evidence[r, c] + 1, self.cap)
+        self.since[r[fresh], c[fresh]] = stamp
+        self.evidence[r, c] = np.minimum(self.evidence[r, c] + 1, self.cap)
         return new
+
+    def moved_into(self, points: np.ndarray, stamp: float, window: float) -> np.ndarray:
+        """Per point (N, 2): motion evidence. Its cell was seen free within ``window`` s before
+        ``stamp`` and is not an obstacle remembered from before that (a static surface is
+        neither; the ground a mover enters was free moments ago)."""
+        rows, cols, inside = self.cell_of(points)
+        out = np.zeros(len(rows), dtype=bool)
+        r, c = rows[inside], cols[inside]
+        old = self.occupied[r, c] & (self.since[r, c] < stamp - window)
+        out[inside] = (self.free_stamp[r, c] >= stamp - window) & ~old
+        return out
 
     def seen_free_since(self, points: np.ndarray, since: float) -> np.ndarray:
         """Per point (N, 2): was its cell traversed by a beam at or after ``since``?"""

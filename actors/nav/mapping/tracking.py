@@ -33,13 +33,15 @@ class TrackerConfig:
     max_extent: float = attrs.field(default=1.0, validator=_positive)  # m; wider clusters are structure
     min_points: int = attrs.field(default=3, validator=attrs.validators.ge(1))
     gate: float = attrs.field(default=0.45, validator=_positive)  # m around a track's prediction
-    window: float = attrs.field(default=0.8, validator=_positive)  # s of centres in the velocity fit
-    min_observations: int = attrs.field(default=4, validator=attrs.validators.ge(2))
-    min_span: float = attrs.field(default=0.25, validator=_positive)  # s the fit must cover
+    window: float = attrs.field(default=1.0, validator=_positive)  # s of centres in the velocity fit
+    min_observations: int = attrs.field(default=6, validator=attrs.validators.ge(2))
+    min_span: float = attrs.field(default=0.5, validator=_positive)  # s the fit must cover
     moving_speed: float = attrs.field(default=0.15, validator=_positive)  # m/s
     max_speed: float = attrs.field(default=3.0, validator=_positive)  # faster is a wrong association
     coast_time: float = attrs.field(default=0.6, validator=_positive)  # s a lost track is predicted
     max_range: float = attrs.field(default=12.0, validator=_positive)  # m; farther returns are not tracked
+    max_residual: float = attrs.field(default=0.03, validator=_positive)  # m RMS of centres off the fitted line
+    min_fresh: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))  # share of hits in fresh space
 
 
 @attrs.define(eq=False)
@@ -51,6 +53,8 @@ class Track:
     velocity: np.ndarray = attrs.field(factory=lambda: np.zeros(2))
     moving: bool = False
     points: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 2)))  # last cluster (world frame)
+    fresh: deque = attrs.field(factory=lambda: deque(maxlen=8))  # per scan: share of hits in space seen free
+    residual: float = 0.0  # m RMS of the centres about the velocity fit
 
     @property
     def position(self) -> np.ndarray:
@@ -101,17 +105,24 @@ class ScanTracker:
             v = v * (cfg.max_speed / speed)
             speed = cfg.max_speed
         track.velocity = v
+        fit = h[:, 1:] - h[:, 1:].mean(axis=0) - t[:, None] * v[None, :]
+        track.residual = float(np.sqrt(np.mean(np.sum(fit * fit, axis=1))))
         mature = len(h) >= cfg.min_observations and h[-1, 0] - h[0, 0] >= cfg.min_span
-        if mature and speed > cfg.moving_speed:
+        # Motion shows as hits where the lidar saw free space moments ago; a static object
+        # seen from a new angle (its centroid shifting) does not do that, nor jump about.
+        fresh = float(np.mean(track.fresh)) if track.fresh else 1.0
+        if mature and speed > cfg.moving_speed and track.residual <= cfg.max_residual and fresh >= cfg.min_fresh:
             track.moving = True
         elif track.moving and speed < 0.5 * cfg.moving_speed:
             track.moving = False
 
     def update(self, stamp: float, points: np.ndarray, origin: tuple[float, float],
-               angle_increment: float = 0.0) -> np.ndarray:
+               angle_increment: float = 0.0, fresh: np.ndarray | None = None) -> np.ndarray:
         """Feed one scan's hit points (N, 2, world frame, beam order) seen from ``origin``.
-        Returns a bool per point: it belongs to a moving track (the caller keeps such points
-        out of its static memory)."""
+        ``fresh`` (optional, bool per point): the point lies where the lidar recently saw free
+        space and nothing is remembered (``EvidenceGrid.seen_free_since``); a track becomes
+        moving only if at least ``min_fresh`` of its hits are. Returns a bool per point: it
+        belongs to a moving track (the caller keeps such points out of its static memory)."""
         cfg = self.cfg
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         org = np.asarray(origin, dtype=float)
@@ -156,10 +167,14 @@ class ScanTracker:
                 track.radius = 0.7 * track.radius + 0.3 * radii[ci]
                 track.last_seen = stamp
                 track.points = points[idx]
+                if fresh is not None:
+                    track.fresh.append(float(np.mean(fresh[idx])))
                 self._fit_velocity(track)
             else:
                 track = Track(self._next_id, deque([(stamp, *centres[ci])], maxlen=64), radii[ci], stamp,
                               points=points[idx])
+                if fresh is not None:
+                    track.fresh.append(float(np.mean(fresh[idx])))
                 self._next_id += 1
                 self.tracks.append(track)
             if track.moving:

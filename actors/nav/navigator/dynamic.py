@@ -43,6 +43,7 @@ class DynamicConfig:
     evidence_cap: int = attrs.field(default=4, validator=attrs.validators.ge(1))  # scans of hits a cell holds
     free_range: float = attrs.field(default=8.0, validator=_nonneg)  # m of each beam that decays the memory
     wait_radius: float = attrs.field(default=3.0, validator=_nonneg)  # a mover this near: waiting, not stuck
+    fresh_time: float = attrs.field(default=1.0, validator=_nonneg)  # s a cell seen free counts as fresh space
 
 
 class DynamicGridNavigator(GridNavigator):
@@ -106,12 +107,19 @@ class DynamicGridNavigator(GridNavigator):
         origin, d, r = self._beams(np.asarray(obs.pose, dtype=float), scan)
         hit = np.isfinite(r)
         world = origin + r[hit, None] * d[hit]
-        moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment))  # type: ignore[union-attr]
+        # Motion evidence: hits in cells beams passed through within the last ``fresh_time`` s
+        # (asked before this scan marks its own free space). A static surface is rarely seen
+        # through; the ground a mover enters was free moments ago.
+        grid: EvidenceGrid = self.grid  # type: ignore[assignment]
+        fresh = grid.moved_into(world, obs.stamp, self.dynamic.fresh_time)
+        moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment), fresh)  # type: ignore[union-attr]
         res = self.grid.resolution
         free = self.dynamic.free_range
         length = np.where(hit, np.minimum(r, free) - 1.5 * res, free)
         self.grid.observe_free((float(origin[0]), float(origin[1])), d, np.maximum(length, 0.0), obs.stamp)  # type: ignore[attr-defined]
-        self.grid.insert(world[~moving])
+        # Withhold from the memory only a moving track's hits in space the lidar recently saw
+        # free: a static object wrongly tracked as moving still enters the memory.
+        self.grid.insert(world[~(moving & fresh)], obs.stamp)  # type: ignore[call-arg]
 
     # -- planning -----------------------------------------------------------------------
 
