@@ -116,7 +116,8 @@ def test_evidence_grid_rejects_bad_cap():
 
 
 def _robot():
-    return RobotConfig(model_type="DIFFERENTIAL_DRIVE", geometry_type="BOX", geometry_params=np.array([0.5, 0.43, 0.25]),
+    return RobotConfig(model_type="DIFFERENTIAL_DRIVE", geometry_type="BOX",
+                       geometry_params=np.array([0.5, 0.43, 0.25]),
                        ctrl_vx_limits=LinearCtrlLimits(max_vel=2.0, max_acc=20.0, max_decel=20.0),
                        ctrl_omega_limits=AngularCtrlLimits(max_vel=4.0, max_acc=25.0, max_decel=25.0))
 
@@ -152,7 +153,8 @@ def test_predicted_movers_validate_shapes():
 
 def _crossing_run(movers):
     """Closed loop at 10 Hz: ArcSampler on a 6 m straight path; a 0.25 m cylinder crosses it
-    at x = 2.2 m at 0.55 m/s, reaching the path as the robot (0.5 m/s) would. Returns (reached, smallest centre distance - radii, statuses)."""
+    at x = 2.2 m at 0.55 m/s, reaching the path as the robot (0.5 m/s) would. Returns
+    (reached, smallest centre distance - radii, statuses)."""
     from emos.actors.nav.controllers import ControlStatus, make_controller
     from emos.actors.nav.controllers.arc_sampler import ArcSamplerConfig
     from emos.actors.nav.kinematics import integrate

@@ -107,19 +107,17 @@ class DynamicGridNavigator(GridNavigator):
         origin, d, r = self._beams(np.asarray(obs.pose, dtype=float), scan)
         hit = np.isfinite(r)
         world = origin + r[hit, None] * d[hit]
-        # Motion evidence: hits in cells beams passed through within the last ``fresh_time`` s
-        # (asked before this scan marks its own free space). A static surface is rarely seen
-        # through; the ground a mover enters was free moments ago.
+        # Motion evidence: hits where beams passed within the last ``fresh_time`` s and no
+        # older obstacle is remembered (asked before this scan marks its own free space).
         grid: EvidenceGrid = self.grid  # type: ignore[assignment]
         fresh = grid.moved_into(world, obs.stamp, self.dynamic.fresh_time)
-        moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment), fresh)  # type: ignore[union-attr]
-        res = self.grid.resolution
+        moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment), fresh)
         free = self.dynamic.free_range
-        length = np.where(hit, np.minimum(r, free) - 1.5 * res, free)
-        self.grid.observe_free((float(origin[0]), float(origin[1])), d, np.maximum(length, 0.0), obs.stamp)  # type: ignore[attr-defined]
+        length = np.where(hit, np.minimum(r, free) - 1.5 * grid.resolution, free)
+        grid.observe_free((float(origin[0]), float(origin[1])), d, np.maximum(length, 0.0), obs.stamp)
         # Withhold from the memory only a moving track's hits in space the lidar recently saw
         # free: a static object wrongly tracked as moving still enters the memory.
-        self.grid.insert(world[~(moving & fresh)], obs.stamp)  # type: ignore[call-arg]
+        grid.insert(world[~(moving & fresh)], obs.stamp)
 
     # -- planning -----------------------------------------------------------------------
 
