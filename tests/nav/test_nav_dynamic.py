@@ -71,6 +71,24 @@ def test_tracker_estimates_a_crossing_cylinders_velocity_and_ignores_static_thin
     assert moving_hits > 0 and static_marked == 0  # wall and post never count as moving
 
 
+def test_tracker_keeps_a_mover_moving_through_a_turn_round():
+    rng = np.random.default_rng(5)
+    tracker = ScanTracker()
+    origin = (0.0, 0.0, 0.0)
+    flags = []
+    for k in range(35):  # up at 0.8 m/s for 2 s, then back down
+        t = 0.1 * k
+        y = -1.5 + 0.8 * min(t, 2.0) - 0.8 * max(t - 2.0, 0.0)
+        r, d = cast(origin, [(4.0, y, 0.25)], WALLS, noise=0.01, rng=rng)
+        hit = np.isfinite(r)
+        tracker.update(t, np.asarray(origin[:2]) + r[hit, None] * d[hit], origin[:2], INC)
+        flags.append(bool(tracker.moving_tracks(t)))
+    first = flags.index(True)
+    assert first <= 8 and all(flags[first:]), flags
+    (track,) = tracker.moving_tracks(3.4)
+    assert np.linalg.norm(track.velocity - (0.0, -0.8)) < 0.15, track.velocity
+
+
 def test_tracker_keeps_a_post_static_while_the_robot_drives_past_it():
     rng = np.random.default_rng(4)
     tracker = ScanTracker()

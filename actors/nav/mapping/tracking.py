@@ -39,6 +39,7 @@ class TrackerConfig:
     moving_speed: float = attrs.field(default=0.15, validator=_positive)  # m/s
     max_speed: float = attrs.field(default=3.0, validator=_positive)  # faster is a wrong association
     coast_time: float = attrs.field(default=0.6, validator=_positive)  # s a lost track is predicted
+    release_time: float = attrs.field(default=1.0, validator=_positive)  # s slow before moving is revoked
     max_range: float = attrs.field(default=12.0, validator=_positive)  # m; farther returns are not tracked
     max_residual: float = attrs.field(default=0.03, validator=_positive)  # m RMS of centres off the fitted line
     min_fresh: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))  # share of hits in fresh space
@@ -55,6 +56,7 @@ class Track:
     points: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 2)))  # last cluster (world frame)
     fresh: deque = attrs.field(factory=lambda: deque(maxlen=8))  # per scan: share of hits in space seen free
     residual: float = 0.0  # m RMS of the centres about the velocity fit
+    slow_since: float | None = None  # stamp since when a moving track has been slow
 
     @property
     def position(self) -> np.ndarray:
@@ -111,10 +113,17 @@ class ScanTracker:
         # Motion shows as hits where the lidar saw free space moments ago; a static object
         # seen from a new angle (its centroid shifting) does not do that, nor jump about.
         fresh = float(np.mean(track.fresh)) if track.fresh else 1.0
+        stamp = float(h[-1, 0])
         if mature and speed > cfg.moving_speed and track.residual <= cfg.max_residual and fresh >= cfg.min_fresh:
             track.moving = True
-        elif track.moving and speed < 0.5 * cfg.moving_speed:
+        if not track.moving or speed >= 0.5 * cfg.moving_speed:
+            track.slow_since = None
+        elif track.slow_since is None:
+            track.slow_since = stamp
+        elif stamp - track.slow_since >= cfg.release_time:
+            # Slow for a while, not just turning round at the end of its run: static now.
             track.moving = False
+            track.slow_since = None
 
     def update(self, stamp: float, points: np.ndarray, origin: tuple[float, float],
                angle_increment: float = 0.0, fresh: np.ndarray | None = None) -> np.ndarray:
@@ -160,6 +169,22 @@ class ScanTracker:
                     continue
                 used_t.add(ti)
                 assigned[ci] = ti
+        # A moving track whose prediction missed (it turned round, or merged with a wall for
+        # a few scans) takes the nearest unassigned cluster within reach of where it was last
+        # seen; its history restarts (old velocity no longer holds) but it stays moving.
+        lost = [ti for ti, t in enumerate(self.tracks) if t.moving and ti not in assigned.values()]
+        for ci in range(len(clusters)):
+            if ci in assigned or not lost:
+                continue
+            reach = [cfg.gate + float(np.hypot(*self.tracks[ti].velocity)) * (stamp - self.tracks[ti].last_seen)
+                     for ti in lost]
+            dist = [float(np.hypot(*(self.tracks[ti].position - centres[ci]))) for ti in lost]
+            k = int(np.argmin(np.asarray(dist) - np.asarray(reach)))
+            if dist[k] <= reach[k]:
+                track = self.tracks[lost.pop(k)]
+                track.history.clear()
+                track.velocity = np.zeros(2)
+                assigned[ci] = self.tracks.index(track)
         for ci, idx in enumerate(clusters):
             if ci in assigned:
                 track = self.tracks[assigned[ci]]
