@@ -22,6 +22,7 @@ from ..robot import RobotConfig
 from .arcs import ArcConfig, ArcPlanner
 from .base import ControlResult, ControlStatus, FollowerConfig
 from .follower import PathFollower
+from .movers import MoverConfig, PredictedMovers
 from .response import ResponseConfig, YawGainEstimator
 from .sensors import ObstacleInput
 
@@ -34,6 +35,14 @@ def _arc_config(value: object) -> ArcConfig:
     if isinstance(value, dict):
         return ArcConfig(**value)
     raise TypeError(f"ArcSamplerConfig.arcs: expected an ArcConfig, got {type(value).__name__}")
+
+
+def _movers(value: object) -> MoverConfig | None:
+    if value is None or isinstance(value, MoverConfig):
+        return value
+    if isinstance(value, dict):
+        return MoverConfig(**value)
+    raise TypeError(f"ArcSamplerConfig.movers: expected a MoverConfig, a dict or None, got {type(value).__name__}")
 
 
 def _response(value: object) -> ResponseConfig | None:
@@ -57,6 +66,11 @@ class ArcSamplerConfig(FollowerConfig):
     """A response model (``response.py``): check and score the arcs the base achieves from
     its measured velocity, with its yaw gain estimated online, and a margin growing with
     speed (a skid-steer base that turns less than commanded). None: commanded arcs."""
+    movers: MoverConfig | None = attrs.field(default=None, converter=_movers)
+    """Moving obstacles (``movers.py``): track the scan's clusters between steps (a scan in
+    beam order, one ``compute`` per control step), keep the moving ones out of the static
+    check and check each arc against their predicted positions; standing still to let one
+    pass is running, not blocked. None: every point is static."""
     field_resolution: float = attrs.field(default=0.1, converter=float)
     final_approach: float = attrs.field(default=0.6, converter=float)
 
@@ -70,6 +84,28 @@ class ArcSampler(PathFollower):
         self._gain = (YawGainEstimator(self.config.response, self.config.control_time_step)
                       if self.config.response is not None else None)
         self._last_turn = 0.0
+        self._tracker = None
+        self._clock = 0.0  # s of control steps: the tracker's time base
+        if self.config.movers is not None:
+            from ..mapping.tracking import ScanTracker
+
+            self._tracker = ScanTracker(self.config.movers.tracker)
+
+    def _split_movers(self, pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, PredictedMovers | None]:
+        """(static points, predicted movers) after feeding this step's points to the tracker."""
+        if self._tracker is None:
+            return points, None
+        self._clock += self.config.control_time_step
+        sx, sy, _ = self.sensor_pose
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        origin = (pose[0] + c * sx - s * sy, pose[1] + s * sx + c * sy)
+        moving = self._tracker.update(self._clock, points, origin)
+        centres, velocities, radii = self._tracker.movers(self._clock)
+        movers = None
+        if len(centres):
+            assert self.config.movers is not None
+            movers = PredictedMovers(centres, velocities, radii, self.config.movers.prediction)
+        return points[~moving], movers
 
     def _local_field(self, pose: np.ndarray, points: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """Cost-to-go over a square window around the robot, to the path point ahead."""
@@ -117,7 +153,13 @@ class ArcSampler(PathFollower):
         if self._gain is not None:
             twist = np.asarray(velocity, dtype=float).reshape(3)
             gain = self._gain.update(self._last_turn, float(twist[0]), float(twist[2]))
-        choice = self.arcs.choose(pose, points, self._local_field(pose, points), twist=twist, yaw_gain=gain)
+        points, movers = self._split_movers(pose, points)
+        choice = self.arcs.choose(pose, points, self._local_field(pose, points), twist=twist, yaw_gain=gain,
+                                  movers=movers)
+        if choice == (0.0, 0.0) and movers is not None:
+            # Standing still scores best while a mover crosses: waiting, not blocked.
+            self._last_turn = 0.0
+            return ControlResult.stop(pose, ControlStatus.RUNNING)
         if choice is None or choice == (0.0, 0.0):
             # No clear arc, or standing still scores best: no trajectory makes progress.
             self._last_turn = 0.0

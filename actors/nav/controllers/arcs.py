@@ -15,6 +15,7 @@ from ..kinematics import integrate
 from ..robot import RobotConfig, RobotGeometry
 
 if TYPE_CHECKING:
+    from .movers import PredictedMovers
     from .response import ResponseConfig
 
 
@@ -156,11 +157,12 @@ class ArcPlanner:
 
     def choose(self, pose: np.ndarray, points: np.ndarray, cost_to_go: Callable[[np.ndarray], np.ndarray],
                reverse_cost: float | None = None, twist: np.ndarray | None = None,
-               yaw_gain: float | None = None) -> tuple[float, float] | None:
+               yaw_gain: float | None = None, movers: "PredictedMovers | None" = None) -> tuple[float, float] | None:
         """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is.
         ``reverse_cost`` overrides the configured cost of backing up (recovery makes it < 0).
         With a response model, ``twist`` (measured) and ``yaw_gain``: arcs as achieved, and a
-        margin that grows with speed."""
+        margin that grows with speed. ``movers``: moving obstacles, checked at each sample's
+        time against their predicted positions (``movers.py``)."""
         cfg = self.cfg
         reverse_cost = cfg.reverse_cost if reverse_cost is None else reverse_cost
         groups = None
@@ -191,6 +193,16 @@ class ArcPlanner:
         wanted = cfg.safe_clearance + 0.1 * np.abs(self.v)
         score = score + cfg.clearance_weight * np.maximum(0.0, wanted - clearance)
         score = score + np.where(self.v < 0, reverse_cost, 0.0)
+        if movers is not None and len(movers):
+            mover_gap = movers.clearances(self, pose, self.groups if groups is None else groups)
+            safe = ok & (mover_gap > 0)
+            if safe.any():
+                ok = safe
+                mc = movers.config
+                score = score + mc.weight * np.maximum(0.0, mc.safe_clearance - mover_gap)
+            else:
+                # No arc escapes the predicted movers: take the clear arc that stays farthest from them.
+                score = -mover_gap
         score = np.where(ok, score, np.inf)
         best = int(np.argmin(score))
         if not np.isfinite(score[best]):

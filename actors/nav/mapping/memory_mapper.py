@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from ..controllers.sensors import LaserScan2D
+from .evidence import EvidenceGrid
 from .hit_grid import HitGrid
 from .scan_matching import ScanMatcher, compose, correction_between
 
@@ -24,12 +25,20 @@ class MemoryMapper:
     ``bounds`` (xmin, ymin, xmax, ymax) of the world window (m); ``sensor_pose`` (x, y, yaw) of
     the scanner on the robot; ``scan_matching`` False trusts odometry. ``carve_range`` > 0 (m)
     clears remembered cells that beams pass through (moved obstacles, drift ghosts).
+    ``evidence_cap`` (scans): forget by evidence instead (``EvidenceGrid``: a cell is released
+    after that many more scans saw through it than hit it, within ``free_range`` m), for
+    worlds where obstacles move; None (default) never forgets.
     """
 
     def __init__(self, bounds: tuple[float, float, float, float], resolution: float = 0.05,
                  sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0), scan_matching: bool = True,
-                 carve_range: float = 0.0) -> None:
-        self.grid = HitGrid(bounds, resolution)
+                 carve_range: float = 0.0, evidence_cap: int | None = None, free_range: float = 8.0) -> None:
+        if evidence_cap is not None and carve_range > 0:
+            raise ValueError("MemoryMapper: give carve_range or evidence_cap, not both (two ways of forgetting)")
+        self.grid: HitGrid = (HitGrid(bounds, resolution) if evidence_cap is None
+                              else EvidenceGrid(bounds, resolution, cap=evidence_cap))
+        self.free_range = float(free_range)
+        self._scans = 0
         self.sensor_pose = sensor_pose
         self.matcher = ScanMatcher() if scan_matching else None
         self.carve_range = float(carve_range)
@@ -50,7 +59,17 @@ class MemoryMapper:
                 self.correction = correction_between(matched, odom_pose)
                 pose = matched
         c, s = math.cos(pose[2]), math.sin(pose[2])
-        if self.carve_range > 0:
+        if isinstance(self.grid, EvidenceGrid):
+            self._scans += 1
+            sx, sy, syaw = pose[0] + c * mx - s * my, pose[1] + s * mx + c * my, pose[2] + myaw
+            angles = syaw + scan.beam_angles()
+            r = scan.ranges
+            usable = ~np.isnan(r)
+            free = self.free_range
+            length = np.where(np.isfinite(r), np.minimum(r, free) - 1.5 * self.grid.resolution, free)
+            self.grid.observe_free((sx, sy), np.c_[np.cos(angles), np.sin(angles)][usable],
+                                   np.maximum(length[usable], 0.0), float(self._scans))
+        elif self.carve_range > 0:
             sx, sy, syaw = pose[0] + c * mx - s * my, pose[1] + s * mx + c * my, pose[2] + myaw
             angles = syaw + scan.beam_angles()
             r = scan.ranges

@@ -2,7 +2,8 @@
 cost-to-go field as global plan, and the arc sampler (or a path follower) as local control.
 A harness (``emos bench barn``) calls ``reset(task)`` then ``step(observation)``."""
 from .interface import NavTask, Navigator, Observation, Scan
+from .dynamic import DynamicConfig, DynamicGridNavigator
 from .mapless import GridNavigator
 from .with_controller import NAVCORE_CONTROLLERS, NavCoreNavigator
 
-__all__ = ["GridNavigator", "NAVCORE_CONTROLLERS", "NavCoreNavigator", "NavTask", "Navigator", "Observation", "Scan"]
+__all__ = ["DynamicConfig", "DynamicGridNavigator", "GridNavigator", "NAVCORE_CONTROLLERS", "NavCoreNavigator", "NavTask", "Navigator", "Observation", "Scan"]

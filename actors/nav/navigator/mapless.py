@@ -59,7 +59,7 @@ class GridNavigator:
         gx, gy = task.goal
         m = self.window_margin
         bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
-        self.grid = HitGrid(bounds, self.resolution)
+        self.grid = self.make_grid(bounds)
         # Clearance is exact to the hit points (measured from cell centres). The robot's centre
         # can never be closer than its half-width (less a cell's rounding): lethal. Up to the
         # half-width plus ``lethal_bias`` travel is allowed but expensive: gaps only a little
@@ -87,6 +87,10 @@ class GridNavigator:
         self._correction = np.zeros(3)  # map <- odometry
         self._matcher = ScanMatcher() if self.localize else None
         self.plan = None
+
+    def make_grid(self, bounds: tuple[float, float, float, float]) -> HitGrid:
+        """The obstacle memory over the task's window (a never-forgetting ``HitGrid`` here)."""
+        return HitGrid(bounds, self.resolution)
 
     @staticmethod
     def arcs_footprint(task: NavTask) -> Any:
@@ -189,7 +193,8 @@ class GridNavigator:
         if self._gain is not None:
             gain = self._gain.update(self._last_command[1], float(obs.twist[0]), float(obs.twist[2]))
         choice = self.arcs.choose(obs.pose, points, self.cost_to_go, reverse_cost=-0.5 if recovering else None,
-                                  twist=obs.twist if self._gain is not None else None, yaw_gain=gain)
+                                  twist=obs.twist if self._gain is not None else None, yaw_gain=gain,
+                                  movers=self.movers(obs))
         if choice is None:
             # Boxed in: no arc is clear, not even turning or backing up. Stand still; the
             # stuck detector will block this route and the field will send us elsewhere.
@@ -198,6 +203,11 @@ class GridNavigator:
         v, w = choice
         self._last_command = (v, w)
         return (v, 0.0, w)
+
+    def movers(self, obs: Observation) -> Any:
+        """Moving obstacles for the arc check (``controllers.movers.PredictedMovers``): none
+        here, the static-world navigator remembers what it sees (``DynamicGridNavigator`` tracks)."""
+        return None
 
     def _stuck(self, obs: Observation) -> bool:
         """No real progress along the cost-to-go for ``stuck_time`` seconds."""

@@ -48,9 +48,18 @@ def _builtin_robust() -> Navigator:
     return nav
 
 
+def _builtin_dynamic() -> Navigator:
+    from emos.actors.nav.controllers.response import ResponseConfig
+    from emos.actors.nav.navigator import DynamicGridNavigator
+
+    return DynamicGridNavigator(response=ResponseConfig())
+
+
 CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
     "builtin-robust": (_builtin_robust, "builtin planning with the arcs the base achieves (estimated yaw gain, lag, "
                                         "traction, speed-dependent margin)"),
+    "builtin-dynamic": (_builtin_dynamic, "builtin-robust for moving obstacles: memory with evidence decay, tracked "
+                                          "movers, arcs checked against their predicted positions"),
     "builtin": (_builtin, "scan-matched lidar obstacle memory + Dijkstra cost-to-go + sampled-arc local planner"),
     "builtin-odom": (_builtin_odom, "builtin without scan matching: trusts odometry"),
     "builtin-carve": (_builtin_carve, "builtin-odom, clearing free space along beams instead"),
