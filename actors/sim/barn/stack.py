@@ -36,11 +36,15 @@ SIM_NAME = "sim"
 PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
     "builtin": ("ArcSampler", True),
     "builtin-odom": ("ArcSampler", False),
+    "builtin-robust": ("ArcSampler", True),  # with the response model (ROBUST_CONTROLLERS)
     "navcore-dwa": ("DWA", True),
     "navcore-purepursuit": ("PurePursuit", True),
     "navcore-stanley": ("Stanley", True),
     "navcore-dvz": ("DVZ", True),
 }
+
+# --controller names whose ArcSampler checks the arcs the base achieves (ResponseConfig)
+ROBUST_CONTROLLERS = ("builtin-robust",)
 
 
 @attrs.define(frozen=True)
@@ -72,6 +76,7 @@ class StackOptions:
     seed: int = 0
     clock_rate: float = 50.0
     window_margin: float = 3.0  # m around start and goal mapped (as the built-in navigator's memory)
+    response_model: bool = False  # ArcSamplerConfig(response=ResponseConfig()): builtin-robust
     recovery: RecoveryOptions = RecoveryOptions()
 
     @classmethod
@@ -81,7 +86,7 @@ class StackOptions:
         except KeyError:
             raise ValueError(f"controller {name!r} has no process-mode stack; choose from {sorted(PROCESS_CONTROLLERS)} "
                              "or run it with --in-process") from None
-        return cls(algorithm=algorithm, scan_matching=matching, **kwargs)
+        return cls(algorithm=algorithm, scan_matching=matching, response_model=name in ROBUST_CONTROLLERS, **kwargs)
 
 
 def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
@@ -139,6 +144,11 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
         progress_distance=recovery.progress_distance,
         failure_tolerance=recovery.progress_timeout if recovery.enabled else 0.0, **common))
     controller.inputs(location=pose_topic)
+    if opts.response_model:
+        from emos.actors.nav.controllers import ArcSamplerConfig
+        from emos.actors.nav.controllers.response import ResponseConfig
+
+        controller.algorithms_config = ArcSamplerConfig(response=ResponseConfig(), control_time_step=1.0 / rules.control_rate_hz)
     control = Topic(name="/control", msg_type="Twist")
     controller.outputs(command=control)
     driver = DriveManager("driver", config=DriveManagerConfig(
