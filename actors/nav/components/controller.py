@@ -21,6 +21,7 @@ import numpy as np
 from attrs import define, field
 
 from emos.config.base import ComponentRunType
+from emos.core import clock
 from emos.config.validators import in_, in_range
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
@@ -35,6 +36,7 @@ from .base import NavComponent, NavComponentConfig, rate_field
 from .controller_vision import VisionTracking
 from .convert import BadInput, grid2d_of, path_msg, path_of, points_of, scan_of, twist_msg
 from .interfaces import ControlPathFeedback, ControlPathGoal, ControlPathResult
+from .progress import ProgressChecker
 
 __all__ = ["Controller", "ControllerConfig"]
 
@@ -52,6 +54,11 @@ class ControllerConfig(NavComponentConfig):
     ``command`` in its time step), "Array" (the whole sequence on ``multi_command``) or
     "Parallel" (both). ``use_direct_sensor``: obstacles from ``sensor_data`` (True) or
     ``local_map`` (False). ``sensor_timeout`` / ``location_timeout`` (s): older inputs stop the robot.
+    ``progress_timeout`` (s, 0: off): less than ``progress_distance`` m of progress along the plan
+    in that time is a stall, reported as an ALGORITHM failure ("no progress") that holds until
+    the robot has moved 0.1 m (for the recipe's fallbacks: back out, block the plan's tightest
+    spot). ``failure_tolerance`` (s): a blocked or path-less step is reported as an ALGORITHM
+    failure only once such steps have lasted this long (0: at once; Nav2's parameter).
     Point clouds: only points between ``cloud_min_height`` (above the floor) and
     ``cloud_max_height`` (default: the robot's height) are obstacles."""
 
@@ -64,6 +71,9 @@ class ControllerConfig(NavComponentConfig):
     location_timeout: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e3))
     cloud_min_height: float = field(default=0.05, validator=in_range(min_value=-100.0, max_value=100.0))
     cloud_max_height: float | None = field(default=None)
+    progress_timeout: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1e4))
+    progress_distance: float = field(default=0.3, validator=in_range(min_value=1e-3, max_value=100.0))
+    failure_tolerance: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1e4))
 
 
 class Controller(VisionTracking, NavComponent):
@@ -146,6 +156,10 @@ class Controller(VisionTracking, NavComponent):
         self._sequence: tuple[np.ndarray, int] | None = None
         self._last_cmd = np.zeros(3)
         self._action_active = False
+        self._failing_since: float | None = None
+        self._stalled_at: np.ndarray | None = None  # where the last stall was reported (held until the robot moves)
+        cfg = self.config
+        self._progress = ProgressChecker(cfg.progress_timeout, cfg.progress_distance) if cfg.progress_timeout > 0 else None
         self.configure_vision()
 
     def custom_on_activate(self) -> None:
@@ -242,11 +256,31 @@ class Controller(VisionTracking, NavComponent):
         follower.sensor_pose = (0.0, 0.0, 0.0) if key == "local_map" else tuple(getattr(follower, "scan_pose", (0.0, 0.0, 0.0)))
         result = follower.compute(pose, velocity, obstacles)
         self.publish_result(result)
-        if result.status in _FAILURES:
+        self._report_step(result, pose, follower)
+        return result
+
+    def _report_step(self, result: ControlResult, pose: np.ndarray, follower: Any) -> None:
+        """Health after one step: failures (after ``failure_tolerance``), stalls (the progress
+        checker), else healthy."""
+        now = clock.now()
+        failing = result.status in _FAILURES
+        self._failing_since = (self._failing_since if self._failing_since is not None else now) if failing else None
+        progress = getattr(follower, "progress", None)
+        if self._progress is not None and (progress is None or result.status is ControlStatus.GOAL_REACHED):
+            self._progress.reset()
+        elif self._progress is not None and self._progress.update(now, float(progress.remaining)):
+            self._stalled_at = np.array(pose[:2], dtype=float)
+            self.fail_algorithm(self.algorithm.value, f"no progress: {self._progress.describe()} "
+                                f"({progress.remaining:.2f} m of plan left)")
+            self.node.publish_status()  # at once: fallbacks act on it
+            return
+        if self._stalled_at is not None and math.dist(pose[:2], self._stalled_at) < 0.1:
+            return  # the stall holds until a recovery has moved the robot
+        self._stalled_at = None
+        if failing and now - self._failing_since >= self.config.failure_tolerance:  # type: ignore[operator]
             self.fail_algorithm(self.algorithm.value, f"{result.status.value}: no valid trajectory" if result.status is ControlStatus.BLOCKED else result.status.value)
         else:
             self.health_status.set_healthy()
-        return result
 
     # -- publishing ---------------------------------------------------------------------------------------
     def publish_result(self, result: ControlResult) -> None:

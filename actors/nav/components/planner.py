@@ -172,6 +172,30 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             self.health_status.set_healthy()
             return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path
 
+    def block_tightest_spot(self) -> bool:
+        """A recovery action (``Action(planner.block_tightest_spot)``, e.g. in a Controller's
+        ``on_algorithm_fail`` ladder): the route the last plan takes looks open but the robot
+        makes no progress along it, so put a temporary block at its tightest spot ahead of
+        the robot and re-plan now. Grid planners only (``CostToGo``); blocks are forgotten when
+        they leave no path. False (and the reason logged) when there is nothing to block."""
+        block = getattr(self._algo, "block_tightest_spot", None)
+        if block is None:
+            self.get_logger().warning("[%s] block_tightest_spot: planner %s has no clearance grid (grid planners only)",
+                                      self.component_name, self.config.planner_id)
+            return False
+        state = self.robot_state()
+        if state is None:
+            return False
+        with self._lock:
+            spot = block(state[0][:2])
+        if spot is None:
+            self.get_logger().warning("[%s] block_tightest_spot: no plan ahead of the robot to block", self.component_name)
+            return False
+        self.get_logger().info("[%s] blocked the plan's tightest spot at (%.2f, %.2f); re-planning", self.component_name, *spot)
+        if self._goal is not None and (self._inflight is None or self._inflight.done()):
+            self._inflight = self._pool.submit(self._plan_in_worker, self._goal.copy())
+        return True
+
     def _distance_to_goal(self) -> float:
         state = self.robot_state()
         if state is None or self._goal is None:

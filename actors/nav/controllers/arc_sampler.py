@@ -17,7 +17,7 @@ import attrs
 import numpy as np
 
 from ..kinematics import integrate_sequence
-from ..planning.costfield import CostField
+from ..planning.costfield import footprint_field
 from ..robot import RobotConfig
 from .arcs import ArcConfig, ArcPlanner
 from .base import ControlResult, ControlStatus, FollowerConfig
@@ -121,10 +121,7 @@ class ArcSampler(PathFollower):
         ij = np.floor((points - origin) / res).astype(int)
         inside = np.all((ij >= 0) & (ij < n), axis=1)
         occupied[ij[inside, 1], ij[inside, 0]] = True
-        width = self.arcs.spec.width
-        hard = max(width / 2 - 0.5 * res, 0.05)
-        soft = width / 2 + 0.08
-        field = CostField((n, n), res, hard, inflation_radius=soft + 0.45, soft_radius=soft)
+        field = footprint_field((n, n), res, self.arcs.spec.width / 2)
         gc = np.clip(np.floor((carrot - origin) / res).astype(int), 0, n - 1)
         field.compute(occupied, (int(gc[1]), int(gc[0])))
         ctg = field.ctg_filled

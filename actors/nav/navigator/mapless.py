@@ -11,7 +11,7 @@ import numpy as np
 
 from ..controllers.arcs import ArcConfig, ArcPlanner
 from ..mapping import HitGrid, ScanMatcher, compose, correction_between
-from ..planning.costfield import CostField
+from ..planning.costfield import CLEARANCE_BAND, footprint_field, tightest_spot
 from .interface import NavTask, Observation
 
 UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has no path
@@ -31,7 +31,7 @@ class GridNavigator:
 
     def __init__(self, resolution: float = 0.05, window_margin: float = 3.0, replan_period: float = 1.0,
                  arc_config: ArcConfig | None = None, stuck_time: float = 3.0, stuck_progress: float = 0.3,
-                 recovery_time: float = 2.0, lethal_bias: float = 0.08, carve_range: float = 0.0,
+                 recovery_time: float = 2.0, lethal_bias: float = CLEARANCE_BAND, carve_range: float = 0.0,
                  localize: bool = True, response: Any = None) -> None:
         self.resolution, self.window_margin, self.replan_period = resolution, window_margin, replan_period
         self.stuck_time, self.stuck_progress, self.recovery_time = stuck_time, stuck_progress, recovery_time
@@ -62,14 +62,8 @@ class GridNavigator:
         self.grid = self.make_grid(bounds)
         # Clearance is exact to the hit points (measured from cell centres). The robot's centre
         # can never be closer than its half-width (less a cell's rounding): lethal. Up to the
-        # half-width plus ``lethal_bias`` travel is allowed but expensive: gaps only a little
-        # wider than the robot need more precision than sampled arcs have, and a plan through
-        # them tends to get the robot stuck. (All 250 shipped BARN worlds keep a route outside
-        # the band, up to a bias of 0.13 m; tests/sim/test_sim_barn.py checks the default.)
-        hard = max(spec.width / 2 - 0.5 * self.resolution, 0.05)
-        soft = spec.width / 2 + self.lethal_bias
-        self.field = CostField(self.grid.shape, self.resolution, hard, inflation_radius=soft + 0.45,
-                               soft_radius=soft)
+        # half-width plus ``lethal_bias`` travel is allowed but expensive (costfield.footprint_field).
+        self.field = footprint_field(self.grid.shape, self.resolution, spec.width / 2, band=self.lethal_bias)
         self.arcs = ArcPlanner(task.robot, self.arc_config, task.center_offset, response=self.response)
         self._gain = None
         if self.response is not None:
@@ -224,18 +218,18 @@ class GridNavigator:
         """The plan leads somewhere the robot cannot go (a gap narrower than it looks, say):
         put a virtual obstacle at the tightest spot of the next 2 m of plan so the field
         routes around it."""
-        if self.plan is None or len(self.plan) < 2:
+        if self.plan is None:
             return
-        seg = np.linalg.norm(np.diff(self.plan, axis=0), axis=1)
-        ahead = self.plan[: int(np.searchsorted(np.cumsum(seg), 2.5)) + 1]
-        # Never block the ground the robot stands on: that would box it in for good.
         keep_out = self.arcs.spec.circumscribed_radius + 0.15  # type: ignore[union-attr]
-        ahead = ahead[np.hypot(ahead[:, 0] - obs.pose[0], ahead[:, 1] - obs.pose[1]) > keep_out]
-        if len(ahead) == 0:
+
+        def clearance_at(xy: np.ndarray) -> np.ndarray:
+            rows, cols, _ = self.grid.cell_of(xy)
+            return self.field.clearance[np.clip(rows, 0, self.grid.shape[0] - 1), np.clip(cols, 0, self.grid.shape[1] - 1)]
+
+        spot = tightest_spot(self.plan, clearance_at, obs.pose[:2], keep_out)
+        if spot is None:
             return
-        rows, cols, _ = self.grid.cell_of(ahead)
-        clear = self.field.clearance[np.clip(rows, 0, self.grid.shape[0] - 1), np.clip(cols, 0, self.grid.shape[1] - 1)]
-        x, y = ahead[int(np.argmin(clear))]
+        x, y = spot
         self.virtual_blocks.append((float(x), float(y)))
         # A small ring of blocked points: with the lethal radius around it this closes the spot.
         a = np.linspace(0, 2 * np.pi, 12, endpoint=False)

@@ -7,9 +7,47 @@ path by following predecessors.
 from __future__ import annotations
 
 import math
+from typing import Callable, Sequence
 
 import numpy as np
 
+#: m beyond the robot's half-width where travel is allowed but costly (``soft_weight``): gaps only
+#: a little wider than the robot need more precision than sampled arcs have, and a plan through
+#: them tends to get the robot stuck. All 250 shipped BARN worlds keep a route outside this band
+#: up to 0.13 m (tests/sim/test_sim_barn.py checks the default).
+CLEARANCE_BAND = 0.08
+#: m beyond the band over which the corridor-centring penalty fades out
+CENTRING_RANGE = 0.45
+
+
+def footprint_field(shape: tuple[int, int], resolution: float, half_width: float,
+                    band: float = CLEARANCE_BAND, centring: float = CENTRING_RANGE) -> "CostField":
+    """The cost field every navigation layer uses for a robot of half-width ``half_width``
+    (a box's half-width, a disc's radius: the largest circle inside the footprint): lethal
+    closer than the half-width (less half a cell, since obstacles fill their cells: the robot
+    touches there whatever its heading), costly up to ``band`` beyond it, a centring penalty
+    fading out ``centring`` further. The global planner, the in-process navigator and the
+    arc sampler's local field share it, so a route one of them takes the others accept."""
+    lethal = max(half_width - 0.5 * resolution, 0.05)
+    soft = half_width + band
+    return CostField(shape, resolution, lethal, inflation_radius=soft + centring, soft_radius=soft)
+
+
+def tightest_spot(plan: np.ndarray, clearance_at: "Callable[[np.ndarray], np.ndarray]", robot_xy: Sequence[float],
+                  keep_out: float, ahead: float = 2.5) -> tuple[float, float] | None:
+    """The point of the next ``ahead`` m of ``plan`` (N, >= 2) with the least clearance, at
+    least ``keep_out`` m from the robot (never block the ground it stands on: that would box
+    it in); None if no such point. Where a plan that makes no progress should be blocked."""
+    plan = np.asarray(plan, dtype=float)[:, :2]
+    if len(plan) < 2:
+        return None
+    seg = np.linalg.norm(np.diff(plan, axis=0), axis=1)
+    near = plan[: int(np.searchsorted(np.cumsum(seg), ahead)) + 1]
+    near = near[np.hypot(near[:, 0] - robot_xy[0], near[:, 1] - robot_xy[1]) > keep_out]
+    if len(near) == 0:
+        return None
+    x, y = near[int(np.argmin(clearance_at(near)))]
+    return float(x), float(y)
 
 
 def _scipy():
@@ -107,8 +145,10 @@ class CostField:
         if unreachable.any() and not unreachable.all():
             gap, (ri, ci) = ndimage.distance_transform_edt(unreachable, return_indices=True)
             self.ctg_filled = np.where(unreachable, self.ctg[ri, ci] + 10.0 * gap * self.resolution, self.ctg)
+            self._nearest_reachable: tuple[np.ndarray, np.ndarray] | None = (ri, ci)
         else:
             self.ctg_filled = self.ctg.copy()
+            self._nearest_reachable = None
 
     def path_from(self, cell: tuple[int, int], max_len: int = 100_000) -> list[tuple[int, int]]:
         """Cells from ``cell`` to the goal following the shortest-path tree ([] if unreachable)."""
@@ -123,3 +163,18 @@ class CostField:
                 break
             out.append((node // cols, node % cols))
         return out
+
+    def escape_from(self, cell: tuple[int, int]) -> tuple[int, int] | None:
+        """For a cell the field cannot reach (inside the lethal band: a robot pushed or
+        localized closer to an obstacle than it can be planned through), the nearest cell it
+        can; the cell itself when reachable; None when nothing is reachable."""
+        if np.isfinite(self.ctg[cell]):
+            return cell
+        near = getattr(self, "_nearest_reachable", None)
+        if near is None or self.clearance[cell] > self.lethal_radius:
+            return None  # free but cut off from the goal: no escape, no path
+        out = (int(near[0][cell]), int(near[1][cell]))
+        # Only out of the band the robot stands in, never across a wall.
+        if math.hypot(out[0] - cell[0], out[1] - cell[1]) * self.resolution > self.lethal_radius + self.resolution:
+            return None
+        return out if np.isfinite(self.ctg[out]) else None

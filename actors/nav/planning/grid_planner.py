@@ -2,9 +2,19 @@
 
 Selected by the Planner like an OMPL planner (``planner_id="CostToGo"``). Unlike the sampling
 planners it is complete on the grid (no path means none exists at this resolution) and its
-paths keep to the middle of corridors (the clearance penalty of :class:`CostField`). Cells
-within the robot's radius (plus half a cell, since obstacles fill their cells) of an
-obstacle are impassable; unknown cells count as obstacles with ``unknown_is_occupied``.
+paths keep to the middle of corridors (the clearance penalty of :class:`CostField`). The
+clearance band is :func:`~.costfield.footprint_field`'s, the one the arc sampler and the
+in-process navigator use: cells closer to an obstacle than the robot's inner radius (half the
+width of a box) are impassable, a band ``clearance_band`` m beyond is costly, so a gap the
+robot fits through is planned through only when nothing wider exists. Unknown cells count as
+obstacles with ``unknown_is_occupied``.
+
+A robot that ends up inside the lethal band (pushed, or localized closer to an obstacle than
+planning allows) is planned out of it: the path starts with a straight step to the nearest
+plannable cell instead of failing with INVALID_START (which left the controller on a stale
+plan). :meth:`CostToGoPlanner.block_tightest_spot` puts a temporary block at the tightest
+spot of the last plan (a recovery action: the route looked open and is not); blocks are
+forgotten when they leave no path.
 """
 from __future__ import annotations
 
@@ -17,7 +27,7 @@ import numpy as np
 from ..maps.grid import OccupancyGridMap
 from ..robot import RobotConfig
 from .config import OMPLConfig
-from .costfield import CostField
+from .costfield import CENTRING_RANGE, CLEARANCE_BAND, CostField, footprint_field, tightest_spot
 from .interpolation import interpolate_se2, path_length
 from .result import PlanResult
 
@@ -33,21 +43,58 @@ class CostToGoPlanner:
 
     name = "CostToGo"
 
-    def __init__(self, robot: RobotConfig, config: OMPLConfig | None = None, inflation: float = 0.45) -> None:
+    def __init__(self, robot: RobotConfig, config: OMPLConfig | None = None, inflation: float = CENTRING_RANGE,
+                 clearance_band: float = CLEARANCE_BAND) -> None:
         self.robot = robot
         self.config = config or OMPLConfig()
         self.inflation = float(inflation)
+        self.clearance_band = float(clearance_band)
         self.grid: OccupancyGridMap | None = None
         self._occupied: np.ndarray | None = None
         self._field: CostField | None = None
+        self.blocks: list[tuple[float, float]] = []  # temporary blocks (world x, y)
+        self.last_path: np.ndarray | None = None
 
     def set_map(self, grid: OccupancyGridMap) -> None:
         cfg = self.config
         self.grid = grid
         self._occupied = grid.occupied_mask(cfg.occupied_threshold, unknown_is_occupied=cfg.unknown_is_occupied)
-        lethal = self.robot.radius + 0.5 * grid.resolution
-        self._field = CostField(grid.data.shape, grid.resolution, lethal, inflation_radius=lethal + self.inflation,
-                                soft_radius=lethal)
+        shape = grid.data.shape
+        if self._field is None or self._field.shape != shape or self._field.resolution != grid.resolution:
+            self._field = footprint_field(shape, grid.resolution, self.robot.inner_radius, self.clearance_band, self.inflation)
+
+    def _with_blocks(self) -> np.ndarray:
+        assert self.grid is not None and self._occupied is not None
+        if not self.blocks:
+            return self._occupied
+        occupied = self._occupied.copy()
+        # A disc of 5 cm around each block: with the lethal band around it this closes the spot.
+        a = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+        ring = np.c_[0.05 * np.cos(a), 0.05 * np.sin(a)]
+        pts = (np.asarray(self.blocks, dtype=float)[:, None, :] + np.vstack([[0.0, 0.0], ring])[None]).reshape(-1, 2)
+        cells = self.grid.world_to_grid(pts)
+        inside = self.grid.in_bounds(cells)
+        occupied[cells[inside, 1], cells[inside, 0]] = True
+        return occupied
+
+    def block_tightest_spot(self, robot_xy: Sequence[float], ahead: float = 2.5) -> tuple[float, float] | None:
+        """Block the tightest spot of the next ``ahead`` m of the last plan (never within
+        reach of the robot); the next :meth:`plan` routes elsewhere. Returns the spot."""
+        if self.last_path is None or self._field is None or self.grid is None:
+            return None
+        grid, field = self.grid, self._field
+
+        def clearance_at(xy: np.ndarray) -> np.ndarray:
+            cells = grid.world_to_grid(xy)
+            ok = grid.in_bounds(cells)
+            out = np.full(len(xy), np.inf)
+            out[ok] = field.clearance[cells[ok, 1], cells[ok, 0]]
+            return out
+
+        spot = tightest_spot(self.last_path, clearance_at, robot_xy, self.robot.radius + 0.15, ahead)
+        if spot is not None:
+            self.blocks.append(spot)
+        return spot
 
     def cancel(self) -> bool:
         return False  # one Dijkstra is a single C call; nothing to interrupt
@@ -73,14 +120,22 @@ class CostToGoPlanner:
             return PlanResult(False, np.zeros((0, 3)), self.name, status, time.perf_counter() - t0, 0.0, 0.0, message)
 
         field = self._field
-        field.compute(self._occupied, g_cell)
+        field.compute(self._with_blocks(), g_cell)
         if field.clearance[g_cell] <= field.lethal_radius:
             return failed("INVALID_GOAL", f"the goal is within {field.lethal_radius:.2f} m of an obstacle (or in one)")
-        cells = field.path_from(s_cell)
-        if not cells:
+        escape = field.escape_from(s_cell)
+        if escape is None and self.blocks:
+            # Our own blocks have boxed the robot in: forget them and plan again.
+            self.blocks.clear()
+            field.compute(self._occupied, g_cell)
+            escape = field.escape_from(s_cell)
+        if escape is None:
             if field.clearance[s_cell] <= field.lethal_radius:
-                return failed("INVALID_START", "the robot is within its radius of an obstacle at the start")
+                return failed("INVALID_START", "the robot is within its radius of an obstacle and no free cell is reachable")
             return failed("NO_SOLUTION", "no free path on the grid connects start and goal")
+        cells = field.path_from(escape)
+        if escape != s_cell:
+            cells = [s_cell, *cells]  # out of the lethal band first, straight to the nearest free cell
         ij = np.asarray(cells)[:, ::-1]  # (row, col) -> (ix, iy)
         xy = self.grid.grid_to_world(ij)
         xy[0] = np.asarray(start, dtype=float)[:2]
@@ -91,12 +146,13 @@ class CostToGoPlanner:
         inside = self.grid.in_bounds(cells_s)
         clear = np.zeros(len(smooth))
         clear[inside] = field.clearance[cells_s[inside, 1], cells_s[inside, 0]]
-        if np.all(clear[1:-1] > field.lethal_radius):
+        if escape == s_cell and np.all(clear[1:-1] > field.lethal_radius):
             xy = smooth
         yaw = np.arctan2(np.gradient(xy[:, 1]), np.gradient(xy[:, 0])) if len(xy) > 1 else np.zeros(1)
         if len(goal) > 2:
             yaw[-1] = float(goal[2])
         path = interpolate_se2(np.column_stack([xy, yaw]), self.config.path_resolution)
+        self.last_path = path
         return PlanResult(True, path, self.name, "EXACT_SOLUTION", time.perf_counter() - t0, 0.0, path_length(path))
 
 

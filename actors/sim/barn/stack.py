@@ -36,11 +36,30 @@ SIM_NAME = "sim"
 PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
     "builtin": ("ArcSampler", True),
     "builtin-odom": ("ArcSampler", False),
+    "builtin-robust": ("ArcSampler", True),  # with the response model (ROBUST_CONTROLLERS)
     "navcore-dwa": ("DWA", True),
     "navcore-purepursuit": ("PurePursuit", True),
     "navcore-stanley": ("Stanley", True),
     "navcore-dvz": ("DVZ", True),
 }
+
+# --controller names whose ArcSampler checks the arcs the base achieves (ResponseConfig)
+ROBUST_CONTROLLERS = ("builtin-robust",)
+
+
+@attrs.define(frozen=True)
+class RecoveryOptions:
+    """The stack's stuck recovery (the in-process navigator's: back out, then block the plan's
+    tightest spot). ``progress_timeout`` s without ``progress_distance`` m of progress is a
+    stall; ``backup_distance`` m per back-out; ``attempts`` back-out + block pairs before giving
+    up; ``rate`` (Hz): at most this many fallback steps per second of wall time."""
+
+    enabled: bool = True
+    progress_timeout: float = 3.0
+    progress_distance: float = 0.3
+    backup_distance: float = 0.5
+    attempts: int = 4
+    rate: float = 1.0
 
 
 @attrs.define(frozen=True)
@@ -57,6 +76,8 @@ class StackOptions:
     seed: int = 0
     clock_rate: float = 50.0
     window_margin: float = 3.0  # m around start and goal mapped (as the built-in navigator's memory)
+    response_model: bool = False  # ArcSamplerConfig(response=ResponseConfig()): builtin-robust
+    recovery: RecoveryOptions = RecoveryOptions()
 
     @classmethod
     def for_controller(cls, name: str, **kwargs: Any) -> "StackOptions":
@@ -65,7 +86,7 @@ class StackOptions:
         except KeyError:
             raise ValueError(f"controller {name!r} has no process-mode stack; choose from {sorted(PROCESS_CONTROLLERS)} "
                              "or run it with --in-process") from None
-        return cls(algorithm=algorithm, scan_matching=matching, **kwargs)
+        return cls(algorithm=algorithm, scan_matching=matching, response_model=name in ROBUST_CONTROLLERS, **kwargs)
 
 
 def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
@@ -115,17 +136,43 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     mapper.outputs(mapping=memory_topic, localized_pose=pose_topic)
     planner = Planner("planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0, **common))
     planner.inputs(map=memory_topic, goal_point=Topic(name=GOAL_TOPIC, msg_type="PointStamped"), location=pose_topic)
+    recovery = opts.recovery
     controller = Controller("controller", config=ControllerConfig(
         algorithm=opts.algorithm, loop_rate=rules.control_rate_hz, control_time_step=1.0 / rules.control_rate_hz,
-        use_direct_sensor=False, **common))
+        use_direct_sensor=False, fallback_rate=recovery.rate,
+        progress_timeout=recovery.progress_timeout if recovery.enabled else 0.0,
+        progress_distance=recovery.progress_distance,
+        failure_tolerance=recovery.progress_timeout if recovery.enabled else 0.0, **common))
     controller.inputs(location=pose_topic)
+    if opts.response_model:
+        from emos.actors.nav.controllers import ArcSamplerConfig
+        from emos.actors.nav.controllers.response import ResponseConfig
+
+        controller.algorithms_config = ArcSamplerConfig(response=ResponseConfig(), control_time_step=1.0 / rules.control_rate_hz)
     control = Topic(name="/control", msg_type="Twist")
     controller.outputs(command=control)
     driver = DriveManager("driver", config=DriveManagerConfig(
-        critical_zone_distance=0.02, slowdown_zone_distance=0.05, **common))
+        critical_zone_distance=0.02, slowdown_zone_distance=0.05, max_distance=recovery.backup_distance, **common))
     driver.inputs(command=control)
     driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
+    if recovery.enabled:
+        wire_recovery(controller, planner, driver, recovery)
     return sim, [mapper, planner, controller, driver]
+
+
+def wire_recovery(controller: Any, planner: Any, driver: Any, recovery: RecoveryOptions) -> None:
+    """The stuck recovery, as a recipe author writes it with the product's fallbacks: the
+    Controller reports a stall (its progress checker) as an ALGORITHM failure; the ladder backs
+    out with the DriveManager (straight back, checked against the scan) and then blocks the
+    plan's tightest spot in the Planner (which re-plans around it), ``recovery.attempts``
+    times; then the Controller gives up (GAVE_UP in ``emos status``, ``on_giveup`` logs it)."""
+    from emos import Action
+    from emos.actions import log
+
+    ladder = [Action(method=driver.move_backward), Action(method=planner.block_tightest_spot)] * recovery.attempts
+    controller.on_algorithm_fail(action=ladder, max_retries=1)
+    controller.on_giveup(action=log(msg=f"controller: stuck recovery spent ({recovery.attempts} back-outs and blocks); "
+                                        "the robot stays where it is"))
 
 
 def bringup(opts: StackOptions) -> int:
@@ -141,14 +188,15 @@ def bringup(opts: StackOptions) -> int:
 
 def recipe_source(opts: StackOptions) -> str:
     """The recipe file ``emos run`` executes for one world."""
-    fields = {a.name: getattr(opts, a.name) for a in attrs.fields(StackOptions) if a.name != "rules"}
+    fields = {a.name: getattr(opts, a.name) for a in attrs.fields(StackOptions) if a.name not in ("rules", "recovery")}
     rules = attrs.asdict(opts.rules)
+    recovery = attrs.asdict(opts.recovery)
     return (
-        "from emos.actors.sim.barn.stack import StackOptions, bringup\n"
+        "from emos.actors.sim.barn.stack import RecoveryOptions, StackOptions, bringup\n"
         "from emos.actors.sim.barn.harness import BarnRules\n"
-        f"bringup(StackOptions(rules=BarnRules(**{rules!r}), **{fields!r}))\n"
+        f"bringup(StackOptions(rules=BarnRules(**{rules!r}), recovery=RecoveryOptions(**{recovery!r}), **{fields!r}))\n"
     )
 
 
-__all__ = ["GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "SIM_NAME", "StackOptions",
-           "build_system", "bringup", "recipe_source"]
+__all__ = ["GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
+           "StackOptions", "build_system", "bringup", "recipe_source", "wire_recovery"]
