@@ -78,14 +78,9 @@ class EvidenceGrid(HitGrid):
         at zero. Returns how many cells were released."""
         if len(lengths) == 0:
             return 0
-        res = self.resolution
-        t = np.arange(0.5 * res, float(np.max(lengths)), res)
-        beam, step = np.nonzero(t[None, :] < lengths[:, None])
+        beam, rows, cols = self.cells_along(origin, directions, lengths, first=0.5 * self.resolution)
         if len(beam) == 0:
             return 0
-        pts = np.asarray(origin) + directions[beam] * t[step][:, None]
-        rows, cols, inside = self.cell_of(pts)
-        beam, rows, cols = beam[inside], rows[inside], cols[inside]
         self.free_stamp[rows, cols] = stamp
         hit = self.occupied[rows, cols]
         if not hit.any():

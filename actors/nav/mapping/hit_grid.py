@@ -27,6 +27,17 @@ class HitGrid:
         self.virtual_xy = np.zeros(self.shape + (2,), dtype=float)
         self.version = 0  # bumps when the blocked cells change
 
+    def cells_along(self, origin, directions: np.ndarray, lengths: np.ndarray,
+                    first: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells beams from ``origin`` along unit ``directions`` (N, 2) cross within their
+        ``lengths`` (N,), sampled every cell from ``first`` m: (beam index, row, col) per sample
+        inside the grid."""
+        t = np.arange(first, float(np.max(lengths)), self.resolution)
+        beam, step = np.nonzero(t[None, :] < lengths[:, None])
+        pts = np.asarray(origin) + directions[beam] * t[step][:, None]
+        rows, cols, inside = self.cell_of(pts)
+        return beam[inside], rows[inside], cols[inside]
+
     def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, cols, inside) for world points (N, 2)."""
         ij = np.floor((np.asarray(xy, dtype=float) - self.origin) / self.resolution).astype(int)
@@ -62,13 +73,9 @@ class HitGrid:
         if len(lengths) == 0 or not self.occupied.any():
             return 0
         tol = 0.2 * self.resolution if tolerance is None else tolerance
-        t = np.arange(0.0, float(np.max(lengths)), self.resolution)
-        beam, step = np.nonzero(t[None, :] < lengths[:, None])
+        beam, rows, cols = self.cells_along(origin, directions, lengths, first=0.0)
         if len(beam) == 0:
             return 0
-        pts = np.asarray(origin) + directions[beam] * t[step][:, None]
-        rows, cols, inside = self.cell_of(pts)
-        beam, rows, cols = beam[inside], rows[inside], cols[inside]
         hit = self.occupied[rows, cols]
         beam, rows, cols = beam[hit], rows[hit], cols[hit]
         rel = self.hit_xy[rows, cols] - np.asarray(origin)
