@@ -152,11 +152,12 @@ def _intrude(prefix: list[str], endpoint: str, key: str) -> None:
         "conf.insert_json5('connect/endpoints', json.dumps([sys.argv[1]]))\n"
         "conf.insert_json5('scouting/multicast/enabled', 'false')\n"
         "with zenoh.open(conf) as s:\n"
-        "    time.sleep(0.5)\n"
         "    fp = sys.argv[3].encode()\n"
         "    framed = b'EMZ1' + bytes(8) + len(fp).to_bytes(2, 'little') + b'\\x00\\x00' + fp + (3).to_bytes(4, 'little') + b'\\xc1' * 4\n"
-        "    for p in (b'not an emos frame', b'EMZ1' + bytes(8) + b'\\x10\\x00\\x00\\x00' + b'f' * 16, os.urandom(4096), framed):\n"
-        "        s.put(sys.argv[2], p)\n"
+        "    for _ in range(10):  # a few seconds: on a loaded machine the route may take a while\n"
+        "        time.sleep(0.5)\n"
+        "        for p in (b'not an emos frame', b'EMZ1' + bytes(8) + b'\\x10\\x00\\x00\\x00' + b'f' * 16, os.urandom(4096), framed):\n"
+        "            s.put(sys.argv[2], p)\n"
         "    time.sleep(0.3)\n"
     )
     from emos.msgs import Image

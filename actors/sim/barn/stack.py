@@ -135,7 +135,9 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     mapper.run_type = "Event"
     mapper.outputs(mapping=memory_topic, localized_pose=pose_topic)
     planner = Planner("planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0, **common))
-    planner.inputs(map=memory_topic, goal_point=Topic(name=GOAL_TOPIC, msg_type="PointStamped"), location=pose_topic)
+    # No pixel goals here, so neither the camera nor /tf (the stack never sees a true pose).
+    planner.inputs(map=memory_topic, goal_point=Topic(name=GOAL_TOPIC, msg_type="PointStamped"), location=pose_topic,
+                   tf=None, depth_camera_info=None)
     recovery = opts.recovery
     controller = Controller("controller", config=ControllerConfig(
         algorithm=opts.algorithm, loop_rate=rules.control_rate_hz, control_time_step=1.0 / rules.control_rate_hz,
