@@ -80,6 +80,7 @@ def measure(duration: float = 20.0, rate: float = 20.0, algorithm: str = "DWA", 
     from emos.actors.nav.components.convert import path_msg
     from emos.actors.nav.controllers import ControllersID
     from emos.core.rpc import RpcClient
+    from emos.supervisor.launched import wait_active, wait_run_dir
     from emos.transport.context import RunContext
     from emos.transport.pubsub import Publisher, Subscriber
 
@@ -95,10 +96,10 @@ def measure(duration: float = 20.0, rate: float = 20.0, algorithm: str = "DWA", 
         pubs: list = []
         sub = None
         try:
-            run_dir = _wait_run_dir(proc, log_path)
+            run_dir = wait_run_dir(proc, log_path, "bench navloop")
             ctx = RunContext(run_dir.name, run_dir, owner=False)
             rpc = RpcClient(run_dir / "supervisor.sock")
-            _wait_active(rpc, proc, log_path)
+            wait_active(rpc, proc, log_path, COMPONENTS, "bench navloop")
             rpc.close()
             scan_pub = Publisher(ctx, "/scan", M.LaserScan, publisher_id="bench_scan")
             odom_pub = Publisher(ctx, "/odom", M.Odometry, publisher_id="bench_odom")
@@ -166,43 +167,6 @@ def measure(duration: float = 20.0, rate: float = 20.0, algorithm: str = "DWA", 
         "missed_cycles": int(missed), "cycles": len(sent),
         "max_ms": round(float(lat.max()), 2), "rate_hz": rate, "duration_s": duration, "algorithm": algorithm,
     }
-
-
-def _wait_run_dir(proc: subprocess.Popen, log_path: Path, timeout: float = 60.0) -> Path:
-    from emos.transport.context import runtime_root
-
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise RuntimeError(f"bench navloop: the system exited with {proc.returncode}:\n{log_path.read_text()}")
-        for d in runtime_root().iterdir():
-            if d.name.startswith(f"{proc.pid}-") and (d / "supervisor.sock").exists():
-                return d
-        time.sleep(0.05)
-    raise RuntimeError(f"bench navloop: the system did not come up within {timeout:.0f} s")
-
-
-def _wait_active(rpc: Any, proc: subprocess.Popen, log_path: Path, timeout: float = 60.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise RuntimeError(f"bench navloop: the system exited with {proc.returncode}:\n{log_path.read_text()}")
-        states: dict[str, str] = {}
-
-        def walk(node: dict) -> None:
-            if "state" in node and "name" in node:
-                states[node["name"]] = node["state"]
-            for child in node.get("children", []):
-                walk(child)
-
-        try:
-            walk(rpc.call("tree")["tree"])
-        except (OSError, ConnectionError, KeyError):
-            pass
-        if all(states.get(c) == "active" for c in COMPONENTS):
-            return
-        time.sleep(0.1)
-    raise RuntimeError("bench navloop: the navigation components did not become active within 60 s")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -52,6 +52,7 @@ def measure(duration: float = 20.0, camera: bool = False, warmup: float = 3.0) -
     own counters (read through its control socket: a subscriber here could miss messages)."""
     from emos.core.node import control_socket
     from emos.core.rpc import RpcClient
+    from emos.supervisor.launched import wait_run_dir
     from emos.transport.context import RunContext
 
     with tempfile.TemporaryDirectory(prefix="emos-bench-sim-") as tmp:
@@ -61,7 +62,7 @@ def measure(duration: float = 20.0, camera: bool = False, warmup: float = 3.0) -
         log = open(log_path, "wb")
         proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(script)], stdout=log, stderr=subprocess.STDOUT, cwd=tmp)
         try:
-            run_dir = _wait_run_dir(proc, log_path)
+            run_dir = wait_run_dir(proc, log_path, "bench sim --component")
             ctx = RunContext(run_dir.name, run_dir, owner=False)
             rpc = RpcClient(control_socket(ctx, "sim"))
 
@@ -97,20 +98,6 @@ def measure(duration: float = 20.0, camera: bool = False, warmup: float = 3.0) -
     return {"realtime_factor": sim / wall, "wall_s": wall, "sim_s": sim, "camera": camera, "rates": rates,
             "commands": after["commands"] - before["commands"],
             "lockstep_wait_share": (after["lockstep_wait_s"] - before["lockstep_wait_s"]) / wall}
-
-
-def _wait_run_dir(proc: subprocess.Popen, log_path: Path, timeout: float = 60.0) -> Path:
-    from emos.transport.context import runtime_root
-
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise RuntimeError(f"bench sim --component: the system exited with {proc.returncode}:\n{log_path.read_text()}")
-        for d in runtime_root().iterdir():
-            if d.name.startswith(f"{proc.pid}-") and (d / "supervisor.sock").exists():
-                return d
-        time.sleep(0.05)
-    raise RuntimeError("bench sim --component: the system did not come up within 60 s")
 
 
 def print_table(result: dict[str, Any]) -> None:

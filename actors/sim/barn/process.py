@@ -22,14 +22,12 @@ import attrs
 from ..barn_protocol import TrialMonitor
 from ..barn_worlds import BARN_GOAL, BARN_START, BarnWorld
 from .harness import EpisodeResult, score_run
+from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_run_dir
+
 from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, SIM_NAME, StackOptions, recipe_source
 
 STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes slowly
 COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
-
-
-class SystemFailed(RuntimeError):
-    """The system of one world did not come up or died; the message carries its log's tail."""
 
 
 def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: float = 600.0,
@@ -63,10 +61,10 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
     from emos.transport.pubsub import Publisher, Subscriber
 
     rules = opts.rules
-    run_dir = _wait_run_dir(proc, log_path)
+    run_dir = wait_run_dir(proc, log_path, f"world {entry.idx}", STARTUP_TIMEOUT_S)
     ctx = RunContext(run_dir.name, run_dir, owner=False)
     with RpcClient(run_dir / "supervisor.sock") as rpc:
-        _wait_active(rpc, proc, log_path, (SIM_NAME, *NAV_COMPONENTS))
+        wait_active(rpc, proc, log_path, (SIM_NAME, *NAV_COMPONENTS), f"world {entry.idx}", STARTUP_TIMEOUT_S)
     truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
@@ -115,9 +113,9 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
                                                          if last_xy else "collision")
                 return outcome.reached, outcome.collided, outcome.time_s, distance, reason
             if proc.poll() is not None:
-                raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{_tail(log_path)}")
+                raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
             if now > deadline:
-                raise SystemFailed(f"world {entry.idx}: no result within {wall_timeout:.0f} s wall:\n{_tail(log_path)}")
+                raise SystemFailed(f"world {entry.idx}: no result within {wall_timeout:.0f} s wall:\n{log_tail(log_path)}")
             time.sleep(0.005)
     finally:
         truth.close()
@@ -131,48 +129,9 @@ def _latest_stamp(truth: Any, proc: subprocess.Popen, log_path: Path, timeout: f
         if items:
             return items[-1].header.stamp.to_sec()
         if proc.poll() is not None:
-            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
+            raise SystemFailed(f"the system exited with {proc.returncode}:\n{log_tail(log_path)}")
         time.sleep(0.01)
-    raise SystemFailed(f"no ground truth on {GROUND_TRUTH_TOPIC} within {timeout:.0f} s:\n{_tail(log_path)}")
-
-
-def _wait_run_dir(proc: subprocess.Popen, log_path: Path, timeout: float = STARTUP_TIMEOUT_S) -> Path:
-    from emos.transport.context import runtime_root
-
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
-        for d in runtime_root().iterdir():
-            if d.name.startswith(f"{proc.pid}-") and (d / "supervisor.sock").exists():
-                return d
-        time.sleep(0.05)
-    raise SystemFailed(f"the system did not come up within {timeout:.0f} s:\n{_tail(log_path)}")
-
-
-def _wait_active(rpc: Any, proc: subprocess.Popen, log_path: Path, components: tuple[str, ...],
-                 timeout: float = STARTUP_TIMEOUT_S) -> None:
-    end = time.monotonic() + timeout
-    states: dict[str, str] = {}
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise SystemFailed(f"the system exited with {proc.returncode}:\n{_tail(log_path)}")
-        states.clear()
-
-        def walk(node: dict) -> None:
-            if "state" in node and "name" in node:
-                states[node["name"]] = node["state"]
-            for child in node.get("children", []):
-                walk(child)
-
-        try:
-            walk(rpc.call("tree")["tree"])
-        except (OSError, ConnectionError, KeyError):
-            pass
-        if all(states.get(c) == "active" for c in components):
-            return
-        time.sleep(0.1)
-    raise SystemFailed(f"components not active within {timeout:.0f} s ({states}):\n{_tail(log_path)}")
+    raise SystemFailed(f"no ground truth on {GROUND_TRUTH_TOPIC} within {timeout:.0f} s:\n{log_tail(log_path)}")
 
 
 def _stop(proc: subprocess.Popen) -> None:
@@ -183,10 +142,3 @@ def _stop(proc: subprocess.Popen) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-
-
-def _tail(path: Path, lines: int = 40) -> str:
-    try:
-        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
-    except OSError as exc:
-        return f"(no log: {exc})"
