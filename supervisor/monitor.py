@@ -38,6 +38,8 @@ class Monitor(BaseComponent):
     # event loop, which a spin would delay, and a spinning Monitor competes for the CPU with the
     # components it watches.
     _wake_spin_us = 0.0
+    # Publishers wake the Monitor after the components that read the same message (waker.py).
+    _wake_background = True
 
     def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0):
         self._entries = entries
