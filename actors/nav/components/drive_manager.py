@@ -227,6 +227,8 @@ class DriveManager(NavComponent):
         self._maneuver = None
         self._held_until = time.monotonic() + self.config.stop_hold_time
         self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+        # An event action is rare and worth a line: which component stopped the robot, for how long.
+        self.get_logger().info("[%s] stop: robot held still for %.1f s", self.component_name, self.config.stop_hold_time)
         return True
 
     def _drive(self) -> None:
