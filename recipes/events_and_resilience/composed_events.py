@@ -158,8 +158,8 @@ class Operator(BaseComponent):
             elif self.driven and let_through == 0.0:
                 self.phase = "creep"
                 near, moving = self.last_seen
-                print(f"[operator] the robot was stopped on the way (radar {near.data if near else float('nan'):.2f} m, "
-                      f"speed {moving.twist.twist.linear.x if moving else float('nan'):.2f} m/s): creeping into the dock", flush=True)
+                print(f"[operator] the robot was stopped on the way (last seen at radar {near.data if near else float('nan'):.2f} m, "
+                      f"{moving.twist.twist.linear.x if moving else float('nan'):.2f} m/s): creeping into the dock", flush=True)
         docked = self.get_input(bumper)
         if self.phase == "creep" and docked is not None and docked.data:
             self.phase = "docked"

@@ -112,6 +112,7 @@ class DriveManager(NavComponent):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
     def custom_on_activate(self) -> None:
+        self._activated_at = time.monotonic()
         if self.run_type.value == "Event":
             self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
 
@@ -181,6 +182,18 @@ class DriveManager(NavComponent):
                 return "location", what
         return None
 
+    def _awaiting_first_inputs(self) -> bool:
+        """Just activated, and odometry or a scan has not sent its first message yet. The robot
+        is held, but that is no SYSTEM failure until the input's timeout has passed since
+        activation: a (re)started DriveManager whose first command comes before its first scan
+        would otherwise fail at once, and an ``on_system_fail`` restart would loop on it."""
+        cfg = self.config
+        if time.monotonic() - getattr(self, "_activated_at", -math.inf) > max(cfg.odom_timeout, cfg.sensor_timeout):
+            return False
+        ages = [self.age_of("location")] if cfg.closed_loop else []
+        ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
+        return any(age is None for age in ages)
+
     def _publisher_alive(self, key: str, age: float) -> bool:
         """Is the process that sent the current command still running? A restarted publisher
         (same ring, new pid) does not revive a command its dead predecessor sent."""
@@ -240,6 +253,9 @@ class DriveManager(NavComponent):
             self.health_status.set_healthy()
             return
         blocked = self._blocking_reason()
+        if blocked is not None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if blocked is not None:
             key, reason = blocked
             self.fail_input(key, f"robot stopped: {reason}")
@@ -247,6 +263,9 @@ class DriveManager(NavComponent):
             self.node.publish_status()
             return
         obstacles, why = self._obstacles()
+        if obstacles is None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if obstacles is None:
             self.fail_input("sensor_data", f"robot stopped: {why}")
             self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
