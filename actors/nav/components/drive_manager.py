@@ -5,6 +5,8 @@ the velocity/acceleration limits and the optional smoothing of :class:`DriveSafe
 watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
 the command input goes stale or its publisher process died, when odometry goes stale
 (``closed_loop``), or when the scan goes stale: the robot never drives on old information.
+Right after activation an input that has not sent its first message yet holds the robot without
+a failure until its timeout has passed (a restart must not fail on its own start-up).
 The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 ``move_to_unblock``) are methods (for event actions) and Trigger services.
 """
