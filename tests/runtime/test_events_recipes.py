@@ -18,21 +18,6 @@ def run_recipe(name: str, duration: float) -> str:
     return out
 
 
-def test_fallback_recipes():
-    out = run_recipe("fallback_recipes.py", 4)
-    assert "switched to model client 'local_backup_client'" in out
-    assert "answered: [local backup]" in out
-    # controller ladder: restart once, then switch algorithm; driver restarted on system failure
-    assert "handler=on_algorithm_fail action=restart(controller) step=1" in out
-    assert "algorithm switched to PurePursuit" in out
-    assert "handler=on_system_fail action=restart(drive_manager)" in out
-
-
-def test_event_driven_cognition_describes_on_appearance_with_debounce():
-    out = run_recipe("event_driven_cognition.py", 7.5)
-    assert out.count("[visual_describer] A person has been detected") == 2, out[-3000:]
-
-
 def test_external_reflexes_switch_algorithm_then_send_the_goal():
     out = run_recipe("external_reflexes.py", 4)
     assert "[controller] following 'person' with VisionRGBDFollower" in out
@@ -43,14 +28,6 @@ def test_cross_component_events():
     assert out.count("[drive_manager] unblocking") == 1
     assert out.count("direct sensor mode: on") == 1
     assert "Got new goal point" in out and "[planner] planning to (2.00, 0.50) within 0.05 m" in out
-
-
-def test_composed_events():
-    out = run_recipe("composed_events.py", 5)
-    assert out.count("EMERGENCY STOP (smart stop)") == 1  # fast near the obstacle, not slow near it
-    assert out.count("EVENT describe person (battery ok)") == 1
-    assert out.count("EVENT auto-track person (not in manual mode)") == 1
-    assert out.count("EVENT collision (lidar or bumper)") == 1
 
 
 def test_context_aware_actions_inject_topic_data():

@@ -5,6 +5,8 @@ the velocity/acceleration limits and the optional smoothing of :class:`DriveSafe
 watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
 the command input goes stale or its publisher process died, when odometry goes stale
 (``closed_loop``), or when the scan goes stale: the robot never drives on old information.
+Right after activation an input that has not sent its first message yet holds the robot without
+a failure until its timeout has passed (a restart must not fail on its own start-up).
 The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 ``move_to_unblock``) are methods (for event actions) and Trigger services.
 """
@@ -120,6 +122,7 @@ class DriveManager(NavComponent):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
     def custom_on_activate(self) -> None:
+        self._activated_at = time.monotonic()
         if self.run_type.value == "Event":
             self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
 
@@ -188,6 +191,18 @@ class DriveManager(NavComponent):
                 what = "no odometry yet" if odom_age is None else f"odometry is {odom_age:.2f} s old (odom_timeout {cfg.odom_timeout:g} s)"
                 return "location", what
         return None
+
+    def _awaiting_first_inputs(self) -> bool:
+        """Just activated, and odometry or a scan has not sent its first message yet. The robot
+        is held, but that is no SYSTEM failure until the input's timeout has passed since
+        activation: a (re)started DriveManager whose first command comes before its first scan
+        would otherwise fail at once, and an ``on_system_fail`` restart would loop on it."""
+        cfg = self.config
+        if time.monotonic() - getattr(self, "_activated_at", -math.inf) > max(cfg.odom_timeout, cfg.sensor_timeout):
+            return False
+        ages = [self.age_of("location")] if cfg.closed_loop else []
+        ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
+        return any(age is None for age in ages)
 
     def _publisher_alive(self, key: str, age: float) -> bool:
         """Is the process that sent the current command still running? A restarted publisher
@@ -262,6 +277,8 @@ class DriveManager(NavComponent):
         self._maneuver = None
         self._held_until = time.monotonic() + self.config.stop_hold_time
         self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+        # An event action is rare and worth a line: which component stopped the robot, for how long.
+        self.get_logger().info("[%s] stop: robot held still for %.1f s", self.component_name, self.config.stop_hold_time)
         return True
 
     def _drive(self) -> None:
@@ -273,6 +290,9 @@ class DriveManager(NavComponent):
             self.health_status.set_healthy()
             return
         blocked = self._blocking_reason()
+        if blocked is not None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if blocked is not None:
             key, reason = blocked
             self.fail_input(key, f"robot stopped: {reason}")
@@ -280,6 +300,9 @@ class DriveManager(NavComponent):
             self.node.publish_status()
             return
         obstacles, why = self._obstacles()
+        if obstacles is None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if obstacles is None:
             self.fail_input("sensor_data", f"robot stopped: {why}")
             self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)

@@ -280,3 +280,50 @@ launcher.bringup()
         client.close()
         control.close(), cmd.close()
         system.stop()
+
+
+def test_a_restarted_drive_manager_waits_for_its_first_scan_instead_of_failing(tmp_path):
+    """Commands arrive at 20 Hz, scan and odometry at 4 Hz: a fresh DriveManager gets a command
+    before its first scan. That holds the robot but is no SYSTEM failure within the inputs'
+    timeouts, so ``on_system_fail(restart)`` does not restart it again and again."""
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+from emos import Action
+driver = DriveManager(component_name="driver")
+driver.on_system_fail(Action(driver.restart))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 3.2, 0.0), rate=4.0)])
+launcher.kompass(components=[driver], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "driver"])
+    control = Publisher(system.ctx, "/control", M.Twist, publisher_id="test_controller")
+    cmd = Subscriber(system.ctx, "/cmd_vel", M.Twist, queue_size=200)
+    status = Subscriber(system.ctx, "/driver/status", M.ComponentStatus, queue_size=200)
+    done = threading.Event()
+
+    def drive() -> None:
+        while not done.is_set():
+            control.publish(M.Twist(linear=M.Vector3(x=0.05)))
+            time.sleep(0.05)
+
+    worker = threading.Thread(target=drive, daemon=True)
+    try:
+        worker.start()
+        wait_until(lambda: any(c.linear.x > 0.01 for c in cmd.take()), 20, what="driving")
+        first = system.pid("driver")
+        system.rpc.call("lifecycle", component="driver", request="restart", wait=False)
+        second = system.wait_new_pid("driver", first, timeout=30)
+        status.take()
+        wait_until(lambda: any(c.linear.x > 0.01 for c in cmd.take()), 20, what="driving after the restart")
+        time.sleep(1.0)
+        assert system.pid("driver") == second  # not restarted again by its on_system_fail ladder
+        levels = [s.status for s in status.take()]
+        assert HealthLevel.SYSTEM_FAILURE not in levels, levels
+        assert "fallback handler=on_system_fail" not in system.output()
+    finally:
+        done.set()
+        worker.join(2)
+        control.close(), cmd.close(), status.close()
+        system.stop()
