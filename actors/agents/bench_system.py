@@ -101,15 +101,9 @@ class RunningRecipe:
             time.sleep(0.1)
 
     def _state(self, name: str) -> str | None:
-        found: dict[str, Any] = {}
+        from emos.supervisor.launched import component_states
 
-        def walk(node: dict) -> None:
-            found[node["name"]] = node.get("state")
-            for child in node.get("children", []):
-                walk(child)
-
-        walk(self.rpc.call("tree")["tree"])
-        return found.get(name)
+        return component_states(self.rpc.call("tree")["tree"]).get(name)
 
     def publisher(self, topic: str, msg_type: type, depth: int = 10) -> Any:
         from emos.transport.pubsub import Publisher

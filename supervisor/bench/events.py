@@ -27,6 +27,7 @@ from emos.msgs import Int64
 from emos.msgs.status import ComponentStatus
 from emos.supervisor.bench.common import percentiles, table
 from emos.supervisor.bench.restart import _wait_for_run
+from emos.supervisor.launched import component_states
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
@@ -58,15 +59,7 @@ class _Run:
     def wait_active(self, names: list[str], timeout: float = 30.0) -> None:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            states = {}
-
-            def walk(node: dict) -> None:
-                if node.get("kind") == "worker":
-                    states[node["name"]] = node.get("state")
-                for c in node.get("children", []):
-                    walk(c)
-
-            walk(self.rpc.call("tree")["tree"])
+            states = component_states(self.rpc.call("tree")["tree"])
             if all(states.get(n) == "active" for n in names):
                 return
             time.sleep(0.05)
