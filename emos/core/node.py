@@ -41,7 +41,7 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 
 
 class _Input:
-    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode")
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode", "sim_at")
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
@@ -50,6 +50,7 @@ class _Input:
         self.stamp_ns = 0
         self.received_ns = 0
         self.decoded: Any = None
+        self.sim_at: float | None = None  # simulated time it was taken at (a node on sim time)
 
 
 def wake_spin_setting() -> float:
@@ -351,6 +352,7 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
+        sim_clock = self._sim_time
         # Every input's latest message first: a step must see the other inputs that arrived in
         # the same wake-up. Then one step per triggering message, all trigger topics merged in
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
@@ -363,6 +365,7 @@ class Node:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
+            inp.sim_at = sim_clock.time_at(stamp) if sim_clock is not None else None
             if active and inp.topic in triggers:
                 backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
         if len(triggers) > 1 and backlog:
@@ -406,6 +409,7 @@ class Node:
                 return None
             inp.stamp_ns, inp.raw, _ = item
             inp.received_ns = time.time_ns()
+            inp.sim_at = self._sim_time.time_at(inp.stamp_ns) if self._sim_time is not None else None
         if inp.decoded is None:
             inp.decoded = inp.decode(inp.raw)
             if inp.decoded is None:
@@ -413,8 +417,19 @@ class Node:
         return inp.decoded
 
     def age(self, topic: Topic | str) -> float | None:
+        """Seconds since the last message on ``topic`` (None: none yet). A node on simulated time
+        counts simulated seconds: under lockstep a loaded machine slows the wall clock, not the
+        robot's, and a command one control period old must not look stale (emos.core.clock)."""
         inp = self._input(topic)
-        return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
+        return None if inp.raw is None else self._age_s(inp)
+
+    def _age_s(self, inp: _Input) -> float:
+        if inp.sim_at is not None and self._sim_time is not None and self._sim_time.time is not None:
+            age = self._sim_time.time - inp.sim_at
+            if age >= 0.0:
+                return age
+            # Simulated time went back (the simulator restarted): fall back to the wall clock.
+        return (time.time_ns() - inp.stamp_ns) / 1e9
 
     def publisher_pids(self, topic: Topic | str) -> list[int]:
         """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
@@ -435,7 +450,7 @@ class Node:
         for name, inp in self._inputs.items():
             if inp.raw is None:
                 stale.append(name)
-            elif inp.topic.data_timeout and (time.time_ns() - inp.stamp_ns) / 1e9 > inp.topic.data_timeout:
+            elif inp.topic.data_timeout and self._age_s(inp) > inp.topic.data_timeout:
                 stale.append(name)
         return stale
 

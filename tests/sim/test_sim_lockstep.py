@@ -50,8 +50,9 @@ class Driver(BaseComponent):
             omega = float(np.clip(2.0 * np.angle(np.exp(1j * (heading - yaw))), -1.5, 1.5))
             vx = float(min(0.8, np.hypot(3.0 - x, 2.5 - y)))
         self.publish("/cmd_vel", M.Twist(linear=M.Vector3(x=vx), angular=M.Vector3(z=omega)))
+        age = self.input_age("/odom")  # on simulated time: the same however loaded the machine
         with open(os.environ["TRACE"], "a") as f:
-            f.write(f"{t:.3f} {x!r} {y!r} {yaw!r} {vx!r} {omega!r}\\n")
+            f.write(f"{t:.3f} {x!r} {y!r} {yaw!r} {vx!r} {omega!r} {age if age is None else round(age, 6)!r}\\n")
         self.health_status.set_healthy()
 
 class ScanLog(BaseComponent):
