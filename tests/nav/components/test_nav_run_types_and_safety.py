@@ -157,7 +157,7 @@ launcher.bringup()
 def test_planner_action_drives_to_the_goal_while_the_motion_server_records(tmp_path):
     from emos.actors.nav.components.convert import pose_stamped
     from emos.actors.nav.components.interfaces import (MotionRecordingFeedback, MotionRecordingGoal, MotionRecordingResult,
-                                                        PlanPathFeedback, PlanPathRequest, PlanPathResult)
+                                                        PathTrackingError, PlanPath)
     from emos.core.services import ActionClient
     from tests.nav.components.fake_base import write_room_map
 
@@ -176,7 +176,7 @@ launcher.kompass(components=[map_server, planner, controller, driver, recorder],
 launcher.robot = robot
 launcher.bringup()
 """, ["base", "map_server", "planner", "controller", "driver", "recorder"])
-    nav = ActionClient("planner/action", PlanPathRequest, PlanPathFeedback, PlanPathResult, ctx=system.ctx)
+    nav = ActionClient("planner/plan_path", PlanPath.Goal, PlanPath.Feedback, PlanPath.Result, ctx=system.ctx)
     rec = ActionClient("recorder/action", MotionRecordingGoal, MotionRecordingFeedback, MotionRecordingResult, ctx=system.ctx)
     recorded: dict = {}
     try:
@@ -184,7 +184,11 @@ launcher.bringup()
             MotionRecordingGoal(duration=3.0, timestep=0.1, name="drive"), timeout=30)), daemon=True)
         recording.start()
         feedback: list = []
-        result = nav.send_goal(PlanPathRequest(goal=pose_stamped(2.0, 3.2, 0.0, "map")), feedback_callback=feedback.append, timeout=90)
+        bad = nav.send_goal(PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose,
+                                          end_tolerance=PathTrackingError(lateral_distance_error=-0.1)), timeout=30)
+        assert not bad.success and "lateral_distance_error" in bad.message, bad.message
+        goal = PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose, end_tolerance=PathTrackingError(lateral_distance_error=0.2))
+        result = nav.send_goal(goal, feedback_callback=feedback.append, timeout=90)
         assert result.success and result.message == "goal reached", result.message
         assert feedback and feedback[0].plan_length > 0
         recording.join(30)
