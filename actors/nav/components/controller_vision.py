@@ -107,11 +107,16 @@ class VisionTracking:
         if goal.search_timeout > 0 and hasattr(follower, "search"):
             follower.search.timeout = float(goal.search_timeout)
         period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
+        # A new goal preempts the one being followed (as a ROS action server does): an event
+        # that fires again must not start a second loop sending commands beside the first.
+        self._track_goal = mine = getattr(self, "_track_goal", 0) + 1
         self.get_logger().info("[%s] track_vision_target: following %r with %s", self.component_name, goal.label, cid.value)  # type: ignore[attr-defined]
         self._tracking = True
         last_msg = None  # the detections message the depth follower measured last
         try:
             while not goal_handle.is_cancel_requested:
+                if self._track_goal != mine:
+                    return TrackVisionTargetResult(success=False, message="preempted by a newer goal")
                 try:
                     box, msg = self._target_box(goal.label)
                 except BadInput as exc:
@@ -148,4 +153,5 @@ class VisionTracking:
             self.publish_stop()  # type: ignore[attr-defined]
             return TrackVisionTargetResult(success=True, message="cancelled")
         finally:
-            self._tracking = False
+            if self._track_goal == mine:
+                self._tracking = False

@@ -42,12 +42,15 @@ class _Run:
         self.system = SystemUnderTest(tmp_path, self.source, env={"PYTHONPATH": str(REPO)})
         self.system.wait_up(timeout=90)
         self.odom = Subscriber(self.system.ctx, odom_topic, M.Odometry, queue_size=1000)
-        self.poses: list[tuple[float, float, float]] = []
+        self.poses: list[tuple[float, float, float]] = []  # x, y, forward speed
+        self.stamped: list[tuple[float, float, float, float]] = []  # simulated time, x, y, yaw
 
     def poll(self) -> str:
         for o in self.odom.take():
-            p = o.pose.pose.position
+            p, q = o.pose.pose.position, o.pose.pose.orientation
             self.poses.append((p.x, p.y, o.twist.twist.linear.x))
+            yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+            self.stamped.append((o.header.stamp.sec + o.header.stamp.nanosec * 1e-9, p.x, p.y, yaw))
         return self.system.output()
 
     def wait_for(self, done, timeout: float, what: str) -> str:
@@ -94,5 +97,38 @@ def test_cross_component_events_unblock_direct_sensor_and_clicked_goal(tmp_path)
         # keep_event_delay=60 and handle_once: one firing each although both failures persist
         time.sleep(3.0)
         assert _monitor_fire_counts(run.system) == [1, 1, 1]
+    finally:
+        run.close()
+
+
+def test_external_reflexes_person_switches_the_controller_to_following(tmp_path):
+    import numpy as np
+
+    from emos.actors.sim.person import Person
+
+    run = _Run(tmp_path, "external_reflexes.py", "/odom")
+    try:
+        path, speed = np.array(_constant(run.source, "PERSON_PATH")), float(_constant(run.source, "PERSON_SPEED"))
+        person = Person(waypoints=path, speed=speed, mode="once")
+        arrival = float(np.sum(np.hypot(*np.diff(path, axis=0).T))) / speed  # simulated s until the person stops
+        out = run.wait_for(lambda o: "track_vision_target: following 'person' with VisionRGBDFollower" in o,
+                           timeout=60, what="the reflex (Vision -> event -> Controller)")
+        # in this order: the parameter, then the goal, which the follower the parameter selected serves
+        assert _after(out, "[controller] parameters set: algorithm='VisionRGBDFollower'",
+                      "[controller] track_vision_target: following 'person' with VisionRGBDFollower"), out[-4000:]
+        assert "following 'person' with VisionRGBFollower" not in out and "following 'person' with DWA" not in out
+        assert _monitor_fire_counts(run.system)[0] >= 1
+        # The person stops to the robot's right (bearing -0.54 rad from the spawn); the robot
+        # has turned to keep them ahead.
+        run.wait_for(lambda o: run.stamped and run.stamped[-1][0] > arrival + 4.0, timeout=60,
+                     what=f"{arrival + 4.0:.0f} s of simulated time")
+        t, x, y, yaw = run.stamped[-1]
+        px, py, _ = person.pose_at(t)
+        bearing = math.atan2(py - y, px - x)
+        info = f"robot ({x:.2f}, {y:.2f}, yaw {yaw:.2f}), person ({px:.2f}, {py:.2f}), bearing {bearing:.2f}\n{run.system.output()[-3000:]}"
+        print(info.splitlines()[0])
+        assert yaw < -0.25, info
+        assert abs(math.remainder(bearing - yaw, math.tau)) < 0.3, info
+        assert 1.0 < math.hypot(px - x, py - y) < 3.5, info
     finally:
         run.close()
