@@ -132,3 +132,38 @@ def test_external_reflexes_person_switches_the_controller_to_following(tmp_path)
         assert 1.0 < math.hypot(px - x, py - y) < 3.5, info
     finally:
         run.close()
+
+
+def test_context_aware_actions_location_name_drives_the_robot(tmp_path):
+    run = _Run(tmp_path, "context_aware_actions.py", "/odometry/filtered")
+    try:
+        spawn = _constant(run.source, "ROBOT_SPAWN")
+        kitchen = tuple(float(v) for v in re.search(r'"kitchen": \{"x": ([-0-9.]+), "y": ([-0-9.]+)\}', run.source).groups())
+        out = run.wait_for(lambda o: "[operator] the planner reports arrival" in o, timeout=75,
+                           what="the robot to reach the kitchen")
+        # the names were read from the topic when the event fired: each command its own lookup
+        assert _after(out, "[operator] said 'garage'", "Unknown location: garage"), out[-4000:]
+        assert _after(out, "[operator] said 'kitchen'", f"Going to kitchen at {kitchen}"), out[-4000:]
+        assert "Going to garage" not in out
+        assert _monitor_fire_counts(run.system) == [2]  # one firing per command, none on the mapper's status
+        run.poll()
+        x, y, _ = run.poses[-1]
+        assert math.dist((x, y), kitchen) < 0.3, (x, y)  # the Planner got the goal and the robot drove there
+        assert math.dist(spawn[:2], kitchen) > 1.5
+    finally:
+        run.close()
+
+
+def test_action_arguments_bound_to_list_items_resolve_when_the_event_fires():
+    """The page's prompt snippet: ``args=(detections.msg.labels[0],)`` is the first label of the
+    message that is there when the action runs (None while there is none)."""
+    import numpy as np
+
+    from emos import Action, Topic
+    from emos.events.runner import prepare
+
+    detections = Topic(name="/detections", msg_type="Detections")
+    prompts = Action(method=lambda label: f"A {label} has been detected.", args=(detections.msg.labels[0],))
+    msg = M.Detections(labels=["chair", "person"], scores=np.ones(2), boxes=np.zeros((2, 4)))
+    assert prepare(prompts, {"/detections": msg}.get)[0] == ("chair",)
+    assert prepare(prompts, {}.get)[0] == (None,)
