@@ -4,9 +4,9 @@
 
 One component's status makes a *different* component act:
 
-A. The ``Controller`` reports ALGORITHM_FAILURE (no valid velocity command: the way ahead is
-   blocked): the ``DriveManager`` runs its ``move_to_unblock`` maneuver (``keep_event_delay=60``:
-   at most once a minute).
+A. The ``Controller`` reports ALGORITHM_FAILURE (stuck: the way ahead is blocked): the
+   ``DriveManager`` runs its ``move_to_unblock`` maneuver (forward, backward or a rotation,
+   whichever the scan allows; ``keep_event_delay=60``: at most once a minute).
 B. The ``LocalMapper`` stops being HEALTHY (its scanner went silent): the ``Controller`` switches
    to the raw scan (``update_parameter(use_direct_sensor=True)``, ``handle_once=True``).
 C. A point clicked on ``/clicked_point`` (``header.stamp.sec > 0``, the spec's ``OnGreater``):
@@ -21,19 +21,20 @@ What is stood in, and how the faults are made:
 * ``Operator`` is the person clicking in RViz: once the robot's odometry and the Planner are up,
   it publishes one ``PointStamped`` goal (``GOAL``), 2.2 m ahead of the robot;
 * the block: a wall across the room (``BLOCKING_WALL``, a Simulator obstacle, so it is not on
-  the map the Planner plans on) stands 0.6 m ahead of the robot; the plan goes through it, the
-  robot drives up to it and the Controller finds no valid command;
+  the map the Planner plans on) stands 0.9 m ahead of the robot; the plan goes through it, the
+  robot drives up to it, stops, and the Controller reports that it makes no progress;
 * the mapper's sensor dropout: the LocalMapper reads its scan through ``ScanDriver``, which
   relays the Simulator's lidar (``/scan``) to ``/mapper/scan`` and goes silent ``DROPOUT_AFTER``
   seconds after it started relaying (a crashed driver); the LocalMapper reports its input stale
   (SYSTEM failure) and the Controller, switched to direct mode, reads ``/scan`` itself.
 
-Differences from the spec's code: imports; the robot configuration and the LocalMapper's
-window are the spec's but set through the launcher as in the other navigation recipes; the
-Simulator publishes the map the Planner needs (the spec's robot has one from elsewhere); the
-mapper runs as ``Event`` (each scan as it arrives) so that it does not report "no scan yet"
-while the Simulator starts, which would fire event B before any fault; ``multiprocessing=True``
-(errata: ``multi_processing`` is the Launcher's argument); ``Twist`` commands (no ROS distro).
+Differences from the spec's code: imports; the Controller's ``progress_timeout=3`` (see the
+comment there); the Simulator publishes the map the Planner needs (the spec's robot has one from
+elsewhere); the mapper runs as ``Event`` (each scan as it arrives) so that it does not report
+"no scan yet" while the Simulator starts, which would fire event B before any fault;
+``multiprocessing=True`` (errata: ``multi_processing`` is the Launcher's argument); ``Twist``
+commands (no ROS distro here). The robot configuration, the events, the actions and the goal
+parser are the spec's.
 """
 import time
 

@@ -167,3 +167,24 @@ def test_action_arguments_bound_to_list_items_resolve_when_the_event_fires():
     msg = M.Detections(labels=["chair", "person"], scores=np.ones(2), boxes=np.zeros((2, 4)))
     assert prepare(prompts, {"/detections": msg}.get)[0] == ("chair",)
     assert prepare(prompts, {}.get)[0] == (None,)
+
+
+def test_send_component_action_server_goal_picks_the_server_of_the_goal_type():
+    import pytest
+
+    from emos import Topic
+    from emos.actions import send_component_action_server_goal
+    from emos.actors.nav.components import Controller, Planner
+    from emos.actors.nav.components.interfaces import ControlPathGoal, PlanPath, TrackVisionTarget
+
+    controller = Controller(component_name="controller")
+    # no vision input: no track_vision_target server, so the goal has nowhere to go
+    with pytest.raises(TypeError, match=r"ControlPathGoal \(controller/action\).*got TrackVisionTargetGoal"):
+        send_component_action_server_goal(component=controller, request_msg=TrackVisionTarget.Goal(label="person"))
+    controller.inputs(vision_detections=Topic(name="detections", msg_type="Detections"))
+    track = send_component_action_server_goal(component=controller, request_msg=TrackVisionTarget.Goal(label="person"))
+    assert track.kwargs["server_name"] == "controller/track_vision_target"
+    follow = send_component_action_server_goal(component=controller, request_msg=ControlPathGoal())
+    assert follow.kwargs["server_name"] == "controller/action"
+    plan = send_component_action_server_goal(component=Planner(component_name="planner"), request_msg=PlanPath.Goal())
+    assert plan.kwargs["server_name"] == "planner/plan_path"
