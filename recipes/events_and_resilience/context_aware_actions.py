@@ -139,9 +139,9 @@ class Operator(BaseComponent):
         now = time.monotonic()
         if len(self.said) < len(COMMANDS) and (not self.said or now - self.said[-1] >= 1.0):
             word = COMMANDS[len(self.said)]
+            self.get_logger().info("[operator] says %r on %s", word, command_topic.name)
             self.publish(command_topic, String(data=word))
             self.said.append(now)
-            self.get_logger().info("[operator] said %r on %s", word, command_topic.name)
             return
         reached = self.get_input(self.reached)
         p = odom.pose.pose.position

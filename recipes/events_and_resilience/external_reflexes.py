@@ -2,8 +2,8 @@
 
     emos run recipes/events_and_resilience/external_reflexes.py --duration 40
 
-The robot idles in the first room of the simulated house. A person walks in through the
-doorway behind the wall and crosses the room. The ``Vision`` component (on-board people
+The robot idles in the first room of the simulated house. A person comes from the far end of
+the room and crosses it in front of the robot, to its right. The ``Vision`` component (on-board people
 detector) reports "person"; ``event_person_detected`` (``on_change=True``: when "person" first
 appears in the labels) runs two actions in order: ``update_parameter`` switches the
 ``Controller``'s ``algorithm`` to ``VisionRGBDFollower``, then ``send_component_action_server_goal``
@@ -39,10 +39,10 @@ from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.person import Person
 
 ROBOT_SPAWN = (1.0, 2.0, 0.0)  # x, y, yaw in the house's first room, facing +x
-# From the room above (out of sight behind the wall), through its doorway, across the room to
-# the robot's right, where the person stops.
-PERSON_PATH = ((2.6, 4.5), (2.6, 3.5), (3.4, 2.6), (3.0, 0.8))
-PERSON_SPEED = 0.4  # m/s
+# From the far end of the room (too far for the detector, and seen edge-on as they walk towards
+# the robot), then across the room 2.4 m ahead, to the robot's right, where the person stops.
+PERSON_PATH = ((4.4, 3.4), (3.4, 3.4), (3.4, 1.0))
+PERSON_SPEED = 0.25  # m/s
 
 # --- Vision Detector ---
 image0 = Topic(name="/camera/rgbd", msg_type="RGBD")
