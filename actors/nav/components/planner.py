@@ -287,10 +287,14 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             return PlanPathResult(success=False, message=message)
         self.get_logger().info("[%s] %s: goal (%.2f, %.2f), arrival within %.2f m", self.component_name,
                                self.main_action_name, goal[0], goal[1], tolerance)
+        # A new goal preempts the running one (a second click in RViz): one loop re-plans, not two.
+        self._action_goal = mine = getattr(self, "_action_goal", 0) + 1
         self._goal, self._goal_key, self._reached = goal, tuple(goal), False
         period = 1.0 / self.config.loop_rate
         last = PlanPathResult(success=False, message="cancelled")
         while not goal_handle.is_cancel_requested:
+            if self._action_goal != mine:
+                return PlanPathResult(success=False, message="preempted by a newer goal")
             if self._check_reached(tolerance):
                 self.get_logger().info("[%s] %s: goal (%.2f, %.2f) reached", self.component_name, self.main_action_name, goal[0], goal[1])
                 plan = path_msg(self.last_plan, self.config.frames.world) if self.last_plan is not None else Path()
@@ -302,7 +306,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             if not ok and self.health_status.is_algorithm_fail:
                 return PlanPathResult(success=False, message=message)
             deadline = time.monotonic() + period
-            while time.monotonic() < deadline and not goal_handle.is_cancel_requested:
+            while time.monotonic() < deadline and not goal_handle.is_cancel_requested and self._action_goal == mine:
                 if self._check_reached(tolerance):
                     break
                 time.sleep(min(0.05, period))

@@ -187,8 +187,16 @@ launcher.bringup()
         bad = nav.send_goal(PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose,
                                           end_tolerance=PathTrackingError(lateral_distance_error=-0.1)), timeout=30)
         assert not bad.success and "lateral_distance_error" in bad.message, bad.message
+        # a goal sent while another runs preempts it
+        first: dict = {}
+        elsewhere = PlanPath.Goal(goal=pose_stamped(5.0, 1.0, 0.0, "map").pose)  # behind the wall
+        runner = threading.Thread(target=lambda: first.setdefault("r", nav.send_goal(elsewhere, timeout=60)), daemon=True)
+        runner.start()
+        time.sleep(1.0)
         goal = PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose, end_tolerance=PathTrackingError(lateral_distance_error=0.2))
         result = nav.send_goal(goal, feedback_callback=feedback.append, timeout=90)
+        runner.join(10)
+        assert first["r"].message == "preempted by a newer goal", first
         assert result.success and result.message == "goal reached", result.message
         assert feedback and feedback[0].plan_length > 0
         recording.join(30)
