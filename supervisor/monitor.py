@@ -22,6 +22,7 @@ from typing import Any
 
 from emos.core.component import BaseComponent
 from emos.core.priority import lower_priority
+from emos.events.topic_group import TopicEvents
 from emos.core.ratelimit import RepeatLimiter
 from emos.core.rpc import AsyncRpcClient
 from emos.events.action import Action
@@ -38,6 +39,8 @@ class Monitor(BaseComponent):
     # event loop, which a spin would delay, and a spinning Monitor competes for the CPU with the
     # components it watches.
     _wake_spin_us = 0.0
+    # Publishers wake the Monitor after the components that read the same message (waker.py).
+    _wake_background = True
 
     def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0):
         self._entries = entries
@@ -73,10 +76,11 @@ class Monitor(BaseComponent):
         fired = self._load_fired()
         self.board = Blackboard({t.name: t.data_timeout for t in self.in_topics})
         self.trackers = [EventTracker(e.to_dict(), fired_before=i in fired) for i, (e, _) in enumerate(self._entries)]
-        self.by_topic: dict[str, list[int]] = {}
+        by_topic: dict[str, list[int]] = {}
         for i, tr in enumerate(self.trackers):
             for t in tr.topics:
-                self.by_topic.setdefault(t, []).append(i)
+                by_topic.setdefault(t, []).append(i)
+        self.by_topic = {t: TopicEvents(indices, self.trackers) for t, indices in by_topic.items()}
         self.runtime = MonitorRuntime(self)
         self._errors = RepeatLimiter()
         self._tasks: set[asyncio.Task] = set()
@@ -113,8 +117,8 @@ class Monitor(BaseComponent):
         stamp = self.node.trigger_stamp_ns
         age = (time.time_ns() - stamp) / 1e9 if stamp is not None else self.input_age(topic)
         self.board.put(topic.name, msg, now - age if age is not None and age > 0 else now)
-        interested = self.by_topic.get(topic.name, ())
-        if not interested:
+        group = self.by_topic.get(topic.name)
+        if group is None:
             return
         cache: dict[str, Any] = {}  # each topic's freshness is looked up once per message, not per leaf
 
@@ -123,16 +127,38 @@ class Monitor(BaseComponent):
                 cache[name] = self.board.fresh(name, now)
             return cache[name]
 
-        for i in interested:
+        try:
+            # The fast path: every condition on this topic in one call, the ones that matter observed.
+            firing = [i for i, value in group.values(fresh, topic.name) if self.trackers[i].observe(value, now)]
+        except Exception:
+            firing = None  # a condition raised: check the events one by one below, each error apart
+        if firing is None:
+            firing = self._check_each(group.indices, topic.name, now, fresh)
+        else:
+            firing += self._check_each(group.whole, topic.name, now, fresh)
+        for i in sorted(firing):  # in the order the events were declared
             try:
-                if self.trackers[i].check(topic.name, self.board, now, fresh):
-                    self._fire(i, topic.name, msg)
-            except Exception as exc:  # one broken event must not stop the others (or restart us)
-                log_now, _, suppressed = self._errors.hit((i, "evaluate", type(exc).__name__))
-                if log_now:
-                    self.get_logger().error("[%s] event %r on %s: %s: %s%s", self.component_name, self._entries[i][0], topic.name,
-                                            type(exc).__name__, exc, f" (and {suppressed} more times)" if suppressed else "")
+                self._fire(i, topic.name, msg)
+            except Exception as exc:  # binding its arguments or recording it failed: the others still fire
+                self._event_error(i, topic.name, "fire", exc)
         self.health_status.set_healthy()
+
+    def _check_each(self, indices: list[int], topic: str, now: float, fresh: Any) -> list[int]:
+        """The events among ``indices`` that fire, checked one by one (an error stays with its event)."""
+        firing = []
+        for i in indices:
+            try:
+                if self.trackers[i].check(topic, self.board, now, fresh):
+                    firing.append(i)
+            except Exception as exc:  # one broken event must not stop the others (or restart us)
+                self._event_error(i, topic, "evaluate", exc)
+        return firing
+
+    def _event_error(self, index: int, topic: str, stage: str, exc: Exception) -> None:
+        log_now, _, suppressed = self._errors.hit((index, stage, type(exc).__name__))
+        if log_now:
+            self.get_logger().error("[%s] event %r on %s: %s: %s%s", self.component_name, self._entries[index][0], topic,
+                                    type(exc).__name__, exc, f" (and {suppressed} more times)" if suppressed else "")
 
     def _fire(self, index: int, topic: str, msg: Any) -> None:
         event, actions = self._entries[index]

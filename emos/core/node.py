@@ -143,7 +143,8 @@ class Node:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self._on_signal, sig)
         self.component._node = self
-        self._waker = Waker(self.ctx, spin_us=self.wake_spin_us)
+        # A best-effort component (the Monitor, the web UI) is woken after the robot's own readers.
+        self._waker = Waker(self.ctx, spin_us=self.wake_spin_us, background=bool(getattr(self.component, "_wake_background", False)))
         loop.add_reader(self._waker.fd, self._on_wake)
         self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
         self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name, max_frame=CONTROL_FRAME)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import keyword
 import operator
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -80,6 +80,42 @@ def compile_tree(tree: Mapping) -> Compiled:
     fn = w.namespace["condition"]
     fn.source = "\n".join(lines)  # for debugging: what a condition compiled to
     return fn
+
+
+def compile_group(trees: Sequence[Mapping]) -> Callable[[Callable[[str], Any], "str | None"], tuple]:
+    """One function ``(fresh, trigger) -> (value of each tree, ...)`` for all the conditions a
+    topic's message must be checked against: one call per message instead of one per event, and
+    each topic's fresh message fetched once. A tree too deep for Python's parser on its own is
+    evaluated by its :func:`compile_tree` fallback from inside the group."""
+    from emos.events.conditions import _MISSING, _leaf, resolve_path
+
+    w = _Writer()
+    w.namespace.update(_MISSING=_MISSING, _resolve_path=resolve_path, _leaf=_leaf)
+    results = []
+    for tree in trees:
+        mark = len(w.lines)
+        var = _node(w, tree, 1)
+        if not _parses(w.lines[mark:]):
+            del w.lines[mark:]
+            var = w.name("r")
+            w.emit(1, f"{var} = {w.name('F', compile_tree(tree))}(fresh, trigger)")
+        results.append(var)
+    lines = ["def conditions(fresh, trigger):"]
+    lines += [f"    {var} = fresh({w.name('T', topic)})" for topic, var in w.topics.items()]
+    lines += w.lines
+    lines.append(f"    return ({''.join(r + ', ' for r in results)})")
+    exec(compile("\n".join(lines), "<emos conditions>", "exec"), w.namespace)  # noqa: S102 - our own names only
+    fn = w.namespace["conditions"]
+    fn.source = "\n".join(lines)
+    return fn
+
+
+def _parses(body: list[str]) -> bool:
+    try:
+        compile("\n".join(["def f(fresh, trigger):", *body]), "<emos condition>", "exec")
+    except (SyntaxError, RecursionError, MemoryError):
+        return False
+    return True
 
 
 def _node(w: _Writer, tree: Mapping, depth: int) -> str:

@@ -134,6 +134,21 @@ class EventTracker:
                 return self._decide(bool(value), now)
         else:
             value = self._evaluate(fresh or (lambda t: board.fresh(t, now)), trigger_topic)
+        return self.observe(value, now)
+
+    @property
+    def whole_topic(self) -> bool:
+        """Fires on every message of its topic (``Event(topic)``): no condition to evaluate."""
+        return self._whole_topic
+
+    @property
+    def on_change(self) -> bool:
+        return self._on_change
+
+    def observe(self, value: bool | None, now: float) -> bool:
+        """Whether the event fires, given its condition's ``value`` on this message (True, False
+        or None: unknown). :meth:`check` evaluates and observes; the Monitor evaluates all the
+        conditions of a topic in one call and observes the ones that matter."""
         truth = value is True
         if not self._on_change:
             return truth and self._decide(True, now)  # most events are false on most messages

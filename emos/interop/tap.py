@@ -59,7 +59,7 @@ class TopicTap:
         self.exclude = normalize_patterns(exclude)
         self.queue_size = queue_size
         self.discover_every = discover_every
-        self.waker = Waker(ctx) if use_waker else None
+        self.waker = Waker(ctx, background=True) if use_waker else None  # an observer: woken after the robot's readers
         self.subs: dict[str, Subscriber] = {}
         self.types: dict[str, type] = {}
         self._refused: set[tuple[str, str]] = set()

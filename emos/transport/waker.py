@@ -17,6 +17,13 @@ When the spin ends the node *parks*: clears the flag, fences, and looks once mor
 published while the flag was still visible is never left unannounced. This is the
 spin-then-block idle strategy of low-latency messaging (Aeron's backoff, adaptive mutexes);
 ``spin_us=0`` turns it off.
+
+Robot first. A publisher wakes its subscribers one system call after the other, and on a
+machine with few cores the first woken takes the free core. Best-effort readers (the Monitor
+evaluating events, the web UI, a recorder) mark their token with :data:`BACKGROUND_BIT`, and
+publishers wake them after every other subscriber, so the robot's own components are not queued
+behind them. The bit only orders wake-ups: a peer that sets it on its own token harms no one but
+itself.
 """
 from __future__ import annotations
 
@@ -37,15 +44,18 @@ PARKED, SPINNING = 0, 1  # the state word a Waker shares with the publishers tha
 DEFAULT_SPIN_US = 100.0  # longer than a request-reply turnaround here; at most this CPU per message
 MAX_LINGER_US = 1000.0  # under a flood, return to the event loop this often (timers, RPC, signals)
 _STATE_BYTES = 64
+BACKGROUND_BIT = 1 << 62  # in a token: wake this reader after the others (module doc)
 
 
 class Waker:
     """The receiving end: a FIFO this node reads, and the state page publishers consult."""
 
-    def __init__(self, ctx: RunContext, spin_us: float = 0.0):
+    def __init__(self, ctx: RunContext, spin_us: float = 0.0, background: bool = False):
+        """``background``: publishers wake this reader after the others (module doc)."""
         if spin_us < 0:
             raise ValueError(f"Waker spin_us must be >= 0 microseconds, got {spin_us}")
-        self.token = secrets.randbits(63) | 1
+        token = secrets.randbits(63) | 1
+        self.token = token | BACKGROUND_BIT if background else token & ~BACKGROUND_BIT
         self.path = fifo_path(ctx, self.token)
         self.spin_ns = int(spin_us * 1000)
         self.announcements = 0  # how many drains saw a publisher appear or go
@@ -174,6 +184,9 @@ class WakeSender:
                     continue
                 raise
             self._map_state(token)
+        # Foreground readers first (dicts keep insertion order; wake() walks it).
+        if any(t & BACKGROUND_BIT for t in self.fds):
+            self.fds = dict(sorted(self.fds.items(), key=lambda item: bool(item[0] & BACKGROUND_BIT)))
         return dead
 
     def _map_state(self, token: int) -> None:

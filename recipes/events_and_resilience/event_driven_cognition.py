@@ -1,98 +1,120 @@
 """Event-driven cognition (seed recipe): a cheap detector wakes an expensive describer.
 
-    emos run recipes/events_and_resilience/event_driven_cognition.py --duration 8
+    emos serve models --script recipes/models/responder.yaml &
+    emos run recipes/events_and_resilience/event_driven_cognition.py --duration 30
 
-``eye_detector`` runs on every camera frame; ``visual_describer`` has no topic trigger: its
-trigger is ``event_person_detected`` (``labels`` contains "person", ``on_change=True``,
-``keep_event_delay=5``), so it runs one step when a person *appears*, at most once per 5 s,
-instead of on every frame.
+The spec's recipe on real components: the ``Vision`` component ``eye_detector`` runs its
+on-board people detector (``enable_local_classifier=True``: OpenCV's HOG detector) on every
+camera frame; the ``VLM`` ``visual_describer`` has no topic trigger: its trigger is
+``event_person_detected`` (``labels`` contains "person", ``on_change=True``,
+``keep_event_delay=5``), so the Monitor runs one VLM step when a person *appears* (at most once
+per 5 s), and the VLM sends the latest frame with the fixed prompt to its model server.
 
-Stand-ins: the model is not the point here, so ``Camera`` renders a scripted scene (a person
-walks in at 0.8 s and out at 1.6 s: described; back at 2.2 s: not described, within 5 s of the
-last description; back at 6 s to stay: described), ``Vision`` "detects" by reading the
-scene's colour code from the frame, and ``VLM`` describes the latest frame from its pixels with
-a fixed prompt. The event, the trigger and the launcher are the real API.
+What stands in for what:
+* the ``Simulator`` (pybullet, headless) is the robot's camera: ``world="house_person"``, the
+  demo house with a person walking across the robot's view, out through the doorway behind the
+  wall (out of sight from ~7 s of simulated time) and back (in sight again from ~12 s), over and
+  over; its camera publishes on the spec's ``/image_raw``;
+* ``Narrator`` (below) only reports: when the detector starts and stops seeing a person, how
+  many frames with a person it saw, and each description, so a headless run shows what happened;
+* ``emos serve models`` is Ollama: ``qwen2.5vl:7b`` there is the scripted responder of
+  ``recipes/models/responder.yaml`` (this machine cannot run a 7B VLM), which answers the
+  prompt without looking at the picture. The detector, the event and the VLM component, its
+  client and its request with the frame are the real ones.
+
+Differences from the spec's code: the imports, the model client's port (``EMOS_MODELS_PORT``),
+and the Simulator. The spec's ``launcher.enable_ui(...)`` line runs when ``EMOS_UI=1`` (the UI
+serves http://127.0.0.1:5001; a headless run or a test does not need it).
 """
-import time
+import os
 
-import numpy as np
+from emos import BaseComponent, Event, FixedInput, Launcher, Topic
+from emos.actors.agents import VLM, OllamaClient, OllamaModel, Vision, VisionConfig
+from emos.actors.sim import Simulator, SimulatorConfig
 
-from emos import BaseComponent, Event, Launcher, Topic
-from emos.msgs import Detections, Image, String
+MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))  # `emos serve models` (Ollama API)
 
+# Define Topics
 camera_image = Topic(name="/image_raw", msg_type="Image")
-detections = Topic(name="/detections", msg_type="Detections")
-description_output = Topic(name="/description", msg_type="String")
+detections = Topic(name="/detections", msg_type="Detections")  # Output of Vision
+description_output = Topic(name="/description", msg_type="String")  # Output of VLM
 
-PERSON_VISIBLE = [(0.8, 1.6), (2.2, 3.0), (6.0, 1e9)]  # seconds after the camera starts
+# Setup the Vision Component (The Trigger)
+# We use a lower threshold to ensure we catch people easily and we use a small local model
+vision_config = VisionConfig(threshold=0.6, enable_local_classifier=True)
+vision_detector = Vision(
+    inputs=[camera_image],
+    outputs=[detections],
+    trigger=camera_image,  # Runs on every frame
+    config=vision_config,
+    component_name="eye_detector",
+)
 
-
-class Camera(BaseComponent):
-    """Renders the scene: red pixels where a person stands."""
-
-    def custom_on_activate(self):
-        self.t0 = time.monotonic()
-
-    def _execution_step(self):
-        t = time.monotonic() - self.t0
-        frame = np.full((48, 64, 3), 90, np.uint8)
-        if any(a <= t < b for a, b in PERSON_VISIBLE):
-            frame[10:40, 20:34] = (200, 30, 30)
-        self.publish(camera_image, Image.from_numpy(frame, "rgb8"))
-        self.health_status.set_healthy()
-
-
-class Vision(BaseComponent):
-    """Stand-in detector: a red blob is a person."""
-
-    def _execution_step(self, msg=None, topic=None):
-        frame = msg.to_numpy()
-        red = (frame[..., 0] > 150) & (frame[..., 1] < 80)
-        labels = ["person"] if red.sum() > 50 else []
-        boxes = np.array([[20.0, 10.0, 34.0, 40.0]]) if labels else np.zeros((0, 4))
-        self.publish(detections, Detections(labels=labels, scores=np.ones(len(labels)), boxes=boxes))
-        self.health_status.set_healthy()
-
-
-class VLM(BaseComponent):
-    """Stand-in describer: answers its fixed prompt from the latest frame's pixels."""
-
-    def __init__(self, prompt: str, **kwargs):
-        super().__init__(**kwargs)
-        self.prompt = prompt
-
-    def _execution_step(self, **_):
-        frame = self.get_input(camera_image)
-        if frame is None:
-            self.health_status.set_fail_system(topic_names=[camera_image.name])
-            return
-        pixels = frame.to_numpy().reshape(-1, 3)
-        share = float(((pixels[:, 0] > 150) & (pixels[:, 1] < 80)).mean())
-        text = f"{self.prompt} -> a person in red clothes fills {share:.0%} of the view"
-        self.publish(description_output, String(data=text))
-        self.get_logger().info("[visual_describer] %s", text)
-        self.health_status.set_healthy()
-
-
-camera = Camera(component_name="camera", outputs=[camera_image])
-camera.config.loop_rate = 15.0
-
-vision_detector = Vision(inputs=[camera_image], outputs=[detections], trigger=camera_image, component_name="eye_detector")
-
+# Define the Event
+# It triggers ONLY if the "labels" list of the detections contains "person" after not
+# containing one, and at most once every 5 seconds.
 event_person_detected = Event(
     detections.msg.labels.contains_any(["person"]),
-    on_change=True,  # only when a person appears
-    keep_event_delay=5,  # and at most once every 5 s
+    on_change=True,  # Trigger only when a change has occurred to stop repeat triggering
+    keep_event_delay=5,  # A delay in seconds
+)
+
+# Setup the VLM Component (The Responder): it does NOT run continuously, it waits for the event.
+qwen_vl = OllamaModel(name="qwen_vl", checkpoint="qwen2.5vl:7b")
+ollama_client = OllamaClient(model=qwen_vl, port=MODELS_PORT)
+
+# A fixed prompt, injected whenever the component runs.
+fixed_prompt = FixedInput(
+    name="prompt",
+    msg_type="String",
+    fixed="A person has been detected. Describe their appearance briefly.",
 )
 
 visual_describer = VLM(
-    prompt="A person has been detected. Describe their appearance briefly.",
-    inputs=[camera_image],
+    inputs=[fixed_prompt, camera_image],  # Takes the fixed prompt + current image
     outputs=[description_output],
-    trigger=event_person_detected,  # runs only when the event fires
+    model_client=ollama_client,
+    trigger=event_person_detected,  # CRITICAL: Only runs when the event fires
     component_name="visual_describer",
 )
 
+# --- The robot's camera: the simulated house with a walking person (see the module doc) ---
+sim = Simulator("sim", config=SimulatorConfig(world="house_person"))
+sim.outputs(camera=camera_image)
+
+
+
+class Narrator(BaseComponent):
+    """Prints the detector's person edges and every description (it only reads topics)."""
+
+    def custom_on_activate(self):
+        self.in_view, self.frames_with_person, self.descriptions = False, 0, 0
+
+    def _execution_step(self, msg=None, topic=None):
+        self.health_status.set_healthy()
+        if topic is not None and topic.name == description_output.name:
+            self.descriptions += 1
+            print(f"[narrator] description #{self.descriptions} (after {self.frames_with_person} frames with a person): "
+                  f"{msg.data!r}", flush=True)
+        elif topic is not None:
+            seen = "person" in list(msg.labels)
+            self.frames_with_person += seen
+            if seen != self.in_view:
+                self.in_view = seen
+                print(f"[narrator] eye_detector: a person {'came into' if seen else 'left'} view", flush=True)
+
+
+narrator = Narrator(component_name="narrator", inputs=[detections, description_output],
+                    trigger=[detections, description_output])
+
+# Launch
 launcher = Launcher()
-launcher.add_pkg(components=[camera, vision_detector, visual_describer], multiprocessing=True, package_name="automatika_embodied_agents")
+if os.environ.get("EMOS_UI") == "1":
+    launcher.enable_ui(outputs=[camera_image, detections, description_output])
+launcher.add_pkg(
+    components=[vision_detector, visual_describer],
+    multiprocessing=True,
+    package_name="automatika_embodied_agents",
+)
+launcher.add_pkg(components=[sim, narrator], multiprocessing=True, package_name="simulation")
 launcher.bringup()

@@ -196,12 +196,18 @@ def test_compiled_conditions_agree_with_the_reference_evaluator():
          "/multi": DetectionsMultiSource(detections=[detections("cat")]), "/odom": o},
         {"/battery": Float32(data=30.0), "/bumper": Bool(data=True), "/detections": detections()},
     ]
-    for cond in conditions:
-        tree = cond.to_dict()["tree"]
+    from emos.events.compiled import compile_group
+
+    trees = [cond.to_dict()["tree"] for cond in conditions]
+    group = compile_group(trees)  # the Monitor's per-topic form: every condition in one call
+    for cond, tree in zip(conditions, trees):
         fast = compile_condition(tree)
         for world in worlds:
             for trigger in (None, "/mode", "/battery"):
                 assert fast(world.get, trigger) == evaluate(tree, world.get, trigger), (cond, world.keys(), trigger)
+    for world in worlds:
+        for trigger in (None, "/mode", "/battery"):
+            assert list(group(world.get, trigger)) == [evaluate(t, world.get, trigger) for t in trees], (world.keys(), trigger)
 
 
 def test_a_condition_too_wide_to_compile_is_still_evaluated():
@@ -212,6 +218,10 @@ def test_a_condition_too_wide_to_compile_is_still_evaluated():
     wide = reduce(lambda a, b: a | b, [battery.msg.data == float(k) for k in range(150)])  # 150 nested blocks
     tree = wide.to_dict()["tree"]
     fn = compile_condition(tree)
+    from emos.events.compiled import compile_group
+
+    group = compile_group([tree, (battery.msg.data > 100.0).to_dict()["tree"]])  # in a group, it falls back alone
     for value in (7.0, 500.0):
         world = {"/battery": Float32(data=value)}
         assert fn(world.get, "/battery") == evaluate(tree, world.get, "/battery") == (value < 150)
+        assert group(world.get, "/battery") == (value < 150, value > 100.0)

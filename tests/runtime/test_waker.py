@@ -74,3 +74,27 @@ def test_spin_must_not_be_negative(ctx):
 
     with pytest.raises(ValueError, match="spin_us must be >= 0"):
         Waker(ctx, spin_us=-1)
+
+
+def test_background_readers_are_woken_after_the_others(ctx, monkeypatch):
+    """The Monitor and observers mark their token; a publisher wakes the robot's components first
+    (on a machine with few cores the first woken takes the free core)."""
+    import emos.transport.waker as W
+
+    background = Waker(ctx, background=True)  # registered first: insertion order alone would wake it first
+    foreground = [Waker(ctx) for _ in range(2)]
+    assert background.token & W.BACKGROUND_BIT and not any(w.token & W.BACKGROUND_BIT for w in foreground)
+    subs = [Subscriber(ctx, "/w", M.Int64, waker=w) for w in (background, *foreground)]
+    pub = Publisher(ctx, "/w", M.Int64, publisher_id="p")
+    for w, s in zip((background, *foreground), subs):
+        w.drain()
+        assert s.take() == []
+    fifo_of = {pub.sender.fds[w.token]: w for w in (background, *foreground)}
+    written: list = []
+    real_write = W.os.write
+    monkeypatch.setattr(W.os, "write", lambda fd, data: (written.append(fifo_of.get(fd)), real_write(fd, data))[1])
+    pub.publish(M.Int64(data=7))
+    assert written[-1] is background and set(written[:-1]) == set(foreground)
+    for w, s in zip((background, *foreground), subs):
+        assert w.drain() == 1 and [m.data for m in s.take()] == [7]
+        w.close()

@@ -122,8 +122,19 @@ class Controller(VisionTracking, NavComponent):
         return servers
 
     def set_algorithm(self, algorithm: ControllersID | str) -> bool:
-        """Switch the control algorithm (an event or fallback action); the next step uses it."""
+        """Switch the control algorithm (an event or fallback action); the next step uses it.
+        The previous algorithm's failure (a stall held until the robot moves, a blocked streak)
+        is cleared: the new one has not failed yet, and a fallback ladder that switched must
+        judge it by its own steps, not by its predecessor's report."""
+        previous = self.config.algorithm
         self.config.algorithm = algorithm  # type: ignore[assignment]
+        if self.config.algorithm != previous and self._node is not None and hasattr(self, "_progress"):  # running
+            self._stalled_at, self._failing_since = None, None
+            if self._progress is not None:
+                self._progress.reset()
+            if self.health_status.is_algorithm_fail:
+                self.health_status.set_healthy()
+            self.get_logger().info("[%s] algorithm switched from %s to %s", self.component_name, previous, self.config.algorithm)
         return True
 
     @property

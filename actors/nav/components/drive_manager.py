@@ -5,6 +5,8 @@ the velocity/acceleration limits and the optional smoothing of :class:`DriveSafe
 watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
 the command input goes stale or its publisher process died, when odometry goes stale
 (``closed_loop``), or when the scan goes stale: the robot never drives on old information.
+Right after activation an input that has not sent its first message yet holds the robot without
+a failure until its timeout has passed (a restart must not fail on its own start-up).
 The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 ``move_to_unblock``) are methods (for event actions) and Trigger services.
 """
@@ -27,9 +29,10 @@ from emos.msgs.std import Bool, Header, Time
 
 from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig
 from ..safety import maneuvers as M
+from ..safety.blind_spot import BlindSpotConfig, BlindSpotMemory
 from ..safety.zones import ZoneCheck
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, scan_of, twist_msg, twist_of
+from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of
 
 __all__ = ["DriveManager", "DriveManagerConfig"]
 
@@ -61,6 +64,10 @@ class DriveManagerConfig(NavComponentConfig):
     max_rotation: float = field(default=math.pi / 2, validator=in_range(min_value=0.0, max_value=2 * math.pi))
     safety_margin: float = field(default=0.05, validator=in_range(min_value=0.0, max_value=10.0))
     stop_hold_time: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
+    blind_spot_memory_time: float = field(default=10.0, validator=in_range(min_value=0.0, max_value=600.0))
+    """s: obstacle points seen this long ago still block backing up where the laser cannot see
+    now (behind a 270 degree laser); 0 turns the memory off. Needs the ``location`` input."""
+    blind_spot_radius: float = field(default=2.0, validator=in_range(min_value=0.1, max_value=50.0))
 
     def __attrs_post_init__(self) -> None:
         if self.slowdown_zone_distance < self.critical_zone_distance:
@@ -108,10 +115,14 @@ class DriveManager(NavComponent):
         self._held_until = -math.inf
         self._cmd_ages: dict[str, float] = {}
         self._cmd_writers: dict[str, list[int]] = {}
+        self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
+                            if cfg.blind_spot_memory_time > 0 else None)
+        self._remembered_scan: Any = None  # the scan message last put into the blind-spot memory
         for name in ("move_forward", "move_backward", "rotate_in_place", "move_to_unblock"):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
     def custom_on_activate(self) -> None:
+        self._activated_at = time.monotonic()
         if self.run_type.value == "Event":
             self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
 
@@ -181,6 +192,18 @@ class DriveManager(NavComponent):
                 return "location", what
         return None
 
+    def _awaiting_first_inputs(self) -> bool:
+        """Just activated, and odometry or a scan has not sent its first message yet. The robot
+        is held, but that is no SYSTEM failure until the input's timeout has passed since
+        activation: a (re)started DriveManager whose first command comes before its first scan
+        would otherwise fail at once, and an ``on_system_fail`` restart would loop on it."""
+        cfg = self.config
+        if time.monotonic() - getattr(self, "_activated_at", -math.inf) > max(cfg.odom_timeout, cfg.sensor_timeout):
+            return False
+        ages = [self.age_of("location")] if cfg.closed_loop else []
+        ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
+        return any(age is None for age in ages)
+
     def _publisher_alive(self, key: str, age: float) -> bool:
         """Is the process that sent the current command still running? A restarted publisher
         (same ring, new pid) does not revive a command its dead predecessor sent."""
@@ -206,9 +229,36 @@ class DriveManager(NavComponent):
         if scan_msg is None:
             return None, "no LaserScan among the sensor_data inputs"
         try:
-            return scan_of(scan_msg), reason
+            scan = scan_of(scan_msg)
         except BadInput as exc:
             return None, str(exc)
+        self._remember(scan_msg, scan)
+        return scan, reason
+
+    def _remember(self, scan_msg: Any, scan: Any) -> None:
+        """Put a new scan into the blind-spot memory, at the pose odometry gives for now."""
+        if self._blind_spot is None or scan_msg is self._remembered_scan:
+            return
+        pose = self._pose()
+        if pose is not None:
+            self._blind_spot.update(pose, scan, time.monotonic())
+            self._remembered_scan = scan_msg
+
+    def _pose(self) -> np.ndarray | None:
+        msg, age = self.latest("location"), self.age_of("location")
+        if msg is None or age is None or age > self.config.odom_timeout:
+            return None
+        try:
+            return pose_of(msg)
+        except BadInput:
+            return None  # the watchdog reports a bad location input
+
+    def _all_around(self, scan: Any) -> Any:
+        """The scan plus remembered obstacles where it cannot see (points in the robot frame);
+        the scan alone when nothing is remembered there. For motion backwards."""
+        pose = self._pose() if self._blind_spot is not None else None
+        blind = self._blind_spot.blind_points(pose, scan) if pose is not None else ()
+        return np.vstack([scan.points(), blind]) if len(blind) else scan
 
     def _range_sensors_min(self) -> float:
         """Nearest reading (m beyond the footprint) of Float range sensors, inf if none."""
@@ -227,6 +277,8 @@ class DriveManager(NavComponent):
         self._maneuver = None
         self._held_until = time.monotonic() + self.config.stop_hold_time
         self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+        # An event action is rare and worth a line: which component stopped the robot, for how long.
+        self.get_logger().info("[%s] stop: robot held still for %.1f s", self.component_name, self.config.stop_hold_time)
         return True
 
     def _drive(self) -> None:
@@ -238,6 +290,9 @@ class DriveManager(NavComponent):
             self.health_status.set_healthy()
             return
         blocked = self._blocking_reason()
+        if blocked is not None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if blocked is not None:
             key, reason = blocked
             self.fail_input(key, f"robot stopped: {reason}")
@@ -245,11 +300,16 @@ class DriveManager(NavComponent):
             self.node.publish_status()
             return
         obstacles, why = self._obstacles()
+        if obstacles is None and self._awaiting_first_inputs():
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            return
         if obstacles is None:
             self.fail_input("sensor_data", f"robot stopped: {why}")
             self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
             self.node.publish_status()
             return
+        if self._command[0] < 0.0:  # backing up: what is behind the laser's field of view counts too
+            obstacles = self._all_around(obstacles)
         out, check = self._safety.step(self._command, obstacles)
         near = self._range_sensors_min()
         if near <= self.config.critical_zone_distance and abs(self._command[0]) > 1e-9:
@@ -285,7 +345,7 @@ class DriveManager(NavComponent):
             return False, maneuver.reason
         self._maneuver = (maneuver, 0)
         self._safety.filter.reset(np.zeros(3))
-        message = f"{maneuver.name}: {maneuver.commands.shape[0]} steps"
+        message = f"{maneuver.name}: {maneuver.commands.shape[0]} steps" + (f" ({maneuver.reason})" if maneuver.reason else "")
         self.get_logger().info("[%s] maneuver %s", self.component_name, message)
         return True, message
 
@@ -293,7 +353,7 @@ class DriveManager(NavComponent):
         obstacles, why = self._obstacles()
         if obstacles is None:
             raise BadInput(f"maneuvers need a fresh scan: {why}")
-        return obstacles
+        return self._all_around(obstacles)
 
     def _run(self, build: Any) -> tuple[bool, str]:
         try:
@@ -339,6 +399,8 @@ class DriveManager(NavComponent):
         cmd = maneuver.commands[i]
         obstacles, _ = self._obstacles()
         check = ZoneCheck(1.0, math.inf)
+        if obstacles is not None and cmd[0] < 0.0:
+            obstacles = self._all_around(obstacles)
         if obstacles is not None and abs(cmd[0]) > 1e-9:
             cmd, check = self._safety.zones.limit(cmd, obstacles)
         if obstacles is None or check.emergency_stop:

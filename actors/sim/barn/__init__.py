@@ -25,7 +25,9 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
+
+import attrs
 
 from .controllers import CONTROLLERS
 from .harness import BarnRules, EpisodeResult, run_episode, score_run
@@ -46,8 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
     parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
                         help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
-    parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
-                        help="navigation controller to drive with")
+    parser.add_argument("--controller", default="builtin-robust", choices=sorted(CONTROLLERS),
+                        help="navigation controller to drive with (default: %(default)s, the navigator that "
+                             "plans with the turn the base achieves)")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
     parser.add_argument("--seeds", type=int, default=10, help="trials per world, each with its own noise and yaw gain "
@@ -62,6 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
                         help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
+    parser.add_argument("--results", type=Path, default=None, metavar="FILE",
+                        help="append every finished trial to this JSON-lines file and skip trials already in it "
+                             "(resume an interrupted run; the file must be of the same configuration)")
 
 
 def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
@@ -144,6 +150,11 @@ def run(args: argparse.Namespace) -> int:
         mode = "supervised processes, "
     name = "DynaBARN-style" if args.dynabarn else "BARN"
     config = "ideal (kinematic, true odometry)" if rules.ideal else f"realistic ({rules.robot}, laser, wheel+IMU odometry)"
+    try:
+        log = _trial_log(args, rules)
+    except ValueError as exc:
+        print(f"emos bench barn: {exc}", file=sys.stderr)
+        return 2
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
     if not args.json:
@@ -155,11 +166,17 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         for k in range(args.seeds):
             seed = trial_seed(key, k, base=args.seed)
+            prior = log.get(idx, seed) if log is not None else None
+            if prior is not None:
+                rows.append(prior)
+                continue
             if args.in_process:
                 png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
                 rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
             else:
                 rows.append(episode(idx, seed))
+            if log is not None:
+                log.append(rows[-1])
         results.extend(rows)
         if args.json and not args.in_process:  # slow enough to want progress; stdout stays pure JSON
             ok = sum(r.success for r in rows)
@@ -187,6 +204,22 @@ def run(args: argparse.Namespace) -> int:
                 _print_summary(label, summarize(part), len(part))
     print(f"wall {wall_total:.1f} s for {len(results)} trials")
     return 0
+
+
+def _trial_log(args: argparse.Namespace, rules: BarnRules) -> Any:
+    """The --results file (None without it), checked against this run's configuration."""
+    if args.results is None:
+        return None
+    from .trial_log import TrialLog
+
+    source = _barn_source(args)
+    config = {"controller": args.controller, "rules": attrs.asdict(rules), "in_process": bool(args.in_process),
+              "dynabarn": bool(args.dynabarn), "seed_base": args.seed,
+              "worlds": str(source) if source is not None else "packaged"}
+    log = TrialLog(args.results, config)
+    if log.trials and not args.json:
+        print(f"resuming: {len(log.trials)} trial(s) already in {args.results}")
+    return log
 
 
 def _print_summary(label: str, s: dict, n: int) -> None:

@@ -37,7 +37,8 @@ def ray_boxes(ox: float, oy: float, angles: np.ndarray, boxes, rmax: float = 10.
 
 
 class FakeBase(BaseComponent):
-    def __init__(self, start=(1.0, 1.0, 0.0), rate: float = 20.0) -> None:
+    def __init__(self, start=(1.0, 1.0, 0.0), rate: float = 20.0, fov_deg: float = 360.0) -> None:
+        """``fov_deg``: the laser's field of view, centred ahead (a Jackal's is 270)."""
         super().__init__(
             component_name="base",
             inputs=[Topic(name="/cmd_vel", msg_type="Twist")],
@@ -45,10 +46,11 @@ class FakeBase(BaseComponent):
             config=BaseComponentConfig(loop_rate=rate),
         )
         self.start = start
+        self.fov = math.radians(fov_deg)
 
     def custom_on_activate(self) -> None:
         self.pose = np.array(self.start, dtype=float)
-        self.angles = -math.pi + np.arange(360) * (2 * math.pi / 360)
+        self.angles = -0.5 * self.fov + np.arange(360) * (self.fov / 360)
 
     def _execution_step(self) -> None:
         dt = 1.0 / self.config.loop_rate
@@ -67,7 +69,7 @@ class FakeBase(BaseComponent):
             odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
             self.publish("/odom", odom)
         r = ray_boxes(self.pose[0], self.pose[1], self.angles + self.pose[2], [ROOM] + BOXES)
-        scan = M.LaserScan(angle_min=-math.pi, angle_max=math.pi, angle_increment=2 * math.pi / 360,
+        scan = M.LaserScan(angle_min=-0.5 * self.fov, angle_max=0.5 * self.fov - self.fov / 360, angle_increment=self.fov / 360,
                            range_min=0.05, range_max=10.0, ranges=r.astype(np.float32))
         self.publish("/scan", scan)
         self.health_status.set_healthy()

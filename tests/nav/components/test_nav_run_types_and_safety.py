@@ -129,6 +129,49 @@ launcher.bringup()
         system.stop()
 
 
+def test_backing_up_remembers_the_wall_the_laser_no_longer_sees(tmp_path):
+    """A 270 degree laser is blind behind. The robot faces the room's west wall (x = 0) from
+    0.9 m, turns round, and is asked to back up 1 m: the wall, seen before the turn, must
+    shorten the back-out (without the memory it would drive into it)."""
+    from emos.core.services import ServiceClient
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+driver = DriveManager(component_name="driver", config=DriveManagerConfig(critical_zone_distance=0.05, slowdown_zone_distance=0.1,
+                                                                         max_distance=1.0))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(0.9, 2.0, 3.14159), fov_deg=270.0)])
+launcher.kompass(components=[driver], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "driver"])
+    control = Publisher(system.ctx, "/control", M.Twist, publisher_id="test_controller")
+    odom = Subscriber(system.ctx, "/odom", M.Odometry)
+    back = ServiceClient("driver/move_backward", M.TriggerRequest, M.TriggerResponse, ctx=system.ctx)
+
+    def latest() -> M.Odometry:
+        return wait_until(lambda: next(iter(odom.take()[-1:]), None), 5)
+
+    try:
+        time.sleep(1.0)  # the wall ahead is in view, and remembered
+        end = time.monotonic() + 30
+        while time.monotonic() < end and abs(latest().pose.pose.orientation.yaw()) > 0.1:  # turn to face east
+            control.publish(M.Twist(angular=M.Vector3(z=1.0)))
+            time.sleep(0.05)
+        control.publish(M.Twist())
+        time.sleep(1.0)  # the controller's command goes stale: the driver stops
+        res = back.call(M.TriggerRequest())
+        assert res.success and "shortened" in res.message, res.message
+        time.sleep(4.0)
+        x = latest().pose.pose.position.x
+        assert 0.15 < x < 0.5, x  # backed up towards the wall, and stopped short of it (radius 0.15 m)
+    finally:
+        back.close()
+        control.close()
+        odom.close()
+        system.stop()
+
+
 def test_map_server_save_map_service_round_trips(tmp_path):
     from emos.actors.nav.components.interfaces import SaveMapRequest, SaveMapResponse
     from emos.actors.nav.maps import load_map
@@ -248,4 +291,51 @@ launcher.bringup()
         worker.join(2)
         client.close()
         control.close(), cmd.close()
+        system.stop()
+
+
+def test_a_restarted_drive_manager_waits_for_its_first_scan_instead_of_failing(tmp_path):
+    """Commands arrive at 20 Hz, scan and odometry at 4 Hz: a fresh DriveManager gets a command
+    before its first scan. That holds the robot but is no SYSTEM failure within the inputs'
+    timeouts, so ``on_system_fail(restart)`` does not restart it again and again."""
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+from emos import Action
+driver = DriveManager(component_name="driver")
+driver.on_system_fail(Action(driver.restart))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 3.2, 0.0), rate=4.0)])
+launcher.kompass(components=[driver], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "driver"])
+    control = Publisher(system.ctx, "/control", M.Twist, publisher_id="test_controller")
+    cmd = Subscriber(system.ctx, "/cmd_vel", M.Twist, queue_size=200)
+    status = Subscriber(system.ctx, "/driver/status", M.ComponentStatus, queue_size=200)
+    done = threading.Event()
+
+    def drive() -> None:
+        while not done.is_set():
+            control.publish(M.Twist(linear=M.Vector3(x=0.05)))
+            time.sleep(0.05)
+
+    worker = threading.Thread(target=drive, daemon=True)
+    try:
+        worker.start()
+        wait_until(lambda: any(c.linear.x > 0.01 for c in cmd.take()), 20, what="driving")
+        first = system.pid("driver")
+        system.rpc.call("lifecycle", component="driver", request="restart", wait=False)
+        second = system.wait_new_pid("driver", first, timeout=30)
+        status.take()
+        wait_until(lambda: any(c.linear.x > 0.01 for c in cmd.take()), 20, what="driving after the restart")
+        time.sleep(1.0)
+        assert system.pid("driver") == second  # not restarted again by its on_system_fail ladder
+        levels = [s.status for s in status.take()]
+        assert HealthLevel.SYSTEM_FAILURE not in levels, levels
+        assert "fallback handler=on_system_fail" not in system.output()
+    finally:
+        done.set()
+        worker.join(2)
+        control.close(), cmd.close(), status.close()
         system.stop()
