@@ -189,13 +189,17 @@ def trigger_component_service(*, component: BaseComponent) -> Action:
 
 
 def send_component_action_server_goal(*, component: BaseComponent, request_msg: Any) -> Action:
+    """Send ``request_msg`` to the component's action server for that goal type: its main one,
+    or another it offers (the Controller's ``track_vision_target`` for a ``TrackVisionTarget`` goal)."""
     comp = _component(component, "send_component_action_server_goal")
-    if comp.main_action_type is None:
-        raise ValueError(f"send_component_action_server_goal: {comp.component_name} ({type(comp).__name__}) has no main action server")
-    types = tuple(resolve(t) for t in comp.main_action_type)
-    if not isinstance(request_msg, types[0]):
-        raise TypeError(f"send_component_action_server_goal({comp.component_name}): request_msg must be a {types[0].__name__}, got {type(request_msg).__name__}")
-    return Action._predefined("send_component_action_server_goal", _goal, comp.component_name, server_name=comp.main_action_name, action_type=types, goal=request_msg, from_event=False)
+    servers = {name: tuple(resolve(t) for t in types) for name, types in comp.action_servers().items()}
+    if not servers:
+        raise ValueError(f"send_component_action_server_goal: {comp.component_name} ({type(comp).__name__}) has no action server")
+    for name, types in servers.items():
+        if isinstance(request_msg, types[0]):
+            return Action._predefined("send_component_action_server_goal", _goal, comp.component_name, server_name=name, action_type=types, goal=request_msg, from_event=False)
+    accepted = ", ".join(f"{types[0].__name__} ({name})" for name, types in servers.items())
+    raise TypeError(f"send_component_action_server_goal({comp.component_name}): request_msg must be one of {accepted}, got {type(request_msg).__name__}")
 
 
 def trigger_component_action_server(*, component: BaseComponent) -> Action:

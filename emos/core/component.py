@@ -240,6 +240,12 @@ class BaseComponent(FallbackHooks):
         goal, feedback, result = (resolve(t) for t in self.main_action_type)
         return ActionInput(self.main_action_name, goal, feedback, result, self.component_name)
 
+    def action_servers(self) -> dict[str, tuple[Any, Any, Any]]:
+        """The action servers this component offers, by name, with their (goal, feedback,
+        result) types: the main one; a component serving others (from ``create_action_server``)
+        adds them, so ``send_component_action_server_goal`` finds the one a goal is for."""
+        return {} if self.main_action_type is None else {self.main_action_name: self.main_action_type}
+
     # -- hooks for subclasses ----------------------------------------------------------------------
     def custom_on_configure(self) -> None:
         pass

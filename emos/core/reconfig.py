@@ -64,6 +64,7 @@ def reconfig_ops(node: "Node") -> dict[str, Callable]:
         def apply() -> dict:
             comp.config.update(**values)  # all validated first; nothing changes on an error
             node.on_config_changed()
+            comp.get_logger().info("[%s] parameters set: %s", comp.component_name, ", ".join(f"{k}={v!r}" for k, v in values.items()))
             return comp.config.asdict()
 
         if keep_alive:

@@ -116,6 +116,11 @@ class Controller(VisionTracking, NavComponent):
 
     plugin = algorithm  # the name the spec's usage example uses
 
+    def action_servers(self) -> dict[str, tuple[Any, Any, Any]]:
+        servers = super().action_servers()
+        servers.update(self.vision_action_servers())
+        return servers
+
     def set_algorithm(self, algorithm: ControllersID | str) -> bool:
         """Switch the control algorithm (an event or fallback action); the next step uses it.
         The previous algorithm's failure (a stall held until the robot moves, a blocked streak)

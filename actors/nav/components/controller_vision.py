@@ -27,12 +27,20 @@ _DEPTH_ENCODINGS = ("16UC1", "32FC1", "mono16")
 class VisionTracking:
     """Mixin of the Controller (uses its inputs, config and publishing helpers)."""
 
+    def _vision_input_key(self) -> str | None:
+        return next((k for k in ("vision_tracking", "vision_detections") if self.get_in_topic(k) is not None), None)  # type: ignore[attr-defined]
+
+    def vision_action_servers(self) -> dict[str, tuple]:
+        """``<name>/track_vision_target`` when the controller has a vision input (it serves it then)."""
+        if self._vision_input_key() is None:
+            return {}
+        return {f"{self.component_name}/track_vision_target": (TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult)}  # type: ignore[attr-defined]
+
     def configure_vision(self) -> None:
         self._tracking = False
-        self._vision_key = next((k for k in ("vision_tracking", "vision_detections") if self.get_in_topic(k) is not None), None)  # type: ignore[attr-defined]
-        if self._vision_key is not None:
-            name = f"{self.component_name}/track_vision_target"  # type: ignore[attr-defined]
-            self.create_action_server(name, TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult, self._track_target)  # type: ignore[attr-defined]
+        self._vision_key = self._vision_input_key()
+        for name, types in self.vision_action_servers().items():
+            self.create_action_server(name, *types, self._track_target)  # type: ignore[attr-defined]
 
     @property
     def tracking_active(self) -> bool:
@@ -99,10 +107,16 @@ class VisionTracking:
         if goal.search_timeout > 0 and hasattr(follower, "search"):
             follower.search.timeout = float(goal.search_timeout)
         period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
+        # A new goal preempts the one being followed (as a ROS action server does): an event
+        # that fires again must not start a second loop sending commands beside the first.
+        self._track_goal = mine = getattr(self, "_track_goal", 0) + 1
+        self.get_logger().info("[%s] track_vision_target: following %r with %s", self.component_name, goal.label, cid.value)  # type: ignore[attr-defined]
         self._tracking = True
         last_msg = None  # the detections message the depth follower measured last
         try:
             while not goal_handle.is_cancel_requested:
+                if self._track_goal != mine:
+                    return TrackVisionTargetResult(success=False, message="preempted by a newer goal")
                 try:
                     box, msg = self._target_box(goal.label)
                 except BadInput as exc:
@@ -139,4 +153,5 @@ class VisionTracking:
             self.publish_stop()  # type: ignore[attr-defined]
             return TrackVisionTargetResult(success=True, message="cancelled")
         finally:
-            self._tracking = False
+            if self._track_goal == mine:
+                self._tracking = False

@@ -345,7 +345,9 @@ class DriveManager(NavComponent):
             return False, maneuver.reason
         self._maneuver = (maneuver, 0)
         self._safety.filter.reset(np.zeros(3))
-        return True, f"{maneuver.name}: {maneuver.commands.shape[0]} steps" + (f" ({maneuver.reason})" if maneuver.reason else "")
+        message = f"{maneuver.name}: {maneuver.commands.shape[0]} steps" + (f" ({maneuver.reason})" if maneuver.reason else "")
+        self.get_logger().info("[%s] maneuver %s", self.component_name, message)
+        return True, message
 
     def _scan_for_maneuver(self) -> Any:
         obstacles, why = self._obstacles()

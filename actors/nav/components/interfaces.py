@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from emos.msgs import fields as F
-from emos.msgs.geometry import PoseStamped
+from emos.msgs.geometry import Pose, PoseStamped
 from emos.msgs.nav import Path
 from emos.msgs.registry import Message, message_type
 
@@ -26,6 +26,26 @@ class PlanPathResponse(Message):
     plan: Path = F.message(Path)
 
 
+@message_type(_PKG, name="PathTrackingError")
+class PathTrackingError(Message):
+    """How far from a pose still counts as there: heading (rad) and distance (m)."""
+
+    orientation_error: float = F.float64()
+    lateral_distance_error: float = F.float64()
+
+
+@message_type(_PKG, name="PlanPath_Goal")
+class PlanPathGoal(Message):
+    """The Planner's action goal (Kompass' ``PlanPath.Goal``): ``goal`` is a position in the
+    world frame (``frames.world``); the Planner plans to it at any heading.
+    ``end_tolerance.lateral_distance_error`` (m): the robot has arrived within it (0: the
+    config's ``distance_tolerance``). ``end_tolerance.orientation_error`` is not checked: the
+    arrival heading is whatever the path ends with."""
+
+    goal: Pose = F.message(Pose)
+    end_tolerance: PathTrackingError = F.message(PathTrackingError)
+
+
 @message_type(_PKG, name="PlanPath_Feedback")
 class PlanPathFeedback(Message):
     distance_to_goal: float = F.float64()
@@ -37,6 +57,13 @@ class PlanPathResult(Message):
     success: bool = F.boolean()
     message: str = F.string()
     plan: Path = F.message(Path)
+
+
+class PlanPath:
+    """The Planner's action as a ROS action type: ``PlanPath.Goal()``, ``PlanPath.Feedback``,
+    ``PlanPath.Result`` (what ``ComponentActions.send_action_goal(action_type=PlanPath)`` takes)."""
+
+    Goal, Feedback, Result = PlanPathGoal, PlanPathFeedback, PlanPathResult
 
 
 # -- Controller: ControlPath and TrackVisionTarget (actions) -------------------------------------
@@ -79,6 +106,12 @@ class TrackVisionTargetFeedback(Message):
 class TrackVisionTargetResult(Message):
     success: bool = F.boolean()
     message: str = F.string()
+
+
+class TrackVisionTarget:
+    """The Controller's ``track_vision_target`` action as a ROS action type (``TrackVisionTarget.Goal()``)."""
+
+    Goal, Feedback, Result = TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult
 
 
 # -- MapServer: Save2dMapToFile (service) ----------------------------------------------------------

@@ -67,6 +67,11 @@ class LocalMapperConfig(NavComponentConfig):
     scan_matching: bool = field(default=True)
     mapping_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
     map_publish_period: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
+    #: s: a scan older than this is a SYSTEM failure naming the topic, and no grid is published
+    #: (the Controller must not drive on an old picture). Timed: checked at every step; Event:
+    #: by a watchdog at ``loop_rate`` once the first scan arrived. Not checked with
+    #: ``use_sim_time`` (lockstep: a wall-clock age means nothing while the simulator waits).
+    sensor_timeout: float = field(default=1.0, validator=in_range(min_value=1e-3, max_value=1e3))
 
 
 class LocalMapper(NavComponent):
@@ -101,10 +106,29 @@ class LocalMapper(NavComponent):
             self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching)
         self._memory_published = -math.inf
 
+    def custom_on_activate(self) -> None:
+        if self.run_type == ComponentRunType.EVENT and not self.config.use_sim_time:
+            self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
+
+    def _scan_is_stale(self) -> bool:
+        """A SYSTEM failure when the last scan is older than ``sensor_timeout`` (a dead scanner)."""
+        age = self.age_of("sensor_data")
+        if self.config.use_sim_time or age is None or age <= self.config.sensor_timeout:
+            return False
+        self.fail_input("sensor_data", f"{self.topic_name('sensor_data')} is stale: last scan {age:.2f} s ago "
+                                       f"(limit {self.config.sensor_timeout:g} s)")
+        return True
+
+    def _watchdog(self) -> None:
+        if self._scan_is_stale():
+            self.node.publish_status()  # at once: events and fallbacks act on it
+
     def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
         scan_msg = msg if msg is not None else self.latest("sensor_data")
         if scan_msg is None:
             self.fail_input("sensor_data", f"no scan on {self.topic_name('sensor_data')} yet")
+            return
+        if msg is None and self._scan_is_stale():
             return
         try:
             scan = scan_of(scan_msg)

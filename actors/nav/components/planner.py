@@ -2,9 +2,9 @@
 
 Run types (all four): Timed re-plans from the current location to the last goal every
 ``1/loop_rate`` s; Event plans when a goal arrives on ``goal_point``; Server answers
-``PlanPath`` requests on ``<name>/service``; ActionServer takes a ``PlanPath`` goal on
-``<name>/action`` and keeps re-planning until the robot is within ``distance_tolerance`` of it
-(or the goal is cancelled). The plan is published on ``plan`` and ``reached_end`` goes True
+``PlanPath`` requests on ``<name>/service``; ActionServer takes a ``PlanPath`` goal (a pose and
+an ``end_tolerance``, as in Kompass) on ``<name>/plan_path`` and keeps re-planning until the
+robot is within the goal's tolerance (or ``distance_tolerance``) of it, or the goal is cancelled. The plan is published on ``plan`` and ``reached_end`` goes True
 when the robot arrives. Plans can be saved, loaded and recorded (:mod:`.planner_paths`). A goal inside an obstacle, off the map or unreachable is an ALGORITHM
 failure (the message says which); no map or no location is a SYSTEM failure naming the topic.
 
@@ -38,7 +38,7 @@ from emos.msgs.std import Bool, Header, Time
 from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, goal_of, grid_map_of, path_msg
-from .interfaces import PlanPathFeedback, PlanPathRequest, PlanPathResponse, PlanPathResult
+from .interfaces import PlanPathFeedback, PlanPathGoal, PlanPathRequest, PlanPathResponse, PlanPathResult
 from .pixel_goals import PIXEL_GOAL_TYPES, PixelGoals, is_pixel_goal
 from .planner_paths import PathFiles
 from .planners import check_planner_id, make_global_planner
@@ -94,8 +94,12 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         "reached_end": AllowedTopic(types=("Bool",), default=Topic(name="/reached_end", msg_type="Bool")),
     }
     main_srv_type = (PlanPathRequest, PlanPathResponse)
-    main_action_type = (PlanPathRequest, PlanPathFeedback, PlanPathResult)
+    main_action_type = (PlanPathGoal, PlanPathFeedback, PlanPathResult)
     config: PlannerConfig
+
+    def __init__(self, component_name: str, config: PlannerConfig | None = None, **kwargs: Any) -> None:
+        kwargs.setdefault("main_action_name", f"{component_name}/plan_path")  # Kompass' name
+        super().__init__(component_name, config=config, **kwargs)
 
     @classmethod
     def config_class(cls) -> type[PlannerConfig]:
@@ -202,8 +206,9 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             return math.inf
         return float(math.hypot(state[0][0] - self._goal[0], state[0][1] - self._goal[1]))
 
-    def _check_reached(self) -> bool:
-        if self._goal is not None and not self._reached and self._distance_to_goal() <= self.config.distance_tolerance:
+    def _check_reached(self, tolerance: float | None = None) -> bool:
+        tolerance = self.config.distance_tolerance if tolerance is None else tolerance
+        if self._goal is not None and not self._reached and self._distance_to_goal() <= tolerance:
             self._reached = True
             out = self.get_out_topic("reached_end")
             if out is not None:
@@ -272,15 +277,26 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         return serve()
 
     def _main_action_callback(self, goal_handle: Any) -> PlanPathResult:
-        try:
-            goal = self._request_goal(goal_handle.goal)
-        except BadInput as exc:
-            return PlanPathResult(success=False, message=str(exc))
+        request: PlanPathGoal = goal_handle.goal
+        goal = np.array([request.goal.position.x, request.goal.position.y])
+        tolerance = float(request.end_tolerance.lateral_distance_error) or self.config.distance_tolerance
+        if not np.all(np.isfinite(goal)) or not (math.isfinite(tolerance) and tolerance > 0):
+            message = f"goal: NaN/inf coordinates {goal.tolist()}" if not np.all(np.isfinite(goal)) else \
+                f"end_tolerance.lateral_distance_error must be a distance >= 0 (m), got {request.end_tolerance.lateral_distance_error!r}"
+            self.get_logger().warning("[%s] %s: refused: %s", self.component_name, self.main_action_name, message)
+            return PlanPathResult(success=False, message=message)
+        self.get_logger().info("[%s] %s: goal (%.2f, %.2f), arrival within %.2f m", self.component_name,
+                               self.main_action_name, goal[0], goal[1], tolerance)
+        # A new goal preempts the running one (a second click in RViz): one loop re-plans, not two.
+        self._action_goal = mine = getattr(self, "_action_goal", 0) + 1
         self._goal, self._goal_key, self._reached = goal, tuple(goal), False
         period = 1.0 / self.config.loop_rate
         last = PlanPathResult(success=False, message="cancelled")
         while not goal_handle.is_cancel_requested:
-            if self._check_reached():
+            if self._action_goal != mine:
+                return PlanPathResult(success=False, message="preempted by a newer goal")
+            if self._check_reached(tolerance):
+                self.get_logger().info("[%s] %s: goal (%.2f, %.2f) reached", self.component_name, self.main_action_name, goal[0], goal[1])
                 plan = path_msg(self.last_plan, self.config.frames.world) if self.last_plan is not None else Path()
                 return PlanPathResult(success=True, message="goal reached", plan=plan)
             ok, message, path = self.plan_once(goal)
@@ -290,8 +306,8 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             if not ok and self.health_status.is_algorithm_fail:
                 return PlanPathResult(success=False, message=message)
             deadline = time.monotonic() + period
-            while time.monotonic() < deadline and not goal_handle.is_cancel_requested:
-                if self._check_reached():
+            while time.monotonic() < deadline and not goal_handle.is_cancel_requested and self._action_goal == mine:
+                if self._check_reached(tolerance):
                     break
                 time.sleep(min(0.05, period))
         self._goal = None

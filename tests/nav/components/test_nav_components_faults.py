@@ -35,12 +35,15 @@ def test_mapper_reports_empty_scans_and_ignores_nan_inf_beams(tmp_path):
     system = _system(tmp_path, """
 mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(map_params=MapConfig(width=2.0, height=2.0, resolution=0.1)))
 mapper.run_type = "Event"
+timed = LocalMapper(component_name="timed_mapper", config=LocalMapperConfig(map_params=MapConfig(width=2.0, height=2.0, resolution=0.1)))
+timed.outputs(local_map=Topic(name="/timed_map", msg_type="OccupancyGrid"))
 launcher = Launcher(multi_processing=True)
-launcher.kompass(components=[mapper], multiprocessing=True)
+launcher.kompass(components=[mapper, timed], multiprocessing=True)
 launcher.bringup()
-""", ["mapper"])
+""", ["mapper", "timed_mapper"])
     scan_pub = Publisher(system.ctx, "/scan", M.LaserScan, publisher_id="test_scan")
     status = Subscriber(system.ctx, "/mapper/status", M.ComponentStatus, queue_size=50)
+    timed_status = Subscriber(system.ctx, "/timed_mapper/status", M.ComponentStatus, queue_size=50)
     grid = Subscriber(system.ctx, "/local_map/occupancy_layer", M.OccupancyGrid)
     try:
         scan_pub.publish(_scan([]))
@@ -56,8 +59,15 @@ launcher.bringup()
         g = msg.grid()
         assert g.shape == (20, 20) and (g == 100).any() and (g == 0).any()
         wait_until(lambda: any(s.status == HealthLevel.HEALTHY for s in status.take()), 5, what="healthy again")
+        wait_until(lambda: any(s.status == HealthLevel.HEALTHY for s in timed_status.take()), 5, what="the timed mapper healthy")
+        # The scanner goes silent: both run types report it (sensor_timeout, 1 s) instead of
+        # mapping the last scan forever.
+        for sub in (status, timed_status):
+            st = wait_until(lambda: next((s for s in sub.take() if s.status == HealthLevel.SYSTEM_FAILURE), None), 10,
+                            what="SYSTEM failure for a silent scanner")
+            assert "/scan is stale" in st.message and "/scan" in st.src_topics, st.message
     finally:
-        scan_pub.close(), status.close(), grid.close()
+        scan_pub.close(), status.close(), timed_status.close(), grid.close()
         system.stop()
 
 

@@ -200,7 +200,7 @@ launcher.bringup()
 def test_planner_action_drives_to_the_goal_while_the_motion_server_records(tmp_path):
     from emos.actors.nav.components.convert import pose_stamped
     from emos.actors.nav.components.interfaces import (MotionRecordingFeedback, MotionRecordingGoal, MotionRecordingResult,
-                                                        PlanPathFeedback, PlanPathRequest, PlanPathResult)
+                                                        PathTrackingError, PlanPath)
     from emos.core.services import ActionClient
     from tests.nav.components.fake_base import write_room_map
 
@@ -219,7 +219,7 @@ launcher.kompass(components=[map_server, planner, controller, driver, recorder],
 launcher.robot = robot
 launcher.bringup()
 """, ["base", "map_server", "planner", "controller", "driver", "recorder"])
-    nav = ActionClient("planner/action", PlanPathRequest, PlanPathFeedback, PlanPathResult, ctx=system.ctx)
+    nav = ActionClient("planner/plan_path", PlanPath.Goal, PlanPath.Feedback, PlanPath.Result, ctx=system.ctx)
     rec = ActionClient("recorder/action", MotionRecordingGoal, MotionRecordingFeedback, MotionRecordingResult, ctx=system.ctx)
     recorded: dict = {}
     try:
@@ -227,7 +227,19 @@ launcher.bringup()
             MotionRecordingGoal(duration=3.0, timestep=0.1, name="drive"), timeout=30)), daemon=True)
         recording.start()
         feedback: list = []
-        result = nav.send_goal(PlanPathRequest(goal=pose_stamped(2.0, 3.2, 0.0, "map")), feedback_callback=feedback.append, timeout=90)
+        bad = nav.send_goal(PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose,
+                                          end_tolerance=PathTrackingError(lateral_distance_error=-0.1)), timeout=30)
+        assert not bad.success and "lateral_distance_error" in bad.message, bad.message
+        # a goal sent while another runs preempts it
+        first: dict = {}
+        elsewhere = PlanPath.Goal(goal=pose_stamped(5.0, 1.0, 0.0, "map").pose)  # behind the wall
+        runner = threading.Thread(target=lambda: first.setdefault("r", nav.send_goal(elsewhere, timeout=60)), daemon=True)
+        runner.start()
+        time.sleep(1.0)
+        goal = PlanPath.Goal(goal=pose_stamped(2.0, 3.2, 0.0, "map").pose, end_tolerance=PathTrackingError(lateral_distance_error=0.2))
+        result = nav.send_goal(goal, feedback_callback=feedback.append, timeout=90)
+        runner.join(10)
+        assert first["r"].message == "preempted by a newer goal", first
         assert result.success and result.message == "goal reached", result.message
         assert feedback and feedback[0].plan_length > 0
         recording.join(30)

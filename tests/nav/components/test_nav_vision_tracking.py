@@ -56,9 +56,15 @@ def test_track_vision_target_turns_to_the_target_and_fails_when_it_is_lost(tmp_p
         runner.start()
         turning = wait_until(lambda: [c for c in cmd.take() if c.angular.z < -0.05], 15, what="commands turning right, towards the person")
         assert all(abs(c.linear.x) < 1e-9 for c in turning[:1])  # the box has its reference size: no approach
+        # A second goal preempts the first (one loop drives the robot, not two)
+        second = threading.Thread(target=lambda: result.setdefault("r2", client.send_goal(TrackVisionTargetGoal(label="person"), timeout=60)), daemon=True)
+        second.start()
+        runner.join(15)
+        assert "r" in result and not result["r"].success and "preempted" in result["r"].message
+        wait_until(lambda: [c for c in cmd.take() if c.angular.z < -0.05], 15, what="the second goal turning the robot")
         visible.clear()  # the person leaves the image
-        runner.join(30)
-        assert "r" in result and not result["r"].success and "lost" in result["r"].message
+        second.join(30)
+        assert "r2" in result and not result["r2"].success and "lost" in result["r2"].message
         wait_until(lambda: any(s.status == HealthLevel.ALGORITHM_FAILURE and "lost" in s.message for s in status.take()), 5,
                    what="ALGORITHM failure naming the lost target")
         last = wait_until(lambda: next(iter(cmd.take()[-1:]), None), 5, what="a final command")
