@@ -187,3 +187,46 @@ def test_latest_skips_an_undecodable_newest_payload_and_close_stops_the_wake_ups
         assert wakes.count == before and not sub.has_news()
     finally:
         pub2.close()
+
+
+def test_a_latched_topic_replays_its_last_messages_to_late_subscribers_checked_as_live_ones(net, caplog):
+    """TRANSIENT_LOCAL over Zenoh: the publisher's cache (depth) answers a subscriber that joins
+    later; cached payloads of a foreign publisher on the key are dropped as live ones would be."""
+    from zenoh import ext
+
+    conf, group = net
+    key = zenoh_net.topic_key("/map", group)
+    pub = zenoh_net.ZenohPublisher("/map", LaserScan, publisher_id="mapper", config_path=conf, group=group, transient_local=True, depth=2)
+    sess = zenoh_net.session(conf)
+    foreign = ext.declare_advanced_publisher(sess, key, cache=ext.CacheConfig(2), publisher_detection=True,
+                                             sample_miss_detection=ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None))
+    subs = []
+    try:
+        caplog.set_level(logging.WARNING, logger="emos.transport.zenoh")
+        for n in range(4):
+            pub.publish(LaserScan(ranges=np.full(3, float(n), np.float32)))
+        foreign.put(b"not an emos frame at all")
+        foreign.put(_well_framed(LaserScan, struct.pack("<I", 3) + b"\xc1\xc1\xc1\0"))
+
+        late = zenoh_net.ZenohSubscriber("/map", LaserScan, queue_size=4, transient_local=True, config_path=conf, group=group)
+        volatile = zenoh_net.ZenohSubscriber("/map", LaserScan, queue_size=4, config_path=conf, group=group)
+        subs += [late, volatile]
+        got = []
+        assert _wait(lambda: (got.extend(late.take()), len(got) >= 2 and late.rejected >= 2)[1]), f"got {len(got)}, rejected {late.rejected}"
+        assert [m.ranges.tolist() for m in got] == [[2.0] * 3, [3.0] * 3]  # the publisher's last two, oldest first
+        assert late.rejected == 2 and late.undecodable == 1 and late.publishers() == ["forger", "mapper"]
+        lines = [r.getMessage() for r in caplog.records if "dropping a payload" in r.getMessage()]
+        assert lines and all(f"topic /map: dropping a payload on key {key}" in line for line in lines)
+        assert not volatile.has_news()  # only a TRANSIENT_LOCAL subscriber asks for the past
+
+        # Live messages follow, once each (a sample seen live and in the cache is not repeated).
+        pub.publish(LaserScan(ranges=np.full(3, 4.0, np.float32)))
+        assert _wait(lambda: (got.extend(late.take()), len(got) >= 3)[1])
+        time.sleep(0.3)
+        got.extend(late.take())
+        assert [m.ranges[0] for m in got] == [2.0, 3.0, 4.0]
+    finally:
+        for sub in subs:
+            sub.close()
+        foreign.undeclare()
+        pub.close()
