@@ -8,9 +8,10 @@ host) can evaluate events on it (see :mod:`emos.supervisor.monitor_net`).
 
 What crosses, and why:
 
-* a change (status level, lifecycle state, message, failed parts, pid) at once; an unchanged
-  status at most every :data:`KEEPALIVE_S`: heartbeats are 10 Hz per component by default,
-  and a remote reader needs to know the component is alive, not every beat.
+* a change (status level, lifecycle state, message, failed parts, pid) within
+  :data:`COALESCE_S`; an unchanged status at most every :data:`KEEPALIVE_S`: heartbeats are
+  10 Hz per component by default, and a remote reader needs to know the component is alive,
+  not every beat.
 * the publisher keeps the last status for subscribers that join later (TRANSIENT_LOCAL over
   Zenoh): a Monitor that starts after a remote component failed still sees the failure, and
   one that starts after the remote run is gone sees nothing (the cache died with the helper).
@@ -33,6 +34,9 @@ from emos.transport.waker import Waker
 
 log = logging.getLogger("emos.transport.zenoh")
 KEEPALIVE_S = 0.5
+# Wake-ups closer than this are handled together: each component beats at 10 Hz by default, and
+# waking once per beat of every component would cost the helper far more than the forwarding.
+COALESCE_S = 0.05
 
 
 def status_topic(component: str) -> str:
@@ -58,6 +62,7 @@ class StatusMirror:
         self._last: dict[str, tuple[tuple, float]] = {}  # name -> (signature, monotonic time sent)
         self._errors = RepeatLimiter()
         self.forwarded = 0
+        self._last_wake = 0.0
 
     def watch(self, components: Iterable[str]) -> None:
         """Mirror these components too (ones already mirrored are kept: a component that is
@@ -75,11 +80,15 @@ class StatusMirror:
                 self._report(name, "cannot be mirrored", exc)
                 continue
             self._pubs[name] = pub
-            self._subs[name] = Subscriber(self.ctx, topic, ComponentStatus, waker=self.waker, queue_size=4)
+            self._subs[name] = Subscriber(self.ctx, topic, ComponentStatus, waker=self.waker, queue_size=16)  # a status ring holds 16
 
     def wait_and_forward(self, timeout: float) -> int:
         """Wait up to ``timeout`` s for a status, then forward what is due; returns how many."""
+        gap = self._last_wake + COALESCE_S - time.monotonic()
+        if gap > 0:
+            time.sleep(gap)
         ready, _, _ = select.select([self.waker.fd], [], [], timeout)
+        self._last_wake = time.monotonic()
         if ready:
             self.waker.drain()
         return self.forward()
@@ -89,24 +98,25 @@ class StatusMirror:
         now = time.monotonic()
         for name, sub in self._subs.items():
             items = [item for item in sub.take_raw() if item[2] == name]
-            if not items:
-                continue
-            try:
-                status = codec.decode(ComponentStatus, items[-1][1], copy=True)
-            except Exception as exc:  # noqa: BLE001 - a corrupt status must not stop the others
-                self._report(name, "status does not decode", exc)
-                continue
-            signature = _signature(status)
-            last = self._last.get(name)
-            if last is not None and last[0] == signature and now - last[1] < self.keepalive_s:
-                continue
-            try:
-                self._pubs[name].publish(status)
-            except Exception as exc:  # noqa: BLE001 - e.g. the session is closing; try again next time
-                self._report(name, "publishing over Zenoh failed", exc)
-                continue
-            self._last[name] = (signature, now)
-            sent += 1
+            for k, (_, payload, _) in enumerate(items):
+                # Every change crosses, even one undone before we woke (a failure reported for
+                # one beat); an unchanged status only when the keepalive is due.
+                try:
+                    status = codec.decode(ComponentStatus, payload, copy=True)
+                except Exception as exc:  # noqa: BLE001 - a corrupt status must not stop the others
+                    self._report(name, "status does not decode", exc)
+                    continue
+                signature = _signature(status)
+                last = self._last.get(name)
+                if last is not None and last[0] == signature and (k < len(items) - 1 or now - last[1] < self.keepalive_s):
+                    continue
+                try:
+                    self._pubs[name].publish(status)
+                except Exception as exc:  # noqa: BLE001 - e.g. the session is closing; try again next time
+                    self._report(name, "publishing over Zenoh failed", exc)
+                    continue
+                self._last[name] = (signature, now)
+                sent += 1
         self.forwarded += sent
         return sent
 

@@ -230,3 +230,48 @@ def test_a_latched_topic_replays_its_last_messages_to_late_subscribers_checked_a
             sub.close()
         foreign.undeclare()
         pub.close()
+
+
+def test_the_status_mirror_sends_every_change_and_an_unchanged_status_only_as_a_keepalive(net, ctx):
+    """emos.transport.zenoh_status_mirror: a component's status ring, repeated over Zenoh."""
+    from emos.msgs.status import ComponentStatus
+    from emos.transport.pubsub import Publisher
+    from emos.transport.zenoh_status_mirror import StatusMirror
+
+    conf, group = net
+    ring = Publisher(ctx, "/arm/status", ComponentStatus, publisher_id="arm", depth=16)
+    stray = Publisher(ctx, "/arm/status", ComponentStatus, publisher_id="someone-else", depth=16)
+    mirror = StatusMirror(ctx, config_path=conf, group=group, keepalive_s=60.0)
+    remote = zenoh_net.ZenohSubscriber("/arm/status", ComponentStatus, queue_size=64, transient_local=True, config_path=conf, group=group)
+    try:
+        mirror.watch(["arm"])
+        healthy = ComponentStatus(status=ComponentStatus.STATUS_HEALTHY, lifecycle_state="active", pid=7)
+        failed = ComponentStatus(status=ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, message="no path", lifecycle_state="active", pid=7)
+        seen = []
+        # The first status crosses (Zenoh matches the subscriber asynchronously: repeat until it hears).
+        assert _wait(lambda: (ring.publish(healthy), mirror.wait_and_forward(0.05), seen.extend(remote.take()))[2] is None and bool(seen))
+        time.sleep(0.3)
+        seen.extend(remote.take())
+        sent = mirror.forwarded
+        for status in [healthy] * 5 + [failed] + [healthy] * 5:  # a one-beat failure among unchanged beats
+            ring.publish(status)
+        stray.publish(failed)  # not the component's own ring: never repeated
+        mirror.wait_and_forward(0.5)
+        assert mirror.forwarded == sent + 2  # the failure and the recovery, not the 10 unchanged beats
+        assert _wait(lambda: (seen.extend(remote.take()), seen[-1].status == ComponentStatus.STATUS_HEALTHY and len(seen) >= 3)[1])
+        assert [(m.status, m.message) for m in seen[-2:]] == [(1, "no path"), (0, "")]
+        assert remote.publishers() == ["arm"]
+
+        # A reader that joins later gets the current status from the cache (depth 1).
+        late = zenoh_net.ZenohSubscriber("/arm/status", ComponentStatus, transient_local=True, config_path=conf, group=group)
+        try:
+            got = []
+            assert _wait(lambda: (got.extend(late.take()), bool(got))[1])
+            assert [m.status for m in got] == [ComponentStatus.STATUS_HEALTHY]
+        finally:
+            late.close()
+    finally:
+        remote.close()
+        mirror.close()
+        ring.close()
+        stray.close()
