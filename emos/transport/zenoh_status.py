@@ -87,9 +87,10 @@ def _serve(run_dir: Path, run_id: str) -> None:
                 query.reply_err(json.dumps({"error": f"{type(exc).__name__}: {exc}"}))
 
     queryable = session().declare_queryable(key, lambda q: threading.Thread(target=answer, args=(q,), daemon=True).start())
-    mirror = StatusMirror(RunContext(run_id, run_dir, owner=False))
+    mirror: StatusMirror | None = None
     next_lookup = 0.0
     try:
+        mirror = StatusMirror(RunContext(run_id, run_dir, owner=False))
         while sock.exists():
             if time.monotonic() >= next_lookup:
                 # The supervisor builds its tree after starting us: look again now and then.
@@ -97,7 +98,8 @@ def _serve(run_dir: Path, run_id: str) -> None:
                 next_lookup = time.monotonic() + NAMES_EVERY_S
             mirror.wait_and_forward(0.2)
     finally:
-        mirror.close()
+        if mirror is not None:
+            mirror.close()
         queryable.undeclare()
 
 

@@ -76,8 +76,8 @@ class StatusMirror:
             try:
                 pub = ZenohPublisher(topic, ComponentStatus, publisher_id=name, config_path=self.config_path, group=self.group,
                                      transient_local=True, depth=1)
-            except ValueError as exc:  # a name that cannot be a Zenoh key expression
-                self._report(name, "cannot be mirrored", exc)
+            except Exception as exc:  # noqa: BLE001 - a name that cannot be a key expression, a session error:
+                self._report(name, "cannot be mirrored", exc)  # the others and `emos status --remote` go on
                 continue
             self._pubs[name] = pub
             self._subs[name] = Subscriber(self.ctx, topic, ComponentStatus, waker=self.waker, queue_size=16)  # a status ring holds 16
