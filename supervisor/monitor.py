@@ -18,7 +18,7 @@ import asyncio
 import json
 import os
 import time
-from typing import Any
+from typing import Any, Collection
 
 from emos.core.component import BaseComponent
 from emos.core.priority import lower_priority
@@ -30,6 +30,7 @@ from emos.events.event import Blackboard, Event, EventTracker
 from emos.events.links import ComponentLinks
 from emos.events.runner import ActionRuntime, prepare, run_action
 from emos.io.topic import Topic
+from emos.supervisor.monitor_net import place_inputs
 
 MONITOR_NAME = "emos_monitor"
 
@@ -42,10 +43,12 @@ class Monitor(BaseComponent):
     # Publishers wake the Monitor after the components that read the same message (waker.py).
     _wake_background = True
 
-    def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0):
+    def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0,
+                 local_components: Collection[str] = ()):
         self._entries = entries
         self._action_timeout = action_timeout
         self._nice = nice
+        self._local_components = tuple(local_components)
         topics: dict[str, Topic] = {}
         outputs: dict[str, Topic] = {}
         for event, actions in entries:
@@ -55,6 +58,8 @@ class Monitor(BaseComponent):
                 if a.predefined == "publish_message":
                     topic = a.kwargs["topic"].value  # a Literal: the topic itself, not a binding
                     outputs[topic.name] = topic
+        # Component statuses: this run's from its rings, other runs' over Zenoh (across hosts).
+        topics = place_inputs(topics, self._local_components)
         super().__init__(component_name=MONITOR_NAME, inputs=list(topics.values()), outputs=list(outputs.values()))
         if topics:
             self.trigger = list(topics.values())
@@ -64,7 +69,7 @@ class Monitor(BaseComponent):
 
     def __deepcopy__(self, memo: dict) -> "Monitor":
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
-        return Monitor(self._entries, self._action_timeout, self._nice)
+        return Monitor(self._entries, self._action_timeout, self._nice, self._local_components)
 
     # -- lifecycle ------------------------------------------------------------------------------
     def custom_on_activate(self) -> None:

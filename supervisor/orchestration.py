@@ -135,7 +135,8 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
     entries = orchestration.all_events(components)
     if not entries:
         return list(packages)
-    monitor = Monitor(entries, orchestration.action_timeout, nice=orchestration.monitor_nice)
+    monitor = Monitor(entries, orchestration.action_timeout, nice=orchestration.monitor_nice,
+                      local_components=[c.component_name for c in components])
     if monitor.component_name in {c.component_name for c in components}:
         raise ValueError(f"component name {monitor.component_name!r} is reserved for the Monitor")
     multiprocessing = any(p.multiprocessing for p in packages)

@@ -139,7 +139,7 @@ def open_publisher(ctx: RunContext, topic: Any, publisher_id: str | None = None,
     if transport_of(topic.name, getattr(topic, "transport", "auto")) == "zenoh":
         from emos.transport.zenoh_net import ZenohPublisher
 
-        return ZenohPublisher(topic.name, topic.msg_type, publisher_id=publisher_id)
+        return ZenohPublisher(topic.name, topic.msg_type, publisher_id=publisher_id, transient_local=topic.qos_profile.transient_local, depth=depth)
     from emos.transport.pubsub import Publisher
 
     return Publisher(ctx, topic.name, topic.msg_type, publisher_id=publisher_id, depth=depth)

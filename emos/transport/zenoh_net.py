@@ -143,10 +143,43 @@ def close_sessions() -> None:
 
 
 # ------------------------------------------------------------------------------------ endpoints
-class ZenohPublisher:
-    """Publishes one topic's messages to its key expression."""
+def _latched_publisher(zenoh: Any, sess: Any, key: str, depth: int) -> Any:
+    """A publisher that keeps its last ``depth`` samples for subscribers that join later
+    (TRANSIENT_LOCAL): Zenoh's advanced publisher, whose cache answers the history query of an
+    advanced subscriber (:func:`_latched_subscriber`), including one that appears after the put.
 
-    def __init__(self, topic: str, msg_cls: type, publisher_id: str | None = None, config_path: str | None = None, group: str | None = None):
+    Samples carry sequence numbers (miss detection, with no heartbeat), not timestamps: that
+    needs nothing in the user's Zenoh configuration (timestamps need ``timestamping`` enabled),
+    and a subscriber that gets a sample both live and from the cache delivers it once."""
+    from zenoh import ext
+
+    depth = max(int(depth), 1)
+    return ext.declare_advanced_publisher(
+        sess, key, congestion_control=zenoh.CongestionControl.DROP, cache=ext.CacheConfig(depth),
+        sample_miss_detection=ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None), publisher_detection=True,
+    )
+
+
+def _latched_subscriber(sess: Any, key: str, depth: int, callback: Callable[[Any], None]) -> Any:
+    """A subscriber that, on declaration and whenever a latched publisher appears, asks the
+    publishers' caches for their last ``depth`` samples; replies and live samples reach the same
+    ``callback``. Missed samples are not recovered (no retransmission): as on a ring, a reader
+    that falls behind loses the oldest, it is not replayed."""
+    from zenoh import ext
+
+    history = ext.HistoryConfig(detect_late_publishers=True, max_samples=max(int(depth), 1))
+    return ext.declare_advanced_subscriber(sess, key, callback, history=history)
+
+
+class ZenohPublisher:
+    """Publishes one topic's messages to its key expression.
+
+    ``transient_local`` (the topic's QoS durability): the publisher keeps its last ``depth``
+    messages, and a subscriber that is TRANSIENT_LOCAL too receives them when it joins, as from
+    a ring. As in ROS 2, both sides must ask for it."""
+
+    def __init__(self, topic: str, msg_cls: type, publisher_id: str | None = None, config_path: str | None = None, group: str | None = None,
+                 transient_local: bool = False, depth: int = 10):
         zenoh = _zenoh()
         self.topic, self.msg_cls = topic, msg_cls
         self.type_name = canonical_name(msg_cls)
@@ -155,8 +188,12 @@ class ZenohPublisher:
         self.key = topic_key(topic, group)
         self._frames = FrameWriter(self.fingerprint, self.publisher_id)
         sess = session(config_path)
+        self.transient_local = transient_local
         # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
-        self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
+        if transient_local:
+            self._pub = _latched_publisher(zenoh, sess, self.key, depth)
+        else:
+            self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
         token_key = f"{self.key}/{_PUB_MARK}/{encode_name(self.type_name)}/{encode_name(self.publisher_id)}"
         self._token = sess.liveliness().declare_token(token_key)
         self.sent = 0
@@ -215,9 +252,14 @@ class ZenohSubscriber:
         self._notify = notify
         self._closed = False
         self._publishers: set[str] = set()
+        self.transient_local = transient_local
+        sess = session(config_path)
         if transient_local:
-            _warn.warning(f"tl:{topic}", "topic %s: TRANSIENT_LOCAL is not kept over Zenoh; a late subscriber receives only new messages", topic)
-        self._sub = session(config_path).declare_subscriber(self.key, self._on_sample)
+            # The publishers' cached messages arrive as replies, through _on_sample like live
+            # ones: checked there and decoded on the reader's thread, exactly as live ones.
+            self._sub = _latched_subscriber(sess, self.key, self.queue_size, self._on_sample)
+        else:
+            self._sub = sess.declare_subscriber(self.key, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
         """On a Zenoh thread: check the frame, queue, wake. Nothing raised here may escape (it

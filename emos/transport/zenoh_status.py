@@ -6,6 +6,9 @@ the supervision tree, asked of the supervisor's control socket (the same ``tree`
 ``emos status`` prints). A separate process, started with exec (``python -m``), because the
 supervisor forks component processes and a Zenoh session's threads must not be forked; it dies
 with the supervisor (parent-death signal) and when the run's socket goes away.
+
+The same helper repeats every component's ``<name>/status`` over Zenoh
+(:mod:`emos.transport.zenoh_status_mirror`), so a Monitor on another host can react to it.
 """
 from __future__ import annotations
 
@@ -19,10 +22,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from emos.transport.context import RunContext
 from emos.transport.zenoh_net import ENV_ZENOH_CONFIG, KEY_ROOT, net_group, session
+from emos.transport.zenoh_status_mirror import StatusMirror
 
 log = logging.getLogger("emos.transport.zenoh")
 RUN_MARK = "_run_"
+NAMES_EVERY_S = 2.0
 
 
 def status_key(run_id: str = "*", group: str | None = None) -> str:
@@ -81,11 +87,39 @@ def _serve(run_dir: Path, run_id: str) -> None:
                 query.reply_err(json.dumps({"error": f"{type(exc).__name__}: {exc}"}))
 
     queryable = session().declare_queryable(key, lambda q: threading.Thread(target=answer, args=(q,), daemon=True).start())
+    mirror: StatusMirror | None = None
+    next_lookup = 0.0
     try:
+        mirror = StatusMirror(RunContext(run_id, run_dir, owner=False))
         while sock.exists():
-            time.sleep(1.0)
+            if time.monotonic() >= next_lookup:
+                # The supervisor builds its tree after starting us: look again now and then.
+                mirror.watch(_worker_names(sock))
+                next_lookup = time.monotonic() + NAMES_EVERY_S
+            mirror.wait_and_forward(0.2)
     finally:
+        if mirror is not None:
+            mirror.close()
         queryable.undeclare()
+
+
+def _worker_names(sock: Path) -> list[str]:
+    """The run's components (the workers of the supervision tree); none if it does not answer."""
+    from emos.core.rpc import RpcClient
+
+    try:
+        with RpcClient(sock, timeout=5.0) as rpc:
+            tree = rpc.call("tree")["tree"]
+    except Exception as exc:  # noqa: BLE001 - starting or stopping: try again later
+        log.debug("zenoh status helper: the supervisor's tree: %s", exc)
+        return []
+    names, todo = [], [tree]
+    while todo:
+        node = todo.pop()
+        if node.get("kind") == "worker" and node.get("name"):
+            names.append(str(node["name"]))
+        todo.extend(node.get("children", []))
+    return names
 
 
 def main(argv: list[str]) -> int:

@@ -126,3 +126,34 @@ def test_use_network_sets_the_run_options_and_checks_them(tmp_path, monkeypatch)
     with pytest.raises(ValueError, match="EMOS_NET_TOPICS"):
         emos.use_network(topics=["bad//name"])
     assert select.transport_of("/scan") == "zenoh"  # the earlier choice stands
+
+
+def test_the_monitor_reads_its_own_runs_statuses_from_rings_and_other_runs_over_zenoh(monkeypatch, caplog):
+    """Where the Monitor's component status inputs come from (emos.supervisor.monitor_net)."""
+    from emos.config.qos import TRANSIENT_LOCAL
+    from emos.supervisor.monitor_net import place_inputs
+
+    topics = {t.name: t for t in (
+        Topic(name="planner/status", msg_type="ComponentStatus"),  # this run's
+        Topic(name="remote/arm/status", msg_type="ComponentStatus"),  # another run's
+        Topic(name="scan", msg_type="LaserScan"),  # not a status: as declared
+        Topic(name="odd/status", msg_type="String"),  # named like one, but not a status
+    )}
+    for var in ("EMOS_ZENOH_CONFIG", "EMOS_NET_TOPICS"):
+        monkeypatch.delenv(var, raising=False)
+    placed = place_inputs(topics, ["planner"])
+    assert placed["/planner/status"].transport == "shm" and placed["/scan"].transport == "auto"
+    assert placed["/remote/arm/status"].transport == "auto"  # no Zenoh in this run: warned, never arrives
+    assert "'remote/arm' is not a component of this run and the run does not use Zenoh" in caplog.text
+
+    monkeypatch.setenv("EMOS_NET_TOPICS", "all")
+    placed = place_inputs(topics, ["planner"])
+    assert placed["/planner/status"].transport == "shm"  # published on its ring only, whatever the option
+    remote = placed["/remote/arm/status"]
+    assert remote.transport == "zenoh" and remote.qos_profile.durability == TRANSIENT_LOCAL
+    assert placed["/scan"] is topics["/scan"] and placed["/odd/status"] is topics["/odd/status"]
+    assert topics["/remote/arm/status"].transport == "auto"  # the recipe's topics are not changed
+
+    monkeypatch.delenv("EMOS_NET_TOPICS")
+    monkeypatch.setenv("EMOS_ZENOH_CONFIG", "/some/zenoh.json5")  # --zenoh alone is enough for other runs' statuses
+    assert place_inputs(topics, ["planner"])["/remote/arm/status"].transport == "zenoh"

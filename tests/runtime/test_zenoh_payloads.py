@@ -187,3 +187,91 @@ def test_latest_skips_an_undecodable_newest_payload_and_close_stops_the_wake_ups
         assert wakes.count == before and not sub.has_news()
     finally:
         pub2.close()
+
+
+def test_a_latched_topic_replays_its_last_messages_to_late_subscribers_checked_as_live_ones(net, caplog):
+    """TRANSIENT_LOCAL over Zenoh: the publisher's cache (depth) answers a subscriber that joins
+    later; cached payloads of a foreign publisher on the key are dropped as live ones would be."""
+    from zenoh import ext
+
+    conf, group = net
+    key = zenoh_net.topic_key("/map", group)
+    pub = zenoh_net.ZenohPublisher("/map", LaserScan, publisher_id="mapper", config_path=conf, group=group, transient_local=True, depth=2)
+    sess = zenoh_net.session(conf)
+    foreign = ext.declare_advanced_publisher(sess, key, cache=ext.CacheConfig(2), publisher_detection=True,
+                                             sample_miss_detection=ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=None))
+    subs = []
+    try:
+        caplog.set_level(logging.WARNING, logger="emos.transport.zenoh")
+        for n in range(4):
+            pub.publish(LaserScan(ranges=np.full(3, float(n), np.float32)))
+        foreign.put(b"not an emos frame at all")
+        foreign.put(_well_framed(LaserScan, struct.pack("<I", 3) + b"\xc1\xc1\xc1\0"))
+
+        late = zenoh_net.ZenohSubscriber("/map", LaserScan, queue_size=4, transient_local=True, config_path=conf, group=group)
+        volatile = zenoh_net.ZenohSubscriber("/map", LaserScan, queue_size=4, config_path=conf, group=group)
+        subs += [late, volatile]
+        got = []
+        assert _wait(lambda: (got.extend(late.take()), len(got) >= 2 and late.rejected >= 2)[1]), f"got {len(got)}, rejected {late.rejected}"
+        assert [m.ranges.tolist() for m in got] == [[2.0] * 3, [3.0] * 3]  # the publisher's last two, oldest first
+        assert late.rejected == 2 and late.undecodable == 1 and late.publishers() == ["forger", "mapper"]
+        lines = [r.getMessage() for r in caplog.records if "dropping a payload" in r.getMessage()]
+        assert lines and all(f"topic /map: dropping a payload on key {key}" in line for line in lines)
+        assert not volatile.has_news()  # only a TRANSIENT_LOCAL subscriber asks for the past
+
+        # Live messages follow, once each (a sample seen live and in the cache is not repeated).
+        pub.publish(LaserScan(ranges=np.full(3, 4.0, np.float32)))
+        assert _wait(lambda: (got.extend(late.take()), len(got) >= 3)[1])
+        time.sleep(0.3)
+        got.extend(late.take())
+        assert [m.ranges[0] for m in got] == [2.0, 3.0, 4.0]
+    finally:
+        for sub in subs:
+            sub.close()
+        foreign.undeclare()
+        pub.close()
+
+
+def test_the_status_mirror_sends_every_change_and_an_unchanged_status_only_as_a_keepalive(net, ctx):
+    """emos.transport.zenoh_status_mirror: a component's status ring, repeated over Zenoh."""
+    from emos.msgs.status import ComponentStatus
+    from emos.transport.pubsub import Publisher
+    from emos.transport.zenoh_status_mirror import StatusMirror
+
+    conf, group = net
+    ring = Publisher(ctx, "/arm/status", ComponentStatus, publisher_id="arm", depth=16)
+    stray = Publisher(ctx, "/arm/status", ComponentStatus, publisher_id="someone-else", depth=16)
+    mirror = StatusMirror(ctx, config_path=conf, group=group, keepalive_s=60.0)
+    remote = zenoh_net.ZenohSubscriber("/arm/status", ComponentStatus, queue_size=64, transient_local=True, config_path=conf, group=group)
+    try:
+        mirror.watch(["arm"])
+        healthy = ComponentStatus(status=ComponentStatus.STATUS_HEALTHY, lifecycle_state="active", pid=7)
+        failed = ComponentStatus(status=ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, message="no path", lifecycle_state="active", pid=7)
+        seen = []
+        # The first status crosses (Zenoh matches the subscriber asynchronously: repeat until it hears).
+        assert _wait(lambda: (ring.publish(healthy), mirror.wait_and_forward(0.05), seen.extend(remote.take()))[2] is None and bool(seen))
+        time.sleep(0.3)
+        seen.extend(remote.take())
+        sent = mirror.forwarded
+        for status in [healthy] * 5 + [failed] + [healthy] * 5:  # a one-beat failure among unchanged beats
+            ring.publish(status)
+        stray.publish(failed)  # not the component's own ring: never repeated
+        mirror.wait_and_forward(0.5)
+        assert mirror.forwarded == sent + 2  # the failure and the recovery, not the 10 unchanged beats
+        assert _wait(lambda: (seen.extend(remote.take()), seen[-1].status == ComponentStatus.STATUS_HEALTHY and len(seen) >= 3)[1])
+        assert [(m.status, m.message) for m in seen[-2:]] == [(1, "no path"), (0, "")]
+        assert remote.publishers() == ["arm"]
+
+        # A reader that joins later gets the current status from the cache (depth 1).
+        late = zenoh_net.ZenohSubscriber("/arm/status", ComponentStatus, transient_local=True, config_path=conf, group=group)
+        try:
+            got = []
+            assert _wait(lambda: (got.extend(late.take()), bool(got))[1])
+            assert [m.status for m in got] == [ComponentStatus.STATUS_HEALTHY]
+        finally:
+            late.close()
+    finally:
+        remote.close()
+        mirror.close()
+        ring.close()
+        stray.close()
