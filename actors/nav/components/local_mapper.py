@@ -15,7 +15,7 @@ from emos.io.topic import Topic
 
 from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
-from ..mapping import MemoryMapper
+from ..mapping import EvidenceConfig, MemoryMapper
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, grid_msg, pose_of, pose_stamped, scan_of
 
@@ -46,6 +46,10 @@ def _sensor_pose(value: Any) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
+def _memory_decay(value: Any) -> EvidenceConfig | None:
+    return EvidenceConfig.of(value, "LocalMapperConfig.memory_decay")
+
+
 @define(kw_only=True)
 class LocalMapperConfig(NavComponentConfig):
     """``map_params``: window size and resolution around the robot. ``keep_memory``: cells the
@@ -57,7 +61,10 @@ class LocalMapperConfig(NavComponentConfig):
     is also added to an obstacle memory over that window, at the odometry pose corrected by
     matching the scan against the memory (``scan_matching``). The memory is published on the
     ``mapping`` output (an OccupancyGrid in ``frames.world``, every ``map_publish_period`` s;
-    a Planner can take it as its map) and the corrected pose on ``localized_pose``."""
+    a Planner can take it as its map) and the corrected pose on ``localized_pose``. The memory
+    never forgets by default (static worlds); ``memory_decay`` (an ``EvidenceConfig`` or a dict
+    of its fields) makes it forget by evidence (cells later scans see through are released:
+    a moving obstacle's trail goes, walls stay), for worlds where obstacles move."""
 
     loop_rate: float = rate_field(10.0)
     map_params: MapConfig = field(factory=MapConfig, converter=_map_config)
@@ -67,6 +74,12 @@ class LocalMapperConfig(NavComponentConfig):
     scan_matching: bool = field(default=True)
     mapping_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
     map_publish_period: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
+    memory_decay: EvidenceConfig | None = field(default=None, converter=_memory_decay)
+
+    def __attrs_post_init__(self) -> None:
+        if self.memory_decay is not None and self.mapping_bounds is None:
+            raise ValueError("LocalMapperConfig.memory_decay: the memory exists in mapping mode only; "
+                             "set mapping_bounds too (or leave memory_decay None)")
 
 
 class LocalMapper(NavComponent):
@@ -98,7 +111,10 @@ class LocalMapper(NavComponent):
         cfg = self.config
         self._memory = None
         if cfg.mapping_bounds is not None:
-            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching)
+            decay = cfg.memory_decay
+            forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
+            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
+                                        **forgetting)
         self._memory_published = -math.inf
 
     def _execution_step(self, msg: Any = None, topic: Any = None) -> None:

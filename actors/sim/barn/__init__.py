@@ -201,15 +201,16 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
     from .process import SystemFailed, run_episode_process
     from .stack import StackOptions
 
-    if args.dynabarn:
-        raise ValueError("--dynabarn runs in-process only for now; add --in-process")
     if args.png is not None:
         raise ValueError("--png draws the in-process run; add --in-process")
+    if args.dynabarn and args.worlds_file is not None:
+        raise ValueError("the Simulator's dynabarn:<index> worlds are the shipped set; --worlds-file with --dynabarn "
+                         "needs --in-process")
     source = _barn_source(args)
     StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
 
     def episode(idx: int, seed: int) -> EpisodeResult:
-        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
+        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed, dynabarn=args.dynabarn,
                                            barn_source=None if source is None else str(source))
         try:
             return run_episode_process(worlds[idx], opts)
