@@ -41,7 +41,7 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 
 
 class _Input:
-    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode")
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "received_sim", "decode")
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
@@ -49,6 +49,7 @@ class _Input:
         self.raw: bytearray | None = None
         self.stamp_ns = 0
         self.received_ns = 0
+        self.received_sim: float | None = None  # simulated time it arrived at (use_sim_time nodes)
         self.decoded: Any = None
 
 
@@ -350,6 +351,7 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
+        sim_now = tick.clock.to_sec() if tick is not None else self._sim_now()
         # Every input's latest message first: a step must see the other inputs that arrived in
         # the same wake-up. Then one step per triggering message, all trigger topics merged in
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
@@ -362,6 +364,7 @@ class Node:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
+            inp.received_sim = sim_now
             if active and inp.topic in triggers:
                 backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
         if len(triggers) > 1 and backlog:
@@ -405,15 +408,28 @@ class Node:
                 return None
             inp.stamp_ns, inp.raw, _ = item
             inp.received_ns = time.time_ns()
+            inp.received_sim = self._sim_now()
         if inp.decoded is None:
             inp.decoded = inp.decode(inp.raw)
             if inp.decoded is None:
                 inp.raw = None  # a malformed network payload, dropped: as if it had not come
         return inp.decoded
 
+    def _sim_now(self) -> float | None:
+        """Simulated time of the newest tick handled (None: not on simulated time, or no tick yet)."""
+        return self._sim_time.time if self._sim_time is not None else None
+
     def age(self, topic: Topic | str) -> float | None:
+        """Seconds since the latest message on ``topic`` arrived: on the node's clock, so a
+        ``use_sim_time`` node measures simulated seconds (a simulator slowed down by a loaded
+        machine must not make every input look stale), else wall seconds."""
         inp = self._input(topic)
-        return None if inp.raw is None else (time.time_ns() - inp.stamp_ns) / 1e9
+        if inp.raw is None:
+            return None
+        sim_now = self._sim_now()
+        if sim_now is not None and inp.received_sim is not None and sim_now >= inp.received_sim:
+            return sim_now - inp.received_sim
+        return (time.time_ns() - inp.stamp_ns) / 1e9  # wall: no tick yet, or simulated time went back
 
     def publisher_pids(self, topic: Topic | str) -> list[int]:
         """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
@@ -434,7 +450,7 @@ class Node:
         for name, inp in self._inputs.items():
             if inp.raw is None:
                 stale.append(name)
-            elif inp.topic.data_timeout and (time.time_ns() - inp.stamp_ns) / 1e9 > inp.topic.data_timeout:
+            elif inp.topic.data_timeout and (self.age(name) or 0.0) > inp.topic.data_timeout:
                 stale.append(name)
         return stale
 

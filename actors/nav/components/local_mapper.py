@@ -12,6 +12,7 @@ from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
 from emos.config.validators import in_range
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
+from emos.msgs import Odometry
 
 from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
@@ -96,7 +97,7 @@ class LocalMapper(NavComponent):
     allowed_outputs = {
         "local_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/occupancy_layer", msg_type="OccupancyGrid"), required=True),
         "mapping": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/memory", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL))),
-        "localized_pose": AllowedTopic(types=("PoseStamped",), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
+        "localized_pose": AllowedTopic(types=("PoseStamped", "Odometry"), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
     }
     config: LocalMapperConfig
 
@@ -127,7 +128,7 @@ class LocalMapper(NavComponent):
         except BadInput as exc:
             self.fail_input("sensor_data", str(exc))
             return
-        pose = None
+        pose, loc = None, None
         if self.config.keep_memory or self._memory is not None:
             loc = self.latest("location")
             if loc is None:
@@ -144,15 +145,25 @@ class LocalMapper(NavComponent):
         out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
         self.publish(self.get_out_topic("local_map"), out)
         if self._memory is not None:
-            self._update_memory(scan, pose)
+            self._update_memory(scan, pose, loc)
         self.health_status.set_healthy()
 
-    def _update_memory(self, scan: Any, odom_pose: Any) -> None:
+    def _update_memory(self, scan: Any, odom_pose: Any, location: Any) -> None:
         corrected = self._memory.update(scan, odom_pose)
         world = self.config.frames.world
         out = self.get_out_topic("localized_pose")
         if out is not None:
-            self.publish(out, pose_stamped(corrected[0], corrected[1], corrected[2], world))
+            msg = pose_stamped(corrected[0], corrected[1], corrected[2], world)
+            if out.msg_type is Odometry:
+                # The corrected pose with the measured body twist of the odometry it corrects
+                # (a map correction does not change body-frame velocities): a controller's
+                # response model needs what the base does, not what it was told.
+                odom = Odometry(header=msg.header, child_frame_id=self.config.frames.robot_base)
+                odom.pose.pose = msg.pose
+                if isinstance(location, Odometry):
+                    odom.twist.twist = location.twist.twist
+                msg = odom
+            self.publish(out, msg)
         now = time.monotonic()
         out = self.get_out_topic("mapping")
         if out is not None and now - self._memory_published >= self.config.map_publish_period:

@@ -149,7 +149,11 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     gx, gy = goal
     m = opts.window_margin
     bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
-    pose_topic = Topic(name="/local_map/pose", msg_type="PoseStamped")
+    # The scan-matched pose with the odometry's measured twist: the Controller's response model
+    # (builtin-robust, builtin-dynamic) estimates the yaw gain from what the base does, as the
+    # in-process navigator does from the odometry's twist (a PoseStamped has no twist: the
+    # Controller would fall back to its own last command).
+    pose_topic = Topic(name="/local_map/pose", msg_type="Odometry")
     memory_topic = Topic(name="/local_map/memory", msg_type="OccupancyGrid")
     common = dict(robot=robot, frames=frames, use_sim_time=True)
     mount = (*lidar.mount_xy, lidar.mount_yaw)
@@ -173,12 +177,19 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     controller.inputs(location=pose_topic)
     if opts.response_model or opts.moving_obstacles:
         from emos.actors.nav.controllers import ArcSamplerConfig
+        from emos.actors.nav.controllers.arcs import ArcConfig
         from emos.actors.nav.controllers.movers import MoverConfig
         from emos.actors.nav.controllers.response import ResponseConfig
 
+        extra: dict[str, Any] = {}
+        if opts.moving_obstacles:
+            # The in-process navigator's arcs, backing-up arcs included: the one way to stand
+            # aside from a mover coming head-on (the local map remembers what is behind).
+            extra["arcs"] = ArcConfig()
         controller.algorithms_config = ArcSamplerConfig(
             response=ResponseConfig() if opts.response_model else None,
-            movers=MoverConfig() if opts.moving_obstacles else None, control_time_step=1.0 / rules.control_rate_hz)
+            movers=MoverConfig() if opts.moving_obstacles else None, control_time_step=1.0 / rules.control_rate_hz,
+            **extra)
     if opts.moving_obstacles:  # obstacles from the local map; moving ones tracked in the scan
         controller.inputs(sensor_data=Topic(name="/scan", msg_type="LaserScan"))
     control = Topic(name="/control", msg_type="Twist")
