@@ -49,7 +49,7 @@ class _Input:
         self.raw: bytearray | None = None
         self.stamp_ns = 0
         self.received_ns = 0
-        self.received_sim: float | None = None  # simulated time it arrived at (use_sim_time nodes)
+        self.received_sim: float | None = None  # use_sim_time: the tick it came with (None: after the newest)
         self.decoded: Any = None
 
 
@@ -351,7 +351,6 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
-        sim_now = tick.clock.to_sec() if tick is not None else self._sim_now()
         # Every input's latest message first: a step must see the other inputs that arrived in
         # the same wake-up. Then one step per triggering message, all trigger topics merged in
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
@@ -364,9 +363,16 @@ class Node:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
-            inp.received_sim = sim_now
+            inp.received_sim = None  # dated by the tick it came with, or else the next one
             if active and inp.topic in triggers:
                 backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
+        if tick is not None:
+            # A simulator publishes a tick's readings before the tick itself, so a wake-up may
+            # see them first: they belong to the tick that follows, whenever it is read.
+            t = tick.clock.to_sec()
+            for waiting in self._inputs.values():
+                if waiting.raw is not None and waiting.received_sim is None:
+                    waiting.received_sim = t
         if len(triggers) > 1 and backlog:
             # A message stamped while the rings were being read may have an earlier-stamped
             # sibling on a ring read before it was written: it waits for the next pass (at once).
@@ -408,7 +414,7 @@ class Node:
                 return None
             inp.stamp_ns, inp.raw, _ = item
             inp.received_ns = time.time_ns()
-            inp.received_sim = self._sim_now()
+            inp.received_sim = None
         if inp.decoded is None:
             inp.decoded = inp.decode(inp.raw)
             if inp.decoded is None:
@@ -427,9 +433,11 @@ class Node:
         if inp.raw is None:
             return None
         sim_now = self._sim_now()
-        if sim_now is not None and inp.received_sim is not None and sim_now >= inp.received_sim:
-            return sim_now - inp.received_sim
-        return (time.time_ns() - inp.stamp_ns) / 1e9  # wall: no tick yet, or simulated time went back
+        if sim_now is None:
+            return (time.time_ns() - inp.stamp_ns) / 1e9
+        if inp.received_sim is None:
+            return 0.0  # came after the newest tick
+        return max(0.0, sim_now - inp.received_sim)  # 0 for the tick being handled (or time that went back)
 
     def publisher_pids(self, topic: Topic | str) -> list[int]:
         """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""

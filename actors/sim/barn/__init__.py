@@ -30,6 +30,9 @@ from typing import Callable
 from .controllers import CONTROLLERS
 from .harness import BarnRules, EpisodeResult, run_episode, score_run
 
+DEFAULT_CONTROLLER = "builtin"
+DYNABARN_DEFAULT_CONTROLLER = "builtin-dynamic"  # the moving-obstacle set needs the navigator that tracks movers
+
 __all__ = ["BarnRules", "EpisodeResult", "add_arguments", "run", "run_episode", "score_run", "summarize"]
 
 
@@ -46,8 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
     parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
                         help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
-    parser.add_argument("--controller", default="builtin", choices=sorted(CONTROLLERS),
-                        help="navigation controller to drive with")
+    parser.add_argument("--controller", default=None, choices=sorted(CONTROLLERS),
+                        help=f"navigation controller to drive with (default: {DEFAULT_CONTROLLER}; with --dynabarn "
+                             f"{DYNABARN_DEFAULT_CONTROLLER})")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
     parser.add_argument("--seeds", type=int, default=10, help="trials per world, each with its own noise and yaw gain "
@@ -118,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
     from ..barn_protocol import trial_seed
     from .controllers import make_controller
 
+    if args.controller is None:
+        args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER
     try:
         rules = _rules(args)
         worlds, indices = _load(args)
