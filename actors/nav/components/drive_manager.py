@@ -113,7 +113,7 @@ class DriveManager(NavComponent):
         self._estop: bool | None = None
         self._maneuver: tuple[M.Maneuver, int] | None = None
         self._held_until = -math.inf
-        self._cmd_ages: dict[str, float] = {}
+        self._cmd_seen: dict[str, Any] = {}  # per command key: the message whose writers were noted
         self._cmd_writers: dict[str, list[int]] = {}
         self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
                             if cfg.blind_spot_memory_time > 0 else None)
@@ -182,7 +182,7 @@ class DriveManager(NavComponent):
         self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
         if age > cfg.cmd_timeout:
             return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
-        if not self._publisher_alive(key, age):
+        if not self._publisher_alive(key, src):
             return key, f"the process that published the last command on {self.topic_name(key)} died"
         self._command = cmd
         if cfg.closed_loop:
@@ -204,16 +204,17 @@ class DriveManager(NavComponent):
         ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
         return any(age is None for age in ages)
 
-    def _publisher_alive(self, key: str, age: float) -> bool:
+    def _publisher_alive(self, key: str, msg: Any) -> bool:
         """Is the process that sent the current command still running? A restarted publisher
         (same ring, new pid) does not revive a command its dead predecessor sent."""
         from emos.core.node import process_alive
 
         topic = self.get_in_topic(key)
-        published_at = time.time() - age  # of the current message; commands are >= 1 ms apart
-        if published_at > self._cmd_ages.get(key, -math.inf) + 1e-3:  # a newer message: note who can have sent it
+        # A newer message (each arrival is decoded into a new object; its age cannot tell: on
+        # simulated time it does not grow while the simulator waits): note who can have sent it.
+        if msg is not self._cmd_seen.get(key):
             self._cmd_writers[key] = [pid for pid in self.node.publisher_pids(topic) if pid <= 0 or process_alive(pid)]
-            self._cmd_ages[key] = published_at
+            self._cmd_seen[key] = msg
         writers = self._cmd_writers.get(key)
         return not writers or any(pid <= 0 or process_alive(pid) for pid in writers)
 
