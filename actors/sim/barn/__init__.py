@@ -65,6 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
                         help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
+    parser.add_argument("--logs", type=Path, default=None, metavar="DIR",
+                        help="through the processes: keep the system log of every trial that did not reach the "
+                             "goal here (world_<idx>_seed_<seed>.log), to see why")
     parser.add_argument("--results", type=Path, default=None, metavar="FILE",
                         help="append every finished trial to this JSON-lines file and skip trials already in it "
                              "(resume an interrupted run; the file must be of the same configuration)")
@@ -140,6 +143,10 @@ def run(args: argparse.Namespace) -> int:
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
     if args.in_process:
+        if args.logs is not None:
+            print("emos bench barn: --logs keeps the system logs of runs through the processes; "
+                  "an --in-process run has none (use --png to see a run)", file=sys.stderr)
+            return 2
         mode = ""
     else:
         try:
@@ -238,14 +245,20 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
         raise ValueError("--dynabarn runs in-process only for now; add --in-process")
     if args.png is not None:
         raise ValueError("--png draws the in-process run; add --in-process")
+    if args.logs is not None:
+        args.logs.mkdir(parents=True, exist_ok=True)
     source = _barn_source(args)
     StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
 
     def episode(idx: int, seed: int) -> EpisodeResult:
         opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
                                            barn_source=None if source is None else str(source))
+        log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         try:
-            return run_episode_process(worlds[idx], opts)
+            result = run_episode_process(worlds[idx], opts, keep_log=log)
+            if log is not None and result.success:
+                log.unlink(missing_ok=True)  # only the failures are worth keeping
+            return result
         except SystemFailed as exc:
             # One broken system must not end a 250-world run: it counts as a failure, loudly.
             print(f"emos bench barn: world {idx} seed {seed}: system failure: {exc}", file=sys.stderr, flush=True)
