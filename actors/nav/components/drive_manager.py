@@ -13,13 +13,13 @@ The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import numpy as np
 from attrs import define, field
 
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.geometry import TwistStamped
@@ -108,7 +108,6 @@ class DriveManager(NavComponent):
                                    smoothing_time_constant=cfg.smoothing_time_constant)
         self._safety = DriveSafety(cfg.robot, zones, filt)
         self._command = np.zeros(3)
-        self._sent_at = time.monotonic()
         self._stopped_reason = ""
         self._estop: bool | None = None
         self._maneuver: tuple[M.Maneuver, int] | None = None
@@ -122,7 +121,7 @@ class DriveManager(NavComponent):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
     def custom_on_activate(self) -> None:
-        self._activated_at = time.monotonic()
+        self._activated_at = clock.now()  # the node's clock (simulated seconds under a simulator), as every age here
         if self.run_type.value == "Event":
             self.create_timer(1.0 / self.config.loop_rate, self._watchdog)
 
@@ -198,7 +197,7 @@ class DriveManager(NavComponent):
         activation: a (re)started DriveManager whose first command comes before its first scan
         would otherwise fail at once, and an ``on_system_fail`` restart would loop on it."""
         cfg = self.config
-        if time.monotonic() - getattr(self, "_activated_at", -math.inf) > max(cfg.odom_timeout, cfg.sensor_timeout):
+        if clock.now() - getattr(self, "_activated_at", -math.inf) > max(cfg.odom_timeout, cfg.sensor_timeout):
             return False
         ages = [self.age_of("location")] if cfg.closed_loop else []
         ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
@@ -242,7 +241,7 @@ class DriveManager(NavComponent):
             return
         pose = self._pose()
         if pose is not None:
-            self._blind_spot.update(pose, scan, time.monotonic())
+            self._blind_spot.update(pose, scan, clock.now())
             self._remembered_scan = scan_msg
 
     def _pose(self) -> np.ndarray | None:
@@ -276,14 +275,14 @@ class DriveManager(NavComponent):
         """Stop the robot now and hold it still for ``stop_hold_time`` s, whatever commands
         arrive meanwhile (an event action: ``Action(method=driver.stop)``); cancels a maneuver."""
         self._maneuver = None
-        self._held_until = time.monotonic() + self.config.stop_hold_time
+        self._held_until = clock.now() + self.config.stop_hold_time
         self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
         # An event action is rare and worth a line: which component stopped the robot, for how long.
         self.get_logger().info("[%s] stop: robot held still for %.1f s", self.component_name, self.config.stop_hold_time)
         return True
 
     def _drive(self) -> None:
-        if time.monotonic() < self._held_until:
+        if clock.now() < self._held_until:
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             return
         if self.age_of("command") is None and self.age_of("multi_command") is None:
@@ -332,7 +331,6 @@ class DriveManager(NavComponent):
             stamp = getattr(self, "_command_stamp", None) if not stop else None
             msg = TwistStamped(header=Header(stamp=stamp or Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(topic, msg)
-        self._sent_at = time.monotonic()
         estop = bool(check.emergency_stop) and not stop
         estop_topic = self.get_out_topic("emergency_stop")
         if estop_topic is not None and estop != self._estop:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 from attrs import define, field
@@ -10,6 +9,7 @@ from attrs import define, field
 from emos.config.base import ComponentRunType
 from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 
@@ -161,7 +161,7 @@ class LocalMapper(NavComponent):
         out = self.get_out_topic("localized_pose")
         if out is not None:
             self.publish(out, pose_stamped(corrected[0], corrected[1], corrected[2], world))
-        now = time.monotonic()
+        now = clock.now()  # simulated seconds under a simulator: the map's age must not follow the machine's speed
         out = self.get_out_topic("mapping")
         if out is not None and now - self._memory_published >= self.config.map_publish_period:
             grid = self._memory.grid
