@@ -1,6 +1,7 @@
 """The Monitor's actions on a component of another run: two runs (separate run ids) that share
 nothing but Zenoh on loopback. Run B's event fires on run A's topic and calls a method of run A's
-worker, sets one of its parameters and restarts it; run A's worker observes all three. An action
+worker, sets one of its parameters, calls the main service of run A's switch and restarts the
+worker; run A's components observe all four. An action
 on a component no run has is logged and the Monitor goes on. Malformed control queries get an
 error reply and the helper keeps serving."""
 import json
@@ -33,16 +34,28 @@ class Worker(BaseComponent):
             f.write(json.dumps({"pid": os.getpid(), "value": value, "note": note, "rate": self.config.loop_rate}) + "\\n")
         return value
 
+class Switch(BaseComponent):
+    main_srv_type = (M.SetBoolRequest, M.SetBoolResponse)
+    def _main_srv_callback(self, request):
+        with open("switch.txt", "a") as f:
+            f.write(f"{os.getpid()} {request.data}\\n")
+        return M.SetBoolResponse(success=True, message="switched")
+
 worker = Worker(component_name="worker", outputs=[alarm])
 worker.config.loop_rate = 5
+components = [worker]
+if os.environ.get("WITH_SWITCH"):
+    switch = Switch(component_name="switch")
+    switch.run_type = "Server"
+    components.append(switch)
 launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[worker])
+launcher.add_pkg(components=components)
 launcher.bringup()
 """
 
 WATCHER = """
 from emos import Event, Action
-from emos.actions import restart, update_parameter
+from emos.actions import restart, send_component_service_request, update_parameter
 
 class Idle(BaseComponent):
     def _execution_step(self):
@@ -52,6 +65,9 @@ class Worker(BaseComponent):  # run A's component, named here, not launched by t
     def mark(self, value, note="-"):
         raise RuntimeError("runs in run A's worker, never here")
 
+class Switch(BaseComponent):  # run A's too
+    main_srv_type = (M.SetBoolRequest, M.SetBoolResponse)
+
 class Ghost(BaseComponent):
     def poke(self):
         raise RuntimeError("never called")
@@ -60,6 +76,7 @@ alarm = Topic(name="alarm", msg_type="Int32", transport="zenoh")
 idle = Idle(component_name="idle")
 idle.config.loop_rate = 2
 worker = Worker(component_name="worker")
+switch = Switch(component_name="switch")
 ghost = Ghost(component_name="ghost")
 alarmed = Event(alarm.msg.data >= 3, handle_once=True)
 haunted = Event(alarm.msg.data >= 2, handle_once=True)
@@ -68,6 +85,7 @@ launcher.add_pkg(components=[idle], events_actions={
     haunted: Action(ghost.poke),
     alarmed: [update_parameter(component=worker, param_name="loop_rate", new_value=7.0),  # in order: set, call, restart
               Action(worker.mark, args=(alarm.msg.data,), kwargs={"note": "from B"}),
+              send_component_service_request(component=switch, srv_request_msg=M.SetBoolRequest(data=True)),
               restart(component=worker)],
 })
 launcher.bringup()
@@ -81,12 +99,12 @@ def _lines(path):
         return []
 
 
-def test_a_monitor_calls_a_method_sets_a_parameter_and_restarts_a_component_of_another_run(tmp_path):
+def test_a_monitor_calls_a_method_a_service_sets_a_parameter_and_restarts_components_of_another_run(tmp_path):
     env_a, env_b = _pair(tmp_path, f"t{uuid.uuid4().hex[:10]}")
     a, b = tmp_path / "a", tmp_path / "b"
     a.mkdir()
     b.mkdir()
-    worker = SystemUnderTest(a, WORKER, env=env_a).wait_up(components=["worker"], timeout=60)
+    worker = SystemUnderTest(a, WORKER, env={**env_a, "WITH_SWITCH": "1"}).wait_up(components=["worker", "switch"], timeout=60)
     watcher = None
     try:
         first = worker.pid("worker")
@@ -99,6 +117,7 @@ def test_a_monitor_calls_a_method_sets_a_parameter_and_restarts_a_component_of_a
         worker.wait_new_pid("worker", first, timeout=60)
         wait_until(lambda: len(_lines(a / "activations.txt")) >= 2, timeout=30, what="the restarted worker's activation")
         assert len(_lines(a / "marked.txt")) == 1  # handle_once: one firing, one call
+        assert _lines(a / "switch.txt") == [f"{worker.pid('switch')} True"]  # the service of run A's switch, served there
         # The action on a component that no run has: an error naming event, action and component.
         wait_until(lambda: "ghost.poke() (component ghost) failed: ServiceUnavailable: component 'ghost'" in watcher.output(),
                    timeout=60, what="the Monitor's error about the ghost component")
