@@ -104,6 +104,7 @@ class ActionRoutes:
                               f"{req.get('op')} not delivered")
         if self._remote is None:
             self._remote = RemoteControl()
+        if self._pool is None:
             self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=4, thread_name_prefix="emos-remote-action")
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self._pool, self._remote.request, component, req, self.timeout if timeout is None else timeout)

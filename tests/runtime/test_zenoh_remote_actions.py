@@ -184,3 +184,44 @@ def _try(fn):
         return fn()
     except Exception:  # noqa: BLE001 - not up yet
         return None
+
+
+def test_load_time_checks_accept_a_remote_target_only_with_zenoh_and_never_in_a_fallback(monkeypatch, tmp_path):
+    """A target outside the launcher: an event's action is accepted when the run uses Zenoh and
+    refused, saying how, when it does not; a fallback on it is refused either way."""
+    from emos import Action, BaseComponent, Event, Topic
+    from emos.actions import restart
+    from emos.supervisor.orchestration import Orchestration
+
+    class Arm(BaseComponent):
+        def park(self):
+            pass
+
+    local, arm = Arm(component_name="local_arm"), Arm(component_name="arm")
+    alarm = Topic(name="alarm", msg_type="Int32")
+    event = Event(alarm.msg.data > 3)
+    orchestration = Orchestration(events_actions=[(event, [Action(arm.park), restart(component=arm)])])
+    monkeypatch.delenv("EMOS_ZENOH_CONFIG", raising=False)
+    with pytest.raises(ValueError, match=r"targets component 'arm', which is not in this launcher.*emos run --zenoh"):
+        orchestration.check([local])
+    conf = tmp_path / "z.json5"
+    conf.write_text("{}")
+    monkeypatch.setenv("EMOS_ZENOH_CONFIG", str(conf))
+    orchestration.check([local])  # accepted: the Monitor sends them over Zenoh
+    local.on_component_fail(action=restart(component=arm))
+    with pytest.raises(ValueError, match="fallbacks act on components of their own run only"):
+        Orchestration().check([local])
+
+
+def test_the_monitor_routes_only_components_outside_its_run_and_needs_zenoh_for_them(monkeypatch):
+    import asyncio
+
+    from emos.events.action import ActionError
+    from emos.supervisor.monitor_net import ActionRoutes
+
+    routes = ActionRoutes(["planner", "/driver"], timeout=1.0)
+    assert not routes.is_remote("planner") and not routes.is_remote("driver") and routes.is_remote("arm")
+    monkeypatch.delenv("EMOS_ZENOH_CONFIG", raising=False)
+    with pytest.raises(ActionError, match="'arm' is not in this run, and this run does not use Zenoh"):
+        asyncio.run(routes.lifecycle("arm", "restart", 0.0))
+    routes.close()
