@@ -16,6 +16,11 @@ from typing import Any, Sequence
 
 from emos.core.component import BaseComponent
 
+# The Monitor reads a message this long after it is woken (see Launcher.__init__): measured with
+# `emos bench events` (docs/benchmarks.md, "The Monitor reads last").
+DEFAULT_MONITOR_DEFER_MS = 0.5
+MAX_MONITOR_DEFER_MS = 20.0
+
 log = logging.getLogger("emos.launcher")
 
 # Set by `emos run --duration`: recipes stop by themselves after that many seconds.
@@ -38,6 +43,7 @@ class Launcher:
         stop_timeout: float = 5.0,
         fallback_reset_after: float = 10.0,
         monitor_nice: int = 5,
+        monitor_defer_ms: float = DEFAULT_MONITOR_DEFER_MS,
         **kwargs: Any,
     ) -> None:
         """``heartbeat_timeout``: seconds without a status message before a component counts as
@@ -47,7 +53,10 @@ class Launcher:
         ``fallback_reset_after``: seconds a component must stay healthy before its fallback retry
         budgets (and a give-up) reset. ``monitor_nice``: niceness (0-19) added to the Monitor's
         process in multi-process runs, so that evaluating events yields the CPU to the components
-        that read the same topics (0 keeps it at the components' priority).
+        that read the same topics (0 keeps it at the components' priority). ``monitor_defer_ms``:
+        how long the Monitor waits after being woken by a message before it reads it, so that on
+        a machine short of cores the components woken by the same message run first (0: at once;
+        it adds as much to every event's latency).
         """
         if kwargs:
             raise TypeError(f"Launcher: unexpected argument(s) {', '.join(sorted(kwargs))}")
@@ -64,6 +73,9 @@ class Launcher:
         if isinstance(monitor_nice, bool) or not isinstance(monitor_nice, int) or not 0 <= monitor_nice <= 19:
             raise ValueError(f"Launcher: monitor_nice must be an int in 0..19, got {monitor_nice!r}")
         self.monitor_nice = monitor_nice
+        if isinstance(monitor_defer_ms, bool) or not isinstance(monitor_defer_ms, (int, float)) or not 0 <= monitor_defer_ms <= MAX_MONITOR_DEFER_MS:
+            raise ValueError(f"Launcher: monitor_defer_ms must be a number of milliseconds in 0..{MAX_MONITOR_DEFER_MS:g}, got {monitor_defer_ms!r}")
+        self.monitor_defer_ms = float(monitor_defer_ms)
         self.heartbeat_timeout = heartbeat_timeout
         self.stop_timeout = stop_timeout
         self.fallback_reset_after = float(fallback_reset_after)
@@ -249,7 +261,7 @@ class Launcher:
             raise ValueError(f"Launcher.fallback_rate must be a positive number of Hz, got {self.fallback_rate!r}")
         orchestration = Orchestration(events_actions=list(self._events_actions), policies=dict(self._fallback_policies),
                                       fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after,
-                                      monitor_nice=self.monitor_nice)
+                                      monitor_nice=self.monitor_nice, monitor_defer_ms=self.monitor_defer_ms)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
         options = SystemOptions(

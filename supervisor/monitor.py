@@ -44,8 +44,11 @@ class Monitor(BaseComponent):
     _wake_background = True
 
     def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0,
-                 local_components: Collection[str] = ()):
+                 local_components: Collection[str] = (), defer_ms: float = 0.0):
         self._entries = entries
+        self._defer_ms = defer_ms
+        # Read by the node: after a wake-up, wait this long before reading (see Node._on_wake).
+        self._wake_defer_s = defer_ms / 1000.0
         self._action_timeout = action_timeout
         self._nice = nice
         self._local_components = tuple(local_components)
@@ -69,7 +72,7 @@ class Monitor(BaseComponent):
 
     def __deepcopy__(self, memo: dict) -> "Monitor":
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
-        return Monitor(self._entries, self._action_timeout, self._nice, self._local_components)
+        return Monitor(self._entries, self._action_timeout, self._nice, self._local_components, self._defer_ms)
 
     # -- lifecycle ------------------------------------------------------------------------------
     def custom_on_activate(self) -> None:

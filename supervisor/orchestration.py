@@ -47,6 +47,7 @@ class Orchestration:
     reset_after: float = DEFAULT_RESET_AFTER_S
     action_timeout: float = 10.0
     monitor_nice: int = 5
+    monitor_defer_ms: float = 0.0
 
     def all_events(self, components: Sequence[BaseComponent]) -> list[tuple[Event, list[Action]]]:
         """Recipe events, the events components bring along (a VLA's stop event), and one per
@@ -144,7 +145,7 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
     entries = orchestration.all_events(components)
     if not entries:
         return list(packages)
-    monitor = Monitor(entries, orchestration.action_timeout, nice=orchestration.monitor_nice,
+    monitor = Monitor(entries, orchestration.action_timeout, nice=orchestration.monitor_nice, defer_ms=orchestration.monitor_defer_ms,
                       local_components=[c.component_name for c in components])
     if monitor.component_name in {c.component_name for c in components}:
         raise ValueError(f"component name {monitor.component_name!r} is reserved for the Monitor")

@@ -94,6 +94,7 @@ class Node:
         if wake_spin_us is None:
             wake_spin_us = getattr(component, "_wake_spin_us", None)  # the Monitor: 0, see supervisor/monitor.py
         self.wake_spin_us = wake_spin_setting() if wake_spin_us is None else wake_spin_us
+        self.wake_defer_s = float(getattr(component, "_wake_defer_s", 0.0))  # the Monitor: see _on_wake
         self.name = component.component_name
         self.ctx = ctx or current()
         self.supervisor_socket = supervisor_socket if supervisor_socket is not None else os.environ.get(ENV_SUPERVISOR_SOCKET)
@@ -336,6 +337,11 @@ class Node:
         return response
 
     def _on_wake(self) -> None:
+        if self.wake_defer_s > 0:
+            # A best-effort reader (the Monitor) lets the components woken by the same message
+            # take the cores first. A blocking sleep, not a loop timer: uvloop's timers have
+            # millisecond steps, and whatever arrives meanwhile is read in this same wake-up.
+            time.sleep(self.wake_defer_s)
         if self._waker is not None:
             self._waker.serve(self._take_inputs, self._inputs_have_news)
         else:

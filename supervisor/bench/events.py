@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from emos.core.rpc import RpcClient
+from emos.launcher import DEFAULT_MONITOR_DEFER_MS, MAX_MONITOR_DEFER_MS
 from emos.msgs import Int64
 from emos.msgs.status import ComponentStatus
 from emos.supervisor.bench.common import percentiles, table
@@ -41,6 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=50.0, help="trigger messages per second")
     parser.add_argument("--rounds", type=int, default=3, help="the event configurations take turns this many times (samples are split between rounds)")
     parser.add_argument("--monitor-nice", type=int, default=5, help="the Launcher's monitor_nice for the systems measured (default: %(default)s, the Launcher's default)")
+    parser.add_argument("--monitor-defer-ms", type=float, default=None,
+                        help="the Launcher's monitor_defer_ms for the systems measured (default: the Launcher's default)")
     parser.add_argument("--json", action="store_true")
 
 
@@ -178,6 +181,11 @@ def run(args: argparse.Namespace) -> int:
         print("emos bench events: --samples >= 10, --failures >= 5, --rate > 0, --rounds >= 1 and --monitor-nice 0..19 please", file=sys.stderr)
         return 2
     os.environ["EMOS_BENCH_MONITOR_NICE"] = str(args.monitor_nice)  # read by the measured systems
+    if args.monitor_defer_ms is not None:
+        if not 0 <= args.monitor_defer_ms <= MAX_MONITOR_DEFER_MS:
+            print(f"emos bench events: --monitor-defer-ms 0..{MAX_MONITOR_DEFER_MS:g} please", file=sys.stderr)
+            return 2
+        os.environ["EMOS_BENCH_MONITOR_DEFER_MS"] = str(args.monitor_defer_ms)
     # The configurations take turns, round after round, so that a change in the machine's load
     # during the run falls on all of them alike (they are compared with each other).
     configs = {"events_0": (0, True), "events_10": (10, True), "events_100": (100, True), "armed_100": (100, False)}
@@ -196,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
         "event_ms": {k: _p(measured[k]["event"]) for k in ("events_10", "events_100")},
         "topic_ms": {k: _p(measured[k]["topic"]) for k in configs},
         "monitor_nice": args.monitor_nice,
+        "monitor_defer_ms": DEFAULT_MONITOR_DEFER_MS if args.monitor_defer_ms is None else args.monitor_defer_ms,
         "fallback_ms": _p(fallback),
         "recover_ms": _p(recover),
         "samples": {"event": {k: len(measured[k]["event"]) for k in ("events_10", "events_100")}, "topic": {k: len(measured[k]["topic"]) for k in configs}, "fallback": len(fallback), "recover": len(recover)},

@@ -14,6 +14,7 @@ import os
 import time
 
 from emos import Action, BaseComponent, BaseComponentConfig, Event, Launcher, Topic
+from emos.launcher import DEFAULT_MONITOR_DEFER_MS
 from emos.actions import restart
 from emos.msgs import Int64
 
@@ -51,7 +52,8 @@ class Faulty(BaseComponent):
 
 
 launcher = Launcher(multi_processing=True, max_restarts=100000, max_seconds=1.0,
-                    monitor_nice=int(os.environ.get("EMOS_BENCH_MONITOR_NICE", "5")))
+                    monitor_nice=int(os.environ.get("EMOS_BENCH_MONITOR_NICE", "5")),
+                    monitor_defer_ms=float(os.environ.get("EMOS_BENCH_MONITOR_DEFER_MS", DEFAULT_MONITOR_DEFER_MS)))
 if MODE == "events":
     listener = Listener(component_name="listener", inputs=[trigger], outputs=[topic_ns], trigger=trigger)
     target = Target(component_name="target", outputs=[event_ns])

@@ -31,3 +31,24 @@ def test_kdtree_and_all_pairs_agree(shape, crowd, monkeypatch):
     assert got.shape == (40, 25)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)  # all pairs compares centres in float32
     assert (got < 0).any() and (got > 0).any()
+
+
+def test_scipy_k_d_tree_is_imported_when_a_controller_is_built_not_with_the_package():
+    """Start-up: importing scipy.spatial takes a good fraction of a second, and every process of
+    a run imports the nav package; only a process that builds a controller needs the tree."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+import emos.actors.nav, emos.actors.sim.barn.stack
+assert "scipy.spatial" not in sys.modules, "imported with the package"
+from emos.actors.nav.controllers import Stanley
+from emos.actors.nav.robot import RobotConfig, RobotGeometry, RobotType
+import numpy as np
+Stanley(RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
+                    geometry_params=np.array([0.2, 0.3])))
+assert "scipy.spatial" in sys.modules, "not warmed up by the controller"
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]

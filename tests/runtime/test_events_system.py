@@ -478,3 +478,47 @@ launcher.bringup()
     values = [int(v) for _, v in rows]
     assert all(name == ("/order_a" if v % 2 else "/order_b") for (name, _), v in zip(rows, values)), rows[:20]
     assert values == sorted(values), [v for v, w in zip(values, values[1:]) if w < v][:10]
+
+
+def test_the_monitor_reads_a_message_only_after_its_defer_time(tmp_path):
+    """``Launcher(monitor_defer_ms=...)``: the Monitor waits that long after a wake-up before it
+    reads, so the components woken by the same message run first. Every event's action starts at
+    least that long after the message was published (the wait is a sleep: a lower bound)."""
+    body = """
+from emos import Event, Action
+
+stamp = Topic(name="stamp", msg_type="Int64")
+
+class Source(BaseComponent):
+    def __init__(self, **kw):
+        super().__init__(outputs=[stamp], **kw)
+        self.config.loop_rate = 20.0
+    def _execution_step(self):
+        self.publish(stamp, M.Int64(data=time.monotonic_ns()))
+        self.health_status.set_healthy()
+
+class Sink(BaseComponent):
+    def record(self, sent_ns):
+        with open("latency.txt", "a") as f:
+            f.write(f"{(time.monotonic_ns() - sent_ns) / 1e6:.3f}\\n")
+
+src = Source(component_name="source")
+sink = Sink(component_name="sink")
+launcher = Launcher(multi_processing=True, monitor_defer_ms=15)
+launcher.add_pkg(components=[src, sink], events_actions={Event(stamp): Action(sink.record, args=(stamp.msg.data,))})
+launcher.bringup()
+"""
+    sut = SystemUnderTest(tmp_path, body).wait_up(components=["source", "sink", "emos_monitor"])
+    out = tmp_path / "latency.txt"
+    wait_until(lambda: len(lines(out)) >= 10, 30, what="ten events through a deferring Monitor")
+    sut.stop()
+    latencies = [float(x) for x in lines(out)]
+    assert min(latencies) >= 15.0, latencies
+
+
+@pytest.mark.parametrize("bad", [-1, 21, "1", True, float("nan")])
+def test_monitor_defer_ms_out_of_range_is_refused_at_definition(bad):
+    from emos import Launcher
+
+    with pytest.raises(ValueError, match="monitor_defer_ms"):
+        Launcher(monitor_defer_ms=bad)

@@ -8,7 +8,7 @@ import subprocess
 import sys
 
 from emos.actors.sim.barn.harness import BarnRules
-from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, StackOptions, build_system
+from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, NAV_COMPONENTS, StackOptions, build_system
 from tests.runtime.helpers import REPO
 
 
@@ -32,10 +32,10 @@ def test_the_stack_never_receives_true_poses():
         assert sorted(sim.config.lockstep_consumers) == sorted(c.component_name for c in nav)
 
 
-def test_barn_world_through_supervised_processes():
+def test_barn_world_through_supervised_processes(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds", "3", "--seeds", "1", "--json"], cwd=REPO,
-                         capture_output=True, text=True, timeout=120, env=env)
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds", "3", "--seeds", "1", "--json",
+                          "--logs", str(tmp_path / "logs")], cwd=REPO, capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads(out.stdout)
     assert set(result) == {"worlds", "summary"}
@@ -49,3 +49,21 @@ def test_barn_world_through_supervised_processes():
     assert 2.0 < world["time_s"] < 30.0 and world["metric"] > 0.25
     assert result["summary"]["success_rate"] == 1.0
     assert "barn: world 3 (1/1) 1/1 success" in out.stderr  # the progress line
+    assert list((tmp_path / "logs").iterdir()) == []  # --logs keeps only the logs of failed trials
+
+
+def test_the_system_log_of_a_failed_trial_is_kept(tmp_path):
+    """``--logs DIR``: a trial that does not reach the goal leaves its system log, to see why."""
+    worlds = tmp_path / "w.json"  # a cylinder on the start: the robot touches it at once
+    worlds.write_text(json.dumps({"7": {"cylinders": [[-2.25, 3.2]], "path_length": 10.0}}))
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds-file", str(worlds), "--seeds", "1",
+                          "--json", "--logs", str(tmp_path / "logs")], cwd=REPO, capture_output=True, text=True,
+                         timeout=180, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    (world,) = json.loads(out.stdout)["worlds"]
+    assert world["collided"] and not world["success"]
+    (log,) = (tmp_path / "logs").iterdir()
+    assert log.name == f"world_007_seed_{world['seed']}.log"
+    text = log.read_text()
+    assert all(name in text for name in ("sim", *NAV_COMPONENTS)), text[-2000:]  # the whole system's log

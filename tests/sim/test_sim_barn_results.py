@@ -31,3 +31,18 @@ def test_a_run_resumes_from_its_results_file_and_refuses_another_configuration(t
     other = _bench(*ARGS, "--controller", "builtin", "--results", str(results))
     assert other.returncode == 2
     assert "another configuration" in other.stderr and "controller: 'builtin-robust' there, 'builtin' now" in other.stderr
+
+
+def test_trials_side_by_side_score_as_one_at_a_time(tmp_path):
+    """``--jobs 2``: the same trials in two worker processes give the same rows, in world order,
+    and every finished trial reaches the results file."""
+    args = ["--in-process", "--worlds", "5,10", "--seeds", "2", "--free-compute", "--json"]  # reproducible
+    one = _bench(*args)
+    results = tmp_path / "barn.jsonl"
+    two = _bench(*args, "--jobs", "2", "--results", str(results))
+    assert one.returncode == 0 and two.returncode == 0, (one.stderr, two.stderr)
+    assert json.loads(two.stdout) == json.loads(one.stdout)
+    trials = [json.loads(line)["trial"] for line in results.read_text().splitlines()[1:]]
+    assert sorted((t["idx"], t["seed"]) for t in trials) == sorted((w["idx"], w["seed"]) for w in json.loads(one.stdout)["worlds"])
+    bad = _bench(*args, "--jobs", "0")
+    assert bad.returncode == 2 and "--jobs must be >= 1" in bad.stderr

@@ -103,3 +103,21 @@ def test_simulator_builds_a_world_from_a_repo_clone(tmp_path):
         SimulatorConfig(world="barn:13", barn_source=str(tmp_path))
     with pytest.raises(ValueError, match="barn_source"):  # whichever validator runs first names it
         SimulatorConfig(world="barn:1", barn_source=str(tmp_path / "missing"))
+
+
+def test_a_worlds_file_is_parsed_once_and_again_when_it_changes(tmp_path):
+    import json
+    import os
+
+    from emos.actors.sim.barn_worlds import load_barn_worlds
+
+    path = tmp_path / "w.json"
+    path.write_text(json.dumps({"5": {"cylinders": [[0.0, 1.0]], "path_length": 10.0}}))
+    first = load_barn_worlds(path)
+    again = load_barn_worlds(path)
+    assert again is not first and again[5] is first[5]  # the parsed worlds, a fresh dict
+    assert not first[5].cylinders.flags.writeable  # nobody can change what the others read
+    path.write_text(json.dumps({"5": {"cylinders": [[0.0, 2.0], [1.0, 1.0]], "path_length": 12.0}}))
+    os.utime(path, ns=(1, 1))  # even a rewrite within the same timestamp tick is seen: the size differs
+    changed = load_barn_worlds(path)
+    assert changed[5].path_length == 12.0 and changed[5].cylinders.shape == (2, 2)

@@ -7,16 +7,13 @@ refined only for obstacle points inside their bounding circle (plus margin).
 """
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
-try:  # imported here, not in a control step: the first import takes a good fraction of a second
-    from scipy.spatial import cKDTree
-except ImportError:  # emos without the nav extra: all pairs
-    cKDTree = None
+import numpy as np
 
 from ..robot import RobotConfig, RobotGeometry
 
-__all__ = ["pose_clearance", "trajectory_clearance", "nearby_obstacles", "voxel_downsample"]
+__all__ = ["pose_clearance", "trajectory_clearance", "nearby_obstacles", "voxel_downsample", "warm_up"]
 
 _ROUND = (RobotGeometry.Type.CYLINDER, RobotGeometry.Type.SPHERE, RobotGeometry.Type.CAPSULE,
           RobotGeometry.Type.CONE)
@@ -102,8 +99,26 @@ KDTREE_PAIRS = 20_000  # poses x obstacles from which a k-d tree beats all pairs
 _NEAREST = 16  # obstacles fetched per pose; poses with more inside their bound are refined in full
 
 
+_cKDTree: Any = None  # scipy's cKDTree once warm_up() ran; False without scipy (all pairs then)
+
+
+def warm_up() -> None:
+    """Import scipy's k-d tree now. The import takes a good fraction of a second: a controller
+    does it when it is built, not in its first control step with enough points to need it, and a
+    process that never builds one (most of a run's processes import this module) never pays it."""
+    global _cKDTree
+    if _cKDTree is None:
+        try:
+            from scipy.spatial import cKDTree
+        except ImportError:  # emos without the nav extra
+            _cKDTree = False
+        else:
+            _cKDTree = cKDTree
+
+
 def _kdtree(obs: np.ndarray):
-    return cKDTree(obs) if cKDTree is not None else None
+    warm_up()
+    return _cKDTree(obs) if _cKDTree else None
 
 
 def _clearance_kdtree(robot: RobotConfig, flat: np.ndarray, obs: np.ndarray, tree) -> np.ndarray:

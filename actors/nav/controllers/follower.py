@@ -8,7 +8,7 @@ import numpy as np
 from ..kinematics import integrate_sequence, ramp_commands, wrap_angle
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig
-from .clearance import nearby_obstacles, pose_clearance
+from .clearance import nearby_obstacles, pose_clearance, warm_up
 from .path import PathProgress, ReferencePath
 from .sensors import ObstacleInput, obstacle_points
 
@@ -25,6 +25,7 @@ class PathFollower:
             raise TypeError(f"robot: expected a RobotConfig, got {type(robot).__name__}")
         self.robot = robot
         self.config = config
+        warm_up()  # clearance's k-d tree: imported while the controller is built, not mid-step
         self.path: ReferencePath | None = None
         self.progress: PathProgress | None = None
         self.sensor_pose = (0.0, 0.0, 0.0)

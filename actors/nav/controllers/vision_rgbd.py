@@ -22,7 +22,7 @@ from ..costs import TrajectoryCostsWeights, evaluate_costs
 from ..kinematics import integrate_sequence, ramp_commands, rollout, wrap_angle
 from ..robot import RobotConfig
 from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state, setters
-from .clearance import nearby_obstacles, pose_clearance, voxel_downsample
+from .clearance import nearby_obstacles, pose_clearance, voxel_downsample, warm_up
 from .detour import detour_reference
 from .dwa import dwa_samples, vec3, vec4
 from .sensors import ObstacleInput, obstacle_points, sensor_offset
@@ -116,6 +116,7 @@ class VisionRGBDFollower:
         self.robot = robot
         self.intrinsics = intrinsics
         self.config = config or VisionRGBDFollowerConfig()
+        warm_up()  # clearance's k-d tree: imported while the controller is built, not mid-step
         cfg = self.config
         self.camera_pose = sensor_offset(cfg.camera_position_to_robot, cfg.camera_rotation_to_robot)
         self.search = TargetSearch(robot, cfg.control_time_step, cfg.target_search_pause,

@@ -65,6 +65,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dynabarn", action="store_true", help="the moving-obstacle set (60 worlds, 20 m) instead of BARN")
     parser.add_argument("--noisy-odometry", action="store_true",
                         help="with --ideal: navigate on drifting wheel odometry with 2%% slip instead of ground truth")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="run N trials at a time (one core each; the scores do not change: in-process the "
+                             "compute charge is CPU time, through the processes the clock is lock-step)")
+    parser.add_argument("--logs", type=Path, default=None, metavar="DIR",
+                        help="through the processes: keep the system log of every trial that did not reach the "
+                             "goal here (world_<idx>_seed_<seed>.log), to see why")
     parser.add_argument("--results", type=Path, default=None, metavar="FILE",
                         help="append every finished trial to this JSON-lines file and skip trials already in it "
                              "(resume an interrupted run; the file must be of the same configuration)")
@@ -122,7 +128,7 @@ def _rules(args: argparse.Namespace) -> BarnRules:
 
 def run(args: argparse.Namespace) -> int:
     from ..barn_protocol import trial_seed
-    from .controllers import make_controller
+    from .parallel import TrialPool, in_process_trial
 
     try:
         rules = _rules(args)
@@ -140,6 +146,10 @@ def run(args: argparse.Namespace) -> int:
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
     if args.in_process:
+        if args.logs is not None:
+            print("emos bench barn: --logs keeps the system logs of runs through the processes; "
+                  "an --in-process run has none (use --png to see a run)", file=sys.stderr)
+            return 2
         mode = ""
     else:
         try:
@@ -155,28 +165,44 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"emos bench barn: {exc}", file=sys.stderr)
         return 2
-    results: list[EpisodeResult] = []
-    wall0 = time.perf_counter()
-    if not args.json:
-        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, {mode}lock-step")
-        print(f"{'world':>5} {'success':>7} {'collide':>7} {'timeout':>7} {'time_s':>7} {'metric':>7} {'m_4t':>6} "
-              f"{'misses':>6} {'wall_s':>7}  first failure")
-    for n, idx in enumerate(indices, 1):
+    try:
+        pool = TrialPool(args.jobs, args.in_process, log.append if log is not None else lambda result: None)
+    except ValueError as exc:
+        print(f"emos bench barn: {exc}", file=sys.stderr)
+        return 2
+    # Every trial not in the results file yet, started in world order (all at once with --jobs 1
+    # deferred: each then runs when its world's row is due, as before).
+    trials: dict[tuple[int, int], Callable[[], EpisodeResult]] = {}
+    for idx in indices:
         key = f"dynabarn:{idx}" if args.dynabarn else idx
-        rows = []
         for k in range(args.seeds):
             seed = trial_seed(key, k, base=args.seed)
             prior = log.get(idx, seed) if log is not None else None
             if prior is not None:
-                rows.append(prior)
-                continue
-            if args.in_process:
+                trials[(idx, k)] = lambda prior=prior: prior
+            elif args.in_process:
                 png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
-                rows.append(run_episode(worlds[idx], make_controller(args.controller), rules, seed=seed, png_path=png))
+                trials[(idx, k)] = pool.submit(in_process_trial, worlds[idx], args.controller, rules, seed, png)
             else:
-                rows.append(episode(idx, seed))
-            if log is not None:
-                log.append(rows[-1])
+                trials[(idx, k)] = pool.submit(episode, idx, seed)
+    try:
+        return _report(args, indices, trials, name, config, mode)
+    finally:
+        pool.close(cancel=True)
+
+
+def _report(args: argparse.Namespace, indices: list[int], trials: dict[tuple[int, int], Callable[[], EpisodeResult]],
+            name: str, config: str, mode: str) -> int:
+    """A row per world as its trials finish (in world order), then the summary."""
+    results: list[EpisodeResult] = []
+    wall0 = time.perf_counter()
+    if not args.json:
+        jobs = f", {args.jobs} trials at a time" if args.jobs > 1 else ""
+        print(f"{name}: {len(indices)} worlds x {args.seeds} seeds, controller {args.controller}, {config}, {mode}lock-step{jobs}")
+        print(f"{'world':>5} {'success':>7} {'collide':>7} {'timeout':>7} {'time_s':>7} {'metric':>7} {'m_4t':>6} "
+              f"{'misses':>6} {'wall_s':>7}  first failure")
+    for n, idx in enumerate(indices, 1):
+        rows = [trials[(idx, k)]() for k in range(args.seeds)]
         results.extend(rows)
         if args.json and not args.in_process:  # slow enough to want progress; stdout stays pure JSON
             ok = sum(r.success for r in rows)
@@ -238,14 +264,20 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
         raise ValueError("--dynabarn runs in-process only for now; add --in-process")
     if args.png is not None:
         raise ValueError("--png draws the in-process run; add --in-process")
+    if args.logs is not None:
+        args.logs.mkdir(parents=True, exist_ok=True)
     source = _barn_source(args)
     StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
 
     def episode(idx: int, seed: int) -> EpisodeResult:
         opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
                                            barn_source=None if source is None else str(source))
+        log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         try:
-            return run_episode_process(worlds[idx], opts)
+            result = run_episode_process(worlds[idx], opts, keep_log=log)
+            if log is not None and result.success:
+                log.unlink(missing_ok=True)  # only the failures are worth keeping
+            return result
         except SystemFailed as exc:
             # One broken system must not end a 250-world run: it counts as a failure, loudly.
             print(f"emos bench barn: world {idx} seed {seed}: system failure: {exc}", file=sys.stderr, flush=True)
