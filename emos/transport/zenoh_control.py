@@ -52,6 +52,7 @@ LIFECYCLE_REQUESTS = ("start", "stop", "restart")
 _RESERVED_ARGS = ("id", "op", "timeout", "on_stream")  # the socket frame's and RpcClient.call's own
 MAX_TIMEOUT_S = 3600.0
 MAX_WAIT_S = 3600.0
+MAX_GOALS = 16  # goals from other runs running at once per component; more are refused
 
 
 def control_key(component: str, group: str | None = None) -> str:
@@ -96,6 +97,7 @@ class ComponentControl(QueryBridge):
         self.ctx, self.component = ctx, component
         self.control_path = control_socket(ctx, component)
         self.supervisor_path = ctx.run_dir / "supervisor.sock"
+        self._goals = threading.BoundedSemaphore(MAX_GOALS)
         super().__init__(control_key(component), OPS, config_path, label=component)
 
     def handle(self, query: Any, req: dict) -> None:
@@ -123,7 +125,13 @@ class ComponentControl(QueryBridge):
         else:  # goal: handed over, not waited for (a goal may run for minutes)
             path, goal = self._server_socket(req), _bytes(req, "goal")
             goal_id = str(req.get("goal_id") or uuid.uuid4().hex)[:64]
-            threading.Thread(target=self._goal, args=(path, goal, goal_id), name=f"emos-net-goal:{self.component}", daemon=True).start()
+            if not self._goals.acquire(blocking=False):
+                raise RuntimeError(f"busy: {MAX_GOALS} goals from other runs already running for {self.component}")
+            try:
+                threading.Thread(target=self._goal, args=(path, goal, goal_id), name=f"emos-net-goal:{self.component}", daemon=True).start()
+            except BaseException:
+                self._goals.release()
+                raise
             result = goal_id
         query.reply(self.key, _pack({"ok": result}))
 
@@ -156,6 +164,8 @@ class ComponentControl(QueryBridge):
                 rpc.call("goal", goal=goal, goal_id=goal_id)
         except Exception as exc:  # noqa: BLE001 - nobody waits for it: say it here
             log.error("goal %s for %s (from another run over Zenoh) failed: %s: %s", goal_id, self.component, type(exc).__name__, exc)
+        finally:
+            self._goals.release()
 
 
 class ControlBridges:

@@ -78,24 +78,40 @@ class QueryBridge:
     ``query.reply(self.key, _pack(...))``; raise to reply an error)."""
 
     what = "query"
+    MAX_CONCURRENT = 32  # queries served at once; more are refused at once (a flood must not spawn threads without end)
 
     def __init__(self, key: str, ops: tuple[str, ...], config_path: str | None = None, label: str = ""):
         self.key, self.ops, self.label = key, ops, label or key
+        self._slots = threading.BoundedSemaphore(self.MAX_CONCURRENT)
         self._queryable = session(config_path).declare_queryable(key, self._on_query)
 
     def _on_query(self, query: Any) -> None:
-        threading.Thread(target=self._serve, args=(query,), name=f"emos-net:{self.label}", daemon=True).start()
+        if not self._slots.acquire(blocking=False):
+            with query:
+                self._refuse(query, RuntimeError(f"busy: {self.MAX_CONCURRENT} queries already being served"))
+            return
+        try:
+            threading.Thread(target=self._serve, args=(query,), name=f"emos-net:{self.label}", daemon=True).start()
+        except BaseException:
+            self._slots.release()
+            raise
 
     def _serve(self, query: Any) -> None:
-        with query:  # the query is finalised (the caller's get ends) when this block is left
-            try:
-                self.handle(query, self._parse(query))
-            except Exception as exc:  # noqa: BLE001 - every failure goes back to the caller
-                _warn.warning(f"q:{self.key}", "%s %s over Zenoh (%s): %s: %s", self.what, self.label, self.key, type(exc).__name__, exc)
+        try:
+            with query:  # the query is finalised (the caller's get ends) when this block is left
                 try:
-                    query.reply_err(_pack({"error": f"{type(exc).__name__}: {exc}"}))
-                except Exception as reply_exc:  # noqa: BLE001 - the caller may have gone
-                    log.debug("%s %s: error reply failed: %s", self.what, self.label, reply_exc)
+                    self.handle(query, self._parse(query))
+                except Exception as exc:  # noqa: BLE001 - every failure goes back to the caller
+                    self._refuse(query, exc)
+        finally:
+            self._slots.release()
+
+    def _refuse(self, query: Any, exc: BaseException) -> None:
+        _warn.warning(f"q:{self.key}", "%s %s over Zenoh (%s): %s: %s", self.what, self.label, self.key, type(exc).__name__, exc)
+        try:
+            query.reply_err(_pack({"error": f"{type(exc).__name__}: {exc}"}))
+        except Exception as reply_exc:  # noqa: BLE001 - the caller may have gone
+            log.debug("%s %s: error reply failed: %s", self.what, self.label, reply_exc)
 
     def _parse(self, query: Any) -> dict:
         payload = query.payload

@@ -225,3 +225,40 @@ def test_the_monitor_routes_only_components_outside_its_run_and_needs_zenoh_for_
     with pytest.raises(ActionError, match="'arm' is not in this run, and this run does not use Zenoh"):
         asyncio.run(routes.lifecycle("arm", "restart", 0.0))
     routes.close()
+
+
+def test_a_query_bridge_refuses_queries_beyond_its_limit_at_once_and_serves_again_after(tmp_path):
+    """A flood of queries must not spawn threads without end: beyond MAX_CONCURRENT, an
+    immediate 'busy' error reply; a slot freed serves again."""
+    import threading
+
+    from emos.transport import zenoh_net
+    from emos.transport.zenoh_rpc import QueryBridge, _pack
+
+    conf = _config(tmp_path / "solo.json5", f"127.0.0.1:{_free_port()}", f"127.0.0.1:{_free_port()}")
+    release = threading.Event()
+
+    class Slow(QueryBridge):
+        MAX_CONCURRENT = 1
+
+        def handle(self, query, req):
+            release.wait(20)
+            query.reply(self.key, _pack({"ok": req["n"]}))
+
+    key = f"emos/t{uuid.uuid4().hex[:8]}/_test_/slow"
+    bridge = Slow(key, ("echo",), conf)
+    try:
+        sess = zenoh_net.session(conf)
+        first = sess.get(key, payload=msgpack.packb({"op": "echo", "n": 1}), timeout=20)  # holds the only slot
+        # The first query is taken once its thread holds the slot; the second is refused at once.
+        busy = wait_until(lambda: (lambda r: r if r and r[0].ok is None else None)(list(sess.get(key, payload=msgpack.packb({"op": "echo", "n": 2}), timeout=5))),
+                          timeout=20, what="a busy reply")
+        assert "busy" in msgpack.unpackb(busy[0].err.payload.to_bytes())["error"]
+        release.set()
+        assert msgpack.unpackb(list(first)[0].ok.payload.to_bytes()) == {"ok": 1}
+        again = list(sess.get(key, payload=msgpack.packb({"op": "echo", "n": 3}), timeout=10))
+        assert msgpack.unpackb(again[0].ok.payload.to_bytes()) == {"ok": 3}
+    finally:
+        release.set()
+        bridge.close()
+        zenoh_net.close_sessions()
