@@ -139,25 +139,20 @@ def request_from_event(request_type: type, trigger_msg: Any) -> Any:
         return request_type()
 
 
-async def _service(rt: ActionRuntime, *, srv_name: str, srv_type: tuple, request: Any, from_event: bool, trigger_msg: Any = None, **_: Any) -> Any:
-    from emos.core.services import call_service_async
-
+async def _service(rt: ActionRuntime, *, srv_name: str, srv_type: tuple, request: Any, from_event: bool, trigger_msg: Any = None,
+                   component: str | None = None, **_: Any) -> Any:
     req_t, resp_t = srv_type
     req = request_from_event(req_t, trigger_msg) if from_event else request
-    response = await call_service_async(rt.ctx, srv_name, req, resp_t, timeout=rt.timeout)
+    response = await rt.call_service(srv_name, req, resp_t, component)
     rt.log.info("service %s answered %r", srv_name, response)
     return response
 
 
-async def _goal(rt: ActionRuntime, *, server_name: str, action_type: tuple, goal: Any, from_event: bool, trigger_msg: Any = None, **_: Any) -> Any:
-    from emos.core.services import ActionClient
-
-    goal_t, fb_t, res_t = action_type
-    msg = request_from_event(goal_t, trigger_msg) if from_event else goal
-    client = ActionClient(server_name, goal_t, fb_t, res_t, ctx=rt.ctx)
+async def _goal(rt: ActionRuntime, *, server_name: str, action_type: tuple, goal: Any, from_event: bool, trigger_msg: Any = None,
+                component: str | None = None, **_: Any) -> Any:
+    msg = request_from_event(action_type[0], trigger_msg) if from_event else goal
     # A goal may run for minutes (follow a person): send it and do not hold the caller.
-    await rt.run_function(client.send_goal, (msg,), {}, None)
-    return True
+    return await rt.send_goal(server_name, action_type, msg, component)
 
 
 def _types(value: Any, n: int, what: str) -> tuple:
@@ -178,14 +173,14 @@ def send_component_service_request(*, component: BaseComponent, srv_request_msg:
     req_t, resp_t = (resolve(t) for t in comp.main_srv_type)
     if not isinstance(srv_request_msg, req_t):
         raise TypeError(f"send_component_service_request({comp.component_name}): srv_request_msg must be a {req_t.__name__}, got {type(srv_request_msg).__name__}")
-    return Action._predefined("send_component_service_request", _service, comp.component_name, srv_name=comp.main_srv_name, srv_type=(req_t, resp_t), request=srv_request_msg, from_event=False)
+    return Action._predefined("send_component_service_request", _service, comp.component_name, component=comp.component_name, srv_name=comp.main_srv_name, srv_type=(req_t, resp_t), request=srv_request_msg, from_event=False)
 
 
 def trigger_component_service(*, component: BaseComponent) -> Action:
     comp = _component(component, "trigger_component_service")
     if comp.main_srv_type is None:
         raise ValueError(f"trigger_component_service: {comp.component_name} ({type(comp).__name__}) has no main service")
-    return Action._predefined("trigger_component_service", _service, comp.component_name, srv_name=comp.main_srv_name, srv_type=tuple(resolve(t) for t in comp.main_srv_type), request=None, from_event=True)
+    return Action._predefined("trigger_component_service", _service, comp.component_name, component=comp.component_name, srv_name=comp.main_srv_name, srv_type=tuple(resolve(t) for t in comp.main_srv_type), request=None, from_event=True)
 
 
 def send_component_action_server_goal(*, component: BaseComponent, request_msg: Any) -> Action:
@@ -197,7 +192,7 @@ def send_component_action_server_goal(*, component: BaseComponent, request_msg: 
         raise ValueError(f"send_component_action_server_goal: {comp.component_name} ({type(comp).__name__}) has no action server")
     for name, types in servers.items():
         if isinstance(request_msg, types[0]):
-            return Action._predefined("send_component_action_server_goal", _goal, comp.component_name, server_name=name, action_type=types, goal=request_msg, from_event=False)
+            return Action._predefined("send_component_action_server_goal", _goal, comp.component_name, component=comp.component_name, server_name=name, action_type=types, goal=request_msg, from_event=False)
     accepted = ", ".join(f"{types[0].__name__} ({name})" for name, types in servers.items())
     raise TypeError(f"send_component_action_server_goal({comp.component_name}): request_msg must be one of {accepted}, got {type(request_msg).__name__}")
 
@@ -206,7 +201,7 @@ def trigger_component_action_server(*, component: BaseComponent) -> Action:
     comp = _component(component, "trigger_component_action_server")
     if comp.main_action_type is None:
         raise ValueError(f"trigger_component_action_server: {comp.component_name} ({type(comp).__name__}) has no main action server")
-    return Action._predefined("trigger_component_action_server", _goal, comp.component_name, server_name=comp.main_action_name, action_type=tuple(resolve(t) for t in comp.main_action_type), goal=None, from_event=True)
+    return Action._predefined("trigger_component_action_server", _goal, comp.component_name, component=comp.component_name, server_name=comp.main_action_name, action_type=tuple(resolve(t) for t in comp.main_action_type), goal=None, from_event=True)
 
 
 def send_srv_request(*, srv_name: str, srv_type: Any, srv_request_msg: Any) -> Action:

@@ -30,7 +30,7 @@ from emos.events.event import Blackboard, Event, EventTracker
 from emos.events.links import ComponentLinks
 from emos.events.runner import ActionRuntime, prepare, run_action
 from emos.io.topic import Topic
-from emos.supervisor.monitor_net import place_inputs
+from emos.supervisor.monitor_net import ActionRoutes, place_inputs
 
 MONITOR_NAME = "emos_monitor"
 
@@ -99,6 +99,7 @@ class Monitor(BaseComponent):
         for task in list(self._tasks):
             task.cancel()
         self.runtime.cancel_periodic()
+        self.runtime.routes.close()
 
     def _load_fired(self) -> set[int]:
         try:
@@ -190,7 +191,7 @@ class Monitor(BaseComponent):
                 raise
             except BaseException as exc:
                 self.stats["actions_failed"] += 1
-                what = "timed out" if isinstance(exc, (asyncio.TimeoutError, TimeoutError)) else f"failed: {type(exc).__name__}: {exc}"
+                what = "timed out" if isinstance(exc, (asyncio.TimeoutError, TimeoutError)) and not str(exc) else f"failed: {type(exc).__name__}: {exc}"
                 log_now, _, suppressed = self._errors.hit((index, k, type(exc).__name__))
                 if log_now:
                     more = f" (and {suppressed} more times)" if suppressed else ""
@@ -209,11 +210,26 @@ class MonitorRuntime(ActionRuntime):
         self.log = monitor.get_logger()
         self.timeout = monitor._action_timeout
         self.links = ComponentLinks(self.ctx, queue_timeout=monitor._action_timeout)
+        self.routes = ActionRoutes((*monitor._local_components, MONITOR_NAME), monitor._action_timeout)  # components of other runs
 
     async def call_component(self, component: str, op: str, timeout: float, **payload: Any) -> Any:
+        if self.routes.is_remote(component):
+            return await self.routes.control(component, op, payload, timeout)
         return await self.links.call(component, op, timeout, **payload)
 
+    async def call_service(self, name: str, request: Any, response_type: type, component: str | None = None) -> Any:
+        if component is not None and self.routes.is_remote(component):
+            return await self.routes.call_service(component, name, request, response_type)
+        return await super().call_service(name, request, response_type, component)
+
+    async def send_goal(self, name: str, types: tuple, goal: Any, component: str | None = None) -> Any:
+        if component is not None and self.routes.is_remote(component):
+            return await self.routes.send_goal(component, name, goal)
+        return await super().send_goal(name, types, goal, component)
+
     async def lifecycle(self, component: str, op: str, wait_time: float = 0.0) -> Any:
+        if self.routes.is_remote(component):
+            return await self.routes.lifecycle(component, op, wait_time)
         sock = self.monitor.node.supervisor_socket
         if not sock:
             raise RuntimeError("no supervisor to send the lifecycle request to")

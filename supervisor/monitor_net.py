@@ -1,4 +1,5 @@
-"""Where the Monitor reads a component's status from: its own run's rings, or Zenoh.
+"""Where the Monitor reads a component's status from, and where its actions on a component go:
+its own run (rings, control sockets, the supervisor), or another run of the group over Zenoh.
 
 An event may read ``<name>/status`` of a component of this run (published on a shared-memory
 ring, the only place a node publishes it) or of a component of another run, on another host,
@@ -14,12 +15,19 @@ A status topic's transport therefore follows where the component is, not the run
 
 Every other topic keeps the transport its ``Topic`` and the run give it (see
 :mod:`emos.transport.select`): an event on a topic marked for the network reads it over Zenoh.
+
+Actions follow the same rule (:class:`ActionRoutes`): one on a component of this run goes to its
+control socket or to the supervisor as always; one on any other component (named in the recipe
+by a component object of that name which this run does not launch) goes over Zenoh to the run
+that has it (:mod:`emos.transport.zenoh_control`), when this run uses Zenoh.
 """
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
 import logging
 import os
-from typing import Collection
+from typing import Any, Collection
 
 import attrs
 
@@ -65,3 +73,60 @@ def place_inputs(topics: dict[str, Topic], local_components: Collection[str]) ->
                         "(emos run --zenoh CONFIG): its status will never arrive", name, owner)
             placed[name] = topic
     return placed
+
+
+def uses_zenoh() -> bool:
+    from emos.transport.zenoh_net import ENV_ZENOH_CONFIG
+
+    return bool(os.environ.get(ENV_ZENOH_CONFIG))
+
+
+class ActionRoutes:
+    """Sends the Monitor's actions on components of other runs over Zenoh."""
+
+    def __init__(self, local_components: Collection[str], timeout: float):
+        self.local = {name.strip("/") for name in local_components}
+        self.timeout = timeout
+        self._remote: Any = None
+        # Its own threads: a remote restart may take seconds, and must not hold the threads that
+        # run the recipe's functions.
+        self._pool: concurrent.futures.ThreadPoolExecutor | None = None
+
+    def is_remote(self, component: str) -> bool:
+        return component not in self.local
+
+    async def request(self, component: str, req: dict, timeout: float | None = None) -> Any:
+        from emos.events.action import ActionError
+        from emos.transport.zenoh_control import RemoteControl
+
+        if not uses_zenoh():
+            raise ActionError(f"component {component!r} is not in this run, and this run does not use Zenoh (emos run --zenoh CONFIG): "
+                              f"{req.get('op')} not delivered")
+        if self._remote is None:
+            self._remote = RemoteControl()
+        if self._pool is None:
+            self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=4, thread_name_prefix="emos-remote-action")
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._pool, self._remote.request, component, req, self.timeout if timeout is None else timeout)
+
+    async def control(self, component: str, call: str, args: dict, timeout: float) -> Any:
+        return await self.request(component, {"op": "control", "call": call, "args": args}, timeout)
+
+    async def lifecycle(self, component: str, op: str, wait_time: float) -> Any:
+        return await self.request(component, {"op": "lifecycle", "request": op, "wait_time": float(wait_time)})
+
+    async def call_service(self, component: str, name: str, request: Any, response_type: type) -> Any:
+        from emos.msgs import codec
+
+        raw = await self.request(component, {"op": "service", "name": name, "request": codec.pack(request)})
+        return codec.decode(response_type, raw, copy=True)
+
+    async def send_goal(self, component: str, name: str, goal: Any) -> Any:
+        from emos.msgs import codec
+
+        return await self.request(component, {"op": "goal", "name": name, "goal": codec.pack(goal)})
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None

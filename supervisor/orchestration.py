@@ -7,6 +7,7 @@ supervisor (``fallback_driver.py``).
 """
 from __future__ import annotations
 
+import logging
 from typing import Any, Callable, Sequence
 
 from attrs import define, field
@@ -64,7 +65,8 @@ class Orchestration:
         names = {c.component_name for c in components}
         for event, actions in self.all_events(components):
             for a in actions:
-                _check_target(a, names, f"event {event!r}")
+                # The Monitor sends an event's action on a component of another run over Zenoh.
+                _check_target(a, names, f"event {event!r}", remote_ok=True)
         for c in components:
             for key, fb in c.fallbacks.items():
                 for a in fb.steps:
@@ -106,10 +108,17 @@ class Orchestration:
         return out
 
 
-def _check_target(action: Action, names: set[str], where: str) -> None:
+def _check_target(action: Action, names: set[str], where: str, remote_ok: bool = False) -> None:
     if action.component is not None and action.component not in names:
-        raise ValueError(f"{where}: action {action.describe()} targets component {action.component!r}, which is not in this launcher "
-                         f"(components: {', '.join(sorted(names))})")
+        from emos.supervisor.monitor_net import uses_zenoh
+
+        if not (remote_ok and uses_zenoh()):
+            hint = ("; a component of another run can be the target of an event's action when this run uses Zenoh (emos run --zenoh CONFIG)"
+                    if remote_ok else "; fallbacks act on components of their own run only")
+            raise ValueError(f"{where}: action {action.describe()} targets component {action.component!r}, which is not in this launcher "
+                             f"(components: {', '.join(sorted(names))}){hint}")
+        logging.getLogger("emos.monitor").info("%s: action %s targets component %r, not in this run: the Monitor sends it over Zenoh "
+                                               "to the run of the group that has it", where, action.describe(), action.component)
     if action.kind in ("component", "function"):
         error = call_signature_error(action.method, action.args, action.kwargs) if not action.parsers else None
         if error:

@@ -31,6 +31,22 @@ class ActionRuntime:
     def publish(self, topic: Topic, msg: Any) -> None:
         raise NotImplementedError
 
+    async def call_service(self, name: str, request: Any, response_type: type, component: str | None = None) -> Any:
+        """Call service ``name`` of this run (``component``: the component offering it, if one
+        does; a runtime that reaches other runs routes by it)."""
+        from emos.core.services import call_service_async
+
+        return await call_service_async(self.ctx, name, request, response_type, timeout=self.timeout)
+
+    async def send_goal(self, name: str, types: tuple, goal: Any, component: str | None = None) -> Any:
+        """Send ``goal`` to action server ``name`` of this run and return without waiting for its
+        result (a goal may run for minutes); ``component`` as for :meth:`call_service`."""
+        from emos.core.services import ActionClient
+
+        client = ActionClient(name, *types, ctx=self.ctx)
+        await self.run_function(client.send_goal, (goal,), {}, None)
+        return True
+
     def latest(self, topic: str) -> Any | None:
         raise NotImplementedError
 

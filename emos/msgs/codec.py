@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import struct
+import threading
 from typing import Any
 
 import attrs
@@ -89,11 +90,13 @@ class Encoded:
         """The frame as consecutive buffers (the header with its metadata and padding, then each
         array and its padding), for ``b"".join``: for a small message one allocation and one
         C call, cheaper than :meth:`write_into` (whose buffer must exist first)."""
-        head = _U32.pack(len(self.meta)) + self.meta
-        out: list[Any] = [head, _ZEROS[: self.header_bytes - len(head)]]
+        meta = self.meta
+        out: list[Any] = [_U32.pack(len(meta)), meta, _ZEROS[: (-_U32.size - len(meta)) % _ALIGN]]
         for arr in self.arrays:
             out.append(arr)  # C-contiguous (see _ArrayCollector): joined as its raw bytes
-            out.append(_ZEROS[: (-arr.nbytes) % _ALIGN])
+            pad = (-arr.nbytes) % _ALIGN
+            if pad:
+                out.append(_ZEROS[:pad])
         return out
 
     def to_bytes(self) -> bytes:
@@ -244,11 +247,30 @@ class _LazyCoder:
         return fn(*args)
 
 
+# One msgpack Packer per thread, reused: ``msgpack.packb`` builds a new Packer on every call,
+# which is most of the cost of packing a small message (about 1.3 us of 2 here). A Packer is not
+# thread-safe (it keeps its buffer between calls), hence one per thread; it empties its buffer
+# after every pack, also when packing raises.
+_packers = threading.local()
+
+
+def _packer() -> msgpack.Packer:
+    try:
+        return _packers.packer
+    except AttributeError:
+        packer = _packers.packer = msgpack.Packer(use_bin_type=True)
+        return packer
+
+
 def encode(msg: Any) -> Encoded:
     """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame."""
     arrays = _ArrayCollector()
-    meta = msgpack.packb(_encoder(type(msg))(msg, arrays), use_bin_type=True)
-    return Encoded(meta, arrays.arrays, arrays.offset)
+    tree = _encoder(type(msg))(msg, arrays)
+    try:
+        packer = _packers.packer
+    except AttributeError:
+        packer = _packer()
+    return Encoded(packer.pack(tree), arrays.arrays, arrays.offset)
 
 
 def decode(cls: type, frame: Any, copy: bool = False) -> Any:
@@ -293,7 +315,7 @@ def check_header(frame: Any, offset: int = 0) -> None:
     if offset + _U32.size > end:
         raise DecodeError(f"a message frame of {end - offset} B has no room for its header")
     (meta_len,) = _U32.unpack_from(frame, offset)
-    if offset + _align(_U32.size + meta_len) > end:
+    if offset + ((_U32.size + meta_len + _ALIGN - 1) & ~(_ALIGN - 1)) > end:  # _align, inlined: once per network message
         raise DecodeError(f"a message frame of {end - offset} B announces {meta_len} bytes of metadata")
 
 

@@ -21,7 +21,7 @@ from emos.msgs import codec
 
 MAGIC = b"EMZ1"
 _HEADER = struct.Struct("<4sQHH")
-_STAMP = struct.Struct("<Q")
+_MAGIC_STAMP = struct.Struct("<4sQ")
 MAX_NAME_BYTES = 1024  # fingerprints are 16 hex digits; publisher names are component names
 
 
@@ -77,22 +77,10 @@ class FrameWriter:
 
     def frame(self, enc: codec.Encoded, stamp_ns: int) -> bytes | bytearray:
         """The frame of ``enc``; a large one is valid until the next call (put it before)."""
-        if enc.nbytes < self.SMALL:
-            return b"".join([MAGIC, _STAMP.pack(stamp_ns), self._lengths, *enc.chunks()])
+        if enc.array_bytes + len(enc.meta) < self.SMALL:  # enc.nbytes give or take its padding, without two property calls
+            return b"".join([_MAGIC_STAMP.pack(MAGIC, stamp_ns), self._lengths, *enc.chunks()])
         frame = self._buffer = write_frame(enc, stamp_ns, self.fingerprint, self.publisher_id, self.prefix, self.start, self._buffer)
         return frame
-
-
-_names: dict[bytes, str] = {}  # publisher names seen, decoded once (bounded below)
-
-
-def _name(raw: bytes) -> str:
-    name = _names.get(raw)
-    if name is None:
-        name = raw.decode()  # UnicodeDecodeError: the caller's BadFrame
-        if len(_names) < 4096:
-            _names[raw] = name
-    return name
 
 
 def read_frame(data: Any, fingerprint: str | bytes) -> tuple[int, str, memoryview]:
@@ -116,15 +104,34 @@ def read_frame(data: Any, fingerprint: str | bytes) -> tuple[int, str, memoryvie
     start = head + _pad(head)
     if start > size:
         raise BadFrame(f"a {size} B frame announces a {start} B header")
-    try:
-        pub = _name(bytes(data[_HEADER.size + fp_len : head]))
-        if data[_HEADER.size : _HEADER.size + fp_len] != fp:
-            got = bytes(data[_HEADER.size : _HEADER.size + fp_len]).decode(errors="replace")
-            raise BadFrame(f"publisher {pub[:60]!r} sends type fingerprint {got[:40]!r}, this subscriber expects {fp.decode()}")
-    except UnicodeDecodeError as exc:
-        raise BadFrame(f"names are not UTF-8: {exc}") from None
+    names = bytes(data[_LENGTHS_AT:head])  # both lengths, fingerprint, publisher: the same in every frame of a publisher
+    pub = _checked.get((fp, names))
+    if pub is None:
+        pub = _check_names(names, fp_len, fp)
     try:
         codec.check_header(data, start)
     except codec.DecodeError as exc:
         raise BadFrame(f"publisher {pub[:60]!r}: {exc}") from None
-    return stamp, pub, memoryview(data)[start:].toreadonly()
+    view = memoryview(data)
+    return stamp, pub, (view if view.readonly else view.toreadonly())[start:]
+
+
+# (expected fingerprint, the frame's name lengths + fingerprint + publisher) -> publisher name,
+# for frames whose names passed the checks: a publisher's later frames need one lookup, not a
+# decode and a comparison. Bounded: anyone can send frames with made-up names.
+_LENGTHS_AT = _HEADER.size - 4
+_checked: dict[tuple[bytes, bytes], str] = {}
+
+
+def _check_names(names: bytes, fp_len: int, fp: bytes) -> str:
+    try:
+        pub = names[4 + fp_len :].decode()
+    except UnicodeDecodeError as exc:
+        raise BadFrame(f"names are not UTF-8: {exc}") from None
+    if names[4 : 4 + fp_len] != fp:
+        got = names[4 : 4 + fp_len].decode(errors="replace")
+        raise BadFrame(f"publisher {pub[:60]!r} sends type fingerprint {got[:40]!r}, this subscriber expects {fp.decode()}")
+    if len(_checked) >= 4096:
+        _checked.clear()
+    _checked[(fp, names)] = pub
+    return pub

@@ -68,49 +68,50 @@ def _pack(obj: Any) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
 
-class NetServiceBridge:
-    """Serves the local service or action ``name`` (``kind``) to the Zenoh group."""
+class QueryBridge:
+    """A Zenoh queryable on ``key`` in front of something local (a Unix socket), serving each
+    query on a thread of its own (forwarding blocks for as long as the request runs).
 
-    def __init__(self, ctx: RunContext, name: str, kind: str, config_path: str | None = None):
-        if kind not in _OPS:
-            raise ValueError(f"bridge kind must be 'service' or 'action', got {kind!r}")
-        self.name, self.kind = name, kind
-        self.path = service_socket(ctx, name)
-        self.key = service_key(name)
-        self._closed = threading.Event()
-        self._queryable = session(config_path).declare_queryable(self.key, self._on_query)
+    The query's payload is untrusted: it must be a msgpack map whose ``op`` is one of ``ops``,
+    else the caller gets an error reply and a rate-limited warning names the key; nothing a
+    query carries can raise out of here. Subclasses implement :meth:`handle` (reply with
+    ``query.reply(self.key, _pack(...))``; raise to reply an error)."""
+
+    what = "query"
+    MAX_CONCURRENT = 32  # queries served at once; more are refused at once (a flood must not spawn threads without end)
+
+    def __init__(self, key: str, ops: tuple[str, ...], config_path: str | None = None, label: str = ""):
+        self.key, self.ops, self.label = key, ops, label or key
+        self._slots = threading.BoundedSemaphore(self.MAX_CONCURRENT)
+        self._queryable = session(config_path).declare_queryable(key, self._on_query)
 
     def _on_query(self, query: Any) -> None:
-        # Off Zenoh's thread at once: forwarding blocks for as long as the request runs.
-        threading.Thread(target=self._serve, args=(query,), name=f"emos-net-srv:{self.name}", daemon=True).start()
+        if not self._slots.acquire(blocking=False):
+            with query:
+                self._refuse(query, RuntimeError(f"busy: {self.MAX_CONCURRENT} queries already being served"))
+            return
+        try:
+            threading.Thread(target=self._serve, args=(query,), name=f"emos-net:{self.label}", daemon=True).start()
+        except BaseException:
+            self._slots.release()
+            raise
 
     def _serve(self, query: Any) -> None:
-        with query:  # the query is finalised (the caller's get ends) when this block is left
-            try:
-                req = self._parse(query)
-                op = req["op"]
-                if op == "call":
-                    with RpcClient(self.path, timeout=float(req.get("timeout", 10.0))) as rpc:
-                        raw = rpc.call("call", request=req["request"])
-                    query.reply(self.key, _pack({"ok": raw}))
-                elif op == "goal":
-                    def feedback(frame: Any) -> None:
-                        if isinstance(frame, dict) and "feedback" in frame:
-                            query.reply(self.key, _pack({"feedback": frame["feedback"]}))
-
-                    with RpcClient(self.path, timeout=float(req.get("timeout", 3600.0))) as rpc:
-                        reply = rpc.call("goal", on_stream=feedback, goal=req["goal"], goal_id=str(req.get("goal_id") or uuid.uuid4().hex))
-                    query.reply(self.key, _pack({"result": reply["result"], "canceled": bool(reply.get("canceled"))}))
-                else:  # cancel
-                    with RpcClient(self.path, timeout=5.0) as rpc:
-                        done = bool(rpc.call("cancel", goal_id=str(req.get("goal_id"))))
-                    query.reply(self.key, _pack({"ok": done}))
-            except Exception as exc:  # noqa: BLE001 - every failure goes back to the caller
-                _warn.warning(f"srv:{self.key}", "%s %s over Zenoh (%s): %s: %s", self.kind, self.name, self.key, type(exc).__name__, exc)
+        try:
+            with query:  # the query is finalised (the caller's get ends) when this block is left
                 try:
-                    query.reply_err(_pack({"error": f"{type(exc).__name__}: {exc}"}))
-                except Exception as reply_exc:  # noqa: BLE001 - the caller may have gone
-                    log.debug("%s %s: error reply failed: %s", self.kind, self.name, reply_exc)
+                    self.handle(query, self._parse(query))
+                except Exception as exc:  # noqa: BLE001 - every failure goes back to the caller
+                    self._refuse(query, exc)
+        finally:
+            self._slots.release()
+
+    def _refuse(self, query: Any, exc: BaseException) -> None:
+        _warn.warning(f"q:{self.key}", "%s %s over Zenoh (%s): %s: %s", self.what, self.label, self.key, type(exc).__name__, exc)
+        try:
+            query.reply_err(_pack({"error": f"{type(exc).__name__}: {exc}"}))
+        except Exception as reply_exc:  # noqa: BLE001 - the caller may have gone
+            log.debug("%s %s: error reply failed: %s", self.what, self.label, reply_exc)
 
     def _parse(self, query: Any) -> dict:
         payload = query.payload
@@ -120,17 +121,61 @@ class NetServiceBridge:
             req = msgpack.unpackb(payload.to_bytes(), raw=False)
         except Exception as exc:  # noqa: BLE001 - foreign bytes
             raise ValueError(f"a payload that is not msgpack: {exc}") from None
-        if not isinstance(req, dict) or req.get("op") not in _OPS[self.kind]:
-            raise ValueError(f"a {self.kind} accepts ops {_OPS[self.kind]}, got {str(req)[:80]}")
+        if not isinstance(req, dict) or req.get("op") not in self.ops:
+            raise ValueError(f"a {self.what} accepts ops {self.ops}, got {str(req)[:80]}")
         return req
 
-    async def close(self) -> None:
+    def handle(self, query: Any, req: dict) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
         queryable, self._queryable = self._queryable, None
         if queryable is not None:
             try:
                 queryable.undeclare()
             except Exception as exc:  # noqa: BLE001 - the session may be gone already
-                log.debug("%s %s: undeclaring: %s", self.kind, self.name, exc)
+                log.debug("%s %s: undeclaring: %s", self.what, self.label, exc)
+
+
+def timeout_of(req: dict, default: float, limit: float) -> float:
+    """The ``timeout`` a remote request asks for, as a number in (0, limit], else ``default``."""
+    value = req.get("timeout", default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= limit:
+        raise ValueError(f"timeout must be a number of seconds in (0, {limit:g}], got {value!r}")
+    return float(value)
+
+
+class NetServiceBridge(QueryBridge):
+    """Serves the local service or action ``name`` (``kind``) to the Zenoh group."""
+
+    def __init__(self, ctx: RunContext, name: str, kind: str, config_path: str | None = None):
+        if kind not in _OPS:
+            raise ValueError(f"bridge kind must be 'service' or 'action', got {kind!r}")
+        self.name, self.kind, self.what = name, kind, kind
+        self.path = service_socket(ctx, name)
+        super().__init__(service_key(name), _OPS[kind], config_path, label=name)
+
+    def handle(self, query: Any, req: dict) -> None:
+        op = req["op"]
+        if op == "call":
+            with RpcClient(self.path, timeout=timeout_of(req, 10.0, 24 * 3600.0)) as rpc:
+                raw = rpc.call("call", request=req["request"])
+            query.reply(self.key, _pack({"ok": raw}))
+        elif op == "goal":
+            def feedback(frame: Any) -> None:
+                if isinstance(frame, dict) and "feedback" in frame:
+                    query.reply(self.key, _pack({"feedback": frame["feedback"]}))
+
+            with RpcClient(self.path, timeout=timeout_of(req, 3600.0, 7 * 24 * 3600.0)) as rpc:
+                reply = rpc.call("goal", on_stream=feedback, goal=req["goal"], goal_id=str(req.get("goal_id") or uuid.uuid4().hex))
+            query.reply(self.key, _pack({"result": reply["result"], "canceled": bool(reply.get("canceled"))}))
+        else:  # cancel
+            with RpcClient(self.path, timeout=5.0) as rpc:
+                done = bool(rpc.call("cancel", goal_id=str(req.get("goal_id"))))
+            query.reply(self.key, _pack({"ok": done}))
+
+    async def close(self) -> None:  # type: ignore[override] - the node closes its servers with await
+        QueryBridge.close(self)
 
 
 def _replies(key: str, request: dict, timeout: float, config_path: str | None) -> Any:

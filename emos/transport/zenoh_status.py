@@ -8,7 +8,9 @@ supervisor forks component processes and a Zenoh session's threads must not be f
 with the supervisor (parent-death signal) and when the run's socket goes away.
 
 The same helper repeats every component's ``<name>/status`` over Zenoh
-(:mod:`emos.transport.zenoh_status_mirror`), so a Monitor on another host can react to it.
+(:mod:`emos.transport.zenoh_status_mirror`), so a Monitor on another host can react to it, and
+serves every component's control (:mod:`emos.transport.zenoh_control`), so that Monitor's
+actions can reach it.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from typing import Any
 
 from emos.transport.context import RunContext
 from emos.transport.zenoh_net import ENV_ZENOH_CONFIG, KEY_ROOT, net_group, session
+from emos.transport.zenoh_control import ControlBridges, control_enabled
 from emos.transport.zenoh_status_mirror import StatusMirror
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -39,6 +42,7 @@ def start_status_bridge(run_dir: Path, run_id: str) -> subprocess.Popen | None:
     """Start the helper if this run uses Zenoh (``$EMOS_ZENOH_CONFIG``); None otherwise."""
     if not os.environ.get(ENV_ZENOH_CONFIG):
         return None
+    control_enabled()  # a bad $EMOS_NET_CONTROL fails here, in the supervisor, not in the helper
     return subprocess.Popen([sys.executable, "-m", "emos.transport.zenoh_status", str(run_dir), run_id, str(os.getpid())], stdin=subprocess.DEVNULL)
 
 
@@ -88,16 +92,23 @@ def _serve(run_dir: Path, run_id: str) -> None:
 
     queryable = session().declare_queryable(key, lambda q: threading.Thread(target=answer, args=(q,), daemon=True).start())
     mirror: StatusMirror | None = None
+    ctx = RunContext(run_id, run_dir, owner=False)
+    controls = ControlBridges(ctx) if control_enabled() else None
     next_lookup = 0.0
     try:
-        mirror = StatusMirror(RunContext(run_id, run_dir, owner=False))
+        mirror = StatusMirror(ctx)
         while sock.exists():
             if time.monotonic() >= next_lookup:
                 # The supervisor builds its tree after starting us: look again now and then.
-                mirror.watch(_worker_names(sock))
+                names = _worker_names(sock)
+                mirror.watch(names)
+                if controls is not None and names:  # an unanswered tree (starting, stopping) keeps what we serve
+                    controls.watch(names)
                 next_lookup = time.monotonic() + NAMES_EVERY_S
             mirror.wait_and_forward(0.2)
     finally:
+        if controls is not None:
+            controls.close()
         if mirror is not None:
             mirror.close()
         queryable.undeclare()

@@ -46,6 +46,18 @@ def test_malformed_frames_are_refused_with_the_reason(mangle, reason):
         read_frame(mangle(frame), LaserScan._emos_fingerprint)
 
 
+def test_a_publishers_names_checked_once_do_not_let_a_differently_split_frame_through():
+    frame = _frame(LaserScan(ranges=np.ones(4, dtype=np.float32)), publisher="lidar")
+    fp = LaserScan._emos_fingerprint
+    assert read_frame(frame, fp)[1] == "lidar" and read_frame(frame, fp)[1] == "lidar"  # the second from the cache
+    fp_len = len(fp.encode())
+    resplit = frame[:12] + struct.pack("<HH", fp_len - 1, len("lidar") + 1) + frame[16:]  # same bytes, other lengths
+    with pytest.raises(BadFrame, match="type fingerprint"):
+        read_frame(resplit, fp)
+    with pytest.raises(BadFrame, match="type fingerprint"):
+        read_frame(frame, Image._emos_fingerprint)  # cached for LaserScan only
+
+
 def test_a_frame_of_another_type_is_refused_naming_both():
     frame = _frame(LaserScan(ranges=np.ones(4, dtype=np.float32)), publisher="lidar")
     with pytest.raises(BadFrame, match=r"'lidar' sends type fingerprint"):
