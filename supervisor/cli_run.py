@@ -27,6 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--zenoh", metavar="CONFIG", default=None, help="Zenoh configuration file (mode, endpoints) for topics across hosts")
     parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
     parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
+    parser.add_argument("--net-control", action="store_true",
+                        help="with --zenoh: let the Monitors of other runs in the group act on this run's components "
+                             "(methods, parameters, start/stop/restart, their services and goals)")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
@@ -72,6 +75,12 @@ def _network_options(args: argparse.Namespace) -> str | None:
         if not os.path.isfile(path):
             return f"--zenoh {args.zenoh!r}: no such Zenoh configuration file"
         os.environ[ENV_ZENOH_CONFIG] = path
+    if args.net_control:
+        if args.zenoh is None and not os.environ.get(ENV_ZENOH_CONFIG):
+            return "--net-control serves this run's components over Zenoh: give --zenoh CONFIG too"
+        from emos.transport.zenoh_control import ENV_NET_CONTROL
+
+        os.environ[ENV_NET_CONTROL] = "on"
     if args.net_services is not None:
         from emos.transport.select import ENV_NET_SERVICES
 

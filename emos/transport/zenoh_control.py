@@ -21,9 +21,10 @@ error. Component names are global in a group (as topic names are), so the run th
 component answers, and only it.
 
 :class:`RemoteControl` is the calling side (the Monitor's, :mod:`emos.supervisor.monitor_net`).
-Who may call: every session that joins the group's Zenoh network, as for ``--net-services``;
-restrict it with Zenoh's own access control and TLS in the configuration file, or turn control
-off for a run with ``$EMOS_NET_CONTROL=off``.
+Served only when the run asks for it (``emos run --net-control``, ``$EMOS_NET_CONTROL=on``), as
+services are only with ``--net-services``: then every session that joins the group's Zenoh
+network may call; restrict who joins with Zenoh's own access control and TLS in the
+configuration file.
 """
 from __future__ import annotations
 
@@ -64,10 +65,10 @@ def control_key(component: str, group: str | None = None) -> str:
 
 def control_enabled() -> bool:
     """Whether this run serves its components' control to the group (``$EMOS_NET_CONTROL``)."""
-    value = os.environ.get(ENV_NET_CONTROL, "on").strip().lower()
+    value = os.environ.get(ENV_NET_CONTROL, "off").strip().lower()
     if value not in ("on", "off", "1", "0", "true", "false", ""):
         raise ValueError(f"${ENV_NET_CONTROL} must be 'on' or 'off', got {value!r}")
-    return value in ("on", "1", "true", "")
+    return value in ("on", "1", "true")
 
 
 def _str(req: dict, field: str, allowed: Iterable[str] | None = None) -> str:

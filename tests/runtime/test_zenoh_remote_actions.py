@@ -104,7 +104,7 @@ def test_a_monitor_calls_a_method_a_service_sets_a_parameter_and_restarts_compon
     a, b = tmp_path / "a", tmp_path / "b"
     a.mkdir()
     b.mkdir()
-    worker = SystemUnderTest(a, WORKER, env={**env_a, "WITH_SWITCH": "1"}).wait_up(components=["worker", "switch"], timeout=60)
+    worker = SystemUnderTest(a, WORKER, env={**env_a, "WITH_SWITCH": "1", "EMOS_NET_CONTROL": "on"}).wait_up(components=["worker", "switch"], timeout=60)
     watcher = None
     try:
         first = worker.pid("worker")
@@ -141,7 +141,7 @@ def test_malformed_control_queries_get_an_error_reply_and_the_helper_keeps_servi
     port_run, port_client = _free_port(), _free_port()
     run_conf = _config(tmp_path / "run.json5", f"127.0.0.1:{port_run}", f"127.0.0.1:{port_client}")
     client_conf = _config(tmp_path / "client.json5", f"127.0.0.1:{port_client}", f"127.0.0.1:{port_run}")
-    system = SystemUnderTest(tmp_path, WORKER, env={"EMOS_NET_GROUP": group, "EMOS_ZENOH_CONFIG": run_conf}).wait_up(components=["worker"], timeout=60)
+    system = SystemUnderTest(tmp_path, WORKER, env={"EMOS_NET_GROUP": group, "EMOS_ZENOH_CONFIG": run_conf, "EMOS_NET_CONTROL": "on"}).wait_up(components=["worker"], timeout=60)
     key = f"emos/{group}/_ctl_/worker"
     try:
         sess = zenoh_net.session(client_conf)
@@ -262,3 +262,25 @@ def test_a_query_bridge_refuses_queries_beyond_its_limit_at_once_and_serves_agai
         release.set()
         bridge.close()
         zenoh_net.close_sessions()
+
+
+def test_a_run_serves_its_components_control_only_when_asked(monkeypatch):
+    import os
+
+    from emos.transport.zenoh_control import control_enabled
+
+    monkeypatch.delenv("EMOS_NET_CONTROL", raising=False)
+    assert control_enabled() is False  # opt-in, as --net-services
+    for value, want in (("on", True), ("1", True), ("off", False), ("0", False)):
+        monkeypatch.setenv("EMOS_NET_CONTROL", value)
+        assert control_enabled() is want
+    monkeypatch.setenv("EMOS_NET_CONTROL", "maybe")
+    with pytest.raises(ValueError, match="EMOS_NET_CONTROL"):
+        control_enabled()
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("EMOS_ZENOH_CONFIG", "EMOS_NET_CONTROL")}
+    out = subprocess.run([sys.executable, "-m", "emos", "run", "--no-log", "--net-control", "sensor_demo"],
+                         capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 2 and "--net-control serves this run's components over Zenoh: give --zenoh" in out.stderr
