@@ -9,7 +9,8 @@
 
 Lockstep. A Simulator in ``clock_mode="lockstep"`` publishes ``/clock`` and then waits until
 every component it lists in ``lockstep_consumers`` has *answered* that tick on
-``/clock_ack/<component>``. A node with ``use_sim_time`` answers after it has handled the tick:
+``/clock_ack/<component>``. A node with ``use_sim_time`` answers (a ``LockstepAck``: the tick, and the CPU time its steps
+took since its previous answer) after it has handled the tick:
 a Timed component runs its step on simulated time (every ``1/loop_rate`` simulated seconds)
 and then answers; other run types answer once the inputs that arrived with the tick are
 handled. Everything the simulator published for a tick is on its rings before the ``/clock``
@@ -117,14 +118,15 @@ class SimTimeDriver:
     component's config has ``use_sim_time``)."""
 
     def __init__(self, ctx: "RunContext", name: str, waker: "Waker", period: Callable[[], float]) -> None:
-        from emos.msgs import Clock
+        from emos.msgs import Clock, LockstepAck
         from emos.transport.pubsub import Publisher, Subscriber
 
         self.name = name
         self._period = period
-        self._clock_cls = Clock
+        self._ack_cls = LockstepAck
         self.sub = Subscriber(ctx, CLOCK_TOPIC, Clock, waker=waker, queue_size=64)
-        self.pub = Publisher(ctx, ack_topic(name), Clock, publisher_id=name, depth=8)
+        self.pub = Publisher(ctx, ack_topic(name), LockstepAck, publisher_id=name, depth=8)
+        self.compute_s = 0.0  # thread CPU seconds of the node's steps since its last answer (Node._run_step adds)
         self.time: float | None = None
         self._published: deque[tuple[int, float]] = deque(maxlen=512)  # (publish stamp ns, simulated time) of recent ticks
         self._next_step: float | None = None
@@ -172,7 +174,8 @@ class SimTimeDriver:
                     self._next_step += period
         else:
             self._next_step = None
-        self.pub.publish(tick)
+        self.pub.publish(self._ack_cls(clock=tick.clock, compute=self.compute_s))
+        self.compute_s = 0.0
 
     def close(self) -> None:
         self.sub.close()

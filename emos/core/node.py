@@ -316,6 +316,8 @@ class Node:
     # ============================================================================ steps and data
     def _run_step(self, **kwargs: Any) -> None:
         comp = self.component
+        sim_time = self._sim_time
+        cpu0 = time.thread_time() if sim_time is not None else 0.0
         try:
             if self._step_kwargs:
                 comp._execution_step(**kwargs)
@@ -326,6 +328,8 @@ class Node:
             # (or the supervisor, if it never recovers) decide what happens next.
             log_exception_limited(self.log, self._step_errors, exc, f"[{self.name}] execution step")
             comp.health_status.set_fail_component(component_names=[self.name], message=f"{type(exc).__name__}: {exc}")
+        if sim_time is not None:  # what a simulator that charges compute time delays our outputs by
+            sim_time.compute_s += time.thread_time() - cpu0
         self.steps += 1
         if comp._status_every_step:
             self.publish_status()

@@ -22,7 +22,7 @@ from emos.msgs.sensor import (
 from emos.msgs.status import ComponentStatus
 from emos.msgs.srv import SetBoolRequest, SetBoolResponse, TriggerRequest, TriggerResponse
 from emos.msgs.std import (
-    Bool, Clock, Duration, Empty, Float32, Float32MultiArray, Float64, Float64MultiArray, Header, Int32, Int32MultiArray,
+    Bool, Clock, Duration, LockstepAck, Empty, Float32, Float32MultiArray, Float64, Float64MultiArray, Header, Int32, Int32MultiArray,
     Int64, MultiArrayDimension, MultiArrayLayout, String, Time, UInt8, UInt8MultiArray,
 )
 

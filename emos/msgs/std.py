@@ -128,3 +128,13 @@ class Clock(Message):
     """Simulated time, published on ``/clock`` by the Simulator (see :mod:`emos.core.clock`)."""
 
     clock: Time = F.message(Time)
+
+
+@message_type("sugar")
+class LockstepAck(Message):
+    """A lockstep consumer's answer to one ``/clock`` tick (on ``/clock_ack/<component>``, see
+    :mod:`emos.core.clock`): the tick it handled, and the CPU seconds its steps took since its
+    previous answer, which a Simulator that charges compute time turns into command latency."""
+
+    clock: Time = F.message(Time)
+    compute: float = F.float64()

@@ -47,13 +47,14 @@ def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: floa
                 _stop(proc)
                 if keep_log is not None:
                     keep_log.write_bytes(log_path.read_bytes())
-    reached, collided, t, distance, reason = outcome
+    reached, collided, t, distance, reason, misses = outcome
     result = score_run(entry, reached, collided, t, opts.rules)
-    return attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason)
+    return attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason,
+                        deadline_misses=misses)
 
 
 def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: StackOptions,
-             wall_timeout: float) -> tuple[bool, bool, float, float, str]:
+             wall_timeout: float) -> tuple[bool, bool, float, float, str, int]:
     from emos import msgs as M
     from emos.core.reconfig import ComponentServices
     from emos.core.rpc import RpcClient
@@ -105,13 +106,15 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
                 monitor.update(last_t, last_xy or BARN_START[:2], True)
             outcome = monitor.outcome
             if outcome is not None:
-                if outcome.reached and sim.execute_method("sim_status").get("collided"):
+                final = sim.execute_method("sim_status")
+                misses = int(final.get("compute", {}).get("deadline_misses", 0))  # with the compute charged
+                if outcome.reached and final.get("collided"):
                     # A touch between the last poll and the goal still fails the trial.
-                    return False, True, outcome.time_s, distance, "collision (before reaching the goal)"
+                    return False, True, outcome.time_s, distance, "collision (before reaching the goal)", misses
                 reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else
                                                          f"collision near ({last_xy[0]:.2f}, {last_xy[1]:.2f})"
                                                          if last_xy else "collision")
-                return outcome.reached, outcome.collided, outcome.time_s, distance, reason
+                return outcome.reached, outcome.collided, outcome.time_s, distance, reason, misses
             if proc.poll() is not None:
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
             if now > deadline:

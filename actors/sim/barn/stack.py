@@ -116,7 +116,9 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     sim = Simulator(SIM_NAME, config=SimulatorConfig(
         world=f"barn:{opts.world}", barn_source=opts.barn_source, robot=rules.robot_name, spawn=BARN_START,
         frames=frames, physics_rate=1.0 / rules.physics_dt, clock_rate=opts.clock_rate, clock_mode="lockstep",
-        lockstep_consumers=list(NAV_COMPONENTS), seed=opts.seed, **sensors))
+        lockstep_consumers=list(NAV_COMPONENTS), seed=opts.seed,
+        # The stack's compute time charged as in-process: its commands act that much later.
+        compute_deadline=1.0 / rules.control_rate_hz if rules.charges_compute else None, **sensors))
     # Nothing that carries the true pose reaches the stack: no /tf (its world -> odom link is
     # computed from the true pose), no map; ground truth on a topic only the referee reads.
     sim.outputs(tf=None, ground_truth=Topic(name=GROUND_TRUTH_TOPIC, msg_type="Odometry"))

@@ -208,6 +208,11 @@ class SimulatorConfig(BaseComponentConfig):
     real_time_factor: float = field(default=1.0, validator=_positive)
     lockstep_consumers: list[str] = field(factory=list, converter=_consumers)
     """Components (with ``use_sim_time``) that must answer every /clock tick in lockstep."""
+    compute_deadline: float | None = field(default=None, validator=attrs.validators.optional(_positive))
+    """Lockstep only: charge the consumers' compute time. A command that arrives with a tick acts
+    only after the CPU time the consumers' steps took for that tick (summed: the stack on one
+    core), as on a robot whose computer takes that long; a tick whose charge exceeds this many
+    seconds (the control period) counts as a deadline miss. None: commands act at once."""
     command_timeout: float = field(default=0.5, validator=_positive)
     """Simulated seconds without a new command after which the robot stops (a base's watchdog)."""
     command_array_step: float = field(default=0.1, validator=_positive)
@@ -248,6 +253,9 @@ class SimulatorConfig(BaseComponentConfig):
         self.check_rates()
 
     def check_rates(self) -> None:
+        if self.compute_deadline is not None and self.clock_mode is not ClockMode.LOCKSTEP:
+            raise ValueError("SimulatorConfig.compute_deadline charges the consumers' compute time in lockstep; "
+                             f"clock_mode is {self.clock_mode.value!r}")
         ticks = self.physics_rate / self.clock_rate
         if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-6:
             raise ValueError(f"SimulatorConfig: physics_rate ({self.physics_rate} Hz) must be a whole multiple of "

@@ -24,6 +24,7 @@ from ..sensors.odometry import Odometry
 from ..sensors.wheel_imu import WheelImuOdometry
 from ..msgs import header
 from .commands import CommandFollower, joint_targets
+from .compute_charge import ComputeCharge
 from .config import SimulatorConfig
 from .publishing import CameraMessages, occupancy_msg, tf_tree
 from .worlds import SimSetup
@@ -72,8 +73,10 @@ class PhysicsLoop(threading.Thread):
             self._joint_sub = Subscriber(ctx, joint_topic.name, joint_topic.msg_type, waker=self._waker, queue_size=16)
         if self.lockstep:
             for consumer in cfg.lockstep_consumers:
-                self._ack_subs[consumer] = Subscriber(ctx, ack_topic(consumer), M.Clock, waker=self._waker, queue_size=16)
+                self._ack_subs[consumer] = Subscriber(ctx, ack_topic(consumer), M.LockstepAck, waker=self._waker, queue_size=16)
                 self._acked[consumer] = -1.0
+        self.charge = ComputeCharge(cfg.compute_deadline, setup.world.clock.dt) if self.lockstep and cfg.compute_deadline else None
+        self._delay_ticks = 0  # physics ticks the commands of the current clock tick wait (compute charge)
 
     # -- control -------------------------------------------------------------------------------
     def stop(self, timeout: float = 10.0) -> None:
@@ -117,6 +120,8 @@ class PhysicsLoop(threading.Thread):
         while not self._stop_event.is_set():
             if self.lockstep and not self._wait_for_answers():
                 return
+            if self.charge is not None:
+                self._delay_ticks = self.charge.close_tick()
             if "map" in self.outputs and self.map_grid is not None and self.sim_time >= map_due - 1e-9:
                 self._send("map", occupancy_msg(self.map_grid, self.sim_time, cfg.frames.world))
                 map_due += MAP_PERIOD_S
@@ -184,12 +189,14 @@ class PhysicsLoop(threading.Thread):
 
     def _take_commands(self) -> None:
         if self._command_sub is not None:
+            charge, ticks = self.charge, self.setup.world.clock.ticks
             for msg in self._command_sub.take():
-                try:
-                    self.follower.receive(msg, self.sim_time)
-                except (ValueError, TypeError) as exc:
-                    self.follower.stop()
-                    self._reject(self._command_sub.topic, exc)
+                if charge is not None:
+                    charge.hold(msg, ticks + self._delay_ticks)
+                else:
+                    self._receive(msg)
+            if charge is not None and (msg := charge.due(ticks)) is not None:
+                self._receive(msg)
         if self._joint_sub is not None:
             for msg in self._joint_sub.take():
                 try:
@@ -198,6 +205,13 @@ class PhysicsLoop(threading.Thread):
                     self.follower.received += 1
                 except (ValueError, TypeError) as exc:  # the arm keeps its previous targets
                     self._reject(self._joint_sub.topic, exc)
+
+    def _receive(self, msg: Any) -> None:
+        try:
+            self.follower.receive(msg, self.sim_time)
+        except (ValueError, TypeError) as exc:
+            self.follower.stop()
+            self._reject(self._command_sub.topic, exc)
 
     def _reject(self, topic: str, exc: Exception) -> None:
         self._bad_commands += 1
@@ -213,6 +227,8 @@ class PhysicsLoop(threading.Thread):
             for name, sub in self._ack_subs.items():
                 for msg in sub.take():
                     self._acked[name] = max(self._acked[name], msg.clock.to_sec())
+                    if self.charge is not None:
+                        self.charge.report(name, msg.compute)
             pending = [n for n, at in self._acked.items() if at < t - 1e-9]
             if not pending:
                 self.waited_s += time.monotonic() - started

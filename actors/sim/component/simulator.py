@@ -208,4 +208,6 @@ class Simulator(KeyedComponent):
         if physics is not None:
             out.update(clock_ticks=physics.clock_ticks, published=dict(physics.published),
                        commands=physics.follower.received, lockstep_wait_s=physics.waited_s)
+            if physics.charge is not None:  # compute_deadline: what the stack's compute time cost
+                out["compute"] = physics.charge.stats()
         return out
