@@ -242,6 +242,10 @@ def _trial_log(args: argparse.Namespace, rules: BarnRules) -> Any:
     config = {"controller": args.controller, "rules": attrs.asdict(rules), "in_process": bool(args.in_process),
               "dynabarn": bool(args.dynabarn), "seed_base": args.seed,
               "worlds": str(source) if source is not None else "packaged"}
+    if not args.in_process and rules.charges_compute:
+        # Through the processes the compute charge is the Simulator's (compute_deadline); files of
+        # runs from before it existed (no charge there) must not be resumed as if they had it.
+        config["process_compute"] = "lockstep-charged"
     log = TrialLog(args.results, config)
     if log.trials and not args.json:
         print(f"resuming: {len(log.trials)} trial(s) already in {args.results}")
