@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:
@@ -125,6 +126,7 @@ class SimTimeDriver:
         self.sub = Subscriber(ctx, CLOCK_TOPIC, Clock, waker=waker, queue_size=64)
         self.pub = Publisher(ctx, ack_topic(name), Clock, publisher_id=name, depth=8)
         self.time: float | None = None
+        self._published: deque[tuple[int, float]] = deque(maxlen=512)  # (publish stamp ns, simulated time) of recent ticks
         self._next_step: float | None = None
         self.ticks = 0
 
@@ -134,11 +136,23 @@ class SimTimeDriver:
     def take(self) -> Any | None:
         """The newest new tick (a ``Clock``), or None. Taken *before* the node's inputs, so
         every message published before that tick is visible when the inputs are read."""
-        items = self.sub.take()
+        items = self.sub.take_with_info()
         if not items:
             return None
+        for msg, stamp_ns, _ in items:
+            self._published.append((stamp_ns, msg.clock.to_sec()))
         self.ticks += len(items)
-        return items[-1]
+        self.time = items[-1][0].clock.to_sec()  # the node is at this tick while it handles its inputs
+        return items[-1][0]
+
+    def time_at(self, stamp_ns: int) -> float | None:
+        """Simulated time of the newest tick published before wall time ``stamp_ns``: a message's
+        age on the simulated clock, the same however late this node woke to read it. Older than
+        every tick remembered: the oldest one's time (its age is at least that much)."""
+        for published_ns, t in reversed(self._published):
+            if published_ns <= stamp_ns:
+                return t
+        return self._published[0][1] if self._published else None
 
     def handle(self, tick: Any, run_step: Callable[[], None] | None) -> None:
         """Run the Timed step if one is due at ``tick`` (``run_step`` None: not a Timed

@@ -41,7 +41,7 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 
 
 class _Input:
-    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "received_sim", "decode")
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode", "sim_at")
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
@@ -49,8 +49,8 @@ class _Input:
         self.raw: bytearray | None = None
         self.stamp_ns = 0
         self.received_ns = 0
-        self.received_sim: float | None = None  # use_sim_time: the tick it came with (None: after the newest)
         self.decoded: Any = None
+        self.sim_at: float | None = None  # simulated time it was taken at (a node on sim time)
 
 
 def wake_spin_setting() -> float:
@@ -352,6 +352,7 @@ class Node:
         active = self.state == L.LifecycleState.ACTIVE
         triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
         tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
+        sim_clock = self._sim_time
         # Every input's latest message first: a step must see the other inputs that arrived in
         # the same wake-up. Then one step per triggering message, all trigger topics merged in
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
@@ -364,16 +365,9 @@ class Node:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
-            inp.received_sim = None  # dated by the tick it came with, or else the next one
+            inp.sim_at = sim_clock.time_at(stamp) if sim_clock is not None else None
             if active and inp.topic in triggers:
                 backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
-        if tick is not None:
-            # A simulator publishes a tick's readings before the tick itself, so a wake-up may
-            # see them first: they belong to the tick that follows, whenever it is read.
-            t = tick.clock.to_sec()
-            for waiting in self._inputs.values():
-                if waiting.raw is not None and waiting.received_sim is None:
-                    waiting.received_sim = t
         if len(triggers) > 1 and backlog:
             # A message stamped while the rings were being read may have an earlier-stamped
             # sibling on a ring read before it was written: it waits for the next pass (at once).
@@ -415,30 +409,27 @@ class Node:
                 return None
             inp.stamp_ns, inp.raw, _ = item
             inp.received_ns = time.time_ns()
-            inp.received_sim = None
+            inp.sim_at = self._sim_time.time_at(inp.stamp_ns) if self._sim_time is not None else None
         if inp.decoded is None:
             inp.decoded = inp.decode(inp.raw)
             if inp.decoded is None:
                 inp.raw = None  # a malformed network payload, dropped: as if it had not come
         return inp.decoded
 
-    def _sim_now(self) -> float | None:
-        """Simulated time of the newest tick handled (None: not on simulated time, or no tick yet)."""
-        return self._sim_time.time if self._sim_time is not None else None
-
     def age(self, topic: Topic | str) -> float | None:
-        """Seconds since the latest message on ``topic`` arrived: on the node's clock, so a
-        ``use_sim_time`` node measures simulated seconds (a simulator slowed down by a loaded
-        machine must not make every input look stale), else wall seconds."""
+        """Seconds since the last message on ``topic`` (None: none yet). A node on simulated time
+        counts simulated seconds: under lockstep a loaded machine slows the wall clock, not the
+        robot's, and a command one control period old must not look stale (emos.core.clock)."""
         inp = self._input(topic)
-        if inp.raw is None:
-            return None
-        sim_now = self._sim_now()
-        if sim_now is None:
-            return (time.time_ns() - inp.stamp_ns) / 1e9
-        if inp.received_sim is None:
-            return 0.0  # came after the newest tick
-        return max(0.0, sim_now - inp.received_sim)  # 0 for the tick being handled (or time that went back)
+        return None if inp.raw is None else self._age_s(inp)
+
+    def _age_s(self, inp: _Input) -> float:
+        if inp.sim_at is not None and self._sim_time is not None and self._sim_time.time is not None:
+            age = self._sim_time.time - inp.sim_at
+            if age >= 0.0:
+                return age
+            # Simulated time went back (the simulator restarted): fall back to the wall clock.
+        return (time.time_ns() - inp.stamp_ns) / 1e9
 
     def publisher_pids(self, topic: Topic | str) -> list[int]:
         """Process ids of the publishers seen on ``topic`` (0 where a ring records none)."""
@@ -459,7 +450,7 @@ class Node:
         for name, inp in self._inputs.items():
             if inp.raw is None:
                 stale.append(name)
-            elif inp.topic.data_timeout and (self.age(name) or 0.0) > inp.topic.data_timeout:
+            elif inp.topic.data_timeout and self._age_s(inp) > inp.topic.data_timeout:
                 stale.append(name)
         return stale
 
