@@ -68,6 +68,12 @@ def sim_time() -> float | None:
     return follower.time() if follower is not None else None
 
 
+def run_clock(ctx: "RunContext") -> "_PassiveFollower":
+    """A reader of the simulated clock of run ``ctx`` for a process that is no node (the
+    supervisor): ``.time()`` is the newest ``/clock`` time, None while no simulator publishes it."""
+    return _PassiveFollower(ctx)
+
+
 def _passive_follower() -> "_PassiveFollower | None":
     global _follower
     if _follower is None:

@@ -20,6 +20,7 @@ import numpy as np
 from attrs import define, field
 
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.geometry import TwistStamped
@@ -242,7 +243,9 @@ class DriveManager(NavComponent):
             return
         pose = self._pose()
         if pose is not None:
-            self._blind_spot.update(pose, scan, time.monotonic())
+            # On the node's clock: with use_sim_time the memory lasts blind_spot_memory_time
+            # simulated seconds, not the few a loaded machine lets the simulator run in 10 wall s.
+            self._blind_spot.update(pose, scan, clock.now())
             self._remembered_scan = scan_msg
 
     def _pose(self) -> np.ndarray | None:
