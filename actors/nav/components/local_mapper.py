@@ -18,7 +18,7 @@ from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
 from ..mapping import EvidenceConfig, MemoryMapper
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, grid_msg, pose_of, pose_stamped, scan_of
+from .convert import BadInput, grid_msg, localized_odometry, pose_of, pose_stamped, scan_of
 
 __all__ = ["LocalMapper", "LocalMapperConfig"]
 
@@ -111,6 +111,11 @@ class LocalMapper(NavComponent):
         return LocalMapperConfig
 
     def custom_on_configure(self) -> None:
+        out, loc = self.get_out_topic("localized_pose"), self.get_in_topic("location")
+        if out is not None and out.msg_type is Odometry and (loc is None or loc.msg_type is not Odometry):
+            raise ValueError(f"{self.component_name}: localized_pose {out.name} is an Odometry (the corrected pose with the "
+                             f"measured twist), so the location input must be an Odometry topic too; got "
+                             f"{'none' if loc is None else f'{loc.name} ({loc.msg_type.__name__})'}")
         if self.run_type == ComponentRunType.EVENT and not self._trigger:
             self._trigger = [self.get_in_topic("sensor_data")]
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
@@ -179,14 +184,9 @@ class LocalMapper(NavComponent):
         if out is not None:
             msg = pose_stamped(corrected[0], corrected[1], corrected[2], world)
             if out.msg_type is Odometry:
-                # The corrected pose with the measured body twist of the odometry it corrects
-                # (a map correction does not change body-frame velocities): a controller's
-                # response model needs what the base does, not what it was told.
-                odom = Odometry(header=msg.header, child_frame_id=self.config.frames.robot_base)
-                odom.pose.pose = msg.pose
-                if isinstance(location, Odometry):
-                    odom.twist.twist = location.twist.twist
-                msg = odom
+                # With the measured twist of the odometry it corrects: a controller's response
+                # model needs what the base does, not what it was told.
+                msg = localized_odometry(msg, location, self.config.frames.robot_base)
             self.publish(out, msg)
         now = time.monotonic()
         out = self.get_out_topic("mapping")
