@@ -216,7 +216,7 @@ launcher.bringup()
             sent += [(m.linear.x, m.angular.z) for m in cmd.take()]
             time.sleep(0.01)
         first_back = next(i for i, (vx, _) in enumerate(sent) if vx < -1e-3)
-        assert first_back >= 1 and sent[0] == (0.0, 0.0), sent[:5]  # stopped before backing
+        assert first_back >= 1 and sent[first_back - 1] == (0.0, 0.0), sent[:first_back + 1]  # stopped before backing
         assert all(abs(w) < 1e-9 for vx, w in sent[first_back:] if vx < -1e-3)  # straight back, no turn
         x = wait_until(lambda: next(iter(odom.take()[-1:]), None), 5).pose.pose.position
         assert math.hypot(x.x - 2.0, x.y - 2.0) > 0.3  # it did back out
