@@ -30,6 +30,8 @@ from emos.msgs.status import ComponentStatus
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 
+from .sim_pacing import SimPacer
+
 if TYPE_CHECKING:
     from emos.supervisor.orchestration import Orchestration
     from emos.supervisor.system import System
@@ -71,6 +73,9 @@ class FallbackDriver(ActionRuntime):
             self.trackers[name] = FallbackTracker(handlers, own.get("on_giveup"), Fallback(A.restart(component=comp), None, f"{name} default"),
                                                   rate, reset_after=orchestration.reset_after)
             self.subs[name] = Subscriber(self.ctx, comp.status_topic.name, ComponentStatus, waker=self.waker, queue_size=4)
+        # Ladders of components on simulated time wait for that clock too (emos.supervisor.sim_pacing).
+        self._sim_paced = {c.component_name for c in system.components if getattr(c.config, "use_sim_time", False)}
+        self._pacer = SimPacer(self.ctx) if self._sim_paced else None
         self._poll = asyncio.ensure_future(self._poll_loop())
         self._closed = False
 
@@ -104,6 +109,8 @@ class FallbackDriver(ActionRuntime):
         while True:  # a lost wake-up (full FIFO) must not stall a ladder; healthy timers need ticks too
             await asyncio.sleep(0.1)
             self._on_wake()
+            if self._pacer is not None:
+                self._pacer.now()  # subscribed to /clock before a ladder needs it (a new reader sees only later ticks)
 
     async def _ladder(self, name: str) -> None:
         tracker = self.trackers[name]
@@ -121,9 +128,10 @@ class FallbackDriver(ActionRuntime):
                     return
                 action = decision["action"]
                 of = decision["of"]
+                sim_at = self._pacer.now() if self._pacer is not None and name in self._sim_paced else None
                 self._record(name, "fallback", handler=decision["handler"], action=action.describe(), step=decision["step"] + 1,
                              steps=decision["steps"], attempt=decision["try"], of=of if of is not None else "unlimited",
-                             level=tracker.level.name)
+                             level=tracker.level.name, **({} if sim_at is None else {"sim_time": round(sim_at, 2)}))
                 # Judge an action on this component by the status it publishes afterwards (a
                 # component action publishes one when it returns; a restarted one at start-up),
                 # not by the failure that was already on the stream.
@@ -143,6 +151,11 @@ class FallbackDriver(ActionRuntime):
                 finally:
                     self._fresh.pop(name, None)
                 await asyncio.sleep(tracker.period)
+                if sim_at is not None and self._pacer is not None:
+                    # A step on simulated time gets its period on that clock as well: a loaded
+                    # machine slows the simulator, and the next step must not come before this
+                    # one has had its simulated second to act (a back-out driven, a re-plan followed).
+                    await self._pacer.wait_until(sim_at, tracker.period, f"[{name}] fallback ladder")
         finally:
             self._tasks.pop(name, None)
 

@@ -105,6 +105,15 @@ def world_key(entry: BarnWorld | DynaWorld) -> int | str:
     return entry.idx if isinstance(entry, BarnWorld) else f"dynabarn:{entry.idx}"
 
 
+def start_and_goal(entry: BarnWorld | DynaWorld) -> tuple[tuple[float, float, float], tuple[float, float]]:
+    """Where a trial of ``entry`` starts (x, y, yaw) and where its goal is (x, y)."""
+    if isinstance(entry, BarnWorld):
+        return BARN_START, BARN_GOAL
+    if isinstance(entry, DynaWorld):
+        return entry.start, entry.goal
+    raise TypeError(f"expected a BarnWorld or a DynaWorld, got {type(entry).__name__}")
+
+
 def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = TrialSpec()) -> TrialWorld:
     """The world of ``entry`` with the spec's robot and sensors, seeded with ``seed``."""
     clock = SimClock(dt=spec.physics_dt, mode=ClockMode.LOCKSTEP)
@@ -112,14 +121,13 @@ def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = Trial
         from .builders import from_barn
 
         world = from_barn(entry, clock=clock, seed=seed)
-        start, goal = BARN_START, BARN_GOAL
     elif isinstance(entry, DynaWorld):
         from .dynabarn import from_dynabarn
 
         world = from_dynabarn(entry, clock=clock, seed=seed)
-        start, goal = entry.start, entry.goal
     else:
         raise TypeError(f"build_trial needs a BarnWorld or a DynaWorld, got {type(entry).__name__}")
+    start, goal = start_and_goal(entry)
     try:
         slip = spec.slip if spec.noisy_odometry else 0.0
         robot = world.add_robot(spec.robot_name, start, slip=slip)

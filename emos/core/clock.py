@@ -69,6 +69,12 @@ def sim_time() -> float | None:
     return follower.time() if follower is not None else None
 
 
+def run_clock(ctx: "RunContext") -> "_PassiveFollower":
+    """A reader of the simulated clock of run ``ctx`` for a process that is no node (the
+    supervisor): ``.time()`` is the newest ``/clock`` time, None while no simulator publishes it."""
+    return _PassiveFollower(ctx)
+
+
 def _passive_follower() -> "_PassiveFollower | None":
     global _follower
     if _follower is None:
@@ -113,6 +119,49 @@ class _PassiveFollower:
             return self._time
 
 
+class SimTimer:
+    """A periodic callback on simulated time: the timers a ``use_sim_time`` component creates
+    (``create_timer``) fire on the ticks of ``/clock``, as ROS 2 timers follow a node's clock.
+    A wall-clock timer would not: under lockstep, a DriveManager whose 20 Hz watchdog plays a
+    back-out step by step drove it for 1/20 *wall* s per step, 5x too short on a machine that
+    slowed the simulator 5x and 3x too long (beyond the distance checked against the scan) on
+    an idle one that runs it 3x faster than real time. Missed periods are skipped, not queued.
+    The first tick after creation arms it; a callback's exception is logged (rate-limited) and
+    the tick is still answered."""
+
+    def __init__(self, driver: "SimTimeDriver", period: float, callback: Callable[[], Any], name: str = "") -> None:
+        if not period > 0:
+            raise ValueError(f"timer period must be > 0 s, got {period}")
+        from emos.core.ratelimit import RepeatLimiter
+
+        self.period, self.callback, self.name = period, callback, name
+        self._driver: "SimTimeDriver | None" = driver
+        self._next: float | None = None
+        self._errors = RepeatLimiter()
+        driver.timers.append(self)
+
+    def fire_due(self, t: float) -> None:
+        if self._next is None or t < self._next - 2 * self.period:
+            self._next = t + self.period  # armed now (or time went back: the simulator restarted)
+            return
+        if t < self._next - 1e-9:
+            return
+        try:
+            self.callback()
+        except Exception as exc:
+            from emos.core.ratelimit import log_exception_limited
+
+            log_exception_limited(log, self._errors, exc, f"[{self.name}] timer")
+        while self._next <= t + 1e-9:
+            self._next += self.period
+
+    def cancel(self) -> None:
+        if self._driver is not None:
+            if self in self._driver.timers:
+                self._driver.timers.remove(self)
+            self._driver = None
+
+
 class SimTimeDriver:
     """Drives one node on simulated time and answers its ticks (used by ``Node`` when the
     component's config has ``use_sim_time``)."""
@@ -128,6 +177,7 @@ class SimTimeDriver:
         self.pub = Publisher(ctx, ack_topic(name), LockstepAck, publisher_id=name, depth=8)
         self.compute_s = 0.0  # thread CPU seconds of the node's steps since its last answer (Node._run_step adds)
         self.time: float | None = None
+        self.timers: list[SimTimer] = []  # the component's create_timer timers, on simulated time
         self._published: deque[tuple[int, float]] = deque(maxlen=512)  # (publish stamp ns, simulated time) of recent ticks
         self._next_step: float | None = None
         self.ticks = 0
@@ -174,6 +224,11 @@ class SimTimeDriver:
                     self._next_step += period
         else:
             self._next_step = None
+        if self.timers:
+            cpu0 = time.thread_time()
+            for timer in list(self.timers):  # before the answer: the simulator sees what they publish
+                timer.fire_due(t)
+            self.compute_s += time.thread_time() - cpu0  # a timer's work is the stack's compute too
         self.pub.publish(self._ack_cls(clock=tick.clock, compute=self.compute_s))
         self.compute_s = 0.0
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from emos.config.base import ComponentRunType
-from emos.core.clock import SimTimeDriver
+from emos.core.clock import SimTimeDriver, SimTimer
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
 from emos.core.ratelimit import RepeatLimiter, log_exception_limited
@@ -115,7 +115,7 @@ class Node:
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
         self._main_timer: _Timer | None = None
-        self._timers: list["_Timer"] = []
+        self._timers: list["_Timer | SimTimer"] = []
         self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
         self._extra_servers: list[tuple[str, tuple]] = []
         self._control: RpcServer | None = None
@@ -494,10 +494,15 @@ class Node:
             self.publish_status()
 
     # ============================================================================ timers and servers
-    def create_timer(self, period: float, callback: Callable[[], Any]) -> "_Timer":
+    def create_timer(self, period: float, callback: Callable[[], Any]) -> "_Timer | SimTimer":
+        """A periodic callback; on simulated time (``SimTimer``) in a ``use_sim_time`` node."""
         if self.loop is None:
             raise RuntimeError(f"component {self.name!r}: timers can only be created while running")
-        timer = _Timer(self.loop, period, callback)
+        timer: _Timer | SimTimer
+        if self._sim_time is not None:
+            timer = SimTimer(self._sim_time, period, callback, self.name)
+        else:
+            timer = _Timer(self.loop, period, callback)
         self._timers.append(timer)
         return timer
 

@@ -169,42 +169,88 @@ def test_predicted_movers_validate_shapes():
         PredictedMovers([[0.0, 0.0]], [[0.0, 0.0], [1.0, 1.0]], [0.2])
 
 
-def _crossing_run(movers):
+def _crossing_run(movers, on_local_map=False):
     """Closed loop at 10 Hz: ArcSampler on a 6 m straight path; a 0.25 m cylinder crosses it
-    at x = 2.2 m at 0.55 m/s, reaching the path as the robot (0.5 m/s) would. Returns
-    (reached, smallest centre distance - radii, statuses)."""
-    from emos.actors.nav.controllers import ControlStatus, make_controller
+    at x = 2.2 m at 0.55 m/s, reaching the path as the robot (0.5 m/s) would. ``on_local_map``:
+    obstacles from a rolling local grid (as the BARN stack's Controller gets them), the scan
+    given apart for tracking. Returns (reached, smallest centre distance - radii, statuses,
+    steps the controller said it was waiting for a mover)."""
+    from emos.actors.nav.controllers import ControlStatus, OccupancyGrid2D, make_controller
     from emos.actors.nav.controllers.arc_sampler import ArcSamplerConfig
     from emos.actors.nav.kinematics import integrate
+    from emos.actors.nav.local_map import LocalMapper, MapConfig
     from tests.nav.sim2d import World, make_robot, straight_path
 
     robot = make_robot("DIFFERENTIAL_DRIVE")
     ctrl = make_controller("ArcSampler", robot, ArcSamplerConfig(movers=movers))
     ctrl.set_path(straight_path(6.0))
+    grid = LocalMapper(MapConfig(width=6.0, height=6.0, resolution=0.05), keep_memory=True)
     pose, vel = np.zeros(3), np.zeros(3)
-    gap, statuses = math.inf, []
+    gap, statuses, waited = math.inf, [], 0
     for step in range(150):
         t = 0.1 * step
         crosser = (2.2, -2.6 + 0.55 * t, 0.25)
         gap = min(gap, math.hypot(pose[0] - crosser[0], pose[1] - crosser[1]) - 0.25 - robot.radius)
-        res = ctrl.compute(pose, vel, World(circles=[crosser], range_max=8.0).scan(pose))
+        scan = World(circles=[crosser], range_max=8.0).scan(pose)
+        if on_local_map:
+            local = OccupancyGrid2D(grid.update(scan, pose).copy(), 0.05, grid.origin)
+            res = ctrl.compute(pose, vel, local, scan=scan if movers is not None else None)
+        else:
+            res = ctrl.compute(pose, vel, scan)
+        waited += ctrl.waiting
         statuses.append(res.status)
         if res.status is ControlStatus.GOAL_REACHED:
-            return True, gap, statuses
+            return True, gap, statuses, waited
         vel = np.asarray(res.command, dtype=float).reshape(-1, 3)[0]
         pose = integrate(pose, vel, 0.1)
-    return False, gap, statuses
+    return False, gap, statuses, waited
 
 
-def test_arc_sampler_with_movers_waits_for_a_crosser_that_the_static_check_runs_into():
+@pytest.mark.parametrize("on_local_map", [False, True])
+def test_arc_sampler_with_movers_waits_for_a_crosser_that_the_static_check_runs_into(on_local_map):
     from emos.actors.nav.controllers import ControlStatus
     from emos.actors.nav.controllers.movers import MoverConfig
 
-    reached, gap, statuses = _crossing_run(MoverConfig())
+    reached, gap, statuses, waited = _crossing_run(MoverConfig(), on_local_map)
     assert reached and gap > 0.0, gap
     assert ControlStatus.BLOCKED not in statuses  # waiting is running
-    _, static_gap, _ = _crossing_run(None)
-    assert static_gap < 0.0  # without prediction the crosser hits it
+    assert waited > 5  # the crosser within wait_radius: a progress checker must not call it a stall
+    _, static_gap, _, never = _crossing_run(None, on_local_map)
+    assert static_gap < 0.0 and never == 0  # without prediction the crosser hits it
+
+
+def test_moving_obstacle_configs_validate_and_the_local_mapper_takes_evidence_decay():
+    from emos.actors.nav.components import LocalMapper, LocalMapperConfig
+    from emos.actors.nav.controllers.arc_sampler import ArcSampler
+    from emos.actors.nav.controllers.movers import MoverConfig
+    from emos.actors.nav.mapping import EvidenceConfig
+    from emos.actors.nav.navigator import DynamicConfig
+    from tests.nav.sim2d import make_robot
+
+    cfg = LocalMapperConfig(mapping_bounds=(0.0, 0.0, 4.0, 4.0), memory_decay={"cap": 3})
+    assert cfg.memory_decay == EvidenceConfig(cap=3, free_range=8.0)
+    cfg.memory_decay = EvidenceConfig(cap=2, free_range=5.0)  # on assignment too
+    mapper = LocalMapper("mapper", config=cfg)
+    mapper.custom_on_configure()
+    assert isinstance(mapper._memory.grid, EvidenceGrid) and mapper._memory.grid.cap == 2
+    assert mapper._memory.free_range == 5.0
+    plain = LocalMapper("plain", config=LocalMapperConfig(mapping_bounds=(0.0, 0.0, 4.0, 4.0)))
+    plain.custom_on_configure()
+    assert not isinstance(plain._memory.grid, EvidenceGrid)  # static worlds: never forget
+    for bad, match in (({"cap": 0}, "cap must be an integer >= 1"), ({"cap": 2.5}, "cap must be an integer"),
+                       ({"free_range": -1.0}, "free_range must be"), ({"decay": 3}, "unknown EvidenceConfig field"),
+                       (4, "expected an EvidenceConfig")):
+        with pytest.raises((ValueError, TypeError), match=match):
+            LocalMapperConfig(mapping_bounds=(0.0, 0.0, 4.0, 4.0), memory_decay=bad)
+    with pytest.raises(ValueError, match="mapping mode only"):
+        LocalMapperConfig(memory_decay=EvidenceConfig())
+    with pytest.raises(ValueError, match="wait_radius"):
+        MoverConfig(wait_radius=-1.0)
+    with pytest.raises(TypeError, match="EvidenceConfig"):
+        DynamicConfig(evidence=4)
+    sampler = ArcSampler(make_robot("DIFFERENTIAL_DRIVE"))
+    with pytest.raises(TypeError, match="scan must be a LaserScan2D"):
+        sampler.compute(np.zeros(3), np.zeros(3), None, scan=np.zeros((3, 2)))
 
 
 def test_memory_mapper_with_evidence_forgets_a_moved_obstacle_and_keeps_walls():

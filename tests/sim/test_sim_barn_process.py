@@ -67,3 +67,29 @@ def test_the_system_log_of_a_failed_trial_is_kept(tmp_path):
     assert log.name == f"world_007_seed_{world['seed']}.log"
     text = log.read_text()
     assert all(name in text for name in ("sim", *NAV_COMPONENTS)), text[-2000:]  # the whole system's log
+
+
+def test_builtin_dynamic_stack_forgets_by_evidence_and_tracks_movers_in_the_scan():
+    sim, (mapper, _, controller, _) = build_system(StackOptions.for_controller("builtin-dynamic", world=3, dynabarn=True))
+    assert sim.config.world == "dynabarn:3" and sim.config.spawn == (0.0, 0.0, 0.0)  # the set's start, not BARN's
+    assert mapper.config.memory_decay is not None and mapper.config.mapping_bounds[2] > 20.0  # window to the goal
+    algo = controller.algorithms_config
+    assert algo.movers is not None and algo.response is not None  # builtin-robust's response model too
+    assert not controller.config.use_direct_sensor and controller.get_in_topic("sensor_data").name == "/scan"
+    static = build_system(StackOptions.for_controller("builtin-robust", world=3))[1]
+    assert static[0].config.memory_decay is None and static[2].algorithms_config.movers is None
+
+
+def test_moving_obstacle_world_through_supervised_processes():
+    # The trial of test_sim_dynabarn_nav (world 3, seed of trial 0): in-process builtin-robust
+    # collides with a crosser there; builtin-dynamic (the --dynabarn default) through the
+    # component processes must not.
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--dynabarn", "--worlds", "3", "--seeds", "1"],
+                         cwd=REPO, capture_output=True, text=True, timeout=240, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "controller builtin-dynamic" in out.stdout and "supervised processes" in out.stdout, out.stdout
+    row = next(line.split() for line in out.stdout.splitlines() if line.split()[:1] == ["3"])
+    success, collided, time_s = float(row[1]), float(row[2]), float(row[4])
+    assert success == 1.0 and collided == 0.0, (out.stdout, out.stderr[-3000:])
+    assert time_s < 20.0  # 20 m: it waits for crossers, it does not crawl

@@ -57,6 +57,13 @@ class Driver(BaseComponent):
 
 class ScanLog(BaseComponent):
     '''Event-triggered on /scan: in lockstep it answers a tick only after handling its scans.'''
+    def custom_on_activate(self):
+        self.create_timer(0.25, self._timer_tick)  # a use_sim_time node's timers run on /clock
+
+    def _timer_tick(self):
+        with open(os.environ["TICKS"], "a") as f:
+            f.write(f"{clock.now():.3f}\\n")
+
     def _execution_step(self, msg=None, topic=None):
         if msg is not None:
             with open(os.environ["SCANS"], "a") as f:
@@ -81,8 +88,8 @@ SIM_SECONDS = 6.0
 def _run(tmp_path, name: str, load_s: float, pause_check: bool = False) -> list[str]:
     work = tmp_path / name
     work.mkdir()
-    trace, pause, scans = work / "trace.txt", work / "pause", work / "scans.txt"
-    env = {"TRACE": str(trace), "PAUSE_FLAG": str(pause), "LOAD_S": str(load_s), "SCANS": str(scans)}
+    trace, pause, scans, ticks = work / "trace.txt", work / "pause", work / "scans.txt", work / "ticks.txt"
+    env = {"TRACE": str(trace), "PAUSE_FLAG": str(pause), "LOAD_S": str(load_s), "SCANS": str(scans), "TICKS": str(ticks)}
     system = SystemUnderTest(work, RECIPE, env=env).wait_up(components=["sim", "driver", "scan_log"], timeout=60)
     clock = Subscriber(system.ctx, "/clock", M.Clock, queue_size=1000)
 
@@ -110,15 +117,15 @@ def _run(tmp_path, name: str, load_s: float, pause_check: bool = False) -> list[
     def upto(path):
         return [line for line in path.read_text().splitlines() if float(line.split()[0]) <= SIM_SECONDS - 0.5]
 
-    return upto(trace), upto(scans)
+    return upto(trace), upto(scans), upto(ticks)
 
 
 def test_lockstep_waits_for_consumers_and_load_changes_nothing(tmp_path):
-    quiet, quiet_scans = _run(tmp_path, "quiet", load_s=0.0, pause_check=True)
+    quiet, quiet_scans, quiet_ticks = _run(tmp_path, "quiet", load_s=0.0, pause_check=True)
     # The same run on a loaded machine: a CPU hog beside it and random delays in every step.
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
-        loaded, loaded_scans = _run(tmp_path, "loaded", load_s=0.03)
+        loaded, loaded_scans, loaded_ticks = _run(tmp_path, "loaded", load_s=0.03)
     finally:
         hog.kill()
         hog.wait()
@@ -131,3 +138,8 @@ def test_lockstep_waits_for_consumers_and_load_changes_nothing(tmp_path):
     stamps = [float(line.split()[0]) for line in quiet_scans]
     assert len(stamps) >= 25 and np.allclose(np.diff(stamps), 0.2)
     assert loaded_scans == quiet_scans
+    # Its 4 Hz timer fired every 0.25 simulated s, also while the clock stood still (the pause):
+    # a wall-clock timer fires there at a frozen time, and under load at another rate.
+    beats = [float(line) for line in quiet_ticks]
+    assert len(beats) >= 18 and np.allclose(np.diff(beats), 0.25), beats
+    assert loaded_ticks == quiet_ticks

@@ -218,6 +218,23 @@ class Controller(VisionTracking, NavComponent):
         top = self.config.cloud_max_height if self.config.cloud_max_height is not None else self.config.robot.height
         return pts[(pts[:, 2] >= self.config.cloud_min_height) & (pts[:, 2] <= top)], key
 
+    def _movers_scan(self) -> Any:
+        """The scan an algorithm that tracks moving obstacles follows them in, when its obstacles
+        come from the local map; raise BadInput naming the topic."""
+        topic = self.get_in_topic("sensor_data")
+        if topic is None:
+            raise BadInput(f"{self.algorithm.value} tracks moving obstacles in the scan: give the sensor_data input "
+                           "a LaserScan topic")
+        msg = self.get_input(topic)
+        age = self.input_age(topic)
+        if msg is None:
+            raise BadInput(f"no message on {topic.name} yet (moving obstacles are tracked in it)")
+        if not isinstance(msg, LaserScan):
+            raise BadInput(f"{topic.name}: moving obstacles are tracked in a LaserScan, got {type(msg).__name__}")
+        if age is not None and age > self.config.sensor_timeout:
+            raise BadInput(f"{topic.name} is stale: last message {age:.2f} s ago")
+        return scan_of(msg)
+
     # -- path following ----------------------------------------------------------------------------------
     def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
         if self._action_active or self.tracking_active:
@@ -270,7 +287,16 @@ class Controller(VisionTracking, NavComponent):
             if out is not None:
                 self.publish(out, path_msg(follower.path.poses()[:: max(1, len(follower.path) // 500)], self.config.frames.world))
         follower.sensor_pose = (0.0, 0.0, 0.0) if key == "local_map" else tuple(getattr(follower, "scan_pose", (0.0, 0.0, 0.0)))
-        result = follower.compute(pose, velocity, obstacles)
+        extra = {}
+        if key == "local_map" and getattr(follower, "tracks_movers", False):
+            # A grid has no beam order: the algorithm tracks moving obstacles in the scan.
+            try:
+                extra["scan"] = self._movers_scan()
+            except BadInput as exc:
+                self.fail_input("sensor_data", str(exc))
+                self.publish_stop()
+                return None
+        result = follower.compute(pose, velocity, obstacles, **extra)
         self.publish_result(result)
         self._report_step(result, pose, follower)
         return result
@@ -282,7 +308,9 @@ class Controller(VisionTracking, NavComponent):
         failing = result.status in _FAILURES
         self._failing_since = (self._failing_since if self._failing_since is not None else now) if failing else None
         progress = getattr(follower, "progress", None)
-        if self._progress is not None and (progress is None or result.status is ControlStatus.GOAL_REACHED):
+        # Standing aside or slowing for a moving obstacle nearby is waiting, not a stall.
+        waiting = bool(getattr(follower, "waiting", False))
+        if self._progress is not None and (progress is None or result.status is ControlStatus.GOAL_REACHED or waiting):
             self._progress.reset()
         elif self._progress is not None and self._progress.update(now, float(progress.remaining)):
             self._stalled_at = np.array(pose[:2], dtype=float)

@@ -21,7 +21,7 @@ from ..maps.grid import OccupancyGridMap
 
 __all__ = [
     "BadInput", "pose_of", "velocity_of", "scan_of", "points_of", "grid_map_of", "grid2d_of",
-    "grid_msg", "path_msg", "path_of", "twist_msg", "twist_of", "goal_of", "pose_stamped",
+    "grid_msg", "path_msg", "path_of", "twist_msg", "twist_of", "goal_of", "pose_stamped", "localized_odometry",
 ]
 
 
@@ -124,6 +124,19 @@ def grid_msg(data: np.ndarray, resolution: float, origin: tuple[float, float, fl
 def pose_stamped(x: float, y: float, yaw: float, frame_id: str, stamp: Time | None = None) -> PoseStamped:
     return PoseStamped(header=Header(stamp=stamp or Time.now(), frame_id=frame_id),
                        pose=Pose(position=Point(x=float(x), y=float(y)), orientation=Quaternion.from_yaw(float(yaw))))
+
+
+def localized_odometry(corrected: PoseStamped, measured: Odometry, child_frame_id: str) -> Odometry:
+    """A corrected pose (``corrected``, in the map frame) as an Odometry that carries the measured
+    twist of ``measured``, the odometry it corrects. Odometry twists are body-frame (ROS REP 105:
+    in ``child_frame_id``; vx forward m/s, omega counter-clockwise rad/s), and a map correction
+    moves and turns the pose, not the body: the twist is copied unchanged, never rotated."""
+    if not isinstance(measured, Odometry):
+        raise BadInput(f"a localized pose with a measured twist needs the odometry it corrects, got {type(measured).__name__}")
+    out = Odometry(header=corrected.header, child_frame_id=child_frame_id)
+    out.pose.pose = corrected.pose
+    out.twist.twist = measured.twist.twist
+    return out
 
 
 def path_msg(poses: np.ndarray, frame_id: str) -> Path:

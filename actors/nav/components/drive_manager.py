@@ -23,6 +23,7 @@ from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.geometry import TwistStamped
+from emos.msgs.nav import Odometry
 from emos.msgs.sensor import LaserScan
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 from emos.msgs.std import Bool, Header, Time
@@ -35,6 +36,8 @@ from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of
 
 __all__ = ["DriveManager", "DriveManagerConfig"]
+
+SETTLE_S = 1.0  # node-clock s: the longest a maneuver waits for the base to come to rest before it is re-planned
 
 
 def _seconds(lo: float = 1e-3, hi: float = 1e3) -> Any:
@@ -117,6 +120,8 @@ class DriveManager(NavComponent):
         self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
                             if cfg.blind_spot_memory_time > 0 else None)
         self._remembered_scan: Any = None  # the scan message last put into the blind-spot memory
+        self._last_out = np.zeros(3)  # the last command sent to the base
+        self._settling: tuple[Any, float] | None = None  # (maneuver builder, node time of the stop)
         for name in ("move_forward", "move_backward", "rotate_in_place", "move_to_unblock"):
             self.create_service(f"{self.component_name}/{name}", TriggerRequest, TriggerResponse, self._trigger_service(name))
 
@@ -241,6 +246,8 @@ class DriveManager(NavComponent):
             return
         pose = self._pose()
         if pose is not None:
+            # On the node's clock: with use_sim_time the memory lasts blind_spot_memory_time
+            # simulated seconds, not the few a loaded machine lets the simulator run in 10 wall s.
             self._blind_spot.update(pose, scan, clock.now())
             self._remembered_scan = scan_msg
 
@@ -275,6 +282,7 @@ class DriveManager(NavComponent):
         """Stop the robot now and hold it still for ``stop_hold_time`` s, whatever commands
         arrive meanwhile (an event action: ``Action(method=driver.stop)``); cancels a maneuver."""
         self._maneuver = None
+        self._settling = None
         self._held_until = clock.now() + self.config.stop_hold_time
         self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
         # An event action is rare and worth a line: which component stopped the robot, for how long.
@@ -331,6 +339,7 @@ class DriveManager(NavComponent):
             stamp = getattr(self, "_command_stamp", None) if not stop else None
             msg = TwistStamped(header=Header(stamp=stamp or Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(topic, msg)
+        self._last_out = np.array(cmd, dtype=float)
         estop = bool(check.emergency_stop) and not stop
         estop_topic = self.get_out_topic("emergency_stop")
         if estop_topic is not None and estop != self._estop:
@@ -356,10 +365,32 @@ class DriveManager(NavComponent):
 
     def _run(self, build: Any) -> tuple[bool, str]:
         try:
-            return self._start(build(self._scan_for_maneuver()))
+            ok, message = self._start(build(self._scan_for_maneuver()))
         except BadInput as exc:
             self.fail_input("sensor_data", str(exc))
             return False, str(exc)
+        self._settling = None
+        if ok and np.any(np.abs(self._last_out) > 1e-3):
+            # The base is still moving (a controller's command): the scan and pose this plan
+            # was checked on fall behind a robot that turns on. Stop it first, then plan the
+            # maneuver again on a scan taken at rest (_play_maneuver). World 242: a back-out
+            # planned while the robot turned at 2 rad/s swung its rear into a post the rear
+            # blind sector hid.
+            self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+            self._settling = (build, clock.now())
+        return ok, message
+
+    def _settled(self, stopped_at: float) -> bool:
+        """At rest since ``stopped_at`` (node clock): a scan stamped a watchdog period after the
+        stop, odometry (if any) that reports no motion; or ``SETTLE_S`` have passed."""
+        now = clock.now()
+        if now - stopped_at >= SETTLE_S:
+            return True
+        scans = [self.get_input(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
+        if not scans or any(m is None or m.header.stamp.to_sec() < stopped_at + 1.0 / self.config.loop_rate for m in scans):
+            return False
+        odom = self.latest("location")
+        return not isinstance(odom, Odometry) or (abs(odom.twist.twist.linear.x) < 0.02 and abs(odom.twist.twist.angular.z) < 0.05)
 
     def _move_forward(self) -> tuple[bool, str]:
         return self._run(lambda s: M.move_forward(self.config.robot, s, self.config.max_distance, 1.0 / self.config.loop_rate, self.config.safety_margin))
@@ -390,6 +421,22 @@ class DriveManager(NavComponent):
 
     def _play_maneuver(self) -> None:
         assert self._maneuver is not None
+        if self._settling is not None:
+            build, stopped_at = self._settling
+            if not self._settled(stopped_at):
+                self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+                return
+            self._settling = None
+            try:
+                replanned = build(self._scan_for_maneuver())
+            except BadInput as exc:
+                replanned = M.Maneuver(self._maneuver[0].name, False, np.zeros((0, 3)), 0.0, str(exc))
+            if not replanned.feasible or replanned.commands.shape[0] == 0:
+                self._maneuver = None
+                self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
+                self.fail_algorithm(replanned.name, f"not possible once stopped: {replanned.reason}")
+                return
+            self._maneuver = (replanned, 0)
         maneuver, i = self._maneuver
         if i >= maneuver.commands.shape[0]:
             self._maneuver = None

@@ -12,12 +12,13 @@ from emos.config.validators import in_range
 from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
+from emos.msgs import Odometry
 
 from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
-from ..mapping import MemoryMapper
+from ..mapping import EvidenceConfig, MemoryMapper
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, grid_msg, pose_of, pose_stamped, scan_of
+from .convert import BadInput, grid_msg, localized_odometry, pose_of, pose_stamped, scan_of
 
 __all__ = ["LocalMapper", "LocalMapperConfig"]
 
@@ -46,6 +47,10 @@ def _sensor_pose(value: Any) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
+def _memory_decay(value: Any) -> EvidenceConfig | None:
+    return EvidenceConfig.of(value, "LocalMapperConfig.memory_decay")
+
+
 @define(kw_only=True)
 class LocalMapperConfig(NavComponentConfig):
     """``map_params``: window size and resolution around the robot. ``keep_memory``: cells the
@@ -57,7 +62,10 @@ class LocalMapperConfig(NavComponentConfig):
     is also added to an obstacle memory over that window, at the odometry pose corrected by
     matching the scan against the memory (``scan_matching``). The memory is published on the
     ``mapping`` output (an OccupancyGrid in ``frames.world``, every ``map_publish_period`` s;
-    a Planner can take it as its map) and the corrected pose on ``localized_pose``."""
+    a Planner can take it as its map) and the corrected pose on ``localized_pose``. The memory
+    never forgets by default (static worlds); ``memory_decay`` (an ``EvidenceConfig`` or a dict
+    of its fields) makes it forget by evidence (cells later scans see through are released:
+    a moving obstacle's trail goes, walls stay), for worlds where obstacles move."""
 
     loop_rate: float = rate_field(10.0)
     map_params: MapConfig = field(factory=MapConfig, converter=_map_config)
@@ -72,6 +80,12 @@ class LocalMapperConfig(NavComponentConfig):
     #: by a watchdog at ``loop_rate`` once the first scan arrived. Not checked with
     #: ``use_sim_time`` (lockstep: a wall-clock age means nothing while the simulator waits).
     sensor_timeout: float = field(default=1.0, validator=in_range(min_value=1e-3, max_value=1e3))
+    memory_decay: EvidenceConfig | None = field(default=None, converter=_memory_decay)
+
+    def __attrs_post_init__(self) -> None:
+        if self.memory_decay is not None and self.mapping_bounds is None:
+            raise ValueError("LocalMapperConfig.memory_decay: the memory exists in mapping mode only; "
+                             "set mapping_bounds too (or leave memory_decay None)")
 
 
 class LocalMapper(NavComponent):
@@ -88,7 +102,7 @@ class LocalMapper(NavComponent):
     allowed_outputs = {
         "local_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/occupancy_layer", msg_type="OccupancyGrid"), required=True),
         "mapping": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/memory", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL))),
-        "localized_pose": AllowedTopic(types=("PoseStamped",), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
+        "localized_pose": AllowedTopic(types=("PoseStamped", "Odometry"), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
     }
     config: LocalMapperConfig
 
@@ -97,13 +111,21 @@ class LocalMapper(NavComponent):
         return LocalMapperConfig
 
     def custom_on_configure(self) -> None:
+        out, loc = self.get_out_topic("localized_pose"), self.get_in_topic("location")
+        if out is not None and out.msg_type is Odometry and (loc is None or loc.msg_type is not Odometry):
+            raise ValueError(f"{self.component_name}: localized_pose {out.name} is an Odometry (the corrected pose with the "
+                             f"measured twist), so the location input must be an Odometry topic too; got "
+                             f"{'none' if loc is None else f'{loc.name} ({loc.msg_type.__name__})'}")
         if self.run_type == ComponentRunType.EVENT and not self._trigger:
             self._trigger = [self.get_in_topic("sensor_data")]
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
         cfg = self.config
         self._memory = None
         if cfg.mapping_bounds is not None:
-            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching)
+            decay = cfg.memory_decay
+            forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
+            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
+                                        **forgetting)
         self._memory_published = -math.inf
 
     def custom_on_activate(self) -> None:
@@ -135,7 +157,7 @@ class LocalMapper(NavComponent):
         except BadInput as exc:
             self.fail_input("sensor_data", str(exc))
             return
-        pose = None
+        pose, loc = None, None
         if self.config.keep_memory or self._memory is not None:
             loc = self.latest("location")
             if loc is None:
@@ -152,15 +174,20 @@ class LocalMapper(NavComponent):
         out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
         self.publish(self.get_out_topic("local_map"), out)
         if self._memory is not None:
-            self._update_memory(scan, pose)
+            self._update_memory(scan, pose, loc)
         self.health_status.set_healthy()
 
-    def _update_memory(self, scan: Any, odom_pose: Any) -> None:
+    def _update_memory(self, scan: Any, odom_pose: Any, location: Any) -> None:
         corrected = self._memory.update(scan, odom_pose)
         world = self.config.frames.world
         out = self.get_out_topic("localized_pose")
         if out is not None:
-            self.publish(out, pose_stamped(corrected[0], corrected[1], corrected[2], world))
+            msg = pose_stamped(corrected[0], corrected[1], corrected[2], world)
+            if out.msg_type is Odometry:
+                # With the measured twist of the odometry it corrects: a controller's response
+                # model needs what the base does, not what it was told.
+                msg = localized_odometry(msg, location, self.config.frames.robot_base)
+            self.publish(out, msg)
         now = clock.now()  # simulated seconds under a simulator: the map's age must not follow the machine's speed
         out = self.get_out_topic("mapping")
         if out is not None and now - self._memory_published >= self.config.map_publish_period:

@@ -22,9 +22,9 @@ from ..robot import RobotConfig
 from .arcs import ArcConfig, ArcPlanner
 from .base import ControlResult, ControlStatus, FollowerConfig
 from .follower import PathFollower
-from .movers import MoverConfig, PredictedMovers
+from .movers import MoverConfig, PredictedMovers, near_movers
 from .response import ResponseConfig, YawGainEstimator
-from .sensors import ObstacleInput
+from .sensors import LaserScan2D, ObstacleInput, obstacle_points
 
 __all__ = ["ArcSampler", "ArcSamplerConfig"]
 
@@ -70,7 +70,9 @@ class ArcSamplerConfig(FollowerConfig):
     """Moving obstacles (``movers.py``): track the scan's clusters between steps (a scan in
     beam order, one ``compute`` per control step), keep the moving ones out of the static
     check and check each arc against their predicted positions; standing still to let one
-    pass is running, not blocked. None: every point is static."""
+    pass is running, not blocked. With a grid or point obstacles (no beam order), give the
+    scan to track as ``compute(..., scan=...)``: the obstacle points on a moving track's
+    circle are then the mover's, not static. None: every point is static."""
     field_resolution: float = attrs.field(default=0.1, converter=float)
     final_approach: float = attrs.field(default=0.6, converter=float)
 
@@ -86,25 +88,43 @@ class ArcSampler(PathFollower):
         self._last_turn = 0.0
         self._tracker = None
         self._clock = 0.0  # s of control steps: the tracker's time base
+        self.scan_pose = (0.0, 0.0, 0.0)  # (x, y, yaw) on the robot of a ``scan`` given to compute
+        self.waiting = False  # the last step had a moving track within ``movers.wait_radius``
         if self.config.movers is not None:
             from ..mapping.tracking import ScanTracker
 
             self._tracker = ScanTracker(self.config.movers.tracker)
 
-    def _split_movers(self, pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, PredictedMovers | None]:
-        """(static points, predicted movers) after feeding this step's points to the tracker."""
+    @property
+    def tracks_movers(self) -> bool:
+        """True when configured for moving obstacles (``compute`` then takes a ``scan``)."""
+        return self._tracker is not None
+
+    def _split_movers(self, pose: np.ndarray, points: np.ndarray,
+                      scan: LaserScan2D | None) -> tuple[np.ndarray, PredictedMovers | None]:
+        """(static points, predicted movers) after feeding this step's scan (or obstacle points,
+        when they are the scan) to the tracker."""
         if self._tracker is None:
             return points, None
+        cfg = self.config.movers
+        assert cfg is not None
         self._clock += self.config.control_time_step
-        sx, sy, _ = self.sensor_pose
+        mount = self.scan_pose if scan is not None else self.sensor_pose
         c, s = math.cos(pose[2]), math.sin(pose[2])
-        origin = (pose[0] + c * sx - s * sy, pose[1] + s * sx + c * sy)
-        moving = self._tracker.update(self._clock, points, origin)
+        origin = (pose[0] + c * mount[0] - s * mount[1], pose[1] + s * mount[0] + c * mount[1])
+        if scan is None:
+            moving = self._tracker.update(self._clock, points, origin)
+        else:
+            local = obstacle_points(scan, mount)
+            world = np.c_[pose[0] + c * local[:, 0] - s * local[:, 1], pose[1] + s * local[:, 0] + c * local[:, 1]]
+            self._tracker.update(self._clock, world, origin, float(scan.angle_increment or 0.0))
         centres, velocities, radii = self._tracker.movers(self._clock)
-        movers = None
-        if len(centres):
-            assert self.config.movers is not None
-            movers = PredictedMovers(centres, velocities, radii, self.config.movers.prediction)
+        if scan is not None:
+            # The grid marks where each mover is now: those cells are the mover, not static.
+            moving = near_movers(points, centres, radii, cfg.footprint_pad)
+        self.waiting = bool(len(centres)) and float(np.min(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1]))) \
+            <= cfg.wait_radius
+        movers = PredictedMovers(centres, velocities, radii, cfg.prediction) if len(centres) else None
         return points[~moving], movers
 
     def _local_field(self, pose: np.ndarray, points: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
@@ -135,7 +155,13 @@ class ArcSampler(PathFollower):
 
         return cost_to_go
 
-    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None,
+                scan: LaserScan2D | None = None) -> ControlResult:
+        """One control step. ``scan`` (with ``movers``, sensor frame, mounted at ``scan_pose``):
+        the scan to track movers in when ``obstacles`` is not that scan (a local map)."""
+        if scan is not None and not isinstance(scan, LaserScan2D):
+            raise TypeError(f"ArcSampler.compute: scan must be a LaserScan2D or None, got {type(scan).__name__}")
+        self.waiting = False
         pose = np.asarray(pose, dtype=np.float64).reshape(3)
         if self.path is None or self.progress is None:
             return self._no_path(pose)
@@ -150,7 +176,7 @@ class ArcSampler(PathFollower):
         if self._gain is not None:
             twist = np.asarray(velocity, dtype=float).reshape(3)
             gain = self._gain.update(self._last_turn, float(twist[0]), float(twist[2]))
-        points, movers = self._split_movers(pose, points)
+        points, movers = self._split_movers(pose, points, scan)
         choice = self.arcs.choose(pose, points, self._local_field(pose, points), twist=twist, yaw_gain=gain,
                                   movers=movers)
         if choice == (0.0, 0.0) and movers is not None:

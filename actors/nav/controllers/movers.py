@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from ..mapping.tracking import TrackerConfig
     from .arcs import ArcPlanner
 
-__all__ = ["MoverConfig", "PredictedMovers", "PredictionConfig"]
+__all__ = ["MoverConfig", "PredictedMovers", "PredictionConfig", "near_movers"]
 
 
 def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
@@ -62,13 +62,32 @@ def _default_tracker() -> "TrackerConfig":
     return TrackerConfig()
 
 
+def _mover_distance(instance: object, attribute: attrs.Attribute, value: float) -> None:
+    if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+        raise ValueError(f"MoverConfig.{attribute.name} must be a finite number of metres >= 0, got {value!r}")
+
+
 @attrs.define(frozen=True)
 class MoverConfig:
     """Moving-obstacle handling for an arc planner: how scans are tracked (``mapping.tracking``)
-    and how the tracks are predicted and checked (``PredictionConfig``)."""
+    and how the tracks are predicted and checked (``PredictionConfig``). ``wait_radius`` (m):
+    with a moving track this near, slow or no progress is waiting for it, not being stuck.
+    ``footprint_pad`` (m): obstacle points within a moving track's circle plus this are the
+    mover's own (a grid or memory that holds them is not asked about them as static)."""
 
     tracker: "TrackerConfig" = attrs.field(factory=_default_tracker, converter=_tracker_config)
     prediction: PredictionConfig = attrs.field(factory=PredictionConfig, converter=_prediction_config)
+    wait_radius: float = attrs.field(default=3.0, validator=_mover_distance)
+    footprint_pad: float = attrs.field(default=0.15, validator=_mover_distance)
+
+
+def near_movers(xy: np.ndarray, centres: np.ndarray, radii: np.ndarray, pad: float) -> np.ndarray:
+    """Per point (N, 2): within ``pad`` of a mover's circle (``centres`` (M, 2), ``radii`` (M,))."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if len(centres) == 0 or len(xy) == 0:
+        return np.zeros(len(xy), dtype=bool)
+    d = np.hypot(xy[:, None, 0] - centres[None, :, 0], xy[:, None, 1] - centres[None, :, 1])
+    return np.any(d <= np.asarray(radii)[None, :] + pad, axis=1)
 
 
 @attrs.define(frozen=True, eq=False)

@@ -14,11 +14,46 @@ new hit lands where the lidar recently saw free space (a sign of motion).
 """
 from __future__ import annotations
 
+import math
+
+import attrs
 import numpy as np
 
 from .hit_grid import HitGrid
 
-__all__ = ["EvidenceGrid"]
+__all__ = ["EvidenceConfig", "EvidenceGrid"]
+
+
+def _cap(instance: object, attribute: attrs.Attribute, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"EvidenceConfig.cap must be an integer >= 1 (scans), got {value!r}")
+
+
+def _free_range(instance: object, attribute: attrs.Attribute, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+        raise ValueError(f"EvidenceConfig.free_range must be a finite number of metres > 0, got {value!r}")
+
+
+@attrs.define(frozen=True)
+class EvidenceConfig:
+    """How an obstacle memory forgets (``EvidenceGrid``): ``cap`` units of hit evidence a cell
+    holds (scans that saw through its hit point release it after that many), ``free_range``
+    (m) of each beam that counts as seeing free space (farther, a beam decays nothing)."""
+
+    cap: int = attrs.field(default=4, validator=_cap)
+    free_range: float = attrs.field(default=8.0, validator=_free_range)
+
+    @classmethod
+    def of(cls, value: object, owner: str) -> "EvidenceConfig | None":
+        """``value`` as a config: an EvidenceConfig, a dict of its fields, or None (never forget)."""
+        if value is None or isinstance(value, cls):
+            return value
+        if isinstance(value, dict):
+            unknown = sorted(set(value) - {a.name for a in attrs.fields(cls)})
+            if unknown:
+                raise ValueError(f"{owner}: unknown EvidenceConfig field(s) {unknown}; expected cap, free_range")
+            return cls(**value)
+        raise TypeError(f"{owner}: expected an EvidenceConfig, a dict of its fields or None, got {type(value).__name__}")
 
 
 class EvidenceGrid(HitGrid):

@@ -22,9 +22,9 @@ from typing import Any
 import attrs
 import numpy as np
 
-from ..controllers.movers import MoverConfig, PredictedMovers
+from ..controllers.movers import MoverConfig, PredictedMovers, near_movers
 from ..mapping import compose, correction_between
-from ..mapping.evidence import EvidenceGrid
+from ..mapping.evidence import EvidenceConfig, EvidenceGrid
 from ..mapping.tracking import ScanTracker
 from .interface import NavTask, Observation
 from .mapless import GridNavigator
@@ -39,11 +39,13 @@ def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
 
 @attrs.define(frozen=True)
 class DynamicConfig:
-    movers: MoverConfig = attrs.field(factory=MoverConfig)  # tracking and predicted arc checks
-    evidence_cap: int = attrs.field(default=4, validator=attrs.validators.ge(1))  # scans of hits a cell holds
-    free_range: float = attrs.field(default=8.0, validator=_nonneg)  # m of each beam that decays the memory
-    wait_radius: float = attrs.field(default=3.0, validator=_nonneg)  # a mover this near: waiting, not stuck
-    fresh_time: float = attrs.field(default=1.0, validator=_nonneg)  # s a cell seen free counts as fresh space
+    """``movers``: tracking, predicted arc checks and the wait radius (a mover this near:
+    waiting, not stuck); ``evidence``: how the memory forgets; ``fresh_time`` (s): a cell seen
+    free this recently counts as fresh space (motion evidence)."""
+
+    movers: MoverConfig = attrs.field(factory=MoverConfig, validator=attrs.validators.instance_of(MoverConfig))
+    evidence: EvidenceConfig = attrs.field(factory=EvidenceConfig, validator=attrs.validators.instance_of(EvidenceConfig))
+    fresh_time: float = attrs.field(default=1.0, validator=_nonneg)
 
 
 class DynamicGridNavigator(GridNavigator):
@@ -62,7 +64,7 @@ class DynamicGridNavigator(GridNavigator):
         super().reset(task)
 
     def make_grid(self, bounds: tuple[float, float, float, float]) -> EvidenceGrid:
-        return EvidenceGrid(bounds, self.resolution, cap=self.dynamic.evidence_cap)
+        return EvidenceGrid(bounds, self.resolution, cap=self.dynamic.evidence.cap)
 
     # -- perception ---------------------------------------------------------------------
 
@@ -75,12 +77,9 @@ class DynamicGridNavigator(GridNavigator):
         angles = yaw + myaw + scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
         return origin, np.c_[np.cos(angles), np.sin(angles)], np.asarray(scan.ranges, dtype=float)
 
-    def _near_movers(self, xy: np.ndarray, stamp: float, pad: float = 0.15) -> np.ndarray:
+    def _near_movers(self, xy: np.ndarray, stamp: float) -> np.ndarray:
         centres, _, radii = self.tracker.movers(stamp)
-        if len(centres) == 0 or len(xy) == 0:
-            return np.zeros(len(xy), dtype=bool)
-        d = np.hypot(xy[:, None, 0] - centres[None, :, 0], xy[:, None, 1] - centres[None, :, 1])
-        return np.any(d <= radii[None, :] + pad, axis=1)
+        return near_movers(xy, centres, radii, self.dynamic.movers.footprint_pad)
 
     def localized(self, obs: Observation) -> Observation:
         """Scan matching as the static navigator, on the returns that are not moving tracks'."""
@@ -112,7 +111,7 @@ class DynamicGridNavigator(GridNavigator):
         grid: EvidenceGrid = self.grid  # type: ignore[assignment]
         fresh = grid.moved_into(world, obs.stamp, self.dynamic.fresh_time)
         moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment), fresh)
-        free = self.dynamic.free_range
+        free = self.dynamic.evidence.free_range
         length = np.where(hit, np.minimum(r, free) - 1.5 * grid.resolution, free)
         grid.observe_free((float(origin[0]), float(origin[1])), d, np.maximum(length, 0.0), obs.stamp)
         # Withhold from the memory only a moving track's hits in space the lidar recently saw
@@ -131,7 +130,7 @@ class DynamicGridNavigator(GridNavigator):
         """Standing aside for a mover is not being stuck: the progress clock restarts."""
         centres, _, _ = self.tracker.movers(obs.stamp)
         if len(centres) and np.min(np.hypot(centres[:, 0] - obs.pose[0], centres[:, 1] - obs.pose[1])) \
-                <= self.dynamic.wait_radius:
+                <= self.dynamic.movers.wait_radius:
             self._progress_ref = None
             return False
         return super()._stuck(obs)

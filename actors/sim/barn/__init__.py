@@ -32,6 +32,9 @@ import attrs
 from .controllers import CONTROLLERS
 from .harness import BarnRules, EpisodeResult, run_episode, score_run
 
+DEFAULT_CONTROLLER = "builtin-robust"  # plans with the turn the base achieves: the realistic robot is the default
+DYNABARN_DEFAULT_CONTROLLER = "builtin-dynamic"  # the moving-obstacle set needs the navigator that tracks movers
+
 __all__ = ["BarnRules", "EpisodeResult", "add_arguments", "run", "run_episode", "score_run", "summarize"]
 
 
@@ -48,9 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds", default=None, help="world indices, e.g. 1,2,5-9 (default: all in the file)")
     parser.add_argument("--split", default="all", choices=("all", "tune", "test"),
                         help="tune: worlds with idx %% 5 != 0 (for tuning); test: idx %% 5 == 0 (report only)")
-    parser.add_argument("--controller", default="builtin-robust", choices=sorted(CONTROLLERS),
-                        help="navigation controller to drive with (default: %(default)s, the navigator that "
-                             "plans with the turn the base achieves)")
+    parser.add_argument("--controller", default=None, choices=sorted(CONTROLLERS),
+                        help=f"navigation controller to drive with (default: {DEFAULT_CONTROLLER}; with --dynabarn "
+                             f"{DYNABARN_DEFAULT_CONTROLLER})")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--png", type=Path, default=None, metavar="DIR", help="write each run's top-down picture here")
     parser.add_argument("--seeds", type=int, default=10, help="trials per world, each with its own noise and yaw gain "
@@ -130,6 +133,8 @@ def run(args: argparse.Namespace) -> int:
     from ..barn_protocol import trial_seed
     from .parallel import TrialPool, in_process_trial
 
+    if args.controller is None:
+        args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER
     try:
         rules = _rules(args)
         worlds, indices = _load(args)
@@ -264,17 +269,18 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
     from .process import SystemFailed, run_episode_process
     from .stack import StackOptions
 
-    if args.dynabarn:
-        raise ValueError("--dynabarn runs in-process only for now; add --in-process")
     if args.png is not None:
         raise ValueError("--png draws the in-process run; add --in-process")
+    if args.dynabarn and args.worlds_file is not None:
+        raise ValueError("the Simulator's dynabarn:<index> worlds are the shipped set; --worlds-file with --dynabarn "
+                         "needs --in-process")
     if args.logs is not None:
         args.logs.mkdir(parents=True, exist_ok=True)
     source = _barn_source(args)
     StackOptions.for_controller(args.controller, world=min(worlds))  # an unsupported controller fails here
 
     def episode(idx: int, seed: int) -> EpisodeResult:
-        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed,
+        opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed, dynabarn=args.dynabarn,
                                            barn_source=None if source is None else str(source))
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         try:

@@ -20,7 +20,9 @@ from typing import Any
 import attrs
 
 from ..barn_protocol import TrialMonitor
-from ..barn_worlds import BARN_GOAL, BARN_START, BarnWorld
+from ..barn_trial import start_and_goal
+from ..barn_worlds import BarnWorld
+from ..dynabarn import DynaWorld
 from .harness import EpisodeResult, score_run
 from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_run_dir
 
@@ -30,7 +32,7 @@ STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes 
 COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
 
 
-def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: float = 600.0,
+def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_timeout: float = 600.0,
                         keep_log: Path | None = None) -> EpisodeResult:
     """Run one world through the processes and score it under ``opts.rules``."""
     wall0 = time.perf_counter()
@@ -53,7 +55,7 @@ def run_episode_process(entry: BarnWorld, opts: StackOptions, wall_timeout: floa
                         deadline_misses=misses)
 
 
-def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: StackOptions,
+def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorld, opts: StackOptions,
              wall_timeout: float) -> tuple[bool, bool, float, float, str, int]:
     from emos import msgs as M
     from emos.core.reconfig import ComponentServices
@@ -69,10 +71,11 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
     truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
-    monitor = TrialMonitor(BARN_START[:2], BARN_GOAL, rules.goal_radius, rules.time_limit)
+    start, goal_xy = start_and_goal(entry)
+    monitor = TrialMonitor(start[:2], goal_xy, rules.goal_radius, rules.time_limit)
     try:
         t0 = _latest_stamp(truth, proc, log_path)  # the trial starts when the goal is given
-        goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=BARN_GOAL[0], y=BARN_GOAL[1]))
+        goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=goal_xy[0], y=goal_xy[1]))
         last_xy: tuple[float, float] | None = None
         last_t = 0.0
         distance = 0.0
@@ -103,7 +106,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld, opts: Sta
                 if outcome is not None:
                     break
             if monitor.outcome is None and collided:
-                monitor.update(last_t, last_xy or BARN_START[:2], True)
+                monitor.update(last_t, last_xy or start[:2], True)
             outcome = monitor.outcome
             if outcome is not None:
                 final = sim.execute_method("sim_status")

@@ -22,7 +22,7 @@ from typing import Any
 
 import attrs
 
-from ..barn_worlds import BARN_GOAL, BARN_START
+from ..barn_trial import start_and_goal
 from ..jackal import JACKAL_ODOMETRY
 from ..robots import PRESETS
 from .harness import BarnRules, nav_robot
@@ -37,6 +37,7 @@ PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
     "builtin": ("ArcSampler", True),
     "builtin-odom": ("ArcSampler", False),
     "builtin-robust": ("ArcSampler", True),  # with the response model (ROBUST_CONTROLLERS)
+    "builtin-dynamic": ("ArcSampler", True),  # and moving obstacles (DYNAMIC_CONTROLLERS)
     "navcore-dwa": ("DWA", True),
     "navcore-purepursuit": ("PurePursuit", True),
     "navcore-stanley": ("Stanley", True),
@@ -44,7 +45,10 @@ PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
 }
 
 # --controller names whose ArcSampler checks the arcs the base achieves (ResponseConfig)
-ROBUST_CONTROLLERS = ("builtin-robust",)
+ROBUST_CONTROLLERS = ("builtin-robust", "builtin-dynamic")
+# --controller names for moving obstacles: the mapper's memory forgets by evidence
+# (EvidenceConfig), the ArcSampler tracks movers and checks arcs against them (MoverConfig)
+DYNAMIC_CONTROLLERS = ("builtin-dynamic",)
 
 
 @attrs.define(frozen=True)
@@ -66,7 +70,7 @@ class RecoveryOptions:
 class StackOptions:
     """One trial's system. ``rules`` (the harness's TrialSpec) carries the robot model and the
     sensor configuration (ideal or realistic, robot, odometry, rates): the same choices as
-    in-process."""
+    in-process. ``dynabarn``: ``world`` indexes the moving-obstacle set, not BARN."""
 
     world: int
     rules: BarnRules = BarnRules()
@@ -77,6 +81,8 @@ class StackOptions:
     clock_rate: float = 50.0
     window_margin: float = 3.0  # m around start and goal mapped (as the built-in navigator's memory)
     response_model: bool = False  # ArcSamplerConfig(response=ResponseConfig()): builtin-robust
+    moving_obstacles: bool = False  # evidence memory + ArcSamplerConfig(movers=MoverConfig()): builtin-dynamic
+    dynabarn: bool = False
     recovery: RecoveryOptions = RecoveryOptions()
 
     @classmethod
@@ -86,7 +92,22 @@ class StackOptions:
         except KeyError:
             raise ValueError(f"controller {name!r} has no process-mode stack; choose from {sorted(PROCESS_CONTROLLERS)} "
                              "or run it with --in-process") from None
-        return cls(algorithm=algorithm, scan_matching=matching, response_model=name in ROBUST_CONTROLLERS, **kwargs)
+        return cls(algorithm=algorithm, scan_matching=matching, response_model=name in ROBUST_CONTROLLERS,
+                   moving_obstacles=name in DYNAMIC_CONTROLLERS, **kwargs)
+
+    def entry(self) -> Any:
+        """The world this system runs (a ``BarnWorld`` or, with ``dynabarn``, a ``DynaWorld``)."""
+        if self.dynabarn:
+            from ..dynabarn import load_dynabarn
+
+            worlds: dict = load_dynabarn()
+        else:
+            from ..barn_worlds import load_barn_worlds
+
+            worlds = load_barn_worlds(self.barn_source)
+        if self.world not in worlds:
+            raise ValueError(f"StackOptions.world: no {'DynaBARN' if self.dynabarn else 'BARN'} world {self.world}")
+        return worlds[self.world]
 
 
 def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
@@ -94,6 +115,7 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     from emos.actors.nav import MapConfig
     from emos.actors.nav.components import (Controller, ControllerConfig, DriveManager, DriveManagerConfig, LocalMapper,
                                             LocalMapperConfig, Planner, PlannerConfig)
+    from emos.actors.nav.mapping import EvidenceConfig
     from emos.actors.nav.robot import RobotFrames
     from emos.io.topic import Topic
 
@@ -113,8 +135,10 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
             scan_fov_deg=lidar.fov_deg, scan_range_max=lidar.range_max, scan_noise_std=lidar.noise_std)
     else:  # the robot preset's drive model, the Jackal's laser, wheel + IMU odometry
         sensors = dict(odometry_mode="wheel-imu", odom_rate=JACKAL_ODOMETRY.rate_hz, scan_preset="jackal")
+    start, goal = start_and_goal(opts.entry())
     sim = Simulator(SIM_NAME, config=SimulatorConfig(
-        world=f"barn:{opts.world}", barn_source=opts.barn_source, robot=rules.robot_name, spawn=BARN_START,
+        world=f"{'dynabarn' if opts.dynabarn else 'barn'}:{opts.world}", barn_source=opts.barn_source,
+        robot=rules.robot_name, spawn=start,
         frames=frames, physics_rate=1.0 / rules.physics_dt, clock_rate=opts.clock_rate, clock_mode="lockstep",
         lockstep_consumers=list(NAV_COMPONENTS), seed=opts.seed,
         # The stack's compute time charged as in-process: its commands act that much later.
@@ -123,17 +147,22 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     # computed from the true pose), no map; ground truth on a topic only the referee reads.
     sim.outputs(tf=None, ground_truth=Topic(name=GROUND_TRUTH_TOPIC, msg_type="Odometry"))
 
-    sx, sy, _ = BARN_START
-    gx, gy = BARN_GOAL
+    sx, sy, _ = start
+    gx, gy = goal
     m = opts.window_margin
     bounds = (min(sx, gx) - m, min(sy, gy) - m, max(sx, gx) + m, max(sy, gy) + m)
-    pose_topic = Topic(name="/local_map/pose", msg_type="PoseStamped")
+    # The scan-matched pose with the odometry's measured twist: the Controller's response model
+    # (builtin-robust, builtin-dynamic) estimates the yaw gain from what the base does, as the
+    # in-process navigator does from the odometry's twist (a PoseStamped has no twist: the
+    # Controller would fall back to its own last command).
+    pose_topic = Topic(name="/local_map/pose", msg_type="Odometry")
     memory_topic = Topic(name="/local_map/memory", msg_type="OccupancyGrid")
     common = dict(robot=robot, frames=frames, use_sim_time=True)
     mount = (*lidar.mount_xy, lidar.mount_yaw)
     mapper = LocalMapper("mapper", config=LocalMapperConfig(
         map_params=MapConfig(width=6.0, height=6.0, resolution=0.05), keep_memory=True, sensor_pose=mount,
-        mapping_bounds=bounds, scan_matching=opts.scan_matching, map_publish_period=0.0, **common))
+        mapping_bounds=bounds, scan_matching=opts.scan_matching, map_publish_period=0.0,
+        memory_decay=EvidenceConfig() if opts.moving_obstacles else None, **common))
     mapper.run_type = "Event"
     mapper.outputs(mapping=memory_topic, localized_pose=pose_topic)
     planner = Planner("planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0, **common))
@@ -148,11 +177,23 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
         progress_distance=recovery.progress_distance,
         failure_tolerance=recovery.progress_timeout if recovery.enabled else 0.0, **common))
     controller.inputs(location=pose_topic)
-    if opts.response_model:
+    if opts.response_model or opts.moving_obstacles:
         from emos.actors.nav.controllers import ArcSamplerConfig
+        from emos.actors.nav.controllers.arcs import ArcConfig
+        from emos.actors.nav.controllers.movers import MoverConfig
         from emos.actors.nav.controllers.response import ResponseConfig
 
-        controller.algorithms_config = ArcSamplerConfig(response=ResponseConfig(), control_time_step=1.0 / rules.control_rate_hz)
+        extra: dict[str, Any] = {}
+        if opts.moving_obstacles:
+            # The in-process navigator's arcs, backing-up arcs included: the one way to stand
+            # aside from a mover coming head-on (the local map remembers what is behind).
+            extra["arcs"] = ArcConfig()
+        controller.algorithms_config = ArcSamplerConfig(
+            response=ResponseConfig() if opts.response_model else None,
+            movers=MoverConfig() if opts.moving_obstacles else None, control_time_step=1.0 / rules.control_rate_hz,
+            **extra)
+    if opts.moving_obstacles:  # obstacles from the local map; moving ones tracked in the scan
+        controller.inputs(sensor_data=Topic(name="/scan", msg_type="LaserScan"))
     control = Topic(name="/control", msg_type="Twist")
     controller.outputs(command=control)
     driver = DriveManager("driver", config=DriveManagerConfig(
@@ -202,5 +243,5 @@ def recipe_source(opts: StackOptions) -> str:
     )
 
 
-__all__ = ["GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
+__all__ = ["DYNAMIC_CONTROLLERS", "GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
            "StackOptions", "build_system", "bringup", "recipe_source", "wire_recovery"]

@@ -2,6 +2,7 @@
 DriveManager's emergency stop and unblock maneuver, the MapServer's PCD maps and save_map."""
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -169,6 +170,63 @@ launcher.bringup()
         back.close()
         control.close()
         odom.close()
+        system.stop()
+
+
+def test_a_back_out_asked_while_the_robot_turns_stops_it_and_is_planned_again_at_rest(tmp_path):
+    """A stuck recovery can ask for a back-out while the controller's last command still turns
+    the robot: the plan was checked on a scan taken before the turn went on. The DriveManager
+    stops the base first and plans the back-out again on a scan taken at rest; the back-out is
+    then straight (BARN world 242: a back-out started mid-turn swung the rear into a post)."""
+    from emos.core.services import ServiceClient
+    from emos.transport.pubsub import Publisher, Subscriber
+
+    system = _system(tmp_path, """
+driver = DriveManager(component_name="driver", config=DriveManagerConfig(critical_zone_distance=0.05, slowdown_zone_distance=0.1,
+                                                                         max_distance=0.5, cmd_timeout=1.0))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(2.0, 2.0, 0.0))])
+launcher.kompass(components=[driver], multiprocessing=True)
+launcher.robot = robot
+launcher.bringup()
+""", ["base", "driver"])
+    control = Publisher(system.ctx, "/control", M.Twist, publisher_id="test_controller")
+    odom = Subscriber(system.ctx, "/odom", M.Odometry, queue_size=1000)
+    cmd = Subscriber(system.ctx, "/cmd_vel", M.Twist, queue_size=1000)
+    back = ServiceClient("driver/move_backward", M.TriggerRequest, M.TriggerResponse, ctx=system.ctx)
+    stop = threading.Event()
+
+    def turn() -> None:  # the controller keeps turning the robot in place
+        while not stop.is_set():
+            control.publish(M.Twist(angular=M.Vector3(z=1.0)))
+            time.sleep(0.05)
+
+    turner = threading.Thread(target=turn, daemon=True)
+    try:
+        wait_until(lambda: odom.take(), 10, what="odometry")
+        turner.start()
+        wait_until(lambda: any(abs(m.twist.twist.angular.z) > 0.5 for m in odom.take()), 10, what="the robot turning")
+        cmd.take()
+        res = back.call(M.TriggerRequest())
+        stop.set()
+        assert res.success and "move_backward" in res.message, res.message
+        sent: list[tuple[float, float]] = []  # every command the driver sends (the ring keeps only the last few)
+        end = time.monotonic() + 2.5
+        while time.monotonic() < end:
+            sent += [(m.linear.x, m.angular.z) for m in cmd.take()]
+            time.sleep(0.01)
+        first_back = next(i for i, (vx, _) in enumerate(sent) if vx < -1e-3)
+        assert first_back >= 1 and sent[first_back - 1] == (0.0, 0.0), sent[:first_back + 1]  # stopped before backing
+        assert all(abs(w) < 1e-9 for vx, w in sent[first_back:] if vx < -1e-3)  # straight back, no turn
+        x = wait_until(lambda: next(iter(odom.take()[-1:]), None), 5).pose.pose.position
+        assert math.hypot(x.x - 2.0, x.y - 2.0) > 0.3  # it did back out
+    finally:
+        stop.set()
+        turner.join(2) if turner.is_alive() else None
+        back.close()
+        control.close()
+        odom.close()
+        cmd.close()
         system.stop()
 
 
