@@ -28,7 +28,13 @@ def list_logs() -> list[Path]:
     folder = logs_dir()
     if not folder.is_dir():
         return []
-    return sorted(folder.glob("*.log"), key=lambda p: p.stat().st_mtime)
+    dated = []
+    for path in folder.glob("*.log"):
+        try:
+            dated.append((path.stat().st_mtime, path))
+        except FileNotFoundError:  # pruned by another run starting at the same moment
+            continue
+    return [path for _, path in sorted(dated)]
 
 
 def _prune(keep: int) -> None:
@@ -46,12 +52,17 @@ def start_run_log(recipe: Path, argv: list[str]) -> Path | None:
     folder = logs_dir()
     try:
         folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-        path = folder / f"{recipe_log_name(recipe)}_{time.strftime('%Y%m%d-%H%M%S')}.log"
-        n = 1
-        while path.exists():
-            n += 1
-            path = folder / f"{path.stem.rsplit('~', 1)[0]}~{n}.log"
-        with open(path, "x") as f:
+        base = f"{recipe_log_name(recipe)}_{time.strftime('%Y%m%d-%H%M%S')}"
+        for n in range(1, 1000):  # runs of one recipe started in the same second (in parallel, too)
+            path = folder / (f"{base}.log" if n == 1 else f"{base}~{n}.log")
+            try:
+                f = open(path, "x")
+            except FileExistsError:
+                continue
+            break
+        else:
+            raise FileExistsError(f"{folder}: 999 logs named {base}*")
+        with f:
             f.write(f"# emos run {' '.join(argv)}\n# recipe {recipe.resolve()}  pid {os.getpid()}  started {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
         os.chmod(path, 0o600)
     except OSError as exc:

@@ -120,3 +120,34 @@ def test_bench_plot_saves_the_main_result_and_checks_the_file_name_first(tmp_pat
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = emos("bench", "restart", "--kills", "3", "--plot", str(tmp_path / "x.gif"))
     assert bad.returncode != 0 and "must end in .png, .svg or .pdf" in bad.stderr
+
+
+def test_run_logs_survive_runs_started_at_the_same_moment(home, tmp_path):
+    """Two `emos run` starting together (`emos bench barn --jobs 2` does): one prunes a log while
+    the other lists them, and both want the same name in the same second. Neither may fail."""
+    import subprocess
+    import sys
+
+    from emos.supervisor import runlog
+
+    logs = home / "logs"
+    logs.mkdir(parents=True)
+    (logs / "old_20200101-000000.log").write_text("kept\n")
+    (logs / "vanished_20200101-000000.log").symlink_to(tmp_path / "gone.log")  # listed, then gone
+    assert [p.name for p in runlog.list_logs()] == ["old_20200101-000000.log"]
+    # The same name in the same second: the second run gets ~2, not an error (and no log lost).
+    code = """
+import sys, time
+from pathlib import Path
+from emos.supervisor import runlog
+time.strftime = lambda fmt, *a: "20261124-120000" if "%H" in fmt else "2026-11-24 12:00:00"
+path = runlog.start_run_log(Path(sys.argv[1]), ["run", "x"])
+print("LOG", path, file=sys.stderr)
+"""
+    recipe = home / "recipes" / "counter" / "recipe.py"
+    names = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", code, str(recipe)], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0 and "not keeping a log" not in out.stderr, out.stderr
+        names.append(out.stderr.split("LOG ")[1].split()[0].rsplit("/", 1)[1])
+    assert names == ["counter_20261124-120000.log", "counter_20261124-120000~2.log"]
