@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import struct
 import threading
+import types
 from typing import Any
 
 import attrs
@@ -27,6 +28,7 @@ _U32 = struct.Struct("<I")
 _ALIGN = 8
 _BULK = 64 * 1024  # arrays at least this big are copied with numpy
 _ZEROS = bytes(_ALIGN)
+_MEMBER_DESCRIPTOR = types.MemberDescriptorType  # a __slots__ entry
 
 
 class DecodeError(ValueError):
@@ -117,23 +119,26 @@ class _ArrayCollector:
     def __call__(self, arr: np.ndarray) -> msgpack.ExtType:
         if not arr.flags.c_contiguous:
             arr = np.ascontiguousarray(arr)
-        key = (arr.dtype, arr.shape, self.offset)
-        ext = _HEADERS_OUT.get(key)
-        if ext is None:
-            if arr.dtype.hasobject or arr.dtype.fields is not None:
-                raise TypeError(f"cannot encode an array of dtype {arr.dtype}: only plain numeric dtypes travel on topics")
+        dtype, offset = arr.dtype, self.offset
+        # Keyed by the dtype's identity, not the dtype: numpy hashes a dtype afresh on every call
+        # (0.3-0.6 us, most of this method). The entry keeps its dtype alive and is used only if
+        # it holds this very object, so a recycled id can never select another dtype's header.
+        entry = _HEADERS_OUT.get((id(dtype), arr.shape, offset))
+        if entry is None or entry[0] is not dtype:
+            if dtype.hasobject or dtype.fields is not None:
+                raise TypeError(f"cannot encode an array of dtype {dtype}: only plain numeric dtypes travel on topics")
             # The ExtType itself is cached: building one checks its fields in Python (~1 us).
-            ext = msgpack.ExtType(_ARRAY_EXT, msgpack.packb((arr.dtype.str, arr.shape, self.offset)))
-            _remember(_HEADERS_OUT, key, ext)
+            entry = (dtype, msgpack.ExtType(_ARRAY_EXT, msgpack.packb((dtype.str, arr.shape, offset))))
+            _remember(_HEADERS_OUT, (id(dtype), arr.shape, offset), entry)
         self.arrays.append(arr)
-        self.offset += _align(arr.nbytes)
-        return ext
+        self.offset = offset + ((arr.nbytes + _ALIGN - 1) & ~(_ALIGN - 1))  # _align, inlined: once per array
+        return entry[1]
 
 
 # Array headers (dtype, shape, offset) repeat from message to message on a topic (same image
 # size, same scan length), so both directions cache them: a dict lookup instead of a msgpack
 # round trip, a dtype parse and a product per array.
-_HEADERS_OUT: dict[tuple, msgpack.ExtType] = {}
+_HEADERS_OUT: dict[tuple, tuple[np.dtype, msgpack.ExtType]] = {}
 _HEADERS_IN: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int, int]] = {}
 _HEADER_CACHE_SIZE = 4096
 
@@ -180,13 +185,13 @@ def _compile_encoder(cls: type) -> Any:
         if kind == F.ARRAY:
             items.append(f"A(o.{name})")
         elif kind == F.MESSAGE:
-            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver, env, f"E{i}")
             items.append(f"E{i}(o.{name}, A)")
         elif kind == F.OPTIONAL_MESSAGE:
-            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver, env, f"E{i}")
             items.append(f"(None if o.{name} is None else E{i}(o.{name}, A))")
         elif kind == F.MESSAGE_LIST:
-            env[f"E{i}"] = _LazyCoder(_encoder, resolver)
+            env[f"E{i}"] = _LazyCoder(_encoder, resolver, env, f"E{i}")
             items.append(f"[E{i}(x, A) for x in o.{name}]")
         else:
             items.append(f"o.{name}")
@@ -214,17 +219,25 @@ def _compile_decoder(cls: type) -> Any:
         "    o = new(cls)",
     ]
     for i, (name, kind, resolver) in enumerate(layout):
-        if kind == F.MESSAGE:
-            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
-            lines.append(f"    sa(o, '{name}', D{i}(v[{i}]))")
-        elif kind == F.OPTIONAL_MESSAGE:
-            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
-            lines.append(f"    sa(o, '{name}', None if v[{i}] is None else D{i}(v[{i}]))")
-        elif kind == F.MESSAGE_LIST:
-            env[f"D{i}"] = _LazyCoder(_decoder, resolver)
-            lines.append(f"    sa(o, '{name}', [D{i}(x) for x in v[{i}]])")
+        # A slot's own setter: half the cost of object.__setattr__ (which looks the name up), and
+        # like it, it bypasses the class's __setattr__ and so the field converters.
+        slot = cls.__dict__.get(name)
+        if type(slot) is _MEMBER_DESCRIPTOR:
+            env[f"S{i}"] = slot.__set__
+            setter = f"S{i}(o, "
         else:
-            lines.append(f"    sa(o, '{name}', v[{i}])")
+            setter = f"sa(o, '{name}', "
+        if kind == F.MESSAGE:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver, env, f"D{i}")
+            lines.append(f"    {setter}D{i}(v[{i}]))")
+        elif kind == F.OPTIONAL_MESSAGE:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver, env, f"D{i}")
+            lines.append(f"    {setter}None if v[{i}] is None else D{i}(v[{i}]))")
+        elif kind == F.MESSAGE_LIST:
+            env[f"D{i}"] = _LazyCoder(_decoder, resolver, env, f"D{i}")
+            lines.append(f"    {setter}[D{i}(x) for x in v[{i}]])")
+        else:
+            lines.append(f"    {setter}v[{i}])")
     lines.append("    return o")
     exec(compile("\n".join(lines) + "\n", f"<emos decoder {cls.__name__}>", "exec"), env)
     fn = env[f"decode_{cls.__name__}"]
@@ -233,17 +246,21 @@ def _compile_decoder(cls: type) -> Any:
 
 
 class _LazyCoder:
-    """Resolves a nested message class on first use (classes may refer to later ones)."""
+    """Resolves a nested message class on first use (classes may refer to later ones), then
+    puts the resolved coder in its place in the generated code's globals, so later calls go
+    straight to it instead of through this object."""
 
-    __slots__ = ("factory", "resolver", "fn")
+    __slots__ = ("factory", "resolver", "fn", "env", "name")
 
-    def __init__(self, factory: Any, resolver: Any):
+    def __init__(self, factory: Any, resolver: Any, env: dict[str, Any], name: str):
         self.factory, self.resolver, self.fn = factory, resolver, None
+        self.env, self.name = env, name
 
     def __call__(self, *args: Any) -> Any:
         fn = self.fn
         if fn is None:
             fn = self.fn = self.factory(self.resolver())
+            self.env[self.name] = fn
         return fn(*args)
 
 
@@ -265,7 +282,8 @@ def _packer() -> msgpack.Packer:
 def encode(msg: Any) -> Encoded:
     """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame."""
     arrays = _ArrayCollector()
-    tree = _encoder(type(msg))(msg, arrays)
+    cls = type(msg)
+    tree = (_ENCODERS.get(cls) or _compile_encoder(cls))(msg, arrays)
     try:
         packer = _packers.packer
     except AttributeError:
@@ -283,7 +301,7 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
     view = memoryview(frame)
     try:
         (meta_len,) = _U32.unpack_from(view, 0)
-        base = _align(_U32.size + meta_len)
+        base = (_U32.size + meta_len + _ALIGN - 1) & ~(_ALIGN - 1)  # _align, inlined: once per message
         end = len(view)
         if base > end:
             raise DecodeError(f"frame of {end} B announces {meta_len} bytes of metadata")
@@ -301,7 +319,7 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
             return arr.copy() if copy else arr
 
         tree = msgpack.unpackb(view[4 : 4 + meta_len], ext_hook=ext_hook, raw=False, strict_map_key=False)
-        return _decoder(cls)(tree)
+        return (_DECODERS.get(cls) or _compile_decoder(cls))(tree)
     except DecodeError:
         raise
     except (ValueError, TypeError, IndexError, KeyError, struct.error, msgpack.UnpackException) as exc:

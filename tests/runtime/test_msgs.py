@@ -141,6 +141,26 @@ def test_any_plain_dtype_travels_with_its_byte_order(dtype):
     np.testing.assert_array_equal(back.data, data)
 
 
+def test_short_lived_dtypes_of_one_shape_never_share_a_cached_header():
+    # The encoder caches array headers by the dtype object's identity (hashing a dtype is slow);
+    # dtypes built and dropped one after another may get the same id, and each must still
+    # travel as itself.
+    from emos.msgs import fields as F
+    from emos.msgs.registry import message_type
+
+    @message_type("test_msgs", name="AnyArrayShortLived")
+    class AnyArray:
+        data: object = F.array()
+
+    for i in range(200):
+        dtype = np.dtype(["<f4", ">f4", "<i4", ">i4", "<u4"][i % 5])  # fresh objects for non-native orders
+        data = (np.arange(6) + i).astype(dtype)
+        back = codec.decode(AnyArray, codec.pack(AnyArray(data=data)))
+        assert back.data.dtype == dtype, (i, back.data.dtype, dtype)
+        np.testing.assert_array_equal(back.data, data)
+        del dtype, data, back
+
+
 def test_array_header_caches_stay_bounded_and_correct_when_shapes_keep_changing():
     for n in range(codec._HEADER_CACHE_SIZE + 50):
         data = np.full(n % 97 + 1, n % 251, dtype=np.uint8)
