@@ -70,6 +70,7 @@ class SimRobot:
         self._command_stamp = -math.inf
         self.collided = False  # ever touched anything
         self.contacts: list[Contact] = []  # contacts of the last tick
+        self.first_contacts: list[Contact] = []  # of the tick that first touched something (where it went wrong)
         self.trail: list[tuple[float, float]] = [(float(pose[0]), float(pose[1]))]
         self.distance_travelled = 0.0
         self.body_id, self.visual_id = self._create_bodies()
@@ -161,6 +162,7 @@ class SimRobot:
         self.drive.reset(self.pose)
         self.collided = False
         self.contacts = []
+        self.first_contacts = []
         self.trail = [(float(self.pose[0]), float(self.pose[1]))]
         self.distance_travelled = 0.0
         self._place()
@@ -183,6 +185,8 @@ class SimRobot:
             Contact(stamp, names.get(p[2], "static"), tuple(p[5]), float(-p[8])) for p in touching
         ]
         if touching:
+            if not self.collided:
+                self.first_contacts = list(self.contacts)
             self.collided = True
             self.pose = self._previous.copy()
             self.twist = np.zeros(3)

@@ -3,9 +3,13 @@ supervised processes, scored by the harness's referee; and what the stack is (no
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 import subprocess
 import sys
+
+import numpy as np
 
 from emos.actors.sim.barn.harness import BarnRules
 from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, NAV_COMPONENTS, StackOptions, build_system
@@ -52,13 +56,15 @@ def test_barn_world_through_supervised_processes(tmp_path):
     assert list((tmp_path / "logs").iterdir()) == []  # --logs keeps only the logs of failed trials
 
 
-def test_the_system_log_of_a_failed_trial_is_kept(tmp_path):
-    """``--logs DIR``: a trial that does not reach the goal leaves its system log, to see why."""
+def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
+    """``--logs DIR``: a trial that does not reach the goal leaves its system log, to see why;
+    ``--png DIR`` draws it, with where the robot first touched."""
     worlds = tmp_path / "w.json"  # a cylinder on the start: the robot touches it at once
     worlds.write_text(json.dumps({"7": {"cylinders": [[-2.25, 3.2]], "path_length": 10.0}}))
     env = dict(os.environ, PYTHONPATH=str(REPO))
     out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds-file", str(worlds), "--seeds", "1",
-                          "--json", "--logs", str(tmp_path / "logs")], cwd=REPO, capture_output=True, text=True,
+                          "--json", "--logs", str(tmp_path / "logs"), "--png", str(tmp_path / "png"),
+                          "--results", str(tmp_path / "trials.jsonl")], cwd=REPO, capture_output=True, text=True,
                          timeout=180, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     (world,) = json.loads(out.stdout)["worlds"]
@@ -67,6 +73,17 @@ def test_the_system_log_of_a_failed_trial_is_kept(tmp_path):
     assert log.name == f"world_007_seed_{world['seed']}.log"
     text = log.read_text()
     assert all(name in text for name in ("sim", *NAV_COMPONENTS)), text[-2000:]  # the whole system's log
+    # The reason names the first contact, which lies on the cylinder (radius 0.075 m at (-2.25, 3.2)).
+    (trial,) = [json.loads(line)["trial"] for line in (tmp_path / "trials.jsonl").read_text().splitlines()[1:]]
+    x, y = map(float, re.fullmatch(r"collision at \((\S+), (\S+)\)", trial["reason"]).groups())
+    assert math.dist((x, y), (-2.25, 3.2)) < 0.2, trial["reason"]
+    from PIL import Image
+
+    (png,) = (tmp_path / "png").iterdir()
+    assert png.name == f"barn_007_seed_{world['seed']}.png"
+    pixels = np.asarray(Image.open(png).convert("RGB")).reshape(-1, 3)
+    assert ((pixels == (255, 0, 0)).all(axis=1)).any()  # the contact's red ring
+    assert ((pixels == (220, 30, 30)).all(axis=1)).any()  # the robot drawn as collided
 
 
 def test_builtin_dynamic_stack_forgets_by_evidence_and_tracks_movers_in_the_scan():

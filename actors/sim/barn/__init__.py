@@ -270,7 +270,7 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
     from .stack import StackOptions
 
     if args.png is not None:
-        raise ValueError("--png draws the in-process run; add --in-process")
+        args.png.mkdir(parents=True, exist_ok=True)
     if args.dynabarn and args.worlds_file is not None:
         raise ValueError("the Simulator's dynabarn:<index> worlds are the shipped set; --worlds-file with --dynabarn "
                          "needs --in-process")
@@ -283,8 +283,9 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
         opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed, dynabarn=args.dynabarn,
                                            barn_source=None if source is None else str(source))
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
+        png = None if args.png is None else args.png / f"{'dynabarn' if args.dynabarn else 'barn'}_{idx:03d}_seed_{seed}.png"
         try:
-            result = run_episode_process(worlds[idx], opts, keep_log=log)
+            result = run_episode_process(worlds[idx], opts, keep_log=log, png_path=png)
             if log is not None and result.success:
                 log.unlink(missing_ok=True)  # only the failures are worth keeping
             return result

@@ -71,6 +71,19 @@ def nav_robot(spec: RobotSpec) -> Any:
     )
 
 
+def picture_bounds(entry: BarnWorld | DynaWorld, trial: Any) -> tuple[float, float, float, float]:
+    """The window of a trial's top-down picture: the BARN course, or start and goal with margins."""
+    if isinstance(entry, BarnWorld):
+        return (-5.0, -0.5, 0.5, 14.5)
+    (x0, y0), (x1, y1) = trial.start[:2], trial.goal
+    return (min(x0, x1) - 3.0, min(y0, y1) - 3.5, max(x0, x1) + 2.75, max(y0, y1) + 1.5)
+
+
+def picture_title(trial: Any, result: EpisodeResult, navigator: str) -> str:
+    status = "success" if result.success else ("collision" if result.collided else "timeout")
+    return f"{trial.key} seed {result.seed} {navigator}: {status} t={result.time_s:.1f}s metric={result.metric:.3f}"
+
+
 def run_episode(entry: BarnWorld | DynaWorld, navigator: Navigator, rules: TrialSpec = BarnRules(), seed: int = 0,
                 png_path: str | Path | None = None) -> EpisodeResult:
     """Drive the Jackal from start to goal in lock-step with the sim clock (faster than real time)."""
@@ -97,15 +110,9 @@ def run_episode(entry: BarnWorld | DynaWorld, navigator: Navigator, rules: Trial
             from ..render import render_topdown
 
             plan = getattr(navigator, "plan", None)
-            status = "success" if result.success else ("collision" if result.collided else "timeout")
-            (x0, y0), (x1, y1) = trial.start[:2], trial.goal
-            bounds = (min(x0, x1) - 3.0, min(y0, y1) - 3.5, max(x0, x1) + 2.75, max(y0, y1) + 1.5)
-            if isinstance(entry, BarnWorld):
-                bounds = (-5.0, -0.5, 0.5, 14.5)
             render_topdown(trial.world, png_path, plan=None if plan is None else np.asarray(plan), goal=trial.goal,
-                           goal_radius=rules.goal_radius, bounds=bounds, pixels_per_m=40,
-                           title=f"{trial.key} seed {seed} {navigator.name}: {status} t={t.time_s:.1f}s "
-                                 f"metric={result.metric:.3f}")
+                           goal_radius=rules.goal_radius, bounds=picture_bounds(entry, trial), pixels_per_m=40,
+                           title=picture_title(trial, result, navigator.name))
         return result
     finally:
         trial.close()

@@ -26,16 +26,18 @@ from ..dynabarn import DynaWorld
 from .harness import EpisodeResult, score_run
 from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_run_dir
 
-from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, SIM_NAME, StackOptions, recipe_source
+from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, PLAN_TOPIC, SIM_NAME, StackOptions, recipe_source
 
 STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes slowly
 COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
 
 
 def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_timeout: float = 600.0,
-                        keep_log: Path | None = None) -> EpisodeResult:
-    """Run one world through the processes and score it under ``opts.rules``."""
+                        keep_log: Path | None = None, png_path: Path | None = None) -> EpisodeResult:
+    """Run one world through the processes and score it under ``opts.rules``; with ``png_path``,
+    draw the run there (the true path the referee saw, the stack's last plan, the contacts)."""
     wall0 = time.perf_counter()
+    seen = _Seen() if png_path is not None else None
     with tempfile.TemporaryDirectory(prefix=f"emos-barn-{entry.idx}-") as tmp:
         recipe = Path(tmp) / "barn_recipe.py"
         recipe.write_text(recipe_source(opts))
@@ -44,19 +46,59 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
             proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(recipe)], stdout=log,
                                     stderr=subprocess.STDOUT, cwd=tmp)
             try:
-                outcome = _referee(proc, log_path, entry, opts, wall_timeout)
+                outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen)
             finally:
                 _stop(proc)
                 if keep_log is not None:
                     keep_log.write_bytes(log_path.read_bytes())
     reached, collided, t, distance, reason, misses = outcome
     result = score_run(entry, reached, collided, t, opts.rules)
-    return attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason,
-                        deadline_misses=misses)
+    result = attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason,
+                          deadline_misses=misses)
+    if seen is not None and png_path is not None:
+        _draw(entry, opts, result, seen, png_path)
+    return result
+
+
+@attrs.define
+class _Seen:
+    """What the referee saw of a run, for its picture: true poses, the last plan, contacts."""
+
+    poses: list[tuple[float, float, float]] = attrs.field(factory=list)
+    plan: Any = None
+    contacts: list[list[float]] = attrs.field(factory=list)
+
+
+def _draw(entry: BarnWorld | DynaWorld, opts: StackOptions, result: EpisodeResult, seen: _Seen, png_path: Path) -> None:
+    """The run's top-down picture, drawn as an in-process run's is (same world, same window)."""
+    import numpy as np
+
+    from ..barn_trial import build_trial
+    from ..render import render_topdown
+    from .harness import picture_bounds, picture_title
+
+    trial = build_trial(entry, opts.seed, opts.rules)  # the same world, rebuilt here only to be drawn
+    try:
+        robot = trial.robot
+        if seen.poses:
+            robot.trail = [(x, y) for x, y, _ in seen.poses]
+            robot.pose = np.asarray(seen.poses[-1], dtype=float)
+        robot.collided = result.collided
+        robot.contacts = [_Contact((float(x), float(y), 0.0)) for x, y in seen.contacts]
+        render_topdown(trial.world, png_path, plan=seen.plan, goal=trial.goal, goal_radius=opts.rules.goal_radius,
+                       bounds=picture_bounds(entry, trial), pixels_per_m=40,
+                       title=picture_title(trial, result, f"{opts.algorithm} (processes)"))
+    finally:
+        trial.close()
+
+
+@attrs.frozen
+class _Contact:
+    position: tuple[float, float, float]
 
 
 def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorld, opts: StackOptions,
-             wall_timeout: float) -> tuple[bool, bool, float, float, str, int]:
+             wall_timeout: float, seen: _Seen | None = None) -> tuple[bool, bool, float, float, str, int]:
     from emos import msgs as M
     from emos.core.reconfig import ComponentServices
     from emos.core.rpc import RpcClient
@@ -69,6 +111,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
     with RpcClient(run_dir / "supervisor.sock") as rpc:
         wait_active(rpc, proc, log_path, (SIM_NAME, *NAV_COMPONENTS), f"world {entry.idx}", STARTUP_TIMEOUT_S)
     truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
+    plans = Subscriber(ctx, PLAN_TOPIC, M.Path, queue_size=4) if seen is not None else None
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
     start, goal_xy = start_and_goal(entry)
@@ -102,21 +145,29 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 if last_xy is not None:
                     distance += math.dist(xy, last_xy)
                 last_xy, last_t = xy, t - t0
+                if seen is not None:
+                    q = msg.pose.pose.orientation
+                    seen.poses.append((p.x, p.y, math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))))
                 outcome = monitor.update(last_t, xy, False)
                 if outcome is not None:
                     break
             if monitor.outcome is None and collided:
                 monitor.update(last_t, last_xy or start[:2], True)
+            if plans is not None:
+                plan = plans.latest()
+                if plan is not None and plan.poses:
+                    seen.plan = [(ps.pose.position.x, ps.pose.position.y) for ps in plan.poses]
             outcome = monitor.outcome
             if outcome is not None:
                 final = sim.execute_method("sim_status")
+                contacts = final.get("contacts") or []
+                if seen is not None:
+                    seen.contacts = list(contacts)
                 misses = int(final.get("compute", {}).get("deadline_misses", 0))  # with the compute charged
                 if outcome.reached and final.get("collided"):
                     # A touch between the last poll and the goal still fails the trial.
                     return False, True, outcome.time_s, distance, "collision (before reaching the goal)", misses
-                reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else
-                                                         f"collision near ({last_xy[0]:.2f}, {last_xy[1]:.2f})"
-                                                         if last_xy else "collision")
+                reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else _collision_reason(contacts, last_xy))
                 return outcome.reached, outcome.collided, outcome.time_s, distance, reason, misses
             if proc.poll() is not None:
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
@@ -126,6 +177,16 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
     finally:
         truth.close()
         goal_pub.close()
+        if plans is not None:
+            plans.close()
+
+
+def _collision_reason(contacts: list, last_xy: tuple[float, float] | None) -> str:
+    """Where the robot first touched (as the in-process harness says it), else where it was."""
+    if contacts:
+        x, y = contacts[0]
+        return f"collision at ({float(x):.2f}, {float(y):.2f})"
+    return f"collision near ({last_xy[0]:.2f}, {last_xy[1]:.2f})" if last_xy else "collision"
 
 
 def _latest_stamp(truth: Any, proc: subprocess.Popen, log_path: Path, timeout: float = 60.0) -> float:

@@ -29,6 +29,7 @@ from .harness import BarnRules, nav_robot
 
 GROUND_TRUTH_TOPIC = "/barn/ground_truth"
 GOAL_TOPIC = "/goal"
+PLAN_TOPIC = "/plan"  # the Planner's output and the Controller's input, both at their defaults
 NAV_COMPONENTS = ("mapper", "planner", "controller", "driver")
 SIM_NAME = "sim"
 
@@ -243,5 +244,5 @@ def recipe_source(opts: StackOptions) -> str:
     )
 
 
-__all__ = ["DYNAMIC_CONTROLLERS", "GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
+__all__ = ["DYNAMIC_CONTROLLERS", "GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PLAN_TOPIC", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
            "StackOptions", "build_system", "bringup", "recipe_source", "wire_recovery"]

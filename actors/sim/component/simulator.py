@@ -203,6 +203,8 @@ class Simulator(KeyedComponent):
             if setup.robot is not None:
                 out["pose"] = [float(v) for v in setup.robot.pose]
                 out["collided"] = bool(setup.robot.collided)
+                if setup.robot.first_contacts:  # where it first touched: (x, y) of up to 8 contact points
+                    out["contacts"] = [[float(c.position[0]), float(c.position[1])] for c in setup.robot.first_contacts[:8]]
             if setup.arm is not None:
                 out["joints"] = dict(zip(setup.arm.names, setup.arm.joint_state()[1].tolist()))
         if physics is not None:
