@@ -47,3 +47,46 @@ def test_memory_mapper_rejects_non_finite_odometry():
     mapper = MemoryMapper((0, 0, 4, 4))
     with pytest.raises(ValueError, match="odom_pose"):
         mapper.update(_scan((1.0, 1.0, 0.0)), np.array([np.nan, 0.0, 0.0]))
+
+
+def _reference_match(matcher, grid, guess, pts_local):
+    """The matcher's search written out plainly: every candidate pose moves every hit, cells
+    outside the window score 0. The fast version must choose exactly as this one does."""
+    from emos.actors.nav.maps.edt import euclidean_distance_transform
+
+    pts = pts_local[:: max(1, len(pts_local) // matcher.max_points)]
+    field = np.exp(-0.5 * (euclidean_distance_transform(grid.occupied, grid.resolution) / matcher.sigma) ** 2).astype(np.float32)
+    yaws = guess[2] + matcher.dyaw
+    c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+    rx, ry = c * pts[:, 0] - s * pts[:, 1] + guess[0], s * pts[:, 0] + c * pts[:, 1] + guess[1]
+    gx = rx[:, None, None, :] + matcher.dxy[None, :, None, None]
+    gy = ry[:, None, None, :] + matcher.dxy[None, None, :, None]
+    cols = np.floor((gx - grid.origin[0]) / grid.resolution).astype(np.int64)
+    rows = np.floor((gy - grid.origin[1]) / grid.resolution).astype(np.int64)
+    inside = (rows >= 0) & (rows < grid.shape[0]) & (cols >= 0) & (cols < grid.shape[1])
+    score = np.where(inside, field[np.clip(rows, 0, grid.shape[0] - 1), np.clip(cols, 0, grid.shape[1] - 1)], 0.0).mean(axis=-1)
+    prior = 1.0 - 0.02 * (np.abs(matcher.dyaw)[:, None, None] / matcher.dyaw.max()
+                          + (np.abs(matcher.dxy)[None, :, None] + np.abs(matcher.dxy)[None, None, :]) / matcher.dxy.max())
+    best = np.unravel_index(int(np.argmax(score * prior)), score.shape)
+    k0 = len(matcher.dyaw) // 2, len(matcher.dxy) // 2, len(matcher.dxy) // 2
+    pose = np.array([guess[0] + matcher.dxy[best[1]], guess[1] + matcher.dxy[best[2]], yaws[best[0]]])
+    return pose, float(score[best]), float(score[k0])
+
+
+def test_scan_matching_chooses_exactly_as_the_plain_search_also_at_the_window_edge():
+    from emos.actors.nav.mapping.hit_grid import HitGrid
+    from emos.actors.nav.mapping.scan_matching import ScanMatcher
+
+    rng = np.random.default_rng(7)
+    grid = HitGrid((-5.0, -1.0, 1.0, 15.0), 0.05)
+    grid.insert(rng.uniform([-5, -1], [1, 15], (3000, 2)))
+    matcher = ScanMatcher()
+    for k in range(40):
+        if k % 8 == 0:
+            grid.insert(rng.uniform([-5, -1], [1, 15], (40, 2)))  # the field is rebuilt when the memory grows
+        # Guesses beyond the window too: hits that fall outside it must score 0 in both.
+        guess = np.array([rng.uniform(-5.5, 1.5), rng.uniform(-1.5, 15.5), rng.uniform(-3.0, 3.0)])
+        pts = rng.uniform(-6.0, 6.0, (int(rng.integers(20, 720)), 2))
+        got, want = matcher.match(grid, guess, pts), _reference_match(matcher, grid, guess, pts)
+        np.testing.assert_array_equal(got[0], want[0])
+        assert got[1:] == want[1:], k

@@ -41,10 +41,13 @@ class ScanMatcher:
         self._field_version = -1
 
     def _likelihood(self, grid: HitGrid) -> np.ndarray:
+        """The likelihood field of ``grid`` behind a border of zeros: cell (r, c) is at
+        (r + 1, c + 1) and index 0 of either axis reads 0 (outside the window)."""
         if self._field is None or self._field_version != grid.version:
             dist = euclidean_distance_transform(grid.occupied, grid.resolution)
-            self._field = np.exp(-0.5 * (dist / self.sigma) ** 2).astype(np.float32)
-            self._field_version = grid.version
+            field = np.zeros((grid.shape[0] + 1, grid.shape[1] + 1), dtype=np.float32)
+            field[1:, 1:] = np.exp(-0.5 * (dist / self.sigma) ** 2)
+            self._field, self._field_version = field, grid.version
         return self._field
 
     def match(self, grid: HitGrid, guess: np.ndarray, points_local: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -60,16 +63,19 @@ class ScanMatcher:
         field = self._likelihood(grid)
         yaws = guess[2] + self.dyaw
         c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
-        # Hits rotated by every candidate heading (Y, N), then shifted by every (dx, dy).
+        # Hits rotated by every candidate heading (Y, N).
         rx = c * pts[:, 0] - s * pts[:, 1] + guess[0]
         ry = s * pts[:, 0] + c * pts[:, 1] + guess[1]
-        gx = rx[:, None, None, :] + self.dxy[None, :, None, None]
-        gy = ry[:, None, None, :] + self.dxy[None, None, :, None]
-        cols = np.floor((gx - grid.origin[0]) / grid.resolution).astype(np.int64)
-        rows = np.floor((gy - grid.origin[1]) / grid.resolution).astype(np.int64)
-        inside = (rows >= 0) & (rows < grid.shape[0]) & (cols >= 0) & (cols < grid.shape[1])
-        values = np.where(inside, field[np.clip(rows, 0, grid.shape[0] - 1), np.clip(cols, 0, grid.shape[1] - 1)], 0.0)
-        score = values.mean(axis=-1)  # (Y, X, Y')
+        # A candidate (heading, dx, dy) puts a hit in the column of its x shift and the row of
+        # its y shift, so cells are computed per (heading, shift, hit), for x and y apart (Y*X*N
+        # each), and only the gather is Y*X*X*N: a third of the time of shifting every point in
+        # both axes, for the same cells. Cells outside the window read the field's zero border.
+        h, w = grid.shape
+        cols = np.floor((rx[:, None, :] + self.dxy[None, :, None] - grid.origin[0]) / grid.resolution).astype(np.int64)
+        rows = np.floor((ry[:, None, :] + self.dxy[None, :, None] - grid.origin[1]) / grid.resolution).astype(np.int64)
+        cols = np.where((cols >= 0) & (cols < w), cols + 1, 0)
+        rows = np.where((rows >= 0) & (rows < h), rows + 1, 0)
+        score = field[rows[:, None, :, :], cols[:, :, None, :]].mean(axis=-1)  # (Y, X, Y')
         # Prefer the guess on ties: odometry is right over short distances.
         prior = 1.0 - 0.02 * (np.abs(self.dyaw)[:, None, None] / max(self.dyaw.max(), 1e-9)
                               + (np.abs(self.dxy)[None, :, None] + np.abs(self.dxy)[None, None, :]) / max(self.dxy.max(), 1e-9))
