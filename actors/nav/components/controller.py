@@ -34,7 +34,7 @@ from ..controllers import ControllersID, ControlResult, ControlStatus
 from ..controllers.registry import CONTROLLERS, make_controller
 from .base import NavComponent, NavComponentConfig, rate_field
 from .controller_vision import VisionTracking
-from .convert import BadInput, grid2d_of, path_msg, path_of, points_of, scan_of, twist_msg
+from .convert import BadInput, grid2d_of, grid_points_in_robot_frame, path_msg, path_of, points_of, scan_of, twist_msg
 from .interfaces import ControlPathFeedback, ControlPathGoal, ControlPathResult
 from .progress import ProgressChecker
 
@@ -197,8 +197,11 @@ class Controller(VisionTracking, NavComponent):
         return self._follower
 
     # -- inputs ------------------------------------------------------------------------------------------
-    def obstacles(self) -> Any:
-        """The obstacle input of this step (robot frame), or raise BadInput naming the topic."""
+    def obstacles(self, pose: np.ndarray | None = None) -> Any:
+        """The obstacle input of this step (robot frame), or raise BadInput naming the topic.
+
+        A ``local_map`` in ``frames.world`` (an obstacle memory, a map) rather than ego-centric
+        is placed by its own origin and brought into the frame of the robot at ``pose``."""
         key = "sensor_data" if self.config.use_direct_sensor else "local_map"
         topic = self.get_in_topic(key)
         if topic is None:
@@ -211,6 +214,8 @@ class Controller(VisionTracking, NavComponent):
             raise BadInput(f"{topic.name} is stale: last message {age:.2f} s ago")
         self._source_stamp = msg.header.stamp  # a TwistStamped command carries its data's time
         if key == "local_map":
+            if msg.header.frame_id and msg.header.frame_id == self.config.frames.world and pose is not None:
+                return grid_points_in_robot_frame(msg, pose), key
             return grid2d_of(msg), key
         if isinstance(msg, LaserScan):
             return scan_of(msg), key
@@ -270,7 +275,7 @@ class Controller(VisionTracking, NavComponent):
         pose, velocity = state
         velocity = self._last_cmd if velocity is None else velocity
         try:
-            obstacles, key = self.obstacles()
+            obstacles, key = self.obstacles(pose)
         except BadInput as exc:
             self.fail_input("sensor_data" if self.config.use_direct_sensor else "local_map", str(exc))
             self.publish_stop()

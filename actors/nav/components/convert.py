@@ -113,6 +113,27 @@ def grid2d_of(msg: OccupancyGrid) -> OccupancyGrid2D:
     return OccupancyGrid2D(msg.grid(), float(info.resolution), (info.origin.position.x, info.origin.position.y))
 
 
+def grid_points_in_robot_frame(msg: OccupancyGrid, pose: np.ndarray, occupied_threshold: int = 50) -> np.ndarray:
+    """Centres (M, 2) of the occupied cells of a grid that is not ego-centric (its origin is a
+    pose in the frame ``pose`` is in, e.g. a map or an obstacle memory in ``map``), in the
+    frame of the robot at ``pose``. Placed by the grid's own origin, so a grid never moves with
+    the robot's pose of another instant (an ego-centric map built at the last scan, read with
+    the pose of the scan before, lands a scan's motion away)."""
+    info = msg.info
+    if info.width * info.height != msg.data.size or msg.data.size == 0:
+        raise BadInput(f"local_map: {info.width}x{info.height} grid with {msg.data.size} cells")
+    rows, cols = np.nonzero(msg.grid() >= occupied_threshold)
+    res = float(info.resolution)
+    gx, gy = (cols + 0.5) * res, (rows + 0.5) * res
+    o = info.origin
+    oyaw = _yaw(o.orientation)
+    co, so = math.cos(oyaw), math.sin(oyaw)
+    wx, wy = o.position.x + co * gx - so * gy, o.position.y + so * gx + co * gy
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dx, dy = wx - pose[0], wy - pose[1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+
 def grid_msg(data: np.ndarray, resolution: float, origin: tuple[float, float, float], frame_id: str) -> OccupancyGrid:
     rows, cols = data.shape
     info = MapMetaData(map_load_time=Time.now(), resolution=float(resolution), width=cols, height=rows,

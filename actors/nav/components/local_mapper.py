@@ -174,15 +174,17 @@ class LocalMapper(NavComponent):
         out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
         self.publish(self.get_out_topic("local_map"), out)
         if self._memory is not None:
-            self._update_memory(scan, pose, loc)
+            self._update_memory(scan, pose, loc, scan_msg.header.stamp)
         self.health_status.set_healthy()
 
-    def _update_memory(self, scan: Any, odom_pose: Any, location: Any) -> None:
+    def _update_memory(self, scan: Any, odom_pose: Any, location: Any, stamp: Any) -> None:
         corrected = self._memory.update(scan, odom_pose)
         world = self.config.frames.world
         out = self.get_out_topic("localized_pose")
         if out is not None:
-            msg = pose_stamped(corrected[0], corrected[1], corrected[2], world)
+            # Stamped with its scan: the pose is where the robot was when the scan was taken (and
+            # under a simulator the stamp is on the simulated clock, not the machine's).
+            msg = pose_stamped(corrected[0], corrected[1], corrected[2], world, stamp=stamp)
             if out.msg_type is Odometry:
                 # With the measured twist of the odometry it corrects: a controller's response
                 # model needs what the base does, not what it was told.
@@ -192,5 +194,7 @@ class LocalMapper(NavComponent):
         out = self.get_out_topic("mapping")
         if out is not None and now - self._memory_published >= self.config.map_publish_period:
             grid = self._memory.grid
-            self.publish(out, grid_msg(self._memory.occupancy(), grid.resolution, (grid.origin[0], grid.origin[1], 0.0), world))
+            memory = grid_msg(self._memory.occupancy(), grid.resolution, (grid.origin[0], grid.origin[1], 0.0), world)
+            memory.header.stamp = stamp  # as of the scan it last took in
+            self.publish(out, memory)
             self._memory_published = now

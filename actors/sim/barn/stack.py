@@ -177,7 +177,11 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
         progress_timeout=recovery.progress_timeout if recovery.enabled else 0.0,
         progress_distance=recovery.progress_distance,
         failure_tolerance=recovery.progress_timeout if recovery.enabled else 0.0, **common))
-    controller.inputs(location=pose_topic)
+    # Obstacles from the memory (world frame, placed by its own origin), not the ego-centric
+    # local map: that one is built at the latest scan and would be placed with the controller's
+    # latest pose, which in lock-step is often the pose of the scan before (51 of 126 control
+    # steps measured in world 19): a scan's motion, up to 4 cm at 2 m/s, against a 1.5 cm margin.
+    controller.inputs(location=pose_topic, local_map=memory_topic)
     if opts.response_model or opts.moving_obstacles:
         from emos.actors.nav.controllers import ArcSamplerConfig
         from emos.actors.nav.controllers.arcs import ArcConfig
