@@ -54,3 +54,38 @@ def test_a_grid_whose_cells_do_not_match_its_size_is_refused():
     msg.info.width = 31
     with pytest.raises(BadInput, match="local_map: 31x20 grid with 600 cells"):
         grid_points_in_robot_frame(msg, np.zeros(3))
+
+
+def _controller_with_location(msg, **config):
+    from emos.actors.nav.components import Controller, ControllerConfig
+
+    class Reading(Controller):  # the location input as the node would hand it over
+        def latest(self, key):
+            return msg if key == "location" else None
+
+    return Reading("controller", config=ControllerConfig(use_direct_sensor=False, **config))
+
+
+def _odometry(age_s: float, vx: float, wz: float):
+    from emos.core import clock
+
+    msg = M.Odometry(header=M.Header(stamp=M.Time.from_sec(clock.now() - age_s), frame_id="map"))
+    msg.twist.twist.linear.x, msg.twist.twist.angular.z = vx, wz
+    return msg
+
+
+def test_the_pose_is_carried_forward_over_its_age_with_the_measured_twist():
+    pose, velocity = np.array([1.0, 2.0, 0.5]), np.array([2.0, 0.0, 1.0])
+    controller = _controller_with_location(_odometry(0.05, 2.0, 1.0))
+    got = controller.predicted_pose(pose, velocity)
+    # About 0.05 s of a 2 m/s, 1 rad/s arc (the age grows by the test's own run time).
+    assert 0.099 < math.dist(got[:2], pose[:2]) < 0.11 and 0.0495 < got[2] - pose[2] < 0.055
+    heading = math.atan2(got[1] - pose[1], got[0] - pose[0])
+    assert abs(heading - (0.5 + (got[2] - 0.5) / 2)) < 1e-6  # a chord of the arc: half the turn
+
+
+@pytest.mark.parametrize("age, horizon", [(-0.05, 0.2), (0.5, 0.2), (0.05, 0.0)])
+def test_a_pose_of_another_clock_or_too_old_or_prediction_off_is_used_as_it_is(age, horizon):
+    pose = np.array([1.0, 2.0, 0.5])
+    controller = _controller_with_location(_odometry(age, 2.0, 1.0), pose_prediction=horizon)
+    assert controller.predicted_pose(pose, np.array([2.0, 0.0, 1.0])) is pose
