@@ -23,11 +23,12 @@ POINTS = (230, 150, 0)
 def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | np.ndarray | None = None,
                    goal: Sequence[float] | None = None, goal_radius: float = 0.0,
                    points: np.ndarray | None = None, bounds: tuple[float, float, float, float] | None = None,
-                   pixels_per_m: float = 40.0, title: str | None = None) -> Any:
+                   pixels_per_m: float = 40.0, title: str | None = None, at_time: float | None = None) -> Any:
     """Draw ``world`` seen from above; returns the PIL image and writes it to ``path`` if given.
 
     ``plan`` is a polyline (N, 2), ``points`` extra world points (a lidar scan, say), ``bounds``
     (xmin, ymin, xmax, ymax) the window (default: everything in the world, goal included).
+    ``at_time``: the simulated time to draw moving obstacles at (default: the world's clock).
     """
     image_mod, draw_mod = _deps.pil_image(), _deps.pil_draw()
     if bounds is None:
@@ -56,7 +57,7 @@ def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequ
         draw.line(px(np.array([[xmin, gy], [xmax, gy]])), fill=(232, 232, 232))
     for shape in world.shapes:
         draw.polygon(px(shape.footprint()), fill=OBSTACLE)
-    t = world.clock.now()
+    t = world.clock.now() if at_time is None else float(at_time)
     for mover in world.movers:
         x, y, heading = mover.pose_at(t)
         fp = mover.shape.footprint() - np.asarray(mover.shape.center)

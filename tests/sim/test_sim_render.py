@@ -32,3 +32,23 @@ def test_gui_request_without_a_display_runs_headless(monkeypatch, caplog):
     with World(gui=True) as world:
         assert not world.gui
     assert "no display" in caplog.text
+
+
+def test_movers_are_drawn_where_they_are_at_the_time_asked(make_world):
+    # A process-mode BARN picture is drawn on a world rebuilt at time 0: the movers must be
+    # drawn where they were when the trial ended, not where they started.
+    from emos.actors.sim import Cylinder
+    from emos.actors.sim.moving import MovingObstacle
+
+    world = make_world()
+    world.add(MovingObstacle(Cylinder((0.0, 0.0), 0.3), waypoints=[(0.0, -2.0), (0.0, 2.0)], speed=1.0, mode="once"))
+    bounds, ppm = (-3, -3, 3, 3), 20
+
+    def colour_at(img, x, y):
+        return np.asarray(img)[int((3 - y) * ppm), int((x + 3) * ppm)].tolist()
+
+    start = render_topdown(world, bounds=bounds, pixels_per_m=ppm)
+    later = render_topdown(world, bounds=bounds, pixels_per_m=ppm, at_time=3.0)  # 3 m along: at (0, 1)
+    # 0.2 m off the path line (drawn in the mover's colour too), inside the 0.3 m cylinder
+    assert colour_at(start, 0.2, -2.0) == [200, 120, 30] and colour_at(start, 0.2, 1.0) != [200, 120, 30]
+    assert colour_at(later, 0.2, 1.0) == [200, 120, 30] and colour_at(later, 0.2, -2.0) != [200, 120, 30]

@@ -65,6 +65,7 @@ class _Seen:
     """What the referee saw of a run, for its picture: true poses, the last plan, contacts."""
 
     poses: list[tuple[float, float, float]] = attrs.field(factory=list)
+    last_stamp: float | None = None  # simulated time of the last true pose: where the movers are drawn
     plan: Any = None
     contacts: list[list[float]] = attrs.field(factory=list)
 
@@ -87,7 +88,7 @@ def _draw(entry: BarnWorld | DynaWorld, opts: StackOptions, result: EpisodeResul
         robot.contacts = [_Contact((float(x), float(y), 0.0)) for x, y in seen.contacts]
         render_topdown(trial.world, png_path, plan=seen.plan, goal=trial.goal, goal_radius=opts.rules.goal_radius,
                        bounds=picture_bounds(entry, trial), pixels_per_m=40,
-                       title=picture_title(trial, result, f"{opts.algorithm} (processes)"))
+                       title=picture_title(trial, result, f"{opts.algorithm} (processes)"), at_time=seen.last_stamp)
     finally:
         trial.close()
 
@@ -146,6 +147,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                     distance += math.dist(xy, last_xy)
                 last_xy, last_t = xy, t - t0
                 if seen is not None:
+                    seen.last_stamp = t
                     q = msg.pose.pose.orientation
                     seen.poses.append((p.x, p.y, math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))))
                 outcome = monitor.update(last_t, xy, False)
