@@ -77,6 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--results", type=Path, default=None, metavar="FILE",
                         help="append every finished trial to this JSON-lines file and skip trials already in it "
                              "(resume an interrupted run; the file must be of the same configuration)")
+    parser.add_argument("--report", type=Path, default=None, metavar="FILE",
+                        help="run nothing: summarize a --results file (overall, tune and test splits, failures), "
+                             "also while its run goes on")
 
 
 def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
@@ -132,6 +135,11 @@ def _rules(args: argparse.Namespace) -> BarnRules:
 def run(args: argparse.Namespace) -> int:
     from ..barn_protocol import trial_seed
     from .parallel import TrialPool, in_process_trial
+
+    if args.report is not None:
+        from .report import run_report
+
+        return run_report(args.report, args.json)
 
     if args.controller is None:
         args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER

@@ -36,26 +36,13 @@ class TrialLog:
             self._write({"config": config})
 
     def _load(self) -> None:
-        with open(self.path, encoding="utf-8") as f:
-            lines = f.read().splitlines()
-        try:
-            head = json.loads(lines[0])["config"]
-        except (ValueError, KeyError, TypeError, IndexError):
-            raise TrialLogError(f"{self.path}: not a results file of emos bench barn (no configuration line)") from None
+        head, trials = read_results(self.path, "that trial runs again")
         if head != self.config:
             diff = {k: (head.get(k), v) for k, v in self.config.items() if head.get(k) != v}
             raise TrialLogError(f"{self.path} holds trials of another configuration "
                                 f"({', '.join(f'{k}: {a!r} there, {b!r} now' for k, (a, b) in diff.items()) or 'different keys'}); "
                                 "give another --results file")
-        fields = {f.name for f in attrs.fields(EpisodeResult)}
-        for n, line in enumerate(lines[1:], 2):
-            try:
-                row = json.loads(line)["trial"]
-                result = EpisodeResult(**{k: v for k, v in row.items() if k in fields})
-            except (ValueError, KeyError, TypeError) as exc:
-                print(f"emos bench barn: {self.path} line {n} unreadable ({type(exc).__name__}); that trial runs again",
-                      file=sys.stderr)
-                continue
+        for result in trials:
             self.trials[(result.idx, result.seed)] = result
 
     def get(self, idx: int, seed: int) -> EpisodeResult | None:
@@ -71,3 +58,33 @@ class TrialLog:
             f.write(json.dumps(record) + "\n")
             f.flush()
             os.fsync(f.fileno())
+
+
+def read_results(path: Path, unreadable: str = "skipped") -> tuple[dict[str, Any], list[EpisodeResult]]:
+    """(configuration, trials) of a results file; an unreadable trial line is reported on stderr
+    with ``unreadable`` (what happens to it) and left out; a later line of the same world and
+    seed replaces an earlier one."""
+    path = Path(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except OSError as exc:
+        raise TrialLogError(f"{path}: cannot read the results file ({exc.strerror or exc})") from None
+    try:
+        head = json.loads(lines[0])["config"]
+        if not isinstance(head, dict):
+            raise TypeError
+    except (ValueError, KeyError, TypeError, IndexError):
+        raise TrialLogError(f"{path}: not a results file of emos bench barn (no configuration line)") from None
+    fields = {f.name for f in attrs.fields(EpisodeResult)}
+    trials: dict[tuple[int, int], EpisodeResult] = {}
+    for n, line in enumerate(lines[1:], 2):
+        try:
+            row = json.loads(line)["trial"]
+            result = EpisodeResult(**{k: v for k, v in row.items() if k in fields})
+            key = (int(result.idx), int(result.seed))
+        except (ValueError, KeyError, TypeError) as exc:
+            print(f"emos bench barn: {path} line {n} unreadable ({type(exc).__name__}); {unreadable}", file=sys.stderr)
+            continue
+        trials[key] = result
+    return head, list(trials.values())

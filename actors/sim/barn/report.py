@@ -1,0 +1,65 @@
+"""``emos bench barn --report FILE``: what a results file (``--results``) holds so far, without
+running anything: its configuration, how many worlds have all their seeds, the official rates
+over every trial and over the tuning and report splits (``idx % 5 != 0`` / ``== 0``), and each
+failure with its reason. A long run can be read while it goes on, or after it was stopped."""
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from .harness import EpisodeResult
+from .trial_log import TrialLogError, read_results
+
+SPLITS = (("all", lambda idx: True), ("tune", lambda idx: idx % 5 != 0), ("test", lambda idx: idx % 5 == 0))
+
+
+def build_report(path: Path) -> dict[str, Any]:
+    from . import summarize
+
+    config, trials = read_results(path)
+    per_world = Counter(t.idx for t in trials)
+    seeds = max(per_world.values(), default=0)
+    splits = {}
+    for name, keep in SPLITS:
+        chosen = [t for t in trials if keep(t.idx)]
+        splits[name] = {"trials": len(chosen), "worlds": len({t.idx for t in chosen}),
+                        **(summarize(chosen) if chosen else {})}
+    failures = sorted((t for t in trials if not t.success), key=lambda t: (t.idx, t.seed))
+    return {
+        "config": config, "trials": len(trials), "worlds": len(per_world), "seeds": seeds,
+        "complete_worlds": sum(1 for n in per_world.values() if n == seeds),
+        "splits": splits,
+        "failures": [{"idx": t.idx, "seed": t.seed, "reason": t.reason or _kind(t)} for t in failures],
+    }
+
+
+def _kind(t: EpisodeResult) -> str:
+    return "collision" if t.collided else ("time limit" if t.timeout else "failed")
+
+
+def run_report(path: Path, as_json: bool) -> int:
+    try:
+        report = build_report(path)
+    except TrialLogError as exc:
+        print(f"emos bench barn: {exc}", file=sys.stderr)
+        return 2
+    if as_json:
+        print(json.dumps(report))
+        return 0
+    from emos.supervisor.bench.common import table
+
+    cfg = report["config"]
+    print(f"{path}: {report['trials']} trials, {report['worlds']} worlds ({report['complete_worlds']} with all "
+          f"{report['seeds']} seeds), controller {cfg.get('controller', '?')}")
+    rows = [{"split": name, **split} for name, split in report["splits"].items() if split["trials"]]
+    print(table(rows, [("split", "split", "s"), ("worlds", "worlds", "d"), ("trials", "trials", "d"),
+                       ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
+                       ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f"),
+                       ("metric_4t", "metric (4 OT)", ".4f"), ("deadline_misses", "deadline misses", ".0f"),
+                       ("mean_time_s", "time s", ".2f")]))
+    for f in report["failures"]:
+        print(f"  world {f['idx']} seed {f['seed']}: {f['reason']}")
+    return 0

@@ -1,0 +1,59 @@
+"""``emos bench barn --report FILE``: a results file summarized without running anything."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import attrs
+
+from emos.actors.sim.barn.harness import EpisodeResult
+from emos.actors.sim.barn.report import build_report
+from tests.runtime.helpers import REPO
+
+
+def _write(path, trials, config=None):
+    lines = [json.dumps({"config": config or {"controller": "builtin-robust"}})]
+    lines += [json.dumps({"trial": attrs.asdict(t)}) for t in trials]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _trial(idx, seed, success=True, collided=False, timeout=False, time_s=5.0, metric=0.5, reason="goal"):
+    return EpisodeResult(idx, success, collided, timeout, time_s, metric if success else 0.0, seed=seed,
+                         metric_4t=metric / 2 if success else 0.0, deadline_misses=2, reason=reason)
+
+
+def test_the_report_splits_tune_and_test_and_lists_failures(tmp_path):
+    path = tmp_path / "r.jsonl"
+    trials = [_trial(1, s) for s in (11, 12)] + [_trial(5, 21), _trial(5, 22, success=False, collided=True,
+                                                                          reason="collision at (1.00, 2.00)")]
+    trials += [_trial(7, 31, success=False, timeout=True, reason="time limit")]  # world 7: one seed of two so far
+    _write(path, trials)
+    with open(path, "a") as f:
+        f.write('{"trial": {"idx": 9, "succ')  # a line cut short by a crash: left out, said on stderr
+    report = build_report(path)
+    assert (report["trials"], report["worlds"], report["seeds"], report["complete_worlds"]) == (5, 3, 2, 2)
+    tune, test = report["splits"]["tune"], report["splits"]["test"]
+    assert (tune["worlds"], tune["trials"], test["worlds"], test["trials"]) == (2, 3, 1, 2)
+    assert tune["success_rate"] == round(2 / 3, 4) and tune["timeout_rate"] == round(1 / 3, 4)
+    assert test["success_rate"] == 0.5 and test["collision_rate"] == 0.5
+    assert report["splits"]["all"]["success_rate"] == 0.6
+    assert report["failures"] == [{"idx": 5, "seed": 22, "reason": "collision at (1.00, 2.00)"},
+                                  {"idx": 7, "seed": 31, "reason": "time limit"}]
+
+
+def test_the_cli_prints_the_report_and_refuses_a_file_that_is_not_one(tmp_path):
+    path = tmp_path / "r.jsonl"
+    _write(path, [_trial(5, 1), _trial(10, 2, success=False, collided=True, reason="collision at (0.10, 0.20)")])
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--report", str(path)], capture_output=True,
+                         text=True, timeout=60, env=env)
+    assert out.returncode == 0, out.stderr
+    assert "2 trials, 2 worlds" in out.stdout and "world 10 seed 2: collision at (0.10, 0.20)" in out.stdout
+    assert " test " in out.stdout and " tune " not in out.stdout  # both worlds are idx % 5 == 0
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("hello\n")
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--report", str(bad)], capture_output=True,
+                         text=True, timeout=60, env=env)
+    assert out.returncode == 2 and "not a results file of emos bench barn" in out.stderr
