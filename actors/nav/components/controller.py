@@ -67,7 +67,9 @@ class ControllerConfig(NavComponentConfig):
     location's pose carried forward over its age (now minus its stamp, when that is between 0
     and this many seconds) with its measured twist. A localizer's pose is as old as the scan it
     matched, and lags the robot by the mapping time (in lock-step, where the controller may
-    run before the mapper has taken the tick's scan, a scan and a half: 30 ms, 6 cm at 2 m/s)."""
+    run before the mapper has taken the tick's scan, a scan and a half: 30 ms, 6 cm at 2 m/s).
+    ``world_map_range`` (m): how far around the robot a world-frame ``local_map`` is read (beyond
+    every built-in algorithm's reach at 2 m/s)."""
 
     loop_rate: float = rate_field(10.0)
     algorithm: str = field(default=ControllersID.DWA.value, converter=_algorithm, on_setattr=attrs.setters.convert)
@@ -82,6 +84,7 @@ class ControllerConfig(NavComponentConfig):
     progress_distance: float = field(default=0.3, validator=in_range(min_value=1e-3, max_value=100.0))
     failure_tolerance: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1e4))
     pose_prediction: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=1.0))
+    world_map_range: float = field(default=5.0, validator=in_range(min_value=0.1, max_value=1e4))
 
 
 class Controller(VisionTracking, NavComponent):
@@ -223,7 +226,7 @@ class Controller(VisionTracking, NavComponent):
         self._source_stamp = msg.header.stamp  # a TwistStamped command carries its data's time
         if key == "local_map":
             if self.world_frame_obstacles(msg) and pose is not None:
-                return grid_points_in_robot_frame(msg, pose), key
+                return grid_points_in_robot_frame(msg, pose, self.config.world_map_range), key
             return grid2d_of(msg), key
         if isinstance(msg, LaserScan):
             return scan_of(msg), key

@@ -113,25 +113,43 @@ def grid2d_of(msg: OccupancyGrid) -> OccupancyGrid2D:
     return OccupancyGrid2D(msg.grid(), float(info.resolution), (info.origin.position.x, info.origin.position.y))
 
 
-def grid_points_in_robot_frame(msg: OccupancyGrid, pose: np.ndarray, occupied_threshold: int = 50) -> np.ndarray:
+def grid_points_in_robot_frame(msg: OccupancyGrid, pose: np.ndarray, max_range: float = math.inf,
+                               occupied_threshold: int = 50) -> np.ndarray:
     """Centres (M, 2) of the occupied cells of a grid that is not ego-centric (its origin is a
     pose in the frame ``pose`` is in, e.g. a map or an obstacle memory in ``map``), in the
-    frame of the robot at ``pose``. Placed by the grid's own origin, so a grid never moves with
-    the robot's pose of another instant (an ego-centric map built at the last scan, read with
-    the pose of the scan before, lands a scan's motion away)."""
+    frame of the robot at ``pose``, those within ``max_range`` m of it. Placed by the grid's
+    own origin, so a grid never moves with the robot's pose of another instant (an ego-centric
+    map built at the last scan, read with the pose of the scan before, lands a scan's motion
+    away). Only the cells of the square around the robot are looked at: a large map costs no
+    more than a small one."""
     info = msg.info
     if info.width * info.height != msg.data.size or msg.data.size == 0:
         raise BadInput(f"local_map: {info.width}x{info.height} grid with {msg.data.size} cells")
-    rows, cols = np.nonzero(msg.grid() >= occupied_threshold)
     res = float(info.resolution)
-    gx, gy = (cols + 0.5) * res, (rows + 0.5) * res
     o = info.origin
     oyaw = _yaw(o.orientation)
     co, so = math.cos(oyaw), math.sin(oyaw)
+    grid = msg.grid()
+    r0, c0 = 0, 0
+    if math.isfinite(max_range):
+        # The robot in grid cells, and the square of cells that can lie within max_range of it.
+        dx, dy = pose[0] - o.position.x, pose[1] - o.position.y
+        col, row = (co * dx + so * dy) / res, (-so * dx + co * dy) / res
+        reach = max_range / res + 1.0
+        r0, r1 = max(int(math.floor(row - reach)), 0), min(int(math.ceil(row + reach)), grid.shape[0])
+        c0, c1 = max(int(math.floor(col - reach)), 0), min(int(math.ceil(col + reach)), grid.shape[1])
+        if r0 >= r1 or c0 >= c1:
+            return np.zeros((0, 2))
+        grid = grid[r0:r1, c0:c1]
+    rows, cols = np.nonzero(grid >= occupied_threshold)
+    gx, gy = (cols + c0 + 0.5) * res, (rows + r0 + 0.5) * res
     wx, wy = o.position.x + co * gx - so * gy, o.position.y + so * gx + co * gy
     c, s = math.cos(pose[2]), math.sin(pose[2])
     dx, dy = wx - pose[0], wy - pose[1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+    out = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+    if math.isfinite(max_range):
+        out = out[np.einsum("ij,ij->i", out, out) <= max_range * max_range]
+    return out
 
 
 def grid_msg(data: np.ndarray, resolution: float, origin: tuple[float, float, float], frame_id: str) -> OccupancyGrid:

@@ -89,3 +89,19 @@ def test_a_pose_of_another_clock_or_too_old_or_prediction_off_is_used_as_it_is(a
     pose = np.array([1.0, 2.0, 0.5])
     controller = _controller_with_location(_odometry(age, 2.0, 1.0), pose_prediction=horizon)
     assert controller.predicted_pose(pose, np.array([2.0, 0.0, 1.0])) is pose
+
+
+@pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (1.0, -1.0, math.pi / 6), (-3.0, 2.0, -2.0)])
+def test_reading_within_a_range_is_the_full_grid_cut_to_that_range(origin):
+    # Only the square of cells around the robot is looked at: the same points as reading the
+    # whole grid and keeping those within range, wherever the robot is (inside, at an edge,
+    # outside the grid) and however the grid is turned.
+    rng = np.random.default_rng(3)
+    cells = [tuple(x) for x in np.c_[rng.integers(0, 20, 150), rng.integers(0, 30, 150)]]
+    msg = _world_grid(cells, origin)
+    for pose in rng.uniform([-4.0, -4.0, -3.0], [5.0, 5.0, 3.0], (40, 3)):
+        full = grid_points_in_robot_frame(msg, pose)
+        for max_range in (0.35, 1.0, 2.5):
+            want = full[np.hypot(full[:, 0], full[:, 1]) <= max_range]
+            got = grid_points_in_robot_frame(msg, pose, max_range)
+            np.testing.assert_allclose(got[np.lexsort(got.T)], want[np.lexsort(want.T)], atol=1e-9)
