@@ -300,8 +300,9 @@ class Controller(VisionTracking, NavComponent):
             self.publish_stop()
             return None
         pose, velocity = state
-        if not self.config.use_direct_sensor:
-            local_map = self.get_input(self.get_in_topic("local_map")) if self.get_in_topic("local_map") is not None else None
+        map_topic = None if self.config.use_direct_sensor else self.get_in_topic("local_map")
+        if map_topic is not None:
+            local_map = self.get_input(map_topic)
             if local_map is not None and self.world_frame_obstacles(local_map):
                 # Obstacles placed by their own origin do not move with the pose: plan from where
                 # the robot is now, not from where the localizer last saw it.
