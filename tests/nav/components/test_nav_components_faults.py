@@ -125,14 +125,22 @@ launcher.bringup()
 """, ["base", "mapper"])
     memory = Subscriber(system.ctx, "/local_map/memory", M.OccupancyGrid, transient_local=True)
     pose = Subscriber(system.ctx, "/local_map/pose", M.PoseStamped)
+    scans = Subscriber(system.ctx, "/scan", M.LaserScan, queue_size=500)
     try:
         grid = wait_until(lambda: next(iter(memory.take()[-1:]), None), 15, what="the obstacle memory")
         g = grid.grid()
         assert grid.header.frame_id == "map" and g.shape == (100, 140) and (g == 100).sum() > 100
         p = wait_until(lambda: next(iter(pose.take()[-1:]), None), 10, what="the localized pose")
         assert abs(p.pose.position.x - 1.0) < 0.05 and abs(p.pose.position.y - 1.0) < 0.05
+        # The pose and the memory carry the stamp of the scan they were made from (a controller
+        # pairs them with other data by it; a publish-time stamp would match nothing).
+        time.sleep(1.0)
+        stamps = {(s.header.stamp.sec, s.header.stamp.nanosec) for s in scans.take()}
+        p, grid = pose.take()[-1], wait_until(lambda: next(iter(memory.take()[-1:]), None), 5, what="a newer memory")
+        assert (p.header.stamp.sec, p.header.stamp.nanosec) in stamps, (p.header.stamp, sorted(stamps)[-3:])
+        assert (grid.header.stamp.sec, grid.header.stamp.nanosec) in stamps
     finally:
-        memory.close(), pose.close()
+        memory.close(), pose.close(), scans.close()
         system.stop()
 
 
