@@ -52,8 +52,9 @@ def run_report(path: Path, as_json: bool) -> int:
     from emos.supervisor.bench.common import table
 
     cfg = report["config"]
-    print(f"{path}: {report['trials']} trials, {report['worlds']} worlds ({report['complete_worlds']} with all "
-          f"{report['seeds']} seeds), controller {cfg.get('controller', '?')}")
+    seeds = f"all {report['seeds']} seeds" if report["seeds"] > 1 else "its seed"
+    print(f"{path}: {report['trials']} trials, {report['worlds']} worlds ({report['complete_worlds']} with {seeds}), "
+          f"controller {cfg.get('controller', '?')}")
     rows = [{"split": name, **split} for name, split in report["splits"].items() if split["trials"]]
     print(table(rows, [("split", "split", "s"), ("worlds", "worlds", "d"), ("trials", "trials", "d"),
                        ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
