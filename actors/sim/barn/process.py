@@ -148,8 +148,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 last_xy, last_t = xy, t - t0
                 if seen is not None:
                     seen.last_stamp = t
-                    q = msg.pose.pose.orientation
-                    seen.poses.append((p.x, p.y, math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))))
+                    seen.poses.append((p.x, p.y, msg.pose.pose.orientation.yaw()))
                 outcome = monitor.update(last_t, xy, False)
                 if outcome is not None:
                     break
