@@ -1,0 +1,108 @@
+"""Where an 8 MiB ping-pong spends its time: EMOS over Zenoh against raw Zenoh, stage by stage.
+
+A diagnostic for ``emos bench net`` (docs/benchmarks.md, "EMOS over Zenoh on a quiet machine"):
+the same two ends as the benchmark (:class:`supervisor.bench.net._End`), in two processes joined
+over loopback TCP, with ``time.perf_counter_ns`` marks around the send (EMOS: encode, frame and
+``put``; and ``put`` alone), the frame check on Zenoh's thread and the take. Prints the half round
+trip's p50 and each stage's median, for the pinging side and the echo::
+
+    python3 scripts/net_stages.py zenoh            # raw Zenoh, 8 MiB
+    python3 scripts/net_stages.py emos-zenoh       # EMOS over Zenoh, 8 MiB
+    python3 scripts/net_stages.py emos-zenoh 921600
+"""
+from __future__ import annotations
+
+import json
+import os
+import select
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import numpy as np  # noqa: E402
+
+from emos.msgs import UInt8MultiArray  # noqa: E402
+from emos.transport import zenoh_net  # noqa: E402
+from supervisor.bench import net as bench  # noqa: E402
+
+ROUND_TRIPS = 60
+clock = time.perf_counter_ns
+marks: dict[str, list[float]] = {}
+
+
+def _timed(name, fn):
+    def wrapper(*args):
+        t0 = clock()
+        try:
+            return fn(*args)
+        finally:
+            marks.setdefault(name, []).append((clock() - t0) / 1000.0)
+    return wrapper
+
+
+def instrument(end: bench._End, transport: str) -> None:
+    end.send = _timed("send", end.send)
+    if transport == "emos-zenoh":
+        end.take = _timed("take", end.take)
+        zenoh_net.read_frame = _timed("read_frame", zenoh_net.read_frame)  # called from Zenoh's thread
+        inner = end._pub._pub
+        end._pub._pub = type("TimedPut", (), {"put": staticmethod(_timed("put", inner.put))})()
+
+
+def medians() -> dict[str, float]:
+    return {k: round(statistics.median(v), 1) for k, v in marks.items()}
+
+
+def echo(transport: str, config: str, group: str, out: str) -> None:
+    end = bench._End(config, group, transport, "pong")
+    instrument(end, transport)
+    echoed, deadline = 0, time.time() + 60
+    while time.time() < deadline:
+        readable, _, _ = select.select([end.inbox.rfd], [], [], 3.0)
+        if not readable:
+            if echoed:
+                break  # the ping side is done
+            continue
+        os.read(end.inbox.rfd, 4096)
+        for msg in end.take():
+            end.send(msg)
+            echoed += 1
+    with open(out, "w") as f:
+        json.dump(medians(), f)
+    os._exit(0)  # Zenoh's threads can hold a normal exit
+
+
+def ping(transport: str, size: int) -> None:
+    folder = tempfile.mkdtemp(prefix="emos-net-stages-")
+    port_ping, port_pong = bench._free_port(), bench._free_port()
+    ping_conf = bench._config_file(folder, "ping", port_ping, port_pong)
+    pong_conf = bench._config_file(folder, "pong", port_pong, port_ping)
+    group, out = f"stages{uuid.uuid4().hex[:6]}", os.path.join(folder, "echo.json")
+    child = subprocess.Popen([sys.executable, __file__, "--echo", transport, pong_conf, group, out])
+    try:
+        end = bench._End(ping_conf, group, transport, "ping")
+        instrument(end, transport)
+        time.sleep(1.0)  # let the sessions connect
+        data = np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8)
+        payload = UInt8MultiArray(data=data) if transport == "emos-zenoh" else data.tobytes()
+        samples, lost = bench._round_trips(end, payload, ROUND_TRIPS)
+        child.wait(20)
+        print(f"{transport} {size} B: half round trip p50 {statistics.median(samples):.0f} us ({lost} lost)")
+        print("  ping side:", medians())
+        with open(out) as f:
+            print("  echo side:", json.load(f))
+    finally:
+        child.kill()
+        os._exit(0)
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "--echo":
+        echo(*sys.argv[2:6])
+    else:
+        ping(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 8 << 20)
