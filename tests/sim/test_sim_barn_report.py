@@ -57,3 +57,16 @@ def test_the_cli_prints_the_report_and_refuses_a_file_that_is_not_one(tmp_path):
     out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--report", str(bad)], capture_output=True,
                          text=True, timeout=60, env=env)
     assert out.returncode == 2 and "not a results file of emos bench barn" in out.stderr
+
+
+def test_a_file_with_no_finished_trial_says_so_and_names_what_a_bad_line_lacks(tmp_path):
+    path = tmp_path / "r.jsonl"
+    _write(path, [])
+    with open(path, "a") as f:
+        f.write(json.dumps({"trial": {"idx": 3, "seed": 4}}) + "\n")  # a trial without its outcome
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--report", str(path)], capture_output=True,
+                         text=True, timeout=60, env=env)
+    assert out.returncode == 0, out.stderr
+    assert "no finished trial yet" in out.stdout and "split" not in out.stdout  # no empty table
+    assert "line 2 unreadable" in out.stderr and "'success'" in out.stderr  # names the missing field

@@ -52,6 +52,9 @@ def run_report(path: Path, as_json: bool) -> int:
     from emos.supervisor.bench.common import table
 
     cfg = report["config"]
+    if not report["trials"]:
+        print(f"{path}: no finished trial yet, controller {cfg.get('controller', '?')}")
+        return 0
     seeds = f"all {report['seeds']} seeds" if report["seeds"] > 1 else "its seed"
     print(f"{path}: {report['trials']} trials, {report['worlds']} worlds ({report['complete_worlds']} with {seeds}), "
           f"controller {cfg.get('controller', '?')}")

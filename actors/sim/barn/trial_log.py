@@ -84,7 +84,7 @@ def read_results(path: Path, unreadable: str = "skipped") -> tuple[dict[str, Any
             result = EpisodeResult(**{k: v for k, v in row.items() if k in fields})
             key = (int(result.idx), int(result.seed))
         except (ValueError, KeyError, TypeError) as exc:
-            print(f"emos bench barn: {path} line {n} unreadable ({type(exc).__name__}); {unreadable}", file=sys.stderr)
+            print(f"emos bench barn: {path} line {n} unreadable ({type(exc).__name__}: {str(exc)[:160]}); {unreadable}", file=sys.stderr)
             continue
         trials[key] = result
     return head, list(trials.values())
