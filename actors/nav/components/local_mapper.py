@@ -5,6 +5,7 @@ import math
 from typing import Any
 
 from attrs import define, field
+from attrs.validators import in_
 
 from emos.config.base import ComponentRunType
 from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
@@ -17,6 +18,7 @@ from emos.msgs import Odometry
 from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
 from ..mapping import EvidenceConfig, MemoryMapper
+from ..mapping.scan_matching import compose
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, grid_msg, localized_odometry, pose_of, pose_stamped, scan_of
 
@@ -65,7 +67,14 @@ class LocalMapperConfig(NavComponentConfig):
     a Planner can take it as its map) and the corrected pose on ``localized_pose``. The memory
     never forgets by default (static worlds); ``memory_decay`` (an ``EvidenceConfig`` or a dict
     of its fields) makes it forget by evidence (cells later scans see through are released:
-    a moving obstacle's trail goes, walls stay), for worlds where obstacles move."""
+    a moving obstacle's trail goes, walls stay), for worlds where obstacles move.
+
+    ``local_map_frame``: ``"robot"`` (default) publishes the grid in ``frames.robot_base``, as
+    seen from the robot at its scan; ``"world"`` publishes the same grid in ``frames.world``,
+    its origin placed at the pose of its scan (the corrected pose in mapping mode, else the
+    odometry's), like a rolling-window costmap in ``odom``. A reader then places the obstacles
+    by the grid's own origin, not by its own latest pose, which may be a scan older or newer
+    than the grid (the Controller does: it plans from its current pose). Needs ``location``."""
 
     loop_rate: float = rate_field(10.0)
     map_params: MapConfig = field(factory=MapConfig, converter=_map_config)
@@ -81,6 +90,7 @@ class LocalMapperConfig(NavComponentConfig):
     #: ``use_sim_time`` (lockstep: a wall-clock age means nothing while the simulator waits).
     sensor_timeout: float = field(default=1.0, validator=in_range(min_value=1e-3, max_value=1e3))
     memory_decay: EvidenceConfig | None = field(default=None, converter=_memory_decay)
+    local_map_frame: str = field(default="robot", validator=in_(("robot", "world")))
 
     def __attrs_post_init__(self) -> None:
         if self.memory_decay is not None and self.mapping_bounds is None:
@@ -158,10 +168,12 @@ class LocalMapper(NavComponent):
             self.fail_input("sensor_data", str(exc))
             return
         pose, loc = None, None
-        if self.config.keep_memory or self._memory is not None:
+        in_world = self.config.local_map_frame == "world"
+        if self.config.keep_memory or self._memory is not None or in_world:
             loc = self.latest("location")
             if loc is None:
-                self.fail_input("location", f"keep_memory needs odometry on {self.topic_name('location')}")
+                why = "a world-frame local_map" if in_world and not self.config.keep_memory else "keep_memory"
+                self.fail_input("location", f"{why} needs odometry on {self.topic_name('location')}")
                 return
             try:
                 pose = pose_of(loc)
@@ -170,14 +182,23 @@ class LocalMapper(NavComponent):
                 return
         grid = self._builder.update(scan, pose)
         o = self._builder.origin
-        out = grid_msg(grid, self.config.map_params.resolution, (o[0], o[1], 0.0), self.config.frames.robot_base)
+        if in_world:
+            # Placed where the robot was at the scan, in the frame of the pose the robot is
+            # located by: the memory's corrected pose when there is one, else the odometry's.
+            at = self._update_memory(scan, pose, loc, scan_msg.header.stamp) if self._memory is not None else pose
+            origin, frame = compose(at, (o[0], o[1], 0.0)), self.config.frames.world
+        else:
+            origin, frame = (o[0], o[1], 0.0), self.config.frames.robot_base
+        out = grid_msg(grid, self.config.map_params.resolution, origin, frame)
         out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
         self.publish(self.get_out_topic("local_map"), out)
-        if self._memory is not None:
+        if self._memory is not None and not in_world:
             self._update_memory(scan, pose, loc, scan_msg.header.stamp)
         self.health_status.set_healthy()
 
-    def _update_memory(self, scan: Any, odom_pose: Any, location: Any, stamp: Any) -> None:
+    def _update_memory(self, scan: Any, odom_pose: Any, location: Any, stamp: Any) -> Any:
+        """Add the scan to the memory, publish the corrected pose (and the memory when due);
+        return the corrected pose."""
         corrected = self._memory.update(scan, odom_pose)
         world = self.config.frames.world
         out = self.get_out_topic("localized_pose")
@@ -198,3 +219,4 @@ class LocalMapper(NavComponent):
             memory.header.stamp = stamp  # as of the scan it last took in
             self.publish(out, memory)
             self._memory_published = now
+        return corrected

@@ -144,6 +144,52 @@ launcher.bringup()
         system.stop()
 
 
+def test_a_world_frame_local_map_lies_where_the_robot_frame_one_does_from_its_scan_pose(tmp_path):
+    """``local_map_frame="world"``: the same grid as the ego-centric one, published in the map
+    frame at the pose of its scan, so a reader that places it by its own origin finds every
+    obstacle where the ego-centric grid, read with that scan's pose, has it."""
+    from emos.actors.nav.components.convert import grid_points_in_robot_frame, pose_of
+    from emos.transport.pubsub import Subscriber
+
+    system = _system(tmp_path, """
+ego = LocalMapper(component_name="ego", config=LocalMapperConfig(mapping_bounds=(-0.5, -0.5, 6.5, 4.5)))
+ego.run_type = "Event"
+placed = LocalMapper(component_name="placed", config=LocalMapperConfig(mapping_bounds=(-0.5, -0.5, 6.5, 4.5), local_map_frame="world"))
+placed.run_type = "Event"
+placed.outputs(local_map=Topic(name="/placed/local_map", msg_type="OccupancyGrid"),
+               mapping=Topic(name="/placed/memory", msg_type="OccupancyGrid"),
+               localized_pose=Topic(name="/placed/pose", msg_type="PoseStamped"))
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.3))])
+launcher.kompass(components=[ego, placed], multiprocessing=True)
+launcher.bringup()
+""", ["base", "ego", "placed"])
+    subs = {name: Subscriber(system.ctx, topic, M.OccupancyGrid if "map" in topic else M.PoseStamped, queue_size=200)
+            for name, topic in (("ego", "/local_map/occupancy_layer"), ("placed", "/placed/local_map"), ("pose", "/placed/pose"))}
+    try:
+        time.sleep(2.0)
+
+        def by_stamp(name):
+            return {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in subs[name].take()}
+
+        ego, placed, poses = wait_until(lambda: (lambda e, p, q: (e, p, q) if set(e) & set(p) & set(q) else None)(
+            by_stamp("ego"), by_stamp("placed"), by_stamp("pose")), 10, what="maps and a pose of one scan")
+        stamp = max(set(ego) & set(placed) & set(poses))
+        world_map, robot_map, pose = placed[stamp], ego[stamp], pose_of(poses[stamp])
+        assert world_map.header.frame_id == "map" and robot_map.header.frame_id == "base_link"
+        assert world_map.info.origin.orientation.yaw() == pytest.approx(pose[2])  # turned with the robot
+        assert np.array_equal(world_map.grid(), robot_map.grid())  # the same cells
+        got = grid_points_in_robot_frame(world_map, pose)
+        res, o = robot_map.info.resolution, robot_map.info.origin.position
+        rows, cols = np.nonzero(robot_map.grid() >= 50)
+        want = np.c_[o.x + (cols + 0.5) * res, o.y + (rows + 0.5) * res]
+        assert len(want) > 20 and np.allclose(np.sort(got, axis=0), np.sort(want, axis=0), atol=1e-6)
+    finally:
+        for sub in subs.values():
+            sub.close()
+        system.stop()
+
+
 def test_controller_on_a_point_cloud_ignores_the_floor_and_stops_for_a_wall(tmp_path):
     from emos.actors.nav.components.convert import path_msg
     from emos.transport.pubsub import Publisher, Subscriber
