@@ -93,8 +93,12 @@ def test_builtin_dynamic_stack_forgets_by_evidence_and_tracks_movers_in_the_scan
     algo = controller.algorithms_config
     assert algo.movers is not None and algo.response is not None  # builtin-robust's response model too
     assert not controller.config.use_direct_sensor and controller.get_in_topic("sensor_data").name == "/scan"
+    assert controller.get_in_topic("local_map").name == mapper.get_out_topic("mapping").name  # the forgetting memory
     static = build_system(StackOptions.for_controller("builtin-robust", world=3))[1]
     assert static[0].config.memory_decay is None and static[2].algorithms_config.movers is None
+    # Static worlds: the latest scan's grid, placed at its scan's pose (the memory piles up noise).
+    assert static[0].config.local_map_frame == "world" and mapper.config.local_map_frame == "robot"
+    assert static[2].get_in_topic("local_map").name == static[0].get_out_topic("local_map").name
 
 
 def test_moving_obstacle_world_through_supervised_processes():

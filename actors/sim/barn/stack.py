@@ -163,7 +163,8 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     mapper = LocalMapper("mapper", config=LocalMapperConfig(
         map_params=MapConfig(width=6.0, height=6.0, resolution=0.05), keep_memory=True, sensor_pose=mount,
         mapping_bounds=bounds, scan_matching=opts.scan_matching, map_publish_period=0.0,
-        memory_decay=EvidenceConfig() if opts.moving_obstacles else None, **common))
+        memory_decay=EvidenceConfig() if opts.moving_obstacles else None,
+        local_map_frame="robot" if opts.moving_obstacles else "world", **common))
     mapper.run_type = "Event"
     mapper.outputs(mapping=memory_topic, localized_pose=pose_topic)
     planner = Planner("planner", config=PlannerConfig(planner_id="CostToGo", loop_rate=1.0, **common))
@@ -177,11 +178,16 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
         progress_timeout=recovery.progress_timeout if recovery.enabled else 0.0,
         progress_distance=recovery.progress_distance,
         failure_tolerance=recovery.progress_timeout if recovery.enabled else 0.0, **common))
-    # Obstacles from the memory (world frame, placed by its own origin), not the ego-centric
-    # local map: that one is built at the latest scan and would be placed with the controller's
-    # latest pose, which in lock-step is often the pose of the scan before (51 of 126 control
-    # steps measured in world 19): a scan's motion, up to 4 cm at 2 m/s, against a 1.5 cm margin.
-    controller.inputs(location=pose_topic, local_map=memory_topic)
+    # Static worlds: the ego-centric grid of the latest scan, published in the world frame at
+    # its scan's pose, so the controller places it by its own origin. Read with the controller's
+    # latest pose instead, it lands a scan's motion away, since in lock-step that pose is often
+    # the scan before's (51 of 126 control steps in world 19: up to 4 cm at 2 m/s, against a
+    # 1.5 cm margin). The never-forgetting memory, placed right too, piles up every scan's range
+    # noise: obstacles about 2 cm wider per side (worlds 62, 117, 111, 112 x 10: 37/50 on the
+    # memory, 48/50 on this grid; docs/benchmarks.md). Moving obstacles: the memory that forgets
+    # by evidence, as tuned.
+    controller.inputs(location=pose_topic, local_map=memory_topic if opts.moving_obstacles else Topic(
+        name="/local_map/occupancy_layer", msg_type="OccupancyGrid"))
     if opts.response_model or opts.moving_obstacles:
         from emos.actors.nav.controllers import ArcSamplerConfig
         from emos.actors.nav.controllers.arcs import ArcConfig
