@@ -70,3 +70,27 @@ def test_a_file_with_no_finished_trial_says_so_and_names_what_a_bad_line_lacks(t
     assert out.returncode == 0, out.stderr
     assert "no finished trial yet" in out.stdout and "split" not in out.stdout  # no empty table
     assert "line 2 unreadable" in out.stderr and "'success'" in out.stderr  # names the missing field
+
+
+def test_two_files_are_compared_on_the_pairs_both_hold(tmp_path):
+    new, old = tmp_path / "new.jsonl", tmp_path / "old.jsonl"
+    failed = dict(success=False, collided=True, reason="collision at (0.00, 1.00)")
+    _write(new, [_trial(1, 11), _trial(1, 12), _trial(2, 21, **failed), _trial(5, 51), _trial(9, 91)])  # 9: only here
+    _write(old, [_trial(1, 11, **failed), _trial(1, 12), _trial(2, 21), _trial(5, 51, **failed), _trial(3, 31)],
+           config={"controller": "builtin-robust", "code": "before"})
+    from emos.actors.sim.barn.report import build_comparison
+
+    got = build_comparison(new, old)
+    assert got["pairs"] == 4 and got["config_differs_in"] == ["code"]
+    assert got["report"]["splits"]["all"]["success_rate"] == 0.75 and got["against"]["splits"]["all"]["success_rate"] == 0.5
+    assert got["report"]["splits"]["test"]["trials"] == 1 and got["against"]["splits"]["test"]["success_rate"] == 0.0
+    assert got["changed_worlds"] == [{"idx": 1, "fixed": 1, "broken": 0}, {"idx": 2, "fixed": 0, "broken": 1},
+                                     {"idx": 5, "fixed": 1, "broken": 0}]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    cli = [sys.executable, "-m", "emos", "bench", "barn"]
+    out = subprocess.run([*cli, "--report", str(new), "--against", str(old)], capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 0, out.stderr
+    assert "4 world-seed pairs in both files; their configurations differ in: code" in out.stdout
+    assert "world 2: 0 seed(s) succeed only in new.jsonl, 1 only in old.jsonl" in out.stdout
+    out = subprocess.run([*cli, "--against", str(old)], capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode != 0 and "give both" in out.stderr

@@ -80,6 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", type=Path, default=None, metavar="FILE",
                         help="run nothing: summarize a --results file (overall, tune and test splits, failures), "
                              "also while its run goes on")
+    parser.add_argument("--against", type=Path, default=None, metavar="FILE",
+                        help="with --report: compare with another results file on the world-seed pairs both hold "
+                             "(the same trials on two versions of the code), and list the worlds whose outcomes differ")
 
 
 def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
@@ -136,10 +139,12 @@ def run(args: argparse.Namespace) -> int:
     from ..barn_protocol import trial_seed
     from .parallel import TrialPool, in_process_trial
 
+    if args.against is not None and args.report is None:
+        raise SystemExit("emos bench barn: --against FILE compares with --report FILE; give both")
     if args.report is not None:
-        from .report import run_report
+        from .report import run_comparison, run_report
 
-        return run_report(args.report, args.json)
+        return run_report(args.report, args.json) if args.against is None else run_comparison(args.report, args.against, args.json)
 
     if args.controller is None:
         args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER

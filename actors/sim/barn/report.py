@@ -16,10 +16,13 @@ from .trial_log import TrialLogError, read_results
 SPLITS = (("all", lambda idx: True), ("tune", lambda idx: idx % 5 != 0), ("test", lambda idx: idx % 5 == 0))
 
 
-def build_report(path: Path) -> dict[str, Any]:
+def build_report(path: Path, trials: list[EpisodeResult] | None = None) -> dict[str, Any]:
+    """The report of a results file, or of ``trials`` (a subset of its trials) when given."""
     from . import summarize
 
-    config, trials = read_results(path)
+    config, everything = read_results(path)
+    if trials is None:
+        trials = everything
     per_world = Counter(t.idx for t in trials)
     seeds = max(per_world.values(), default=0)
     splits = {}
@@ -34,6 +37,54 @@ def build_report(path: Path) -> dict[str, Any]:
         "splits": splits,
         "failures": [{"idx": t.idx, "seed": t.seed, "reason": t.reason or _kind(t)} for t in failures],
     }
+
+
+def build_comparison(path: Path, other: Path) -> dict[str, Any]:
+    """Both files' reports over the world-seed pairs both hold, and per world the outcomes that
+    differ: the same trials (seeds are drawn per world and seed base) on two versions of a
+    navigator, or two configurations."""
+    (mine_config, mine), (their_config, theirs) = read_results(path), read_results(other)
+    key = lambda t: (t.idx, t.seed)  # noqa: E731
+    common = {key(t) for t in mine} & {key(t) for t in theirs}
+    a = sorted((t for t in mine if key(t) in common), key=key)
+    b = sorted((t for t in theirs if key(t) in common), key=key)
+    changed: dict[int, dict[str, int]] = {}
+    for x, y in zip(a, b):
+        if x.success != y.success:
+            row = changed.setdefault(x.idx, {"fixed": 0, "broken": 0})
+            row["fixed" if x.success else "broken"] += 1
+    differ = sorted(k for k in set(mine_config) | set(their_config) if mine_config.get(k) != their_config.get(k))
+    return {"pairs": len(common), "report": build_report(path, a), "against": build_report(other, b),
+            "config_differs_in": differ, "changed_worlds": [{"idx": idx, **row} for idx, row in sorted(changed.items())]}
+
+
+def run_comparison(path: Path, other: Path, as_json: bool) -> int:
+    try:
+        comparison = build_comparison(path, other)
+    except TrialLogError as exc:
+        print(f"emos bench barn: {exc}", file=sys.stderr)
+        return 2
+    if as_json:
+        print(json.dumps(comparison))
+        return 0
+    if not comparison["pairs"]:
+        print(f"{path} and {other} share no world-seed pair yet")
+        return 0
+    from emos.supervisor.bench.common import table
+
+    differ = comparison["config_differs_in"]
+    print(f"{comparison['pairs']} world-seed pairs in both files"
+          + (f"; their configurations differ in: {', '.join(differ)}" if differ else " (same configuration)"))
+    rows = [{"file": name, "split": split, **report["splits"][split]}
+            for split in ("all", "tune", "test") for name, report in ((str(path), comparison["report"]), (str(other), comparison["against"]))
+            if report["splits"][split]["trials"]]
+    print(table(rows, [("split", "split", "s"), ("file", "file", "s"), ("trials", "trials", "d"),
+                       ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
+                       ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f"),
+                       ("mean_time_s", "time s", ".2f")]))
+    for row in comparison["changed_worlds"]:
+        print(f"  world {row['idx']}: {row['fixed']} seed(s) succeed only in {path.name}, {row['broken']} only in {other.name}")
+    return 0
 
 
 def _kind(t: EpisodeResult) -> str:
