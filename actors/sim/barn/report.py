@@ -82,8 +82,9 @@ def run_comparison(path: Path, other: Path, as_json: bool) -> int:
                        ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
                        ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f"),
                        ("mean_time_s", "time s", ".2f")]))
+    mine, theirs = (path.name, other.name) if path.name != other.name else (str(path), str(other))
     for row in comparison["changed_worlds"]:
-        print(f"  world {row['idx']}: {row['fixed']} seed(s) succeed only in {path.name}, {row['broken']} only in {other.name}")
+        print(f"  world {row['idx']}: {row['fixed']} seed(s) succeed only in {mine}, {row['broken']} only in {theirs}")
     return 0
 
 
