@@ -14,6 +14,9 @@ from .harness import EpisodeResult
 from .trial_log import TrialLogError, read_results
 
 SPLITS = (("all", lambda idx: True), ("tune", lambda idx: idx % 5 != 0), ("test", lambda idx: idx % 5 == 0))
+# The official rates, as both the report's and the comparison's tables show them.
+RATE_COLUMNS = [("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
+                ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f")]
 
 
 def build_report(path: Path, trials: list[EpisodeResult] | None = None) -> dict[str, Any]:
@@ -58,11 +61,18 @@ def build_comparison(path: Path, other: Path) -> dict[str, Any]:
             "config_differs_in": differ, "changed_worlds": [{"idx": idx, **row} for idx, row in sorted(changed.items())]}
 
 
-def run_comparison(path: Path, other: Path, as_json: bool) -> int:
+def _built(build: Any, *paths: Path) -> dict[str, Any] | None:
+    """``build(*paths)``, or None after saying on stderr why the files cannot be read."""
     try:
-        comparison = build_comparison(path, other)
+        return build(*paths)
     except TrialLogError as exc:
         print(f"emos bench barn: {exc}", file=sys.stderr)
+        return None
+
+
+def run_comparison(path: Path, other: Path, as_json: bool) -> int:
+    comparison = _built(build_comparison, path, other)
+    if comparison is None:
         return 2
     if as_json:
         print(json.dumps(comparison))
@@ -78,9 +88,7 @@ def run_comparison(path: Path, other: Path, as_json: bool) -> int:
     rows = [{"file": name, "split": split, **report["splits"][split]}
             for split in ("all", "tune", "test") for name, report in ((str(path), comparison["report"]), (str(other), comparison["against"]))
             if report["splits"][split]["trials"]]
-    print(table(rows, [("split", "split", "s"), ("file", "file", "s"), ("trials", "trials", "d"),
-                       ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
-                       ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f"),
+    print(table(rows, [("split", "split", "s"), ("file", "file", "s"), ("trials", "trials", "d"), *RATE_COLUMNS,
                        ("mean_time_s", "time s", ".2f")]))
     mine, theirs = (path.name, other.name) if path.name != other.name else (str(path), str(other))
     for row in comparison["changed_worlds"]:
@@ -93,10 +101,8 @@ def _kind(t: EpisodeResult) -> str:
 
 
 def run_report(path: Path, as_json: bool) -> int:
-    try:
-        report = build_report(path)
-    except TrialLogError as exc:
-        print(f"emos bench barn: {exc}", file=sys.stderr)
+    report = _built(build_report, path)
+    if report is None:
         return 2
     if as_json:
         print(json.dumps(report))
@@ -111,9 +117,7 @@ def run_report(path: Path, as_json: bool) -> int:
     print(f"{path}: {report['trials']} trials, {report['worlds']} worlds ({report['complete_worlds']} with {seeds}), "
           f"controller {cfg.get('controller', '?')}")
     rows = [{"split": name, **split} for name, split in report["splits"].items() if split["trials"]]
-    print(table(rows, [("split", "split", "s"), ("worlds", "worlds", "d"), ("trials", "trials", "d"),
-                       ("success_rate", "success", ".3f"), ("collision_rate", "collision", ".3f"),
-                       ("timeout_rate", "timeout", ".3f"), ("mean_metric", "metric (2 OT)", ".4f"),
+    print(table(rows, [("split", "split", "s"), ("worlds", "worlds", "d"), ("trials", "trials", "d"), *RATE_COLUMNS,
                        ("metric_4t", "metric (4 OT)", ".4f"), ("deadline_misses", "deadline misses", ".0f"),
                        ("mean_time_s", "time s", ".2f")]))
     for f in report["failures"]:

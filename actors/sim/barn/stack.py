@@ -186,8 +186,7 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     # noise: obstacles about 2 cm wider per side (worlds 62, 117, 111, 112 x 10: 37/50 on the
     # memory, 48/50 on this grid; docs/benchmarks.md). Moving obstacles: the memory that forgets
     # by evidence, as tuned.
-    controller.inputs(location=pose_topic, local_map=memory_topic if opts.moving_obstacles else Topic(
-        name="/local_map/occupancy_layer", msg_type="OccupancyGrid"))
+    controller.inputs(location=pose_topic, local_map=memory_topic if opts.moving_obstacles else mapper.get_out_topic("local_map"))
     if opts.response_model or opts.moving_obstacles:
         from emos.actors.nav.controllers import ArcSamplerConfig
         from emos.actors.nav.controllers.arcs import ArcConfig
