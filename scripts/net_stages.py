@@ -9,6 +9,7 @@ trip's p50 and each stage's median, for the pinging side and the echo::
     python3 scripts/net_stages.py zenoh            # raw Zenoh, 8 MiB
     python3 scripts/net_stages.py emos-zenoh       # EMOS over Zenoh, 8 MiB
     python3 scripts/net_stages.py emos-zenoh 921600
+    python3 scripts/net_stages.py --tight 8        # the same stages in a tight loop (warm caches)
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import timeit
 import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -101,8 +103,31 @@ def ping(transport: str, size: int) -> None:
         os._exit(0)
 
 
+def tight(size: int) -> None:
+    """The EMOS stages of one hop run back to back on one message: what they cost warm."""
+    from emos.msgs import codec
+    from emos.transport.netframe import FrameWriter, read_frame
+
+    msg = UInt8MultiArray(data=np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8))
+    fingerprint = UInt8MultiArray._emos_fingerprint
+    writer = FrameWriter(fingerprint, "ping")
+    frame = bytes(writer.frame(codec.encode(msg), 1))
+    payload = read_frame(frame, fingerprint)[2]
+    stages = {
+        "encode + frame": lambda: writer.frame(codec.encode(msg), 1),
+        "read_frame": lambda: read_frame(frame, fingerprint),
+        "decode": lambda: codec.decode(UInt8MultiArray, payload),
+    }
+    number = max(20, 20000 * 8 // max(size, 8))
+    for name, fn in stages.items():
+        best = min(timeit.repeat(fn, number=number, repeat=7)) / number * 1e6
+        print(f"{size} B {name}: {best:.1f} us (best of 7 x {number})")
+
+
 if __name__ == "__main__":
-    if sys.argv[1] == "--echo":
+    if sys.argv[1] == "--tight":
+        tight(int(sys.argv[2]) if len(sys.argv) > 2 else 8)
+    elif sys.argv[1] == "--echo":
         echo(*sys.argv[2:6])
     else:
         ping(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 8 << 20)
