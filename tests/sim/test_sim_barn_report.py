@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import attrs
+import numpy as np
 
 from emos.actors.sim.barn.harness import EpisodeResult
 from emos.actors.sim.barn.report import build_report
@@ -94,3 +95,51 @@ def test_two_files_are_compared_on_the_pairs_both_hold(tmp_path):
     assert "world 2: 0 seed(s) succeed only in new.jsonl, 1 only in old.jsonl" in out.stdout
     out = subprocess.run([*cli, "--against", str(old)], capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode != 0 and "give both" in out.stderr
+
+
+def test_the_outcome_grid_has_a_column_per_world_and_a_row_per_seed():
+    from emos.actors.sim.barn import report_plot as rp
+
+    trials = [_trial(5, 52, success=False, collided=True), _trial(5, 51, time_s=30.0, metric=0.3),
+              _trial(1, 11), _trial(1, 12, success=False, timeout=True), _trial(7, 71)]
+    worlds, grid = rp.outcome_grid(trials)
+    assert worlds == [1, 5, 7] and grid.shape == (2, 3)
+    assert grid[:, 0].tolist() == [rp.SUCCESS, rp.TIMEOUT]
+    assert grid[:, 1].tolist() == [rp.SLOW_SUCCESS, rp.COLLISION]  # seeds in order: 51 before 52
+    assert grid[:, 2].tolist() == [rp.SUCCESS, rp.NOT_RUN]  # world 7 has one seed so far
+    worlds, grid = rp.outcome_grid(trials, worlds=[1, 3])  # fixed columns: a world without trials is not run
+    assert grid[:, 1].tolist() == [rp.NOT_RUN, rp.NOT_RUN]
+
+
+def test_the_cli_draws_the_outcome_map_and_a_collision_shows_in_red(tmp_path):
+    from PIL import Image
+
+    from emos.actors.sim.barn.report_plot import COLLISION, COLOURS
+
+    red = np.round(COLOURS[COLLISION] * 255).astype(int)
+
+    def reds(picture):
+        pixels = np.asarray(Image.open(picture).convert("RGB")).astype(int)
+        return int((np.abs(pixels - red).max(axis=2) <= 3).sum())
+
+    clean, crashed = tmp_path / "clean.jsonl", tmp_path / "crashed.jsonl"
+    _write(clean, [_trial(i, s) for i in (1, 2, 3) for s in (1, 2)])
+    _write(crashed, [_trial(i, s, **(dict(success=False, collided=True) if (i, s) == (2, 2) else {}))
+                     for i in (1, 2, 3) for s in (1, 2)])
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    cli = [sys.executable, "-m", "emos", "bench", "barn"]
+    for path in (clean, crashed):
+        out = subprocess.run([*cli, "--report", str(path), "--plot", str(path.with_suffix(".png"))],
+                             capture_output=True, text=True, timeout=60, env=env)
+        assert out.returncode == 0 and "outcome map written" in out.stderr, out.stderr
+        assert "3 worlds" in out.stdout  # the report is printed as without --plot
+    # Both have the legend's red swatch; only the run with a collision has a red cell (a sixth of
+    # a 2-seed band's height by a fiftieth of its width: hundreds of pixels).
+    assert reds(crashed.with_suffix(".png")) - reds(clean.with_suffix(".png")) > 200
+    both = tmp_path / "both.png"
+    out = subprocess.run([*cli, "--report", str(crashed), "--against", str(clean), "--plot", str(both)],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 0 and both.exists(), out.stderr
+    out = subprocess.run([*cli, "--report", str(clean), "--plot", str(tmp_path / "map.txt")],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode != 0 and ".png, .svg or .pdf" in out.stderr

@@ -83,6 +83,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--against", type=Path, default=None, metavar="FILE",
                         help="with --report: compare with another results file on the world-seed pairs both hold "
                              "(the same trials on two versions of the code), and list the worlds whose outcomes differ")
+    parser.add_argument("--plot", type=Path, default=None, metavar="PICTURE",
+                        help="with --report: draw every trial's outcome, world by seed, into this .png/.svg/.pdf "
+                             "(with --against, both files on the pairs both hold)")
 
 
 def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
@@ -141,10 +144,17 @@ def run(args: argparse.Namespace) -> int:
 
     if args.against is not None and args.report is None:
         raise SystemExit("emos bench barn: --against FILE compares with --report FILE; give both")
+    if args.plot is not None and args.report is None:
+        raise SystemExit("emos bench barn: --plot PICTURE draws a --report FILE; give both")
     if args.report is not None:
+        from emos.supervisor.plotting import check_plot_argument
+
         from .report import run_comparison, run_report
 
-        return run_report(args.report, args.json) if args.against is None else run_comparison(args.report, args.against, args.json)
+        check_plot_argument(str(args.plot) if args.plot is not None else None)
+        if args.against is None:
+            return run_report(args.report, args.json, args.plot)
+        return run_comparison(args.report, args.against, args.json, args.plot)
 
     if args.controller is None:
         args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER

@@ -47,18 +47,23 @@ def build_comparison(path: Path, other: Path) -> dict[str, Any]:
     differ: the same trials (seeds are drawn per world and seed base) on two versions of a
     navigator, or two configurations."""
     (mine_config, mine), (their_config, theirs) = read_results(path), read_results(other)
-    key = lambda t: (t.idx, t.seed)  # noqa: E731
-    common = {key(t) for t in mine} & {key(t) for t in theirs}
-    a = sorted((t for t in mine if key(t) in common), key=key)
-    b = sorted((t for t in theirs if key(t) in common), key=key)
+    a, b = paired_trials(mine, theirs)
     changed: dict[int, dict[str, int]] = {}
     for x, y in zip(a, b):
         if x.success != y.success:
             row = changed.setdefault(x.idx, {"fixed": 0, "broken": 0})
             row["fixed" if x.success else "broken"] += 1
     differ = sorted(k for k in set(mine_config) | set(their_config) if mine_config.get(k) != their_config.get(k))
-    return {"pairs": len(common), "report": build_report(path, a), "against": build_report(other, b),
+    return {"pairs": len(a), "report": build_report(path, a), "against": build_report(other, b),
             "config_differs_in": differ, "changed_worlds": [{"idx": idx, **row} for idx, row in sorted(changed.items())]}
+
+
+def paired_trials(mine: list[EpisodeResult], theirs: list[EpisodeResult]) -> tuple[list[EpisodeResult], list[EpisodeResult]]:
+    """The trials of each list whose world-seed pair the other holds too, in the same order."""
+    key = lambda t: (t.idx, t.seed)  # noqa: E731
+    common = {key(t) for t in mine} & {key(t) for t in theirs}
+    return (sorted((t for t in mine if key(t) in common), key=key),
+            sorted((t for t in theirs if key(t) in common), key=key))
 
 
 def _built(build: Any, *paths: Path) -> dict[str, Any] | None:
@@ -70,10 +75,13 @@ def _built(build: Any, *paths: Path) -> dict[str, Any] | None:
         return None
 
 
-def run_comparison(path: Path, other: Path, as_json: bool) -> int:
+def run_comparison(path: Path, other: Path, as_json: bool, plot: Path | None = None) -> int:
     comparison = _built(build_comparison, path, other)
     if comparison is None:
         return 2
+    if plot is not None and comparison["pairs"]:
+        mine, theirs = paired_trials(read_results(path)[1], read_results(other)[1])
+        _plot(plot, [(str(path), mine), (str(other), theirs)])
     if as_json:
         print(json.dumps(comparison))
         return 0
@@ -96,14 +104,23 @@ def run_comparison(path: Path, other: Path, as_json: bool) -> int:
     return 0
 
 
+def _plot(plot: Path, panels: list[tuple[str, list[EpisodeResult]]]) -> None:
+    from .report_plot import save_outcome_map
+
+    save_outcome_map(plot, panels)
+    print(f"emos bench barn: outcome map written to {plot}", file=sys.stderr)  # stdout stays the report (or its JSON)
+
+
 def _kind(t: EpisodeResult) -> str:
     return "collision" if t.collided else ("time limit" if t.timeout else "failed")
 
 
-def run_report(path: Path, as_json: bool) -> int:
+def run_report(path: Path, as_json: bool, plot: Path | None = None) -> int:
     report = _built(build_report, path)
     if report is None:
         return 2
+    if plot is not None and report["trials"]:
+        _plot(plot, [(str(path), read_results(path)[1])])
     if as_json:
         print(json.dumps(report))
         return 0
