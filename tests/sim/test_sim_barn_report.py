@@ -143,3 +143,17 @@ def test_the_cli_draws_the_outcome_map_and_a_collision_shows_in_red(tmp_path):
     out = subprocess.run([*cli, "--report", str(clean), "--plot", str(tmp_path / "map.txt")],
                          capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode != 0 and ".png, .svg or .pdf" in out.stderr
+
+
+def test_a_run_s_progress_estimates_the_time_left_from_the_trials_it_ran_itself():
+    import time
+
+    from emos.actors.sim.barn import _time_left
+
+    trials = {(idx, k): None for idx in (1, 2, 3) for k in (0, 1)}
+    resumed = {(1, 0), (1, 1), (3, 1)}  # read back from the results file: free
+    started = time.perf_counter() - 120.0
+    # Worlds 1 and 2 done: 2 trials ran in 120 s, 1 of the remaining 2 still has to run.
+    assert _time_left(trials, resumed, 4, started) == ", about 1 min left"
+    assert _time_left(trials, resumed, 2, started) == ""  # nothing ran yet: no pace to go by
+    assert _time_left(trials, resumed, 6, started) == ""  # all done

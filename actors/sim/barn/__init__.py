@@ -201,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
     # Every trial not in the results file yet, started in world order (all at once with --jobs 1
     # deferred: each then runs when its world's row is due, as before).
     trials: dict[tuple[int, int], Callable[[], EpisodeResult]] = {}
+    resumed: set[tuple[int, int]] = set()  # trials read back from the results file, not run now
     for idx in indices:
         key = f"dynabarn:{idx}" if args.dynabarn else idx
         for k in range(args.seeds):
@@ -208,19 +209,30 @@ def run(args: argparse.Namespace) -> int:
             prior = log.get(idx, seed) if log is not None else None
             if prior is not None:
                 trials[(idx, k)] = lambda prior=prior: prior
+                resumed.add((idx, k))
             elif args.in_process:
                 png = args.png / f"{name.split('-')[0].lower()}_{idx:03d}_s{k}.png" if args.png else None
                 trials[(idx, k)] = pool.submit(in_process_trial, worlds[idx], args.controller, rules, seed, png)
             else:
                 trials[(idx, k)] = pool.submit(episode, idx, seed)
     try:
-        return _report(args, indices, trials, name, config, mode)
+        return _report(args, indices, trials, name, config, mode, resumed)
     finally:
         pool.close(cancel=True)
 
 
+def _time_left(trials: dict, resumed: set, finished: int, wall0: float) -> str:
+    """", about N min left": the trials still to run at this invocation's pace so far (trials
+    read back from a results file cost nothing and do not count)."""
+    ran = finished - sum(1 for key in list(trials)[:finished] if key in resumed)
+    to_run = len(trials) - finished - sum(1 for key in list(trials)[finished:] if key in resumed)
+    if ran <= 0 or to_run <= 0:
+        return ""
+    return f", about {(time.perf_counter() - wall0) / ran * to_run / 60:.0f} min left"
+
+
 def _report(args: argparse.Namespace, indices: list[int], trials: dict[tuple[int, int], Callable[[], EpisodeResult]],
-            name: str, config: str, mode: str) -> int:
+            name: str, config: str, mode: str, resumed: set[tuple[int, int]] = frozenset()) -> int:  # type: ignore[assignment]
     """A row per world as its trials finish (in world order), then the summary."""
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
@@ -235,7 +247,8 @@ def _report(args: argparse.Namespace, indices: list[int], trials: dict[tuple[int
         if args.json and not args.in_process:  # slow enough to want progress; stdout stays pure JSON
             ok = sum(r.success for r in rows)
             print(f"barn: world {idx} ({n}/{len(indices)}) {ok}/{len(rows)} success, "
-                  f"{sum(r.wall_s for r in rows):.1f} s wall", file=sys.stderr, flush=True)
+                  f"{sum(r.wall_s for r in rows):.1f} s wall{_time_left(trials, resumed, n * args.seeds, wall0)}",
+                  file=sys.stderr, flush=True)
         if not args.json:
             s = summarize(rows)
             fail = next((f"seed {k}: {r.reason}" for k, r in enumerate(rows) if not r.success), "")
