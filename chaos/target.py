@@ -76,10 +76,13 @@ class RunningSystem:
                     self.run_dir, self.run_id = found[0], found[0].name
             if self.run_dir is not None:
                 try:
-                    workers = list(iter_workers(self.tree()["tree"]))
+                    answer = self.tree()
+                    workers = list(iter_workers(answer["tree"]))
                 except (OSError, ConnectionError, TimeoutError, KeyError):
-                    workers = []
-                if workers and all(w.get("pid") and w.get("health") == "HEALTHY" for w in workers):
+                    answer, workers = {}, []
+                # "up": every group started. Groups start one after another and the tree shows a
+                # group only once it is up, so healthy workers alone can be the first groups only.
+                if answer.get("up") and workers and all(w.get("pid") and w.get("health") == "HEALTHY" for w in workers):
                     return
             time.sleep(0.1)
         self.kill()

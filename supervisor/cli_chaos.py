@@ -72,6 +72,10 @@ def run(args: argparse.Namespace) -> int:
         say("interrupted: nemeses undone, system stopped")
         if not results:
             return 130
+    except (ScenarioError, NemesisError) as exc:  # found only once the system runs, e.g. a target it does not have
+        print(f"emos chaos run: {scenario.source}, seed {args.seed + len(results)}: {exc} (nemeses undone, system stopped)",
+              file=sys.stderr)
+        return 2
     summary = aggregate(results)
     (out / "results.json").write_text(json.dumps({"summary": summary, "runs": results}, indent=1, default=str))
     if args.json:

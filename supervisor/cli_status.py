@@ -58,7 +58,8 @@ def snapshot(ctx_run: Any) -> dict[str, Any]:
 
 
 def render(data: dict[str, Any]) -> str:
-    lines = [f"run {data['run_id']}  supervisor pid {data['pid']}  up {data['uptime_s']:.1f} s", ""]
+    starting = "" if data.get("up", True) else "  (starting: later groups are not up yet)"
+    lines = [f"run {data['run_id']}  supervisor pid {data['pid']}  up {data['uptime_s']:.1f} s{starting}", ""]
     header = f"{'NAME':<28} {'PID':>7} {'STATE':<12} {'HEALTH':<18} {'RESTARTS':>8} {'UPTIME':>9} {'CPU%':>6} {'RSS MB':>7}"
     lines.append(header)
     lines.append("-" * len(header))

@@ -83,6 +83,7 @@ class System:
         self._hellos: dict[str, asyncio.Future[int]] = {}
         self._stop_requested: asyncio.Event | None = None
         self.root: Supervisor | None = None
+        self.up = False  # every group started (the tree lists a group only once it is up)
 
     # ------------------------------------------------------------------ entry point
     def run(self) -> int:
@@ -170,6 +171,7 @@ class System:
                 self.exit_code, self.exit_reason = EXIT_START_FAILED, str(exc)
                 log.error("start-up failed: %s", exc)
                 return
+            self.up = True
             log.info("system up: %d components (run %s)", len(self.components), self.ctx.run_id)
             waiters = [asyncio.ensure_future(self._stop_requested.wait()), self.root.exited]
             if self.options.duration:
@@ -277,7 +279,8 @@ class System:
 
         async def tree(req: dict, stream: Any) -> dict:
             assert self.root is not None
-            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3), "tree": self.fallbacks.annotate(self.root.tree())}
+            return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3),
+                    "up": self.up, "tree": self.fallbacks.annotate(self.root.tree())}
 
         async def events(req: dict, stream: Any) -> list:
             since = float(req.get("since", 0.0))

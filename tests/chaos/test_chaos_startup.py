@@ -1,0 +1,74 @@
+"""The chaos runner waits for the whole system, not just its first groups, before the first
+fault; and a fault aimed at a component the system does not have ends the run with a clear
+error, the system stopped, instead of a traceback."""
+import re
+import subprocess
+import sys
+import textwrap
+
+from emos.chaos.target import RunningSystem
+from emos.transport.context import runtime_root
+
+# Two groups: the launcher starts them one after the other, and the second one's component
+# takes seconds to activate (a model loading, a driver finding its device).
+RECIPE = textwrap.dedent('''
+    import time
+    from emos import BaseComponent, Launcher
+
+    class Quick(BaseComponent):
+        def _execution_step(self):
+            self.health_status.set_healthy()
+
+    class Late(BaseComponent):
+        def custom_on_activate(self):
+            time.sleep(3.0)
+
+        def _execution_step(self):
+            self.health_status.set_healthy()
+
+    launcher = Launcher(multi_processing=True)
+    launcher.add_pkg(components=[Quick(component_name="quick", trigger=0.1)], package_name="first")
+    launcher.add_pkg(components=[Late(component_name="late", trigger=0.1)], package_name="second")
+    launcher.bringup()
+''')
+
+
+def test_start_returns_only_once_every_group_is_up(tmp_path):
+    recipe = tmp_path / "two_groups.py"
+    recipe.write_text(RECIPE)
+    system = RunningSystem(recipe, duration=60, log_path=tmp_path / "run.log")
+    try:
+        system.start()
+        workers = system.workers()
+        assert {"quick", "late"} <= set(workers), workers
+        assert workers["late"]["health"] == "HEALTHY" and workers["late"].get("pid")
+        assert system.tree()["up"] is True
+    finally:
+        if system.alive:
+            system.stop()
+    assert system.run_dir is not None and not system.run_dir.exists()
+
+
+def test_a_fault_aimed_at_a_component_the_system_lacks_is_a_clear_error(tmp_path):
+    recipe = tmp_path / "two_groups.py"
+    recipe.write_text(RECIPE)
+    scenario = tmp_path / "typo.yaml"
+    scenario.write_text(textwrap.dedent('''
+        name: typo
+        recipe: two_groups.py
+        duration: 20
+        warmup: 0.5
+        schedule:
+          every: 1.0
+          nemeses:
+            - {kind: kill, target: lat}
+    '''))
+    proc = subprocess.run([sys.executable, "-m", "emos", "chaos", "run", str(scenario), "--json", "--no-plot",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr
+    assert "typo.yaml, seed 1: kill: no component named 'lat'; components: late, quick" in proc.stderr
+    assert "system stopped" in proc.stderr
+    (log,) = (tmp_path / "out").glob("typo-*/run-1.log")
+    run_id = re.search(r"system up: 2 components \(run (\S+)\)", log.read_text()).group(1)
+    assert not (runtime_root() / run_id).exists()  # stopped in order: its run directory is gone
