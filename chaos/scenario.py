@@ -272,7 +272,7 @@ def run_scenario(sc: Scenario, seed: int, out_dir: Path, progress: Callable[[str
         exit_code = None
         if system is not None and system.alive and observers:
             observers[0].finish()  # the supervisor's last events, while it still answers
-        if system is not None:
+        if system is not None and system.proc is not None:  # None: interrupted before the recipe was started
             exit_code = system.stop() if system.alive else system.wait(30)
         for o in observers:
             o.halt.set()

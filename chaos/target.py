@@ -7,10 +7,12 @@ the system under test knows it is being tested.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, Iterator
@@ -23,6 +25,26 @@ from emos.transport.context import ENV_RUN_ID, SHM_DIR, SHM_PREFIX, runtime_root
 
 class SystemUnderTestError(RuntimeError):
     """The recipe did not come up, or could not be observed."""
+
+
+@contextlib.contextmanager
+def _signals_held(*signums: int) -> Iterator[None]:
+    """Hold ``signums`` (their Python handlers, which raise) until the block ends, then deliver
+    them. Around a ``Popen``: a SIGTERM raised between the fork and the assignment of the
+    ``Popen`` would leave the recipe running with nobody holding its pid. (Blocking them with
+    the signal mask instead would be inherited by the recipe across ``exec``.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # handlers only run in the main thread; nothing to hold elsewhere
+        return
+    arrived: list[int] = []
+    previous = {n: signal.signal(n, lambda signum, frame: arrived.append(signum)) for n in signums}
+    try:
+        yield
+    finally:
+        for n, handler in previous.items():
+            signal.signal(n, handler)
+        for n in dict.fromkeys(arrived):
+            signal.raise_signal(n)  # now, with the Popen assigned: its handler unwinds as usual
 
 
 def iter_workers(node: dict[str, Any]) -> Iterator[dict[str, Any]]:
@@ -65,7 +87,8 @@ class RunningSystem:
         self._log = open(self.log_path, "wb")
         # Own session: a Ctrl-C of the chaos tool must not reach the system under test directly;
         # the tool stops it in order instead (and kills the whole group if that fails).
-        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env, start_new_session=True)
+        with _signals_held(signal.SIGTERM, signal.SIGINT):
+            self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env, start_new_session=True)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:

@@ -68,8 +68,13 @@ def run(args: argparse.Namespace) -> int:
                     say("timeline picture skipped: matplotlib is not installed (pip install 'emos[plots]')")
             results.append(result)
             say(f"[{scenario.name} seed {result['seed']}] {'pass' if result['passed'] else 'FAIL: ' + '; '.join(result['problems'])}")
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemExit) as exc:  # Ctrl-C; SIGTERM raises SystemExit(143) (see cli.py)
         say("interrupted: nemeses undone, system stopped")
+        if isinstance(exc, SystemExit):
+            if results:  # keep what the finished runs found, then end as terminated
+                (out / "results.json").write_text(json.dumps({"summary": aggregate(results), "runs": results}, indent=1, default=str))
+                say(f"results of the {len(results)} finished run(s): {out / 'results.json'}")
+            raise
         if not results:
             return 130
     except (ScenarioError, NemesisError) as exc:  # found only once the system runs, e.g. a target it does not have

@@ -1,10 +1,16 @@
-"""The chaos runner waits for the whole system, not just its first groups, before the first
-fault; and a fault aimed at a component the system does not have ends the run with a clear
-error, the system stopped, instead of a traceback."""
+"""The chaos runner itself: it waits for the whole system, not just its first groups, before
+the first fault; a fault aimed at a component the system does not have ends the run with a
+clear error, the system stopped, instead of a traceback; SIGTERM keeps the finished runs'
+results."""
+import json
 import re
+import signal
 import subprocess
 import sys
 import textwrap
+import time
+
+import psutil
 
 from emos.chaos.target import RunningSystem
 from emos.transport.context import runtime_root
@@ -72,3 +78,46 @@ def test_a_fault_aimed_at_a_component_the_system_lacks_is_a_clear_error(tmp_path
     (log,) = (tmp_path / "out").glob("typo-*/run-1.log")
     run_id = re.search(r"system up: 2 components \(run (\S+)\)", log.read_text()).group(1)
     assert not (runtime_root() / run_id).exists()  # stopped in order: its run directory is gone
+
+
+def test_sigterm_between_runs_keeps_the_finished_runs_results_and_stops_the_system(tmp_path):
+    recipe = tmp_path / "two_groups.py"
+    recipe.write_text(RECIPE)
+    scenario = tmp_path / "kills.yaml"
+    scenario.write_text(textwrap.dedent('''
+        name: kills
+        recipe: two_groups.py
+        duration: 3
+        warmup: 0.5
+        cooldown: 0
+        schedule:
+          every: 1.0
+          nemeses:
+            - {kind: kill, target: each}
+    '''))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "emos", "chaos", "run", str(scenario), "--runs", "5", "--no-plot",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    seen = []
+    try:
+        deadline = time.monotonic() + 150
+        for line in proc.stdout:  # progress lines; the first run's verdict ends it
+            seen.append(line)
+            if line.startswith("[kills seed 1] pass") or line.startswith("[kills seed 1] FAIL"):
+                break
+            assert time.monotonic() < deadline, "".join(seen)
+        proc.send_signal(signal.SIGTERM)  # during the second run
+        rest, _ = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, "".join(seen) + rest
+    (results,) = out.glob("kills-*/results.json")
+    runs = json.loads(results.read_text())["runs"]
+    assert [r["seed"] for r in runs] == [1] and runs[0]["faults"] >= 1
+    # The interrupted run was stopped wherever the signal found it (starting or up): no process of
+    # the recipe is left, and a run that came up has its directory removed.
+    assert not [p.pid for p in psutil.process_iter(["cmdline"]) if str(recipe) in " ".join(p.info["cmdline"] or [])]
+    for log in out.glob("kills-*/run-*.log"):
+        up = re.search(r"system up: 2 components \(run (\S+)\)", log.read_text())
+        assert up is None or not (runtime_root() / up.group(1)).exists(), log
