@@ -223,16 +223,18 @@ def run(args: argparse.Namespace) -> int:
 
 def _time_left(trials: dict, resumed: set, finished: int, wall0: float) -> str:
     """", about N min left": the trials still to run at this invocation's pace so far (trials
-    read back from a results file cost nothing and do not count)."""
-    ran = finished - sum(1 for key in list(trials)[:finished] if key in resumed)
-    to_run = len(trials) - finished - sum(1 for key in list(trials)[finished:] if key in resumed)
+    read back from a results file cost nothing and do not count). ``finished``: how many of
+    ``trials``, in their (world) order, are done."""
+    keys = list(trials)
+    ran = sum(1 for key in keys[:finished] if key not in resumed)
+    to_run = sum(1 for key in keys[finished:] if key not in resumed)
     if ran <= 0 or to_run <= 0:
         return ""
     return f", about {(time.perf_counter() - wall0) / ran * to_run / 60:.0f} min left"
 
 
 def _report(args: argparse.Namespace, indices: list[int], trials: dict[tuple[int, int], Callable[[], EpisodeResult]],
-            name: str, config: str, mode: str, resumed: set[tuple[int, int]] = frozenset()) -> int:  # type: ignore[assignment]
+            name: str, config: str, mode: str, resumed: set[tuple[int, int]]) -> int:
     """A row per world as its trials finish (in world order), then the summary."""
     results: list[EpisodeResult] = []
     wall0 = time.perf_counter()
