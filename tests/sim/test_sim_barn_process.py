@@ -114,3 +114,44 @@ def test_moving_obstacle_world_through_supervised_processes():
     success, collided, time_s = float(row[1]), float(row[2]), float(row[4])
     assert success == 1.0 and collided == 0.0, (out.stdout, out.stderr[-3000:])
     assert time_s < 20.0  # 20 m: it waits for crossers, it does not crawl
+
+
+def test_sigterm_stops_the_trials_in_flight_at_once_and_records_none_of_them(tmp_path):
+    """Stopping a long run must not wait for every trial in flight to finish (minutes each when
+    one times out), leave their systems running, or record them as failures (a resumed run
+    would then skip them)."""
+    import signal
+    import time
+
+    import psutil
+
+    results = tmp_path / "r.jsonl"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    bench = subprocess.Popen([sys.executable, "-m", "emos", "bench", "barn", "--worlds", "3,4", "--seeds", "2",
+                              "--jobs", "2", "--json", "--results", str(results)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        me = psutil.Process(bench.pid)
+        deadline = time.monotonic() + 120
+        systems: list[psutil.Process] = []
+        while len(systems) < 2:  # both trials' systems are up and driving
+            assert bench.poll() is None and time.monotonic() < deadline, bench.stderr.read() if bench.poll() else "too slow"
+            systems = [p for p in me.children() if "emos-barn-" in " ".join(p.cmdline())]
+            time.sleep(0.5)
+        everything = systems + [c for p in systems for c in p.children(recursive=True)]
+        time.sleep(3.0)
+        stopped_at = time.monotonic()
+        bench.send_signal(signal.SIGTERM)
+        _, err = bench.communicate(timeout=90)
+        took = time.monotonic() - stopped_at
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+    assert bench.returncode == 143, err[-3000:]
+    assert took < 45, took  # each system's own stop, not the rest of its trial
+    assert "Traceback" not in err and "system failure" not in err, err[-3000:]
+    time.sleep(1.0)
+    assert not [p.pid for p in everything if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    lines = results.read_text().splitlines() if results.exists() else []
+    recorded = [json.loads(line)["trial"] for line in lines[1:]]
+    assert all(t["reason"] in ("goal", "time limit") or t["reason"].startswith("collision") for t in recorded), recorded

@@ -179,9 +179,13 @@ def run(args: argparse.Namespace) -> int:
                   "an --in-process run has none (use --png to see a run)", file=sys.stderr)
             return 2
         mode = ""
+        systems = None
     else:
+        from .process import TrialSystems
+
+        systems = TrialSystems()
         try:
-            episode = _process_episode(worlds, rules, args)
+            episode = _process_episode(worlds, rules, args, systems)
         except ValueError as exc:
             print(f"emos bench barn: {exc}", file=sys.stderr)
             return 2
@@ -217,6 +221,10 @@ def run(args: argparse.Namespace) -> int:
                 trials[(idx, k)] = pool.submit(episode, idx, seed)
     try:
         return _report(args, indices, trials, name, config, mode, resumed)
+    except BaseException:  # Ctrl-C, SIGTERM (SystemExit), an error: stop the trials in flight too
+        if systems is not None:
+            systems.abandon()
+        raise
     finally:
         pool.close(cancel=True)
 
@@ -302,8 +310,9 @@ def _print_summary(label: str, s: dict, n: int) -> None:
           f"metric_4t {s['metric_4t']:.4f}  deadline misses {s['deadline_misses']}")
 
 
-def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -> Callable[[int, int], EpisodeResult]:
-    """One trial through the supervised processes, as ``episode(world index, seed)``."""
+def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace, systems: Any) -> Callable[[int, int], EpisodeResult]:
+    """One trial through the supervised processes, as ``episode(world index, seed)``; ``systems``
+    (a :class:`.process.TrialSystems`) holds the trials in flight, to stop them with the run."""
     from .process import SystemFailed, run_episode_process
     from .stack import StackOptions
 
@@ -323,7 +332,7 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace) -
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         png = None if args.png is None else args.png / f"{'dynabarn' if args.dynabarn else 'barn'}_{idx:03d}_seed_{seed}.png"
         try:
-            result = run_episode_process(worlds[idx], opts, keep_log=log, png_path=png)
+            result = run_episode_process(worlds[idx], opts, keep_log=log, png_path=png, systems=systems)
             if log is not None and result.success:
                 log.unlink(missing_ok=True)  # only the failures are worth keeping
             return result

@@ -56,7 +56,8 @@ class TrialPool:
 
             return run_now
         future: Future = self._executor.submit(fn, *args)
-        future.add_done_callback(lambda f: f.exception() is None and self._done(f.result()))
+        # A cancelled or failed trial (a run being stopped) has no result to record.
+        future.add_done_callback(lambda f: not f.cancelled() and f.exception() is None and self._done(f.result()))
         return future.result
 
     def _done(self, result: EpisodeResult) -> None:

@@ -13,6 +13,7 @@ import math
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -28,14 +29,55 @@ from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_r
 
 from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, PLAN_TOPIC, SIM_NAME, StackOptions, recipe_source
 
+class TrialAbandoned(RuntimeError):
+    """The benchmark is being stopped: this trial's system was stopped too, and it has no result
+    (unlike a system failure, which counts as a failed trial)."""
+
+
+class TrialSystems:
+    """The trial systems in flight of one benchmark run, so that stopping the run (Ctrl-C,
+    SIGTERM) stops them at once instead of waiting for each trial to finish."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._live: set[subprocess.Popen] = set()
+        self.abandoned = threading.Event()
+
+    def started(self, proc: subprocess.Popen) -> None:
+        with self._lock:
+            self._live.add(proc)
+        if self.abandoned.is_set():  # abandoned while this one was being spawned
+            proc.terminate()
+
+    def ended(self, proc: subprocess.Popen) -> None:
+        with self._lock:
+            self._live.discard(proc)
+
+    def abandon(self) -> None:
+        """Stop every system in flight (SIGTERM: each supervisor stops its components in order);
+        their referees then end with :class:`TrialAbandoned`, and no new trial starts."""
+        self.abandoned.set()
+        with self._lock:
+            live = list(self._live)
+        for proc in live:
+            if proc.poll() is None:
+                proc.terminate()
+
+
 STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes slowly
 COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
 
 
 def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_timeout: float = 600.0,
-                        keep_log: Path | None = None, png_path: Path | None = None) -> EpisodeResult:
+                        keep_log: Path | None = None, png_path: Path | None = None,
+                        systems: TrialSystems | None = None) -> EpisodeResult:
     """Run one world through the processes and score it under ``opts.rules``; with ``png_path``,
-    draw the run there (the true path the referee saw, the stack's last plan, the contacts)."""
+    draw the run there (the true path the referee saw, the stack's last plan, the contacts).
+    ``systems``: the run's trials in flight; once it is abandoned the trial raises
+    :class:`TrialAbandoned` (before it starts, or as soon as its stopped system is noticed)."""
+    systems = systems or TrialSystems()
+    if systems.abandoned.is_set():
+        raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: not started, the benchmark is stopping")
     wall0 = time.perf_counter()
     seen = _Seen() if png_path is not None else None
     with tempfile.TemporaryDirectory(prefix=f"emos-barn-{entry.idx}-") as tmp:
@@ -45,9 +87,15 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
         with open(log_path, "wb") as log:
             proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(recipe)], stdout=log,
                                     stderr=subprocess.STDOUT, cwd=tmp)
+            systems.started(proc)
             try:
                 outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen)
+            except Exception:
+                if systems.abandoned.is_set():  # whatever the stopped system made the referee see
+                    raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: stopped with the benchmark") from None
+                raise
             finally:
+                systems.ended(proc)
                 _stop(proc)
                 if keep_log is not None:
                     keep_log.write_bytes(log_path.read_bytes())
