@@ -121,3 +121,16 @@ def test_sigterm_between_runs_keeps_the_finished_runs_results_and_stops_the_syst
     for log in out.glob("kills-*/run-*.log"):
         up = re.search(r"system up: 2 components \(run (\S+)\)", log.read_text())
         assert up is None or not (runtime_root() / up.group(1)).exists(), log
+
+
+def test_emos_status_says_when_later_groups_are_still_starting():
+    from emos.supervisor.cli_status import render
+
+    answer = {"run_id": "r1", "pid": 7, "uptime_s": 1.5,
+              "tree": {"name": "root", "kind": "supervisor", "strategy": "one_for_one", "children": [
+                  {"name": "first", "kind": "supervisor", "strategy": "one_for_one", "children": [
+                      {"name": "quick", "kind": "worker", "pid": 8, "state": "active", "health": "HEALTHY"}]}]}}
+    assert "starting" not in render({**answer, "up": True})
+    assert "starting" not in render(answer)  # a supervisor from before the key: says nothing
+    text = render({**answer, "up": False})
+    assert "(starting: later groups are not up yet)" in text.splitlines()[0] and "quick" in text
