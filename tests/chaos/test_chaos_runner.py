@@ -39,6 +39,15 @@ RECIPE = textwrap.dedent('''
 ''')
 
 
+def _scenario(tmp_path, name, duration, cooldown, target):
+    """The two-group recipe and a scenario killing ``target`` every second after 0.5 s."""
+    (tmp_path / "two_groups.py").write_text(RECIPE)
+    scenario = tmp_path / f"{name}.yaml"
+    scenario.write_text(f"name: {name}\nrecipe: two_groups.py\nduration: {duration}\nwarmup: 0.5\n"
+                        f"cooldown: {cooldown}\nschedule:\n  every: 1.0\n  nemeses:\n    - {{kind: kill, target: {target}}}\n")
+    return scenario
+
+
 def test_start_returns_only_once_every_group_is_up(tmp_path):
     recipe = tmp_path / "two_groups.py"
     recipe.write_text(RECIPE)
@@ -56,19 +65,7 @@ def test_start_returns_only_once_every_group_is_up(tmp_path):
 
 
 def test_a_fault_aimed_at_a_component_the_system_lacks_is_a_clear_error(tmp_path):
-    recipe = tmp_path / "two_groups.py"
-    recipe.write_text(RECIPE)
-    scenario = tmp_path / "typo.yaml"
-    scenario.write_text(textwrap.dedent('''
-        name: typo
-        recipe: two_groups.py
-        duration: 20
-        warmup: 0.5
-        schedule:
-          every: 1.0
-          nemeses:
-            - {kind: kill, target: lat}
-    '''))
+    scenario = _scenario(tmp_path, "typo", duration=20, cooldown=5, target="lat")
     proc = subprocess.run([sys.executable, "-m", "emos", "chaos", "run", str(scenario), "--json", "--no-plot",
                            "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=180)
     assert proc.returncode == 2, proc.stderr[-3000:]
@@ -81,20 +78,8 @@ def test_a_fault_aimed_at_a_component_the_system_lacks_is_a_clear_error(tmp_path
 
 
 def test_sigterm_between_runs_keeps_the_finished_runs_results_and_stops_the_system(tmp_path):
+    scenario = _scenario(tmp_path, "kills", duration=3, cooldown=0, target="each")
     recipe = tmp_path / "two_groups.py"
-    recipe.write_text(RECIPE)
-    scenario = tmp_path / "kills.yaml"
-    scenario.write_text(textwrap.dedent('''
-        name: kills
-        recipe: two_groups.py
-        duration: 3
-        warmup: 0.5
-        cooldown: 0
-        schedule:
-          every: 1.0
-          nemeses:
-            - {kind: kill, target: each}
-    '''))
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "emos", "chaos", "run", str(scenario), "--runs", "5", "--no-plot",
                              "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
