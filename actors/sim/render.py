@@ -18,17 +18,21 @@ TRAIL = (30, 90, 220)
 PLAN = (40, 170, 60)
 GOAL = (220, 40, 40)
 POINTS = (230, 150, 0)
+ESTIMATE = (150, 60, 190)  # where the navigation stack believed the robot was
 
 
 def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | np.ndarray | None = None,
                    goal: Sequence[float] | None = None, goal_radius: float = 0.0,
                    points: np.ndarray | None = None, bounds: tuple[float, float, float, float] | None = None,
-                   pixels_per_m: float = 40.0, title: str | None = None, at_time: float | None = None) -> Any:
+                   pixels_per_m: float = 40.0, title: str | None = None, at_time: float | None = None,
+                   estimate: Sequence[Sequence[float]] | np.ndarray | None = None) -> Any:
     """Draw ``world`` seen from above; returns the PIL image and writes it to ``path`` if given.
 
     ``plan`` is a polyline (N, 2), ``points`` extra world points (a lidar scan, say), ``bounds``
     (xmin, ymin, xmax, ymax) the window (default: everything in the world, goal included).
     ``at_time``: the simulated time to draw moving obstacles at (default: the world's clock).
+    ``estimate``: the poses (N, 2+) the navigation stack believed, drawn thin beside the true
+    trail with a cross at the last one: where the two part is where localization drifted.
     """
     image_mod, draw_mod = _deps.pil_image(), _deps.pil_draw()
     if bounds is None:
@@ -75,6 +79,13 @@ def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequ
     if points is not None and len(points):
         for u, v in px(np.asarray(points)[:, :2]):
             draw.point((u, v), fill=POINTS)
+    if estimate is not None and len(estimate):
+        believed = np.asarray(estimate, dtype=float)[:, :2]
+        if len(believed) > 1:
+            draw.line(px(believed), fill=ESTIMATE, width=1)
+        (u, v), = px(believed[-1])
+        draw.line([(u - 5, v - 5), (u + 5, v + 5)], fill=ESTIMATE, width=2)
+        draw.line([(u - 5, v + 5), (u + 5, v - 5)], fill=ESTIMATE, width=2)
     for robot in world.robots:
         if len(robot.trail) > 1:
             draw.line(px(np.asarray(robot.trail)), fill=TRAIL, width=2)

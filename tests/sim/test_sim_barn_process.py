@@ -39,7 +39,8 @@ def test_the_stack_never_receives_true_poses():
 def test_barn_world_through_supervised_processes(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     out = subprocess.run([sys.executable, "-m", "emos", "bench", "barn", "--worlds", "3", "--seeds", "1", "--json",
-                          "--logs", str(tmp_path / "logs")], cwd=REPO, capture_output=True, text=True, timeout=120, env=env)
+                          "--logs", str(tmp_path / "logs"), "--png", str(tmp_path / "png")],
+                         cwd=REPO, capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads(out.stdout)
     assert set(result) == {"worlds", "summary"}
@@ -54,6 +55,15 @@ def test_barn_world_through_supervised_processes(tmp_path):
     assert result["summary"]["success_rate"] == 1.0
     assert "barn: world 3 (1/1) 1/1 success" in out.stderr  # the progress line
     assert list((tmp_path / "logs").iterdir()) == []  # --logs keeps only the logs of failed trials
+    from PIL import Image
+
+    from emos.actors.sim.render import ESTIMATE, TRAIL
+
+    (png,) = (tmp_path / "png").iterdir()  # --png draws every trial
+    pixels = np.asarray(Image.open(png).convert("RGB")).reshape(-1, 3)
+    # The true trail, and the stack's localized poses beside it (where it believed it was).
+    assert ((pixels == TRAIL).all(axis=1)).sum() > 100
+    assert ((pixels == ESTIMATE).all(axis=1)).sum() > 20
 
 
 def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
@@ -84,6 +94,20 @@ def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
     pixels = np.asarray(Image.open(png).convert("RGB")).reshape(-1, 3)
     assert ((pixels == (255, 0, 0)).all(axis=1)).any()  # the contact's red ring
     assert ((pixels == (220, 30, 30)).all(axis=1)).any()  # the robot drawn as collided
+
+
+def test_pose_drift_compares_the_belief_with_the_truth_of_the_same_time():
+    from emos.actors.sim.barn.process import _PoseDrift
+
+    drift = _PoseDrift(keep=4)
+    assert drift.describe() == ""  # nothing seen yet: the reason stays "time limit"
+    for k in range(20):  # truth every 0.02 s along x
+        drift.truth(k * 0.02, (k * 0.02, 0.0))
+    drift.believed(0.30, (1.30, 0.0))  # at t = 0.30 the truth was x = 0.30 (kept: the latest 4-8)
+    dist, believed, true = drift.error()
+    assert math.isclose(dist, 1.0) and believed == (1.30, 0.0) and true == (0.30, 0.0)
+    assert drift.describe() == "; the stack believed (1.30, 0.00), 1.00 m from the true (0.30, 0.00)"
+    assert len(drift._truth) <= 8  # bounded: a 100 s trial publishes 5,000 true poses
 
 
 def test_builtin_dynamic_stack_forgets_by_evidence_and_tracks_movers_in_the_scan():
@@ -154,4 +178,4 @@ def test_sigterm_stops_the_trials_in_flight_at_once_and_records_none_of_them(tmp
     assert not [p.pid for p in everything if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
     lines = results.read_text().splitlines() if results.exists() else []
     recorded = [json.loads(line)["trial"] for line in lines[1:]]
-    assert all(t["reason"] in ("goal", "time limit") or t["reason"].startswith("collision") for t in recorded), recorded
+    assert all(t["reason"] == "goal" or t["reason"].startswith(("time limit", "collision")) for t in recorded), recorded

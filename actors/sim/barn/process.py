@@ -27,7 +27,8 @@ from ..dynabarn import DynaWorld
 from .harness import EpisodeResult, score_run
 from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_run_dir
 
-from .stack import GOAL_TOPIC, GROUND_TRUTH_TOPIC, NAV_COMPONENTS, PLAN_TOPIC, SIM_NAME, StackOptions, recipe_source
+from .stack import (GOAL_TOPIC, GROUND_TRUTH_TOPIC, LOCALIZED_POSE_TOPIC, NAV_COMPONENTS, PLAN_TOPIC, SIM_NAME, StackOptions,
+                    recipe_source)
 
 class TrialAbandoned(RuntimeError):
     """The benchmark is being stopped: this trial's system was stopped too, and it has no result
@@ -110,9 +111,11 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
 
 @attrs.define
 class _Seen:
-    """What the referee saw of a run, for its picture: true poses, the last plan, contacts."""
+    """What the referee saw of a run, for its picture: true poses, the poses the stack believed,
+    the last plan, contacts."""
 
     poses: list[tuple[float, float, float]] = attrs.field(factory=list)
+    believed: list[tuple[float, float]] = attrs.field(factory=list)
     last_stamp: float | None = None  # simulated time of the last true pose: where the movers are drawn
     plan: Any = None
     contacts: list[list[float]] = attrs.field(factory=list)
@@ -136,7 +139,8 @@ def _draw(entry: BarnWorld | DynaWorld, opts: StackOptions, result: EpisodeResul
         robot.contacts = [_Contact((float(x), float(y), 0.0)) for x, y in seen.contacts]
         render_topdown(trial.world, png_path, plan=seen.plan, goal=trial.goal, goal_radius=opts.rules.goal_radius,
                        bounds=picture_bounds(entry, trial), pixels_per_m=40,
-                       title=picture_title(trial, result, f"{opts.algorithm} (processes)"), at_time=seen.last_stamp)
+                       title=picture_title(trial, result, f"{opts.algorithm} (processes)"), at_time=seen.last_stamp,
+                       estimate=seen.believed or None)
     finally:
         trial.close()
 
@@ -160,6 +164,10 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
     with RpcClient(run_dir / "supervisor.sock") as rpc:
         wait_active(rpc, proc, log_path, (SIM_NAME, *NAV_COMPONENTS), f"world {entry.idx}", STARTUP_TIMEOUT_S)
     truth = Subscriber(ctx, GROUND_TRUTH_TOPIC, M.Odometry, queue_size=4096)
+    # What the stack believes, to say how far off it was when a trial times out (a robot that
+    # waits outside the goal circle usually thinks it is inside) and to draw it.
+    believed = Subscriber(ctx, LOCALIZED_POSE_TOPIC, M.Odometry, queue_size=4096)
+    drift = _PoseDrift()
     plans = Subscriber(ctx, PLAN_TOPIC, M.Path, queue_size=4) if seen is not None else None
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
@@ -194,12 +202,18 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 if last_xy is not None:
                     distance += math.dist(xy, last_xy)
                 last_xy, last_t = xy, t - t0
+                drift.truth(t, xy)
                 if seen is not None:
                     seen.last_stamp = t
                     seen.poses.append((p.x, p.y, msg.pose.pose.orientation.yaw()))
                 outcome = monitor.update(last_t, xy, False)
                 if outcome is not None:
                     break
+            for msg in believed.take():
+                p = msg.pose.pose.position
+                drift.believed(msg.header.stamp.to_sec(), (p.x, p.y))
+                if seen is not None and msg.header.stamp.to_sec() >= t0:  # the trial's, as the true trail
+                    seen.believed.append((p.x, p.y))
             if monitor.outcome is None and collided:
                 monitor.update(last_t, last_xy or start[:2], True)
             if plans is not None:
@@ -216,7 +230,8 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 if outcome.reached and final.get("collided"):
                     # A touch between the last poll and the goal still fails the trial.
                     return False, True, outcome.time_s, distance, "collision (before reaching the goal)", misses
-                reason = "goal" if outcome.reached else ("time limit" if outcome.timeout else _collision_reason(contacts, last_xy))
+                reason = "goal" if outcome.reached else (
+                    f"time limit{drift.describe()}" if outcome.timeout else _collision_reason(contacts, last_xy))
                 return outcome.reached, outcome.collided, outcome.time_s, distance, reason, misses
             if proc.poll() is not None:
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
@@ -225,9 +240,47 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
             time.sleep(0.005)
     finally:
         truth.close()
+        believed.close()
         goal_pub.close()
         if plans is not None:
             plans.close()
+
+
+class _PoseDrift:
+    """How far the stack's pose is from the truth: its latest believed pose against the true
+    pose of the same simulated time (lock-step: the truth is published every physics step, the
+    belief at the mapper's rate, so a matching stamp is among the last few hundred)."""
+
+    def __init__(self, keep: int = 512):
+        self._truth: dict[float, tuple[float, float]] = {}
+        self._keep = keep
+        self._belief: tuple[float, tuple[float, float]] | None = None
+
+    def truth(self, stamp: float, xy: tuple[float, float]) -> None:
+        self._truth[stamp] = xy
+        if len(self._truth) > 2 * self._keep:  # keep the latest: dicts keep insertion order
+            for old in list(self._truth)[:self._keep]:
+                del self._truth[old]
+
+    def believed(self, stamp: float, xy: tuple[float, float]) -> None:
+        self._belief = (stamp, xy)
+
+    def error(self) -> tuple[float, tuple[float, float], tuple[float, float]] | None:
+        """(metres apart, believed xy, true xy) at the latest belief, or None if either is unseen."""
+        if self._belief is None or not self._truth:
+            return None
+        stamp, xy = self._belief
+        nearest = min(self._truth, key=lambda t: abs(t - stamp))
+        true_xy = self._truth[nearest]
+        return math.dist(xy, true_xy), xy, true_xy
+
+    def describe(self) -> str:
+        """``'; the stack believed (x, y), 0.12 m from the true (x, y)'``, or '' if unknown."""
+        err = self.error()
+        if err is None:
+            return ""
+        dist, (bx, by), (tx, ty) = err
+        return f"; the stack believed ({bx:.2f}, {by:.2f}), {dist:.2f} m from the true ({tx:.2f}, {ty:.2f})"
 
 
 def _collision_reason(contacts: list, last_xy: tuple[float, float] | None) -> str:

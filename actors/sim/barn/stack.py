@@ -30,6 +30,7 @@ from .harness import BarnRules, nav_robot
 GROUND_TRUTH_TOPIC = "/barn/ground_truth"
 GOAL_TOPIC = "/goal"
 PLAN_TOPIC = "/plan"  # the Planner's output and the Controller's input, both at their defaults
+LOCALIZED_POSE_TOPIC = "/local_map/pose"  # the LocalMapper's scan-matched pose: where the stack believes it is
 NAV_COMPONENTS = ("mapper", "planner", "controller", "driver")
 SIM_NAME = "sim"
 
@@ -156,7 +157,7 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     # (builtin-robust, builtin-dynamic) estimates the yaw gain from what the base does, as the
     # in-process navigator does from the odometry's twist (a PoseStamped has no twist: the
     # Controller would fall back to its own last command).
-    pose_topic = Topic(name="/local_map/pose", msg_type="Odometry")
+    pose_topic = Topic(name=LOCALIZED_POSE_TOPIC, msg_type="Odometry")
     memory_topic = Topic(name="/local_map/memory", msg_type="OccupancyGrid")
     common = dict(robot=robot, frames=frames, use_sim_time=True)
     mount = (*lidar.mount_xy, lidar.mount_yaw)
@@ -253,5 +254,5 @@ def recipe_source(opts: StackOptions) -> str:
     )
 
 
-__all__ = ["DYNAMIC_CONTROLLERS", "GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "NAV_COMPONENTS", "PLAN_TOPIC", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
+__all__ = ["DYNAMIC_CONTROLLERS", "GROUND_TRUTH_TOPIC", "GOAL_TOPIC", "LOCALIZED_POSE_TOPIC", "NAV_COMPONENTS", "PLAN_TOPIC", "PROCESS_CONTROLLERS", "RecoveryOptions", "SIM_NAME",
            "StackOptions", "build_system", "bringup", "recipe_source", "wire_recovery"]
