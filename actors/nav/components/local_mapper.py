@@ -22,7 +22,7 @@ from ..mapping.scan_matching import compose
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, grid_msg, localized_odometry, pose_of, pose_stamped, scan_of
 
-__all__ = ["LocalMapper", "LocalMapperConfig"]
+__all__ = ["LocalMapper", "LocalMapperConfig", "memory_of"]
 
 
 def _map_config(value: Any) -> MapConfig:
@@ -98,6 +98,16 @@ class LocalMapperConfig(NavComponentConfig):
                              "set mapping_bounds too (or leave memory_decay None)")
 
 
+def memory_of(cfg: "LocalMapperConfig") -> MemoryMapper | None:
+    """The obstacle memory (with scan matching) a LocalMapper of this config keeps, or None
+    without ``mapping_bounds``; also what an offline replay of its scans builds."""
+    if cfg.mapping_bounds is None:
+        return None
+    decay = cfg.memory_decay
+    forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
+    return MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching, **forgetting)
+
+
 class LocalMapper(NavComponent):
     """Publishes the grid (robot frame, ``frames.robot_base``) on ``local_map``.
 
@@ -129,13 +139,7 @@ class LocalMapper(NavComponent):
         if self.run_type == ComponentRunType.EVENT and not self._trigger:
             self._trigger = [self.get_in_topic("sensor_data")]
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
-        cfg = self.config
-        self._memory = None
-        if cfg.mapping_bounds is not None:
-            decay = cfg.memory_decay
-            forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
-            self._memory = MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
-                                        **forgetting)
+        self._memory = memory_of(self.config)
         self._memory_published = -math.inf
 
     def custom_on_activate(self) -> None:

@@ -16,7 +16,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import attrs
 
@@ -71,11 +71,14 @@ COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about c
 
 def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_timeout: float = 600.0,
                         keep_log: Path | None = None, png_path: Path | None = None,
-                        systems: TrialSystems | None = None) -> EpisodeResult:
+                        systems: TrialSystems | None = None,
+                        observer: Callable[[Any], Callable[[], None]] | None = None) -> EpisodeResult:
     """Run one world through the processes and score it under ``opts.rules``; with ``png_path``,
     draw the run there (the true path the referee saw, the stack's last plan, the contacts).
     ``systems``: the run's trials in flight; once it is abandoned the trial raises
-    :class:`TrialAbandoned` (before it starts, or as soon as its stopped system is noticed)."""
+    :class:`TrialAbandoned` (before it starts, or as soon as its stopped system is noticed).
+    ``observer``: called with the trial's ``RunContext`` once its system is up (to subscribe to
+    its topics: ``scripts/barn_pose_replay.py``); it returns what to call when the trial ends."""
     systems = systems or TrialSystems()
     if systems.abandoned.is_set():
         raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: not started, the benchmark is stopping")
@@ -90,7 +93,7 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
                                     stderr=subprocess.STDOUT, cwd=tmp)
             systems.started(proc)
             try:
-                outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen)
+                outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen, observer)
             except Exception:
                 if systems.abandoned.is_set():  # whatever the stopped system made the referee see
                     raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: stopped with the benchmark") from None
@@ -151,7 +154,8 @@ class _Contact:
 
 
 def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorld, opts: StackOptions,
-             wall_timeout: float, seen: _Seen | None = None) -> tuple[bool, bool, float, float, str, int]:
+             wall_timeout: float, seen: _Seen | None = None,
+             observer: Callable[[Any], Callable[[], None]] | None = None) -> tuple[bool, bool, float, float, str, int]:
     from emos import msgs as M
     from emos.core.reconfig import ComponentServices
     from emos.core.rpc import RpcClient
@@ -168,6 +172,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
     # waits outside the goal circle usually thinks it is inside) and to draw it.
     believed = Subscriber(ctx, LOCALIZED_POSE_TOPIC, M.Odometry, queue_size=4096)
     drift = _PoseDrift()
+    stop_observing = observer(ctx) if observer is not None else None
     plans = Subscriber(ctx, PLAN_TOPIC, M.Path, queue_size=4) if seen is not None else None
     goal_pub = Publisher(ctx, GOAL_TOPIC, M.PointStamped, publisher_id="barn_referee")
     sim = ComponentServices(SIM_NAME, ctx)
@@ -242,6 +247,8 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
         truth.close()
         believed.close()
         goal_pub.close()
+        if stop_observing is not None:
+            stop_observing()
         if plans is not None:
             plans.close()
 
