@@ -101,6 +101,8 @@ def replay(args: argparse.Namespace) -> int:
     _, (mapper, *_) = build_system(StackOptions.for_controller("builtin-dynamic" if dynabarn else "builtin-robust",
                                                                world=int(z["world"]), dynabarn=dynabarn))
     memory = memory_of(mapper.config)
+    if args.match_margin is not None:  # a matcher setting to try against the stack's
+        memory.match_margin = args.match_margin
     odom, belief, truth = z["odom"], z["belief"], z["truth"]
     n = len(z["scan_t"]) if args.scans is None else min(args.scans, len(z["scan_t"]))
     t0, next_print = float(z["scan_t"][0]), float(z["scan_t"][0])
@@ -135,6 +137,8 @@ def main() -> int:
     rep = sub.add_parser("replay", help="feed a recorded trial through the mapper and print its pose error")
     rep.add_argument("trace", type=Path)
     rep.add_argument("--scans", type=int, default=None, help="only the first N scans")
+    rep.add_argument("--match-margin", type=float, default=None,
+                     help="try another MemoryMapper.match_margin (the stack's: 0.01)")
     rep.add_argument("--every", type=float, default=5.0, help="print every this many simulated seconds")
     args = parser.parse_args()
     if args.command == "record" and args.output.suffix != ".npz":

@@ -90,3 +90,17 @@ def test_scan_matching_chooses_exactly_as_the_plain_search_also_at_the_window_ed
         got, want = matcher.match(grid, guess, pts), _reference_match(matcher, grid, guess, pts)
         np.testing.assert_array_equal(got[0], want[0])
         assert got[1:] == want[1:], k
+
+
+def test_match_margin_is_checked_and_reaches_the_memory_from_the_local_mapper_config():
+    import pytest
+
+    from emos.actors.nav.components.local_mapper import LocalMapperConfig, memory_of
+
+    with pytest.raises(ValueError, match="match_margin"):
+        MemoryMapper((0, 0, 4, 4), match_margin=float("nan"))
+    with pytest.raises(ValueError, match="match_margin"):
+        LocalMapperConfig(mapping_bounds=(0, 0, 4, 4), match_margin=-0.1)
+    assert memory_of(LocalMapperConfig()) is None  # no mapping window: no memory
+    assert memory_of(LocalMapperConfig(mapping_bounds=(0, 0, 4, 4))).match_margin == 0.01
+    assert memory_of(LocalMapperConfig(mapping_bounds=(0, 0, 4, 4), match_margin=0.0)).match_margin == 0.0

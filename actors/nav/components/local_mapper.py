@@ -62,7 +62,8 @@ class LocalMapperConfig(NavComponentConfig):
 
     Mapping mode (``mapping_bounds`` = (xmin, ymin, xmax, ymax) of a world window): every scan
     is also added to an obstacle memory over that window, at the odometry pose corrected by
-    matching the scan against the memory (``scan_matching``). The memory is published on the
+    matching the scan against the memory (``scan_matching``; a match is adopted when it raises
+    the scan's mean likelihood by more than ``match_margin`` over the odometry's guess). The memory is published on the
     ``mapping`` output (an OccupancyGrid in ``frames.world``, every ``map_publish_period`` s;
     a Planner can take it as its map) and the corrected pose on ``localized_pose``. The memory
     never forgets by default (static worlds); ``memory_decay`` (an ``EvidenceConfig`` or a dict
@@ -82,6 +83,7 @@ class LocalMapperConfig(NavComponentConfig):
     sensor_pose: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), converter=_sensor_pose)
     mapping_bounds: tuple[float, float, float, float] | None = field(default=None, converter=_bounds)
     scan_matching: bool = field(default=True)
+    match_margin: float = field(default=0.01, validator=in_range(min_value=0.0, max_value=1.0))
     mapping_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
     map_publish_period: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
     #: s: a scan older than this is a SYSTEM failure naming the topic, and no grid is published
@@ -105,7 +107,8 @@ def memory_of(cfg: "LocalMapperConfig") -> MemoryMapper | None:
         return None
     decay = cfg.memory_decay
     forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
-    return MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching, **forgetting)
+    return MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
+                        match_margin=cfg.match_margin, **forgetting)
 
 
 class LocalMapper(NavComponent):

@@ -27,12 +27,17 @@ class MemoryMapper:
     clears remembered cells that beams pass through (moved obstacles, drift ghosts).
     ``evidence_cap`` (scans): forget by evidence instead (``EvidenceGrid``: a cell is released
     after that many more scans saw through it than hit it, within ``free_range`` m), for
-    worlds where obstacles move; None (default) never forgets.
+    worlds where obstacles move; None (default) never forgets. ``match_margin``: how much a
+    scan match must raise the mean likelihood over the odometry's guess to be adopted (0.01).
     """
 
     def __init__(self, bounds: tuple[float, float, float, float], resolution: float = 0.05,
                  sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0), scan_matching: bool = True,
-                 carve_range: float = 0.0, evidence_cap: int | None = None, free_range: float = 8.0) -> None:
+                 carve_range: float = 0.0, evidence_cap: int | None = None, free_range: float = 8.0,
+                 match_margin: float = 0.01) -> None:
+        if not (math.isfinite(match_margin) and match_margin >= 0.0):
+            raise ValueError(f"MemoryMapper.match_margin: expected a finite number >= 0, got {match_margin!r}")
+        self.match_margin = float(match_margin)
         if evidence_cap is not None and carve_range > 0:
             raise ValueError("MemoryMapper: give carve_range or evidence_cap, not both (two ways of forgetting)")
         self.grid: HitGrid = (HitGrid(bounds, resolution) if evidence_cap is None
@@ -55,7 +60,7 @@ class MemoryMapper:
         pose = compose(self.correction, odom_pose)
         if self.matcher is not None and len(local):
             matched, best, at_guess = self.matcher.match(self.grid, pose, local)
-            if best > at_guess + 0.01:
+            if best > at_guess + self.match_margin:
                 self.correction = correction_between(matched, odom_pose)
                 pose = matched
         c, s = math.cos(pose[2]), math.sin(pose[2])
