@@ -78,3 +78,14 @@ def test_simulator_config_takes_the_realistic_options():
         SimulatorConfig(drive="tank")
     with pytest.raises(ValueError, match="SimulatorConfig.odometry_mode"):
         SimulatorConfig(odometry_mode="gps")
+
+
+def test_a_trial_picture_shows_the_whole_corridor():
+    # A crosser can push the robot against either side wall; both must be in the picture
+    # (the window once ended 1.5 m above the centre line and cut collisions near y = +2.2 off).
+    from emos.actors.sim.barn.harness import picture_bounds
+
+    xmin, ymin, xmax, ymax = picture_bounds(load_dynabarn()[44])
+    assert ymin < -CORRIDOR_HALF_WIDTH and ymax > CORRIDOR_HALF_WIDTH
+    assert xmin < 0.0 and xmax > 20.0  # start and goal
+    assert ymax - ymin < 2 * CORRIDOR_HALF_WIDTH + 2.0  # and not much more

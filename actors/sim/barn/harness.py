@@ -71,12 +71,14 @@ def nav_robot(spec: RobotSpec) -> Any:
     )
 
 
-def picture_bounds(entry: BarnWorld | DynaWorld, trial: Any) -> tuple[float, float, float, float]:
-    """The window of a trial's top-down picture: the BARN course, or start and goal with margins."""
+def picture_bounds(entry: BarnWorld | DynaWorld) -> tuple[float, float, float, float]:
+    """The window of a trial's top-down picture: the BARN course, or the whole moving-obstacle
+    corridor (both side walls: a crosser can push the robot against either) with a margin."""
     if isinstance(entry, BarnWorld):
         return (-5.0, -0.5, 0.5, 14.5)
-    (x0, y0), (x1, y1) = trial.start[:2], trial.goal
-    return (min(x0, x1) - 3.0, min(y0, y1) - 3.5, max(x0, x1) + 2.75, max(y0, y1) + 1.5)
+    ends = np.array([end for wall in entry.walls() for end in (wall.start, wall.end)], dtype=float)
+    (xmin, ymin), (xmax, ymax) = ends.min(axis=0) - 0.5, ends.max(axis=0) + 0.5
+    return (float(xmin), float(ymin), float(xmax), float(ymax))
 
 
 def picture_title(trial: Any, result: EpisodeResult, navigator: str) -> str:
@@ -111,7 +113,7 @@ def run_episode(entry: BarnWorld | DynaWorld, navigator: Navigator, rules: Trial
 
             plan = getattr(navigator, "plan", None)
             render_topdown(trial.world, png_path, plan=None if plan is None else np.asarray(plan), goal=trial.goal,
-                           goal_radius=rules.goal_radius, bounds=picture_bounds(entry, trial), pixels_per_m=40,
+                           goal_radius=rules.goal_radius, bounds=picture_bounds(entry), pixels_per_m=40,
                            title=picture_title(trial, result, navigator.name))
         return result
     finally:

@@ -141,7 +141,7 @@ def _draw(entry: BarnWorld | DynaWorld, opts: StackOptions, result: EpisodeResul
         robot.collided = result.collided
         robot.contacts = [_Contact((float(x), float(y), 0.0)) for x, y in seen.contacts]
         render_topdown(trial.world, png_path, plan=seen.plan, goal=trial.goal, goal_radius=opts.rules.goal_radius,
-                       bounds=picture_bounds(entry, trial), pixels_per_m=40,
+                       bounds=picture_bounds(entry), pixels_per_m=40,
                        title=picture_title(trial, result, f"{opts.algorithm} (processes)"), at_time=seen.last_stamp,
                        estimate=seen.believed or None)
     finally:
