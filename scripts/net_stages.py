@@ -38,10 +38,10 @@ marks: dict[str, list[float]] = {}
 
 
 def _timed(name, fn):
-    def wrapper(*args):
+    def wrapper(*args, **kwargs):
         t0 = clock()
         try:
-            return fn(*args)
+            return fn(*args, **kwargs)
         finally:
             marks.setdefault(name, []).append((clock() - t0) / 1000.0)
     return wrapper
@@ -52,6 +52,7 @@ def instrument(end: bench._End, transport: str) -> None:
     if transport == "emos-zenoh":
         end.take = _timed("take", end.take)
         zenoh_net.read_frame = _timed("read_frame", zenoh_net.read_frame)  # called from Zenoh's thread
+        zenoh_net.read_split = _timed("read_split", zenoh_net.read_split)  # (large messages)
         inner = end._pub._pub
         end._pub._pub = type("TimedPut", (), {"put": staticmethod(_timed("put", inner.put))})()
 
@@ -91,13 +92,19 @@ def ping(transport: str, size: int) -> None:
         instrument(end, transport)
         time.sleep(1.0)  # let the sessions connect
         data = np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8)
-        payload = UInt8MultiArray(data=data) if transport == "emos-zenoh" else data.tobytes()
+        raw = data.tobytes()  # as in the benchmark: the EMOS message's array is a view of these bytes
+        payload = UInt8MultiArray(data=np.frombuffer(raw, np.uint8)) if transport == "emos-zenoh" else raw
         samples, lost = bench._round_trips(end, payload, ROUND_TRIPS)
         child.wait(20)
         print(f"{transport} {size} B: half round trip p50 {statistics.median(samples):.0f} us ({lost} lost)")
         print("  ping side:", medians())
         with open(out) as f:
             print("  echo side:", json.load(f))
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()  # os._exit below would swallow it
+        raise
     finally:
         child.kill()
         os._exit(0)

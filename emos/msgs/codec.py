@@ -101,6 +101,25 @@ class Encoded:
                 out.append(_ZEROS[:pad])
         return out
 
+    def head_chunks(self) -> list[Any]:
+        """The frame's header (metadata length, metadata, padding) as buffers, without the
+        arrays: with :meth:`write_arrays_into`, a message in two parts (see
+        :mod:`emos.transport.netframe`, large messages over Zenoh), decoded with
+        ``decode(cls, head, arrays=region)``."""
+        meta = self.meta
+        return [_U32.pack(len(meta)), meta, _ZEROS[: (-_U32.size - len(meta)) % _ALIGN]]
+
+    def write_arrays_into(self, buf: memoryview) -> None:
+        """Write the array region alone (the arrays at their offsets, at least
+        :attr:`array_bytes` long) into ``buf``."""
+        pos = 0
+        dst = np.frombuffer(buf, dtype=np.uint8)
+        for arr in self.arrays:
+            n = arr.nbytes
+            if n:
+                np.copyto(dst[pos : pos + n], arr.reshape(-1).view(np.uint8))
+            pos += _align(n)
+
     def to_bytes(self) -> bytes:
         out = bytearray(self.nbytes)
         self.write_into(memoryview(out))
@@ -291,12 +310,14 @@ def encode(msg: Any) -> Encoded:
     return Encoded(packer.pack(tree), arrays.arrays, arrays.offset)
 
 
-def decode(cls: type, frame: Any, copy: bool = False) -> Any:
+def decode(cls: type, frame: Any, copy: bool = False, arrays: Any = None) -> Any:
     """Rebuild a ``cls`` instance from a frame (bytes, bytearray or memoryview).
 
     Arrays are views into ``frame`` unless ``copy`` is true; pass a buffer you own.
-    Field converters are bypassed (the frame came from :func:`encode` of the same layout, which
-    the topic's type fingerprint guarantees), so decoding costs little beyond msgpack.
+    ``arrays``: the array region when it travels apart from the header (see
+    :meth:`Encoded.head_chunks`); ``frame`` is then the header alone, and arrays are views of
+    ``arrays``. Field converters are bypassed (the frame came from :func:`encode` of the same
+    layout, which the topic's type fingerprint guarantees), so decoding costs little beyond msgpack.
     """
     view = memoryview(frame)
     try:
@@ -305,6 +326,10 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
         end = len(view)
         if base > end:
             raise DecodeError(f"frame of {end} B announces {meta_len} bytes of metadata")
+        meta = view[4 : 4 + meta_len]
+        if arrays is not None:
+            view = memoryview(arrays)
+            base, end = 0, len(view)
 
         def ext_hook(code: int, data: bytes) -> Any:
             if code != _ARRAY_EXT:
@@ -318,7 +343,7 @@ def decode(cls: type, frame: Any, copy: bool = False) -> Any:
             arr = np.ndarray(shape, dtype, view, start)
             return arr.copy() if copy else arr
 
-        tree = msgpack.unpackb(view[4 : 4 + meta_len], ext_hook=ext_hook, raw=False, strict_map_key=False)
+        tree = msgpack.unpackb(meta, ext_hook=ext_hook, raw=False, strict_map_key=False)
         return (_DECODERS.get(cls) or _compile_decoder(cls))(tree)
     except DecodeError:
         raise

@@ -7,6 +7,13 @@ message itself in EMOS's own encoding (msgpack metadata + raw, aligned arrays; s
     "EMZ1" | stamp_ns u64 | fingerprint length u16 | publisher length u16 | fingerprint | publisher | padding to 8 | payload
 
 The payload starts 8-byte aligned within the frame, so the arrays in it can be viewed in place.
+
+A large message (arrays of :attr:`FrameWriter.SPLIT` bytes or more) travels in two parts
+instead: the sample's attachment holds the same header with magic ``"EMZ2"`` and the message's
+metadata alone, and the sample's payload holds its array region. That spares a copy wherever
+the array already lives in a ``bytes`` object, as every array a subscriber decoded does: a
+component that forwards a camera image hands Zenoh the very bytes it received (zenoh-python
+takes only ``bytes``/``bytearray``, so any other array must be copied once to reach it).
 Anything can arrive on a key expression (another program, another version, a forged sender), so
 :func:`read_frame` checks every length against the frame before it slices; the body is decoded
 (and, if it does not decode, dropped) by whoever needs the message, once (see
@@ -20,6 +27,7 @@ from typing import Any
 from emos.msgs import codec
 
 MAGIC = b"EMZ1"
+SPLIT_MAGIC = b"EMZ2"  # the attachment of a message whose arrays are the sample's payload
 _HEADER = struct.Struct("<4sQHH")
 _MAGIC_STAMP = struct.Struct("<4sQ")
 MAX_NAME_BYTES = 1024  # fingerprints are 16 hex digits; publisher names are component names
@@ -68,12 +76,14 @@ class FrameWriter:
     are written into one reused buffer (see :func:`write_frame`)."""
 
     SMALL = 64 * 1024  # below this, joining beats writing into a kept buffer
+    SPLIT = 64 * 1024  # arrays of this many bytes or more travel apart from the header (see split)
 
     def __init__(self, fingerprint: str, publisher_id: str):
         self.fingerprint, self.publisher_id = fingerprint, publisher_id
         self.prefix, self.start = frame_prefix(fingerprint, publisher_id)
         self._lengths = struct.pack("<HH", len(fingerprint.encode()), len(publisher_id.encode())) + self.prefix
         self._buffer: bytearray | None = None
+        self._arrays: bytearray | None = None
 
     def frame(self, enc: codec.Encoded, stamp_ns: int) -> bytes | bytearray:
         """The frame of ``enc``; a large one is valid until the next call (put it before)."""
@@ -82,8 +92,59 @@ class FrameWriter:
         frame = self._buffer = write_frame(enc, stamp_ns, self.fingerprint, self.publisher_id, self.prefix, self.start, self._buffer)
         return frame
 
+    def split(self, enc: codec.Encoded, stamp_ns: int) -> tuple[bytes | bytearray, bytes]:
+        """``(arrays, head)`` of a large message: its array region (the sample's payload) and
+        the header with its metadata (the sample's attachment, magic ``"EMZ2"``).
 
-def read_frame(data: Any, fingerprint: str | bytes) -> tuple[int, str, memoryview]:
+        A message whose one array covers a whole ``bytes`` or ``bytearray`` (as every array a
+        subscriber decodes does, and ``np.frombuffer(b)``) is sent from that object itself,
+        with no copy of ours; any other array region is written into one reused buffer, valid
+        until the next call (put it before)."""
+        head = b"".join([_MAGIC_STAMP.pack(SPLIT_MAGIC, stamp_ns), self._lengths, *enc.head_chunks()])
+        if len(enc.arrays) == 1:
+            arr = enc.arrays[0]
+            owner = arr.base
+            # C-contiguous (the encoder makes it so) and as long as its owner: it is the whole
+            # object, first byte to last, so the object's bytes are the array's.
+            if type(owner) in (bytes, bytearray) and len(owner) == arr.nbytes:
+                return owner, head
+        size = enc.array_bytes
+        region = self._arrays if self._arrays is not None and len(self._arrays) == size else bytearray(size)
+        self._arrays = region
+        view = memoryview(region)
+        try:
+            enc.write_arrays_into(view)
+        finally:
+            view.release()
+        return region, head
+
+
+class SplitPayload:
+    """A large message as it arrived in two parts: ``head`` (the attachment's header frame past
+    its names: metadata length, metadata) and ``arrays`` (the sample's payload, the array
+    region). Decoded by :meth:`decode`; the arrays are views of ``arrays``."""
+
+    __slots__ = ("head", "arrays")
+
+    def __init__(self, head: memoryview, arrays: bytes):
+        self.head, self.arrays = head, arrays
+
+    def decode(self, cls: type, copy: bool = False) -> Any:
+        return codec.decode(cls, self.head, copy=copy, arrays=self.arrays)
+
+    def __len__(self) -> int:
+        return len(self.head) + len(self.arrays)
+
+
+def read_split(head: Any, arrays: bytes, fingerprint: str | bytes) -> tuple[int, str, SplitPayload]:
+    """``(stamp_ns, publisher_id, payload)`` of a message that arrived in two parts: ``head``
+    from the sample's attachment, ``arrays`` its payload. The head gets every check of
+    :func:`read_frame`; whether the arrays fit the region is checked when the body is decoded."""
+    stamp, pub, meta = read_frame(head, fingerprint, SPLIT_MAGIC)
+    return stamp, pub, SplitPayload(meta, arrays)
+
+
+def read_frame(data: Any, fingerprint: str | bytes, magic: bytes = MAGIC) -> tuple[int, str, memoryview]:
     """``(stamp_ns, publisher_id, payload)`` of a frame carrying messages of ``fingerprint``.
 
     Checks everything but the message body: magic, every length against the frame, the type
@@ -95,9 +156,12 @@ def read_frame(data: Any, fingerprint: str | bytes) -> tuple[int, str, memoryvie
     size = len(data)
     if size < _HEADER.size:
         raise BadFrame(f"{size} B is shorter than a frame header ({_HEADER.size} B)")
-    magic, stamp, fp_len, pub_len = _HEADER.unpack_from(data, 0)
-    if magic != MAGIC:
-        raise BadFrame(f"not an EMOS frame (starts with {bytes(magic)!r})")
+    got_magic, stamp, fp_len, pub_len = _HEADER.unpack_from(data, 0)
+    if got_magic != magic:
+        if got_magic in (MAGIC, SPLIT_MAGIC):
+            what = "a header with no array part" if got_magic == SPLIT_MAGIC else "a whole frame as the attachment"
+            raise BadFrame(f"{what} (magic {bytes(got_magic)!r})")
+        raise BadFrame(f"not an EMOS frame (starts with {bytes(got_magic)!r})")
     if fp_len > MAX_NAME_BYTES or pub_len > MAX_NAME_BYTES:
         raise BadFrame(f"names of {fp_len} and {pub_len} B exceed {MAX_NAME_BYTES} B")
     head = _HEADER.size + fp_len + pub_len

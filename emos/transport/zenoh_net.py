@@ -4,8 +4,10 @@ A topic marked for the network (see :mod:`emos.transport.select`) is published t
 subscribed from the Zenoh key expression ``emos/<group>/<topic>`` (``/scan`` of group
 ``lab`` is ``emos/lab/scan``), each sample one frame of :mod:`emos.transport.netframe`: the
 same msgpack + raw-array encoding as a shared-memory ring, behind a small header naming the
-type fingerprint and the publisher. ``<group>`` (``$EMOS_NET_GROUP``, default ``default``)
-keeps robots that share a network apart.
+type fingerprint and the publisher (a large message puts that header in the sample's
+attachment and its arrays in the payload, so an array received as ``bytes`` is forwarded with
+no copy). ``<group>`` (``$EMOS_NET_GROUP``, default ``default``) keeps robots that share a
+network apart.
 
 One Zenoh session per process and configuration file, opened on first use and shared by every
 topic of the process. Its mode (peer or client), endpoints and scouting come from the Zenoh
@@ -36,7 +38,7 @@ from typing import Any, Callable
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport.context import encode_name
-from emos.transport.netframe import FrameWriter, read_frame
+from emos.transport.netframe import FrameWriter, SplitPayload, read_frame, read_split
 from emos.transport.trust import RateLimitedLog
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -207,7 +209,12 @@ class ZenohPublisher:
             raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
         # Publishing is single-threaded per publisher (the node holds its lock), so one writer;
         # Zenoh copies the frame on put, so its buffer is free again when put returns.
-        self._pub.put(self._frames.frame(codec.encode(msg), time.time_ns()))
+        enc = codec.encode(msg)
+        if enc.array_bytes < FrameWriter.SPLIT:
+            self._pub.put(self._frames.frame(enc, time.time_ns()))
+        else:  # arrays as the payload, header in the attachment: no copy of an array held in bytes
+            arrays, head = self._frames.split(enc, time.time_ns())
+            self._pub.put(arrays, attachment=head)
         self.sent += 1
         return self.sent - 1
 
@@ -245,8 +252,9 @@ class ZenohSubscriber:
         self.dropped = 0  # taken off the full queue to make room
         self.rejected = 0  # payloads that were not a frame, or not a decodable message, of our type
         self.undecodable = 0  # of those, well-framed ones whose body did not decode (as Subscriber's)
-        # (stamp, payload, publisher), payload a read-only view of the bytes Zenoh delivered.
-        self._queue: collections.deque[tuple[int, memoryview, str]] = collections.deque()
+        # (stamp, payload, publisher), payload a read-only view of the bytes Zenoh delivered, or
+        # for a large message the SplitPayload of its two parts.
+        self._queue: collections.deque[tuple[int, memoryview | SplitPayload, str]] = collections.deque()
         self._lock = threading.Lock()  # the queue: held for an append or a drain, never while waking
         self._waking: list[bool] = []  # one entry per callback between its queueing and its wake-up call
         self._notify = notify
@@ -265,7 +273,11 @@ class ZenohSubscriber:
         """On a Zenoh thread: check the frame, queue, wake. Nothing raised here may escape (it
         would be lost in Zenoh's thread and the subscriber would look alive while deaf)."""
         try:
-            stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
+            head = sample.attachment
+            if head is None:
+                stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
+            else:  # a large message: arrays in the payload (see emos.transport.netframe)
+                stamp, pub, payload = read_split(head.to_bytes(), sample.payload.to_bytes(), self._fp)
         except Exception as exc:  # noqa: BLE001 - BadFrame, or anything a foreign payload provokes
             self._reject(str(sample.key_expr), exc)
             return
@@ -303,6 +315,8 @@ class ZenohSubscriber:
         rejected) if its body does not decode as this topic's type: only its frame was checked
         on arrival, and anyone on the network can send a well-framed lie."""
         try:
+            if type(payload) is SplitPayload:
+                return payload.decode(self.msg_cls)
             return codec.decode(self.msg_cls, payload)
         except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
             self.undecodable += 1

@@ -191,7 +191,9 @@ def measure(sizes: list[int], messages: int, rounds: int) -> list[dict[str, Any]
         time.sleep(0.5)  # let the two sessions connect and match subscriptions
         for size in sizes:
             data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
-            payloads = {"emos-zenoh": UInt8MultiArray(data=data), "zenoh": data.tobytes()}
+            raw = data.tobytes()
+            # Both carry the same bytes object: the EMOS message's array is a view of it.
+            payloads = {"emos-zenoh": UInt8MultiArray(data=np.frombuffer(raw, np.uint8)), "zenoh": raw}
             samples: dict[str, list[float]] = {t: [] for t in TRANSPORTS}
             lost = {t: 0 for t in TRANSPORTS}
             count = max(_messages_for(size, messages) // rounds, 5)

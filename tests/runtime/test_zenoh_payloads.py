@@ -275,3 +275,98 @@ def test_the_status_mirror_sends_every_change_and_an_unchanged_status_only_as_a_
         mirror.close()
         ring.close()
         stray.close()
+
+
+# ------------------------------------------------------------------------ large messages, in two parts
+def test_a_large_message_travels_as_arrays_plus_a_header_and_an_array_held_in_bytes_is_not_copied():
+    """FrameWriter.split: arrays of FrameWriter.SPLIT bytes or more are the sample's payload and
+    the header (magic EMZ2) its attachment; an array covering a whole bytes object is sent as
+    that object; several arrays, or one that is not bytes, go into the writer's reused region."""
+    from emos.transport.netframe import SPLIT_MAGIC, SplitPayload, read_split
+
+    fp = UInt8MultiArray._emos_fingerprint
+    writer = FrameWriter(fp, "camera")
+    held = np.random.default_rng(0).integers(0, 256, FrameWriter.SPLIT, dtype=np.uint8).tobytes()
+    arrays, head = writer.split(codec.encode(UInt8MultiArray(data=np.frombuffer(held, np.uint8))), 42)
+    assert arrays is held and head[:4] == SPLIT_MAGIC
+    stamp, pub, payload = read_split(head, arrays, fp)
+    assert (stamp, pub) == (42, "camera") and isinstance(payload, SplitPayload)
+    msg = payload.decode(UInt8MultiArray)
+    assert msg.data.tobytes() == held and msg.data.base is held  # a view of the bytes that came
+
+    # The decoded array is again a whole bytes object: forwarding it copies nothing either.
+    assert writer.split(codec.encode(msg), 43)[0] is held
+    # A slice of bytes is not the whole object: copied into the region, still exact.
+    part = np.frombuffer(held, np.uint8)[8:]
+    region, head = writer.split(codec.encode(UInt8MultiArray(data=part)), 44)
+    assert region is not held and read_split(head, bytes(region), fp)[2].decode(UInt8MultiArray).data.tobytes() == part.tobytes()
+
+    # Several arrays: each at its offset in the region, byte exact, and the region is reused.
+    scan = LaserScan(ranges=np.linspace(0, 1, 40_000, dtype=np.float32), intensities=np.arange(40_001, dtype=np.float32))
+    sfp = LaserScan._emos_fingerprint
+    swriter = FrameWriter(sfp, "lidar")
+    region, head = swriter.split(codec.encode(scan), 1)
+    back = read_split(head, bytes(region), sfp)[2].decode(LaserScan)
+    assert np.array_equal(back.ranges, scan.ranges) and np.array_equal(back.intensities, scan.intensities)
+    assert swriter.split(codec.encode(scan), 2)[0] is region
+
+
+def test_split_messages_cross_zenoh_a_forwarder_resends_the_received_bytes_and_bad_parts_are_dropped(net, caplog):
+    conf, group = net
+    key = zenoh_net.topic_key("/image", group)
+    sub = zenoh_net.ZenohSubscriber("/image", Image, queue_size=16, config_path=conf, group=group)
+    relay_in = zenoh_net.ZenohSubscriber("/camera", Image, queue_size=4, config_path=conf, group=group)
+    camera = zenoh_net.ZenohPublisher("/camera", Image, publisher_id="camera", config_path=conf, group=group)
+    relay_out = zenoh_net.ZenohPublisher("/image", Image, publisher_id="relay", config_path=conf, group=group)
+    sess = zenoh_net.session(conf)
+    fp = Image._emos_fingerprint
+    try:
+        caplog.set_level(logging.WARNING, logger="emos.transport.zenoh")
+        pixels = np.random.default_rng(1).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+        frame = Image(height=240, width=320, encoding="rgb8", step=960, data=pixels)
+        _warm_up(camera, relay_in, frame)
+        _warm_up(relay_out, sub, frame)
+        camera.publish(frame)
+        got = []
+        assert _wait(lambda: (got.extend(relay_in.take()), bool(got))[1])
+        received = got[-1]
+        assert isinstance(received.data.base, bytes) and len(received.data.base) == pixels.nbytes
+        relay_out.publish(received)  # forwarded as the bytes that came: Zenoh's own copy only
+
+        arrays, head = FrameWriter(fp, "forger").split(codec.encode(frame), 7)
+        bad = {
+            "foreign attachment": (bytes(arrays), b"not an emos header"),
+            "a whole frame as the attachment": (bytes(arrays), bytes(FrameWriter(fp, "forger").frame(codec.encode(Image(data=np.zeros(1, np.uint8))), 1))),
+            "a header with no array part": (head + bytes(8), None),
+            "arrays shorter than the header says": (bytes(arrays)[:1000], head),
+        }
+        for payload, attachment in bad.values():
+            sess.put(key, payload, attachment=attachment)
+        relay_out.publish(Image(height=1, width=1, encoding="mono8", step=1, data=np.full(1, 9, np.uint8)))
+        out = []
+        assert _wait(lambda: (out.extend(sub.take()), len(out) >= 2)[1]), f"got {len(out)}"
+        assert len(out) == 2 and np.array_equal(out[0].data, pixels) and out[1].data.tolist() == [9]
+        assert _wait(lambda: sub.rejected == len(bad)) and sub.undecodable == 1  # the short arrays, on decode
+        assert set(sub.publishers()) == {"relay", "forger"}
+        lines = [r.getMessage() for r in caplog.records if "dropping a payload" in r.getMessage()]
+        assert lines and all(f"on key {key}" in line for line in lines)
+    finally:
+        for end in (camera, relay_out, relay_in, sub):
+            end.close()
+
+
+def test_a_latched_large_message_replays_with_its_attachment(net):
+    conf, group = net
+    pub = zenoh_net.ZenohPublisher("/map", UInt8MultiArray, publisher_id="mapper", config_path=conf, group=group, transient_local=True, depth=1)
+    grid = np.random.default_rng(2).integers(0, 100, 300_000, dtype=np.uint8)
+    late = None
+    try:
+        pub.publish(UInt8MultiArray(data=grid))
+        late = zenoh_net.ZenohSubscriber("/map", UInt8MultiArray, transient_local=True, config_path=conf, group=group)
+        got = []
+        assert _wait(lambda: (got.extend(late.take()), bool(got))[1])
+        assert len(got) == 1 and np.array_equal(got[0].data, grid) and late.rejected == 0
+    finally:
+        if late is not None:
+            late.close()
+        pub.close()
