@@ -9,9 +9,12 @@ callback thread queues the sample and writes one byte to a pipe, the main thread
 pipe, takes the sample, and answers.
 
 * ``emos-zenoh``: :class:`ZenohPublisher` / :class:`ZenohSubscriber` with a ``UInt8MultiArray``
-  of ``payload_bytes``: encode into a frame, put; on the other side check the frame on Zenoh's
-  thread, decode on the main thread (``take()``; the array is a view), and the echo
-  re-publishes the decoded message.
+  of ``payload_bytes``: encode, frame, put (from 64 KiB, the array as the payload and the header
+  in the attachment); on the other side check the frame on Zenoh's thread, decode on the main
+  thread (``take()``; the array is a view), and the echo re-publishes the decoded message.
+  The pinging side's message is a view of the same ``bytes`` object the raw peer puts, so both
+  start from the same bytes (an ``ndarray`` of its own would cost EMOS one copy per send, as
+  ``arr.tobytes()`` would cost a raw Zenoh program).
 * ``zenoh``: ``session.declare_publisher(...).put(bytes)`` and a callback subscriber; the echo
   puts the received bytes back.
 
