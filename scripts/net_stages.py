@@ -52,7 +52,6 @@ def instrument(end: bench._End, transport: str) -> None:
     if transport == "emos-zenoh":
         end.take = _timed("take", end.take)
         zenoh_net.read_frame = _timed("read_frame", zenoh_net.read_frame)  # called from Zenoh's thread
-        zenoh_net.read_split = _timed("read_split", zenoh_net.read_split)  # (large messages)
         inner = end._pub._pub
         end._pub._pub = type("TimedPut", (), {"put": staticmethod(_timed("put", inner.put))})()
 

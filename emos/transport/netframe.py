@@ -120,9 +120,10 @@ class FrameWriter:
 
 
 class SplitPayload:
-    """A large message as it arrived in two parts: ``head`` (the attachment's header frame past
-    its names: metadata length, metadata) and ``arrays`` (the sample's payload, the array
-    region). Decoded by :meth:`decode`; the arrays are views of ``arrays``."""
+    """A large message as it arrived in two parts: ``head`` (what :func:`read_frame` with
+    ``magic=SPLIT_MAGIC`` returns of the sample's attachment: metadata length, metadata) and
+    ``arrays`` (the sample's payload, the array region). Decoded by :meth:`decode`, which also
+    checks that every array fits the region; the arrays are views of ``arrays``."""
 
     __slots__ = ("head", "arrays")
 
@@ -136,21 +137,14 @@ class SplitPayload:
         return len(self.head) + len(self.arrays)
 
 
-def read_split(head: Any, arrays: bytes, fingerprint: str | bytes) -> tuple[int, str, SplitPayload]:
-    """``(stamp_ns, publisher_id, payload)`` of a message that arrived in two parts: ``head``
-    from the sample's attachment, ``arrays`` its payload. The head gets every check of
-    :func:`read_frame`; whether the arrays fit the region is checked when the body is decoded."""
-    stamp, pub, meta = read_frame(head, fingerprint, SPLIT_MAGIC)
-    return stamp, pub, SplitPayload(meta, arrays)
-
-
 def read_frame(data: Any, fingerprint: str | bytes, magic: bytes = MAGIC) -> tuple[int, str, memoryview]:
     """``(stamp_ns, publisher_id, payload)`` of a frame carrying messages of ``fingerprint``.
 
     Checks everything but the message body: magic, every length against the frame, the type
     fingerprint, the publisher's name, and that the message's own metadata length fits (see
     :func:`emos.msgs.codec.check_header`); decoding the body, which can still fail, is left to
-    whoever needs the message. Cheap enough for Zenoh's delivery thread (about 1 us). Raises
+    whoever needs the message. ``magic``: :data:`SPLIT_MAGIC` for the attachment of a message
+    in two parts (the returned payload is then its metadata, see :class:`SplitPayload`). Cheap enough for Zenoh's delivery thread (about 1 us). Raises
     :class:`BadFrame` saying what is wrong; never reads outside ``data``."""
     fp = fingerprint if isinstance(fingerprint, bytes) else fingerprint.encode()
     size = len(data)

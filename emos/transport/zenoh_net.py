@@ -38,7 +38,7 @@ from typing import Any, Callable
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport.context import encode_name
-from emos.transport.netframe import FrameWriter, SplitPayload, read_frame, read_split
+from emos.transport.netframe import SPLIT_MAGIC, FrameWriter, SplitPayload, read_frame
 from emos.transport.trust import RateLimitedLog
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -277,7 +277,10 @@ class ZenohSubscriber:
             if head is None:
                 stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
             else:  # a large message: arrays in the payload (see emos.transport.netframe)
-                stamp, pub, payload = read_split(head.to_bytes(), sample.payload.to_bytes(), self._fp)
+                # The header first: a bad one costs no copy of the arrays, and its check runs
+                # before that copy has run through the caches.
+                stamp, pub, meta = read_frame(head.to_bytes(), self._fp, SPLIT_MAGIC)
+                payload = SplitPayload(meta, sample.payload.to_bytes())
         except Exception as exc:  # noqa: BLE001 - BadFrame, or anything a foreign payload provokes
             self._reject(str(sample.key_expr), exc)
             return
