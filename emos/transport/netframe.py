@@ -133,9 +133,6 @@ class SplitPayload:
     def decode(self, cls: type, copy: bool = False) -> Any:
         return codec.decode(cls, self.head, copy=copy, arrays=self.arrays)
 
-    def __len__(self) -> int:
-        return len(self.head) + len(self.arrays)
-
 
 def read_frame(data: Any, fingerprint: str | bytes, magic: bytes = MAGIC) -> tuple[int, str, memoryview]:
     """``(stamp_ns, publisher_id, payload)`` of a frame carrying messages of ``fingerprint``.
@@ -144,8 +141,9 @@ def read_frame(data: Any, fingerprint: str | bytes, magic: bytes = MAGIC) -> tup
     fingerprint, the publisher's name, and that the message's own metadata length fits (see
     :func:`emos.msgs.codec.check_header`); decoding the body, which can still fail, is left to
     whoever needs the message. ``magic``: :data:`SPLIT_MAGIC` for the attachment of a message
-    in two parts (the returned payload is then its metadata, see :class:`SplitPayload`). Cheap enough for Zenoh's delivery thread (about 1 us). Raises
-    :class:`BadFrame` saying what is wrong; never reads outside ``data``."""
+    in two parts (the returned payload is then its metadata, see :class:`SplitPayload`).
+    Cheap enough for Zenoh's delivery thread (about 1 us). Raises :class:`BadFrame` saying
+    what is wrong; never reads outside ``data``."""
     fp = fingerprint if isinstance(fingerprint, bytes) else fingerprint.encode()
     size = len(data)
     if size < _HEADER.size:
