@@ -109,14 +109,31 @@ def session(config_path: str | None = None) -> Any:
 
 
 def _load_config(zenoh: Any, path: str) -> Any:
+    """The configuration in ``path`` (Zenoh's defaults if empty), with Zenoh's own shared
+    memory turned off unless the file says anything about ``shared_memory``.
+
+    Why off: Zenoh 1.10 moves messages of 3 KiB or more between processes of one host through
+    shared-memory pools it maps into the receivers, and a receiver keeps the pool (16 MiB) and
+    metadata (1.3 MB) of every sending process it ever heard mapped and locked for its own
+    lifetime, a clean exit or a SIGKILL of the sender alike (eclipse-zenoh/zenoh#2787, open).
+    A component restarted by its supervisor is a new sending process each time, so subscribers
+    would grow by 17 MB per restart. Processes of one host already have EMOS's own rings, which
+    free a dead writer's segments; Zenoh is for crossing hosts, where its shared memory does not
+    apply. A configuration file that mentions ``shared_memory`` is taken as it is."""
     if not path:
-        return zenoh.Config()
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
-    try:
-        return zenoh.Config.from_file(path)
-    except Exception as exc:  # zenoh.ZError: say which file
-        raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
+        conf = zenoh.Config()
+    else:
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
+        try:
+            conf = zenoh.Config.from_file(path)
+        except Exception as exc:  # zenoh.ZError: say which file
+            raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
+        with open(path, encoding="utf-8", errors="replace") as f:
+            if "shared_memory" in f.read():
+                return conf
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    return conf
 
 
 def _ephemeral_listen(zenoh: Any, path: str) -> Any | None:

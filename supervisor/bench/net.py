@@ -3,10 +3,10 @@ transport against raw ``eclipse-zenoh`` pub/sub carrying the same bytes, measure
 in the same run.
 
 Two processes, each with its own Zenoh session (peer mode, each listening on a loopback port
-and connecting to the other's, no multicast scouting: TCP over 127.0.0.1, as between hosts),
-and no shared memory between them. Both transports use the same hand-off a node uses: Zenoh's
-callback thread queues the sample and writes one byte to a pipe, the main thread wakes on the
-pipe, takes the sample, and answers.
+and connecting to the other's, no multicast scouting, Zenoh's shared memory off: TCP over
+127.0.0.1, as between hosts), and no shared memory between them. Both transports use the
+same hand-off a node uses: Zenoh's callback thread queues the sample and writes one byte to a
+pipe, the main thread wakes on the pipe, takes the sample, and answers.
 
 * ``emos-zenoh``: :class:`ZenohPublisher` / :class:`ZenohSubscriber` with a ``UInt8MultiArray``
   of ``payload_bytes``: encode, frame, put (from 64 KiB, the array as the payload and the header
@@ -67,6 +67,10 @@ def _config_file(folder: str, name: str, listen: int, connect: int) -> str:
             "listen": {"endpoints": [f"tcp/127.0.0.1:{listen}"]},
             "connect": {"endpoints": [f"tcp/127.0.0.1:{connect}"]},
             "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+            # As between hosts: no shared-memory shortcut between two processes of this one
+            # (EMOS's default too, see zenoh_net._load_config; said here so that it holds
+            # whatever that default becomes).
+            "transport": {"shared_memory": {"enabled": False}},
         }, f)
     return path
 

@@ -374,3 +374,41 @@ def test_a_latched_large_message_replays_with_its_attachment(net):
         if late is not None:
             late.close()
         pub.close()
+
+
+# ------------------------------------------------------------------------ Zenoh's own shared memory
+def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(net, tmp_path):
+    """Zenoh 1.10 would carry messages of 3 KiB or more between two sessions of this host through
+    shared-memory pools that receivers keep mapped for life (eclipse-zenoh/zenoh#2787): EMOS
+    turns that off, so a 1 MiB exchange creates no Zenoh segment in /dev/shm; a configuration
+    file that says anything about shared_memory is taken as written."""
+    import os
+
+    conf, group = net
+    zen = zenoh_net._zenoh()
+    assert json.loads(zenoh_net._load_config(zen, conf).get_json("transport/shared_memory/enabled")) is False
+    assert json.loads(zenoh_net._load_config(zen, "").get_json("transport/shared_memory/enabled")) is False
+    chosen = tmp_path / "shm.json5"
+    chosen.write_text('{mode: "peer", transport: {shared_memory: {enabled: true}}}')
+    assert json.loads(zenoh_net._load_config(zen, str(chosen)).get_json("transport/shared_memory/enabled")) is True
+
+    # Two sessions of this process (two configuration files), joined over loopback TCP.
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    other = tmp_path / "other.json5"
+    listen = json.loads(open(conf).read())["listen"]["endpoints"]
+    other.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]}, "connect": {"endpoints": listen},
+                                 "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}}}))
+    before = {n for n in os.listdir("/dev/shm") if n.endswith(".zenoh")}
+    sub = zenoh_net.ZenohSubscriber("/big", UInt8MultiArray, config_path=conf, group=group)
+    pub = zenoh_net.ZenohPublisher("/big", UInt8MultiArray, publisher_id="far", config_path=str(other), group=group)
+    try:
+        data = np.random.default_rng(3).integers(0, 256, 1 << 20, dtype=np.uint8)
+        got = []
+        assert _wait(lambda: (pub.publish(UInt8MultiArray(data=data)), got.extend(sub.take()), bool(got))[2])
+        assert np.array_equal(got[0].data, data)
+        assert {n for n in os.listdir("/dev/shm") if n.endswith(".zenoh")} - before == set()
+    finally:
+        pub.close()
+        sub.close()
