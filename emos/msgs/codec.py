@@ -71,7 +71,14 @@ class Encoded:
         meta_len = len(self.meta)
         _U32.pack_into(buf, 0, meta_len)
         buf[4 : 4 + meta_len] = self.meta
-        pos = self.header_bytes
+        return self.write_arrays_into(buf, self.header_bytes)
+
+    def write_arrays_into(self, buf: memoryview, start: int = 0) -> int:
+        """Write the arrays alone, each at its offset from ``start`` (the array region, at least
+        :attr:`array_bytes` long from there), into ``buf``; return where the region ends. The
+        whole frame (:meth:`write_into`), or a message in two parts, header apart (see
+        :meth:`head_chunks`)."""
+        pos = start
         dst = None
         for arr in self.arrays:
             n = arr.nbytes
@@ -88,37 +95,24 @@ class Encoded:
             pos += _align(n)
         return pos
 
+    def head_chunks(self) -> list[Any]:
+        """The frame's header (metadata length, metadata, padding) as buffers: with
+        :meth:`write_arrays_into`, a message in two parts (see :mod:`emos.transport.netframe`,
+        large messages over Zenoh), decoded with ``decode(cls, head, arrays=region)``."""
+        meta = self.meta
+        return [_U32.pack(len(meta)), meta, _ZEROS[: (-_U32.size - len(meta)) % _ALIGN]]
+
     def chunks(self) -> list[Any]:
         """The frame as consecutive buffers (the header with its metadata and padding, then each
         array and its padding), for ``b"".join``: for a small message one allocation and one
         C call, cheaper than :meth:`write_into` (whose buffer must exist first)."""
-        meta = self.meta
-        out: list[Any] = [_U32.pack(len(meta)), meta, _ZEROS[: (-_U32.size - len(meta)) % _ALIGN]]
+        out = self.head_chunks()
         for arr in self.arrays:
             out.append(arr)  # C-contiguous (see _ArrayCollector): joined as its raw bytes
             pad = (-arr.nbytes) % _ALIGN
             if pad:
                 out.append(_ZEROS[:pad])
         return out
-
-    def head_chunks(self) -> list[Any]:
-        """The frame's header (metadata length, metadata, padding) as buffers, without the
-        arrays: with :meth:`write_arrays_into`, a message in two parts (see
-        :mod:`emos.transport.netframe`, large messages over Zenoh), decoded with
-        ``decode(cls, head, arrays=region)``."""
-        meta = self.meta
-        return [_U32.pack(len(meta)), meta, _ZEROS[: (-_U32.size - len(meta)) % _ALIGN]]
-
-    def write_arrays_into(self, buf: memoryview) -> None:
-        """Write the array region alone (the arrays at their offsets, at least
-        :attr:`array_bytes` long) into ``buf``."""
-        pos = 0
-        dst = np.frombuffer(buf, dtype=np.uint8)
-        for arr in self.arrays:
-            n = arr.nbytes
-            if n:
-                np.copyto(dst[pos : pos + n], arr.reshape(-1).view(np.uint8))
-            pos += _align(n)
 
     def to_bytes(self) -> bytes:
         out = bytearray(self.nbytes)
