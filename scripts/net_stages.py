@@ -3,13 +3,20 @@
 A diagnostic for ``emos bench net`` (docs/benchmarks.md, "EMOS over Zenoh on a quiet machine"):
 the same two ends as the benchmark (:class:`supervisor.bench.net._End`), in two processes joined
 over loopback TCP, with ``time.perf_counter_ns`` marks around the send (EMOS: encode, frame and
-``put``; and ``put`` alone), the frame check on Zenoh's thread and the take. Prints the half round
-trip's p50 and each stage's median, for the pinging side and the echo::
+``put``; and ``put`` alone), the frame check and the decode on Zenoh's thread, and the take.
+Prints the half round trip's p50 and each stage's median, for the pinging side and the echo::
 
     python3 scripts/net_stages.py zenoh            # raw Zenoh, 8 MiB
     python3 scripts/net_stages.py emos-zenoh       # EMOS over Zenoh, 8 MiB
     python3 scripts/net_stages.py emos-zenoh 921600
     python3 scripts/net_stages.py --tight 8        # the same stages in a tight loop (warm caches)
+    python3 scripts/net_stages.py --floor 8        # raw Zenoh, the least a typed API can do, EMOS
+
+``--floor`` answers "how close to raw Zenoh can a typed API get at all?": in one pair of
+processes, interleaved round by round, it measures raw Zenoh, EMOS, and a *typed floor*, raw
+Zenoh plus only what any API that hands a component a message object must do per hop: on
+receipt, build a ``UInt8MultiArray`` (its layout and a numpy view of the bytes) with no header,
+no checks and no codec; on send, take the array's bytes (``tobytes``). Small payloads only.
 """
 from __future__ import annotations
 
@@ -52,6 +59,7 @@ def instrument(end: bench._End, transport: str) -> None:
     if transport == "emos-zenoh":
         end.take = _timed("take", end.take)
         zenoh_net.read_frame = _timed("read_frame", zenoh_net.read_frame)  # called from Zenoh's thread
+        zenoh_net.codec.decode = _timed("decode", zenoh_net.codec.decode)  # so is the decode (on arrival)
         inner = end._pub._pub
         end._pub._pub = type("TimedPut", (), {"put": staticmethod(_timed("put", inner.put))})()
 
@@ -109,6 +117,80 @@ def ping(transport: str, size: int) -> None:
         os._exit(0)
 
 
+class TypedFloor:
+    """One end of the typed floor (see the module doc): a raw Zenoh end whose ``take`` builds
+    each message object and whose ``send`` takes the bytes out of one."""
+
+    def __init__(self, config: str, group: str, side: str):
+        from emos.msgs.std import MultiArrayLayout
+
+        self._raw = bench._End(config, f"{group}floor", "zenoh", side)  # keys of its own
+        self.inbox = self._raw.inbox
+        put, new, setattr_ = self._raw.send, object.__new__, object.__setattr__
+
+        def build(data: bytes) -> UInt8MultiArray:
+            layout = new(MultiArrayLayout)
+            setattr_(layout, "dim", [])
+            setattr_(layout, "data_offset", 0)
+            msg = new(UInt8MultiArray)
+            setattr_(msg, "layout", layout)
+            setattr_(msg, "data", np.frombuffer(data, np.uint8))
+            return msg
+
+        self.send = lambda msg: put(msg.data.tobytes())
+        self.take = lambda: [build(data) for data in self._raw.take()]
+
+
+FLOOR_ENDS = ("zenoh", "typed floor", "emos-zenoh")
+
+
+def _floor_ends(config: str, group: str, side: str) -> dict:
+    return {name: TypedFloor(config, group, side) if name == "typed floor" else bench._End(config, group, name, side) for name in FLOOR_ENDS}
+
+
+def floor_echo(config: str, group: str) -> None:
+    by_fd = {end.inbox.rfd: end for end in _floor_ends(config, group, "pong").values()}
+    last = time.time()
+    while time.time() - last < 5.0:  # the ping side is done (or gone)
+        for fd in select.select(list(by_fd), [], [], 1.0)[0]:
+            os.read(fd, 4096)
+            end = by_fd[fd]
+            for msg in end.take():
+                end.send(msg)
+            last = time.time()
+    os._exit(0)
+
+
+def floor(size: int, rounds: int = 8, per_round: int = 150) -> None:
+    if size >= 64 * 1024:
+        sys.exit("--floor is for small payloads (under 64 KiB): the floor's tobytes would copy a large one")
+    folder = tempfile.mkdtemp(prefix="emos-net-floor-")
+    port_ping, port_pong = bench._free_port(), bench._free_port()
+    ping_conf = bench._config_file(folder, "ping", port_ping, port_pong)
+    pong_conf = bench._config_file(folder, "pong", port_pong, port_ping)
+    group = f"floor{uuid.uuid4().hex[:6]}"
+    child = subprocess.Popen([sys.executable, __file__, "--floor-echo", pong_conf, group])
+    try:
+        ends = _floor_ends(ping_conf, group, "ping")
+        time.sleep(1.0)  # let the sessions connect
+        raw = np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8).tobytes()
+        msg = UInt8MultiArray(data=np.frombuffer(raw, np.uint8))
+        payloads = {"zenoh": raw, "typed floor": msg, "emos-zenoh": msg}
+        samples: dict[str, list[float]] = {name: [] for name in FLOOR_ENDS}
+        for i in range(rounds):
+            for name in FLOOR_ENDS:
+                samples[name] += bench._round_trips(ends[name], payloads[name], per_round)[0]
+            print(f"round {i + 1}/{rounds}", file=sys.stderr, flush=True)
+        base = statistics.median(samples["zenoh"])
+        print(f"{size} B, half round trip p50 over {rounds} interleaved rounds of {per_round}:")
+        for name in FLOOR_ENDS:
+            p50 = statistics.median(samples[name])
+            print(f"  {name:12s} {p50:7.1f} us   {p50 - base:+6.1f} us a hop   {100 * (p50 - base) / base:+6.1f} %")
+    finally:
+        child.kill()
+        os._exit(0)
+
+
 def tight(size: int) -> None:
     """The EMOS stages of one hop run back to back on one message: what they cost warm. From
     ``FrameWriter.SPLIT`` up, as ``ZenohPublisher`` sends it: in two parts (arrays, header)."""
@@ -142,7 +224,11 @@ def tight(size: int) -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1] == "--tight":
+    if sys.argv[1] == "--floor":
+        floor(int(sys.argv[2]) if len(sys.argv) > 2 else 8)
+    elif sys.argv[1] == "--floor-echo":
+        floor_echo(*sys.argv[2:4])
+    elif sys.argv[1] == "--tight":
         tight(int(sys.argv[2]) if len(sys.argv) > 2 else 8)
     elif sys.argv[1] == "--echo":
         echo(*sys.argv[2:6])

@@ -45,7 +45,7 @@ class _Input:
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
-        self.decode = payload_decoder(sub, topic.msg_type)  # None from it: a network payload dropped (logged)
+        self.decode = payload_decoder(sub, topic.msg_type)  # a ring's payload -> its message (network ones come decoded)
         self.raw: bytearray | None = None
         self.stamp_ns = 0
         self.received_ns = 0
@@ -390,8 +390,6 @@ class Node:
         backlog.sort(key=lambda item: item[:2])  # by stamp; within a stamp, as read
         for stamp_i, _, inp, raw_i in backlog:
             msg = inp.decode(raw_i)
-            if msg is None:
-                continue
             inp.decoded = msg if raw_i is inp.raw else inp.decoded
             self.trigger_stamp_ns = stamp_i
             try:
@@ -422,8 +420,6 @@ class Node:
             inp.sim_at = self._sim_time.time_at(inp.stamp_ns) if self._sim_time is not None else None
         if inp.decoded is None:
             inp.decoded = inp.decode(inp.raw)
-            if inp.decoded is None:
-                inp.raw = None  # a malformed network payload, dropped: as if it had not come
         return inp.decoded
 
     def age(self, topic: Topic | str) -> float | None:

@@ -205,7 +205,8 @@ def _compile_encoder(cls: type) -> Any:
             items.append(f"(None if o.{name} is None else E{i}(o.{name}, A))")
         elif kind == F.MESSAGE_LIST:
             env[f"E{i}"] = _LazyCoder(_encoder, resolver, env, f"E{i}")
-            items.append(f"[E{i}(x, A) for x in o.{name}]")
+            # Mostly empty (a layout's dims, a header-less list): then no comprehension is run.
+            items.append(f"([E{i}(x, A) for x in o.{name}] if o.{name} else [])")
         else:
             items.append(f"o.{name}")
     src = f"def encode_{cls.__name__}(o, A):\n    return [{', '.join(items)}]\n"

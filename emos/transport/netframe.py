@@ -15,8 +15,8 @@ the array already lives in a ``bytes`` object, as every array a subscriber decod
 component that forwards a camera image hands Zenoh the very bytes it received (zenoh-python
 takes only ``bytes``/``bytearray``, so any other array must be copied once to reach it).
 Anything can arrive on a key expression (another program, another version, a forged sender), so
-:func:`read_frame` checks every length against the frame before it slices; the body is decoded
-(and, if it does not decode, dropped) by whoever needs the message, once (see
+:func:`read_frame` checks every length against the frame before it slices; the subscriber then
+decodes the body, and drops it if it does not decode (see
 :class:`emos.transport.zenoh_net.ZenohSubscriber`).
 """
 from __future__ import annotations
@@ -140,7 +140,7 @@ def read_frame(data: Any, fingerprint: str | bytes, magic: bytes = MAGIC) -> tup
     Checks everything but the message body: magic, every length against the frame, the type
     fingerprint, the publisher's name, and that the message's own metadata length fits (see
     :func:`emos.msgs.codec.check_header`); decoding the body, which can still fail, is left to
-    whoever needs the message. ``magic``: :data:`SPLIT_MAGIC` for the attachment of a message
+    the caller. ``magic``: :data:`SPLIT_MAGIC` for the attachment of a message
     in two parts (the returned payload is then its metadata, see :class:`SplitPayload`).
     Cheap enough for Zenoh's delivery thread (about 1 us). Raises :class:`BadFrame` saying
     what is wrong; never reads outside ``data``."""

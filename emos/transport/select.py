@@ -33,8 +33,9 @@ class TopicPublisher(Protocol):
 
 
 class TopicSubscriber(Protocol):
-    """What a node reads a topic through. ``take_raw`` gives ``(stamp_ns, frame, publisher)``,
-    decoded with :func:`payload_decoder`; the node learns of news from the waker it passed in."""
+    """What a node reads a topic through. ``take_raw`` gives ``(stamp_ns, payload, publisher)``,
+    a payload turned into its message by :func:`payload_decoder`; the node learns of news from
+    the waker it passed in."""
 
     topic: str
     dropped: int
@@ -47,18 +48,22 @@ class TopicSubscriber(Protocol):
 
 
 def payload_decoder(sub: Any, msg_type: type) -> Callable[[Any], Any]:
-    """How a node turns ``sub``'s ``take_raw`` payloads into messages: the subscriber's own
-    ``decode_payload`` if it has one (Zenoh: the body is checked only when decoded, and one that
-    does not decode gives ``None``, logged), else :func:`emos.msgs.codec.decode` of ``msg_type``
-    (shared memory: the ring's writer is trusted, exactly as before)."""
-    guarded = getattr(sub, "decode_payload", None)
-    if guarded is not None:
-        return guarded
+    """How a node turns ``sub``'s ``take_raw`` payloads into messages: as they are for a
+    subscriber that ``decodes_on_arrival`` (Zenoh: each body was decoded, and one that did not
+    decode dropped with a log line, before it was queued), else :func:`emos.msgs.codec.decode`
+    of ``msg_type`` (shared memory: the ring's writer is trusted, and a message is decoded only
+    when the node uses it)."""
+    if getattr(sub, "decodes_on_arrival", False):
+        return _as_is
     from functools import partial
 
     from emos.msgs import codec
 
     return partial(codec.decode, msg_type)
+
+
+def _as_is(message: Any) -> Any:
+    return message
 
 
 def use_network(zenoh_config: str | None = None, topics: str | list[str] | None = None, services: str | list[str] | None = None, group: str | None = None) -> None:

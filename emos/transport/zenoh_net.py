@@ -14,12 +14,14 @@ topic of the process. Its mode (peer or client), endpoints and scouting come fro
 configuration file (``$EMOS_ZENOH_CONFIG``, set by ``emos run --zenoh CONFIG``); without one,
 Zenoh's defaults (peer mode, multicast scouting) apply.
 
-Zenoh delivers samples on its own threads. A subscriber checks each frame there (magic,
-lengths, type fingerprint; anything else is dropped with a rate-limited warning naming the
-key), appends it to a bounded queue (``queue_size``, oldest dropped and counted) and calls its
-``notify`` (the node's waker: one byte to the FIFO its uvloop watches). The node then takes
-from the queue on its own thread, as it reads a ring, and decodes each message it uses once,
-through :meth:`ZenohSubscriber.decode_payload` (a body that does not decode is dropped there).
+Zenoh delivers samples on its own threads. A subscriber checks and decodes each one there
+(magic, lengths, type fingerprint, then the body; anything that fails is dropped with a
+rate-limited warning naming the key), appends the message to a bounded queue (``queue_size``,
+oldest dropped and counted) and calls its ``notify`` (the node's waker: one byte to the FIFO
+its uvloop watches). The node then takes the decoded messages on its own thread, as it reads a
+ring. Decoding on arrival costs a message the reader skips about 2 us, and saves every message
+it uses a cold start: Zenoh's thread has just run, while the reader wakes up cold, and the same
+decode costs it several times as much (see docs/benchmarks.md, "Decoding on Zenoh's thread").
 
 Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
 so :func:`list_topics` can discover the topics of every host in the group.
@@ -249,16 +251,19 @@ class ZenohSubscriber:
     """Receives one topic from every publisher on its key expression, on any host of the group.
 
     The same reading interface as :class:`emos.transport.pubsub.Subscriber` (``take_raw``,
-    ``latest_raw``, ``has_news``, ``take``, ``latest``, ``close``), so a node reads either alike,
-    plus :meth:`decode_payload`, the guarded decode a node uses for ``take_raw``'s payloads.
-    ``notify`` is called (on a Zenoh thread) after each accepted frame.
+    ``latest_raw``, ``has_news``, ``take``, ``latest``, ``close``), so a node reads either alike;
+    ``take_raw``'s payloads are the messages themselves, already decoded (``decodes_on_arrival``,
+    see :func:`emos.transport.select.payload_decoder`). ``notify`` is called (on a Zenoh thread)
+    after each accepted message.
 
-    Work is split so that a message is decoded once, where it is used: Zenoh's thread checks only
-    the frame (:func:`read_frame`: magic, lengths, type fingerprint, about 1 us) and queues the
-    payload; the reader's thread decodes it, and a payload whose body does not decode is dropped
-    there with the same rate-limited warning. Zenoh's thread holds no lock while it wakes the
-    reader, so the woken thread never waits for it.
+    Zenoh's thread checks the frame (:func:`read_frame`: magic, lengths, type fingerprint),
+    decodes the body, and queues the message; anything that fails either step is dropped there
+    with a rate-limited warning, and never wakes the reader. Decoding there rather than on the
+    reader's thread is what the module doc explains: the reader wakes cold. Zenoh's thread holds
+    no lock while it wakes the reader, so the woken thread never waits for it.
     """
+
+    decodes_on_arrival = True
 
     def __init__(self, topic: str, msg_cls: type, notify: Callable[[], None] | None = None, queue_size: int = 10, transient_local: bool = False, config_path: str | None = None, group: str | None = None):
         self.topic, self.msg_cls = topic, msg_cls
@@ -269,9 +274,9 @@ class ZenohSubscriber:
         self.dropped = 0  # taken off the full queue to make room
         self.rejected = 0  # payloads that were not a frame, or not a decodable message, of our type
         self.undecodable = 0  # of those, well-framed ones whose body did not decode (as Subscriber's)
-        # (stamp, payload, publisher), payload a read-only view of the bytes Zenoh delivered, or
-        # for a large message the SplitPayload of its two parts.
-        self._queue: collections.deque[tuple[int, memoryview | SplitPayload, str]] = collections.deque()
+        # (stamp, message, publisher); a message's arrays are read-only views of the bytes Zenoh
+        # delivered.
+        self._queue: collections.deque[tuple[int, Any, str]] = collections.deque()
         self._lock = threading.Lock()  # the queue: held for an append or a drain, never while waking
         self._waking: list[bool] = []  # one entry per callback between its queueing and its wake-up call
         self._notify = notify
@@ -281,24 +286,30 @@ class ZenohSubscriber:
         sess = session(config_path)
         if transient_local:
             # The publishers' cached messages arrive as replies, through _on_sample like live
-            # ones: checked there and decoded on the reader's thread, exactly as live ones.
+            # ones: checked and decoded there exactly as live ones.
             self._sub = _latched_subscriber(sess, self.key, self.queue_size, self._on_sample)
         else:
             self._sub = sess.declare_subscriber(self.key, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
-        """On a Zenoh thread: check the frame, queue, wake. Nothing raised here may escape (it
-        would be lost in Zenoh's thread and the subscriber would look alive while deaf)."""
+        """On a Zenoh thread: check the frame, decode, queue, wake. Nothing raised here may
+        escape (it would be lost in Zenoh's thread and the subscriber would look alive while deaf)."""
         try:
             head = sample.attachment
             if head is None:
                 stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
             else:  # a large message: arrays in the payload (see emos.transport.netframe)
-                # The header first: a bad one costs no copy of the arrays, and its check runs
-                # before that copy has run through the caches.
+                # The header first: a bad one costs no copy of the arrays.
                 stamp, pub, meta = read_frame(head.to_bytes(), self._fp, SPLIT_MAGIC)
                 payload = SplitPayload(meta, sample.payload.to_bytes())
         except Exception as exc:  # noqa: BLE001 - BadFrame, or anything a foreign payload provokes
+            self._reject(str(sample.key_expr), exc)
+            return
+        try:
+            # Anyone on the network can send a well-framed lie: the body is checked by decoding it.
+            msg = codec.decode(self.msg_cls, payload) if head is None else payload.decode(self.msg_cls)
+        except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
+            self.undecodable += 1
             self._reject(str(sample.key_expr), exc)
             return
         waking = self._waking
@@ -309,7 +320,7 @@ class ZenohSubscriber:
             if len(queue) >= self.queue_size:
                 queue.popleft()
                 self.dropped += 1
-            queue.append((stamp, payload, pub))
+            queue.append((stamp, msg, pub))
             waking.append(True)  # see close(): we may wake the reader until we pop this
         try:
             if pub not in self._publishers:
@@ -330,23 +341,9 @@ class ZenohSubscriber:
             self.topic, key, canonical_name(self.msg_cls), self.rejected, type(exc).__name__, exc,
         )
 
-    def decode_payload(self, payload: Any) -> Any | None:
-        """The message in a payload of :meth:`take_raw`, or ``None`` (logged and counted as
-        rejected) if its body does not decode as this topic's type: only its frame was checked
-        on arrival, and anyone on the network can send a well-framed lie."""
-        try:
-            if type(payload) is SplitPayload:
-                return payload.decode(self.msg_cls)
-            return codec.decode(self.msg_cls, payload)
-        except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
-            self.undecodable += 1
-            self._reject(self.key, exc)
-            return None
-
     # -- reading (the node's thread) --------------------------------------------------------------
     def take_raw(self) -> list[tuple[int, Any, str]]:
-        """Every queued ``(stamp_ns, payload, publisher)``, oldest first; decode each with
-        :meth:`decode_payload` (frames are checked, bodies are not)."""
+        """Every queued ``(stamp_ns, message, publisher)``, oldest first (decoded on arrival)."""
         if not self._queue:
             return []
         with self._lock:
@@ -366,18 +363,13 @@ class ZenohSubscriber:
         return bool(self._queue)
 
     def take(self) -> list[Any]:
-        """Every queued message, decoded, oldest first; bodies that do not decode are dropped."""
-        decode = self.decode_payload
-        return [msg for msg in (decode(payload) for _, payload, _ in self.take_raw()) if msg is not None]
+        """Every queued message, oldest first."""
+        return [msg for _, msg, _ in self.take_raw()]
 
     def latest(self) -> Any | None:
-        """The newest queued message that decodes (older ones are discarded), or ``None``."""
-        items = self.take_raw()
-        while items:
-            msg = self.decode_payload(items.pop()[1])
-            if msg is not None:
-                return msg
-        return None
+        """The newest queued message (older ones are discarded), or ``None``."""
+        item = self.latest_raw()
+        return None if item is None else item[1]
 
     def publishers(self) -> list[str]:
         return sorted(self._publishers)

@@ -10,8 +10,9 @@ pipe, the main thread wakes on the pipe, takes the sample, and answers.
 
 * ``emos-zenoh``: :class:`ZenohPublisher` / :class:`ZenohSubscriber` with a ``UInt8MultiArray``
   of ``payload_bytes``: encode, frame, put (from 64 KiB, the array as the payload and the header
-  in the attachment); on the other side check the frame on Zenoh's thread, decode on the main
-  thread (``take()``; the array is a view), and the echo re-publishes the decoded message.
+  in the attachment); on the other side check the frame and decode it on Zenoh's thread, take
+  the message on the main thread (``take()``; the array is a view), and the echo re-publishes
+  the decoded message.
   The pinging side's message is a view of the same ``bytes`` object the raw peer puts, so both
   start from the same bytes (an ``ndarray`` of its own would cost EMOS one copy per send, as
   ``arr.tobytes()`` would cost a raw Zenoh program).
