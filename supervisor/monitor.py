@@ -68,7 +68,7 @@ class Monitor(BaseComponent):
             self.trigger = list(topics.values())
         else:
             self.run_type = "Event"
-        self._status_every_step = False  # a flood of event messages must not flood the status topic
+        self._status_after_step = False  # a flood of event messages must not flood the status topic
 
     def __deepcopy__(self, memo: dict) -> "Monitor":
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.

@@ -57,7 +57,7 @@ class BaseComponent(FallbackHooks):
     # Subclasses with Server / ActionServer run types declare their interface types here.
     main_srv_type: tuple[Any, Any] | None = None  # (request type, response type)
     main_action_type: tuple[Any, Any, Any] | None = None  # (goal, feedback, result)
-    _status_every_step = True  # the Monitor turns this off: its steps are messages, not work
+    _status_after_step = True  # publish the status after a step that changed it; the Monitor turns this off (its steps are messages, not work)
 
     def __init__(
         self,

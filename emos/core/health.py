@@ -28,15 +28,19 @@ class Status:
         self.components: list[str] = []
         self.topics: list[str] = []
         self.message = ""
+        # Bumped whenever what the status says changes: the node publishes a status after a step
+        # only then (and at its heartbeat rate regardless), not after every step.
+        self.revision = 0
 
     def _set(self, level: HealthLevel, algorithms: Sequence[str] = (), components: Sequence[str] = (), topics: Sequence[str] = (), message: str = "") -> None:
         for kind, names in (("algorithm_names", algorithms), ("component_names", components), ("topic_names", topics)):
             if isinstance(names, str) or not all(isinstance(n, str) for n in names):
                 raise TypeError(f"{kind} must be a list of str, got {names!r}")
+        said = (level, list(algorithms), list(components), list(topics), message)
         with self._lock:
-            self.level = level
-            self.algorithms, self.components, self.topics = list(algorithms), list(components), list(topics)
-            self.message = message
+            if said != (self.level, self.algorithms, self.components, self.topics, self.message):
+                self.level, self.algorithms, self.components, self.topics, self.message = said
+                self.revision += 1
 
     def set_healthy(self) -> None:
         self._set(HealthLevel.HEALTHY)

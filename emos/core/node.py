@@ -114,6 +114,7 @@ class Node:
         self._status_pub: Publisher | None = None
         self._status_lock = threading.Lock()
         self._last_status_ns = 0
+        self._status_revision = -1  # the health status revision last published (see _run_step)
         self._main_timer: _Timer | None = None
         self._timers: list["_Timer | SimTimer"] = []
         self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
@@ -237,6 +238,13 @@ class Node:
         for topic in self.component.in_topics:
             sub = open_subscriber(self.ctx, topic, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
             self._inputs[topic.name] = _Input(topic, sub)
+        if self._waker is not None and self._waker.spin_ns and any(getattr(inp.sub, "threaded_delivery", False) for inp in self._inputs.values()):
+            # Zenoh's threads deliver these inputs, and need the interpreter lock to do it, which
+            # a spinning node holds nearly all the time: a message arriving during the spin
+            # waited for its end (about 60 us a hop of an 8 B ping-pong between two components),
+            # and the spin could never see it anyway. So such a node sleeps at once.
+            self.log.debug("[%s] inputs over Zenoh: no spin after a wake-up", self.name)
+            self._waker.spin_ns = 0
         if getattr(self.component.config, "use_sim_time", False):
             assert self._waker is not None
             self._sim_time = SimTimeDriver(self.ctx, self.name, self._waker, lambda: 1.0 / self.component.config.loop_rate)
@@ -331,7 +339,11 @@ class Node:
         if sim_time is not None:  # what a simulator that charges compute time delays our outputs by
             sim_time.compute_s += time.thread_time() - cpu0
         self.steps += 1
-        if comp._status_every_step:
+        if comp._status_after_step and comp.health_status.revision != self._status_revision:
+            # Only a change: an unchanged status is already on the stream, and the heartbeat
+            # repeats it. Publishing it after every step woke the supervisor and the run's
+            # Zenoh helper at every message (60 us a hop of an 8 B ping-pong between two
+            # components over Zenoh; docs/benchmarks.md, "A status after every step").
             self.publish_status()
 
     def _serve_main(self, request: Any) -> Any:
@@ -478,11 +490,14 @@ class Node:
     def publish_status(self) -> None:
         if self._status_pub is None:
             return
-        msg = self.component.health_status.to_msg(self.state.value)
+        health = self.component.health_status
+        revision = health.revision  # before the snapshot: a change made after it is published next
+        msg = health.to_msg(self.state.value)
         with self._status_lock:
             if self._status_pub.ring is not None:
                 self._status_pub.publish(msg)
                 self._last_status_ns = time.monotonic_ns()
+                self._status_revision = revision
 
     def _heartbeat_tick(self) -> None:
         period_ns = 1e9 / self.component.config.heartbeat_rate

@@ -264,6 +264,7 @@ class ZenohSubscriber:
     """
 
     decodes_on_arrival = True
+    threaded_delivery = True  # Zenoh's threads deliver, holding the interpreter lock: a node must not spin (see Node)
 
     def __init__(self, topic: str, msg_cls: type, notify: Callable[[], None] | None = None, queue_size: int = 10, transient_local: bool = False, config_path: str | None = None, group: str | None = None):
         self.topic, self.msg_cls = topic, msg_cls

@@ -4,8 +4,8 @@ The transport mode measures the rings with a hand-made event loop at history dep
 measures what a component gets: two ``BaseComponent``s in supervised processes (zygote, pidfd,
 heartbeats and all, under a real :class:`~emos.supervisor.system.System`), their topics declared
 with the default QoS (KEEP_LAST 10), each message delivered through the node's wake-up path to an
-Event-triggered ``_execution_step`` that decodes it, and a ``ComponentStatus`` published after
-every step, as the node does for every component.
+Event-triggered ``_execution_step`` that decodes it, and the ``ComponentStatus`` stream every
+component publishes (its heartbeat, and after a step that changed it).
 
 * ``ping`` (the initiator) publishes a ``UInt8MultiArray`` on ``/bench/ping``;
 * ``echo``, triggered by ``/bench/ping``, publishes the message it decoded on ``/bench/pong``;
@@ -52,8 +52,11 @@ def qos_depth() -> int:
     return int(QoSConfig().queue_size)
 
 
-def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, int] | None) -> list[Any]:
-    """The two components; built in the benchmark process, forked into workers by the zygote."""
+def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, int] | None, transport: str = "auto",
+                label: str = "emos_component") -> list[Any]:
+    """The two components, ``[echo, ping]``; built in the benchmark process, forked into workers
+    by the zygote. ``transport``: their topics' (``"zenoh"``: ``emos bench net --mode component``,
+    each in a run of its own); ``label``: the ``transport`` their result rows carry."""
     from emos import BaseComponent, Topic
     from emos.msgs import UInt8MultiArray
 
@@ -131,8 +134,8 @@ def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, 
             half = [ns / 2e3 for ns in self.rtts_ns[self.total - self.count :]]
             p = percentiles(half)
             self.results.append({
-                "transport": "emos_component", "payload_bytes": int(self.payload.nbytes), "p50_us": round(p["p50"], 2),
-                "p99_us": round(p["p99"], 2), "round_trips": len(half), "seq_mismatches": self.mismatches, "startup_resends": self.resends,
+                "transport": label, "payload_bytes": int(self.payload.nbytes), "p50_us": round(p["p50"], 2),
+                "p95_us": round(p["p95"], 2), "p99_us": round(p["p99"], 2), "round_trips": len(half), "seq_mismatches": self.mismatches, "startup_resends": self.resends,
             })
             self.phase += 1
             if self.phase < len(plan):
@@ -148,7 +151,7 @@ def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, 
                 json.dump(doc, f)
             os.replace(tmp, result_path)  # the benchmark sees all of it or nothing
 
-    topic = {"msg_type": "UInt8MultiArray"}  # default QoS: what recipes get
+    topic = {"msg_type": "UInt8MultiArray", "transport": transport}  # default QoS: what recipes get
     echo = Echo(component_name="bench_echo", inputs=[Topic(name=PING, **topic)], outputs=[Topic(name=PONG, **topic)], trigger=Topic(name=PING, **topic))
     ping = Ping(component_name="bench_ping", inputs=[Topic(name=PONG, **topic)], outputs=[Topic(name=PING, **topic)], trigger=Topic(name=PONG, **topic))
     return [echo, ping]

@@ -47,8 +47,14 @@ SIZES = [8, 921_600, 8 * 1024 * 1024]
 TRANSPORTS = ["emos-zenoh", "zenoh"]
 
 
+MODES = ["both", "transport", "component"]
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the machine-readable result")
+    parser.add_argument("--mode", choices=MODES, default="both",
+                        help="transport: EMOS's Zenoh publisher and subscriber under a bare loop, against raw Zenoh; component: "
+                             "ping-pong between components of two real runs over Zenoh (the raw figure: the transport mode's, same invocation)")
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes, comma-separated")
     parser.add_argument("--messages", type=int, default=300, help="round trips per size and transport (fewer for large payloads)")
     parser.add_argument("--rounds", type=int, default=3, help="alternations of the two transports per size (samples are pooled)")
@@ -178,15 +184,20 @@ def _messages_for(size: int, messages: int) -> int:
     return messages
 
 
-def measure(sizes: list[int], messages: int, rounds: int) -> list[dict[str, Any]]:
+def _config_pair(folder: str) -> tuple[str, str]:
+    """Zenoh configuration files of a pinging and an echoing end that reach each other."""
+    port_ping, port_pong = _free_port(), _free_port()
+    return _config_file(folder, "ping", port_ping, port_pong), _config_file(folder, "pong", port_pong, port_ping)
+
+
+def measure(sizes: list[int], messages: int, rounds: int, transports: list[str] = TRANSPORTS) -> list[dict[str, Any]]:
+    """The transport mode: rows for each of ``transports`` and size."""
     from emos.msgs import UInt8MultiArray
     from emos.transport import zenoh_net
 
     group = f"bench{uuid.uuid4().hex[:8]}"
     folder = tempfile.mkdtemp(prefix="emos-bench-net-")
-    port_ping, port_pong = _free_port(), _free_port()
-    ping_conf = _config_file(folder, "ping", port_ping, port_pong)
-    pong_conf = _config_file(folder, "pong", port_pong, port_ping)
+    ping_conf, pong_conf = _config_pair(folder)
     spawn = mp.get_context("spawn")  # a fresh interpreter: no Zenoh session or thread inherited
     ready = spawn.Event()
     echo = spawn.Process(target=_echo_main, args=(pong_conf, group, ready), name="emos-bench-net-echo", daemon=True)
@@ -195,22 +206,22 @@ def measure(sizes: list[int], messages: int, rounds: int) -> list[dict[str, Any]
     try:
         if not ready.wait(60):
             raise RuntimeError("the echo process did not come up within 60 s")
-        ends = {t: _End(ping_conf, group, t, "ping") for t in TRANSPORTS}
+        ends = {t: _End(ping_conf, group, t, "ping") for t in transports}
         time.sleep(0.5)  # let the two sessions connect and match subscriptions
         for size in sizes:
             data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
             raw = data.tobytes()
             # Both carry the same bytes object: the EMOS message's array is a view of it.
             payloads = {"emos-zenoh": UInt8MultiArray(data=np.frombuffer(raw, np.uint8)), "zenoh": raw}
-            samples: dict[str, list[float]] = {t: [] for t in TRANSPORTS}
-            lost = {t: 0 for t in TRANSPORTS}
+            samples: dict[str, list[float]] = {t: [] for t in transports}
+            lost = {t: 0 for t in transports}
             count = max(_messages_for(size, messages) // rounds, 5)
             for _ in range(rounds):
-                for t in TRANSPORTS:
+                for t in transports:
                     got, missing = _round_trips(ends[t], payloads[t], count)
                     samples[t] += got
                     lost[t] += missing
-            for t in TRANSPORTS:
+            for t in transports:
                 pct = percentiles(samples[t], (50, 95))
                 mean_rtt_s = 2 * sum(samples[t]) / len(samples[t]) / 1e6
                 results.append({
@@ -233,15 +244,39 @@ def run(args: argparse.Namespace) -> int:
     if not sizes or min(sizes) < 1 or args.messages < 1 or args.rounds < 1:
         print("emos bench net: sizes, --messages and --rounds must be >= 1", file=sys.stderr)
         return 2
-    results = measure(sizes, args.messages, args.rounds)
-    for size in sizes:
-        raw = next(r for r in results if r["transport"] == "zenoh" and r["payload_bytes"] == size)
-        for r in results:
-            if r["payload_bytes"] == size and r["transport"] == "emos-zenoh":
-                r["overhead_p50_pct"] = round(100.0 * (r["p50_us"] - raw["p50_us"]) / raw["p50_us"], 1)
+    with_transport, with_component = args.mode in ("both", "transport"), args.mode in ("both", "component")
+    # The component mode's raw figure is the transport mode's raw Zenoh, from this invocation.
+    results = measure(sizes, args.messages, args.rounds, TRANSPORTS if with_transport else ["zenoh"])
+    raw_p50 = {r["payload_bytes"]: r["p50_us"] for r in results if r["transport"] == "zenoh"}
+    for r in results:
+        if r["transport"] == "emos-zenoh":
+            r["overhead_p50_pct"] = _overhead(r["p50_us"], raw_p50[r["payload_bytes"]])
+    doc: dict[str, Any] = {"method": "pingpong over Zenoh, TCP on 127.0.0.1, two processes", "results": results}
+    if with_component:
+        from emos.supervisor.bench import net_component
+
+        if not args.json:
+            print("emos bench net, component mode: Ping and Echo components in two runs over Zenoh...", file=sys.stderr, flush=True)
+        folder = tempfile.mkdtemp(prefix="emos-bench-net-")
+        rows, error = net_component.latency(sizes, lambda size: _messages_for(size, args.messages), _config_pair(folder), f"bench{uuid.uuid4().hex[:8]}")
+        for r in rows:
+            r["overhead_p50_pct"] = _overhead(r["p50_us"], raw_p50[r["payload_bytes"]])
+        doc["component"] = {"method": "pingpong between components of two runs over Zenoh (TCP on 127.0.0.1); overhead against the raw Zenoh rows",
+                            "results": rows, "error": error}
     if args.json:
-        print(json.dumps({"method": "pingpong over Zenoh, TCP on 127.0.0.1, two processes", "results": results}))
-        return 0
-    print(table(results, [("transport", "transport", "s"), ("payload_bytes", "bytes", "d"), ("p50_us", "p50 us", ".1f"),
-                          ("p95_us", "p95 us", ".1f"), ("mb_per_s", "MB/s", ".1f"), ("overhead_p50_pct", "EMOS overhead %", ".1f")]))
+        print(json.dumps(doc))
+        return 0 if not with_component or doc["component"]["error"] is None else 1
+    columns = [("transport", "transport", "s"), ("payload_bytes", "bytes", "d"), ("p50_us", "p50 us", ".1f"),
+               ("p95_us", "p95 us", ".1f"), ("overhead_p50_pct", "EMOS overhead %", ".1f")]
+    print(table(results, columns[:4] + [("mb_per_s", "MB/s", ".1f"), columns[4]]))
+    if with_component:
+        print()
+        print(table(doc["component"]["results"], columns))
+        if doc["component"]["error"]:
+            print(f"component mode: {doc['component']['error']}", file=sys.stderr)
+            return 1
     return 0
+
+
+def _overhead(p50_us: float, raw_p50_us: float) -> float:
+    return round(100.0 * (p50_us - raw_p50_us) / raw_p50_us, 1)

@@ -20,7 +20,7 @@ from tests.runtime.helpers import REPO
 SIZES = [8, 70000]
 TRANSPORTS = {"emos", "mp_queue", "mp_pipe"}
 ROW_KEYS = {"transport", "payload_bytes", "p50_us", "p99_us", "msgs_per_s", "dropped", "seq_mismatches"}
-COMPONENT_ROW_KEYS = {"transport", "payload_bytes", "p50_us", "p99_us", "round_trips", "seq_mismatches", "startup_resends"}
+COMPONENT_ROW_KEYS = {"transport", "payload_bytes", "p50_us", "p95_us", "p99_us", "round_trips", "seq_mismatches", "startup_resends"}
 
 
 def _bench(*extra: str, timeout: float = 120.0) -> tuple[subprocess.CompletedProcess, list[str]]:

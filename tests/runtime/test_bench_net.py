@@ -1,0 +1,60 @@
+"""``emos bench net`` end to end: the transport mode (EMOS's Zenoh publisher and subscriber
+against raw Zenoh) and the component mode (two real runs over Zenoh), the JSON contract, and that
+nothing is left behind: no process, no shared memory (EMOS's or Zenoh's), no run directory.
+
+Timing is not asserted (shared, noisy machine); only that every measurement is real and sane."""
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from emos.transport.context import SHM_DIR, runtime_root
+from tests.runtime.test_bench_ipc import _run_python
+
+pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
+
+SIZES = [8, 70000]
+MESSAGES = 30
+
+
+def _leftovers_since(shm_before: set[str], runs_before: set[str]) -> list[str]:
+    left = [n for n in set(os.listdir(SHM_DIR)) - shm_before if n.startswith("emos.") or n.endswith(".zenoh")]
+    return left + sorted(set(d.name for d in runtime_root().iterdir()) - runs_before)
+
+
+def test_bench_net_both_modes_json_shape_and_no_leftovers():
+    from emos.supervisor.bench.net import _messages_for
+
+    shm_before, runs_before = set(os.listdir(SHM_DIR)), set(d.name for d in runtime_root().iterdir())
+    result, left = _run_python(["-m", "emos", "bench", "net", "--json", "--sizes", ",".join(map(str, SIZES)),
+                                "--messages", str(MESSAGES), "--rounds", "2"], timeout=240)
+    assert result.returncode == 0, result.stderr
+    doc = json.loads(result.stdout.strip().splitlines()[-1])
+    assert set(doc) == {"method", "results", "component"}
+
+    rows = doc["results"]
+    assert sorted((r["transport"], r["payload_bytes"]) for r in rows) == sorted((t, s) for t in ("emos-zenoh", "zenoh") for s in SIZES)
+    for row in rows:
+        assert 0 < row["p50_us"] <= row["p95_us"] and row["lost"] == 0 and row["samples"] >= MESSAGES // 2, row
+        assert ("overhead_p50_pct" in row) == (row["transport"] == "emos-zenoh"), row
+
+    component = doc["component"]
+    assert component["error"] is None, component
+    assert [r["payload_bytes"] for r in component["results"]] == SIZES
+    raw = {r["payload_bytes"]: r["p50_us"] for r in rows if r["transport"] == "zenoh"}
+    for row in component["results"]:
+        assert row["transport"] == "emos-zenoh-component" and row["seq_mismatches"] == 0, row
+        assert row["round_trips"] == _messages_for(row["payload_bytes"], MESSAGES), row
+        assert 0 < row["p50_us"] <= row["p95_us"] <= row["p99_us"], row
+        expected = round(100.0 * (row["p50_us"] - raw[row["payload_bytes"]]) / raw[row["payload_bytes"]], 1)
+        assert row["overhead_p50_pct"] == expected, row
+
+    assert left == [] and _leftovers_since(shm_before, runs_before) == []
+
+
+def test_bench_net_refuses_bad_sizes_naming_the_option():
+    result, left = _run_python(["-m", "emos", "bench", "net", "--sizes", "8,lots"], timeout=60)
+    assert result.returncode == 2 and "--sizes" in result.stderr and "'8,lots'" in result.stderr
+    assert left == []
