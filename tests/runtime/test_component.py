@@ -1,4 +1,4 @@
-"""Components: lifecycle, health on every step, event triggers, errors; services and actions across processes."""
+"""Components: lifecycle, health reported when it changes, event triggers, errors; services and actions across processes."""
 import threading
 import time
 
@@ -91,6 +91,94 @@ def test_event_component_lifecycle_health_and_errors(ctx):
         thread.join(10)
     assert not thread.is_alive()
     assert comp.events[-1] == "shutdown"
+
+
+def test_a_status_is_published_when_a_step_changes_it_not_after_every_step(ctx):
+    """The status stream carries changes at once and heartbeats; an unchanged status is not
+    repeated after every step (that woke the supervisor at every message a component handled)."""
+    inp, out = Topic(name="in", msg_type="Int64"), Topic(name="out", msg_type="Int64")
+    comp = Doubler(component_name="doubler", inputs=[inp], outputs=[out], trigger=inp)
+    comp.config.heartbeat_rate = 0.1  # one beat every 10 s: none falls inside this test's windows
+    node, thread, rpc = run_node(comp, ctx)
+    status = Subscriber(ctx, "/doubler/status", M.ComponentStatus, queue_size=100)
+    feed = Publisher(ctx, "/in", M.Int64)
+
+    def step_with(value):
+        steps = node.steps
+        feed.publish(M.Int64(data=value))
+        wait_until(lambda: node.steps > steps, what=f"a step for input {value}")
+
+    try:
+        rpc.call("transition", transition="configure")
+        rpc.call("transition", transition="activate")
+        step_with(3)  # healthy, as it was: perhaps one status from activation still on its way
+        time.sleep(0.2)
+        status.take()
+        for _ in range(20):
+            step_with(3)
+        time.sleep(0.2)
+        assert status.take() == []  # twenty healthy steps of a healthy component: nothing new to say
+        started = time.monotonic()
+        step_with(0)  # algorithm failure: a change, published by that step, not at the next beat
+        reports = []
+        wait_until(lambda: reports.extend(status.take()) or bool(reports), timeout=5.0, what="the failure status")
+        assert [r.status for r in reports] == [M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL]
+        assert reports[0].src_algorithms == ["doubling"] and time.monotonic() - started < 5.0
+        step_with(0)  # the same failure again: not repeated
+        step_with(3)  # healthy again: a change
+        reports = []
+        wait_until(lambda: reports.extend(status.take()) or bool(reports), timeout=5.0, what="the recovery status")
+        assert [r.status for r in reports] == [M.ComponentStatus.STATUS_HEALTHY]
+    finally:
+        rpc.call("exit")
+        thread.join(10)
+    assert not thread.is_alive()
+
+
+def test_a_node_with_an_input_over_zenoh_does_not_spin_and_still_steps_on_it(ctx, tmp_path, monkeypatch):
+    """Zenoh's threads need the interpreter lock to deliver, which a spinning node would hold;
+    a node whose inputs are all rings keeps its spin."""
+    zenoh_net = pytest.importorskip("emos.transport.zenoh_net")
+    pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
+    import json
+    import socket
+    import uuid
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    conf = tmp_path / "z.json5"
+    conf.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]},
+                                "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}}}))
+    monkeypatch.setenv("EMOS_ZENOH_CONFIG", str(conf))
+    monkeypatch.setenv("EMOS_NET_GROUP", f"t{uuid.uuid4().hex[:10]}")
+    monkeypatch.delenv("EMOS_WAKE_SPIN_US", raising=False)
+    net_in = Topic(name="net_in", msg_type="Int64", transport="zenoh")
+    local_in = Topic(name="local_in", msg_type="Int64")
+    out = Topic(name="out", msg_type="Int64")
+    remote = Doubler(component_name="remote", inputs=[net_in], outputs=[out], trigger=net_in)
+    local = Doubler(component_name="local", inputs=[local_in], outputs=[Topic(name="out2", msg_type="Int64")], trigger=local_in)
+    running = [run_node(remote, ctx), run_node(local, ctx)]
+    feed = zenoh_net.ZenohPublisher("/net_in", M.Int64, publisher_id="feeder")
+    results = Subscriber(ctx, "/out", M.Int64)
+    try:
+        for _, _, rpc in running:
+            rpc.call("transition", transition="configure")
+            rpc.call("transition", transition="activate")
+        (node_remote, _, _), (node_local, _, _) = running
+        from emos.transport.waker import DEFAULT_SPIN_US
+
+        assert node_remote._waker.spin_ns == 0 and node_local._waker.spin_ns == int(DEFAULT_SPIN_US * 1000)
+        got = []
+        wait_until(lambda: (feed.publish(M.Int64(data=21)), got.extend(m.data for m in results.take()))[1] or bool(got),
+                   what="a step on a message over Zenoh")
+        assert set(got) == {42}
+    finally:
+        feed.close()
+        for _, thread, rpc in running:
+            rpc.call("exit")
+            thread.join(10)
+        zenoh_net.close_sessions()
 
 
 def test_outputs_reach_subscribers_with_values(ctx):
