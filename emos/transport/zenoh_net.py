@@ -19,9 +19,10 @@ Zenoh delivers samples on its own threads. A subscriber checks and decodes each 
 rate-limited warning naming the key), appends the message to a bounded queue (``queue_size``,
 oldest dropped and counted) and calls its ``notify`` (the node's waker: one byte to the FIFO
 its uvloop watches). The node then takes the decoded messages on its own thread, as it reads a
-ring. Decoding on arrival costs a message the reader skips about 2 us, and saves every message
-it uses a cold start: Zenoh's thread has just run, while the reader wakes up cold, and the same
-decode costs it several times as much (see docs/benchmarks.md, "Decoding on Zenoh's thread").
+ring. Decoding on arrival costs a message the reader skips about 2 us, and is cheaper for every
+message it uses: the reader runs it straight after a wake-up, which is when Python code runs
+slowest (an 8 B ping-pong: take and decode 18 us on the reader, against a decode of 8-10 us
+on Zenoh's thread and a take of 3; docs/benchmarks.md, "Decoding on Zenoh's thread").
 
 Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
 so :func:`list_topics` can discover the topics of every host in the group.
@@ -258,9 +259,9 @@ class ZenohSubscriber:
 
     Zenoh's thread checks the frame (:func:`read_frame`: magic, lengths, type fingerprint),
     decodes the body, and queues the message; anything that fails either step is dropped there
-    with a rate-limited warning, and never wakes the reader. Decoding there rather than on the
-    reader's thread is what the module doc explains: the reader wakes cold. Zenoh's thread holds
-    no lock while it wakes the reader, so the woken thread never waits for it.
+    with a rate-limited warning, and never wakes the reader. Why decode there rather than on the
+    reader's thread: see the module doc. Zenoh's thread holds no lock while it wakes the reader,
+    so the woken thread never waits for it.
     """
 
     decodes_on_arrival = True
