@@ -199,6 +199,13 @@ class BaseComponent(FallbackHooks):
     def publish(self, topic: Topic | str, msg: Any) -> None:
         self.node.publish(topic, msg)
 
+    @property
+    def health_status_publisher(self) -> "_StatusPublisher":
+        """Publishes a status at once, from a callback or another thread, as in the ROS-based
+        EMOS: ``self.health_status_publisher.publish(self.health_status())``. The node publishes
+        the status by itself otherwise: after a step that changed it, and at ``heartbeat_rate``."""
+        return _StatusPublisher(self.node)
+
     def create_timer(self, period: float, callback: Any) -> Any:
         return self.node.create_timer(period, callback)
 
@@ -283,3 +290,16 @@ class BaseComponent(FallbackHooks):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(component_name={self.component_name!r}, run_type={self.run_type.value!r})"
+
+
+class _StatusPublisher:
+    """``component.health_status_publisher``: the component's own status topic, written through
+    its node (one writer, the lifecycle state and pid filled in)."""
+
+    __slots__ = ("_node",)
+
+    def __init__(self, node: "Node"):
+        self._node = node
+
+    def publish(self, msg: Any) -> None:
+        self._node.publish_status_message(msg)

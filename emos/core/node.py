@@ -499,6 +499,23 @@ class Node:
                 self._last_status_ns = time.monotonic_ns()
                 self._status_revision = revision
 
+    def publish_status_message(self, msg: Any) -> None:
+        """A status the component built itself (``health_status_publisher.publish``), published
+        now on its status topic; an empty lifecycle state or pid is filled in with the node's."""
+        if not isinstance(msg, ComponentStatus):
+            raise TypeError(f"component {self.name!r}: health_status_publisher publishes a ComponentStatus "
+                            f"(e.g. self.health_status()), got {type(msg).__name__}")
+        if self._status_pub is None:
+            raise RuntimeError(f"component {self.name!r}: its status topic is not open yet (the node is starting)")
+        if not msg.lifecycle_state:
+            msg.lifecycle_state = self.state.value
+        if not msg.pid:
+            msg.pid = os.getpid()
+        with self._status_lock:
+            if self._status_pub.ring is not None:
+                self._status_pub.publish(msg)
+                self._last_status_ns = time.monotonic_ns()
+
     def _heartbeat_tick(self) -> None:
         period_ns = 1e9 / self.component.config.heartbeat_rate
         if time.monotonic_ns() - self._last_status_ns >= 0.9 * period_ns:

@@ -118,6 +118,13 @@ def test_a_status_is_published_when_a_step_changes_it_not_after_every_step(ctx):
             step_with(3)
         time.sleep(0.2)
         assert status.take() == []  # twenty healthy steps of a healthy component: nothing new to say
+        # The spec's forced publish, from another thread (here the test's): at once, completed.
+        comp.health_status_publisher.publish(comp.health_status())
+        forced = []
+        wait_until(lambda: forced.extend(status.take()) or bool(forced), timeout=5.0, what="the forced status")
+        assert [(r.status, r.lifecycle_state, r.pid > 0) for r in forced] == [(M.ComponentStatus.STATUS_HEALTHY, "active", True)]
+        with pytest.raises(TypeError, match="'doubler'.*ComponentStatus.*got str"):
+            comp.health_status_publisher.publish("healthy")
         started = time.monotonic()
         step_with(0)  # algorithm failure: a change, published by that step, not at the next beat
         reports = []
