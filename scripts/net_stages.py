@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import shutil
 import statistics
 import subprocess
 import sys
@@ -114,6 +115,8 @@ def ping(transport: str, size: int) -> None:
         raise
     finally:
         child.kill()
+        child.wait(10)
+        shutil.rmtree(folder, ignore_errors=True)  # the Zenoh configurations (and the echo's result)
         os._exit(0)
 
 
@@ -188,6 +191,8 @@ def floor(size: int, rounds: int = 8, per_round: int = 150) -> None:
             print(f"  {name:12s} {p50:7.1f} us   {p50 - base:+6.1f} us a hop   {100 * (p50 - base) / base:+6.1f} %")
     finally:
         child.kill()
+        child.wait(10)
+        shutil.rmtree(folder, ignore_errors=True)  # the Zenoh configurations (and the echo's result)
         os._exit(0)
 
 

@@ -192,12 +192,15 @@ def _config_pair(folder: str) -> tuple[str, str]:
 
 def measure(sizes: list[int], messages: int, rounds: int, transports: list[str] = TRANSPORTS) -> list[dict[str, Any]]:
     """The transport mode: rows for each of ``transports`` and size."""
+    group = f"bench{uuid.uuid4().hex[:8]}"
+    with tempfile.TemporaryDirectory(prefix="emos-bench-net-") as folder:
+        return _measure(sizes, messages, rounds, transports, group, *_config_pair(folder))
+
+
+def _measure(sizes: list[int], messages: int, rounds: int, transports: list[str], group: str, ping_conf: str, pong_conf: str) -> list[dict[str, Any]]:
     from emos.msgs import UInt8MultiArray
     from emos.transport import zenoh_net
 
-    group = f"bench{uuid.uuid4().hex[:8]}"
-    folder = tempfile.mkdtemp(prefix="emos-bench-net-")
-    ping_conf, pong_conf = _config_pair(folder)
     spawn = mp.get_context("spawn")  # a fresh interpreter: no Zenoh session or thread inherited
     ready = spawn.Event()
     echo = spawn.Process(target=_echo_main, args=(pong_conf, group, ready), name="emos-bench-net-echo", daemon=True)
@@ -257,8 +260,8 @@ def run(args: argparse.Namespace) -> int:
 
         if not args.json:
             print("emos bench net, component mode: Ping and Echo components in two runs over Zenoh...", file=sys.stderr, flush=True)
-        folder = tempfile.mkdtemp(prefix="emos-bench-net-")
-        rows, error = net_component.latency(sizes, lambda size: _messages_for(size, args.messages), _config_pair(folder), f"bench{uuid.uuid4().hex[:8]}")
+        with tempfile.TemporaryDirectory(prefix="emos-bench-net-") as folder:
+            rows, error = net_component.latency(sizes, lambda size: _messages_for(size, args.messages), _config_pair(folder), f"bench{uuid.uuid4().hex[:8]}")
         for r in rows:
             r["overhead_p50_pct"] = _overhead(r["p50_us"], raw_p50[r["payload_bytes"]])
         doc["component"] = {"method": "pingpong between components of two runs over Zenoh (TCP on 127.0.0.1); overhead against the raw Zenoh rows",

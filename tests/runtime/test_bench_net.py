@@ -1,6 +1,7 @@
 """``emos bench net`` end to end: the transport mode (EMOS's Zenoh publisher and subscriber
 against raw Zenoh) and the component mode (two real runs over Zenoh), the JSON contract, and that
-nothing is left behind: no process, no shared memory (EMOS's or Zenoh's), no run directory.
+nothing is left behind: no process, no shared memory (EMOS's or Zenoh's), no run directory, no
+temporary file.
 
 Timing is not asserted (shared, noisy machine); only that every measurement is real and sane."""
 from __future__ import annotations
@@ -24,9 +25,12 @@ def _leftovers_since(shm_before: set[str], runs_before: set[str]) -> list[str]:
     return left + sorted(set(d.name for d in runtime_root().iterdir()) - runs_before)
 
 
-def test_bench_net_both_modes_json_shape_and_no_leftovers():
+def test_bench_net_both_modes_json_shape_and_no_leftovers(tmp_path, monkeypatch):
     from emos.supervisor.bench.net import _messages_for
 
+    scratch = tmp_path / "tmp"  # the benchmark's temporary files (its Zenoh configurations) go here
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
     shm_before, runs_before = set(os.listdir(SHM_DIR)), set(d.name for d in runtime_root().iterdir())
     result, left = _run_python(["-m", "emos", "bench", "net", "--json", "--sizes", ",".join(map(str, SIZES)),
                                 "--messages", str(MESSAGES), "--rounds", "2"], timeout=240)
@@ -52,6 +56,7 @@ def test_bench_net_both_modes_json_shape_and_no_leftovers():
         assert row["overhead_p50_pct"] == expected, row
 
     assert left == [] and _leftovers_since(shm_before, runs_before) == []
+    assert sorted(p.name for p in scratch.iterdir()) == []
 
 
 def test_bench_net_refuses_bad_sizes_naming_the_option():
