@@ -492,12 +492,17 @@ class Node:
             return
         health = self.component.health_status
         revision = health.revision  # before the snapshot: a change made after it is published next
-        msg = health.to_msg(self.state.value)
+        if self._write_status(health.to_msg(self.state.value)):
+            self._status_revision = revision
+
+    def _write_status(self, msg: ComponentStatus) -> bool:
+        """Publish on the status ring (one writer: the loop, actions and callbacks may all call)."""
         with self._status_lock:
-            if self._status_pub.ring is not None:
-                self._status_pub.publish(msg)
-                self._last_status_ns = time.monotonic_ns()
-                self._status_revision = revision
+            if self._status_pub is None or self._status_pub.ring is None:
+                return False
+            self._status_pub.publish(msg)
+            self._last_status_ns = time.monotonic_ns()
+            return True
 
     def publish_status_message(self, msg: Any) -> None:
         """A status the component built itself (``health_status_publisher.publish``), published
@@ -511,10 +516,7 @@ class Node:
             msg.lifecycle_state = self.state.value
         if not msg.pid:
             msg.pid = os.getpid()
-        with self._status_lock:
-            if self._status_pub.ring is not None:
-                self._status_pub.publish(msg)
-                self._last_status_ns = time.monotonic_ns()
+        self._write_status(msg)
 
     def _heartbeat_tick(self) -> None:
         period_ns = 1e9 / self.component.config.heartbeat_rate

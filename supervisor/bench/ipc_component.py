@@ -170,32 +170,50 @@ def _system_main(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int,
 
 def latency(sizes: list[int], messages: int, samples_for: Any) -> tuple[list[dict[str, Any]], str | None]:
     """One row per size, and an error (None if every reply was the one expected)."""
-    from emos.supervisor.bench.ipc_common import start_child, stop_child
+    from emos.supervisor.bench.ipc_common import start_child
 
-    if min(sizes) < SEQ_BYTES:
-        return [], f"component mode needs payloads of at least {SEQ_BYTES} B (the sequence number), got {min(sizes)}"
+    too_small = check_sizes(sizes)
+    if too_small:
+        return [], too_small
     plan = [(size, samples_for(size, messages)) for size in sizes]
     budget = 60.0 + sum(warmup_round_trips(n) + n for _, n in plan) * 0.02
     with tempfile.TemporaryDirectory(prefix="emos-bench-") as tmp:
         result_path = str(Path(tmp) / "result.json")
         allowed = os.sched_getaffinity(0)
         proc = start_child(_system_main, (plan, result_path, ipc_common.PLACEMENT, allowed), "emos:bench-sys")
-        try:
-            deadline = time.monotonic() + budget
-            while not os.path.exists(result_path):
+        return await_result({"benchmark system": proc}, result_path, budget)
+
+
+def check_sizes(sizes: list[int]) -> str | None:
+    """Why these payload sizes cannot be measured by the components, or None."""
+    if min(sizes) < SEQ_BYTES:
+        return f"component mode needs payloads of at least {SEQ_BYTES} B (the sequence number), got {min(sizes)}"
+    return None
+
+
+def await_result(systems: dict[str, Any], result_path: str, budget: float) -> tuple[list[dict[str, Any]], str | None]:
+    """Wait for the Ping component's result file, then stop ``systems`` (name -> started process
+    running a ``System``) whatever happened: rows and an error, as :func:`latency` returns them."""
+    from emos.supervisor.bench.ipc_common import stop_child
+
+    try:
+        deadline = time.monotonic() + budget
+        while not os.path.exists(result_path):
+            for name, proc in systems.items():
                 if not proc.is_alive():
-                    return [], f"the benchmark system exited with code {proc.exitcode} before reporting"
-                if time.monotonic() > deadline:
-                    return [], f"no result from the component ping-pong within {budget:.0f} s"
-                time.sleep(0.05)
-            with open(result_path) as f:
-                doc = json.load(f)
-        finally:
+                    return [], f"the {name} exited with code {proc.exitcode} before reporting"
+            if time.monotonic() > deadline:
+                return [], f"no result from the component ping-pong within {budget:.0f} s"
+            time.sleep(0.05)
+        with open(result_path) as f:
+            doc = json.load(f)
+    finally:
+        for proc in systems.values():
             if proc.is_alive():
-                os.kill(proc.pid, signal.SIGTERM)  # the supervisor stops both components in order
+                os.kill(proc.pid, signal.SIGTERM)  # its supervisor stops its components in order
+        for proc in systems.values():
             stop_child(proc, 30.0)
-    rows = doc["results"]
-    error = doc["error"]
+    rows, error = doc["results"], doc["error"]
     mismatches = sum(r["seq_mismatches"] for r in rows)
     if error is None and mismatches:
         error = f"{mismatches} repl(ies) carried the wrong sequence number"

@@ -15,12 +15,10 @@ already, and a Zenoh runtime does not survive a fork.
 """
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
 import os
 import signal
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
@@ -50,38 +48,20 @@ def _run_main(role: str, plan: list[tuple[int, int]], result_path: str, config: 
 def latency(sizes: list[int], messages_for: Any, configs: tuple[str, str], group: str) -> tuple[list[dict[str, Any]], str | None]:
     """One row per size (``transport``: :data:`LABEL`), and an error (None if every reply was the
     one expected). ``configs``: the Zenoh configuration files of the ping and the echo run."""
-    from emos.supervisor.bench.ipc_common import stop_child
+    from emos.supervisor.bench.ipc_component import await_result, check_sizes
 
+    too_small = check_sizes(sizes)
+    if too_small:
+        return [], too_small
     plan = [(size, messages_for(size)) for size in sizes]
     budget = 90.0 + sum((warmup_round_trips(n) + n) * (0.02 + size / 2e7) for size, n in plan)
     spawn = mp.get_context("spawn")
     with tempfile.TemporaryDirectory(prefix="emos-bench-net-") as tmp:
         result_path = str(Path(tmp) / "result.json")
         runs = {
-            role: spawn.Process(target=_run_main, args=(role, plan, result_path, config, group, os.getpid()), name=f"emos-bench-net-{role}", daemon=True)
+            f"{role} run": spawn.Process(target=_run_main, args=(role, plan, result_path, config, group, os.getpid()), name=f"emos-bench-net-{role}", daemon=True)
             for role, config in (("echo", configs[1]), ("ping", configs[0]))
         }
         for proc in runs.values():
             proc.start()
-        try:
-            deadline = time.monotonic() + budget
-            while not os.path.exists(result_path):
-                for role, proc in runs.items():
-                    if not proc.is_alive():
-                        return [], f"the {role} run exited with code {proc.exitcode} before the ping-pong ended"
-                if time.monotonic() > deadline:
-                    return [], f"no result from the component ping-pong within {budget:.0f} s"
-                time.sleep(0.05)
-            with open(result_path) as f:
-                doc = json.load(f)
-        finally:
-            for proc in runs.values():
-                if proc.is_alive():
-                    os.kill(proc.pid, signal.SIGTERM)  # each supervisor stops its component in order
-            for proc in runs.values():
-                stop_child(proc, 30.0)
-    rows, error = doc["results"], doc["error"]
-    mismatches = sum(r["seq_mismatches"] for r in rows)
-    if error is None and mismatches:
-        error = f"{mismatches} repl(ies) carried the wrong sequence number"
-    return rows, error
+        return await_result(runs, result_path, budget)

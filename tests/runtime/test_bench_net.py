@@ -59,7 +59,13 @@ def test_bench_net_both_modes_json_shape_and_no_leftovers(tmp_path, monkeypatch)
     assert sorted(p.name for p in scratch.iterdir()) == []
 
 
-def test_bench_net_refuses_bad_sizes_naming_the_option():
+def test_bench_net_refuses_bad_sizes_naming_what_was_expected():
     result, left = _run_python(["-m", "emos", "bench", "net", "--sizes", "8,lots"], timeout=60)
     assert result.returncode == 2 and "--sizes" in result.stderr and "'8,lots'" in result.stderr
+    assert left == []
+    # The components carry an 8 B sequence number: a smaller payload is an error, not a bad sample.
+    result, left = _run_python(["-m", "emos", "bench", "net", "--json", "--mode", "component", "--sizes", "4",
+                                "--messages", "10", "--rounds", "1"], timeout=120)
+    doc = json.loads(result.stdout.strip().splitlines()[-1])
+    assert result.returncode == 1 and doc["component"]["results"] == [] and "at least 8 B" in doc["component"]["error"]
     assert left == []
