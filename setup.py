@@ -6,7 +6,7 @@ would shadow supervisord's, which many robots have installed.
 """
 from pathlib import Path
 
-from setuptools import setup
+from setuptools import Extension, setup
 
 ROOTS = {"emos": "emos", "emos.actors": "actors", "emos.supervisor": "supervisor", "emos.chaos": "chaos"}
 
@@ -22,5 +22,15 @@ def _packages() -> tuple[list[str], dict[str, str]]:
     return packages, package_dir
 
 
+def _extensions() -> list[Extension]:
+    """The codec's C fast path (emos/msgs/_ccodec.c). Optional: without a C compiler or numpy's
+    headers the install goes on, and the Python codec writes and reads the same frames alone."""
+    try:
+        import numpy
+    except ImportError:
+        return []
+    return [Extension("emos.msgs._ccodec", ["emos/msgs/_ccodec.c"], include_dirs=[numpy.get_include()], optional=True, extra_compile_args=["-O2"])]
+
+
 packages, package_dir = _packages()
-setup(packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css", "LICENSE"]})
+setup(ext_modules=_extensions(), packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css", "LICENSE"]})

@@ -12,6 +12,8 @@ and a subscriber decodes arrays as zero-copy views of the frame it read.
 from __future__ import annotations
 
 import math
+import os
+import re
 import struct
 import threading
 import types
@@ -162,11 +164,18 @@ def _remember(cache: dict, key: Any, value: Any) -> None:
     cache[key] = value
 
 
+_DTYPE_STR = re.compile(r"[<>|=][biufcmMSUV][0-9]{1,6}(\[[0-9]*[A-Za-z]{1,3}\])?")  # e.g. <f8, |u1, <M8[ns], <m8[10s]
+
+
 def _array_header(data: bytes) -> tuple[np.dtype, tuple[int, ...], int, int, int]:
     """(dtype, shape, count, offset, nbytes) of an encoded array header."""
     spec = _HEADERS_IN.get(data)
     if spec is None:
         dtype_str, shape, offset = msgpack.unpackb(data)
+        # Only what the encoder writes (dtype.str of a plain dtype): numpy parses anything else
+        # with its own parsers, which answer a forged string with any exception (SyntaxError).
+        if type(dtype_str) is not str or not _DTYPE_STR.fullmatch(dtype_str):
+            raise DecodeError(f"invalid array dtype {str(dtype_str)[:40]!r}")
         dtype = np.dtype(dtype_str)
         shape = tuple(int(d) for d in shape)
         count = math.prod(shape)
@@ -293,8 +302,9 @@ def _packer() -> msgpack.Packer:
         return packer
 
 
-def encode(msg: Any) -> Encoded:
-    """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame."""
+def encode_python(msg: Any) -> Encoded:
+    """Split ``msg`` (a registered message instance) into an :class:`Encoded` frame: the Python
+    codec (:func:`encode` is the C fast path when built, which falls back to this)."""
     arrays = _ArrayCollector()
     cls = type(msg)
     tree = (_ENCODERS.get(cls) or _compile_encoder(cls))(msg, arrays)
@@ -305,8 +315,9 @@ def encode(msg: Any) -> Encoded:
     return Encoded(packer.pack(tree), arrays.arrays, arrays.offset)
 
 
-def decode(cls: type, frame: Any, copy: bool = False, arrays: Any = None) -> Any:
-    """Rebuild a ``cls`` instance from a frame (bytes, bytearray or memoryview).
+def decode_python(cls: type, frame: Any, copy: bool = False, arrays: Any = None) -> Any:
+    """Rebuild a ``cls`` instance from a frame (bytes, bytearray or memoryview): the Python codec
+    (:func:`decode` is the C fast path when built, which falls back to this).
 
     Arrays are views into ``frame`` unless ``copy`` is true; pass a buffer you own.
     ``arrays``: the array region when it travels apart from the header (see
@@ -344,6 +355,46 @@ def decode(cls: type, frame: Any, copy: bool = False, arrays: Any = None) -> Any
         raise
     except (ValueError, TypeError, IndexError, KeyError, struct.error, msgpack.UnpackException) as exc:
         raise DecodeError(f"cannot decode {cls.__name__}: {exc}") from exc
+
+
+# ------------------------------------------------------------------------ the C fast path
+# emos/msgs/_ccodec.c writes and reads the same frames in one C call per message. It returns
+# exactly what the functions above return, or gives up and they run instead (any value or byte
+# it does not handle, every error): see that file for why, and tests/runtime/test_ccodec.py.
+_C_KINDS = {F.ARRAY: 1, F.MESSAGE: 2, F.OPTIONAL_MESSAGE: 3, F.MESSAGE_LIST: 4}  # anything else is a plain value
+
+
+def _c_plan(cls: type) -> tuple | None:
+    """What the C codec needs of ``cls``: per field, in order, (kind, the slot's member
+    descriptor or the field's name, the nested message class or None); None if the C codec
+    must leave ``cls`` to the Python one. The generated coders above read and set fields the
+    same way."""
+    if not attrs.has(cls) or cls.__new__ is not object.__new__:
+        return None
+    plan = []
+    for name, kind, resolver in _layout(cls):
+        slot = cls.__dict__.get(name)
+        code = _C_KINDS.get(kind, 0)
+        plan.append((code, slot if type(slot) is _MEMBER_DESCRIPTOR else name, resolver() if code >= 2 else None))
+    return tuple(plan)
+
+
+def _load_c_codec() -> Any:
+    """The C fast path's module, set up, if it was built and not turned off with
+    ``EMOS_CODEC=python``; else None."""
+    if os.environ.get("EMOS_CODEC", "").lower() == "python":
+        return None
+    try:
+        from emos.msgs import _ccodec
+    except ImportError:  # installed without a C compiler: the Python codec alone, same frames
+        return None
+    slots = (Encoded.meta, Encoded.arrays, Encoded.array_bytes)
+    _ccodec.setup(Encoded, slots, _HEADERS_IN, _array_header, _c_plan, encode_python, decode_python)
+    return _ccodec
+
+
+C_CODEC = _load_c_codec()  # the C module in use (emos.transport.netframe uses its frame functions too), or None
+encode, decode = (C_CODEC.encode, C_CODEC.decode) if C_CODEC is not None else (encode_python, decode_python)
 
 
 def check_header(frame: Any, offset: int = 0) -> None:

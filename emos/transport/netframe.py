@@ -82,6 +82,7 @@ class FrameWriter:
         self.fingerprint, self.publisher_id = fingerprint, publisher_id
         self.prefix, self.start = frame_prefix(fingerprint, publisher_id)
         self._lengths = struct.pack("<HH", len(fingerprint.encode()), len(publisher_id.encode())) + self.prefix
+        self.header = MAGIC + bytes(8) + self._lengths  # a whole frame's start, its stamp left to fill (see encode_framed)
         self._buffer: bytearray | None = None
         self._arrays: bytearray | None = None
 
@@ -117,6 +118,18 @@ class FrameWriter:
         finally:
             view.release()
         return region, head
+
+
+def read_message_python(data: Any, fingerprint: bytes, cls: type) -> tuple[int, str, Any]:
+    """``(stamp_ns, publisher_id, message)`` of a whole frame: :func:`read_frame`, then the body
+    decoded. Raises :class:`BadFrame` for the frame, :class:`emos.msgs.codec.DecodeError` for a
+    body that does not decode (a well-framed lie)."""
+    stamp, pub, payload = read_frame(data, fingerprint)
+    return stamp, pub, codec.decode(cls, payload)
+
+
+def _encode_unframed(msg: Any, header: bytes, stamp_ns: int, limit: int) -> codec.Encoded:
+    return codec.encode(msg)
 
 
 class SplitPayload:
@@ -191,3 +204,16 @@ def _check_names(names: bytes, fp_len: int, fp: bytes) -> str:
         _checked.clear()
     _checked[(fp, names)] = pub
     return pub
+
+
+# The C fast path (see emos/msgs/_ccodec.c), when the codec has it: one C call for a publisher's
+# whole small frame, and one for a whole frame's checks and decode. Both give the same results
+# as the Python code here, which they fall back to (every bad frame, a publisher's first frame).
+#   encode_framed(msg, FrameWriter.header, stamp_ns, FrameWriter.SMALL) -> the frame as bytes, or
+#       the Encoded message for FrameWriter.frame or .split (always the latter without C);
+#   read_message(data, fingerprint, cls) -> (stamp_ns, publisher, message), as read_message_python.
+if codec.C_CODEC is not None:
+    codec.C_CODEC.setup_frames(read_message_python, _checked)
+    encode_framed, read_message = codec.C_CODEC.frame_message, codec.C_CODEC.read_message
+else:
+    encode_framed, read_message = _encode_unframed, read_message_python

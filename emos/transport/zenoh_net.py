@@ -38,10 +38,9 @@ import threading
 import time
 from typing import Any, Callable
 
-from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport.context import encode_name
-from emos.transport.netframe import SPLIT_MAGIC, FrameWriter, SplitPayload, read_frame
+from emos.transport.netframe import SPLIT_MAGIC, BadFrame, FrameWriter, SplitPayload, encode_framed, read_frame, read_message
 from emos.transport.trust import RateLimitedLog
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -229,11 +228,14 @@ class ZenohPublisher:
             raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
         # Publishing is single-threaded per publisher (the node holds its lock), so one writer;
         # Zenoh copies the frame on put, so its buffer is free again when put returns.
-        enc = codec.encode(msg)
-        if enc.array_bytes < FrameWriter.SPLIT:
-            self._pub.put(self._frames.frame(enc, time.time_ns()))
+        stamp = time.time_ns()
+        enc = encode_framed(msg, self._frames.header, stamp, FrameWriter.SMALL)  # a small message: its whole frame
+        if type(enc) is bytes:
+            self._pub.put(enc)
+        elif enc.array_bytes < FrameWriter.SPLIT:
+            self._pub.put(self._frames.frame(enc, stamp))
         else:  # arrays as the payload, header in the attachment: no copy of an array held in bytes
-            arrays, head = self._frames.split(enc, time.time_ns())
+            arrays, head = self._frames.split(enc, stamp)
             self._pub.put(arrays, attachment=head)
         self.sent += 1
         return self.sent - 1
@@ -298,19 +300,17 @@ class ZenohSubscriber:
         escape (it would be lost in Zenoh's thread and the subscriber would look alive while deaf)."""
         try:
             head = sample.attachment
-            if head is None:
-                stamp, pub, payload = read_frame(sample.payload.to_bytes(), self._fp)
+            if head is None:  # a whole frame: checked and decoded in one call
+                stamp, pub, msg = read_message(sample.payload.to_bytes(), self._fp, self.msg_cls)
             else:  # a large message: arrays in the payload (see emos.transport.netframe)
                 # The header first: a bad one costs no copy of the arrays.
                 stamp, pub, meta = read_frame(head.to_bytes(), self._fp, SPLIT_MAGIC)
-                payload = SplitPayload(meta, sample.payload.to_bytes())
-        except Exception as exc:  # noqa: BLE001 - BadFrame, or anything a foreign payload provokes
+                msg = SplitPayload(meta, sample.payload.to_bytes()).decode(self.msg_cls)
+        except BadFrame as exc:
             self._reject(str(sample.key_expr), exc)
             return
-        try:
-            # Anyone on the network can send a well-framed lie: the body is checked by decoding it.
-            msg = codec.decode(self.msg_cls, payload) if head is None else payload.decode(self.msg_cls)
         except Exception as exc:  # noqa: BLE001 - DecodeError, or anything a forged body provokes
+            # Anyone on the network can send a well-framed lie: the body is checked by decoding it.
             self.undecodable += 1
             self._reject(str(sample.key_expr), exc)
             return
