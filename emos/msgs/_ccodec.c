@@ -743,10 +743,10 @@ static PyObject *read_message(reader *r, PyObject *cls, int depth)
 /* The message frame at p[0:len] (u32 meta_len | meta | padding | arrays), or NULL to give up.
  * Its arrays are views of region_data[0:region_len], which is the frame itself (``split`` 0:
  * offsets count from the end of the metadata's padding) or the array region of a message in two
- * parts (``split`` 1: from its start). ``region``: the memoryview of that region; the arrays'
- * base is the object it views, as numpy's own constructor makes it from a memoryview (and, as
- * there, no buffer export is held: the owner keeps the bytes alive). */
-static PyObject *decode_at(PyObject *cls, const unsigned char *p, Py_ssize_t len, PyObject *region, const char *region_data,
+ * parts (``split`` 1: from its start). ``owner``: the object holding those bytes, every array's
+ * base, as numpy's own constructor makes it from a memoryview (see owner_of; as there, no
+ * buffer export is held: the owner keeps the bytes alive). */
+static PyObject *decode_at(PyObject *cls, const unsigned char *p, Py_ssize_t len, PyObject *owner, const char *region_data,
                            Py_ssize_t region_len, int split, int readonly, int copy)
 {
     if (len < 4)
@@ -756,8 +756,7 @@ static PyObject *decode_at(PyObject *cls, const unsigned char *p, Py_ssize_t len
     unsigned long long base = (4 + meta_len + ALIGN - 1) & ~(unsigned long long)(ALIGN - 1);
     if (base > (unsigned long long)len)
         return NULL;
-    PyObject *owner = PyMemoryView_GET_BASE(region);
-    reader r = {.p = p + 4, .pos = 0, .end = (Py_ssize_t)meta_len, .owner = owner != NULL ? owner : region, .region_data = region_data,
+    reader r = {.p = p + 4, .pos = 0, .end = (Py_ssize_t)meta_len, .owner = owner, .region_data = region_data,
                 .base = split ? 0 : (Py_ssize_t)base, .region_end = region_len, .readonly = readonly, .copy = copy};
     PyObject *out = read_message(&r, cls, 0);
     if (out != NULL && r.pos != r.end)
@@ -780,6 +779,14 @@ static PyObject *flat_view(PyObject *obj)
     return view;
 }
 
+/* What numpy's constructor takes as an array's base given a buffer through memoryview ``view``:
+ * the object the view looks at (borrowed). */
+static PyObject *owner_of(PyObject *view)
+{
+    PyObject *owner = PyMemoryView_GET_BASE(view);
+    return owner != NULL ? owner : view;
+}
+
 /* The fast path of decode(cls, frame, copy, arrays): the message, NotImplemented, or NULL with
  * an exception that is not an Exception. */
 static PyObject *try_decode_impl(PyObject *cls, PyObject *frame, int copy, PyObject *arrays)
@@ -791,7 +798,7 @@ static PyObject *try_decode_impl(PyObject *cls, PyObject *frame, int copy, PyObj
     if (region == NULL)
         goto give_up;
     Py_buffer *buf = PyMemoryView_GET_BUFFER(view), *rbuf = PyMemoryView_GET_BUFFER(region);
-    out = decode_at(cls, buf->buf, buf->len, region, rbuf->buf, rbuf->len, arrays != Py_None, rbuf->readonly, copy);
+    out = decode_at(cls, buf->buf, buf->len, owner_of(region), rbuf->buf, rbuf->len, arrays != Py_None, rbuf->readonly, copy);
     if (out != NULL)
         goto done;
 give_up:
@@ -953,12 +960,21 @@ static PyObject *frame_message(PyObject *self, PyObject *const *args, Py_ssize_t
  * a new publisher's first frame, like every bad one, takes the Python path. */
 static PyObject *try_read_framed(PyObject *data, PyObject *fingerprint, PyObject *cls)
 {
-    PyObject *view = flat_view(data), *out = NULL, *names = NULL, *key = NULL, *msg = NULL;
-    if (view == NULL || !PyBytes_CheckExact(fingerprint) || !PyType_Check(cls))
+    PyObject *view = NULL, *out = NULL, *names = NULL, *key = NULL, *msg = NULL, *owner = data;
+    const unsigned char *p;
+    Py_ssize_t size;
+    if (!PyBytes_CheckExact(fingerprint) || !PyType_Check(cls))
         goto done;
-    Py_buffer *buf = PyMemoryView_GET_BUFFER(view);
-    const unsigned char *p = buf->buf;
-    Py_ssize_t size = buf->len;
+    if (PyBytes_CheckExact(data)) {  /* what Zenoh's payload.to_bytes() gives: no view needed */
+        p = (const unsigned char *)PyBytes_AS_STRING(data);
+        size = PyBytes_GET_SIZE(data);
+    } else {
+        if ((view = flat_view(data)) == NULL)
+            goto done;
+        p = PyMemoryView_GET_BUFFER(view)->buf;
+        size = PyMemoryView_GET_BUFFER(view)->len;
+        owner = owner_of(view);
+    }
     if (size < NET_HEADER || memcmp(p, "EMZ1", 4) != 0)
         goto done;
     unsigned long long stamp = 0;
@@ -977,11 +993,18 @@ static PyObject *try_read_framed(PyObject *data, PyObject *fingerprint, PyObject
         goto done;
     Py_INCREF(pub);
     /* Read-only arrays, whatever ``data`` is, as netframe.read_frame's read-only view makes them. */
-    msg = decode_at(cls, p + start, size - start, view, (const char *)p + start, size - start, 0, 1, 0);
-    if (msg != NULL)
-        out = Py_BuildValue("(KNN)", stamp, pub, msg);
-    else
+    msg = decode_at(cls, p + start, size - start, owner, (const char *)p + start, size - start, 0, 1, 0);
+    PyObject *stamp_obj = msg == NULL ? NULL : PyLong_FromUnsignedLongLong(stamp);
+    out = stamp_obj == NULL ? NULL : PyTuple_New(3);
+    if (out != NULL) {
+        PyTuple_SET_ITEM(out, 0, stamp_obj);
+        PyTuple_SET_ITEM(out, 1, pub);
+        PyTuple_SET_ITEM(out, 2, msg);
+    } else {
+        Py_XDECREF(stamp_obj);
         Py_DECREF(pub);
+        Py_XDECREF(msg);
+    }
 done:
     Py_XDECREF(key);
     Py_XDECREF(names);
