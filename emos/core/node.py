@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import operator
 import os
 import signal
 import threading
@@ -38,6 +39,9 @@ ENV_WAKE_SPIN_US = "EMOS_WAKE_SPIN_US"
 
 def control_socket(ctx: RunContext, component_name: str) -> Path:
     return ctx.run_dir / "ctl" / f"{encode_name(component_name)}.sock"
+
+
+_STAMP_THEN_ORDER = operator.itemgetter(0, 1)  # a backlog item: (stamp, order read, input, payload)
 
 
 class _Input:
@@ -389,7 +393,10 @@ class Node:
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
             inp.sim_at = sim_clock.time_at(stamp) if sim_clock is not None else None
             if active and inp.topic in triggers:
-                backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
+                if len(items) == 1:  # the usual case: no generator to run
+                    backlog.append((stamp, len(backlog), inp, raw))
+                else:
+                    backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
         if len(triggers) > 1 and backlog:
             # A message stamped while the rings were being read may have an earlier-stamped
             # sibling on a ring read before it was written: it waits for the next pass (at once).
@@ -399,7 +406,8 @@ class Node:
                 backlog = [item for item in backlog if not now <= item[0] <= took]
                 assert self.loop is not None
                 self.loop.call_soon(self._take_inputs)
-        backlog.sort(key=lambda item: item[:2])  # by stamp; within a stamp, as read
+        if len(backlog) > 1:
+            backlog.sort(key=_STAMP_THEN_ORDER)  # by stamp; within a stamp, as read
         for stamp_i, _, inp, raw_i in backlog:
             msg = inp.decode(raw_i)
             inp.decoded = msg if raw_i is inp.raw else inp.decoded
@@ -473,19 +481,27 @@ class Node:
         return stale
 
     def publish(self, topic: Topic | str, msg: Any) -> None:
-        name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
-        try:
-            pub, lock = self._publishers[name]
-        except KeyError:
-            if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
-                raise RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}") from None
-            raise KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}") from None
+        # A name exactly as declared needs no normalizing (a key is its own normal form): that
+        # check costs more than the rest of this method, on every message.
+        name = topic
+        entry = self._publishers.get(topic) if type(topic) is str else None
+        if entry is None:
+            name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
+            entry = self._publishers.get(name)
+            if entry is None:
+                raise self._no_output(name)
+        pub, lock = entry
         if self.publish_faults.active:  # empty unless a chaos run switched a sensor fault on
             msg = self.publish_faults.apply(name, msg)
             if msg is None:
                 return
         with lock:  # rings are single-writer; action threads and the loop may both publish
             pub.publish(msg)
+
+    def _no_output(self, name: str) -> Exception:
+        if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):
+            return RuntimeError(f"component {self.name!r} cannot publish on {name!r} while {self.state.value}")
+        return KeyError(f"component {self.name!r} has no output {name!r}; outputs: {sorted(self._publishers)}")
 
     def publish_status(self) -> None:
         if self._status_pub is None:

@@ -313,3 +313,27 @@ def _catch(fn):
         return fn()
     except Exception as exc:
         return exc
+
+
+def test_publish_takes_a_topic_its_name_or_the_name_without_its_slash(ctx):
+    """Node.publish looks a declared name up as it is (no normalizing on every message), and
+    normalizes anything else; an undeclared output is refused naming the outputs."""
+    inp, out = Topic(name="in", msg_type="Int64"), Topic(name="out", msg_type="Int64")
+    comp = Doubler(component_name="doubler", inputs=[inp], outputs=[out], trigger=inp)
+    node, thread, rpc = run_node(comp, ctx)
+    results = Subscriber(ctx, "/out", M.Int64, queue_size=10)
+    try:
+        rpc.call("transition", transition="configure")
+        rpc.call("transition", transition="activate")
+        for value, topic in enumerate([out, "/out", "out", " out "]):
+            node.publish(topic, M.Int64(data=value))
+        got = []
+        wait_until(lambda: got.extend(results.take()) or len(got) >= 4, what="four messages on /out")
+        assert [m.data for m in got] == [0, 1, 2, 3]
+        with pytest.raises(KeyError, match=r"has no output '/nowhere'; outputs: \['/out'\]"):
+            node.publish("nowhere", M.Int64(data=1))
+        with pytest.raises(ValueError, match="invalid"):
+            node.publish("bad//name", M.Int64(data=1))
+    finally:
+        rpc.call("exit")
+        thread.join(10)
