@@ -3,7 +3,8 @@
 A diagnostic for ``emos bench net`` (docs/benchmarks.md, "EMOS over Zenoh on a quiet machine"):
 the same two ends as the benchmark (:class:`supervisor.bench.net._End`), in two processes joined
 over loopback TCP, with ``time.perf_counter_ns`` marks around the send (EMOS: encode, frame and
-``put``; and ``put`` alone), the frame check and the decode on Zenoh's thread, and the take.
+``put``; and ``put`` alone), the frame check and the decode on Zenoh's thread, and the take
+(``EMOS_CODEC=python`` for the Python codec, see emos/msgs/_ccodec.c).
 Prints the half round trip's p50 and each stage's median, for the pinging side and the echo::
 
     python3 scripts/net_stages.py zenoh            # raw Zenoh, 8 MiB
@@ -59,8 +60,10 @@ def instrument(end: bench._End, transport: str) -> None:
     end.send = _timed("send", end.send)
     if transport == "emos-zenoh":
         end.take = _timed("take", end.take)
-        zenoh_net.read_frame = _timed("read_frame", zenoh_net.read_frame)  # called from Zenoh's thread
-        zenoh_net.codec.decode = _timed("decode", zenoh_net.codec.decode)  # so is the decode (on arrival)
+        # Called from Zenoh's thread: a whole frame's check and decode (one C call when the codec's
+        # fast path is built), and a large message's header check.
+        zenoh_net.read_message = _timed("check + decode", zenoh_net.read_message)
+        zenoh_net.read_frame = _timed("read_frame (split header)", zenoh_net.read_frame)
         inner = end._pub._pub
         end._pub._pub = type("TimedPut", (), {"put": staticmethod(_timed("put", inner.put))})()
 
@@ -200,7 +203,7 @@ def tight(size: int) -> None:
     """The EMOS stages of one hop run back to back on one message: what they cost warm. From
     ``FrameWriter.SPLIT`` up, as ``ZenohPublisher`` sends it: in two parts (arrays, header)."""
     from emos.msgs import codec
-    from emos.transport.netframe import SPLIT_MAGIC, FrameWriter, SplitPayload, read_frame
+    from emos.transport.netframe import SPLIT_MAGIC, FrameWriter, SplitPayload, encode_framed, read_frame, read_message
 
     raw = np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8).tobytes()
     msg = UInt8MultiArray(data=np.frombuffer(raw, np.uint8))  # as the benchmark sends it
@@ -209,10 +212,14 @@ def tight(size: int) -> None:
     if size < FrameWriter.SPLIT:
         frame = bytes(writer.frame(codec.encode(msg), 1))
         payload = read_frame(frame, fingerprint)[2]
+        fp = fingerprint.encode()
+        read_message(frame, fp, UInt8MultiArray)  # the publisher's names checked once, as on a first frame
         stages = {
             "encode + frame": lambda: writer.frame(codec.encode(msg), 1),
             "read_frame": lambda: read_frame(frame, fingerprint),
             "decode": lambda: codec.decode(UInt8MultiArray, payload),
+            "encode_framed (what ZenohPublisher runs)": lambda: encode_framed(msg, writer.header, 1, FrameWriter.SMALL),
+            "read_message (what ZenohSubscriber runs)": lambda: read_message(frame, fp, UInt8MultiArray),
         }
     else:
         arrays, head = writer.split(codec.encode(msg), 1)

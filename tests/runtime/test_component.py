@@ -337,3 +337,26 @@ def test_publish_takes_a_topic_its_name_or_the_name_without_its_slash(ctx):
     finally:
         rpc.call("exit")
         thread.join(10)
+
+
+def test_the_health_status_revision_moves_only_when_what_it_says_changes():
+    """Status.revision drives the status published after a step; set_healthy on a healthy
+    status (every step of most components) takes a shortcut that must not hide a change."""
+    from emos.core.health import HealthLevel, Status
+
+    status = Status()
+    start = status.revision
+    for _ in range(3):
+        status.set_healthy()
+    assert status.revision == start
+    status.set_fail_algorithm(["planner"], message="no path")
+    assert (status.level, status.algorithms, status.message, status.revision) == (HealthLevel.ALGORITHM_FAILURE, ["planner"], "no path", start + 1)
+    status.set_fail_algorithm(["planner"], message="no path")
+    assert status.revision == start + 1  # the same failure again
+    status.set_healthy()
+    assert (status.level, status.algorithms, status.message, status.revision) == (HealthLevel.HEALTHY, [], "", start + 2)
+    status.set_general(message="warming up")  # healthy-looking level changes are changes too
+    status.set_healthy()
+    assert (status.message, status.revision) == ("", start + 4)
+    with pytest.raises(TypeError, match="algorithm_names must be a list of str"):
+        status.set_fail_algorithm("planner")
