@@ -12,9 +12,10 @@ want_test=0
 PY=${PYTHON:-python3}
 export PIP_DISABLE_PIP_VERSION_CHECK=1
 
-# System packages: espeak-ng for local text to speech; with --test, headless Chromium and its
-# driver for the web UI tests.
-apt_pkgs=(espeak-ng)
+# System packages: espeak-ng for local text to speech; gcc to build the codec's C fast path
+# (emos/msgs/_ccodec.c; without it EMOS installs and runs on the Python codec alone); with
+# --test, headless Chromium and its driver for the web UI tests.
+apt_pkgs=(espeak-ng gcc)
 [ $want_test = 1 ] && apt_pkgs+=(chromium chromium-driver)
 missing=()
 for p in "${apt_pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done

@@ -22,6 +22,7 @@
 #include <Python.h>
 #include <structmember.h>
 #include <string.h>
+#include <time.h>
 
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
@@ -285,7 +286,28 @@ typedef struct {
 } encoder;
 
 /* dtype.str, through a cache (borrowed reference), or NULL. */
+static PyObject *dtype_str_cached(PyArray_Descr *descr);
+
+/* The last dtype seen and its str (strong references): a topic's messages nearly always repeat it,
+ * and one comparison is cheaper than the dict's hashing when caches are cold. */
+static PyArray_Descr *last_descr;
+static PyObject *last_descr_str;
+
 static PyObject *dtype_str(PyArray_Descr *descr)
+{
+    if (descr == last_descr)
+        return last_descr_str;
+    PyObject *str = dtype_str_cached(descr);
+    if (str != NULL) {
+        Py_INCREF(descr);
+        Py_INCREF(str);
+        Py_XSETREF(last_descr, descr);
+        Py_XSETREF(last_descr_str, str);
+    }
+    return str;
+}
+
+static PyObject *dtype_str_cached(PyArray_Descr *descr)
 {
     PyObject *key = PyLong_FromVoidPtr(descr);
     if (key == NULL)
@@ -548,8 +570,16 @@ static Py_ssize_t take_array_header(reader *r)
     return (Py_ssize_t)n;
 }
 
-static PyObject *read_array_ext(reader *r, const unsigned char *data, Py_ssize_t n)
+/* The last array header read and what codec._array_header made of it (a strong reference): as
+ * dtype_str's, one comparison instead of a bytes object, its hash and a dict lookup. */
+static unsigned char last_ext[64];
+static Py_ssize_t last_ext_len = -1;
+static PyObject *last_spec;
+
+static PyObject *array_spec(const unsigned char *data, Py_ssize_t n)
 {
+    if (n == last_ext_len && memcmp(data, last_ext, n) == 0)
+        return Py_NewRef(last_spec);
     PyObject *key = PyBytes_FromStringAndSize((const char *)data, n);
     if (key == NULL)
         return NULL;
@@ -560,6 +590,17 @@ static PyObject *read_array_ext(reader *r, const unsigned char *data, Py_ssize_t
         spec = PyObject_CallOneArg(array_header, key);  /* checks it, and fills the cache */
     }
     Py_DECREF(key);
+    if (spec != NULL && n <= (Py_ssize_t)sizeof(last_ext)) {
+        memcpy(last_ext, data, n);
+        last_ext_len = n;
+        Py_XSETREF(last_spec, Py_NewRef(spec));
+    }
+    return spec;
+}
+
+static PyObject *read_array_ext(reader *r, const unsigned char *data, Py_ssize_t n)
+{
+    PyObject *spec = array_spec(data, n);
     if (spec == NULL)
         return NULL;
     PyObject *arr = NULL;
@@ -888,6 +929,12 @@ static PyObject *decode(PyObject *self, PyObject *const *args, Py_ssize_t nargs,
 
 static PyObject *read_message_python; /* netframe.read_message_python(data, fingerprint, cls) */
 static PyObject *checked_names;       /* netframe._checked: {(fingerprint, lengths + names): publisher} */
+/* The last frame's names that checked_names accepted, for the fingerprint object the subscriber
+ * passed (strong references): a topic's frames nearly always come from the publisher of the
+ * one before, and one comparison spares a bytes object, a tuple, their hashes and a lookup. */
+static PyObject *last_fingerprint, *last_publisher;
+static unsigned char last_names[4 + 2 * NET_MAX_NAME];
+static Py_ssize_t last_names_len = -1;
 
 static void put_le(char *q, unsigned long long v, int size)
 {
@@ -895,7 +942,7 @@ static void put_le(char *q, unsigned long long v, int size)
         q[i] = (char)(v >> (8 * i));
 }
 
-/* frame_message(msg, header, stamp_ns, limit): the whole frame as bytes when the message's
+/* frame_message(msg, header, stamp_ns or None (now), limit): the whole frame as bytes when the message's
  * metadata and arrays take fewer than ``limit`` bytes; else (or when the fast path gives up)
  * the message's Encoded, for netframe to frame. ``header``: the publisher's constant frame
  * start, stamp bytes included (overwritten), its length a multiple of 8. */
@@ -906,9 +953,16 @@ static PyObject *frame_message(PyObject *self, PyObject *const *args, Py_ssize_t
         return NULL;
     }
     PyObject *msg = args[0], *header = args[1];
-    unsigned long long stamp = PyLong_AsUnsignedLongLong(args[2]);
-    if (stamp == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
+    unsigned long long stamp;
+    if (args[2] == Py_None) {  /* now, as time.time_ns() would say, without a call into Python */
+        struct timespec now;
+        clock_gettime(CLOCK_REALTIME, &now);
+        stamp = (unsigned long long)now.tv_sec * 1000000000ULL + (unsigned long long)now.tv_nsec;
+    } else {
+        stamp = PyLong_AsUnsignedLongLong(args[2]);
+        if (stamp == (unsigned long long)-1 && PyErr_Occurred())
+            return NULL;
+    }
     Py_ssize_t limit = PyLong_AsSsize_t(args[3]);
     if (limit == -1 && PyErr_Occurred())
         return NULL;
@@ -986,12 +1040,22 @@ static PyObject *try_read_framed(PyObject *data, PyObject *fingerprint, PyObject
     Py_ssize_t head = NET_HEADER + fp_len + pub_len, start = (head + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1);
     if (start > size)
         goto done;
-    names = PyBytes_FromStringAndSize((const char *)p + 12, head - 12);
-    key = names == NULL ? NULL : PyTuple_Pack(2, fingerprint, names);
-    PyObject *pub = key == NULL ? NULL : PyDict_GetItemWithError(checked_names, key);
-    if (pub == NULL)
-        goto done;
-    Py_INCREF(pub);
+    PyObject *pub;
+    Py_ssize_t names_len = head - 12;
+    if (fingerprint == last_fingerprint && names_len == last_names_len && memcmp(p + 12, last_names, names_len) == 0) {
+        pub = Py_NewRef(last_publisher);  /* the same publisher as the last frame: checked then */
+    } else {
+        names = PyBytes_FromStringAndSize((const char *)p + 12, names_len);
+        key = names == NULL ? NULL : PyTuple_Pack(2, fingerprint, names);
+        pub = key == NULL ? NULL : PyDict_GetItemWithError(checked_names, key);
+        if (pub == NULL)
+            goto done;
+        Py_INCREF(pub);
+        memcpy(last_names, p + 12, names_len);  /* names_len <= 4 + 2 * NET_MAX_NAME: checked above */
+        last_names_len = names_len;
+        Py_XSETREF(last_fingerprint, Py_NewRef(fingerprint));
+        Py_XSETREF(last_publisher, Py_NewRef(pub));
+    }
     /* Read-only arrays, whatever ``data`` is, as netframe.read_frame's read-only view makes them. */
     msg = decode_at(cls, p + start, size - start, owner, (const char *)p + start, size - start, 0, 1, 0);
     PyObject *stamp_obj = msg == NULL ? NULL : PyLong_FromUnsignedLongLong(stamp);

@@ -209,7 +209,7 @@ def _check_names(names: bytes, fp_len: int, fp: bytes) -> str:
 # The C fast path (see emos/msgs/_ccodec.c), when the codec has it: one C call for a publisher's
 # whole small frame, and one for a whole frame's checks and decode. Both give the same results
 # as the Python code here, which they fall back to (every bad frame, a publisher's first frame).
-#   encode_framed(msg, FrameWriter.header, stamp_ns, FrameWriter.SMALL) -> the frame as bytes, or
+#   encode_framed(msg, FrameWriter.header, stamp_ns or None for now, FrameWriter.SMALL) -> the frame as bytes, or
 #       the Encoded message for FrameWriter.frame or .split (always the latter without C);
 #   read_message(data, fingerprint, cls) -> (stamp_ns, publisher, message), as read_message_python.
 if codec.C_CODEC is not None:

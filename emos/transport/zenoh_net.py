@@ -228,14 +228,13 @@ class ZenohPublisher:
             raise RuntimeError(f"topic {self.topic!r}: publisher {self.publisher_id!r} is closed")
         # Publishing is single-threaded per publisher (the node holds its lock), so one writer;
         # Zenoh copies the frame on put, so its buffer is free again when put returns.
-        stamp = time.time_ns()
-        enc = encode_framed(msg, self._frames.header, stamp, FrameWriter.SMALL)  # a small message: its whole frame
+        enc = encode_framed(msg, self._frames.header, None, FrameWriter.SMALL)  # a small message: its whole frame, stamped now
         if type(enc) is bytes:
             self._pub.put(enc)
         elif enc.array_bytes < FrameWriter.SPLIT:
-            self._pub.put(self._frames.frame(enc, stamp))
+            self._pub.put(self._frames.frame(enc, time.time_ns()))
         else:  # arrays as the payload, header in the attachment: no copy of an array held in bytes
-            arrays, head = self._frames.split(enc, stamp)
+            arrays, head = self._frames.split(enc, time.time_ns())
             self._pub.put(arrays, attachment=head)
         self.sent += 1
         return self.sent - 1

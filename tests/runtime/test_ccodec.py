@@ -286,3 +286,39 @@ def test_bad_network_frames_raise_netframes_errors():
         elif fast is not NotImplemented:
             assert fast[:2] == expected[:2]
             _same(fast[2], expected[2])
+
+
+@needs_c
+def test_a_frame_stamped_by_the_c_code_carries_the_wall_clock():
+    import time
+
+    from emos.msgs import String
+
+    writer = FrameWriter(String._emos_fingerprint, "talker")
+    before = time.time_ns()
+    frame = C.frame_message(String(data="now"), writer.header, None, FrameWriter.SMALL)
+    after = time.time_ns()
+    stamp, pub, msg = netframe.read_message(frame, String._emos_fingerprint.encode(), String)
+    assert before <= stamp <= after and (pub, msg.data) == ("talker", "now")
+
+
+@needs_c
+def test_the_last_publisher_shortcut_never_admits_a_frame_netframe_would_refuse():
+    """read_message remembers the last publisher whose names it accepted, for that subscriber's
+    fingerprint: another publisher, another type, or the same names for another fingerprint
+    still go through netframe's checks."""
+    from emos.msgs import Header, String
+
+    fp_string, fp_header = String._emos_fingerprint.encode(), Header._emos_fingerprint.encode()
+    a = C.frame_message(String(data="a"), FrameWriter(String._emos_fingerprint, "alice").header, 1, FrameWriter.SMALL)
+    b = C.frame_message(String(data="b"), FrameWriter(String._emos_fingerprint, "bob").header, 2, FrameWriter.SMALL)
+    netframe._checked.clear()
+    assert netframe.read_message(a, fp_string, String)[1:2] == ("alice",)
+    assert C.try_read_message(a, fp_string, String)[1] == "alice"  # the shortcut
+    assert C.try_read_message(b, fp_string, String) is NotImplemented  # bob's names: not checked yet
+    assert netframe.read_message(b, fp_string, String)[1] == "bob"
+    assert C.try_read_message(a, fp_string, String)[1] == "alice"  # back to the first: through the dict
+    with pytest.raises(netframe.BadFrame, match="fingerprint"):
+        netframe.read_message(a, fp_header, Header)  # alice's names, a subscriber of another type
+    equal_not_same = bytes(bytearray(fp_string))  # another object with the same fingerprint
+    assert C.try_read_message(a, equal_not_same, String)[1] == "alice"
