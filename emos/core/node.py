@@ -42,6 +42,7 @@ def control_socket(ctx: RunContext, component_name: str) -> Path:
 
 
 _STAMP_THEN_ORDER = operator.itemgetter(0, 1)  # a backlog item: (stamp, order read, input, payload)
+_NO_INPUT = object()  # Node._run_step without a triggering message (a timer's step)
 
 
 class _Input:
@@ -326,13 +327,14 @@ class Node:
             self._sim_time = None
 
     # ============================================================================ steps and data
-    def _run_step(self, **kwargs: Any) -> None:
+    def _run_step(self, msg: Any = _NO_INPUT, topic: Any = None) -> None:
+        """One step: with the message that triggered it (``msg``, on ``topic``), or none (a timer)."""
         comp = self.component
         sim_time = self._sim_time
         cpu0 = time.thread_time() if sim_time is not None else 0.0
         try:
-            if self._step_kwargs:
-                comp._execution_step(**kwargs)
+            if msg is not _NO_INPUT and self._step_kwargs:
+                comp._execution_step(msg=msg, topic=topic)
             else:
                 comp._execution_step()
         except Exception as exc:
@@ -376,9 +378,10 @@ class Node:
     def _take_inputs(self) -> None:
         now = time.time_ns()
         active = self.state == L.LifecycleState.ACTIVE
-        triggers = self.component._trigger if self.component.run_type == ComponentRunType.EVENT else ()
-        tick = self._sim_time.take() if self._sim_time is not None else None  # before the inputs: see emos.core.clock
+        comp = self.component
+        triggers = comp._trigger if comp.run_type == ComponentRunType.EVENT else ()
         sim_clock = self._sim_time
+        tick = sim_clock.take() if sim_clock is not None else None  # before the inputs: see emos.core.clock
         # Every input's latest message first: a step must see the other inputs that arrived in
         # the same wake-up. Then one step per triggering message, all trigger topics merged in
         # publish order: a component (the Monitor above all) that was descheduled and wakes to a
