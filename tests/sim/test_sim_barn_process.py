@@ -181,6 +181,53 @@ def test_sigterm_stops_the_trials_in_flight_at_once_and_records_none_of_them(tmp
     assert all(t["reason"] == "goal" or t["reason"].startswith(("time limit", "collision")) for t in recorded), recorded
 
 
+def test_a_trials_system_dies_with_a_benchmark_killed_outright():
+    """SIGKILL runs no handler and no `finally`: the trial's system must still stop (it gets
+    SIGTERM when the benchmark process dies) and leave no shared memory behind. Before, it went
+    on driving, holding its rings, until stopped by hand."""
+    import signal
+    import time
+
+    import psutil
+
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    code = ("from emos.actors.sim.barn.harness import BarnRules; from emos.actors.sim.barn.process import run_episode_process; "
+            "from emos.actors.sim.barn.stack import StackOptions; from emos.actors.sim.barn_worlds import load_barn_worlds; "
+            "run_episode_process(load_barn_worlds()[3], StackOptions(world=3, rules=BarnRules(ideal=True)), wall_timeout=120.0)")
+    bench = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    try:
+        me = psutil.Process(bench.pid)
+        deadline = time.monotonic() + 120
+        systems: list[psutil.Process] = []
+        while not systems:
+            assert bench.poll() is None and time.monotonic() < deadline, "the trial's system did not start"
+            systems = [p for p in me.children() if "emos-barn-" in " ".join(p.cmdline())]
+            time.sleep(0.3)
+        run_id = None
+        while run_id is None and time.monotonic() < deadline:  # its rings exist: it is running
+            names = [n for n in os.listdir("/dev/shm") if n.startswith(f"emos.{systems[0].pid}-")]
+            run_id = names[0].split(".")[1] if names else None
+            time.sleep(0.3)
+        assert run_id is not None, "the trial's system made no rings"
+        everything = systems + systems[0].children(recursive=True)
+        bench.send_signal(signal.SIGKILL)
+        bench.wait(10)
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+    def alive() -> list[psutil.Process]:
+        return [p for p in everything if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+
+    gone_by = time.monotonic() + 45
+    while time.monotonic() < gone_by and alive():
+        time.sleep(0.5)
+    left = alive()
+    for p in left:  # a failing run must not leave its system driving for the rest of the suite
+        p.terminate()
+    assert not [p.pid for p in left]
+    assert not [n for n in os.listdir("/dev/shm") if n.startswith(f"emos.{run_id}.")]
+
+
 def test_a_recorded_trial_replays_through_the_stacks_mapper_to_the_same_poses(tmp_path):
     """``scripts/barn_pose_replay.py``: the replay of a recorded trial's scans and odometry
     through the mapper as the stack configures it lands where the stack's own belief did (so a

@@ -10,6 +10,7 @@ timer from the first 0.1 m of motion), on simulated time counted from when the g
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 import tempfile
@@ -26,6 +27,7 @@ from ..barn_worlds import BarnWorld
 from ..dynabarn import DynaWorld
 from .harness import EpisodeResult, score_run
 from emos.supervisor.launched import SystemFailed, log_tail, wait_active, wait_run_dir
+from emos.supervisor.spawn import die_with
 
 from .stack import (GOAL_TOPIC, GROUND_TRUTH_TOPIC, LOCALIZED_POSE_TOPIC, NAV_COMPONENTS, PLAN_TOPIC, SIM_NAME, StackOptions,
                     recipe_source)
@@ -89,8 +91,16 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
         recipe.write_text(recipe_source(opts))
         log_path = Path(tmp) / "system.log"
         with open(log_path, "wb") as log:
+            benchmark = os.getpid()
+
+            def die_with_the_benchmark() -> None:  # in the child, before exec
+                if not die_with(benchmark):
+                    os._exit(1)
+
+            # A benchmark killed from outside runs no `finally`: its trial's system must not go on
+            # without it (one did, holding its shared memory, until stopped by hand).
             proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(recipe)], stdout=log,
-                                    stderr=subprocess.STDOUT, cwd=tmp)
+                                    stderr=subprocess.STDOUT, cwd=tmp, preexec_fn=die_with_the_benchmark)
             systems.started(proc)
             try:
                 outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen, observer)
