@@ -185,6 +185,7 @@ def test_a_trials_system_dies_with_a_benchmark_killed_outright():
     """SIGKILL runs no handler and no `finally`: the trial's system must still stop (it gets
     SIGTERM when the benchmark process dies) and leave no shared memory behind. Before, it went
     on driving, holding its rings, until stopped by hand."""
+    import shutil
     import signal
     import time
 
@@ -210,6 +211,8 @@ def test_a_trials_system_dies_with_a_benchmark_killed_outright():
             time.sleep(0.3)
         assert run_id is not None, "the trial's system made no rings"
         everything = systems + systems[0].children(recursive=True)
+        # The harness's temporary folder (the recipe): a killed harness cannot remove it, we do.
+        trial_dir = next(os.path.dirname(arg) for arg in systems[0].cmdline() if "emos-barn-" in arg)
         bench.send_signal(signal.SIGKILL)
         bench.wait(10)
     finally:
@@ -224,6 +227,7 @@ def test_a_trials_system_dies_with_a_benchmark_killed_outright():
     left = alive()
     for p in left:  # a failing run must not leave its system driving for the rest of the suite
         p.terminate()
+    shutil.rmtree(trial_dir, ignore_errors=True)
     assert not [p.pid for p in left]
     assert not [n for n in os.listdir("/dev/shm") if n.startswith(f"emos.{run_id}.")]
 
