@@ -280,7 +280,7 @@ class System:
         async def tree(req: dict, stream: Any) -> dict:
             assert self.root is not None
             return {"run_id": self.ctx.run_id, "pid": os.getpid(), "uptime_s": round(time.monotonic() - self.root.started_at, 3),
-                    "up": self.up, "tree": self.fallbacks.annotate(self.root.tree())}
+                    "up": self.up, "tree": self.fallbacks.annotate(self.root.tree()), "zygotes": self._zygote_pids()}
 
         async def events(req: dict, stream: Any) -> list:
             since = float(req.get("since", 0.0))

@@ -319,11 +319,17 @@ launcher.bringup()
 """)).wait_up(components=["w"])
     try:
         zygotes = wait_until(lambda: len(_zygotes(system)) == 2 and _zygotes(system), what="primary and spare zygotes")
+        def replaced(z) -> bool:
+            # Two zygote processes is not enough: a clone is named before the launcher holds its
+            # channel, and killing its source in between leaves the launcher none (this test's
+            # race, 1 run in about 45). The launcher's own list must name both.
+            known = set(system.rpc.call("tree")["zygotes"])
+            return not psutil.pid_exists(z.pid) and len(known) == 2 and known == {p.pid for p in _zygotes(system)}
+
         for z in zygotes:  # the primary, then the spare that replaced it
             os.kill(z.pid, signal.SIGKILL)
             # No component restarts meanwhile: the launcher must notice by itself, not at the next spawn.
-            wait_until(lambda: not psutil.pid_exists(z.pid) and len(_zygotes(system)) == 2, timeout=10,
-                       what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
+            wait_until(lambda: replaced(z), timeout=10, what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
         assert not {z.pid for z in zygotes} & {z.pid for z in _zygotes(system)}
         pid = system.pid("w")
         os.kill(pid, signal.SIGKILL)
