@@ -1076,8 +1076,9 @@ done:
     return out;
 }
 
-/* read_message(data, fingerprint, cls) -> (stamp_ns, publisher, message): netframe's, fast. */
-static PyObject *read_framed(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* The fast path of a whole frame, then on give-up either netframe's Python reader (``python``
+ * 1: read_message) or NotImplemented (0: try_read_message, for the tests). */
+static PyObject *read_message_or(PyObject *const *args, Py_ssize_t nargs, int python)
 {
     if (nargs != 3) {
         PyErr_SetString(PyExc_TypeError, "read_message(data, fingerprint, cls)");
@@ -1086,21 +1087,14 @@ static PyObject *read_framed(PyObject *self, PyObject *const *args, Py_ssize_t n
     PyObject *out = try_read_framed(args[0], args[1], args[2]);
     if (out != NULL || !can_fall_back())
         return out;
-    return PyObject_Vectorcall(read_message_python, args, 3, NULL);
+    return python ? PyObject_Vectorcall(read_message_python, args, 3, NULL) : Py_NewRef(Py_NotImplemented);
 }
 
-/* The fast path alone: the tuple, or NotImplemented (for the tests). */
-static PyObject *try_read_message(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (nargs != 3) {
-        PyErr_SetString(PyExc_TypeError, "try_read_message(data, fingerprint, cls)");
-        return NULL;
-    }
-    PyObject *out = try_read_framed(args[0], args[1], args[2]);
-    if (out != NULL || !can_fall_back())
-        return out;
-    return Py_NewRef(Py_NotImplemented);
-}
+/* read_message(data, fingerprint, cls) -> (stamp_ns, publisher, message): netframe's, fast. */
+static PyObject *read_framed(PyObject *self, PyObject *const *args, Py_ssize_t nargs) { return read_message_or(args, nargs, 1); }
+
+/* The fast path alone: the tuple, or NotImplemented. */
+static PyObject *try_read_message(PyObject *self, PyObject *const *args, Py_ssize_t nargs) { return read_message_or(args, nargs, 0); }
 
 static PyObject *setup_frames(PyObject *self, PyObject *args)
 {
