@@ -119,8 +119,14 @@ def _terminated(signum: int, frame: object) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; Ctrl-C (130), a closed output pipe (141) and SIGTERM (143) end it quietly."""
+    from emos.transport.context import RuntimeDirError
+
     try:
         return _main(argv)
+    except RuntimeDirError as exc:
+        # The message says what is wrong and the way out; a traceback around it only hides it.
+        print(f"emos: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

@@ -165,19 +165,28 @@ def _coerce(value: Any, target: Any, source: str, where: str) -> Any:
 def load_into(config: Any, config_file: str | Path, component_name: str) -> dict[str, Any]:
     """Apply a file's sections to ``config``; returns its ``inputs``/``outputs`` topic sections."""
     data = read_config_file(config_file)
-    common = data.get(COMMON_SECTION) or {}
-    own = {}
+    common = _section(data, COMMON_SECTION, config_file, "the section every component reads")
+    own: dict[str, Any] = {}
     for key in (component_name, "/" + component_name):
-        if isinstance(data.get(key), dict):
-            own = data[key]
+        own = _section(data, key, config_file, f"the section of component {component_name}") or own
     topics = {k: own.get(k, common.get(k)) for k in TOPIC_SECTIONS if own.get(k, common.get(k)) is not None}
     common = {k: v for k, v in common.items() if k not in TOPIC_SECTIONS}
     own = {k: v for k, v in own.items() if k not in TOPIC_SECTIONS}
-    if not isinstance(common, dict):
-        raise ConfigError(f"{config_file}: section '/**' must be a mapping")
     apply_mapping(config, common, str(config_file), ignore_unknown=True)
     apply_mapping(config, own, str(config_file), path=component_name)
     return topics
+
+
+def _section(data: dict[str, Any], key: str, source: str | Path, what: str) -> dict[str, Any]:
+    """``data[key]`` as a mapping of parameters ({} when absent or empty); anything else is refused,
+    since a scalar where parameters belong (``cam: 5``) would otherwise be ignored without a word."""
+    section = data.get(key)
+    if section is None:
+        return {}
+    if not isinstance(section, dict):
+        raise ConfigError(f"config file {source}: {key!r} is {what} and must be a mapping of parameters "
+                          f"(name: value), got {type(section).__name__} {section!r}")
+    return section
 
 
 def section_problems(data: dict[str, Any], component_names: list[str], source: str) -> list[str]:
@@ -195,6 +204,9 @@ def section_problems(data: dict[str, Any], component_names: list[str], source: s
             continue
         name = str(key).lstrip("/")
         if name in component_names:
+            if value is not None and not isinstance(value, dict):
+                problems.append(f"{source}: {key!r} is the section of component {name} and must be a mapping of "
+                                f"parameters (name: value), got {type(value).__name__} {value!r}; it is ignored")
             continue
         if not isinstance(value, dict):
             problems.append(

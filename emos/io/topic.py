@@ -11,7 +11,7 @@ from emos.config.qos import QoSConfig
 from emos.msgs.registry import canonical_name, resolve
 from emos.transport.limits import check_topic_name
 
-_NAME_RE = re.compile(r"^/?[A-Za-z_~{][A-Za-z0-9_~{}]*(/[A-Za-z_{][A-Za-z0-9_{}]*)*$")
+_NAME_RE = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
 
 
 def normalize_topic_name(name: str) -> str:
@@ -20,6 +20,11 @@ def normalize_topic_name(name: str) -> str:
         raise ValueError(f"Topic name must be a non-empty string, got {name!r}")
     name = name.strip()
     if not _NAME_RE.match(name):
+        if "~" in name or "{" in name:
+            # ROS expands these in the node's context; EMOS names are global and never expanded,
+            # so '~scan' would be a different topic from the one a ROS user means.
+            raise ValueError(f"Topic name {name!r} is invalid: ROS substitutions ('~' for the node's namespace, "
+                             "'{...}') are not expanded by EMOS; write the full name, e.g. '/robot/scan'")
         raise ValueError(
             f"Topic name {name!r} is invalid: use letters, digits and '_', separated by '/', "
             "not starting with a digit and without '//' or a trailing '/'"

@@ -52,16 +52,23 @@ def runtime_root() -> Path:
     user must not be able to plant sockets or FIFOs where we will connect. In ``/tmp`` anyone
     can create ``emos-<uid>`` first; then we refuse, naming the owner and the way out, rather
     than run in (or delete) a directory someone else controls.
+
+    Owning the directory is not enough: whoever owns a directory above it can rename it away
+    mid-run and put another in its place. ``sudo -E`` and ``su`` leave ``XDG_RUNTIME_DIR``
+    pointing at the invoking user's ``/run/user/<uid>``, so every directory on the way must be
+    ours or root's, and one that others may write must be sticky (as ``/tmp`` is).
     """
     uid = os.geteuid()
     explicit = os.environ.get(ENV_RUNTIME_DIR)
     xdg = os.environ.get("XDG_RUNTIME_DIR")
+    source: str | None = None  # the variable that chose the directory, named in a refusal
     if explicit:
-        root = Path(explicit)
+        root, source = Path(explicit), ENV_RUNTIME_DIR
     elif xdg and Path(xdg).is_dir():
-        root = Path(xdg) / "emos"
+        root, source = Path(xdg) / "emos", "XDG_RUNTIME_DIR"
     else:
         root = TMP_DIR / f"emos-{uid}"
+    _check_ancestors(root, uid, source)
     try:
         root.mkdir(mode=0o700, parents=True, exist_ok=True)
     except FileExistsError:
@@ -81,6 +88,40 @@ def runtime_root() -> Path:
             f"yours with mode 0700 (it is created if missing)"
         )
     return root
+
+
+def _unsafe_directory(path: Path, uid: int) -> str | None:
+    """Why another user could replace what lies under ``path``, or None if nobody but us (and
+    root) can."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return None  # created below by mkdir, under a parent that passed this check
+    if st.st_uid not in (uid, 0):
+        return f"is owned by uid {st.st_uid}, not by us (uid {uid}) or root"
+    if stat.S_ISLNK(st.st_mode):
+        return None  # a link's own mode means nothing; its target is checked on the resolved path
+    if st.st_mode & (stat.S_IWGRP | stat.S_IWOTH) and not st.st_mode & stat.S_ISVTX:
+        return f"is writable by other users (mode {oct(stat.S_IMODE(st.st_mode))}) without the sticky bit"
+    return None
+
+
+def _check_ancestors(root: Path, uid: int, variable: str | None) -> None:
+    """Refuse a runtime directory whose parents another user controls (see runtime_root)."""
+    absolute = Path(os.path.abspath(root))
+    # The path as written (a planted link is refused by its owner) and as resolved (a link of
+    # root's to a directory someone else owns is refused by the target's owner).
+    for chain in (absolute.parents, Path(os.path.realpath(absolute.parent)).joinpath("x").parents):
+        for parent in chain:
+            problem = _unsafe_directory(parent, uid)
+            if problem is None:
+                continue
+            via = f" (from {variable}={os.environ.get(variable)})" if variable else ""
+            hint = ("unset XDG_RUNTIME_DIR (`sudo -E` and `su` leave the invoking user's there) or set "
+                    f"{ENV_RUNTIME_DIR} to a directory of yours") if variable == "XDG_RUNTIME_DIR" else \
+                f"set {ENV_RUNTIME_DIR} to a directory of yours whose parents only you and root can write"
+            raise RuntimeDirError(f"the EMOS runtime directory {root}{via} cannot be used: its parent {parent} "
+                                  f"{problem}, so another user could replace it mid-run; {hint}")
 
 
 def _start_token(pid: int) -> int | None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 import os
 
-from emos.transport.context import SHM_PREFIX, encode_name, runtime_root
+from emos.transport.context import ENV_RUNTIME_DIR, SHM_PREFIX, encode_name, runtime_root
 
 SUN_PATH_MAX = 107  # sizeof(sockaddr_un.sun_path) = 108, minus the NUL
 NAME_MAX = 255
@@ -32,14 +32,15 @@ ANONYMOUS_PUBLISHER_MAX = 3 + _PID_DIGITS + 1 + 16
 
 
 @functools.lru_cache(maxsize=8)
-def _root_bytes(xdg_runtime_dir: str | None) -> int:
+def _root_bytes(emos_runtime_dir: str | None, xdg_runtime_dir: str | None) -> int:
     return len(os.fsencode(str(runtime_root())))
 
 
 def _runtime_root_bytes() -> int:
-    # Cached per $XDG_RUNTIME_DIR (what runtime_root() depends on): names are checked on hot
-    # paths too (a publish by topic name), and runtime_root() makes and stats a directory.
-    return _root_bytes(os.environ.get("XDG_RUNTIME_DIR"))
+    # Cached per $EMOS_RUNTIME_DIR and $XDG_RUNTIME_DIR (what runtime_root() depends on): names
+    # are checked on hot paths too (a publish by topic name), and runtime_root() makes and stats
+    # directories.
+    return _root_bytes(os.environ.get(ENV_RUNTIME_DIR), os.environ.get("XDG_RUNTIME_DIR"))
 
 
 def socket_name_limit(subdir: str = "ctl") -> int:

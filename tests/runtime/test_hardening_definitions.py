@@ -1,11 +1,13 @@
 """Issue 9, probes 8-10: what is wrong in a recipe is refused when it is defined, with the limit."""
 import logging
+import re
 import subprocess
 import sys
 
 import pytest
 
 from emos import BaseComponent, Launcher, Topic
+from emos.config import ConfigError
 from emos.core.wiring import TopicTypeConflict, warn_unused_config_sections
 from emos.supervisor.system import Package, System
 from emos.transport.limits import component_name_limit, segment_name_limit
@@ -80,6 +82,38 @@ def test_misspelled_and_scalar_config_sections_are_reported_with_close_matches(t
     assert "section 'planer' matches no component" in problems[0] and "did you mean 'planner'" in problems[0]
     assert "top-level key 'heartbeat_rate' holds a int (3), not a section" in problems[1]
     assert "did you mean 'planner'" in caplog.text and "'heartbeat_rate' holds a int" in caplog.text
+
+
+def test_a_scalar_where_a_components_parameters_belong_is_refused_at_definition_and_reported_at_bringup(tmp_path):
+    path = tmp_path / "params.yaml"
+    path.write_text("/**:\n  loop_rate: 3.0\ncam: 5\n")
+    refused = r"params.yaml: 'cam' is the section of component cam and must be a mapping of parameters \(name: value\), got int 5"
+    with pytest.raises(ConfigError, match=refused):
+        BaseComponent(component_name="cam", config_file=str(path))
+    with pytest.raises(ConfigError, match=refused):
+        Launcher(config_file=str(path)).add_pkg(components=[BaseComponent(component_name="cam")])
+    # A component that reads the same file for its own parameters loads it; bring-up names the
+    # scalar that its neighbour 'cam' (configured otherwise) would never see.
+    other = BaseComponent(component_name="other", config_file=str(path))
+    assert other.config.loop_rate == 3.0
+    problems = warn_unused_config_sections([other, BaseComponent(component_name="cam")])
+    assert len(problems) == 1 and "'cam' is the section of component cam" in problems[0] and "ignored" in problems[0]
+    common = tmp_path / "common.toml"
+    common.write_text('"/**" = 5\n')
+    with pytest.raises(ConfigError, match=r"'/\*\*' is the section every component reads and must be a mapping"):
+        BaseComponent(component_name="cam", config_file=str(common))
+
+
+@pytest.mark.parametrize("name", ["{x}", "~x", "~/scan", "robot/{ns}/scan", "a~b", "a b", "scan/", "//scan", "1scan", "sc-an"])
+def test_topic_names_hold_letters_digits_and_underscores_only(name):
+    with pytest.raises(ValueError, match=f"Topic name {re.escape(repr(name))} is invalid"):
+        Topic(name=name, msg_type="String")
+
+
+def test_ros_substitutions_in_topic_names_are_refused_with_the_reason():
+    with pytest.raises(ValueError, match=r"ROS substitutions .* are not expanded by EMOS"):
+        Topic(name="~/scan", msg_type="LaserScan")
+    assert Topic(name="robot_1/scan_2", msg_type="LaserScan").name == "/robot_1/scan_2"
 
 
 def _emos_run(tmp_path, body: str, *extra: str) -> subprocess.CompletedProcess:

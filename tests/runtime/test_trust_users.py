@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import psutil
 import pytest
@@ -126,6 +127,48 @@ def test_a_runtime_directory_another_user_controls_is_refused_with_a_clear_error
     monkeypatch.setenv(context.ENV_RUNTIME_DIR, str(shared_tmp / "mine"))
     assert context.runtime_root() == shared_tmp / "mine"
     assert (os.stat(shared_tmp / "mine").st_mode & 0o777) == 0o700
+
+
+def _cli(*args: str, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", *args], env=env, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_an_xdg_runtime_dir_another_user_owns_is_refused_in_one_line(planted, shared_tmp, monkeypatch):
+    # `sudo -E` and `su` keep the invoking user's XDG_RUNTIME_DIR: its owner could rename our
+    # `emos` folder in it mid-run (restarts then failed and the run gave up).
+    theirs = planted.plant_dir(shared_tmp / "run-user-theirs")
+    monkeypatch.delenv(context.ENV_RUNTIME_DIR, raising=False)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(theirs))
+    with pytest.raises(RuntimeDirError, match=f"XDG_RUNTIME_DIR={theirs}.*owned by uid {planted.uid}.*unset XDG_RUNTIME_DIR"):
+        context.runtime_root()
+    assert not (theirs / "emos").exists()
+    # The command line says it in one line, without a traceback around it.
+    env = {k: v for k, v in os.environ.items() if k != context.ENV_RUNTIME_DIR}
+    env["XDG_RUNTIME_DIR"] = str(theirs)
+    for args in (("status",), ("run", "--duration", "1", str(Path(__file__).parents[2] / "recipes" / "sensor_demo.py"))):
+        out = _cli(*args, env=env)
+        assert out.returncode == 1, out
+        assert "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0, out.stderr
+        assert out.stderr.startswith("emos: the EMOS runtime directory") and "XDG_RUNTIME_DIR" in out.stderr
+
+
+def test_a_runtime_directory_under_a_parent_others_can_write_is_refused(planted, shared_tmp, monkeypatch):
+    monkeypatch.delenv("XDG_RUNTIME_DIR", raising=False)
+    open_parent = shared_tmp / "open"
+    open_parent.mkdir()
+    os.chmod(open_parent, 0o777)  # writable by all, not sticky: anyone may rename what is in it
+    monkeypatch.setenv(context.ENV_RUNTIME_DIR, str(open_parent / "emos"))
+    with pytest.raises(RuntimeDirError, match=r"its parent .*open is writable by other users \(mode 0o777\) without the sticky bit"):
+        context.runtime_root()
+    os.chmod(open_parent, 0o1777)  # sticky, as /tmp: only the owner of an entry may rename it
+    assert context.runtime_root() == open_parent / "emos"
+    # A link of ours to a directory another user owns is judged by where it leads.
+    link = shared_tmp / "link"
+    link.symlink_to(planted.plant_dir(shared_tmp / "their-dir"))
+    monkeypatch.setenv(context.ENV_RUNTIME_DIR, str(link / "emos"))
+    with pytest.raises(RuntimeDirError, match=f"their-dir is owned by uid {planted.uid}"):
+        context.runtime_root()
 
 
 STATUS_RECIPE = """
