@@ -61,6 +61,15 @@ def now() -> float:
     return t if t is not None else time.time()
 
 
+def release_driven_time() -> None:
+    """Forget the simulated time a ``SimTimeDriver`` of this process set: ``now()`` reads the
+    wall clock (or a simulator of the run) again. For a process that drove a node on a clock of
+    its own and goes on without it (``emos.testing``)."""
+    global _driven_time
+    with _state_lock:
+        _driven_time = None
+
+
 def sim_time() -> float | None:
     """Simulated time if this process follows a simulator's clock, else None."""
     if _driven_time is not None:

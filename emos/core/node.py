@@ -121,6 +121,7 @@ class Node:
         self._last_status_ns = 0
         self._status_revision = -1  # the health status revision last published (see _run_step)
         self._main_timer: _Timer | None = None
+        self._heartbeat: _Timer | None = None  # started by _main: a node driven by hand has none
         self._timers: list["_Timer | SimTimer"] = []
         self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
         self._extra_servers: list[tuple[str, tuple]] = []
@@ -150,11 +151,9 @@ class Node:
         if install_signal_handlers:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self._on_signal, sig)
-        self.component._node = self
-        # A best-effort component (the Monitor, the web UI) is woken after the robot's own readers.
-        self._waker = Waker(self.ctx, spin_us=self.wake_spin_us, background=bool(getattr(self.component, "_wake_background", False)))
+        self.open_local()
+        assert self._waker is not None
         loop.add_reader(self._waker.fd, self._on_wake)
-        self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
         self._control = RpcServer(control_socket(self.ctx, self.name), self._control_ops(), name=self.name, max_frame=CONTROL_FRAME)
         await self._control.start()
         self._heartbeat = _Timer(loop, 1.0 / self.component.config.heartbeat_rate, self._heartbeat_tick)
@@ -164,6 +163,27 @@ class Node:
             await self._stop.wait()
         finally:
             await self._teardown()
+
+    def open_local(self) -> None:
+        """What a node needs before its first transition and that involves no supervisor: its
+        wake-up FIFO and its status topic. ``_main`` and the test harness (``emos.testing``,
+        which drives the node by hand on its own clock) both start here."""
+        self.component._node = self
+        # A best-effort component (the Monitor, the web UI) is woken after the robot's own readers.
+        self._waker = Waker(self.ctx, spin_us=self.wake_spin_us, background=bool(getattr(self.component, "_wake_background", False)))
+        self._status_pub = Publisher(self.ctx, self.component.status_topic.name, ComponentStatus, publisher_id=self.name, depth=16)
+
+    def close_local(self) -> None:
+        """Undo ``open_local`` (after the node is finalized)."""
+        if self._waker is not None:
+            if self.loop is not None and not self.loop.is_closed():
+                self.loop.remove_reader(self._waker.fd)
+            self._waker.close()
+            self._waker = None
+        if self._status_pub is not None:
+            self._status_pub.close()
+            self._status_pub = None
+        self.component._node = None
 
     async def _hello(self) -> None:
         """Tell the supervisor we are up; it then drives our lifecycle through the control socket."""
@@ -189,7 +209,8 @@ class Node:
             self.loop.call_soon_threadsafe(lambda: asyncio.ensure_future(self._graceful_exit(code)))
 
     async def _teardown(self) -> None:
-        self._heartbeat.cancel()
+        if self._heartbeat is not None:
+            self._heartbeat.cancel()
         if self.state != L.LifecycleState.FINALIZED:
             await self.transition(L.Transition.SHUTDOWN)
         self.publish_status()
@@ -197,12 +218,7 @@ class Node:
             await self._supervisor.close()
         if self._control is not None:
             await self._control.close()
-        if self.loop is not None and self._waker is not None:
-            self.loop.remove_reader(self._waker.fd)
-            self._waker.close()
-        if self._status_pub is not None:
-            self._status_pub.close()
-        self.component._node = None
+        self.close_local()
 
     # ============================================================================ lifecycle
     async def transition(self, transition: L.Transition | str) -> L.LifecycleState:
@@ -565,7 +581,8 @@ class Node:
         """Re-arm the main timer and heartbeat after a rate parameter changed."""
         if self._main_timer is not None and self.loop is not None:
             self._main_timer.period = 1.0 / self.component.config.loop_rate
-        self._heartbeat.period = 1.0 / self.component.config.heartbeat_rate
+        if self._heartbeat is not None:
+            self._heartbeat.period = 1.0 / self.component.config.heartbeat_rate
 
     # ============================================================================ control socket
     def _control_ops(self) -> dict[str, Callable]:

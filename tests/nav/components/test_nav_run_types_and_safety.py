@@ -338,14 +338,13 @@ launcher.bringup()
     try:
         worker.start()
         wait_until(lambda: any(c.linear.x > 0.15 for c in cmd.take()), 10, what="driving")
+        # Through the control socket, as an event's Action reaches it. How long the hold lasts
+        # is tested on robot time in tests/testing/test_harness.py: here the wall clock is the
+        # robot's, and a loaded machine stretches every sleep.
         assert client.call("execute_method", method="stop") is True
-        t0 = time.monotonic()
         cmd.take()
-        time.sleep(0.7)
-        held = cmd.take()
-        assert held and all(c.linear.x == 0.0 for c in held)  # commands kept coming, the robot stood
-        wait_until(lambda: any(c.linear.x > 0.1 for c in cmd.take()), 5, what="driving again after the hold")
-        assert time.monotonic() - t0 >= 0.9
+        wait_until(lambda: any(c.linear.x == 0.0 for c in cmd.take()), 10, what="a stop command")
+        wait_until(lambda: any(c.linear.x > 0.1 for c in cmd.take()), 30, what="driving again after the hold")
     finally:
         done.set()
         worker.join(2)
