@@ -75,6 +75,8 @@ class OMPLConfig:
     - ``occupied_threshold``: cells with value >= this are obstacles.
     - ``unknown_is_occupied``: plan only through known free space (and inside the map).
     - ``simplify``: run OMPL's simplifier on the raw solution.
+    - ``first_solution``: stop at the first exact solution; optimizing planners otherwise use
+      the whole ``planning_timeout`` to shorten it.
     """
 
     log_level: str = attrs.field(default="WARN", validator=_log_level)
@@ -88,6 +90,7 @@ class OMPLConfig:
     occupied_threshold: int = attrs.field(default=65, validator=_threshold)
     unknown_is_occupied: bool = attrs.field(default=True, converter=bool)
     simplify: bool = attrs.field(default=True, converter=bool)
+    first_solution: bool = attrs.field(default=False, converter=bool)
 
     @planner_params.validator
     def _check_params(self, attribute: attrs.Attribute, value: dict[str, Any]) -> None:

@@ -222,6 +222,10 @@ class OMPLGeometricPlanner:
         goal_states.setThreshold(cfg.goal_tolerance)
         pdef.setGoal(goal_states)
         objective = ob.PathLengthOptimizationObjective(si)
+        if cfg.first_solution:
+            # Every path satisfies an infinite cost threshold, so an optimizing planner (RRT*,
+            # PRM, BIT*...) stops at its first solution instead of refining it until the timeout.
+            objective.setCostThreshold(ob.Cost(math.inf))
         pdef.setOptimizationObjective(objective)
 
         # A goal in plain sight: the straight SE2 motion is the shortest path, so no search is
@@ -239,6 +243,10 @@ class OMPLGeometricPlanner:
         # A C++-side timed condition: cancel() can end it from another thread without any
         # Python call per planner iteration.
         ptc = ob.timedPlannerTerminationCondition(budget)
+        if cfg.first_solution:
+            # Planners that ignore the cost threshold (AORRTC) stop when the problem holds an
+            # exact solution.
+            ptc = ob.plannerOrTerminationCondition(ptc, ob.exactSolnPlannerTerminationCondition(pdef))
         with self._ptc_lock:
             self._ptc, self._cancelled = ptc, False
         try:
