@@ -42,15 +42,19 @@ def _line(out: str, pattern: str, after: int = 0) -> int:
     return m.start() if m else -1
 
 
+# The waits below are for events in the order the ladders promise; their timeouts only bound a
+# hang, and are long because a busy machine runs the simulated house slower than real time
+# (90 s for the controller's whole ladder failed once with the cores kept busy).
+@pytest.mark.timeout(1200)
 def test_fallback_recipes_model_server_loss_and_navigation_ladders(tmp_path, backup_server):
     primary = start_server(script=RESPONDER)
     system = _run(tmp_path, "fallback_recipes.py",
                   {"EMOS_MODELS_PORT": str(backup_server.port), "EMOS_PRIMARY_PORT": str(primary.port)})
     try:
-        system.wait_up(components=["sim", "route", "user", "brain", "controller", "drive_manager"], timeout=90)
+        system.wait_up(components=["sim", "route", "user", "brain", "controller", "drive_manager"], timeout=240)
         out = system.output
         # 1. The primary (RoboML) answers while it runs.
-        wait_until(lambda: "[user] the brain answered" in out(), 60, interval=0.2, what="an answer from the primary")
+        wait_until(lambda: "[user] the brain answered" in out(), 240, interval=0.2, what="an answer from the primary")
         assert "model client is now" not in out()
         # 2. The primary server dies: the brain's ladder swaps to the backup and answers go on.
         primary.stop()
@@ -61,14 +65,14 @@ def test_fallback_recipes_model_server_loss_and_navigation_ladders(tmp_path, bac
             swap = _line(text, r"model client is now 'local_backup_client'", killed)
             return swap > 0 and _line(text, r"\[user\] the brain answered", swap) > 0
 
-        wait_until(answered_after_swap, 60, interval=0.2, what="an answer after the swap to the backup")
+        wait_until(answered_after_swap, 240, interval=0.2, what="an answer after the swap to the backup")
         text = out()
         assert _line(text, r"\[brain\] fallback handler=on_(component|algorithm)_fail action=brain\.change_model_client\(\)", killed) > 0, text[killed:][-3000:]
         # 3. The controller's ladder, in order: DWA stalls at the closed door -> restart ->
         #    DWA stalls again -> switch to PurePursuit (in the running controller) -> it stalls
         #    too -> ladder spent.
         gave_up = r"\[controller\] gave_up handler=on_algorithm_fail"
-        wait_until(lambda: _line(out(), gave_up) > 0, 90, interval=0.2, what="the controller's ladder spent")
+        wait_until(lambda: _line(out(), gave_up) > 0, 480, interval=0.2, what="the controller's ladder spent")
         text = out()
         steps = [r"\[controller\] DWA: no progress",
                  r"\[controller\] fallback handler=on_algorithm_fail action=restart\(controller\) step=1",
