@@ -31,6 +31,7 @@ from emos.msgs.std import Header, Time
 from emos.msgs.sensor import LaserScan
 
 from ..controllers import ControllersID, ControlResult, ControlStatus
+from ..controllers.follower import PathFollower
 from ..controllers.registry import CONTROLLERS, make_controller
 from ..kinematics import integrate
 from .base import NavComponent, NavComponentConfig, rate_field
@@ -325,9 +326,9 @@ class Controller(VisionTracking, NavComponent):
             out = self.get_out_topic("interpolation")
             if out is not None:
                 self.publish(out, path_msg(follower.path.poses()[:: max(1, len(follower.path) // 500)], self.config.frames.world))
-        follower.sensor_pose = (0.0, 0.0, 0.0) if key == "local_map" else tuple(getattr(follower, "scan_pose", (0.0, 0.0, 0.0)))
+        follower.sensor_pose = (0.0, 0.0, 0.0) if key == "local_map" else tuple(follower.scan_pose)
         extra = {}
-        if key == "local_map" and getattr(follower, "tracks_movers", False):
+        if key == "local_map" and follower.tracks_movers:
             # A grid has no beam order: the algorithm tracks moving obstacles in the scan.
             try:
                 extra["scan"] = self._movers_scan()
@@ -340,15 +341,15 @@ class Controller(VisionTracking, NavComponent):
         self._report_step(result, pose, follower)
         return result
 
-    def _report_step(self, result: ControlResult, pose: np.ndarray, follower: Any) -> None:
+    def _report_step(self, result: ControlResult, pose: np.ndarray, follower: PathFollower) -> None:
         """Health after one step: failures (after ``failure_tolerance``), stalls (the progress
         checker), else healthy."""
         now = clock.now()
         failing = result.status in _FAILURES
         self._failing_since = (self._failing_since if self._failing_since is not None else now) if failing else None
-        progress = getattr(follower, "progress", None)
+        progress = follower.progress
         # Standing aside or slowing for a moving obstacle nearby is waiting, not a stall.
-        waiting = bool(getattr(follower, "waiting", False))
+        waiting = follower.waiting
         if self._progress is not None and (progress is None or result.status is ControlStatus.GOAL_REACHED or waiting):
             self._progress.reset()
         elif self._progress is not None and self._progress.update(now, float(progress.remaining)):

@@ -104,7 +104,7 @@ class VisionTracking:
         except BadInput as exc:
             self.fail_input("depth_camera_info", str(exc))  # type: ignore[attr-defined]
             return TrackVisionTargetResult(success=False, message=str(exc))
-        if goal.search_timeout > 0 and hasattr(follower, "search"):
+        if goal.search_timeout > 0:  # both vision followers search for a lost target
             follower.search.timeout = float(goal.search_timeout)
         period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
         # A new goal preempts the one being followed (as a ROS action server does): an event

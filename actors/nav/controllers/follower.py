@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -16,9 +17,21 @@ __all__ = ["PathFollower"]
 
 
 class PathFollower:
-    """Holds the reference path and the robot; subclasses implement :meth:`compute`."""
+    """What the Controller component asks of a path-following algorithm, as Nav2's
+    ``nav2_core::Controller`` is for its controller server: ``set_path`` then ``compute`` once per
+    control step. It holds the reference path and the robot; subclasses implement ``compute``.
+
+    Capabilities are declared here, with the defaults of a plain follower, and read directly by
+    the component (never probed): a subclass that has one overrides the attribute.
+    """
 
     config: FollowerConfig
+    #: Where a ``scan`` given to ``compute`` is mounted on the robot (x, y, yaw).
+    scan_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: ``compute`` takes the laser ``scan`` as well, to track moving obstacles in it.
+    tracks_movers: bool = False
+    #: The last step stood aside or slowed for a moving obstacle: waiting, not stalled.
+    waiting: bool = False
 
     def __init__(self, robot: RobotConfig, config: FollowerConfig) -> None:
         if not isinstance(robot, RobotConfig):
@@ -38,6 +51,11 @@ class PathFollower:
         # rejoining the path further on), but never to a far branch of a U-turn or loop.
         reach = max(1.0, 4.0 * self.robot.ctrl_vx_limits.max_vel)
         self.progress = PathProgress(self.path, search_ahead=reach)
+
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None, **inputs: Any) -> ControlResult:
+        """One control step from the robot's ``pose`` (world) and body ``velocity``, with the
+        obstacles of this step (robot frame, mounted at ``sensor_pose``)."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement compute")
 
     def goal_reached(self, pose: np.ndarray) -> bool:
         return self.progress is not None and self.progress.goal_reached(pose, self.config.goal_dist_tolerance)
