@@ -206,8 +206,10 @@ class Launcher:
     def enable_ui(self, inputs: Sequence[Any] | None = None, outputs: Sequence[Any] | None = None,
                   port: int = 5001, host: str = "127.0.0.1", **settings: Any) -> None:
         """Serve a web page for this recipe: ``outputs`` are shown, ``inputs`` can be sent from it.
-        Local-only by default; any other ``host`` requires the access token printed at start-up
-        (``$EMOS_UI_TOKEN``, or a fresh one). Further ``UIConfig`` fields may be given by name."""
+        Every request needs the access token, loopback included: ``token=...``, ``$EMOS_UI_TOKEN``,
+        or a fresh random one. It is printed once at start-up as the link
+        ``http://127.0.0.1:5001/?token=...`` and kept in ``<run dir>/ui.token`` (mode 0600) while
+        the UI runs; it cannot be switched off. Further ``UIConfig`` fields may be given by name."""
         from emos.actors.ui.launch import check_ui_request
 
         self._ui = check_ui_request(inputs, outputs, port, host, settings)

@@ -1,6 +1,6 @@
 """A recipe with a web page: a camera, a map with the robot and its plan, a chat and a battery.
 
-    emos run ui_demo            # then open http://127.0.0.1:5001
+    emos run ui_demo            # then open the link it prints (http://127.0.0.1:5001/?token=...)
     emos run ui_demo -- --port 5002
 
 Everything here is synthetic so that it runs on any machine: the camera draws a moving pattern,

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from emos.actors.ui.auth import new_token
 from emos.supervisor.bench.common import percentiles, table
 
 SYSTEM = Path(__file__).with_name("bench_system.py")
@@ -112,7 +113,9 @@ def measure(duration: float, rounds: int, browser_nice: int) -> dict[str, Any]:
 
     tmp = Path(tempfile.mkdtemp(prefix="emos-bench-ui-"))
     out, port = tmp / "probe.json", _free_port()
-    env = dict(os.environ, EMOS_BENCH_UI_PORT=str(port), EMOS_BENCH_UI_OUT=str(out), EMOS_HOME=str(tmp / "home"))
+    # The page needs the access token: give the system ours (its output is not read).
+    token = new_token()
+    env = dict(os.environ, EMOS_BENCH_UI_PORT=str(port), EMOS_BENCH_UI_OUT=str(out), EMOS_HOME=str(tmp / "home"), EMOS_UI_TOKEN=token)
     proc = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "run", "--no-log", str(SYSTEM)], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     driver = profile = None
@@ -132,7 +135,7 @@ def measure(duration: float, rounds: int, browser_nice: int) -> dict[str, Any]:
             time.sleep(duration)
             off_windows.append((t0, time.time()))
             _progress(f"round {r + 1}/{rounds}: page open, {duration:g} s")
-            driver.get(f"http://127.0.0.1:{port}/")
+            driver.get(f"http://127.0.0.1:{port}/?token={token}")  # the server moves it into a cookie
             time.sleep(2.0)  # connect and first frames, not measured
             if browser_nice:
                 _renice_browser(driver, browser_nice)  # renderers started for the page

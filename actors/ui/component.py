@@ -36,6 +36,12 @@ class UIComponent(BaseComponent):
         config = config or UIConfig()
         if not isinstance(config, UIConfig):
             raise TypeError(f"UIComponent config must be a UIConfig, got {type(config).__name__}")
+        if not config.token:
+            # Made here, in the launcher's process, so that a restarted UI process keeps it and
+            # open pages (their cookie) stay signed in.
+            from emos.actors.ui.auth import new_token
+
+            config.token = new_token()
         shown, controls = list(ui_outputs), list(ui_inputs)
         both = sorted({t.name for t in shown} & {t.name for t in controls})
         if both:
@@ -60,6 +66,7 @@ class UIComponent(BaseComponent):
         from emos.actors.ui.streams import make_hub
         from emos.core.node import control_socket
         from emos.core.services import service_socket
+        from emos.transport.context import encode_name
 
         node = self.node
         lower_priority(self.config.nice, self.component_name)  # best effort: the robot's components run first
@@ -74,6 +81,7 @@ class UIComponent(BaseComponent):
             publish=self.publish, control_socket=lambda name: Path(control_socket(node.ctx, name)),
             supervisor_socket=node.supervisor_socket, own_name=self.component_name,
             actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)),
+            token_file=Path(node.ctx.run_dir) / f"{encode_name(self.component_name)}.token",
         )
         self._listening = False
 
@@ -109,7 +117,9 @@ class UIComponent(BaseComponent):
             return
         self._listening = True
         self.health_status.set_healthy()
-        self.get_logger().info("[%s] page at %s", self.component_name, page_url(self.config))
+        # The link with the token was printed once at bringup; logs (and restarts) get the file.
+        self.get_logger().info("[%s] page at %s (access token in %s)", self.component_name, page_url(self.config, with_token=False),
+                               server.token_file)
 
     def custom_on_shutdown(self) -> None:
         self._stop_server()
@@ -142,7 +152,10 @@ class UIComponent(BaseComponent):
             self.health_status.set_healthy()
 
 
-def page_url(config: UIConfig) -> str:
+def page_url(config: UIConfig, with_token: bool = True) -> str:
+    """The page's address; ``with_token``: the link that signs the browser in (print it once)."""
+    from urllib.parse import quote
+
     host = config.host if config.host not in ("0.0.0.0", "::") else "<this machine's address>"
     host = f"[{host}]" if ":" in host and not host.startswith("<") else host
-    return f"http://{host}:{config.port}/" + (f"?token={config.token}" if config.token else "")
+    return f"http://{host}:{config.port}/" + (f"?token={quote(config.token, safe='')}" if with_token and config.token else "")

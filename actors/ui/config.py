@@ -34,10 +34,12 @@ class UIConfig(BaseComponentConfig):
     """TCP port of the page."""
 
     host: str = field(default="127.0.0.1", validator=_check_host)
-    """Address to listen on. Anything but a loopback address requires the access token."""
+    """Address to listen on (loopback by default; the access token is required on every address)."""
 
-    token: str = field(default="")
-    """Access token; set by ``enable_ui`` when ``host`` is not a loopback address."""
+    token: str = field(default="", repr=False)  # a secret: kept out of reprs and log lines
+    """Access token every request must carry, loopback included. Empty means "make one":
+    ``enable_ui`` (or ``$EMOS_UI_TOKEN``) and ``UIComponent`` set a fresh random token; there is
+    no way to switch it off."""
 
     jpeg_quality: int = field(default=80, validator=base_validators.in_range(min_value=10, max_value=100))
     """JPEG quality of camera streams (10-100)."""

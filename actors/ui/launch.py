@@ -8,7 +8,7 @@ from typing import Any, Sequence
 import attrs
 
 from emos.actors.ui.auth import new_token
-from emos.actors.ui.config import UIConfig, is_loopback
+from emos.actors.ui.config import UIConfig
 from emos.core.action_input import ActionInput
 from emos.io.topic import Topic
 
@@ -32,14 +32,18 @@ def _topics(role: str, items: Sequence[Any] | None, actions_allowed: bool = Fals
 
 def check_ui_request(inputs: Sequence[Any] | None, outputs: Sequence[Any] | None, port: int, host: str,
                      settings: dict[str, Any]) -> dict[str, Any]:
-    known = {f.name for f in attrs.fields(UIConfig)} - {"port", "host", "token"}
+    known = {f.name for f in attrs.fields(UIConfig)} - {"port", "host"}
     unknown = sorted(set(settings) - known)
     if unknown:
         raise TypeError(f"enable_ui: unexpected argument(s) {', '.join(unknown)}; UI settings are {', '.join(sorted(known))}")
-    token = ""
-    if not is_loopback(str(host)):
-        token = os.environ.get(ENV_TOKEN) or new_token()
-    config = UIConfig(port=port, host=host, token=token, **settings)  # validated here, at definition
+    settings = dict(settings)
+    # The page can stop components and publish goals, and a loopback port is open to every
+    # local user: the token is required on every address and cannot be switched off.
+    if "token" in settings and (not isinstance(settings["token"], str) or not settings["token"]):
+        raise ValueError(f"enable_ui(token={settings['token']!r}): the UI always requires an access token; leave token out "
+                         f"to get a fresh random one (or set ${ENV_TOKEN}), or give a non-empty string")
+    settings["token"] = settings.get("token") or os.environ.get(ENV_TOKEN) or new_token()
+    config = UIConfig(port=port, host=host, **settings)  # validated here, at definition
     ui_in, ui_out = _topics("inputs", inputs, actions_allowed=True), _topics("outputs", outputs)
     if not ui_in and not ui_out:
         raise ValueError("enable_ui: give the topics to show (outputs=[...]) and/or to send (inputs=[...])")
@@ -61,4 +65,6 @@ def add_ui(launcher: Any, request: dict[str, Any]) -> None:
     ui = UIComponent(ui_inputs=topics, ui_outputs=request["outputs"], ui_actions=actions, components=components, config=config,
                      component_name=UI_NAME)
     launcher.add_pkg(components=[ui], package_name="ui", multiprocessing=True)
+    # Printed once, here: this link signs the browser in. The UI's own log line (and every
+    # restart's) names the token file instead of repeating the token.
     print(f"EMOS UI: {page_url(config)}", flush=True)

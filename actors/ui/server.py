@@ -15,7 +15,8 @@ from aiohttp import WSMsgType, web
 
 from emos.actors.ui import settings as settings_mod
 from emos.actors.ui.actions import ActionRunner
-from emos.actors.ui.auth import SECURITY_HEADERS, make_middleware
+from emos.actors.ui.auth import CSRF_KEY, SECURITY_HEADERS, make_middleware
+from emos.actors.ui.tokenfile import TokenFileRefused, remove_token_file, write_token_file
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
 from emos.actors.ui.streams import Client, Hub, serve_client
@@ -25,6 +26,7 @@ from emos.msgs.registry import resolve
 
 log = logging.getLogger("emos.ui")
 
+CSRF_PLACEHOLDER = b"__EMOS_CSRF__"  # in index.html; replaced by the session's CSRF token
 STATIC = {"app.js": "application/javascript", "media.js": "application/javascript", "panels.js": "application/javascript", "app.css": "text/css", "index.html": "text/html", "favicon.svg": "image/svg+xml"}
 
 
@@ -50,8 +52,11 @@ def bind_socket(host: str, port: int) -> socket.socket:
 class UIServer:
     def __init__(self, config: UIConfig, hubs: list[Hub], inputs: dict[str, str], components: dict[str, Any],
                  publish: Callable[[str, Any], None], control_socket: Callable[[str], Path], supervisor_socket: str | None,
-                 own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None):
+                 own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None,
+                 token_file: Path | None = None):
+        """``token_file``: where the access token is kept (mode 0600) while the UI listens."""
         self.config, self.hubs, self.inputs = config, hubs, inputs
+        self.token_file = token_file
         self.components = components  # name -> config object (its class drives the form)
         self.publish, self.control_socket, self.own_name = publish, control_socket, own_name
         self.system = SystemView(supervisor_socket, control_socket, own_name)
@@ -71,19 +76,29 @@ class UIServer:
             self._sock = bind_socket(self.config.host, self.config.port)
 
     async def start(self) -> None:
-        app = web.Application(middlewares=[make_middleware(self.config.host, self.config.token)], client_max_size=32 * 2**20)
+        guard = make_middleware(self.config.host, self.config.token, self.config.port, self.token_file)
+        app = web.Application(middlewares=[guard], client_max_size=32 * 2**20)
         app.on_response_prepare.append(self._headers)
         app.add_routes([
             web.get("/", self._index), web.get("/static/{name}", self._static), web.get("/api/layout", self._layout),
             web.get("/ws", self._ws), web.post("/api/upload/{topic:.+}", self._upload),
             web.get("/api/settings", self._settings), web.post("/api/settings/{component}", self._apply_settings),
             web.get("/api/system", self._system), web.post("/api/system/{component}/{action}", self._system_action),
-            web.get("/api/stats", self._stats),
+            web.get("/api/stats", self._stats), web.get("/api/session", self._session),
         ])
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         assert self._sock is not None
         await web.SockSite(self._runner, self._sock, shutdown_timeout=1.0).start()
+        self._write_token_file()
+
+    def _write_token_file(self) -> None:
+        if self.token_file is None:
+            return
+        try:
+            write_token_file(self.token_file, self.config.token)
+        except (TokenFileRefused, OSError) as exc:  # the printed link still works: serve anyway
+            log.error("[ui] port %d: %s", self.config.port, exc)
 
     def close_listener(self) -> None:
         """Synchronous part of stopping: free the port at once."""
@@ -93,6 +108,10 @@ class UIServer:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+        if self.token_file is not None:
+            left = remove_token_file(self.token_file)
+            if left is not None:
+                log.warning("[ui] port %d: token file %s left in place: it %s", self.config.port, self.token_file, left)
 
     async def stop(self) -> None:
         self.close_listener()
@@ -108,7 +127,13 @@ class UIServer:
 
     # ------------------------------------------------------------------ pages
     async def _index(self, request: web.Request) -> web.Response:
-        return web.Response(body=self._assets["index.html"], content_type="text/html")
+        # The session's CSRF token, readable only by script of this origin (see auth.py).
+        page = self._assets["index.html"].replace(CSRF_PLACEHOLDER, request[CSRF_KEY].encode())
+        return web.Response(body=page, content_type="text/html")
+
+    async def _session(self, request: web.Request) -> web.Response:
+        """For scripts: the CSRF token of this session (the session cookie comes with it)."""
+        return web.json_response({"csrf": request[CSRF_KEY]})
 
     async def _static(self, request: web.Request) -> web.Response:
         name = request.match_info["name"]

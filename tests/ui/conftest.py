@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import socket
@@ -10,6 +11,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
+from urllib.parse import parse_qs, urlsplit
 
 import pytest
 
@@ -43,6 +46,38 @@ def wait_http(port: int, timeout: float = 60.0, proc: subprocess.Popen | None = 
     raise TimeoutError(f"nothing listens on port {port} after {timeout} s")
 
 
+LINK_RE = re.compile(r"EMOS UI: (http://\S+)")
+
+
+def wait_link(log_path: Path, proc: subprocess.Popen, timeout: float = 60.0) -> str:
+    """The sign-in link the launcher prints once at bringup (``EMOS UI: http://...?token=...``)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        m = LINK_RE.search(log_path.read_text()) if log_path.exists() else None
+        if m:
+            return m.group(1)
+        if proc.poll() is not None:
+            raise RuntimeError(f"the recipe exited with code {proc.returncode}: {log_path.read_text()[-3000:]}")
+        time.sleep(0.2)
+    raise TimeoutError(f"no 'EMOS UI: <link>' line in {log_path} after {timeout} s")
+
+
+def token_of(link: str) -> str:
+    return parse_qs(urlsplit(link).query).get("token", [""])[0]
+
+
+class UISystem(NamedTuple):
+    port: int
+    out: Path
+    proc: subprocess.Popen
+    link: str  # http://127.0.0.1:<port>/?token=...
+    log: Path
+
+    @property
+    def token(self) -> str:
+        return token_of(self.link)
+
+
 def start_recipe(recipe: Path, env_extra: dict[str, str], log_path: Path) -> subprocess.Popen:
     env = dict(os.environ, **env_extra)
     log = open(log_path, "w")
@@ -60,18 +95,24 @@ def stop_recipe(proc: subprocess.Popen) -> None:
             proc.wait(5)
 
 
-@pytest.fixture(scope="module")
-def ui_system(tmp_path_factory):
-    """The test recipe running under `emos run`: (port, recorder output file, process)."""
-    tmp = tmp_path_factory.mktemp("ui")
+def run_system(tmp: Path, recipe: str):
+    """Run a test recipe under `emos run` and yield its :class:`UISystem` (stopped afterwards)."""
     port, out = free_port(), tmp / "received.jsonl"
-    proc = start_recipe(HERE / "ui_recipe.py", {"EMOS_UI_TEST_PORT": str(port), "EMOS_UI_TEST_OUT": str(out), "EMOS_HOME": str(tmp / "home")}, tmp / "recipe.log")
+    env = {"EMOS_UI_TEST_PORT": str(port), "EMOS_UI_TEST_OUT": str(out), "EMOS_HOME": str(tmp / "home")}
+    proc = start_recipe(HERE / recipe, env, tmp / "recipe.log")
     try:
+        link = wait_link(tmp / "recipe.log", proc)
         wait_http(port, proc=proc)
-        yield port, out, proc
+        yield UISystem(port, out, proc, link, tmp / "recipe.log")
     finally:
         stop_recipe(proc)
         print((tmp / "recipe.log").read_text()[-3000:])
+
+
+@pytest.fixture(scope="module")
+def ui_system(tmp_path_factory):
+    """The test recipe (camera, map, recorder, navigator) running under `emos run`."""
+    yield from run_system(tmp_path_factory.mktemp("ui"), "ui_recipe.py")
 
 
 @pytest.fixture(scope="module")

@@ -47,9 +47,15 @@ def run_dir_of(driver) -> Path:
 
 
 def test_page_loads_offline_and_shows_the_camera(ui_system, browser):
-    port, _, _ = ui_system
+    port = ui_system.port
     browser.get_log("performance")  # drop what the browser did before our page
+    # The link printed at start-up, as a user opens it: the token moves into a cookie and out
+    # of the address bar; without it (a fresh browser) the page is refused.
     browser.get(f"http://127.0.0.1:{port}/")
+    assert "access token required" in browser.page_source
+    browser.get_log("browser")  # the refusal's console errors are not the page's
+    browser.get(ui_system.link)
+    assert browser.current_url == f"http://127.0.0.1:{port}/"
     wait_for(lambda: stats(browser)["frames"].get("/camera", 0) >= 5, what="camera frames on the page")
     # The picture on the canvas is the published one (red), not an empty canvas.
     pixel = browser.execute_script("""
@@ -69,7 +75,9 @@ def test_page_loads_offline_and_shows_the_camera(ui_system, browser):
     networked = [u for u in urls if u.split(":", 1)[0] in ("http", "https", "ws", "wss", "ftp")]
     outside = [u for u in networked if not u.startswith((f"http://127.0.0.1:{port}/", f"ws://127.0.0.1:{port}/"))]
     assert not outside, outside
-    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    # (Chrome asks for /favicon.ico on the refusal page above, maybe after the drain: our page
+    # links /static/favicon.svg, so that 401 is the refusal's, not the page's.)
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE" and "/favicon.ico" not in e["message"]]
     assert not severe, severe
     wait_for(lambda: browser.execute_script("return document.querySelector('#map-canvas') !== null"), what="map view")
     time.sleep(1.0)  # let the map and odometry draw before the picture
@@ -80,7 +88,7 @@ def test_text_typed_reaches_its_topic_and_the_answer_is_shown(ui_system, browser
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
 
-    _, out, _ = ui_system
+    out = ui_system.out
     box = browser.find_element(By.CSS_SELECTOR, "textarea[data-topic='/question']")
     box.send_keys("where is the kitchen?")
     box.send_keys(Keys.ENTER)
@@ -96,7 +104,7 @@ def test_text_typed_reaches_its_topic_and_the_answer_is_shown(ui_system, browser
 def test_bool_buttons_publish(ui_system, browser):
     from selenium.webdriver.common.by import By
 
-    _, out, _ = ui_system
+    out = ui_system.out
     browser.find_element(By.CSS_SELECTOR, "[data-input='/estop'] button[data-value='true']").click()
     assert wait_for(lambda: received(out, "/estop") == [True], what="True on /estop")
 
@@ -105,7 +113,7 @@ def test_microphone_recording_reaches_the_audio_topic(ui_system, browser):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
-    _, out, _ = ui_system
+    out = ui_system.out
     button = browser.find_element(By.CSS_SELECTOR, "button[data-record='/voice']")
     ActionChains(browser).click_and_hold(button).pause(1.0).release().perform()
     sizes = wait_for(lambda: received(out, "/voice"), what="a recording on /voice")
@@ -116,7 +124,7 @@ def test_click_on_the_map_publishes_a_goal_at_that_point(ui_system, browser):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
-    _, out, _ = ui_system
+    out = ui_system.out
     canvas = browser.find_element(By.ID, "map-canvas")
     wait_for(lambda: stats(browser)["frames"].get("/map", 0) >= 1, what="the map on the page")
     # Where world point (3.0, 5.0) is on screen, computed here from the map's geometry (the
@@ -142,7 +150,7 @@ def test_click_on_the_map_publishes_a_goal_at_that_point(ui_system, browser):
 def test_action_goal_from_the_page_shows_feedback_and_result(ui_system, browser):
     from selenium.webdriver.common.by import By
 
-    _, out, _ = ui_system
+    out = ui_system.out
     card = browser.find_element(By.CSS_SELECTOR, "[data-input='navigator/action']")
     x, y = card.find_elements(By.CSS_SELECTOR, "input[type=number]")
     x.send_keys("1.25")
@@ -155,10 +163,11 @@ def test_action_goal_from_the_page_shows_feedback_and_result(ui_system, browser)
 
 
 def test_wrong_input_type_is_refused_with_a_message(ui_system, browser):
-    _, out, _ = ui_system
+    out = ui_system.out
     result = browser.execute_async_script("""
         const done = arguments[0];
-        const ws = new WebSocket('ws://' + location.host + '/ws');
+        const csrf = document.querySelector('meta[name="emos-csrf"]').content;
+        const ws = new WebSocket('ws://' + location.host + '/ws?csrf=' + encodeURIComponent(csrf));
         ws.onopen = () => ws.send(JSON.stringify({op: 'publish', id: 7, topic: '/estop', value: 'yes'}));
         ws.onmessage = ev => { if (typeof ev.data === 'string') { const m = JSON.parse(ev.data); if (m.op === 'result') { ws.close(); done(m); } } };""")
     assert result["ok"] is False and "/estop" in result["error"] and "true or false" in result["error"]
@@ -223,7 +232,7 @@ def test_system_view_and_the_ui_coming_back_after_a_kill(ui_system, browser):
     # A second tab gets its own stream.
     first = browser.current_window_handle
     browser.switch_to.new_window("tab")
-    browser.get(browser.execute_script("return location.href") if False else f"http://127.0.0.1:{ui_system[0]}/")
+    browser.get(f"http://127.0.0.1:{ui_system.port}/")  # signed in by the cookie, no token in the address
     wait_for(lambda: stats(browser)["frames"].get("/camera", 0) >= 3, what="frames in the second tab")
     browser.close()
     browser.switch_to.window(first)
@@ -237,21 +246,103 @@ def test_system_view_and_the_ui_coming_back_after_a_kill(ui_system, browser):
     wait_for(lambda: stats(browser)["frames"]["/camera"] > before + 3, what="frames after the reconnect")
 
 
+ELSEWHERE = """<!doctype html><title>another page on this machine</title>
+<iframe sandbox="allow-scripts" src="/frame"></iframe>"""
+# Sandboxed (no allow-same-origin): its requests say "Origin: null", as a local HTML file's do.
+FRAME = """<!doctype html><script>
+addEventListener("message", async ev => {
+  const port = ev.data, out = { origin: self.origin };
+  try {
+    await fetch(`http://127.0.0.1:${port}/api/system/camera/stop`, { method: "POST", mode: "no-cors", credentials: "include",
+      headers: { "Content-Type": "text/plain" }, body: "{}" });
+    out.post = "sent";
+  } catch (e) { out.post = String(e); }
+  out.ws = await new Promise(resolve => {
+    const ws = new WebSocket(`ws://127.0.0.1:${port}/ws`);
+    ws.onmessage = () => { resolve("data"); ws.close(); };
+    ws.onclose = () => resolve("refused");
+  });
+  parent.postMessage(out, "*");
+});
+</script>"""
+
+
+def test_pages_of_other_origins_cannot_drive_the_robot_or_watch_it(ui_system, browser):
+    """Issue 31: a page of another origin in the user's browser (here on another port of this
+    machine, so the browser even sends it the UI's SameSite cookie) and a sandboxed frame in it
+    (``Origin: null``) try the study's attack: stop the camera with a text/plain POST (no CORS
+    preflight), and read the robot's streams over the websocket."""
+    import http.server
+    import threading
+
+    class Elsewhere(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            body = (FRAME if self.path == "/frame" else ELSEWHERE).encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Elsewhere)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    first = browser.current_window_handle
+    browser.switch_to.new_window("tab")
+    try:
+        browser.get(f"http://127.0.0.1:{server.server_address[1]}/")
+        result = browser.execute_async_script("""
+            const [port, done] = arguments, ui = `http://127.0.0.1:${port}`, top = {};
+            fetch(ui + "/api/system/camera/stop", { method: "POST", mode: "no-cors", credentials: "include",
+                  headers: { "Content-Type": "text/plain" }, body: "{}" })
+              .then(() => { top.post = "sent"; }, e => { top.post = String(e); })
+              .then(() => new Promise(resolve => {
+                const ws = new WebSocket(`ws://127.0.0.1:${port}/ws`);
+                ws.onmessage = () => { resolve("data"); ws.close(); };
+                ws.onclose = () => resolve("refused");
+              }))
+              .then(ws => {
+                top.ws = ws;
+                addEventListener("message", ev => done({ top, frame: ev.data }));
+                document.querySelector("iframe").contentWindow.postMessage(port, "*");
+              });""", ui_system.port)
+    finally:
+        browser.close()
+        browser.switch_to.window(first)
+        server.shutdown()
+        server.server_close()
+        thread.join(10)
+    assert result["frame"]["origin"] == "null", result  # the frame really was an opaque origin
+    assert result["top"]["ws"] == "refused" and result["frame"]["ws"] == "refused", result
+    with RpcClient(run_dir_of(browser) / "ctl" / "camera.sock", timeout=5.0) as rpc:
+        assert rpc.call("get_state")["state"] == "active"  # the POSTs (sent, the answers opaque) changed nothing
+    # The UI's own page, meanwhile, still streams.
+    before = stats(browser)["frames"]["/camera"]
+    wait_for(lambda: stats(browser)["frames"]["/camera"] > before + 3, what="frames on the UI's own page")
+
+
 def test_a_page_that_never_confirms_gets_no_backlog(ui_system):
     """A stalled page is sent at most ``frames_in_flight`` frames while the camera goes on."""
     import asyncio
 
     import aiohttp
 
-    port = ui_system[0]
+    port = ui_system.port
 
     async def scenario() -> tuple[int, int, int]:
-        async with aiohttp.ClientSession() as session:
+        # A script signs in with the token and the session's CSRF token, as the page does.
+        headers = {"Authorization": f"Bearer {ui_system.token}"}
+        async with aiohttp.ClientSession(headers=headers, cookie_jar=aiohttp.CookieJar(unsafe=True)) as session:
+            async with session.get(f"http://127.0.0.1:{port}/api/session") as r:
+                csrf = (await r.json())["csrf"]
             async def camera_received() -> int:
                 async with session.get(f"http://127.0.0.1:{port}/api/stats") as r:
                     return next(h["received"] for h in (await r.json())["hubs"] if h["topic"] == "/camera")
 
-            async with session.ws_connect(f"http://127.0.0.1:{port}/ws") as ws:
+            async with session.ws_connect(f"http://127.0.0.1:{port}/ws", params={"csrf": csrf}) as ws:
                 before = await camera_received()
                 frames = 0
                 deadline = asyncio.get_running_loop().time() + 2.0
@@ -276,8 +367,8 @@ def test_topic_plot_records_a_field_of_the_running_system(ui_system, tmp_path):
     import sys
     import urllib.request
 
-    port = ui_system[0]
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/system", timeout=10) as r:
+    request = urllib.request.Request(f"http://127.0.0.1:{ui_system.port}/api/system", headers={"Authorization": f"Bearer {ui_system.token}"})
+    with urllib.request.urlopen(request, timeout=10) as r:
         run_id = json.loads(r.read())["run_id"]
     out = tmp_path / "odom.csv"
     cmd = [sys.executable, "-m", "emos.supervisor.cli", "topic", "plot", "--run", run_id, "/odom"]

@@ -11,7 +11,7 @@ import urllib.request
 
 import pytest
 
-from tests.ui.conftest import HERE, free_port, start_recipe, stop_recipe
+from tests.ui.conftest import HERE, free_port, start_recipe, stop_recipe, token_of, wait_link
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -39,6 +39,7 @@ def test_taken_port_is_reported_and_retried_while_the_robot_runs(tmp_path):
             assert proc.poll() is None, log.read_text()
             time.sleep(0.2)
         assert run_id, log.read_text()
+        token = token_of(wait_link(log, proc))  # printed at bringup, before the UI listens
         while time.monotonic() < deadline and _health(run_id).get("ui") != "SYSTEM_FAILURE":
             time.sleep(0.3)
         health = _health(run_id)
@@ -49,7 +50,8 @@ def test_taken_port_is_reported_and_retried_while_the_robot_runs(tmp_path):
         holder.close()
         while time.monotonic() < deadline:
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/layout", timeout=2) as r:
+                request = urllib.request.Request(f"http://127.0.0.1:{port}/api/layout", headers={"Authorization": f"Bearer {token}"})
+                with urllib.request.urlopen(request, timeout=2) as r:
                     assert json.loads(r.read())["outputs"][0]["topic"] == "/words"
                     break
             except OSError:

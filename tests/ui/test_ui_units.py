@@ -14,7 +14,7 @@ from attrs import define, field
 from aiohttp.test_utils import TestClient, TestServer
 
 from emos import BaseComponent, Launcher, Topic
-from emos.actors.ui.auth import COOKIE, make_middleware
+from emos.actors.ui.auth import make_middleware, token_cookie
 from emos.actors.ui.codecs import encode_grid
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
@@ -25,37 +25,43 @@ from emos.config.base import BaseComponentConfig, enum_converter
 from emos.msgs import Image, MapMetaData, OccupancyGrid
 
 
-def _serve(host: str, token: str):
+def _serve(host: str, token: str, port: int = 5001):
     async def hello(request: web.Request) -> web.Response:
         return web.Response(text="hello")
 
-    app = web.Application(middlewares=[make_middleware(host, token)])
+    app = web.Application(middlewares=[make_middleware(host, token, port)])
     app.router.add_get("/", hello)
     return app
 
 
-def test_token_required_off_loopback_and_host_checked_on_loopback():
+def test_token_required_everywhere_and_host_checked_on_loopback():
+    cookie = token_cookie(5001)
+
     async def scenario() -> None:
-        async with TestClient(TestServer(_serve("0.0.0.0", "s3cret"))) as client:
-            assert (await client.get("/")).status == 401
-            assert (await client.get("/?token=wrong")).status == 401
-            r = await client.get("/?token=s3cret", allow_redirects=False)
-            assert r.status == 303 and r.headers["Location"] == "/" and COOKIE in r.cookies  # token out of the address bar
-            assert (await client.get("/")).status == 200  # the cookie carries it from now on
-            client.session.cookie_jar.clear()
-            assert (await client.get("/", headers={"Authorization": "Bearer s3cret"})).status == 200
-            assert (await client.get("/")).status == 401
-        async with TestClient(TestServer(_serve("127.0.0.1", ""))) as client:
-            assert (await client.get("/")).status == 200
-            assert (await client.get("/", headers={"Host": "attacker.example:5001"})).status == 403
-            assert (await client.get("/", headers={"Origin": "http://attacker.example"})).status == 403
+        for host in ("0.0.0.0", "127.0.0.1"):  # loopback too: other local users reach it (issue 31)
+            async with TestClient(TestServer(_serve(host, "s3cret"))) as client:
+                assert (await client.get("/")).status == 401
+                assert (await client.get("/?token=wrong")).status == 401
+                r = await client.get("/?token=s3cret", allow_redirects=False)
+                assert r.status == 303 and r.headers["Location"] == "/" and cookie in r.cookies  # token out of the address bar
+                assert r.cookies[cookie]["httponly"] and r.cookies[cookie]["samesite"] == "Strict"
+                assert (await client.get("/")).status == 200  # the cookie carries it from now on
+                client.session.cookie_jar.clear()
+                assert (await client.get("/", headers={"Authorization": "Bearer s3cret"})).status == 200
+                assert (await client.get("/")).status == 401
+        async with TestClient(TestServer(_serve("127.0.0.1", "s3cret"))) as client:
+            ok = {"Authorization": "Bearer s3cret"}
+            assert (await client.get("/", headers={**ok, "Host": "attacker.example:5001"})).status == 403
+            assert (await client.get("/", headers={**ok, "Origin": "http://attacker.example"})).status == 403
+            assert (await client.get("/", headers={**ok, "Origin": "null"})).status == 403
 
     asyncio.run(scenario())
-    with pytest.raises(ValueError, match="needs an access token"):
-        make_middleware("0.0.0.0", "")
+    for host in ("0.0.0.0", "127.0.0.1"):
+        with pytest.raises(ValueError, match="needs an access token"):
+            make_middleware(host, "", 5001)
 
 
-def test_enable_ui_checks_its_arguments_and_makes_a_token_off_loopback(monkeypatch):
+def test_enable_ui_always_makes_a_token_and_refuses_to_switch_it_off(monkeypatch):
     text = Topic(name="q", msg_type="String")
     launcher = Launcher()
     with pytest.raises(TypeError, match="enable_ui\\(inputs=...\\) takes Topic objects"):
@@ -64,14 +70,30 @@ def test_enable_ui_checks_its_arguments_and_makes_a_token_off_loopback(monkeypat
         launcher.enable_ui(outputs=[text], port=70000)
     with pytest.raises(TypeError, match="unexpected argument"):
         launcher.enable_ui(outputs=[text], colour="red")
+    monkeypatch.delenv("EMOS_UI_TOKEN", raising=False)
     launcher.enable_ui(outputs=[text])
-    assert launcher._ui["config"].token == ""
+    first = launcher._ui["config"].token
+    assert len(first) >= 20  # loopback too
+    launcher.enable_ui(outputs=[text])
+    assert launcher._ui["config"].token != first  # fresh for every run
+    with pytest.raises(ValueError, match="always requires an access token"):
+        launcher.enable_ui(outputs=[text], token="")
+    launcher.enable_ui(outputs=[text], token="chosen-by-the-user")
+    assert launcher._ui["config"].token == "chosen-by-the-user"
+    assert "chosen-by-the-user" not in repr(launcher._ui["config"])
     monkeypatch.setenv("EMOS_UI_TOKEN", "from-env")
     launcher.enable_ui(outputs=[text], host="0.0.0.0")
     assert launcher._ui["config"].token == "from-env"
-    monkeypatch.delenv("EMOS_UI_TOKEN")
-    launcher.enable_ui(outputs=[text], host="0.0.0.0")
+    monkeypatch.setenv("EMOS_UI_TOKEN", "")  # set but empty: a fresh one, not none
+    launcher.enable_ui(outputs=[text])
     assert len(launcher._ui["config"].token) >= 20
+    # A UIComponent made without enable_ui makes its own.
+    from emos.actors.ui.component import UIComponent, page_url
+
+    ui = UIComponent(ui_outputs=[text], config=UIConfig(port=5002))
+    assert len(ui.config.token) >= 20
+    assert page_url(ui.config) == f"http://127.0.0.1:5002/?token={ui.config.token}"
+    assert page_url(ui.config, with_token=False) == "http://127.0.0.1:5002/"
 
 
 def test_inputs_of_the_wrong_type_are_refused_with_the_topic_named():

@@ -14,6 +14,14 @@ const el = (tag, attrs = {}, ...children) => {
   return node;
 };
 
+// This session's CSRF token, put in the page by the server (only pages of this origin can read
+// it): every POST carries it in X-EMOS-CSRF, the websocket in its address.
+const CSRF = document.querySelector('meta[name="emos-csrf"]').content;
+
+function postJSON(url, value) {
+  return fetch(url, { method: "POST", headers: { "Content-Type": "application/json", "X-EMOS-CSRF": CSRF }, body: JSON.stringify(value) });
+}
+
 // Measurements the benchmark and the tests read.
 window.emosStats = { frames: {}, latencies: [], messages: 0, connects: 0, published: [] };
 
@@ -372,7 +380,7 @@ async function cancelGoal(topic) {
 }
 
 async function uploadTo(topic, blob) {
-  const res = await fetch("/api/upload" + (topic.startsWith("/") ? topic : "/" + topic), { method: "POST", body: blob });
+  const res = await fetch("/api/upload" + (topic.startsWith("/") ? topic : "/" + topic), { method: "POST", headers: { "X-EMOS-CSRF": CSRF }, body: blob });
   const body = await res.json();
   window.emosStats.published.push({ topic, ok: body.ok, error: body.error });
   body.ok ? toast(`sent to ${topic}`, true) : toast(body.error, false);
@@ -383,7 +391,7 @@ async function uploadTo(topic, blob) {
 function ack(topic) { if (state.ws && state.ws.readyState === WebSocket.OPEN) state.ws.send(JSON.stringify({ op: "ack", topic })); }
 
 function connect() {
-  const ws = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws");
+  const ws = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws?csrf=" + encodeURIComponent(CSRF));
   ws.binaryType = "arraybuffer";
   state.ws = ws;
   ws.onopen = () => { $("#conn-dot").className = "dot on"; $("#conn-text").textContent = "live"; window.emosStats.connects++; connect.delay = 250; };

@@ -41,7 +41,7 @@ async function loadSettings() {
       }
       status.replaceChildren();
       if (!Object.keys(values).length) { status.append(el("div", { class: "muted" }, "nothing changed")); return; }
-      const r = await fetch("/api/settings/" + encodeURIComponent(comp.component), { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(values) });
+      const r = await postJSON("/api/settings/" + encodeURIComponent(comp.component), values);
       const body = await r.json();
       if (body.ok) {
         for (const [name, { f, input }] of Object.entries(inputs)) {
@@ -82,7 +82,7 @@ async function pollSystem() {
           for (const action of ["start", "stop", "restart"]) {
             if (n.name === data.ui && action !== "restart") continue;
             buttons.append(el("button", { class: "act secondary", "data-action": action, "data-component": n.name, onclick: async () => {
-              const r = await fetch(`/api/system/${encodeURIComponent(n.name)}/${action}`, { method: "POST" });
+              const r = await postJSON(`/api/system/${encodeURIComponent(n.name)}/${action}`, {});
               const b = await r.json();
               b.ok ? toast(`${n.name}: ${b.detail}`, true) : toast(b.error, false);
               setTimeout(pollSystem, 300);
