@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from emos.geometry import wrap_angle
 from .robot import RobotConfig, RobotType
 
 __all__ = [
@@ -24,11 +25,6 @@ __all__ = [
     "ramp_commands",
     "integrate_sequence",
 ]
-
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def feasible_commands(robot: RobotConfig, commands: np.ndarray) -> np.ndarray:

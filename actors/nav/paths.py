@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.geometry import wrap_angle
+
 __all__ = ["PathFileError", "save_path_csv", "load_path_csv", "PathRecorder", "headings_along"]
 
 _HEADER = ("x", "y", "yaw")
@@ -129,7 +131,7 @@ class PathRecorder:
         if self._kept:
             lx, ly, lyaw = self._kept[-1]
             moved = math.hypot(x - lx, y - ly)
-            turned = abs((yaw - lyaw + math.pi) % (2 * math.pi) - math.pi)
+            turned = abs(wrap_angle(yaw - lyaw))
             if moved < self.min_distance and turned < self.min_angle:
                 return False
             if self.recording_time_step is not None and self._last_stamp is not None:

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 import attrs
 import numpy as np
 
+from emos.geometry import quaternion_of_yaw
 from . import _deps
 from .robots import RobotSpec, feasible_command, integrate
 
@@ -26,10 +27,6 @@ class Contact:
     other: str  # "static", a moving obstacle's name or another robot's name
     position: tuple[float, float, float]
     depth: float  # penetration (m, >= 0)
-
-
-def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
-    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
 
 
 class SimRobot:
@@ -135,9 +132,9 @@ class SimRobot:
     def _place(self) -> None:
         c, (x, y, yaw), s = self.world.client, self.pose, self.spec
         cx, cy = x + s.center_offset * math.cos(yaw), y + s.center_offset * math.sin(yaw)
-        c.resetBasePositionAndOrientation(self.body_id, [cx, cy, GROUND_CLEARANCE + s.height / 2], _yaw_quat(yaw))
+        c.resetBasePositionAndOrientation(self.body_id, [cx, cy, GROUND_CLEARANCE + s.height / 2], quaternion_of_yaw(yaw))
         if self.visual_id is not None:
-            c.resetBasePositionAndOrientation(self.visual_id, [x, y, 0.0], _yaw_quat(yaw))
+            c.resetBasePositionAndOrientation(self.visual_id, [x, y, 0.0], quaternion_of_yaw(yaw))
 
     # -- commands and kinematics -------------------------------------------------------------
     def command(self, vx: float, vy: float = 0.0, omega: float = 0.0) -> None:

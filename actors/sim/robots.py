@@ -15,6 +15,8 @@ import math
 import attrs
 import numpy as np
 
+from emos.geometry import wrap_angle
+
 
 class DriveType(str, enum.Enum):
     DIFFERENTIAL = "differential"
@@ -203,4 +205,4 @@ def integrate(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
     s0, c0, s1, c1 = math.sin(yaw), math.cos(yaw), math.sin(yaw1), math.cos(yaw1)
     dx = (vx * (s1 - s0) + vy * (c1 - c0)) / w
     dy = (vx * (c0 - c1) + vy * (s1 - s0)) / w
-    return np.array([x + dx, y + dy, math.atan2(math.sin(yaw1), math.cos(yaw1))])
+    return np.array([x + dx, y + dy, wrap_angle(yaw1)])

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from emos.geometry import planar_pose, yaw_of_quaternion
 from emos.msgs.sensor import IMAGE_ENCODINGS
 
 _cv2: Any = None
@@ -139,22 +140,17 @@ def encode_wav(msg: Any, sample_rate: int = 16000) -> bytes:
 
 
 def yaw_of(q: Any) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return yaw_of_quaternion(q.x, q.y, q.z, q.w)
 
 
 def pose_of(msg: Any) -> dict[str, float] | None:
-    """x, y, yaw of Odometry, PoseStamped, PoseWithCovarianceStamped, Pose or Pose2D."""
-    name = type(msg).__name__
-    if name == "Pose2D":
-        return {"x": msg.x, "y": msg.y, "yaw": msg.theta}
-    pose = msg
-    if name == "Odometry" or name == "PoseWithCovarianceStamped":
-        pose = msg.pose.pose
-    elif name == "PoseStamped":
-        pose = msg.pose
-    if not hasattr(pose, "position"):
+    """x, y, yaw of Odometry, PoseStamped, PoseWithCovarianceStamped, Pose or Pose2D; None for
+    anything else."""
+    try:
+        x, y, yaw = planar_pose(msg)
+    except TypeError:
         return None
-    return {"x": pose.position.x, "y": pose.position.y, "yaw": yaw_of(pose.orientation)}
+    return {"x": x, "y": y, "yaw": yaw}
 
 
 def path_points(msg: Any, max_points: int = 2000) -> list[list[float]]:

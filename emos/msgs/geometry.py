@@ -1,10 +1,9 @@
 """geometry_msgs."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from emos.geometry import planar_pose, quaternion_of_yaw, yaw_of_quaternion
 from emos.msgs import fields as F
 from emos.msgs.registry import Message, message_type
 from emos.msgs.std import Header
@@ -33,11 +32,12 @@ class Quaternion(Message):
 
     @classmethod
     def from_yaw(cls, yaw: float) -> "Quaternion":
-        return cls(z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+        x, y, z, w = quaternion_of_yaw(yaw)
+        return cls(x=x, y=y, z=z, w=w)
 
     def yaw(self) -> float:
         """Heading about z, the angle a planar robot cares about."""
-        return math.atan2(2.0 * (self.w * self.z + self.x * self.y), 1.0 - 2.0 * (self.y * self.y + self.z * self.z))
+        return yaw_of_quaternion(self.x, self.y, self.z, self.w)
 
 
 @message_type("geometry_msgs")
@@ -110,7 +110,7 @@ class TransformStamped(Message):
 
 def pose_xy_yaw(pose: Pose) -> np.ndarray:
     """(x, y, yaw) of a pose, the planar state navigation works with."""
-    return np.array([pose.position.x, pose.position.y, pose.orientation.yaw()])
+    return np.array(planar_pose(pose))
 
 
 @message_type("tf2_msgs")

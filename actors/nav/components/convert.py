@@ -29,10 +29,6 @@ class BadInput(ValueError):
     """An input message the navigation algorithms cannot use (the message names it)."""
 
 
-def _yaw(q: Quaternion) -> float:
-    return q.yaw()
-
-
 def pose_of(msg: Any) -> np.ndarray:
     """(x, y, yaw) from an Odometry, PoseStamped, Pose or PointStamped-like message."""
     if isinstance(msg, Odometry):
@@ -43,7 +39,7 @@ def pose_of(msg: Any) -> np.ndarray:
         pose = msg
     else:
         raise BadInput(f"location: expected Odometry, PoseStamped or Pose, got {type(msg).__name__}")
-    out = np.array([pose.position.x, pose.position.y, _yaw(pose.orientation)], dtype=np.float64)
+    out = np.array([pose.position.x, pose.position.y, pose.orientation.yaw()], dtype=np.float64)
     if not np.all(np.isfinite(out)):
         raise BadInput(f"location: pose has NaN/inf values {out.tolist()}")
     return out
@@ -102,7 +98,7 @@ def grid_map_of(msg: OccupancyGrid) -> OccupancyGridMap:
         raise BadInput("map: empty OccupancyGrid (width or height is 0)")
     o = info.origin
     return OccupancyGridMap.from_flat(msg.data, int(info.width), int(info.height), float(info.resolution),
-                                      (o.position.x, o.position.y, _yaw(o.orientation)), msg.header.frame_id or "map")
+                                      (o.position.x, o.position.y, o.orientation.yaw()), msg.header.frame_id or "map")
 
 
 def grid2d_of(msg: OccupancyGrid) -> OccupancyGrid2D:
@@ -127,7 +123,7 @@ def grid_points_in_robot_frame(msg: OccupancyGrid, pose: np.ndarray, max_range: 
         raise BadInput(f"local_map: {info.width}x{info.height} grid with {msg.data.size} cells")
     res = float(info.resolution)
     o = info.origin
-    oyaw = _yaw(o.orientation)
+    oyaw = o.orientation.yaw()
     co, so = math.cos(oyaw), math.sin(oyaw)
     grid = msg.grid()
     r0, c0 = 0, 0
@@ -189,7 +185,7 @@ def path_msg(poses: np.ndarray, frame_id: str) -> Path:
 
 def path_of(msg: Path) -> np.ndarray:
     """Path -> (N, 3) poses; an empty path is an (0, 3) array."""
-    out = np.array([(p.pose.position.x, p.pose.position.y, _yaw(p.pose.orientation)) for p in msg.poses], dtype=np.float64).reshape(-1, 3)
+    out = np.array([(p.pose.position.x, p.pose.position.y, p.pose.orientation.yaw()) for p in msg.poses], dtype=np.float64).reshape(-1, 3)
     if not np.all(np.isfinite(out)):
         raise BadInput("plan: the path has NaN/inf poses")
     return out

@@ -28,6 +28,7 @@ import math
 import attrs
 import numpy as np
 
+from emos.geometry import wrap_angle
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state
 from .follower import PathFollower
@@ -106,7 +107,7 @@ class DVZ(PathFollower):
             # Judge the intrusion against the direction of travel (an omni robot may move
             # sideways), not against the heading.
             moving = math.atan2(vy_ref, v_ref) if abs(v_ref) + abs(vy_ref) > 1e-6 else 0.0
-            rel = math.atan2(math.sin(theta - moving), math.cos(theta - moving))
+            rel = wrap_angle(theta - moving)
             if abs(rel) > 0.35:  # clear side: turn away from it and remember that side
                 self._side = -math.copysign(1.0, rel)
             ahead = max(math.cos(rel), 0.0)

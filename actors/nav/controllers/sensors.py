@@ -11,6 +11,8 @@ from typing import Union
 import attrs
 import numpy as np
 
+from emos.geometry import yaw_of_quaternion
+
 __all__ = ["LaserScan2D", "OccupancyGrid2D", "ObstacleInput", "obstacle_points", "sensor_offset"]
 
 
@@ -105,7 +107,7 @@ ObstacleInput = Union[LaserScan2D, OccupancyGrid2D, np.ndarray, None]
 def sensor_offset(position: np.ndarray | list[float], rotation_quat: np.ndarray | list[float]) -> tuple[float, float, float]:
     """Planar (x, y, yaw) of a sensor mounted at ``position`` with quaternion (x, y, z, w)."""
     qx, qy, qz, qw = (float(v) for v in rotation_quat)
-    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    yaw = yaw_of_quaternion(qx, qy, qz, qw)
     return float(position[0]), float(position[1]), yaw
 
 

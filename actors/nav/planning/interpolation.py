@@ -5,12 +5,9 @@ import math
 
 import numpy as np
 
+from emos.geometry import wrap_angle
+
 __all__ = ["wrap_angle", "path_length", "interpolate_se2"]
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def path_length(path: np.ndarray) -> float:

@@ -12,6 +12,7 @@ import math
 import attrs
 import numpy as np
 
+from emos.geometry import wrap_angle
 from ..controllers.base import in_range, setters
 from ..controllers.sensors import LaserScan2D
 from ..robot import RobotConfig, RobotGeometry
@@ -113,7 +114,7 @@ class SafetyZones:
             if self._round:
                 # Robot-centred sensor and round footprint: distance beyond = range - radius,
                 # and the cone is a fixed set of beams. Cache it; a check is then one gather.
-                rel = np.abs((ang - direction + math.pi) % (2 * math.pi) - math.pi)
+                rel = np.abs(wrap_angle(ang - direction))
                 self._cone_idx = np.nonzero(rel <= math.radians(0.5 * self.config.critical_zone_angle))[0]
             self._cos, self._sin = np.cos(ang), np.sin(ang)
             self._scan_key = key

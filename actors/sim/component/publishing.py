@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from emos.geometry import quaternion_of_yaw
 from emos import msgs as M
 
 from ..msgs import camera_to_msgs, header
@@ -37,10 +38,6 @@ def transform(stamp: float, parent: str, child: str, xyz: tuple[float, float, fl
         header=header(stamp, parent), child_frame_id=child,
         transform=M.Transform(translation=M.Vector3(x=xyz[0], y=xyz[1], z=xyz[2]),
                               rotation=M.Quaternion(x=quat[0], y=quat[1], z=quat[2], w=quat[3])))
-
-
-def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
-    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
 
 
 def _compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -78,12 +75,12 @@ def tf_tree(frames: Any, odom: OdometryReading, true_pose: np.ndarray, lidar: Li
     out = []
     if frames.world != frames.odom:
         correction = _compose(tuple(float(v) for v in true_pose), _inverse((odom.x, odom.y, odom.yaw)))
-        out.append(transform(stamp, frames.world, frames.odom, (correction[0], correction[1], 0.0), _yaw_quat(correction[2])))
-    out.append(transform(stamp, frames.odom, frames.robot_base, (odom.x, odom.y, 0.0), _yaw_quat(odom.yaw)))
+        out.append(transform(stamp, frames.world, frames.odom, (correction[0], correction[1], 0.0), quaternion_of_yaw(correction[2])))
+    out.append(transform(stamp, frames.odom, frames.robot_base, (odom.x, odom.y, 0.0), quaternion_of_yaw(odom.yaw)))
     if lidar is not None:
         cfg = lidar.config
         z = cfg.mount_z if cfg.mount_z is not None else lidar.robot.spec.lidar_height
-        out.append(transform(stamp, frames.robot_base, frames.scan, (cfg.mount_xy[0], cfg.mount_xy[1], z), _yaw_quat(cfg.mount_yaw)))
+        out.append(transform(stamp, frames.robot_base, frames.scan, (cfg.mount_xy[0], cfg.mount_xy[1], z), quaternion_of_yaw(cfg.mount_yaw)))
     if camera is not None:
         xyz, quat = camera_mount(camera)
         out.append(transform(stamp, frames.robot_base, frames.rgb, xyz, quat))

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from emos.geometry import wrap_angle
+
 if TYPE_CHECKING:
     from ..robots import RobotSpec
 
@@ -50,7 +52,7 @@ def twist_between(pose0: np.ndarray, pose1: np.ndarray, dt: float) -> np.ndarray
     """The constant body twist that carries ``pose0`` to ``pose1`` in ``dt`` s: the exact inverse
     of :func:`emos.actors.sim.robots.integrate` (so re-integrating it reproduces ``pose1``)."""
     x0, y0, yaw0 = (float(v) for v in pose0)
-    dyaw = float(np.arctan2(np.sin(pose1[2] - yaw0), np.cos(pose1[2] - yaw0)))
+    dyaw = wrap_angle(float(pose1[2]) - yaw0)
     c, s = np.cos(yaw0), np.sin(yaw0)
     dx, dy = float(pose1[0]) - x0, float(pose1[1]) - y0
     bx, by = c * dx + s * dy, -s * dx + c * dy  # displacement in the start's body frame

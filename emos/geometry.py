@@ -1,0 +1,57 @@
+"""Planar geometry every layer shares: angle wrapping, yaw <-> quaternion, a message's pose.
+
+One home for these, so the simulator, the navigation stack, the UI and the interop code agree
+to the last bit on what a heading is (a planar robot's yaw about z, wrapped to [-pi, pi)).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, overload
+
+import numpy as np
+
+__all__ = ["wrap_angle", "yaw_of_quaternion", "quaternion_of_yaw", "planar_pose"]
+
+_TAU = 2.0 * math.pi
+
+
+@overload
+def wrap_angle(angle: float) -> float: ...
+@overload
+def wrap_angle(angle: np.ndarray) -> np.ndarray: ...
+
+
+def wrap_angle(angle: Any) -> Any:
+    """``angle`` (rad; a number or an array) wrapped to [-pi, pi)."""
+    if isinstance(angle, (float, int)):
+        return (angle + math.pi) % _TAU - math.pi  # plain arithmetic: 10x numpy's cost on a scalar
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """The rotation about z (rad) of the unit quaternion (x, y, z, w)."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def quaternion_of_yaw(yaw: float) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of a rotation by ``yaw`` (rad) about z."""
+    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
+
+
+_POSE_TYPES = "Odometry, PoseWithCovarianceStamped, PoseStamped, Pose or Pose2D"
+
+
+def planar_pose(msg: Any) -> tuple[float, float, float]:
+    """(x, y, yaw) of an Odometry, PoseWithCovarianceStamped, PoseStamped, Pose or Pose2D message
+    (by field names: the ROS types and ours alike). Raises TypeError for anything else."""
+    if hasattr(msg, "theta") and hasattr(msg, "x"):  # Pose2D
+        return float(msg.x), float(msg.y), float(msg.theta)
+    pose = msg
+    inner = getattr(pose, "pose", None)
+    while inner is not None and not hasattr(pose, "position"):  # Odometry.pose.pose, PoseStamped.pose
+        pose, inner = inner, getattr(inner, "pose", None)
+    position, orientation = getattr(pose, "position", None), getattr(pose, "orientation", None)
+    if position is None or orientation is None:
+        raise TypeError(f"expected a pose message ({_POSE_TYPES}), got {type(msg).__name__}")
+    q = orientation
+    return float(position.x), float(position.y), yaw_of_quaternion(q.x, q.y, q.z, q.w)

@@ -1,0 +1,39 @@
+"""emos.geometry: the one home of angle wrapping, yaw <-> quaternion and a message's planar pose."""
+import math
+
+import numpy as np
+import pytest
+
+from emos import msgs as M
+from emos.geometry import planar_pose, quaternion_of_yaw, wrap_angle, yaw_of_quaternion
+
+
+@pytest.mark.parametrize("angle, wrapped", [(0.0, 0.0), (math.pi, -math.pi), (-math.pi, -math.pi), (3 * math.pi / 2, -math.pi / 2),
+                                            (-7.0, -7.0 + 2 * math.pi), (100.0, 100.0 - 32 * math.pi)])
+def test_wrap_angle_gives_the_same_angle_in_minus_pi_to_pi(angle, wrapped):
+    assert wrap_angle(angle) == pytest.approx(wrapped)
+    assert isinstance(wrap_angle(angle), float)
+    array = wrap_angle(np.array([angle, angle]))
+    assert isinstance(array, np.ndarray) and np.allclose(array, wrapped)
+
+
+def test_yaw_and_quaternion_round_trip_and_agree_with_the_message_type():
+    for yaw in np.linspace(-math.pi, math.pi, 37, endpoint=False):
+        q = quaternion_of_yaw(float(yaw))
+        assert yaw_of_quaternion(*q) == pytest.approx(yaw)
+        assert M.Quaternion.from_yaw(float(yaw)).yaw() == pytest.approx(yaw)
+    # A tilted quaternion's heading: 90 deg about z, then pitched: still facing +y.
+    half = math.sqrt(0.5)
+    assert yaw_of_quaternion(0.0, 0.0, half, half) == pytest.approx(math.pi / 2)
+
+
+def test_planar_pose_reads_every_pose_message_and_refuses_others():
+    pose = M.Pose(position=M.Point(x=1.0, y=2.0), orientation=M.Quaternion.from_yaw(0.5))
+    odom = M.Odometry()
+    odom.pose.pose = pose
+    stamped = M.PoseStamped(pose=pose)
+    for msg in (pose, odom, stamped, M.PoseWithCovarianceStamped(pose=M.PoseWithCovariance(pose=pose))):
+        assert planar_pose(msg) == pytest.approx((1.0, 2.0, 0.5)), type(msg).__name__
+    assert planar_pose(M.Pose2D(x=3.0, y=4.0, theta=-1.0)) == (3.0, 4.0, -1.0)
+    with pytest.raises(TypeError, match="expected a pose message .*got String"):
+        planar_pose(M.String(data="x"))
