@@ -10,7 +10,7 @@ from typing import Any, overload
 
 import numpy as np
 
-__all__ = ["wrap_angle", "yaw_of_quaternion", "quaternion_of_yaw", "planar_pose"]
+__all__ = ["wrap_angle", "yaw_of_quaternion", "quaternion_of_yaw", "planar_pose", "integrate_pose"]
 
 _TAU = 2.0 * math.pi
 
@@ -55,3 +55,39 @@ def planar_pose(msg: Any) -> tuple[float, float, float]:
         raise TypeError(f"expected a pose message ({_POSE_TYPES}), got {type(msg).__name__}")
     q = orientation
     return float(position.x), float(position.y), yaw_of_quaternion(q.x, q.y, q.z, q.w)
+
+
+def _arc_factors(dth: float, dt: float) -> tuple[float, float]:
+    """(integral of cos, integral of sin) of the heading change over the step, per unit speed;
+    written through ``dth`` so that a straight step (omega -> 0) is well conditioned."""
+    if abs(dth) < 1e-6:
+        return (1.0 - dth * dth / 6.0) * dt, dth / 2.0 * dt
+    return math.sin(dth) / dth * dt, (1.0 - math.cos(dth)) / dth * dt
+
+
+def integrate_pose(pose: Any, twist: Any, dt: Any) -> np.ndarray:
+    """The exact pose (x, y, yaw) after holding the body twist (vx, vy, omega) for ``dt`` s: arcs,
+    not Euler steps, so long horizons with coarse steps stay exact. Broadcasts over leading axes
+    (poses, twists and steps of a rollout); one pose and one twist take a scalar path, the
+    simulator's per-tick case. The heading comes out wrapped to [-pi, pi)."""
+    if np.ndim(pose) == 1 and np.ndim(twist) == 1 and np.ndim(dt) == 0:
+        x, y, th = (float(v) for v in pose)
+        vx, vy, om = (float(v) for v in twist)
+        step = float(dt)
+        a, b = _arc_factors(om * step, step)
+        dx_b, dy_b = vx * a - vy * b, vx * b + vy * a  # displacement in the start's body frame
+        c, s = math.cos(th), math.sin(th)
+        return np.array([x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + om * step)])
+    pose = np.asarray(pose, dtype=np.float64)
+    cmd = np.asarray(twist, dtype=np.float64)
+    x, y, th = pose[..., 0], pose[..., 1], pose[..., 2]
+    vx, vy, om = cmd[..., 0], cmd[..., 1], cmd[..., 2]
+    dth = om * dt
+    small = np.abs(dth) < 1e-6
+    safe = np.where(small, 1.0, dth)
+    a = np.where(small, 1.0 - dth**2 / 6.0, np.sin(safe) / safe) * dt
+    b = np.where(small, dth / 2.0, (1.0 - np.cos(safe)) / safe) * dt
+    dx_b = vx * a - vy * b
+    dy_b = vx * b + vy * a
+    c, s = np.cos(th), np.sin(th)
+    return np.stack(np.broadcast_arrays(x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + dth)), axis=-1)

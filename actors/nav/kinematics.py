@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from emos.geometry import wrap_angle
+from emos.geometry import integrate_pose, wrap_angle
 from .robot import RobotConfig, RobotType
 
 __all__ = [
@@ -99,28 +99,9 @@ def limit_command_change(
 
 
 def integrate(pose: np.ndarray, commands: np.ndarray, dt: float | np.ndarray) -> np.ndarray:
-    """Exact pose after applying constant body velocities for ``dt`` (broadcasts).
-
-    Closed-form arc integration (not Euler) so long horizons with coarse steps stay exact.
-    """
-    pose = np.asarray(pose, dtype=np.float64)
-    cmd = np.asarray(commands, dtype=np.float64)
-    x, y, th = pose[..., 0], pose[..., 1], pose[..., 2]
-    vx, vy, om = cmd[..., 0], cmd[..., 1], cmd[..., 2]
-    dth = om * dt
-    # sin(dth)/om and (1-cos(dth))/om written via dth so that om -> 0 is well conditioned.
-    small = np.abs(dth) < 1e-6
-    safe = np.where(small, 1.0, dth)
-    a = np.where(small, 1.0 - dth**2 / 6.0, np.sin(safe) / safe) * dt  # integral of cos
-    b = np.where(small, dth / 2.0, (1.0 - np.cos(safe)) / safe) * dt  # integral of sin
-    # Displacement in the start body frame, then rotated to the world.
-    dx_b = vx * a - vy * b
-    dy_b = vx * b + vy * a
-    c, s = np.cos(th), np.sin(th)
-    return np.stack(
-        np.broadcast_arrays(x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + dth)),
-        axis=-1,
-    )
+    """Exact pose after applying constant body velocities for ``dt`` (broadcasts): see
+    :func:`emos.geometry.integrate_pose`."""
+    return integrate_pose(pose, commands, dt)
 
 
 def rollout(pose: np.ndarray, commands: np.ndarray, dt: float, steps: int) -> np.ndarray:

@@ -15,7 +15,7 @@ import math
 import attrs
 import numpy as np
 
-from emos.geometry import wrap_angle
+from emos.geometry import integrate_pose
 
 
 class DriveType(str, enum.Enum):
@@ -194,15 +194,6 @@ def accelerate(spec: RobotSpec, current: np.ndarray, target: np.ndarray, dt: flo
 
 
 def integrate(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-    """Exact constant-twist integration of (x, y, yaw) over ``dt`` (arcs, not straight steps)."""
-    x, y, yaw = pose
-    vx, vy, w = twist
-    if abs(w) < 1e-9:
-        c, s = math.cos(yaw), math.sin(yaw)
-        return np.array([x + (vx * c - vy * s) * dt, y + (vx * s + vy * c) * dt, yaw])
-    yaw1 = yaw + w * dt
-    # Integral of R(yaw(t)) @ (vx, vy) dt in closed form.
-    s0, c0, s1, c1 = math.sin(yaw), math.cos(yaw), math.sin(yaw1), math.cos(yaw1)
-    dx = (vx * (s1 - s0) + vy * (c1 - c0)) / w
-    dy = (vx * (c0 - c1) + vy * (s1 - s0)) / w
-    return np.array([x + dx, y + dy, wrap_angle(yaw1)])
+    """Exact constant-twist integration of (x, y, yaw) over ``dt`` (arcs, not straight steps):
+    :func:`emos.geometry.integrate_pose`, the same one the navigation stack predicts with."""
+    return integrate_pose(pose, twist, dt)
