@@ -19,7 +19,7 @@ from .fixtures.server_process import start_server
 def server():
     proc = start_server(script=None)
     yield proc
-    assert proc.stop() == 0
+    assert proc.stop() == 143  # a clean SIGTERM exit
 
 
 def test_ollama_backend_embeds_like_the_local_model_and_drives_queries(server, tmp_path):

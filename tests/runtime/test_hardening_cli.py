@@ -141,7 +141,7 @@ def test_serve_models_names_the_resp_port_that_is_busy():
     finally:
         busy.close()
     assert out.returncode == 1
-    assert f"cannot listen for RESP on 127.0.0.1:{port}" in out.stderr, out.stderr
+    assert f"cannot listen on 127.0.0.1:{port} for the RESP server: address in use" in out.stderr, out.stderr
 
 
 def _helpers_of(token: str) -> list[int]:
@@ -189,7 +189,7 @@ def test_ctrl_c_ends_serve_models_cleanly():
         if serve.poll() is None:
             serve.kill()
             serve.wait()
-    assert serve.returncode == 0 and "Traceback" not in err, err
+    assert serve.returncode == 130 and "Traceback" not in err, err  # 128 + SIGINT, after a clean shutdown
 
 
 def test_sigterm_at_any_moment_of_topic_echo_leaves_nothing(system):

@@ -31,6 +31,20 @@ class ChatBackend(Protocol):
     def stream(self, request: ChatRequest, model: str): ...
 
 
+def check_wav(audio: bytes) -> None:
+    """Raise ValueError unless ``audio`` parses as a WAV file. Python's wave module answers
+    bytes that only start like one with wave.Error, EOFError, struct.error or even a bare
+    RuntimeError; any of them means the client sent something else."""
+    from ..local.audio import read_wav
+
+    try:
+        read_wav(bytes(audio))
+    except ValueError as exc:
+        raise ValueError(f"audio could not be decoded (expected a WAV file): {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - untrusted bytes: every parse failure is the input's
+        raise ValueError(f"audio could not be decoded (expected a WAV file): {type(exc).__name__} {exc}".rstrip()) from None
+
+
 class LocalModels:
     def __init__(self, script: Any = None, gguf: str | None = None, extra_models: tuple[str, ...] = ()) -> None:
         scripted = ScriptedResponder(script)
@@ -52,12 +66,16 @@ class LocalModels:
 
     # ------------------------------------------------------------------ registry
     def chat_backend(self, name: str) -> ChatBackend | None:
+        if name is not None and not isinstance(name, str):  # a JSON list or object: no such model
+            return None
         return self.chat.get(name or self.default_chat)
 
     def all_names(self) -> list[str]:
         return [*self.chat, EMBEDDING_NAMES[0], TTS_NAME]
 
     def has(self, name: str) -> bool:
+        if not isinstance(name, str):
+            return False
         return name in self.chat or name in EMBEDDING_NAMES or name == TTS_NAME
 
     # ------------------------------------------------------------------ embeddings
@@ -86,6 +104,9 @@ class LocalModels:
         return self._tts.synthesize(text, voice=espeak_voice, speed_wpm=wpm)
 
     def transcribe(self, audio: bytes, language: str | None = None) -> str:
+        """The words in ``audio`` (WAV bytes); ValueError if they are not a WAV file."""
+        if language is not None and not isinstance(language, str):
+            raise ValueError(f"language must be a string, got {type(language).__name__}")
         if language and not language.lower().startswith("en"):
             raise BackendUnavailable(f"the local speech-to-text model is English only; language {language!r} is unavailable")
         with self._lock:
@@ -96,10 +117,12 @@ class LocalModels:
                     self._stt = PocketSphinxSTT()
                 except ImportError as exc:
                     raise BackendUnavailable(f"no packaged speech-to-text model is installed here ({exc})") from None
+        check_wav(audio)
+        with self._lock:
             try:
                 return str(self._stt.transcribe(audio))
             except (ValueError, TypeError) as exc:
-                raise ValueError(f"audio could not be decoded: {exc}") from None
+                raise ValueError(f"audio could not be decoded (expected a WAV file): {exc}") from None
 
     # ------------------------------------------------------------------ detection
     def detect(self, image: np.ndarray, threshold: float) -> dict[str, Any]:

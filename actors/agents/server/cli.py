@@ -45,11 +45,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos serve models: {exc}", file=sys.stderr)
         return 2
     try:
-        asyncio.run(serve(models, args.host, args.port, args.resp_port, args.lerobot_port))
+        signum = asyncio.run(serve(models, args.host, args.port, args.resp_port, args.lerobot_port))
     except ListenError as exc:  # port in use, bad interface: the message names the listener
         print(f"emos serve models: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:
         print(f"emos serve models: {exc}", file=sys.stderr)
         return 1
-    return 0
+    # After a clean shutdown, the shell's convention for "ended by a signal", as the other
+    # `emos` commands: 130 for SIGINT (Ctrl-C), 143 for SIGTERM.
+    return 128 + signum if signum else 0

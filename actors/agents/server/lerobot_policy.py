@@ -37,9 +37,15 @@ class HoldPositionPolicyServer:
             "GetActions": grpc.unary_unary_rpc_method_handler(self._get_actions),
         }
         self.server = grpc.server(futures.ThreadPoolExecutor(max_workers=4), options=[
-            ("grpc.max_receive_message_length", 64 * 1024 * 1024), ("grpc.max_send_message_length", 64 * 1024 * 1024)])
+            ("grpc.max_receive_message_length", 64 * 1024 * 1024), ("grpc.max_send_message_length", 64 * 1024 * 1024),
+            # gRPC shares ports by default (SO_REUSEPORT): a second server on a taken port would
+            # start "fine" and get half the connections. Bind exclusively.
+            ("grpc.so_reuseport", 0)])
         self.server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(wire.SERVICE, handlers),))
-        self.port = self.server.add_insecure_port(f"{host}:{port}")
+        try:
+            self.port = self.server.add_insecure_port(f"{host}:{port}")
+        except RuntimeError as exc:  # grpc >= 1.53 raises "Failed to bind to address ..."
+            raise OSError(str(exc).split(";")[0]) from None
         if self.port == 0:
             raise OSError(f"cannot bind the LeRobot policy server to {host}:{port}")
 

@@ -11,7 +11,8 @@ from aiohttp import web
 from ..clients import ollama_codec
 from ..types import ChatMessage, ChatRequest
 from .backends import EMBEDDING_NAMES, BackendUnavailable, LocalModels
-from .common import in_thread, iterate_in_thread, read_json, text_inputs
+from .common import in_thread, iterate_in_thread, model_name, read_json, text_inputs
+from .guard import takes_json
 
 __all__ = ["add_ollama_routes"]
 
@@ -39,11 +40,12 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
     async def version(_request: web.Request) -> web.Response:
         return web.json_response({"version": "0.0.0-emos"})
 
+    @takes_json
     async def show(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
-            name = body.get("model") or body.get("name")
-        except (ValueError, AttributeError) as exc:
+            name = model_name(body, "model", "name")
+        except ValueError as exc:
             return _error(400, str(exc))
         if not name or not models.has(name):
             return _error(404, f"model '{name}' not found")
@@ -51,12 +53,13 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
         return web.json_response({"modelfile": f"# served by emos serve models\nFROM {name}\n", "parameters": "",
                                   "template": "", "details": details(name), "model_info": {}, "capabilities": caps})
 
+    @takes_json
     async def pull(request: web.Request) -> web.StreamResponse:
         # Nothing is downloaded: models are local. Success for models we have, an error otherwise.
         try:
             body = await read_json(request)
-            name = body.get("model") or body.get("name")
-        except (ValueError, AttributeError) as exc:
+            name = model_name(body, "model", "name")
+        except ValueError as exc:
             return _error(400, str(exc))
         if not name or not models.has(name):
             return _error(404, f"pull model manifest: model '{name}' is not available on this local server (no downloads)")
@@ -69,14 +72,17 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
         await stream.write_eof()
         return stream
 
+    @takes_json
     async def chat(request: web.Request) -> web.StreamResponse:
         body: Any = None
         try:
             body = await read_json(request)
+            model_name(body, "model")
             model, chat_request = ollama_codec.chat_request_from_ollama(body)
-        except (ValueError, TypeError, KeyError) as exc:
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
             # Ollama allows an empty message list to load/unload a model; so do we.
-            if isinstance(body, dict) and body.get("messages") == [] and body.get("model"):
+            if isinstance(body, dict) and body.get("messages") == [] and isinstance(body.get("model"), str) \
+                    and body["model"]:
                 return await load_only(body)
             return _error(400, f"invalid chat request: {exc}")
         backend = models.chat_backend(model)
@@ -113,11 +119,12 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
         return web.json_response({"model": name, "created_at": ollama_codec.ollama_timestamp(),
                                   "message": {"role": "assistant", "content": ""}, "done_reason": reason, "done": True})
 
+    @takes_json
     async def generate(request: web.Request) -> web.StreamResponse:
         try:
             body = await read_json(request)
-            name = body.get("model") or models.default_chat
-        except (ValueError, AttributeError) as exc:
+            name = model_name(body, "model") or models.default_chat
+        except ValueError as exc:
             return _error(400, str(exc))
         prompt = body.get("prompt")
         if not prompt:  # empty prompt = load (or, with keep_alive 0, unload) the model
@@ -149,13 +156,14 @@ def add_ollama_routes(app: web.Application, models: LocalModels) -> None:
         await stream.write_eof()
         return stream
 
+    @takes_json
     async def embed(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
             texts = text_inputs(body)
+            name = model_name(body, "model")
         except (ValueError, TypeError, KeyError) as exc:
             return _error(400, f"invalid embed request: {exc}")
-        name = body.get("model")
         if name not in EMBEDDING_NAMES:
             return _error(404, f"model '{name}' not found")
         started = time.monotonic()

@@ -11,7 +11,8 @@ from ..clients import openai_codec
 from ..clients.sse import SSE_DONE, format_sse
 from ..types import AUDIO_MIME
 from .backends import EMBEDDING_NAMES, BackendUnavailable, LocalModels
-from .common import in_thread, iterate_in_thread, read_json, text_inputs
+from .common import in_thread, iterate_in_thread, model_name, read_json, text_inputs
+from .guard import takes_json
 
 __all__ = ["add_openai_routes"]
 
@@ -27,10 +28,13 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
         data = [{"id": name, "object": "model", "created": created, "owned_by": "emos"} for name in models.all_names()]
         return web.json_response({"object": "list", "data": data})
 
+    @takes_json
     async def chat(request: web.Request) -> web.StreamResponse:
         try:
-            model, chat_request = openai_codec.chat_request_from_openai(await read_json(request))
-        except (ValueError, TypeError, KeyError) as exc:
+            body = await read_json(request)
+            model_name(body, "model")
+            model, chat_request = openai_codec.chat_request_from_openai(body)
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
             return _error(400, f"invalid chat request: {exc}")
         backend = models.chat_backend(model)
         if backend is None:
@@ -68,13 +72,14 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
         await stream.write_eof()
         return stream
 
+    @takes_json
     async def embeddings(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
             texts = text_inputs(body)
+            model = model_name(body, "model") or EMBEDDING_NAMES[0]
         except (ValueError, TypeError, KeyError) as exc:
             return _error(400, f"invalid embeddings request: {exc}")
-        model = body.get("model") or EMBEDDING_NAMES[0]
         if model not in EMBEDDING_NAMES:
             return _error(404, f"The model '{model}' does not exist", "not_found_error")
         try:
@@ -86,22 +91,28 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
         return web.json_response({"object": "list", "data": data, "model": model,
                                   "usage": {"prompt_tokens": tokens, "total_tokens": tokens}})
 
+    @takes_json
     async def speech(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
+            if not isinstance(body, dict):
+                raise ValueError("body: expected a JSON object")
             text = body["input"]
             if not isinstance(text, str) or not text.strip():
                 raise ValueError("'input' must be a non-empty string")
             speed = float(body.get("speed", 1.0))
             if not 0.25 <= speed <= 4.0:
                 raise ValueError("'speed' must be within 0.25..4.0")
+            voice = body.get("voice")
+            if voice is not None and not isinstance(voice, str):
+                raise ValueError("'voice' must be a string")
         except (ValueError, TypeError, KeyError) as exc:
             return _error(400, f"invalid speech request: {exc}")
         fmt = body.get("response_format", "wav")
         if fmt != "wav":
-            return _error(400, f"response_format {fmt!r} is not supported by the local server; use 'wav'")
+            return _error(400, f"response_format {str(fmt)[:40]!r} is not supported by the local server; use 'wav'")
         try:
-            audio = await in_thread(models.synthesize, text, body.get("voice"), speed)
+            audio = await in_thread(models.synthesize, text, voice, speed)
         except BackendUnavailable as exc:
             return _error(501, str(exc), "server_error")
         except RuntimeError as exc:
@@ -111,12 +122,17 @@ def add_openai_routes(app: web.Application, models: LocalModels) -> None:
     async def transcriptions(request: web.Request) -> web.Response:
         if not request.content_type.startswith("multipart/"):
             return _error(400, "expected a multipart/form-data body with a 'file' part")
-        form = await request.post()
+        try:
+            form = await request.post()
+        except ValueError as exc:  # a malformed multipart body
+            return _error(400, f"the multipart/form-data body could not be read: {exc}")
         upload = form.get("file")
         if upload is None or not hasattr(upload, "file"):
             return _error(400, "missing the 'file' part")
         audio = upload.file.read()
         language = form.get("language") or None
+        if language is not None and not isinstance(language, str):
+            return _error(400, "'language' must be a text field")
         try:
             text = await in_thread(models.transcribe, audio, language)
         except BackendUnavailable as exc:

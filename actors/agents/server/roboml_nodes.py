@@ -86,6 +86,8 @@ class RoboMLNodes:
 
     def initialize(self, name: str, params: dict | None) -> None:
         node = self._node(name)
+        if params is not None and not isinstance(params, dict):
+            raise NodeError(400, f"initialize: expected an object of parameters, got {type(params).__name__}")
         node["params"] = dict(params or {})
         node["status"] = "READY"
 
@@ -103,8 +105,10 @@ class RoboMLNodes:
             return getattr(self, f"_{node['kind']}")(node, data)
         except BackendUnavailable as exc:
             raise NodeError(501, str(exc)) from None
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise NodeError(400, f"invalid inference input: {exc}") from None
+        except RecursionError:
+            raise NodeError(400, "invalid inference input: nested too deeply") from None
 
     def _chat(self, node: dict, data: dict) -> dict | Iterator[str]:
         query = data["query"]

@@ -8,6 +8,8 @@ import msgpack
 from aiohttp import WSMsgType, WSCloseCode, web
 
 from .common import in_thread, iterate_in_thread, read_json
+from .guard import takes_json, takes_no_body
+from .limits import MAX_WS_MESSAGE, unpack_msgpack
 from .roboml_nodes import STREAM_END, NodeError, RoboMLNodes
 
 __all__ = ["add_roboml_routes"]
@@ -29,6 +31,7 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
     async def about(_request: web.Request) -> web.Response:
         return web.json_response({"title": "emos local model server (RoboML-compatible)", "apps_served": list(nodes.nodes)})
 
+    @takes_no_body
     async def add_node(request: web.Request) -> web.Response:
         try:
             status, body = nodes.add_node(request.query.get("node_name", ""), request.query.get("node_model", ""))
@@ -36,12 +39,14 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
             return _error(exc)
         return web.json_response(body, status=status)
 
+    @takes_no_body
     async def remove_node(request: web.Request) -> web.Response:
         try:
             return web.json_response(nodes.remove_node(request.query.get("node_name", "")), status=202)
         except NodeError as exc:
             return _error(exc)
 
+    @takes_json
     async def initialize(request: web.Request) -> web.Response:
         try:
             body = await read_json(request)
@@ -58,6 +63,7 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
         except NodeError as exc:
             return _error(exc)
 
+    @takes_json
     async def inference(request: web.Request) -> web.StreamResponse:
         try:
             body = await read_json(request)
@@ -76,7 +82,7 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
         return stream
 
     async def ws_inference(request: web.Request) -> web.WebSocketResponse:
-        ws = web.WebSocketResponse(max_msg_size=64 * 1024 * 1024)
+        ws = web.WebSocketResponse(max_msg_size=MAX_WS_MESSAGE)
         await ws.prepare(request)
         sockets.add(ws)
         name = request.match_info["node"]
@@ -85,7 +91,7 @@ def add_roboml_routes(app: web.Application, nodes: RoboMLNodes) -> None:
                 await ws.close(code=1003, message=b"expected msgpack binary frames")
                 break
             try:
-                data = msgpack.unpackb(message.data, raw=False)
+                data = unpack_msgpack(message.data)
             except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError):
                 await ws.close(code=1007, message=b"payload is not msgpack")
                 break
