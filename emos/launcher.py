@@ -17,7 +17,7 @@ from typing import Any, Sequence
 from emos.core.component import BaseComponent
 
 # The Monitor reads a message this long after it is woken (see Launcher.__init__). Measured with
-# `emos bench events` (docs/benchmarks.md, "The Monitor reads last"): with one core busy it keeps
+# `emos bench events` (docs/benchmarks-history.md, "The Monitor reads last"): with one core busy it keeps
 # the topic's p95 within 10 % (1.5x without), for +0.7 ms of event latency.
 DEFAULT_MONITOR_DEFER_MS = 0.5
 MAX_MONITOR_DEFER_MS = 20.0

@@ -1,6 +1,6 @@
 """How much wider an obstacle looks in a never-forgetting hit memory than in one scan.
 
-A diagnostic for docs/benchmarks.md ("World 62: the obstacle memory, not the carried pose"):
+A diagnostic for docs/benchmarks-history.md ("World 62: the obstacle memory, not the carried pose"):
 a 0.15 m cylinder seen by the BARN laser (720 beams over +-2.356 rad, Gaussian range noise
 0.01 m) while the robot drives 1 m towards it; every scan's hits go into a
 :class:`~emos.actors.nav.mapping.hit_grid.HitGrid` of 0.05 m cells, as the LocalMapper's static

@@ -1,6 +1,6 @@
 """Where an 8 MiB ping-pong spends its time: EMOS over Zenoh against raw Zenoh, stage by stage.
 
-A diagnostic for ``emos bench net`` (docs/benchmarks.md, "EMOS over Zenoh on a quiet machine"):
+A diagnostic for ``emos bench net`` (docs/benchmarks-history.md, "EMOS over Zenoh on a quiet machine"):
 the same two ends as the benchmark (:class:`supervisor.bench.net._End`), in two processes joined
 over loopback TCP, with ``time.perf_counter_ns`` marks around the send (EMOS: encode, frame and
 ``put``; and ``put`` alone), the frame check and the decode on Zenoh's thread, and the take

@@ -365,7 +365,7 @@ class Node:
             # Only a change: an unchanged status is already on the stream, and the heartbeat
             # repeats it. Publishing it after every step woke the supervisor and the run's
             # Zenoh helper at every message: 8 B between two components took 2.6x as long on
-            # rings and 1.5x over Zenoh (docs/benchmarks.md, "A status after every step").
+            # rings and 1.5x over Zenoh (docs/benchmarks-history.md, "A status after every step").
             self.publish_status()
 
     def _serve_main(self, request: Any) -> Any:

@@ -3,7 +3,7 @@
  * Why it exists: encoding and decoding a small message costs 1-2 us in a warm Python loop, but
  * a topic's reader runs it straight after a wake-up, with cold caches, where the same Python
  * code (a dozen C calls into msgpack, struct and numpy, each through the interpreter) costs
- * 10-20 us: most of what EMOS adds to an 8 B message over Zenoh (docs/benchmarks.md, "A codec
+ * 10-20 us: most of what EMOS adds to an 8 B message over Zenoh (docs/benchmarks-history.md, "A codec
  * in C"). One C call that walks the message's fields touches far less code.
  *
  * It is a fast path, never the only path. Each function either returns exactly what the Python

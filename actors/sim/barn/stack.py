@@ -185,7 +185,7 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     # the scan before's (51 of 126 control steps in world 19: up to 4 cm at 2 m/s, against a
     # 1.5 cm margin). The never-forgetting memory, placed right too, piles up every scan's range
     # noise: obstacles about 2 cm wider per side (worlds 62, 117, 111, 112 x 10: 37/50 on the
-    # memory, 48/50 on this grid; docs/benchmarks.md). Moving obstacles: the memory that forgets
+    # memory, 48/50 on this grid; docs/benchmarks-history.md, "World 62"). Moving obstacles: the memory that forgets
     # by evidence, as tuned.
     controller.inputs(location=pose_topic, local_map=memory_topic if opts.moving_obstacles else mapper.get_out_topic("local_map"))
     if opts.response_model or opts.moving_obstacles:
