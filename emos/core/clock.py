@@ -215,14 +215,17 @@ class SimTimeDriver:
                 return t
         return self._published[0][1] if self._published else None
 
-    def handle(self, tick: Any, run_step: Callable[[], None] | None) -> None:
+    def handle(self, tick: Any, run_step: Callable[[], None] | None, answer: bool = True) -> None:
         """Run the Timed step if one is due at ``tick`` (``run_step`` None: not a Timed
-        component, or not active), then answer the tick."""
+        component, or not active), then answer the tick. ``answer=False``: only follow the
+        time (a node that has not been active yet: see ``Node._take_inputs``)."""
         global _driven_time
         t = tick.clock.to_sec()
         self.time = t
         with _state_lock:
             _driven_time = t
+        if not answer:
+            return
         if run_step is not None:
             if self._next_step is None or t < self._next_step - 2 * self._period():
                 self._next_step = t  # the first tick, or time went back (the simulator restarted)

@@ -129,6 +129,7 @@ class Node:
         self._supervisor: AsyncRpcClient | None = None
         self._step_kwargs = component._step_accepts_kwargs()
         self._sim_time: SimTimeDriver | None = None  # config.use_sim_time: steps and answers on /clock
+        self._been_active = False  # answers /clock ticks only once it has been active (see _take_inputs)
         self._step_errors = RepeatLimiter()
         self.steps = 0
 
@@ -248,6 +249,7 @@ class Node:
             self.publish_status()
             raise L.InvalidTransition(f"component {self.name!r}: {transition.value} failed: {exc}") from exc
         self.state = target
+        self._been_active = self._been_active or target == L.LifecycleState.ACTIVE
         self.log.debug("[%s] %s -> %s", self.name, transition.value, target.value)
         self.publish_status()
         return target
@@ -437,7 +439,10 @@ class Node:
                 self.trigger_stamp_ns = None
         if tick is not None and self._sim_time is not None:  # after the inputs that came with the tick
             timed = active and self.component.run_type == ComponentRunType.TIMED
-            self._sim_time.handle(tick, self._run_step if timed else None)
+            # A node that has never been active does not answer: a lockstep simulator then waits
+            # for it (republishing the tick) instead of running on while its inputs are dropped,
+            # so whether a consumer sees the first scans does not depend on how fast it started.
+            self._sim_time.handle(tick, self._run_step if timed else None, answer=self._been_active)
 
     def _input(self, topic: Topic | str) -> _Input:
         name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
