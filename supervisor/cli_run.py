@@ -24,7 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recipe", help="recipe name (see `emos ls`) or path of the recipe script")
     parser.add_argument("--duration", type=_seconds, default=None, help="stop by itself after this many seconds")
     parser.add_argument("--no-log", action="store_true", help="do not keep a copy of the output in ~/emos/logs")
-    parser.add_argument("--zenoh", metavar="CONFIG", default=None, help="Zenoh configuration file (mode, endpoints) for topics across hosts")
+    parser.add_argument("--zenoh", metavar="CONFIG", default=None,
+                        help="Zenoh configuration file (mode, endpoints, TLS, access control) to reach other hosts; "
+                             "without one, Zenoh stays on this host's loopback")
     parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
     parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
     parser.add_argument("--net-control", action="store_true",

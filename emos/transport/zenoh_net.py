@@ -12,7 +12,8 @@ network apart.
 One Zenoh session per process and configuration file, opened on first use and shared by every
 topic of the process. Its mode (peer or client), endpoints and scouting come from the Zenoh
 configuration file (``$EMOS_ZENOH_CONFIG``, set by ``emos run --zenoh CONFIG``); without one,
-Zenoh's defaults (peer mode, multicast scouting) apply.
+the session stays on loopback and meets the other sessions of this host only (see
+:mod:`emos.transport.zenoh_config`, which builds every session's configuration).
 
 Zenoh delivers samples on its own threads. A subscriber checks and decodes each one there
 (magic, lengths, type fingerprint, then the body; anything that fails is dropped with a
@@ -22,7 +23,7 @@ its uvloop watches). The node then takes the decoded messages on its own thread,
 ring. Decoding on arrival costs a message the reader skips about 2 us, and is cheaper for every
 message it uses: the reader runs it straight after a wake-up, which is when Python code runs
 slowest (an 8 B ping-pong: take and decode 18 us on the reader, against a decode of 8-10 us
-on Zenoh's thread and a take of 3; docs/benchmarks.md, "Decoding on Zenoh's thread").
+on Zenoh's thread and a take of 3; docs/benchmarks-history.md, "Decoding on Zenoh's thread").
 
 Publishers also declare a liveliness token ``emos/<group>/<topic>/_pub_/<type>/<publisher>``,
 so :func:`list_topics` can discover the topics of every host in the group.
@@ -39,12 +40,13 @@ import time
 from typing import Any, Callable
 
 from emos.msgs.registry import canonical_name
+from emos.transport import zenoh_config
 from emos.transport.context import encode_name
 from emos.transport.netframe import SPLIT_MAGIC, BadFrame, FrameWriter, SplitPayload, encode_framed, read_frame, read_message
 from emos.transport.trust import RateLimitedLog
+from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
 
 log = logging.getLogger("emos.transport.zenoh")
-ENV_ZENOH_CONFIG = "EMOS_ZENOH_CONFIG"
 ENV_NET_GROUP = "EMOS_NET_GROUP"
 DEFAULT_GROUP = "default"
 KEY_ROOT = "emos"
@@ -83,59 +85,46 @@ def topic_key(topic: str, group: str | None = None) -> str:
 # ------------------------------------------------------------------------------------ sessions
 _sessions: dict[tuple[int, str], Any] = {}  # (pid, config path): a forked child opens its own
 _sessions_lock = threading.Lock()
+_registrations: dict[tuple[int, str], Any] = {}  # a loopback session's registration (zenoh_config.open_loopback)
 
 
 def session(config_path: str | None = None) -> Any:
-    """This process's Zenoh session for ``config_path`` (default ``$EMOS_ZENOH_CONFIG``)."""
+    """This process's Zenoh session for ``config_path`` (default ``$EMOS_ZENOH_CONFIG``; none:
+    loopback only, see :mod:`emos.transport.zenoh_config`)."""
     path = config_path if config_path is not None else os.environ.get(ENV_ZENOH_CONFIG, "")
     key = (os.getpid(), path)
     with _sessions_lock:
         sess = _sessions.get(key)
         if sess is None or sess.is_closed():
             zenoh = _zenoh()
-            conf = _load_config(zenoh, path)
-            try:
-                sess = zenoh.open(conf)
-            except Exception as exc:  # zenoh.ZError
-                # Every process of a run reads the same file; only the first can bind a fixed
-                # listening port. The others listen on a port of the kernel's choosing and still
-                # reach the other hosts through the configured ``connect`` endpoints.
-                ephemeral = _ephemeral_listen(zenoh, path) if "Address already in use" in str(exc) else None
-                if ephemeral is None:
-                    raise
-                log.info("Zenoh: %s; this process listens on %s instead", str(exc).split(" at ")[0], ephemeral.get_json("listen/endpoints"))
-                sess = zenoh.open(ephemeral)
+            if key in _registrations:  # closed by someone else: its endpoint answers no more
+                zenoh_config.unregister(_registrations.pop(key))
+            if not path:
+                sess, _registrations[key] = zenoh_config.open_loopback(zenoh)
+            else:
+                sess = _open_file(zenoh, path)
+                log.info("Zenoh session %s opened (%s)", sess.info.zid(), path)
             _sessions[key] = sess
-            log.info("Zenoh session %s opened (%s)", sess.info.zid(), path or "default configuration")
         return sess
 
 
-def _load_config(zenoh: Any, path: str) -> Any:
-    """The configuration in ``path`` (Zenoh's defaults if empty), with Zenoh's own shared
-    memory turned off unless the file says anything about ``shared_memory``.
+def _open_file(zenoh: Any, path: str) -> Any:
+    conf = _load_config(zenoh, path)
+    zenoh_config.warn_if_exposed(conf, path)
+    try:
+        return zenoh.open(conf)
+    except Exception as exc:  # zenoh.ZError
+        # Every process of a run reads the same file; only the first can bind a fixed
+        # listening port. The others listen on a port of the kernel's choosing and still
+        # reach the other hosts through the configured ``connect`` endpoints.
+        ephemeral = _ephemeral_listen(zenoh, path) if "Address already in use" in str(exc) else None
+        if ephemeral is None:
+            raise
+        log.info("Zenoh: %s; this process listens on %s instead", str(exc).split(" at ")[0], ephemeral.get_json("listen/endpoints"))
+        return zenoh.open(ephemeral)
 
-    Why off: Zenoh 1.10 moves messages of 3 KiB or more between processes of one host through
-    shared-memory pools it maps into the receivers, and a receiver keeps the pool (16 MiB) and
-    metadata (1.3 MB) of every sending process it ever heard mapped and locked for its own
-    lifetime, a clean exit or a SIGKILL of the sender alike (eclipse-zenoh/zenoh#2787, open).
-    A component restarted by its supervisor is a new sending process each time, so subscribers
-    would grow by 17 MB per restart. Processes of one host already have EMOS's own rings, which
-    free a dead writer's segments; Zenoh is for crossing hosts, where its shared memory does not
-    apply. A configuration file that mentions ``shared_memory`` is taken as it is."""
-    if not path:
-        conf = zenoh.Config()
-    else:
-        if not os.path.isfile(path):
-            raise FileNotFoundError(f"Zenoh configuration file {path!r} (from --zenoh or ${ENV_ZENOH_CONFIG}) does not exist")
-        try:
-            conf = zenoh.Config.from_file(path)
-        except Exception as exc:  # zenoh.ZError: say which file
-            raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
-        with open(path, encoding="utf-8", errors="replace") as f:
-            if "shared_memory" in f.read():
-                return conf
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    return conf
+
+_load_config = zenoh_config.load_config  # the file's configuration (its doc says what EMOS changes)
 
 
 def _ephemeral_listen(zenoh: Any, path: str) -> Any | None:
@@ -161,6 +150,8 @@ def close_sessions() -> None:
             except Exception as exc:  # noqa: BLE001 - closing must go on for the others
                 log.debug("closing a Zenoh session: %s", exc)
         _sessions.clear()
+        _registrations.clear()
+        zenoh_config.unregister_all()
 
 
 # ------------------------------------------------------------------------------------ endpoints

@@ -75,7 +75,7 @@ def _config_file(folder: str, name: str, listen: int, connect: int) -> str:
             "connect": {"endpoints": [f"tcp/127.0.0.1:{connect}"]},
             "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
             # As between hosts: no shared-memory shortcut between two processes of this one
-            # (EMOS's default too, see zenoh_net._load_config; said here so that it holds
+            # (EMOS's default too, see zenoh_config.load_config; said here so that it holds
             # whatever that default becomes).
             "transport": {"shared_memory": {"enabled": False}},
         }, f)
