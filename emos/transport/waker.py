@@ -24,6 +24,13 @@ evaluating events, the web UI, a recorder) mark their token with :data:`BACKGROU
 publishers wake them after every other subscriber, so the robot's own components are not queued
 behind them. The bit only orders wake-ups: a peer that sets it on its own token harms no one but
 itself.
+
+Leftovers of a killed reader. A reader's FIFO and state page (and its entry in the topics'
+subscriber lists) are removed by its ``close``; a reader killed outright (SIGKILL) cannot. So the
+state page names its owner (pid and process start time, which a reused pid does not share), and
+a reader counts as dead when no process holds its FIFO open for reading *and* its owner is gone.
+Publishers remove a dead reader's files as soon as a wake-up fails (:class:`WakeSender`), and
+:func:`sweep_dead_wakers` removes those of readers nobody publishes to.
 """
 from __future__ import annotations
 
@@ -31,12 +38,15 @@ import errno
 import mmap
 import os
 import secrets
+import stat
+import struct
 import time
 from pathlib import Path
 from typing import Callable
 
-from emos.transport.context import RunContext
+from emos.transport.context import RunContext, make_run_id, run_is_alive
 from emos.transport.fence import full_fence
+from emos.transport.trust import distrust_reason, rate_limited
 
 MESSAGE = b"\x01"
 ANNOUNCE = b"\x02"
@@ -45,6 +55,7 @@ DEFAULT_SPIN_US = 100.0  # longer than a request-reply turnaround here; at most 
 MAX_LINGER_US = 1000.0  # under a flood, return to the event loop this often (timers, RPC, signals)
 _STATE_BYTES = 64
 BACKGROUND_BIT = 1 << 62  # in a token: wake this reader after the others (module doc)
+_OWNER_PID, _OWNER_START = 1, 2  # words of the state page naming the reader's process (module doc)
 
 
 class Waker:
@@ -69,6 +80,8 @@ class Waker:
             finally:
                 os.close(fd)
             self._state = memoryview(self._state_mm).cast("Q")
+            self._state[_OWNER_START] = _own_start_token()
+            self._state[_OWNER_PID] = os.getpid()
             os.mkfifo(self.path, 0o600)
             # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
             self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
@@ -181,6 +194,7 @@ class WakeSender:
                 # ENXIO: no reader has it open; ENOENT: the FIFO is gone. Either way its node died.
                 if exc.errno in (errno.ENXIO, errno.ENOENT):
                     dead.append(token)
+                    remove_if_dead(self.ctx, token)
                     continue
                 raise
             self._map_state(token)
@@ -230,8 +244,151 @@ class WakeSender:
                 dead.append(token)
         for token in dead:
             self._forget(token)
+            remove_if_dead(self.ctx, token)
         return dead
 
     def close(self) -> None:
         for token in list(self.fds):
             self._forget(token)
+
+
+# ---------------------------------------------------------------------------- leftovers of dead readers
+_start_tokens: dict[int, int] = {}  # pid -> start token; keyed by pid because a fork has its own
+
+
+def _own_start_token() -> int:
+    """This process's start time as run ids spell it (0 if unreadable: never judged dead)."""
+    pid = os.getpid()
+    token = _start_tokens.get(pid)
+    if token is None:
+        try:
+            token = int(make_run_id(pid).split("-")[1])
+        except (RuntimeError, ValueError, IndexError):
+            token = 0
+        _start_tokens.clear()
+        _start_tokens[pid] = token
+    return token
+
+
+def _lstat(path: Path) -> os.stat_result | None:
+    try:
+        return os.lstat(path)
+    except FileNotFoundError:
+        return None
+
+
+def _fifo_has_reader(path: Path) -> bool:
+    """Whether some process holds the FIFO open for reading (our Waker holds it O_RDWR)."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError as exc:
+        # ENXIO: nobody reads it; ENOENT: gone. Anything else (not a FIFO of ours, a link): we
+        # cannot tell, so it counts as read and is left alone.
+        return exc.errno not in (errno.ENXIO, errno.ENOENT)
+    os.close(fd)
+    return True
+
+
+def _owner_alive(path: Path) -> bool | None:
+    """Whether the process named in a state page still runs; None if the page names none yet
+    (being made) or cannot be read as ours."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+    except OSError:
+        return None
+    try:
+        if distrust_reason(os.fstat(fd), 0o600) is not None:
+            return None
+        data = os.pread(fd, 8 * (_OWNER_START + 1), 0)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    if len(data) < 8 * (_OWNER_START + 1):
+        return None
+    pid, start = struct.unpack_from("=QQ", data, 8 * _OWNER_PID)
+    if pid == 0 or start == 0 or pid > 2**31:
+        return None
+    return run_is_alive(f"{pid}-{start}")
+
+
+def _unlink_ours(path: Path, fifo: bool) -> None:
+    st = _lstat(path)
+    if st is None:
+        return
+    ours = st.st_uid == os.geteuid() and (stat.S_ISFIFO(st.st_mode) if fifo else distrust_reason(st, 0o600) is None)
+    if not ours:
+        rate_limited.warning(f"wake:{path}", "wake-ups: leaving %s in place: it is not a %s of ours", path, "FIFO" if fifo else "state page")
+        return
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        rate_limited.warning(f"wake:{path}", "wake-ups: cannot remove %s: %s", path, exc.strerror)
+
+
+def remove_if_dead(ctx: RunContext, token: int) -> bool:
+    """Remove the FIFO and state page of reader ``token`` if it is dead (module doc); returns
+    whether it was judged dead (also when its files were already gone)."""
+    fifo, state = fifo_path(ctx, token), state_path(ctx, token)
+    fifo_st, state_st = _lstat(fifo), _lstat(state)
+    if fifo_st is not None and _fifo_has_reader(fifo):
+        return False
+    # The state page is made first and removed last, so without it nothing is half made; with it,
+    # a live owner may be closing or still opening its FIFO, and an unreadable page is not ours to judge.
+    if state_st is not None and _owner_alive(state) is not False:
+        return False
+    _unlink_ours(fifo, fifo=True)
+    _unlink_ours(state, fifo=False)
+    return True
+
+
+def _token_of(name: str) -> int | None:
+    stem = name.removesuffix(".state")
+    if len(stem) != 16:
+        return None
+    try:
+        return int(stem, 16)
+    except ValueError:
+        return None
+
+
+def sweep_dead_wakers(ctx: RunContext) -> int:
+    """Remove the wake-up files of readers killed without closing (module doc) and their
+    entries in the subscriber lists of the run; returns how many readers were swept.
+    Never raises for what it finds: a run directory holds only our files, but is read as untrusted."""
+    wake_dir = ctx.run_dir / "wake"
+    try:
+        names = os.listdir(wake_dir)
+    except OSError:
+        return 0
+    live: set[int] = set()
+    swept = 0
+    for token in {t for t in map(_token_of, names) if t is not None}:
+        if remove_if_dead(ctx, token):
+            swept += 1
+        else:
+            live.add(token)
+    try:
+        topics = list((ctx.run_dir / "subs").iterdir())
+    except OSError:
+        return swept
+    for folder in topics:
+        try:
+            entries = list(folder.iterdir())
+        except OSError:
+            continue
+        for entry in entries:
+            token = _token_of(entry.name)
+            # A subscriber registers after its waker is made: an entry whose waker has no file
+            # left belongs to a reader that is gone (or is closing, and removes it anyway).
+            if token is None or token in live or _lstat(fifo_path(ctx, token)) or _lstat(state_path(ctx, token)):
+                continue
+            st = _lstat(entry)
+            if st is not None and stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid():
+                try:
+                    entry.unlink()
+                except FileNotFoundError:
+                    pass
+    return swept
