@@ -217,7 +217,8 @@ class Launcher:
     def enable_foxglove(self, port: int = 8765, host: str = "127.0.0.1", **config: Any) -> None:
         """Serve every topic live to Foxglove on ``ws://host:port``, from a supervised component
         (``foxglove_bridge``) in its own process. ``config``: more ``FoxgloveConfig`` fields
-        (``topics``, ``exclude``, ``loop_rate``, ``distribution``)."""
+        (``topics``, ``exclude``, ``loop_rate``, ``distribution``, ``token``, ``allow_origins``);
+        a host other than loopback requires ``token``."""
         from emos.actors.viz import FoxgloveBridgeComponent, FoxgloveConfig
 
         bridge = FoxgloveBridgeComponent(config=FoxgloveConfig(host=host, port=port, **config))

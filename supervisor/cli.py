@@ -70,7 +70,8 @@ EXAMPLES: dict[str, str] = {
               "emos record /camera/rgb /scan -o two.mcap --duration 10\n"
               "emos record -o nav.mcap -x '/*/status' --compression zstd",
     "play": "emos play run.mcap\nemos play run.mcap --rate 2 --loop --topics /scan",
-    "viz": "emos viz                                  # ws://127.0.0.1:8765 for Foxglove\nemos viz /scan '/camera/*' --port 8766",
+    "viz": "emos viz                                  # ws://127.0.0.1:8765 for Foxglove\nemos viz /scan '/camera/*' --port 8766\n"
+           "emos viz --token auto                     # prints the URL with its token once",
     "bench record": "emos bench record\nemos bench record --pairs 4 --window 8 --against hz   # control",
 }
 

@@ -28,11 +28,10 @@ import re
 import secrets
 from pathlib import Path
 from typing import Any, Awaitable, Callable
-from urllib.parse import urlsplit
 
 from aiohttp import web
 
-from emos.actors.ui.config import LOOPBACK_NAMES, is_loopback
+from emos.hosts import LOOPBACK_NAMES, host_of, is_loopback, same_origin
 
 CSRF_HEADER = "X-EMOS-CSRF"
 CSRF_QUERY = "csrf"
@@ -61,23 +60,6 @@ def csrf_for(token: str, session: str) -> str:
     return hmac.new(token.encode(), b"emos-ui-csrf:" + session.encode(), hashlib.sha256).hexdigest()
 
 
-def _host_name(host_header: str) -> str:
-    host = host_header.strip()
-    if host.startswith("["):
-        return host[1:host.find("]")] if "]" in host else host
-    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
-
-
-def _same_origin(origin: str, host_header: str) -> bool:
-    """``Origin`` names this page (scheme http(s), same host and port as the request's ``Host``).
-    ``null`` and anything unparsable are foreign."""
-    try:
-        parts = urlsplit(origin)
-    except ValueError:
-        return False
-    return parts.scheme in ("http", "https") and bool(host_header) and parts.netloc.lower() == host_header.strip().lower()
-
-
 def _refuse(status: int, text: str, **headers: str) -> web.Response:
     return web.Response(status=status, text=f"EMOS UI: {text}\n", headers=headers)
 
@@ -103,10 +85,10 @@ def make_middleware(bind_host: str, token: str, port: int, token_file: Path | No
     @web.middleware
     async def check(request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]) -> web.StreamResponse:
         host = request.headers.get("Host", "")
-        if local_only and _host_name(host) not in LOOPBACK_NAMES:
+        if local_only and host_of(host) not in LOOPBACK_NAMES:
             return _refuse(403, "this page is served to this machine only (Host not allowed)")
         origin = request.headers.get("Origin")
-        if origin is not None and not _same_origin(origin, host):
+        if origin is not None and not same_origin(origin, host):
             return _refuse(403, f"cross-origin request refused (Origin {origin!r}; only pages of http://{host} may call it)")
         if not hmac.compare_digest(_given_token(request, tok_cookie).encode(), token.encode()):
             return _refuse(401, f"access token required: open the address printed at start-up (.../?token=...){where}, "

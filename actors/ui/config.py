@@ -1,24 +1,10 @@
 """The UI component's configuration."""
 from __future__ import annotations
 
-import ipaddress
-
 from attrs import define, field
 
 from emos.config import validators as base_validators
 from emos.config.base import BaseComponentConfig
-
-LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` only accepts connections from this machine."""
-    if host in LOOPBACK_NAMES:
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def _check_host(instance: object, attribute: object, value: str) -> None:

@@ -31,6 +31,27 @@ def _names(instance: Any, attribute: Any, value: Any) -> None:
         raise ValueError(f"FoxgloveConfig.{attribute.name} must be a list of topic names or wildcards, got {value!r}")
 
 
+def _token(instance: Any, attribute: Any, value: Any) -> None:
+    from emos.interop.foxglove_gate import make_token
+
+    try:
+        make_token(value)
+    except ValueError as exc:
+        raise ValueError(f"FoxgloveConfig.token: {exc}") from None
+
+
+def _origins(instance: Any, attribute: Any, value: Any) -> None:
+    from emos.interop.foxglove_gate import OriginPattern
+
+    if not isinstance(value, list):
+        raise ValueError(f"FoxgloveConfig.allow_origins must be a list of origins such as 'https://example.com:*', got {value!r}")
+    for origin in value:
+        try:
+            OriginPattern(origin)
+        except (ValueError, AttributeError) as exc:
+            raise ValueError(f"FoxgloveConfig.allow_origins: {exc}") from None
+
+
 def _distribution(instance: Any, attribute: Any, value: Any) -> None:
     from emos.interop.ros2_cdr import DISTRIBUTIONS
 
@@ -40,7 +61,10 @@ def _distribution(instance: Any, attribute: Any, value: Any) -> None:
 
 @define(kw_only=True)
 class FoxgloveConfig(BaseComponentConfig):
-    """``host``/``port``: where the WebSocket server listens (127.0.0.1 keeps it on this machine).
+    """``host``/``port``: where the WebSocket server listens (127.0.0.1 keeps it on this machine;
+    any other host requires a ``token``). ``token``: required of every client as
+    ``ws://host:port/?token=...``; ``"auto"`` makes a random one, logged once with the URL.
+    ``allow_origins``: browser origins accepted besides Foxglove's app and localhost pages.
     ``topics``/``exclude``: names or wildcards (empty ``topics``: all). ``loop_rate``: how often (Hz)
     new messages are forwarded."""
 
@@ -50,6 +74,18 @@ class FoxgloveConfig(BaseComponentConfig):
     topics: list = field(factory=list, validator=_names)
     exclude: list = field(factory=list, validator=_names)
     distribution: str = field(default="humble", validator=_distribution)
+    token: str | None = field(default=None, validator=_token)
+    allow_origins: list = field(factory=list, validator=_origins)
+
+
+def _check_exposure(component_name: str, config: FoxgloveConfig) -> None:
+    """At definition time, not at activation: a bridge open to the network needs a token."""
+    from emos.hosts import is_loopback
+
+    if config.token is None and not is_loopback(config.host):
+        raise ValueError(f"component {component_name!r}: FoxgloveConfig.host {config.host!r} is not a loopback address, so "
+                         "every machine that reaches it would get every topic (camera frames included): set "
+                         "FoxgloveConfig.token (a string of 8+ URL characters, or 'auto')")
 
 
 class FoxgloveBridgeComponent(BaseComponent):
@@ -59,17 +95,25 @@ class FoxgloveBridgeComponent(BaseComponent):
         config = config or FoxgloveConfig()
         if not isinstance(config, FoxgloveConfig):
             raise TypeError(f"component {component_name!r}: config must be a FoxgloveConfig, got {type(config).__name__}")
+        _check_exposure(component_name, config)
         super().__init__(component_name, config=config, **kwargs)
         self.config: FoxgloveConfig = config
         self.bridge: Any = None
 
     def custom_on_activate(self) -> None:
         from emos.interop.foxglove_bridge import FoxgloveBridge
+        from emos.hosts import is_loopback
 
         cfg = self.config
         self.bridge = FoxgloveBridge(self.node.ctx, cfg.host, cfg.port, cfg.topics or None, cfg.exclude,
-                                     distribution=cfg.distribution, use_waker=False)
-        self.get_logger().info("Foxglove: ws://%s:%d", cfg.host, self.bridge.port)
+                                     distribution=cfg.distribution, use_waker=False, token=cfg.token,
+                                     allow_origins=cfg.allow_origins)
+        if not is_loopback(cfg.host):
+            self.get_logger().warning("Foxglove: listening on %s port %d: every machine that reaches it and knows the token gets "
+                                      "every topic, camera frames included; the traffic is not encrypted", cfg.host, self.bridge.port)
+        # A token the user chose is not repeated in the log; an "auto" one is shown once, or nobody could use it.
+        self.get_logger().info("Foxglove: %s%s", self.bridge.url(with_token=cfg.token == "auto"),
+                               " (token required)" if cfg.token not in (None, "auto") else "")
 
     def _execution_step(self, **kwargs: Any) -> None:
         if self.bridge is not None:

@@ -18,6 +18,10 @@ How each topic is offered:
 
 Messages are converted only for channels a client subscribed to (``Channel.has_sinks``), so an
 idle bridge costs one read per message.
+
+Who may connect: clients reach the SDK's server only through :class:`HandshakeGate`
+(:mod:`emos.interop.foxglove_gate`), which checks the browser ``Origin`` against an allow-list and,
+when one is set, a token; a bridge on a non-loopback host requires a token.
 """
 from __future__ import annotations
 
@@ -28,6 +32,8 @@ from typing import Any, Iterable
 import attrs
 import numpy as np
 
+from emos.hosts import is_loopback
+from emos.interop.foxglove_gate import HandshakeGate, make_token, private_loopback_address
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
 from emos.interop.tap import RunWatch, TopicTap
 from emos.msgs import codec
@@ -73,12 +79,19 @@ class FoxgloveBridge:
     """Serves a run's topics (all, or the given names/wildcards) on a Foxglove WebSocket server.
 
     ``port=0`` picks a free port (see :attr:`port`). ``use_waker`` makes :meth:`wait` sleep until
-    a message arrives; a component polling at its loop rate passes ``False``.
+    a message arrives; a component polling at its loop rate passes ``False``. ``token``: ``None``,
+    a string, or ``"auto"`` (a random one, see :attr:`token`), required of every client; it is
+    mandatory when ``host`` is not a loopback address. ``allow_origins``: browser origins allowed
+    besides :data:`~emos.interop.foxglove_gate.DEFAULT_ORIGINS`.
     """
 
     def __init__(self, ctx: RunContext, host: str = "127.0.0.1", port: int = 8765, topics: Iterable[str] | None = None,
                  exclude: Iterable[str] | None = None, distribution: str = DEFAULT_DISTRIBUTION, use_waker: bool = True,
-                 name: str = "EMOS"):
+                 name: str = "EMOS", token: str | None = None, allow_origins: Iterable[str] = ()):
+        self.token = make_token(token)
+        if self.token is None and not is_loopback(host):
+            raise ValueError(f"Foxglove bridge: host {host!r} is not a loopback address, so every machine that reaches it "
+                             "would get every topic (camera frames included): set a token ('auto' makes one)")
         fg = _foxglove()
         self._fg = fg
         self.ros2 = codec_for(distribution)
@@ -86,20 +99,52 @@ class FoxgloveBridge:
         self.routes: dict[str, _Route] = {}
         self.errors: dict[str, int] = {}
         self.sent: dict[str, int] = {}
+        self.gate: HandshakeGate | None = None
+        self.server: Any = None
         # Few messages queued per topic: a viewer wants the newest, not a backlog.
         self.tap = TopicTap(ctx, topics, exclude, queue_size=16, use_waker=use_waker)
         try:
-            self.server = fg.start_server(name=name, host=host, port=port, context=self.context)
+            self.server = self._start_server(fg, name)
+            self.gate = HandshakeGate(host, port, (self._inner, int(self.server.port)), allow_origins, self.token)
         except Exception as exc:
+            self._stop_server()
             self.tap.close()
+            if isinstance(exc, ValueError):
+                raise
             raise OSError(f"Foxglove bridge: cannot serve on {host}:{port}: {exc}") from exc
         self.host = host
         self._add_routes(self.tap.subs)
-        log.info("Foxglove bridge on ws://%s:%d serving %d topics", host, self.port, len(self.routes))
+        log.info("Foxglove bridge on ws://%s:%d serving %d topics%s", host, self.port, len(self.routes),
+                 " (token required)" if self.token else "")
+
+    def _start_server(self, fg: Any, name: str) -> Any:
+        """The SDK's server, on a random private loopback address (see foxglove_gate for why)."""
+        self._inner = "127.0.0.1"
+        for _ in range(3):
+            addr = private_loopback_address()
+            try:
+                server = fg.start_server(name=name, host=addr, port=0, context=self.context)
+            except Exception as exc:  # a system where only 127.0.0.1 is configured
+                log.debug("Foxglove bridge: cannot listen on %s: %s", addr, exc)
+                continue
+            self._inner = addr
+            return server
+        return fg.start_server(name=name, host="127.0.0.1", port=0, context=self.context)
+
+    def _stop_server(self) -> None:
+        if self.server is not None:
+            server, self.server = self.server, None
+            server.stop()
 
     @property
     def port(self) -> int:
-        return int(self.server.port)
+        """The port clients connect to (the gate's)."""
+        assert self.gate is not None
+        return self.gate.port
+
+    def url(self, with_token: bool = True) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"ws://{host}:{self.port}/" + (f"?token={self.token}" if self.token and with_token else "")
 
     def _add_routes(self, topics: Iterable[str]) -> None:
         for topic in topics:
@@ -172,12 +217,14 @@ class FoxgloveBridge:
             self.step()
             if progress is not None and time.monotonic() >= next_report:
                 next_report = time.monotonic() + progress_every
-                progress(f"Foxglove bridge ws://{self.host}:{self.port}: {len(self.routes)} topics; sent "
+                progress(f"Foxglove bridge {self.url(with_token=False)}: {len(self.routes)} topics; sent "
                          + ("  ".join(f"{t} {n}" for t, n in sorted(self.sent.items())) or "nothing yet (no client subscribed)"))
 
     def close(self) -> None:
         try:
-            self.server.stop()
+            self._stop_server()  # the SDK server first, then the gate in front of it
+            if self.gate is not None:
+                self.gate.close()
         finally:
             for route in self.routes.values():
                 try:

@@ -7,12 +7,19 @@ recipe runs on recorded data with no sensors or simulator.
 """
 from __future__ import annotations
 
+import errno
 import fnmatch
+import io
 import logging
+import os
+import stat
 import time
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from emos.interop.mcap_bag import BagChannel, BagInfo, BagWriter, read_bag
+from attrs import define
+
+from emos.interop.mcap_bag import PROFILE, BagChannel, BagInfo, BagWriter, read_bag
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, CdrError
 from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
 from emos.transport.context import RunContext
@@ -30,6 +37,88 @@ def _mb(n: int) -> str:
 
 
 DEFAULT_DEFER_S = 0.005
+
+
+def describe_os_error(exc: OSError) -> str:
+    """``No space left on device (ENOSPC)``: the OS error without Python's ``[Errno 28]`` noise."""
+    name = errno.errorcode.get(exc.errno or 0)
+    text = exc.strerror or str(exc)
+    return f"{text} ({name})" if name else text
+
+
+@define
+class WriteFailure:
+    """The recording stopped because its file could not be written."""
+
+    path: Path
+    error: OSError
+    kept: int | None        # size of the valid MCAP file left behind; None: it could not be closed properly
+    problem: str = ""       # why it could not (when ``kept`` is None)
+
+    def message(self) -> str:
+        head = f"writing {self.path} failed: {describe_os_error(self.error)}; recording stopped"
+        if self.kept is not None:
+            size = _mb(self.kept) if self.kept >= 1e6 else f"{self.kept / 1e3:.1f} kB"
+            return (f"{head}; {self.path} is a valid MCAP file ({size}) holding the chunks written before the error "
+                    "(the messages of the chunk being written are lost)")
+        return f"{head}; {self.problem}"
+
+
+def _closing_records() -> bytes:
+    """Data End and a Footer without summary, then the magic: what ends a valid MCAP file."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import MCAP0_MAGIC
+
+    rb = RecordBuilder()
+    DataEnd(data_section_crc=0).write(rb)  # 0: "not computed", as the specification allows
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(rb)
+    return rb.end() + MCAP0_MAGIC
+
+
+def _empty_mcap() -> bytes:
+    from mcap.writer import Writer
+
+    buf = io.BytesIO()
+    writer = Writer(buf)
+    writer.start(profile=PROFILE, library="emos")
+    writer.finish()
+    return buf.getvalue()
+
+
+def salvage(path: Path, good: int, error: OSError) -> WriteFailure:
+    """After a failed write: cut the file back to ``good`` (the end of its last complete chunk,
+    all of which reached the OS) and end it there as a valid MCAP file. If even that fails, the
+    file is left cut at ``good``: readable up to its last complete chunk, as after a SIGKILL."""
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError as exc:
+        return WriteFailure(path, error, None, f"it could not be reopened to close it properly ({describe_os_error(exc)})")
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return WriteFailure(path, error, None, "it is not a regular file, so nothing recorded could be kept")
+        # good == 0: not even the header reached the OS; an empty recording then.
+        tail = _empty_mcap() if good == 0 else _closing_records()
+        start = good
+        try:
+            os.ftruncate(fd, start)
+            view = memoryview(tail)
+            while view:
+                n = os.pwrite(fd, view, start)
+                view, start = view[n:], start + n
+            os.fsync(fd)
+        except OSError as exc:
+            try:
+                os.ftruncate(fd, good)
+            except OSError:
+                pass
+            left = ("it is left empty" if good == 0 else
+                    "it is readable up to its last complete chunk (emos play says it was cut short)")
+            return WriteFailure(path, error, None,
+                                f"the device refused even the few bytes that end the file properly ({describe_os_error(exc)}): {left}")
+        return WriteFailure(path, error, start)
+    finally:
+        os.close(fd)
 
 
 class Recorder:
@@ -59,37 +148,46 @@ class Recorder:
         self.errors: dict[str, int] = {}
         self.alive = RunWatch(ctx)
         self.run_ended = False  # the system stopped while we recorded
+        self.write_error: OSError | None = None  # the file could not be written: the recording stops
+        self.failure: WriteFailure | None = None  # set by close() after a write error
 
     def run(self, should_stop: Callable[[], bool], duration: float | None = None, progress: Progress | None = None,
             progress_every: float = 1.0) -> None:
-        """Record until ``should_stop()`` or ``duration`` seconds; the file stays open (see :meth:`close`)."""
+        """Record until ``should_stop()``, ``duration`` seconds or a write error (:attr:`write_error`);
+        the file stays open (see :meth:`close`)."""
         start = time.monotonic()
         next_report = start + progress_every
         for topic in self.tap.subs:
             log.info("recording %s (%s)", topic, self.tap.types[topic].__name__)
-        while not should_stop() and (duration is None or time.monotonic() - start < duration):
-            if not self.alive():
-                self.run_ended = True
-                break
-            self.tap.wait(0.1)
-            if self.defer:
-                time.sleep(self.defer)
+        try:
+            while not should_stop() and (duration is None or time.monotonic() - start < duration):
+                if not self.alive():
+                    self.run_ended = True
+                    break
+                self.tap.wait(0.1)
+                if self.defer:
+                    time.sleep(self.defer)
+                self.step()
+                for topic in self.tap.discover():
+                    log.info("recording %s (%s), which appeared during the recording", topic, self.tap.types[topic].__name__)
+                now = time.monotonic()
+                if progress is not None and now >= next_report:
+                    next_report = now + progress_every
+                    progress(self.report(now - start))
             self.step()
-            for topic in self.tap.discover():
-                log.info("recording %s (%s), which appeared during the recording", topic, self.tap.types[topic].__name__)
-            now = time.monotonic()
-            if progress is not None and now >= next_report:
-                next_report = now + progress_every
-                progress(self.report(now - start))
-        self.step()
+        except OSError as exc:  # the file, not a message: nothing more can be recorded
+            self.write_error = exc
 
     def step(self) -> int:
-        """Write every message that arrived since the last call; returns how many."""
+        """Write every message that arrived since the last call; returns how many. Raises the
+        OSError of a failed write (full disk, I/O error): the recording cannot go on."""
         items = self.tap.take()
         now = time.time_ns()
         for topic, stamp, frame in items:
             try:
                 self.writer.write_frame(topic, self.tap.types[topic], frame, stamp, now)
+            except OSError:
+                raise
             except Exception as exc:  # one undecodable message must not end the recording
                 n = self.errors[topic] = self.errors.get(topic, 0) + 1
                 if n == 1 or n % 100 == 0:
@@ -103,10 +201,28 @@ class Recorder:
         return f"recording {elapsed:6.1f} s  {_mb(self.writer.size):>9}  " + "  ".join(parts) + tail
 
     def close(self) -> None:
+        """Close the file (summary written); after a write error, see :attr:`failure`."""
         try:
             self.tap.close()
         finally:
-            self.writer.close()
+            self._close_writer()
+
+    def _close_writer(self) -> None:
+        if self.writer.closed:
+            return
+        good = self.writer.size  # the end of the last chunk that reached the OS
+        if self.write_error is None:
+            try:
+                self.writer.close()
+                return
+            except OSError as exc:  # the summary did not fit, or the data never reached the disk
+                self.write_error = exc
+        else:
+            try:
+                self.writer.close()  # releases the file; whatever it writes past `good` is cut off below
+            except Exception as exc:
+                log.debug("closing %s after a write error: %s", self.writer.path, exc)
+        self.failure = salvage(self.writer.path, good, self.write_error)
 
 
 class Player:

@@ -45,6 +45,8 @@ import time
 from pathlib import Path
 from typing import Any, Self
 
+from emos.hosts import is_loopback
+
 log = logging.getLogger("emos.transport.zenoh")
 ENV_ZENOH_CONFIG = "EMOS_ZENOH_CONFIG"
 LOOPBACK_HOST = "127.0.0.1"
@@ -128,13 +130,7 @@ def is_loopback_endpoint(endpoint: str) -> bool:
         return True
     address = re.split(r"[?#]", rest, maxsplit=1)[0]
     host = address.rsplit(":", 1)[0] if ":" in address else address
-    host = host.strip("[]")
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+    return is_loopback(host)
 
 
 def _is_loopback_interface(name: str) -> bool:

@@ -23,10 +23,7 @@ from typing import Awaitable, Callable
 
 from aiohttp import web
 
-# The web UI's Host and Origin checks and loopback names, shared rather than copied. (The two
-# functions are private to the UI's module; if they are renamed, this import fails at start-up.)
-from emos.actors.ui.auth import _host_name, _same_origin
-from emos.actors.ui.config import LOOPBACK_NAMES, is_loopback
+from emos.hosts import LOOPBACK_NAMES, host_of, is_loopback, same_origin
 from emos.transport.trust import RateLimitedLog
 
 from .limits import MAX_HTTP_BODY, ByteBudget, MiB
@@ -77,11 +74,11 @@ def make_guard(bind_host: str, budget: ByteBudget) -> Callable[..., Awaitable[we
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
         host = request.headers.get("Host", "")
-        if local_only and _host_name(host) not in LOOPBACK_NAMES:
+        if local_only and host_of(host) not in LOOPBACK_NAMES:
             return refuse(request, 403, f"this model server is served to this machine only (Host {host[:80]!r} "
                                         f"is not one of {', '.join(LOOPBACK_NAMES)})")
         origin = request.headers.get("Origin")
-        if origin is not None and not _same_origin(origin, host):
+        if origin is not None and not same_origin(origin, host):
             return refuse(request, 403, f"cross-origin request refused (Origin {origin[:80]!r} "
                                         f"is not this server, http://{host[:80]})")
         route = request.match_info.handler
