@@ -19,7 +19,8 @@ from typing import Any, Callable, Iterable
 
 from attrs import define
 
-from emos.interop.mcap_bag import PROFILE, BagChannel, BagInfo, BagWriter, read_bag
+from emos.interop.mcap_bag import PROFILE, BagWriter
+from emos.interop.mcap_read import BagChannel, BagInfo, ReadLimits, read_bag
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, CdrError
 from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
 from emos.transport.context import RunContext
@@ -233,9 +234,12 @@ class Player:
     """
 
     def __init__(self, ctx: RunContext, path: str, rate: float = 1.0, loop: bool = False, topics: Iterable[str] | None = None,
-                 distribution: str = DEFAULT_DISTRIBUTION):
+                 distribution: str = DEFAULT_DISTRIBUTION, limits: ReadLimits | None = None):
+        """``limits``: what a (possibly hostile) file may cost to read, and how many topics play."""
         if not rate > 0:
             raise ValueError(f"rate must be > 0, got {rate!r}")
+        self.limits = limits if limits is not None else ReadLimits()
+        self.over_limit: set[str] = set()  # topics not played: --max-topics were playing already
         self.ctx = ctx
         self.path = path
         self.rate = float(rate)
@@ -247,38 +251,60 @@ class Player:
         self.skipped: dict[str, str] = {}
         self.refused: set[str] = set()
         self.errors: dict[str, int] = {}
-        self.info = BagInfo()
+        self.info = BagInfo(limits=self.limits)
         self.alive = RunWatch(ctx)
         self.run_ended = False  # the system stopped while we played
 
     def _wanted(self, topic: str) -> bool:
         return not self.patterns or any(fnmatch.fnmatchcase(topic, p) for p in self.patterns)
 
+    def topics_to_play(self, channels: dict[int, BagChannel]) -> set[str]:
+        """The topics of ``channels`` (a file's summary) that this player would publish."""
+        return {ch.topic for ch in channels.values() if ch.cls is not None and self._wanted(ch.topic)}
+
+    def _skip(self, topic: str, reason: str) -> None:
+        self.skipped[topic] = reason
+        log.warning("not playing %s: %s", shown_topic(topic), reason)
+
     def _publisher(self, ch: BagChannel) -> Publisher | None:
+        """The publisher of ``ch``'s topic, created when its first message plays; None if the
+        channel is not to be played."""
+        if ch.cls is None:
+            # Never the publisher of another channel of the same topic: its messages do not decode.
+            if ch.topic not in self.skipped:
+                self._skip(ch.topic, ch.problem)
+            return None
         pub = self.publishers.get(ch.topic)
-        if pub is None:
-            if ch.topic in self.refused:
-                return None
-            if ch.cls is None:
-                if ch.topic not in self.skipped:
-                    self.skipped[ch.topic] = ch.problem
-                    log.warning("not playing %s: %s", ch.topic, ch.problem)
-                return None
-            # Subscribers refuse a ring of another type than the topic's, so never create one.
-            current = list_topics(self.ctx).get(ch.topic, {}).get("type", "?")
-            if current not in ("?", canonical_name(ch.cls)):
-                self.skipped[ch.topic] = f"the running system carries {current} on it, the recording {canonical_name(ch.cls)}"
-                log.warning("not playing %s: %s", ch.topic, self.skipped[ch.topic])
-                self.refused.add(ch.topic)
-                return None
-            pub = self.publishers[ch.topic] = Publisher(self.ctx, ch.topic, ch.cls)
+        if pub is not None or ch.topic in self.refused or ch.topic in self.over_limit:
+            return pub
+        if len(self.publishers) >= self.limits.max_topics:
+            if not self.over_limit:
+                log.warning("not playing %s, nor any further topic: %d topics play already, the limit (--max-topics)",
+                            shown_topic(ch.topic), self.limits.max_topics)
+            self.over_limit.add(ch.topic)
+            return None
+        # Subscribers refuse a ring of another type than the topic's, so never create one.
+        current = list_topics(self.ctx).get(ch.topic, {}).get("type", "?")
+        if current not in ("?", canonical_name(ch.cls)):
+            self._skip(ch.topic, f"the running system carries {current} on it, the recording {canonical_name(ch.cls)}")
+            self.refused.add(ch.topic)
+            return None
+        try:
+            # Sized to the data (small messages get a ring of a few KiB, not 64 KiB x 18 slots).
+            pub = Publisher(self.ctx, ch.topic, ch.cls, capacity=ring_capacity(ch.largest))
+        except OSError as exc:  # out of /dev/shm or file descriptors: this topic, not the play, fails
+            self._skip(ch.topic, f"cannot create its ring ({exc})")
+            self.refused.add(ch.topic)
+            return None
+        self.publishers[ch.topic] = pub
         return pub
 
     def run(self, should_stop: Callable[[], bool], progress: Progress | None = None, progress_every: float = 1.0) -> int:
         """Play (and replay with ``loop``) until done or ``should_stop()``; returns messages published."""
         total = 0
         while True:
-            self.info = BagInfo()
+            self.info = BagInfo(limits=self.limits)
+            self.info.should_stop = should_stop  # honoured while a chunk is read, too
             n, stopped = self._play_once(should_stop, progress, progress_every)
             total += n
             if stopped or not self.loop or n == 0:
@@ -349,3 +375,15 @@ def default_progress(stream: Any = None) -> Progress:
         out.flush()
 
     return show
+
+
+def ring_capacity(largest: int) -> int:
+    """Slot size of a played topic's ring: its largest recorded message, plus room for the
+    difference between a ROS 2 (cdr) message and the same message in EMOS's frame."""
+    return max(1024, largest + largest // 16 + 256)
+
+
+def shown_topic(topic: str, width: int = 60) -> str:
+    """A topic name as printed: a hostile file's names can be any length or contain anything."""
+    text = repr(topic) if not topic or not topic.isprintable() or " " in topic else topic
+    return text if len(text) <= width else f"{text[:width - 20]}...({len(topic)} characters)"

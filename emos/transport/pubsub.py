@@ -71,8 +71,13 @@ def parse_segment(ctx: RunContext, name: str) -> tuple[str, str, int] | None:
 class Publisher:
     """Writes messages of one type to one topic."""
 
-    def __init__(self, ctx: RunContext, topic: str, msg_cls: type, publisher_id: str | None = None, depth: int = 10, max_bytes: int = MAX_MESSAGE_BYTES):
+    def __init__(self, ctx: RunContext, topic: str, msg_cls: type, publisher_id: str | None = None, depth: int = 10,
+                 max_bytes: int = MAX_MESSAGE_BYTES, capacity: int = DEFAULT_CAPACITY):
+        """``capacity``: the slot size (bytes) of the first ring; it grows as messages need."""
+        if not 0 < capacity <= max_bytes:
+            raise ValueError(f"Publisher on {topic!r}: capacity must be 1..{max_bytes} bytes, got {capacity!r}")
         self.ctx = ctx
+        self._first_capacity = int(capacity)
         self.topic = topic
         self.msg_cls = msg_cls
         self.type_name = canonical_name(msg_cls)
@@ -117,7 +122,7 @@ class Publisher:
                 log.warning("topic %s: cannot remove damaged ring %s: %s", self.topic, name, left)
             gen += 1
         # Subscribers (re-)register from the subscriber directory in _announce, owed from ``first``.
-        ring = self._create_ring(gen or 0, self.depth, DEFAULT_CAPACITY, _fingerprint(self.msg_cls), self.type_name, first)
+        ring = self._create_ring(gen or 0, self.depth, self._first_capacity, _fingerprint(self.msg_cls), self.type_name, first)
         ring.set_writer_pid(os.getpid())
         return ring
 

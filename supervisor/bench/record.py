@@ -57,7 +57,7 @@ def _wait_recording(proc: subprocess.Popen, bag: Path | None, timeout: float = 3
 
 def _recorded_frames(bag: Path) -> tuple[int, int]:
     """(frames in the file, frames the camera published between the first and the last of them)."""
-    from emos.interop.mcap_bag import read_bag
+    from emos.interop.mcap_read import read_bag
 
     seqs = [int(m.decode().header.frame_id) for m in read_bag(bag, topics=["/camera/rgb"])]
     return len(seqs), (max(seqs) - min(seqs) + 1 if seqs else 0)
