@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     if args.verb == "info":
         return _call(control_socket(ctx, args.name), "info", {}, args.timeout, args.name)
     if args.service in LIFECYCLE:
-        return _call(ctx.run_dir / "supervisor.sock", "lifecycle", {"component": args.name, "request": args.service}, args.timeout, args.name)
+        return _call(ctx.run_dir / "supervisor.sock", "lifecycle", {"component": args.name, "request": args.service, "by": "cli"}, args.timeout, args.name)
     if args.service not in SERVICES:
         sys.exit(f"emos component call: SERVICE must be one of {', '.join(SERVICES + LIFECYCLE)}, got {args.service!r}")
     try:

@@ -60,20 +60,29 @@ def snapshot(ctx_run: Any) -> dict[str, Any]:
 def render(data: dict[str, Any]) -> str:
     starting = "" if data.get("up", True) else "  (starting: later groups are not up yet)"
     lines = [f"run {data['run_id']}  supervisor pid {data['pid']}  up {data['uptime_s']:.1f} s{starting}", ""]
-    header = f"{'NAME':<28} {'PID':>7} {'STATE':<12} {'HEALTH':<18} {'RESTARTS':>8} {'UPTIME':>9} {'CPU%':>6} {'RSS MB':>7}"
+    # RESTARTS: over the whole run (group restarts included); LAST RESTART: why the last one was.
+    header = (f"{'NAME':<28} {'PID':>7} {'STATE':<12} {'HEALTH':<18} {'RESTARTS':>8} {'UPTIME':>9} {'CPU%':>6} {'RSS MB':>7}  "
+              f"{'LAST RESTART':<14}")
     lines.append(header)
     lines.append("-" * len(header))
     for depth, n in _rows(data["tree"]):
         name = "  " * depth + n.get("name", "?")
+        last = _text(n.get("last_restart_reason")) or "-"
         if n.get("kind") == "supervisor":
-            lines.append(f"{name:<28} {'':>7} {n.get('strategy', ''):<12} {n.get('intensity', ''):<18} {n.get('restarts', 0):>8}")
+            lines.append(f"{name:<28} {'':>7} {n.get('strategy', ''):<12} {n.get('intensity', ''):<18} {n.get('restarts', 0):>8} "
+                         f"{'':>9} {'':>6} {'':>7}  {last:<14}")
             continue
         cpu = n.get("cpu_percent")
         lines.append(
             f"{name:<28} {n.get('pid') or '-':>7} {n.get('state', '?'):<12} {n.get('health', '?'):<18} {n.get('restarts', 0):>8} "
-            f"{n.get('uptime_s', 0):>8.1f}s {'' if cpu is None else f'{cpu:.1f}':>6} {n.get('rss_mb', ''):>7}"
+            f"{n.get('uptime_s', 0):>8.1f}s {'' if cpu is None else f'{cpu:.1f}':>6} {n.get('rss_mb', ''):>7}  {last:<14}"
         )
-    return "\n".join(lines)
+    return "\n".join(line.rstrip() for line in lines)
+
+
+def _text(value: Any) -> str:
+    """A reason from the tree answer (possibly another host's, over Zenoh) as plain printable text."""
+    return "".join(ch for ch in str(value)[:40] if ch.isprintable()) if value else ""
 
 
 def _remote(args: argparse.Namespace) -> int:

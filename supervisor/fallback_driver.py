@@ -11,6 +11,12 @@ The ladder state (:class:`~emos.core.fallbacks.FallbackTracker`) lives here, not
 it survives the restarts it causes, and behaves the same for threads and processes. A component
 that gave up shows ``GAVE_UP`` as its health in ``emos status`` until it has been healthy again
 for ``reset_after`` seconds.
+
+A status belongs to one incarnation of its component. Only the running incarnation's count:
+written by its process (the ring's writer pid) and stamped after it was spawned. When an
+incarnation ends or a new one starts (a crash, a group restart), the failure the old one
+reported is forgotten: the ladder waits for what the new one reports (its spent retries stay),
+and a restart the ladder asked for the old one does not hit the new one.
 """
 from __future__ import annotations
 
@@ -20,6 +26,7 @@ import time
 from typing import TYPE_CHECKING, Any, Callable
 
 from emos.core.fallbacks import HANDLERS, Fallback, FallbackTracker
+from emos.core.health import HealthLevel
 from emos.core.ratelimit import RepeatLimiter
 from emos.events.action import ActionError
 from emos.events.links import ComponentLinks
@@ -31,6 +38,7 @@ from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 
 from .sim_pacing import SimPacer
+from .tree import FALLBACK
 
 if TYPE_CHECKING:
     from emos.supervisor.orchestration import Orchestration
@@ -54,6 +62,7 @@ class FallbackDriver(ActionRuntime):
         self.giveups: dict[str, Fallback | None] = {}
         self.last_status: dict[str, ComponentStatus] = {}
         self._not_before: dict[str, float] = {}  # wall time; statuses stamped earlier belong to a past incarnation
+        self._status_of: dict[str, Any] = {}  # name -> the incarnation whose status the tracker holds
         self._tasks: dict[str, asyncio.Task] = {}
         # name -> (wall time, event): set by the first status stamped after that time
         self._fresh: dict[str, tuple[float, asyncio.Event]] = {}
@@ -85,16 +94,23 @@ class FallbackDriver(ActionRuntime):
         for name, sub in self.subs.items():
             # Only the component's own status ring counts (its publisher id is its name): a
             # stray publisher on <name>/status must not drive its fallbacks.
+            # (take_raw reads every ring of the topic: a damaged or forged one is dropped and logged.)
             items = [item for item in sub.take_raw() if item[2] == name]
             if not items:
                 continue
+            own = sub.sources.get(name)
+            incarnation = self.system.incarnation(name)
+            if incarnation is None or own is None or own.ring.writer_pid != incarnation.pid:
+                continue  # between incarnations, or not written by the running one
             try:
                 status = codec.decode(ComponentStatus, items[-1][1], copy=True)
             except Exception as exc:
                 self._report(name, "status decode", exc)
                 continue
-            if status.header.stamp.to_sec() < self._not_before.get(name, 0.0):
-                continue
+            stamp = status.header.stamp.to_sec()
+            if stamp < self._not_before.get(name, 0.0) or stamp < incarnation.started_wall:
+                continue  # reported by an earlier incarnation
+            self._status_of[name] = incarnation
             self.last_status[name] = status
             waiting = self._fresh.get(name)
             if waiting is not None and status.header.stamp.to_sec() >= waiting[0]:
@@ -170,6 +186,18 @@ class FallbackDriver(ActionRuntime):
             except Exception as exc:
                 self._report(name, f"on_giveup {action.describe()}", exc)
 
+    def incarnation_changed(self, name: str) -> None:
+        """An incarnation of ``name`` ended or started: the failure the tracker holds was
+        reported by one that is gone, so no ladder acts on it (a running ladder stops after its
+        current step). What the new incarnation reports decides. Spent retries are kept: they
+        reset only after ``reset_after`` seconds of health."""
+        tracker = self.trackers.get(name)
+        if tracker is None or self._status_of.get(name) is self.system.incarnation(name):
+            return
+        tracker.level = HealthLevel.HEALTHY
+        tracker.failing_since = None
+        self.last_status.pop(name, None)
+
     def _report(self, name: str, what: str, exc: BaseException) -> None:
         now_log, _, suppressed = self._errors.hit((name, what, type(exc).__name__))
         if now_log:
@@ -184,19 +212,29 @@ class FallbackDriver(ActionRuntime):
     async def call_component(self, component: str, op: str, timeout: float, **payload: Any) -> Any:
         return await self.links.call(component, op, timeout, **payload)
 
-    async def lifecycle(self, component: str, op: str, wait_time: float = 0.0) -> Any:
-        """start / stop (lifecycle transitions) or restart (through the supervision tree)."""
+    async def lifecycle(self, component: str, op: str, wait_time: float = 0.0, why: str = FALLBACK, by: str = "") -> Any:
+        """start / stop (lifecycle transitions) or restart (through the supervision tree).
+
+        ``why``: ``FALLBACK`` when a ladder of this driver asks (run_action calls this with the
+        defaults), ``REQUESTED`` through the supervisor socket (``by`` says who, if told)."""
         if op in ("start", "stop"):
             return await self.links.call(component, "transition", self.timeout, transition="activate" if op == "start" else "deactivate")
         if op != "restart":
             raise ActionError(f"unknown lifecycle operation {op!r} (start, stop, restart)")
+        # The incarnation to restart: for a ladder's own component, the one whose failure it
+        # judged; else the one running now. None (between incarnations): the next one to run.
+        target = self._status_of.get(component) if why == FALLBACK and component in self._tasks else self.system.incarnation(component)
+        detail = f"restart of {component} requested by {'a fallback' if why == FALLBACK else by or 'a request'}"
         deadline = time.monotonic() + self.timeout
         while True:
+            if target is not None and self.system.incarnation(component) is not target:
+                log.info("[%s] restart skipped: the incarnation it was for (pid %s) has ended already", component, target.pid)
+                return True
             root = self._root()
             sup = root.find(component) if root is not None else None
             if sup is not None:
                 self._not_before[component] = time.time()
-                if await sup.restart_child(component, reason="restart_requested", detail=f"restart of {component} requested by an action or fallback", wait_time=wait_time):
+                if await sup.restart_child(component, reason="restart_requested", detail=detail, wait_time=wait_time, why=why, only_if=target):
                     return True
             if time.monotonic() >= deadline:
                 raise ActionError(f"cannot restart {component!r}: it is not running (stopping, or its group is being restarted)")

@@ -235,7 +235,8 @@ class MonitorRuntime(ActionRuntime):
             raise RuntimeError("no supervisor to send the lifecycle request to")
         client = AsyncRpcClient(sock)
         try:
-            return await client.call("lifecycle", component=component, request=op, wait_time=wait_time, timeout=self.timeout + wait_time + 30.0)
+            return await client.call("lifecycle", component=component, request=op, wait_time=wait_time, by="event",
+                                     timeout=self.timeout + wait_time + 30.0)
         finally:
             await client.close()
 

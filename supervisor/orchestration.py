@@ -155,13 +155,27 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
                     policy=SupervisionPolicy(max_restarts=10, max_seconds=10.0), name="monitor")] + list(packages)
 
 
+def requester(value: Any) -> str:
+    """Who asked for a lifecycle operation (a request's optional ``by``: ``cli``, ``ui``, ``event``,
+    ``component``...): a short word, or "" when absent or not a plain name (it lands in logs and
+    in ``emos status``, so a peer's bytes are not echoed)."""
+    if isinstance(value, str) and 0 < len(value) <= 32 and all(ch.isalnum() or ch in "-_." for ch in value):
+        return value
+    return ""
+
+
 def lifecycle_op(driver: Callable[[], Any]) -> Any:
-    """The supervisor socket's ``lifecycle`` operation: start / stop / restart a component."""
+    """The supervisor socket's ``lifecycle`` operation: start / stop / restart a component.
+
+    A restart asked here is counted as ``requested`` (by ``req["by"]`` if given), never as a crash."""
     import asyncio
     import logging
 
+    from emos.supervisor.tree import REQUESTED
+
     async def lifecycle(req: dict, stream: Any) -> Any:
-        coro = driver().lifecycle(str(req.get("component", "")), str(req.get("request", "")), float(req.get("wait_time") or 0.0))
+        coro = driver().lifecycle(str(req.get("component", "")), str(req.get("request", "")), float(req.get("wait_time") or 0.0),
+                                  why=REQUESTED, by=requester(req.get("by")))
         if req.get("wait", True):
             return await coro
 

@@ -7,7 +7,9 @@
   components, and no fork of a process that runs threads.
 * **Double fork + subreaper.** The zygote forks an intermediate that forks the worker and exits
   at once. The launcher has marked itself ``PR_SET_CHILD_SUBREAPER``, so the orphaned worker is
-  re-parented to the launcher, which alone reaps it and reads its exit status.
+  re-parented to the launcher, which alone reaps it and reads its exit status. Each worker
+  marks itself a subreaper too (the flag is not inherited, and the zygote must not have it),
+  so what its descendants orphan stays below it (reaper.py).
 * **pidfd.** The launcher watches a ``pidfd`` of every worker in its event loop: death is
   known the moment the kernel reaps the task, with no polling.
 * **Parent death.** Workers and the zygote set ``PR_SET_PDEATHSIG`` to the launcher: if the
@@ -29,7 +31,7 @@ from typing import Any, Callable
 
 import msgpack
 
-from emos.supervisor.reaper import ENV_WORKER_PID, kill_group, kill_worker_trees
+from emos.supervisor.reaper import ENV_WORKER_PID, AdoptedReaper, end_descendants, kill_group, kill_worker_trees
 
 log = logging.getLogger("emos.supervisor")
 
@@ -353,11 +355,19 @@ class Zygote:
         code = 70
         if not 0 <= index < len(self.targets):
             os._exit(code)
+        me = os.getpid()
         try:
             set_process_name(f"emos:{self.names[index]}")
-            # A session (and process group) of our own: everything we start dies with us.
+            # A session (and process group) of our own, and the subreaper of everything below
+            # us: orphans of our descendants (daemons that left the session) come back to us,
+            # not to the launcher, and we end them when we end (see reaper.py).
             os.setsid()
-            os.environ[ENV_WORKER_PID] = str(os.getpid())
+            try:
+                become_subreaper()
+            except OSError as exc:
+                log.warning("[%s] cannot become a child subreaper (%s): daemons it starts are ended by the launcher", self.names[index], exc)
+            AdoptedReaper().start()
+            os.environ[ENV_WORKER_PID] = str(me)
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, signal.SIG_DFL)
             # Wait to be re-parented to the launcher (the intermediate exits right away), then
@@ -374,6 +384,11 @@ class Zygote:
             traceback.print_exc()
             code = 70
         finally:
+            if os.getpid() == me:  # not in a child the component forked and that unwound to here
+                try:
+                    end_descendants()
+                except Exception:
+                    pass
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(code)

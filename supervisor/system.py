@@ -26,11 +26,13 @@ from emos.supervisor.heartbeat import HeartbeatMonitor
 from emos.supervisor.orchestration import Orchestration, fallback_summary, lifecycle_op, with_monitor
 from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote, become_subreaper
-from emos.supervisor.tree import ChildSpec, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
+from emos.supervisor.tree import ChildSpec, RestartLedger, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
 from emos.transport.context import RunContext, remove_run_dir, remove_segments, set_current
+from emos.transport.waker import sweep_dead_wakers
 
 log = logging.getLogger("emos.supervisor")
+WAKERS_SWEEP_S = 5.0  # how often the launcher removes the wake-up files of readers killed outright
 
 EXIT_OK, EXIT_GAVE_UP, EXIT_START_FAILED = 0, 3, 4
 
@@ -80,10 +82,13 @@ class System:
         self.exit_code = EXIT_OK
         self.exit_reason = ""
         self.zygote: Zygote | None = None
+        self._wakers_swept_at = time.monotonic()
         self._hellos: dict[str, asyncio.Future[int]] = {}
         self._stop_requested: asyncio.Event | None = None
         self.root: Supervisor | None = None
         self.up = False  # every group started (the tree lists a group only once it is up)
+        self.ledger = RestartLedger()  # every (re)start of every child, over the whole run
+        self.incarnations: dict[str, Any] = {}  # component name -> its running worker (process or thread)
 
     # ------------------------------------------------------------------ entry point
     def run(self) -> int:
@@ -95,7 +100,8 @@ class System:
         self.control_path = self.ctx.run_dir / "supervisor.sock"
         os.environ[ENV_SUPERVISOR_SOCKET] = str(self.control_path)
         become_subreaper()
-        self.reaper = OrphanReaper(protected=self._zygote_pids, on_sweep=lambda: self.zygote.replace_dead() if self.zygote else None)
+        self.reaper = OrphanReaper(protected=self._zygote_pids, on_sweep=self._on_sweep,
+                                   threads_fork=not all(p.multiprocessing for p in self.packages))
         try:
             process_indices = [i for i, c in enumerate(self.components) if self._mode(i) == "process"]
             if process_indices:
@@ -124,6 +130,20 @@ class System:
             log.debug("removed %d shared-memory segments", removed)
             set_current(None)
         return self.exit_code
+
+    def _on_sweep(self) -> None:
+        """Every reaper tick: replace a dead zygote; every WAKERS_SWEEP_S, remove the wake-up
+        files of readers killed outright (``emos topic echo`` SIGKILLed before any publisher
+        noticed: nothing else would until the run ends)."""
+        if self.zygote is not None:
+            self.zygote.replace_dead()
+        now = time.monotonic()
+        if now - self._wakers_swept_at >= WAKERS_SWEEP_S:
+            self._wakers_swept_at = now
+            try:
+                sweep_dead_wakers(self.ctx)
+            except OSError as exc:  # a vanished directory mid-sweep: the next sweep sees the rest
+                log.warning("supervisor: sweeping wake-up files of dead readers failed: %s", exc)
 
     def _zygote_pids(self) -> list[int]:
         z = self.zygote
@@ -219,13 +239,14 @@ class System:
             name = pkg.name or f"group{k}"
             children.append(supervisor_spec(self._group_factory(pkg, offset, name), name))
             offset += len(pkg.components)
-        return Supervisor("root", children, Strategy.ONE_FOR_ONE, self.options.max_restarts, self.options.max_seconds, on_event=self._record)
+        return Supervisor("root", children, Strategy.ONE_FOR_ONE, self.options.max_restarts, self.options.max_seconds, on_event=self._record,
+                          ledger=self.ledger)
 
     def _group_factory(self, pkg: Package, offset: int, name: str) -> Callable[[], Supervisor]:
         def make() -> Supervisor:
             specs = [self._component_spec(pkg, offset + i) for i in range(len(pkg.components))]
             p = pkg.policy
-            return Supervisor(name, specs, p.strategy, p.max_restarts, p.max_seconds, on_event=self._record)
+            return Supervisor(name, specs, p.strategy, p.max_restarts, p.max_seconds, on_event=self._record, ledger=self.ledger)
 
         return make
 
@@ -241,23 +262,39 @@ class System:
     def _record(self, event: dict[str, Any]) -> None:
         self.events.append(event)
 
+    # ------------------------------------------------------------------ incarnations
+    def incarnation_started(self, worker: Any) -> None:
+        """``worker`` (a ProcessWorker or ThreadWorker) is now the one incarnation of its component."""
+        self.incarnations[worker.name] = worker
+        fallbacks = getattr(self, "fallbacks", None)
+        if fallbacks is not None:
+            fallbacks.incarnation_changed(worker.name)
+
+    def incarnation_ended(self, worker: Any) -> None:
+        if self.incarnations.get(worker.name) is worker:
+            del self.incarnations[worker.name]
+        fallbacks = getattr(self, "fallbacks", None)
+        if fallbacks is not None:
+            fallbacks.incarnation_changed(worker.name)
+
+    def incarnation(self, name: str) -> Any | None:
+        """The running incarnation of component ``name`` (from its spawn on), or None."""
+        return self.incarnations.get(name)
+
     def summary(self) -> str:
-        """What happened during the run, per component: restarts and why."""
-        exits: collections.Counter[tuple[str, str]] = collections.Counter()
-        failed_starts: collections.Counter[str] = collections.Counter()
-        for e in self.events:
-            if e["event"] == "exit":
-                exits[(e["child"], e.get("reason", "?"))] += 1
-            elif e["event"] == "start_failed":
-                failed_starts[e["child"]] += 1  # restart attempts (or the first start) that never came up
+        """What happened during the run, per component: restarts over the run and why."""
         lines = [f"EMOS run {self.ctx.run_id}: exit code {self.exit_code} ({self.exit_reason})"]
         for c in self.components:
             name = c.component_name
-            reasons = ", ".join(f"{n} {r}" for (child, r), n in sorted(exits.items()) if child == name)
+            entry = self.ledger.entry("worker", name)
+            reasons = ", ".join(f"{n} {r}" for r, n in sorted(entry.reasons.items()))
             text = "restarted after: " + reasons if reasons else "no restarts"
-            if failed_starts[name]:
-                text += f"; {failed_starts[name]} start(s) failed during start-up"
+            if entry.failed_starts:  # restart attempts (or the first start) that never came up
+                text += f"; {entry.failed_starts} start(s) failed during start-up"
             lines.append(f"  {name:<24} {text}")
+        for (kind, group), entry in sorted(self.ledger.entries.items()):
+            if kind == "supervisor" and entry.reasons:
+                lines.append(f"  group {group} restarted after: " + ", ".join(f"{n} {r}" for r, n in sorted(entry.reasons.items())))
         lines.extend(fallback_summary(self.events, self.components))
         escalations = [e for e in self.events if e["event"] == "escalated"]
         for e in escalations:

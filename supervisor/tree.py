@@ -17,11 +17,16 @@ supervisor handles that like any child exit. At the root, that ends the system.
 
 Children are anything with an ``exited`` future and an async ``stop(timeout)``: a component
 process, a component thread, or another Supervisor.
+
+Every start of every child is written in a :class:`RestartLedger` that the whole tree shares and
+that outlives group incarnations (a group restarted by its parent is a new Supervisor): a
+component's restarts are counted over the run, each with its reason.
 """
 from __future__ import annotations
 
 import asyncio
 import collections
+import contextvars
 import logging
 import time
 from enum import Enum
@@ -78,6 +83,64 @@ class StartFailed(RuntimeError):
     pass
 
 
+# Why a child is (re)started. A child's own exit reasons (crash, killed, hang, normal, start_failed,
+# escalated for a group) restart it under that name; besides them:
+FALLBACK = "fallback"  # a fallback ladder restarted it (its status reported a failure)
+REQUESTED = "requested"  # someone asked: the CLI, the web UI, an event's action, the component itself
+GROUP_RESTART = "group restart"  # a sibling failed and the strategy (one_for_all, rest_for_one) took it along
+ESCALATION = "escalation"  # its group breached its restart intensity and was restarted by its parent
+
+# The reason a (sub-)supervisor is being started for, seen by its Supervisor.start().
+_GROUP_START_REASON: contextvars.ContextVar[str | None] = contextvars.ContextVar("emos_group_start_reason", default=None)
+
+
+@define
+class LedgerEntry:
+    starts: int = 0
+    reasons: collections.Counter = field(factory=collections.Counter)  # restart reason -> count
+    last_reason: str | None = None
+    last_detail: str = ""
+    last_at: float | None = None  # wall time of the last restart
+    failed_starts: int = 0
+
+
+class RestartLedger:
+    """Starts per child over the whole run, across incarnations of their groups, by reason."""
+
+    def __init__(self) -> None:
+        self.entries: dict[tuple[str, str], LedgerEntry] = {}
+
+    def entry(self, kind: str, cid: str) -> LedgerEntry:
+        return self.entries.setdefault((kind, cid), LedgerEntry())
+
+    def started(self, kind: str, cid: str, reason: str | None, detail: str = "") -> int:
+        """Note a start; every start after the first is a restart. Returns the restarts so far."""
+        e = self.entry(kind, cid)
+        e.starts += 1
+        if e.starts > 1:
+            e.reasons[reason or "restart"] += 1
+            e.last_reason, e.last_detail, e.last_at = reason or "restart", detail, time.time()
+        return max(0, e.starts - 1)
+
+    def start_failed(self, kind: str, cid: str) -> None:
+        self.entry(kind, cid).failed_starts += 1
+
+    def restarts(self, kind: str, cid: str) -> int:
+        e = self.entries.get((kind, cid))
+        return max(0, e.starts - 1) if e is not None else 0
+
+    def info(self, kind: str, cid: str) -> dict[str, Any]:
+        """What ``emos status`` shows of a child's restarts."""
+        e = self.entries.get((kind, cid)) or LedgerEntry()
+        out: dict[str, Any] = {"restarts": max(0, e.starts - 1), "restart_reasons": dict(sorted(e.reasons.items())),
+                               "last_restart_reason": e.last_reason}
+        if e.last_detail:
+            out["last_restart_detail"] = e.last_detail
+        if e.failed_starts:
+            out["failed_starts"] = e.failed_starts
+        return out
+
+
 EventSink = Callable[[dict[str, Any]], None]
 
 
@@ -90,6 +153,7 @@ class Supervisor:
         max_restarts: int = 5,
         max_seconds: float = 10.0,
         on_event: EventSink | None = None,
+        ledger: RestartLedger | None = None,
     ):
         if max_restarts < 0 or max_seconds <= 0:
             raise ValueError(f"supervisor {name!r}: max_restarts must be >= 0 and max_seconds > 0")
@@ -103,7 +167,7 @@ class Supervisor:
         self.max_seconds = max_seconds
         self.on_event = on_event
         self.running: dict[str, Child] = {}
-        self.restart_counts: collections.Counter[str] = collections.Counter()
+        self.ledger = ledger if ledger is not None else RestartLedger()
         self._restarts: collections.deque[float] = collections.deque()
         self._lock: asyncio.Lock | None = None
         # one_for_one restarts touch one child each, so each takes only that child's lock: a
@@ -132,11 +196,16 @@ class Supervisor:
         self.exited = loop.create_future()
         self._stopping = False
         self.started_at = time.monotonic()
+        # A group started again by its parent starts each child again: that is their restart too.
+        group_reason = _GROUP_START_REASON.get()
+        reason = None if group_reason is None else GROUP_RESTART if group_reason == GROUP_RESTART else ESCALATION
+        detail = "" if group_reason is None else f"group {self.name} restarted ({group_reason})"
         started: list[str] = []
         for spec in self.specs:
             try:
-                await self._start_child(spec)
+                await self._start_child(spec, reason, detail)
             except Exception as exc:
+                self.ledger.start_failed(spec.kind, spec.id)
                 self._emit("start_failed", spec.id, detail=str(exc))
                 for cid in reversed(started):
                     await self._stop_child(cid)
@@ -144,11 +213,18 @@ class Supervisor:
             started.append(spec.id)
         return self
 
-    async def _start_child(self, spec: ChildSpec) -> None:
-        child = await spec.start()
+    async def _start_child(self, spec: ChildSpec, reason: str | None = None, detail: str = "") -> int:
+        """Start ``spec`` (``reason``: why, None for its first start); returns its restarts so far."""
+        token = _GROUP_START_REASON.set(reason)  # seen by a sub-supervisor's start()
+        try:
+            child = await spec.start()
+        finally:
+            _GROUP_START_REASON.reset(token)
         self.running[spec.id] = child
         self._watchers[spec.id] = asyncio.ensure_future(self._watch(spec.id, child))
+        restarts = self.ledger.started(spec.kind, spec.id, reason, detail)
         self._emit("started", spec.id, **{k: v for k, v in child.info().items() if k in ("pid",)})
+        return restarts
 
     async def _watch(self, cid: str, child: Child) -> None:
         try:
@@ -210,22 +286,26 @@ class Supervisor:
                 if spec.restart == RestartType.TEMPORARY:
                     self.specs.remove(spec)
                 return
-            await self._restart_from(spec)
+            await self._restart_from(spec, result.reason, f"{cid}: {result.detail}" if result.detail else cid)
 
-    async def restart_child(self, cid: str, reason: str, detail: str = "", wait_time: float = 0.0) -> bool:
-        """Restart a running child on request (a fallback or an action), exactly as if it had
-        exited: same strategy, counted against the restart intensity (a breach escalates).
-        Returns False if the child is not running here (stopping, or being restarted already)."""
+    async def restart_child(self, cid: str, reason: str, detail: str = "", wait_time: float = 0.0, why: str = REQUESTED,
+                            only_if: Any = None) -> bool:
+        """Restart a running child on request, exactly as if it had exited: same strategy,
+        counted against the restart intensity (a breach escalates). ``reason`` names the exit
+        event; ``why`` is the restart's reason in the ledger (``FALLBACK`` or ``REQUESTED``).
+        ``only_if``: restart only that incarnation of the child. Returns False if the child is
+        not running here (stopping, being restarted already, or another incarnation)."""
         async with self._restart_lock(cid):
             child = self.running.get(cid)
             spec = self._spec(cid)
-            if self._stopping or child is None or spec is None:
+            if self._stopping or child is None or spec is None or (only_if is not None and child is not only_if):
                 return False
             await self._stop_child(cid)
-            self._emit("exit", cid, reason=reason, detail=detail or f"restart requested ({reason})", detected_at=time.monotonic())
+            detail = detail or f"restart requested ({reason})"
+            self._emit("exit", cid, reason=reason, by=why, detail=detail, detected_at=time.monotonic())
             if wait_time > 0:
                 await asyncio.sleep(wait_time)
-            await self._restart_from(spec)
+            await self._restart_from(spec, why, detail)
             return True
 
     def find(self, cid: str) -> "Supervisor | None":
@@ -246,7 +326,8 @@ class Supervisor:
             self._restarts.popleft()
         return len(self._restarts) <= self.max_restarts
 
-    async def _restart_from(self, failed: ChildSpec) -> None:
+    async def _restart_from(self, failed: ChildSpec, why: str, detail: str = "") -> None:
+        """Restart ``failed`` (for ``why``) and, by the strategy, its siblings (a group restart)."""
         idx = self.specs.index(failed)
         if self.strategy == Strategy.ONE_FOR_ONE:
             group = [failed]
@@ -265,15 +346,17 @@ class Supervisor:
                     return
                 if self._stopping:
                     return  # the group is being stopped or escalated meanwhile (see _restart_lock)
-                self.restart_counts[spec.id] += 1
+                reason = why if spec is failed else GROUP_RESTART
+                because = detail if spec is failed else f"after {failed.id} ({why})"
                 try:
-                    await self._start_child(spec)
+                    count = await self._start_child(spec, reason, because)
                     if self._stopping:  # escalated by a sibling while this one was starting
                         await self._stop_child(spec.id)
                         return
-                    self._emit("restarted", spec.id, count=self.restart_counts[spec.id])
+                    self._emit("restarted", spec.id, count=count, why=reason)
                     break
                 except Exception as exc:
+                    self.ledger.start_failed(spec.kind, spec.id)
                     self._emit("start_failed", spec.id, detail=str(exc))
                     await asyncio.sleep(0.05)  # counted against intensity; avoid a hot loop
 
@@ -294,7 +377,8 @@ class Supervisor:
             "kind": "supervisor",
             "strategy": self.strategy.value,
             "intensity": f"{self.max_restarts}/{self.max_seconds:g}s",
-            "restarts": sum(self.restart_counts.values()),
+            # over the run: restarts of its children (sub-groups: their own), whatever incarnation of it ran them
+            "restarts": sum(self.ledger.restarts(s.kind, s.id) for s in self.specs),
         }
 
     def tree(self) -> dict[str, Any]:
@@ -310,7 +394,10 @@ class Supervisor:
                 entry = {"name": spec.id, "kind": spec.kind, "state": "stopped"}
             entry.setdefault("name", spec.id)
             entry["restart"] = spec.restart.value
-            entry["restarts"] = self.restart_counts[spec.id] if not isinstance(child, Supervisor) else entry.get("restarts", 0) + self.restart_counts[spec.id]
+            ledger = self.ledger.info(spec.kind, spec.id)
+            if isinstance(child, Supervisor):  # its children's restarts and its own
+                ledger["restarts"] += entry.get("restarts", 0)
+            entry.update(ledger)
             node["children"].append(entry)
         return node
 

@@ -42,6 +42,8 @@ class _Incarnation:
         self.exited: asyncio.Future[Exit] = asyncio.get_running_loop().create_future()
         self.pid: int | None = None
         self.started_at = time.monotonic()
+        # Wall time, as status stamps are: a status stamped earlier is from a past incarnation.
+        self.started_wall = time.time()
         self._stop_reason: str | None = None  # set when *we* end it: shutdown or hang
 
     async def _bring_up(self, died: "asyncio.Future[Any]") -> None:
@@ -104,6 +106,7 @@ class ProcessWorker(_Incarnation):
         self.system.reaper.worker_started(self.pid)
         self.watch = ProcessWatch(self.pid, loop, group=True)
         self.watch.exited.add_done_callback(self._on_exit)
+        self.system.incarnation_started(self)
         try:
             await self._bring_up(self.watch.exited)
         except BaseException:
@@ -117,6 +120,7 @@ class ProcessWorker(_Incarnation):
         info = fut.result()
         self.system.reaper.worker_ended(info.pid)
         self.system.heartbeats.unwatch(self.name, self)
+        self.system.incarnation_ended(self)
         if self._stop_reason == "hang":
             result = Exit("hang", f"pid {info.pid} missed its heartbeat deadline; {info}", info.at)
         elif self._stop_reason is not None:
@@ -172,6 +176,7 @@ class ThreadWorker(_Incarnation):
             loop.call_soon_threadsafe(lambda: self._thread_done.done() or self._thread_done.set_result(result))
 
         self.thread = threading.Thread(target=main, name=f"emos:{self.name}", daemon=True)
+        self.system.incarnation_started(self)
         self.thread.start()
         self._thread_done.add_done_callback(self._on_exit)
         try:
@@ -184,6 +189,7 @@ class ThreadWorker(_Incarnation):
 
     def _on_exit(self, fut: "asyncio.Future[Exit]") -> None:
         self.system.heartbeats.unwatch(self.name, self)
+        self.system.incarnation_ended(self)
         result = fut.result()
         if self._stop_reason == "hang":
             result = Exit("hang", "thread missed its heartbeat deadline and was abandoned", result.at)

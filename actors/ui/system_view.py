@@ -1,8 +1,8 @@
 """The supervision tree as the page shows it, and the start/stop/restart buttons.
 
 Stop and start are the lifecycle's deactivate and activate (the process stays up, its topics
-stay open); restart asks the component's process to exit, and its supervisor starts a fresh one
-(as it would after a crash, so it counts against the group's restart intensity).
+stay open); restart is asked of the supervisor, which starts a fresh process and counts the
+restart as requested (by the UI), not as a crash.
 """
 from __future__ import annotations
 
@@ -55,11 +55,17 @@ class SystemView:
             raise ValueError(f"no component {name!r}; components: {', '.join(sorted(known))}")
         if name == self.own_name and action != "restart":
             raise ValueError("the UI cannot stop itself from its own page")
+        if action == "restart":
+            if not self.supervisor_socket:
+                raise ConnectionError("this UI runs without a supervisor")
+            sup = AsyncRpcClient(self.supervisor_socket)
+            try:  # wait=False: the UI may be restarting itself
+                await sup.call("lifecycle", component=name, request="restart", by="ui", wait=False, timeout=10.0)
+            finally:
+                await sup.close()
+            return "restarting; its supervisor starts a fresh process"
         client = AsyncRpcClient(self.control_socket(name))
         try:
-            if action == "restart":
-                await client.call("exit", timeout=3.0, code=1)
-                return "exiting; its supervisor starts a fresh process"
             state = await client.call("get_state", timeout=3.0)
             want = {"start": "activate", "stop": "deactivate"}[action]
             current = state.get("state")

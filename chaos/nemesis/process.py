@@ -242,7 +242,7 @@ class TermDeafComponent(_Targeted):
         self._pid = pid
         record = self._fault(target=name, pid=pid)
         with RpcClient(self.system.run_dir / "supervisor.sock", timeout=2.0) as rpc:
-            rpc.call("lifecycle", component=name, request="restart", wait=False)
+            rpc.call("lifecycle", component=name, request="restart", wait=False, by="chaos")
         return record
 
     def stop(self) -> None:

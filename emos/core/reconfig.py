@@ -158,7 +158,7 @@ def request_lifecycle(node: "Node", op: str, wait_time: float = 0.0) -> None:
 
         client = AsyncRpcClient(node.supervisor_socket)  # type: ignore[arg-type]
         try:
-            await client.call("lifecycle", component=node.name, request=op, wait_time=wait_time, wait=False, timeout=10.0)
+            await client.call("lifecycle", component=node.name, request=op, wait_time=wait_time, wait=False, by="component", timeout=10.0)
         except Exception as exc:
             node.log.error("[%s] %s request to the supervisor failed: %s", node.name, op, exc)
         finally:

@@ -120,7 +120,7 @@ class ComponentControl(QueryBridge):
             if isinstance(wait, bool) or not isinstance(wait, (int, float)) or not 0 <= wait <= MAX_WAIT_S:  # NaN fails too
                 raise ValueError(f"'wait_time' must be a number of seconds in [0, {MAX_WAIT_S:g}], got {wait!r}")
             with RpcClient(self.supervisor_path, timeout=timeout + float(wait) + 30.0) as rpc:
-                result = rpc.call("lifecycle", component=self.component, request=request, wait_time=float(wait))
+                result = rpc.call("lifecycle", component=self.component, request=request, wait_time=float(wait), by="remote")
         elif op == "service":
             result = self._retrying(self._server_socket(req), "call", timeout, {"request": _bytes(req, "request")})
         else:  # goal: handed over, not waited for (a goal may run for minutes)

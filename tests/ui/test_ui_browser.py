@@ -229,6 +229,12 @@ def test_system_view_and_the_ui_coming_back_after_a_kill(ui_system, browser):
     press("world", "restart")
     wait_for(lambda: (c := cells("world")) and c[1] not in (world_pid, "-") and c[2] == "active", timeout=30,
              what="world restarted with a new pid")
+    # Counted as asked for from the page, not as a crash.
+    world = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const find = n => n.name === "world" ? n : (n.children || []).map(find).find(x => x);
+        fetch("/api/system").then(r => r.json()).then(d => done(find(d.tree)));""")
+    assert world["restart_reasons"] == {"requested": 1} and "requested by ui" in world["last_restart_detail"], world
     # A second tab gets its own stream.
     first = browser.current_window_handle
     browser.switch_to.new_window("tab")
