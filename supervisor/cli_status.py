@@ -18,7 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--watch", type=float, default=0.0, metavar="S", help="refresh every S seconds")
     parser.add_argument("--remote", metavar="ZENOH_CONFIG", nargs="?", const="", default=None,
                         help="the runs of every host in the Zenoh group ($EMOS_NET_GROUP) that were started with --zenoh, "
-                             "through this Zenoh configuration file (default: $EMOS_ZENOH_CONFIG); needs no local run")
+                             "through this Zenoh configuration file (default: $EMOS_ZENOH_CONFIG; with neither, only the "
+                             "loopback sessions of this host and user); needs no local run")
 
 
 def _cpu_percent(pids: list[int], interval: float = 0.25) -> dict[int, float]:
