@@ -10,20 +10,8 @@ import sys
 
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import LISTENER, SystemUnderTest, wait_until
 
-LISTENER = """
-class Listener(BaseComponent):
-    def _execution_step(self):
-        self.get_input("/shared")
-        self.health_status.set_healthy()
-
-c = Listener(component_name="listener", inputs=[Topic(name="/shared", msg_type="String")])
-c.config.loop_rate = 20.0
-launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[c])
-launcher.bringup()
-"""
 
 
 @pytest.fixture(scope="module")

@@ -68,31 +68,47 @@ def system(tmp_path_factory):
 
 
 # -- running `emos play` -------------------------------------------------------------------------
+# Runs a command as its child and writes the child's peak RSS (KiB) to argv[1]. A process forked
+# from pytest and then exec'd reports at least pytest's own RSS at the fork as its peak (Linux
+# carries the old memory's high-water mark across exec), which is about a gigabyte late in the
+# suite; forked from this small interpreter, `emos play` reports its own. Signals are passed on.
+PEAK_METER = r"""
+import os, signal, sys
+pid = os.fork()
+if pid == 0:
+    os.execv(sys.argv[2], sys.argv[2:])
+for sig in (signal.SIGTERM, signal.SIGINT):
+    signal.signal(sig, lambda s, _frame: os.kill(pid, s))
+_, status, usage = os.wait4(pid, 0)
+with open(sys.argv[1], "w") as f:
+    f.write(str(usage.ru_maxrss))
+code = os.waitstatus_to_exitcode(status)
+os._exit(code if code >= 0 else 128 - code)
+"""
+
+
 class Play:
-    """`emos play` in a subprocess; ``finish`` reaps it with os.wait4 for its own peak RSS."""
+    """`emos play` in a subprocess, under PEAK_METER for its own peak RSS."""
 
     def __init__(self, tmp_path: Path, system: SystemUnderTest | None, *args: str):
         self.out_path, self.err_path = tmp_path / "play.out", tmp_path / "play.err"
+        self.peak_path = tmp_path / "play.peak"
         run = ["--run", system.ctx.run_id] if system is not None else []
         with open(self.out_path, "w") as out, open(self.err_path, "w") as err:
-            self.proc = subprocess.Popen([sys.executable, "-m", "emos", "play", *run, *args], stdout=out, stderr=err)
+            self.proc = subprocess.Popen([sys.executable, "-c", PEAK_METER, str(self.peak_path),
+                                          sys.executable, "-m", "emos", "play", *run, *args],
+                                         stdout=out, stderr=err, start_new_session=True)
         self.returncode: int | None = None
         self.maxrss_kb = 0
 
     def finish(self, timeout: float = HANG) -> "Play":
-        deadline = time.monotonic() + timeout
-        while True:
-            pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
-            if pid:
-                self.returncode = os.waitstatus_to_exitcode(status)
-                self.proc.returncode = self.returncode  # reaped here: Popen must not wait for it again
-                self.maxrss_kb = usage.ru_maxrss
-                return self
-            if time.monotonic() > deadline:
-                self.proc.kill()
-                self.proc.wait()
-                raise AssertionError(f"emos play did not end within {timeout} s\n{self.stdout}\n{self.stderr}")
-            time.sleep(0.05)
+        try:
+            self.returncode = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise AssertionError(f"emos play did not end within {timeout} s\n{self.stdout}\n{self.stderr}") from None
+        self.maxrss_kb = int(self.peak_path.read_text())
+        return self
 
     @property
     def stdout(self) -> str:
@@ -103,8 +119,12 @@ class Play:
         return self.err_path.read_text()
 
     def kill(self) -> None:
-        if self.returncode is None and self.proc.poll() is None:
-            self.proc.kill()
+        """Kill the meter and `emos play` under it (one session)."""
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
             self.proc.wait()
 
 

@@ -24,6 +24,20 @@ from emos import BaseComponent, Launcher, Topic
 from emos import msgs as M
 """
 
+# A run whose one component reads the String topic /shared (the CLI tests publish on it).
+LISTENER = """
+class Listener(BaseComponent):
+    def _execution_step(self):
+        self.get_input("/shared")
+        self.health_status.set_healthy()
+
+c = Listener(component_name="listener", inputs=[Topic(name="/shared", msg_type="String")])
+c.config.loop_rate = 20.0
+launcher = Launcher(multi_processing=True)
+launcher.add_pkg(components=[c])
+launcher.bringup()
+"""
+
 
 def wait_until(pred: Callable[[], Any], timeout: float = 10.0, interval: float = 0.02, what: str = "condition") -> Any:
     end = time.monotonic() + timeout
