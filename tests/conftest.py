@@ -1,4 +1,9 @@
-"""Settings for every test."""
+"""Settings for every test, and the tiers every test module declares.
+
+Each module sets ``pytestmark`` to its tiers (pyproject.toml lists them): ``unit`` (one process,
+no process tree, simulator or browser: ``python3 -m pytest -m unit`` is the fast inner loop),
+``process`` (starts runs, servers or the CLI), ``sim`` (a pybullet world), ``browser`` (headless
+Chromium), and ``statistical`` beside one of those (rates over many trials)."""
 import os
 import tempfile
 
@@ -18,3 +23,14 @@ def _private_emos_home():
             yield
         finally:
             os.environ.pop("EMOS_HOME", None)
+
+
+TIERS = ("unit", "process", "sim", "browser")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A test without a tier would be in no loop but the full run: refuse to collect it."""
+    untiered = sorted({item.nodeid.split("::")[0] for item in items if not any(item.get_closest_marker(t) for t in TIERS)})
+    if untiered:
+        raise pytest.UsageError(f"test modules without a tier marker ({', '.join(TIERS)}): {', '.join(untiered)}; "
+                                "set pytestmark = pytest.mark.<tier> in each (see tests/conftest.py)")

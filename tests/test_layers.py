@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import ast
 from pathlib import Path
+import pytest
+
+pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 # Folder on disk -> package it imports as (pyproject's package-dir).

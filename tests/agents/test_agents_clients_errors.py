@@ -28,6 +28,8 @@ from emos.actors.agents.types import ChatMessage, ChatRequest, EmbeddingRequest,
 
 from .fixtures.stub_servers import RawServer, ScriptedHTTP, closed_port, garbage, silent
 
+pytestmark = pytest.mark.unit
+
 FIXTURES = Path(__file__).parent / "fixtures"
 FEATURES = {"observation.state": {"dtype": "float32", "shape": [1], "names": ["j"]}}
 

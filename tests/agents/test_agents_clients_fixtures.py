@@ -13,6 +13,8 @@ from emos.actors.agents.clients.sse import format_sse, iter_sse_data
 from emos.actors.agents.errors import MalformedResponseError
 from emos.actors.agents.types import ChatMessage, ChatRequest, ImageData, ToolSpec
 
+pytestmark = pytest.mark.unit
+
 FIXTURES = Path(__file__).parent / "fixtures"
 CTX = {"client": "test", "model": "m", "url": "http://fixture"}
 

@@ -45,6 +45,8 @@ from emos.actors.agents.types import (
 
 from .fixtures.server_process import start_server
 
+pytestmark = pytest.mark.process
+
 GO_TO = ToolSpec(name="go_to", description="Drive to a place",
                  parameters={"type": "object", "properties": {"place": {"type": "string"}}, "required": ["place"]})
 

@@ -28,6 +28,8 @@ from emos.actors.agents.types import (
     sniff_image_mime,
 )
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize("shape", [(5, 7), (5, 7, 3), (5, 7, 4), (5, 7, 1)])
 def test_png_encoding_round_trips_through_opencv(shape):

@@ -10,6 +10,9 @@ from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.fixtures.server_process import start_server
 from tests.agents.fixtures.stub_servers import ScriptedHTTP
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 FIXTURES = Path(__file__).parent / "fixtures"
 MODELS = (200, "application/json", json.dumps({"object": "list", "data": [{"id": "m", "object": "model"}]}).encode())

@@ -9,6 +9,9 @@ from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.fixtures.server_process import start_server
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 
 def _free_port() -> int:

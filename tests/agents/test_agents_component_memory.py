@@ -8,6 +8,8 @@ from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 HEADER = AGENT_HEADER + """
 from emos.actors.agents import (SemanticRouter, SemanticRouterConfig, Route, MapEncoding, MapConfig, MapLayer,
                                 VideoMessageMaker, VideoMessageMakerConfig, ChromaClient, ChromaDB)

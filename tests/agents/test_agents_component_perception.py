@@ -10,6 +10,9 @@ from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.test_agents_local_models import _figure
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 HEADER = AGENT_HEADER + """
 from emos.actors.agents import Vision, VisionConfig, SpeechToText, SpeechToTextConfig, TextToSpeech, TextToSpeechConfig

@@ -11,6 +11,9 @@ import numpy as np
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 FIXTURES = Path(__file__).parent / "fixtures"
 JOINTS = ["Rotation", "Pitch", "Elbow", "Wrist_Pitch", "Wrist_Roll", "Jaw"]

@@ -16,6 +16,8 @@ from emos.actors.agents.components.convert import OutputConversionError, to_mess
 from emos.actors.agents.logic.tracking import CentroidTracker
 from emos.core.offload import StepWorker
 
+pytestmark = pytest.mark.unit
+
 CLIENT = OllamaClient(OllamaModel(name="llama", checkpoint="llama3.2:3b"))
 Q = Topic(name="q", msg_type="String")
 A = Topic(name="a", msg_type="String")

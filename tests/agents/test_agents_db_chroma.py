@@ -16,6 +16,8 @@ import pytest
 from emos.actors.agents.db import ChromaClient, ChromaDB
 from emos.actors.agents.errors import MalformedResponseError, ModelConnectionError, ModelServerError
 
+pytestmark = pytest.mark.process
+
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 ROOMS = ["the kitchen has a red fridge and a stove",

@@ -14,6 +14,8 @@ from emos.actors.agents.local.embeddings import SentenceEmbedder
 
 from .fixtures.server_process import start_server
 
+pytestmark = pytest.mark.process
+
 
 @pytest.fixture(scope="module")
 def server():

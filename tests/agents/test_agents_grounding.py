@@ -19,6 +19,8 @@ from emos.actors.agents.server.roboml_nodes import NodeError, RoboMLNodes
 from emos.actors.agents.types import ChatMessage, ChatRequest, ImageData
 from tests.agents.test_agents_local_models import _figure
 
+pytestmark = pytest.mark.unit
+
 
 def _png(image: np.ndarray) -> str:
     ok, data = cv2.imencode(".png", image[:, :, ::-1])

@@ -8,6 +8,8 @@ import wave
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.unit
+
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from emos.actors.agents.local.audio import read_wav, resample, write_wav

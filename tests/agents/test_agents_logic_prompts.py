@@ -12,6 +12,8 @@ from emos.actors.agents.logic.templates import PromptBuilder, PromptTemplate, Te
 from emos.actors.agents.local.vision import Detection
 from emos.actors.agents.types import ChatChunk, ChatMessage, ImageData, ToolCall
 
+pytestmark = pytest.mark.unit
+
 
 # ----------------------------------------------------------------- templates
 def test_topic_and_component_templates_compose_the_prompt():

@@ -7,6 +7,8 @@ import os
 
 import pytest
 
+pytestmark = pytest.mark.unit
+
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from emos.actors.agents.db import ChromaClient, ChromaDB

@@ -21,6 +21,8 @@ from emos.actors.agents.types import ChatMessage, ChatRequest, ToolCall
 
 from .fixtures.server_process import start_server
 
+pytestmark = pytest.mark.process
+
 SCRIPT = Path(__file__).parent / "data" / "logic_responder_script.yaml"
 
 # The tool-calling recipe's description, verbatim in structure: "list[float]" type and

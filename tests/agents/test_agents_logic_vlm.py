@@ -14,6 +14,8 @@ from emos.actors.agents.logic.vlm_tasks import (
     parse_vlm_output,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def test_general_is_the_stripped_text():
     assert parse_vlm_output("general", "  A kitchen.\n") == GeneralResult("A kitchen.")

@@ -26,6 +26,8 @@ from emos.actors.agents.models import (
     model_from_dict,
 )
 
+pytestmark = pytest.mark.unit
+
 FIXTURES = Path(__file__).parent / "fixtures"
 
 ALL = [GenericLLM, GenericMLLM, GenericTTS, GenericSTT, OllamaModel, TransformersLLM, TransformersMLLM,

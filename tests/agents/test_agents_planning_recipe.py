@@ -13,6 +13,8 @@ from tests.agents.components_helpers import Probe, sim_status
 from tests.agents.fixtures.server_process import start_server
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 RECIPES = Path(__file__).resolve().parents[2] / "recipes"
 GOAL_LINE = re.compile(r"\[planner\] goal from goal_point /grounding_output \(Detections\): \(([-\d.]+), ([-\d.]+)\)")
 

@@ -16,6 +16,8 @@ from tests.agents.fixtures.server_process import start_server
 from tests.agents.test_agents_local_models import _figure
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 REPO = Path(__file__).resolve().parents[2]
 RECIPES = REPO / "recipes"
 

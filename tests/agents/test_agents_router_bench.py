@@ -6,6 +6,9 @@ import json
 import os
 import subprocess
 import sys
+import pytest
+
+pytestmark = [pytest.mark.process, pytest.mark.statistical]
 
 
 def test_bench_agents_json_contract():

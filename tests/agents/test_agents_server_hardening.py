@@ -25,6 +25,8 @@ from tests.runtime.helpers import wait_until
 
 from .fixtures.server_process import READY, start_server
 
+pytestmark = pytest.mark.process
+
 MiB = 1024 * 1024
 CHAT = {"model": "llama3.2:3b", "messages": [{"role": "user", "content": "hello"}], "stream": False}
 

@@ -17,6 +17,8 @@ from emos.actors.agents.clients.sse import iter_sse_data
 
 from .fixtures.server_process import start_server
 
+pytestmark = pytest.mark.process
+
 
 @pytest.fixture(scope="module")
 def server():

@@ -8,6 +8,8 @@ import pytest
 from emos.actors.agents.server.responder import ScriptedResponder, load_script
 from emos.actors.agents.types import ChatMessage, ChatRequest, ToolSpec
 
+pytestmark = pytest.mark.unit
+
 SCRIPT = Path(__file__).parent / "fixtures" / "responder_script.yaml"
 GO_TO = ToolSpec(name="go_to", parameters={"type": "object", "properties": {"place": {"type": "string"}}})
 

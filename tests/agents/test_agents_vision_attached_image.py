@@ -7,6 +7,9 @@ from emos.actors.agents import Vision, VisionConfig
 from emos.actors.agents.components.vision import _attached_image
 from emos.msgs import CompressedImage, Header, Image
 from emos.msgs.control import RGBD
+import pytest
+
+pytestmark = pytest.mark.unit
 
 
 def test_rgbd_input_is_allowed_and_its_depth_travels_with_the_detections():

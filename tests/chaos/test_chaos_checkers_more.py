@@ -6,6 +6,8 @@ from emos.chaos.checkers import judge_faults, moving_again, stops_on_stale, verd
 from emos.chaos.history import History, Record
 from emos.chaos.ladder import LadderSpecError, check_ladder, parse_spec
 
+pytestmark = pytest.mark.unit
+
 SPEC = parse_spec({"component": "solver", "steps": ["reset_state", "restart", "switch_algorithm"], "max_retries": 2}, "test")
 ACTIONS = {1: "solver.reset_state()", 2: "restart(solver)", 3: "solver.switch_algorithm()"}
 

@@ -9,6 +9,8 @@ import pytest
 from emos.chaos.nemesis import NemesisError
 from emos.chaos.nemesis.proxy import FaultProxy
 
+pytestmark = pytest.mark.unit
+
 
 class _Echo(socketserver.BaseRequestHandler):
     def handle(self):

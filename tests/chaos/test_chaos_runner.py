@@ -14,6 +14,9 @@ import psutil
 
 from emos.chaos.target import RunningSystem
 from emos.transport.context import runtime_root
+import pytest
+
+pytestmark = pytest.mark.process
 
 # Two groups: the launcher starts them one after the other, and the second one's component
 # takes seconds to activate (a model loading, a driver finding its device).

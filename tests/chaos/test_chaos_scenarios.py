@@ -11,6 +11,8 @@ from emos.chaos.history import History
 from emos.chaos.nemesis import NemesisError
 from emos.chaos.scenario import Scenario, ScenarioError, shipped_scenarios
 
+pytestmark = pytest.mark.process
+
 
 def _chaos(tmp_path, *args, timeout=240):
     proc = subprocess.run([sys.executable, "-m", "emos", "chaos", "run", *args, "--short", "--json", "--out", str(tmp_path)],

@@ -15,6 +15,8 @@ from emos.msgs import LaserScan
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
 
+pytestmark = pytest.mark.unit
+
 SOAK = PROJECT_ROOT / "chaos" / "recipes" / "soak.py"
 
 

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.process
+
 ROOT = Path(__file__).resolve().parents[2]
 RECIPE = "from emos import Launcher\nLauncher().bringup()\n"
 HAS_ANALYZE = shutil.which("systemd-analyze") is not None

@@ -12,6 +12,8 @@ import pytest
 
 from tests.runtime.helpers import LISTENER, SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 
 
 @pytest.fixture(scope="module")

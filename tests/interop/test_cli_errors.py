@@ -6,6 +6,8 @@ import sys
 
 import pytest
 
+pytestmark = pytest.mark.process
+
 
 def emos(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "emos", *args], capture_output=True, text=True, timeout=60)

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("foxglove")
+
+pytestmark = pytest.mark.process
 websockets = pytest.importorskip("websockets")
 
 from rosbags.typesys import Stores, get_typestore  # noqa: E402

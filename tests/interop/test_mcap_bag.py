@@ -19,6 +19,8 @@ from emos.msgs import ComponentStatus, Detections, Image, String, codec, scan_fr
 from emos.transport.context import RunContext  # noqa: E402
 from emos.transport.pubsub import Subscriber  # noqa: E402
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture
 def ctx():

@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mcap")
+
+pytestmark = pytest.mark.process
 zstandard = pytest.importorskip("zstandard")
 lz4_frame = pytest.importorskip("lz4.frame")
 

@@ -16,6 +16,8 @@ pytest.importorskip("rosbags")
 from emos.interop.mcap_bag import BagInfo, read_bag  # noqa: E402
 from tests.runtime.helpers import SystemUnderTest  # noqa: E402
 
+pytestmark = pytest.mark.process
+
 CAMERA = """
 class Camera(BaseComponent):
     def _execution_step(self):

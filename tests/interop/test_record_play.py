@@ -18,6 +18,8 @@ pytest.importorskip("rosbags")
 from emos.interop.mcap_bag import BagInfo, read_bag  # noqa: E402
 from tests.runtime.helpers import REPO, SystemUnderTest  # noqa: E402
 
+pytestmark = pytest.mark.process
+
 CHECKER_RECIPE = """
 import json, zlib
 from emos.msgs import Image, LaserScan

@@ -23,6 +23,8 @@ from emos.msgs import (  # noqa: E402
 )
 from emos.msgs import fields as F  # noqa: E402
 
+pytestmark = pytest.mark.unit
+
 CODEC = codec_for("humble")
 
 # Which of our packages must be shared (the brief: the standard ROS 2 message packages).

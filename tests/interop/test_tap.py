@@ -8,6 +8,8 @@ from emos.msgs import Int32, String, codec
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture
 def ctx():

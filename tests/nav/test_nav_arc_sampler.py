@@ -5,6 +5,9 @@ import numpy as np
 
 from emos.actors.nav.controllers import ControllersID, ControlStatus, make_controller
 from tests.nav.sim2d import World, make_robot, run_closed_loop, straight_path
+import pytest
+
+pytestmark = pytest.mark.unit
 
 
 def test_arc_sampler_follows_a_path_around_an_obstacle_and_stops_at_the_goal():

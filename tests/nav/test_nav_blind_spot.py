@@ -8,6 +8,8 @@ import pytest
 from emos.actors.nav.controllers.sensors import LaserScan2D
 from emos.actors.nav.safety.blind_spot import BlindSpotConfig, BlindSpotMemory
 
+pytestmark = pytest.mark.unit
+
 FOV = math.radians(270)
 
 

@@ -8,6 +8,8 @@ from emos.actors.nav.robot import RobotConfig, RobotGeometry, RobotType
 
 pytest.importorskip("scipy")
 
+pytestmark = [pytest.mark.sim, pytest.mark.process]
+
 FOOTPRINTS = {
     "box": (RobotGeometry.Type.BOX, np.array([0.5, 0.3, 0.2])),
     "cylinder": (RobotGeometry.Type.CYLINDER, np.array([0.2, 0.3])),

@@ -10,6 +10,8 @@ from emos.actors.nav.collision import MapCollisionChecker, geometry_to_fcl, occu
 from emos.actors.nav.maps import OccupancyGridMap
 from emos.actors.nav.robot import RobotGeometry
 
+pytestmark = pytest.mark.unit
+
 T = RobotGeometry.Type
 
 

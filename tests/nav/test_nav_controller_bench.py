@@ -7,6 +7,8 @@ import pytest
 
 from emos.actors.nav import bench
 
+pytestmark = pytest.mark.process
+
 
 def test_bench_nav_json_has_exactly_the_issue_keys():
     out = subprocess.run(

@@ -11,6 +11,8 @@ from emos.actors.nav.controllers.follower import PathFollower
 from emos.actors.nav.controllers.registry import CONTROLLERS, make_controller
 from emos.actors.nav.robot import RobotConfig, RobotGeometry, RobotType
 
+pytestmark = pytest.mark.unit
+
 VISION = {ControllersID.VISION_IMG, ControllersID.VISION_DEPTH}
 
 

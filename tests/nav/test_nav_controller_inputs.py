@@ -28,6 +28,8 @@ from emos.actors.nav.local_map import LocalMapper, MapConfig
 
 from .sim2d import World, make_robot, run_closed_loop, straight_path
 
+pytestmark = pytest.mark.unit
+
 
 class GridWorld(World):
     """The same world, but the controller sees a local occupancy grid built from the scan."""

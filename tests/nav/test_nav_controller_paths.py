@@ -8,6 +8,8 @@ from emos.actors.nav.controllers.base import ControlStatus
 
 from .sim2d import World, circle_path, make_robot, run_closed_loop, straight_path, u_turn_path
 
+pytestmark = pytest.mark.unit
+
 MODELS = ["DIFFERENTIAL_DRIVE", "OMNI", "ACKERMANN"]
 PATHS = {
     "straight": (straight_path, (2.0, 0.0, 0.15)),

@@ -18,6 +18,8 @@ from emos.actors.nav.kinematics import integrate, to_robot_frame, wrap_angle
 
 from .sim2d import World, make_robot
 
+pytestmark = pytest.mark.unit
+
 K = CameraIntrinsics(fx=500.0, fy=500.0, cx=320.0, cy=240.0)
 W, H = 640, 480
 CAM_Z = 0.5  # camera height above the floor

@@ -14,6 +14,8 @@ from emos.actors.nav.costs import (
 )
 import emos.actors.nav.costs.kernels as kernels
 
+pytestmark = pytest.mark.unit
+
 
 def straight(y, n=11, length=1.0):
     x = np.linspace(0.0, length, n)

@@ -10,6 +10,8 @@ from emos.actors.nav.controllers.movers import PredictedMovers, PredictionConfig
 from emos.actors.nav.mapping import EvidenceGrid, ScanTracker, TrackerConfig
 from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
 
+pytestmark = pytest.mark.unit
+
 BEAMS, FOV = 720, math.radians(270.0)
 ANGLES = -FOV / 2 + FOV / (BEAMS - 1) * np.arange(BEAMS)
 INC = FOV / (BEAMS - 1)

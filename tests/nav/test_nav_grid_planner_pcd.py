@@ -9,6 +9,8 @@ from emos.actors.nav.maps.pcd import cloud_to_grid, read_pcd
 from emos.actors.nav.planning.grid_planner import CostToGoPlanner
 from emos.actors.nav.robot import RobotConfig
 
+pytestmark = pytest.mark.unit
+
 
 def _room() -> OccupancyGridMap:
     data = np.zeros((80, 120), dtype=np.int8)

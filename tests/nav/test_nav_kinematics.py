@@ -15,6 +15,8 @@ from emos.actors.nav.kinematics import (
 )
 from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotType
 
+pytestmark = pytest.mark.unit
+
 
 def robot(model, **kw):
     return RobotConfig(

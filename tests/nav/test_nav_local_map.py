@@ -6,6 +6,8 @@ import pytest
 from emos.actors.nav.controllers.sensors import LaserScan2D
 from emos.actors.nav.local_map import FREE, OCCUPIED, UNKNOWN, LocalMapper, MapConfig, MapperConfig
 
+pytestmark = pytest.mark.unit
+
 
 def full_scan(ranges, range_max=10.0):
     ranges = np.asarray(ranges, dtype=float)

@@ -6,6 +6,8 @@ import pytest
 from emos.actors.nav.mapping import HitGrid
 from emos.actors.nav.planning.costfield import CostField, lattice_edges
 
+pytestmark = pytest.mark.unit
+
 
 def test_costfield_routes_around_a_wall_through_its_gap():
     shape = (60, 60)

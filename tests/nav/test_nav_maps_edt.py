@@ -10,6 +10,8 @@ from emos.actors.nav.maps import (
     squared_distance_transform_1d,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def brute_force_edt(mask: np.ndarray) -> np.ndarray:
     ys, xs = np.nonzero(mask)

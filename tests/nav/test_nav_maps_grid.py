@@ -6,6 +6,8 @@ import pytest
 
 from emos.actors.nav.maps import OccupancyGridMap
 
+pytestmark = pytest.mark.unit
+
 
 def test_world_grid_round_trip_with_rotated_origin():
     grid = OccupancyGridMap(data=np.zeros((50, 80), np.int8), resolution=0.1, origin=(2.0, -1.0, math.pi / 6))

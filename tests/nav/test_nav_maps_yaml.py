@@ -8,6 +8,8 @@ import yaml
 from emos.actors.nav.data import ROOMS_MAP_YAML
 from emos.actors.nav.maps import MapFileError, OccupancyGridMap, load_map, read_pgm, save_map, write_pgm
 
+pytestmark = pytest.mark.unit
+
 
 def write_map(tmp_path: Path, pixels: np.ndarray, name: str = "m", **keys) -> Path:
     write_pgm(tmp_path / f"{name}.pgm", pixels)

@@ -8,6 +8,9 @@ import numpy as np
 from emos.actors.nav.controllers.sensors import LaserScan2D
 from emos.actors.nav.mapping import MemoryMapper
 from tests.nav.components.fake_base import BOXES, ROOM, ray_boxes
+import pytest
+
+pytestmark = pytest.mark.unit
 
 
 def _scan(pose) -> LaserScan2D:

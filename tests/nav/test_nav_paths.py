@@ -6,6 +6,8 @@ import pytest
 
 from emos.actors.nav.paths import PathFileError, PathRecorder, load_path_csv, save_path_csv
 
+pytestmark = pytest.mark.unit
+
 
 def test_csv_round_trip_is_exact(tmp_path):
     rng = np.random.default_rng(0)

@@ -16,6 +16,8 @@ from emos.actors.nav.components.pixel_goals import (camera_on_base, depth_in_met
 from emos.actors.nav.controllers.vision_common import CameraIntrinsics
 from emos.actors.nav.transforms import TransformTree, quaternion_matrix, transform_matrix
 
+pytestmark = pytest.mark.sim
+
 WHERE = "goal_point /grounding_output (Detections)"
 # A camera 0.2 m ahead of the base and 0.4 m up, looking forward: optical x right, y down, z forward.
 OPTICAL = np.c_[[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]

@@ -10,6 +10,8 @@ from emos.actors.nav.maps import OccupancyGridMap, load_map
 from emos.actors.nav.planning import OMPLConfig, OMPLGeometricPlanner, available_planners
 from emos.actors.nav.robot import RobotConfig, RobotGeometry, RobotType
 
+pytestmark = pytest.mark.unit
+
 RADIUS = 0.25
 SW_ROOM = (-4.0, -4.0, 0.0)
 NE_ROOM = (2.0, 2.0, math.pi / 2)

@@ -1,5 +1,8 @@
 """The planning table that ``emos bench nav`` embeds."""
 from emos.actors.nav.bench_planning import format_table, run_planning_table
+import pytest
+
+pytestmark = pytest.mark.unit
 
 
 def test_planning_table_rows_have_the_contract_keys():

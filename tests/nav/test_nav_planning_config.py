@@ -16,6 +16,8 @@ from emos.actors.nav.planning import (
     resolve_planner_name,
 )
 
+pytestmark = pytest.mark.unit
+
 DESIGN_LIST = {"RRT", "RRTConnect", "RRTstar", "InformedRRTstar", "SORRTstar", "AORRTC", "PRM", "PRMstar",
                "FMT", "BFMT", "BITstar", "KPIECE1", "BKPIECE1", "LBKPIECE1"}
 

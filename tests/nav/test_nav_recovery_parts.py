@@ -11,6 +11,8 @@ from emos.actors.nav.planning.costfield import CLEARANCE_BAND
 from emos.actors.nav.planning.grid_planner import CostToGoPlanner
 from emos.actors.nav.robot import RobotConfig
 
+pytestmark = pytest.mark.unit
+
 
 def _jackal() -> RobotConfig:
     return RobotConfig(model_type="DIFFERENTIAL_DRIVE", geometry_type="BOX", geometry_params=np.array([0.508, 0.43, 0.25]))

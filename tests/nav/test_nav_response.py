@@ -7,6 +7,8 @@ import pytest
 from emos.actors.nav.controllers.response import ResponseConfig, YawGainEstimator, achieved_arcs
 from emos.actors.nav.kinematics import integrate
 
+pytestmark = pytest.mark.sim
+
 
 def test_achieved_arcs_are_the_commanded_arcs_for_an_ideal_base():
     cfg = ResponseConfig(yaw_lag=1e-6, speed_acc=1e6, lateral_acc=1e6)

@@ -12,6 +12,8 @@ from emos.actors.nav.robot import (
     RobotType,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def test_spec_example_builds_and_radius_matches_geometry():
     cfg = RobotConfig(

@@ -19,6 +19,8 @@ from emos.actors.nav.safety import (
     trapezoid_profile,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def robot(geometry="CYLINDER", params=(0.2, 0.3), model="DIFFERENTIAL_DRIVE"):
     return RobotConfig(model_type=model, geometry_type=geometry, geometry_params=np.array(params),

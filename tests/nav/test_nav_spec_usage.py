@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.unit
+
 
 def test_planner_controller_driver_mapper_server_usage_examples(tmp_path):
     from emos import Topic

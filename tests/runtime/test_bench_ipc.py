@@ -17,6 +17,8 @@ from emos.supervisor.bench import ipc_pingpong
 from emos.transport.context import SHM_DIR, runtime_root
 from tests.runtime.helpers import REPO
 
+pytestmark = pytest.mark.process
+
 SIZES = [8, 70000]
 TRANSPORTS = {"emos", "mp_queue", "mp_pipe"}
 ROW_KEYS = {"transport", "payload_bytes", "p50_us", "p99_us", "msgs_per_s", "dropped", "seq_mismatches"}

@@ -18,6 +18,8 @@ from tests.runtime.test_bench_ipc import _run_python
 
 pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
 
+pytestmark = pytest.mark.process
+
 SIZES = [8, 70000]
 MESSAGES = 30
 

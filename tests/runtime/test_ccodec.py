@@ -23,6 +23,8 @@ from emos.msgs.registry import registered_types
 from emos.transport import netframe
 from emos.transport.netframe import FrameWriter
 
+pytestmark = pytest.mark.process
+
 C = codec.C_CODEC
 needs_c = pytest.mark.skipif(C is None, reason="the C codec is not built (no compiler at install, or EMOS_CODEC=python)")
 TYPES = sorted(set(registered_types().values()), key=lambda cls: cls.__name__)

@@ -3,6 +3,9 @@ import subprocess
 import sys
 
 from emos.supervisor import cli
+import pytest
+
+pytestmark = pytest.mark.process
 
 
 def test_every_plugin_table_entry_names_an_importable_module_path():

@@ -15,6 +15,8 @@ from emos.transport.pubsub import Publisher, Subscriber
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 
 class Doubler(BaseComponent):
     def custom_on_configure(self):

@@ -8,6 +8,8 @@ from emos import BaseComponent, Topic
 from emos.config import BaseComponentConfig, ConfigError, QoSConfig, base_validators
 from emos.config.qos import DurabilityPolicy
 
+pytestmark = pytest.mark.unit
+
 
 @define(kw_only=True)
 class AwesomeConfig(BaseComponentConfig):

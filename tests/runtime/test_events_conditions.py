@@ -10,6 +10,8 @@ from emos.msgs import Bool, Detections, DetectionsMultiSource, Float32, String
 from emos.msgs.nav import Odometry
 from emos.msgs.status import ComponentStatus
 
+pytestmark = pytest.mark.unit
+
 battery = Topic(name="battery", msg_type="Float32", data_timeout=0.5)
 mode = Topic(name="mode", msg_type="String")
 bumper = Topic(name="bumper", msg_type="Bool")

@@ -14,6 +14,8 @@ from tests.agents.components_helpers import Probe
 from tests.agents.fixtures.server_process import start_server
 from tests.runtime.helpers import REPO, SystemUnderTest, kill_leftover_systems, wait_until
 
+pytestmark = pytest.mark.process
+
 RECIPES = REPO / "recipes" / "events_and_resilience"
 RESPONDER = str(REPO / "recipes" / "models" / "responder.yaml")
 

@@ -11,6 +11,8 @@ from emos.core.node import control_socket
 from emos.core.rpc import RpcClient
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 COUNTER = """
 from emos import Event, Action
 from emos.actions import log, restart

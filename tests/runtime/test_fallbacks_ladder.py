@@ -8,6 +8,8 @@ from emos.core.health import HealthLevel
 from emos.events.action import decode_value, encode_value, resolve_bindings
 from emos.msgs import Float32, String
 
+pytestmark = pytest.mark.unit
+
 C, A, S, H = HealthLevel.COMPONENT_FAILURE, HealthLevel.ALGORITHM_FAILURE, HealthLevel.SYSTEM_FAILURE, HealthLevel.HEALTHY
 
 

@@ -7,6 +7,8 @@ import pytest
 from emos import msgs as M
 from emos.geometry import planar_pose, quaternion_of_yaw, wrap_angle, yaw_of_quaternion
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize("angle, wrapped", [(0.0, 0.0), (math.pi, -math.pi), (-math.pi, -math.pi), (3 * math.pi / 2, -math.pi / 2),
                                             (-7.0, -7.0 + 2 * math.pi), (100.0, 100.0 - 32 * math.pi)])

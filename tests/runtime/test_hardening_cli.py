@@ -12,6 +12,8 @@ from emos.msgs import Image
 from emos.transport.pubsub import Publisher
 from tests.runtime.helpers import LISTENER, SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 
 
 def _ctrl_c_as_at_a_terminal() -> None:

@@ -15,6 +15,8 @@ import pytest
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 # argv: marker, pid folder. Double fork with setsid between, as daemon(3) does.
 DAEMON = r"""
 import os, sys, time

@@ -13,6 +13,8 @@ from emos.supervisor.system import Package, System
 from emos.transport.limits import component_name_limit, segment_name_limit
 from tests.runtime.helpers import RECIPE_HEADER
 
+pytestmark = pytest.mark.process
+
 
 def test_two_components_declaring_one_topic_with_two_types_are_refused_at_bringup():
     a = BaseComponent(component_name="talker", outputs=[Topic(name="/shared", msg_type="String")])

@@ -3,6 +3,9 @@ import subprocess
 import sys
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 HANGER = """
 class Hanger(BaseComponent):

@@ -6,6 +6,9 @@ import time
 import psutil
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 FORKER = """
 import subprocess

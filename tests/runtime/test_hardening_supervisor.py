@@ -7,6 +7,9 @@ import msgpack
 
 from emos.core.rpc import CONTROL_FRAME
 from tests.runtime.helpers import SystemUnderTest
+import pytest
+
+pytestmark = pytest.mark.process
 
 STEADY = """
 class Steady(BaseComponent):

@@ -6,6 +6,8 @@ import pytest
 from emos import Launcher, Topic
 from emos.core.keyed import AllowedTopic, KeyedComponent
 
+pytestmark = pytest.mark.process
+
 
 class Keys(str, enum.Enum):
     PLAN = "plan"

@@ -17,6 +17,8 @@ from emos.transport.context import RunContext
 from emos.transport.loans import LOAN_MIN_BYTES
 from emos.transport.pubsub import Publisher, Subscriber
 
+pytestmark = pytest.mark.process
+
 BIG = 2 * LOAN_MIN_BYTES  # loaned, and well inside the ring's first slot size
 
 

@@ -6,6 +6,8 @@ from emos import msgs as M
 from emos.msgs import codec, fields as F
 from emos.msgs.registry import UnknownMessageType, message_type, registered_types, resolve
 
+pytestmark = pytest.mark.unit
+
 SPEC_TYPES = [
     "String", "Bool", "Float32", "Float32MultiArray", "Float64", "Float64MultiArray", "Point", "PointStamped", "Pose",
     "PoseStamped", "Twist", "TwistStamped", "Image", "CompressedImage", "Audio", "LaserScan", "PointCloud2", "CameraInfo",

@@ -8,6 +8,9 @@ import sys
 import time
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 CRASHY = """
 FLAGS = os.environ["FLAGS"]

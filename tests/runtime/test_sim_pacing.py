@@ -9,6 +9,8 @@ from emos.msgs import Clock, Time
 from emos.supervisor.sim_pacing import SimPacer
 from emos.transport.pubsub import Publisher
 
+pytestmark = pytest.mark.unit
+
 
 def _tick(pub, t):
     pub.publish(Clock(clock=Time.from_sec(t)))

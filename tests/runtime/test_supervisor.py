@@ -8,6 +8,8 @@ import pytest
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 COMPONENTS = """
 class Steady(BaseComponent):
     def _execution_step(self):

@@ -5,6 +5,9 @@ import sys
 import time
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 THREADED = """
 class Counter(BaseComponent):

@@ -17,6 +17,8 @@ from emos.transport.context import SHM_DIR, RunContext, sweep_stale_runs
 from emos.transport.pubsub import MessageTooLarge, Publisher, Subscriber, TopicTypeError
 from emos.transport.waker import Waker
 
+pytestmark = pytest.mark.process
+
 
 def test_many_publishers_and_subscribers_queued_and_latest(ctx):
     waker = Waker(ctx)

@@ -12,6 +12,8 @@ from emos.transport import select
 from emos.transport.netframe import BadFrame, frame_prefix, read_frame, write_frame
 from emos.transport.pubsub import Publisher, Subscriber
 
+pytestmark = pytest.mark.unit
+
 
 def _frame(msg, publisher="cam", stamp=42):
     fp = type(msg)._emos_fingerprint

@@ -15,6 +15,8 @@ from emos.transport.context import ENV_RUN_DIR, ENV_RUN_ID
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 
+pytestmark = pytest.mark.process
+
 
 _WATCHED: list = []  # [ring, message number] whose state each fence records
 

@@ -11,6 +11,8 @@ from emos.transport.context import SHM_DIR
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 
+pytestmark = pytest.mark.unit
+
 
 def _scribble(ring: R.Ring, how: str) -> None:
     q = np.frombuffer(ring.mm, dtype=np.uint64)

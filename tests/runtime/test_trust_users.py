@@ -23,6 +23,8 @@ from emos.transport.waker import Waker
 from tests.runtime.helpers import SystemUnderTest, wait_until
 from tests.runtime.trust_helpers import attacker, forged_ring, planted, publish_bad_message, shared_tmp, write_own_file  # noqa: F401
 
+pytestmark = pytest.mark.process
+
 
 def _seg(ctx, topic, pub, gen=0):
     return SHM_DIR / ctx.segment_name(topic, pub, gen)

@@ -6,6 +6,9 @@ import time
 from emos import msgs as M
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import PARKED, SPINNING, Waker
+import pytest
+
+pytestmark = pytest.mark.unit
 
 
 def _pair(ctx, spin_us: float):

@@ -11,6 +11,8 @@ import pytest
 from tests.runtime.helpers import SystemUnderTest, wait_until
 from tests.runtime.test_zenoh_net import _config, _free_port
 
+pytestmark = pytest.mark.process
+
 zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
 
 MAPPER = """

@@ -17,6 +17,8 @@ import pytest
 
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
 
 

@@ -16,6 +16,8 @@ import pytest
 from emos.transport.context import SHM_DIR
 from tests.runtime.helpers import SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
 
 CAMERA = """

@@ -18,6 +18,8 @@ from emos.msgs import Image, LaserScan, UInt8MultiArray, codec
 from emos.transport import select
 from emos.transport.netframe import FrameWriter, frame_prefix, read_frame, write_frame
 
+pytestmark = pytest.mark.unit
+
 zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
 from emos.transport import zenoh_net  # noqa: E402
 

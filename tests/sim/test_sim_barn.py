@@ -8,6 +8,8 @@ import pytest
 from emos.actors.sim.barn import BarnRules, run_episode, summarize
 from emos.actors.sim.barn_worlds import BarnWorld, barn_metric, load_barn_worlds
 
+pytestmark = [pytest.mark.sim, pytest.mark.process]
+
 
 class Straight:
     """Scripted navigator: drive straight ahead at a fixed speed."""

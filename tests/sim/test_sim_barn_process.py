@@ -14,6 +14,9 @@ import numpy as np
 from emos.actors.sim.barn.harness import BarnRules
 from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, NAV_COMPONENTS, StackOptions, build_system
 from tests.runtime.helpers import REPO
+import pytest
+
+pytestmark = [pytest.mark.sim, pytest.mark.process]
 
 
 def test_the_stack_never_receives_true_poses():

@@ -6,6 +6,8 @@ from emos.actors.sim.barn_protocol import (ControlDeadline, MotionTimer, Trial, 
                                            summarize_trials, trial_seed, tuning_split)
 from emos.actors.sim.barn_worlds import barn_metric
 
+pytestmark = pytest.mark.sim
+
 
 def test_timer_starts_after_a_tenth_of_a_metre():
     timer = MotionTimer((0.0, 0.0))

@@ -8,6 +8,9 @@ from emos.actors.sim.barn.harness import BarnRules
 from emos.actors.sim.barn.process import run_episode_process
 from emos.actors.sim.barn.stack import RecoveryOptions, StackOptions, build_system
 from emos.actors.sim.barn_worlds import load_barn_worlds
+import pytest
+
+pytestmark = pytest.mark.sim
 
 
 def test_the_stack_wires_the_recovery_ladder_on_the_controller():

@@ -12,6 +12,9 @@ import numpy as np
 from emos.actors.sim.barn.harness import EpisodeResult
 from emos.actors.sim.barn.report import build_report
 from tests.runtime.helpers import REPO
+import pytest
+
+pytestmark = [pytest.mark.sim, pytest.mark.process]
 
 
 def _write(path, trials, config=None):

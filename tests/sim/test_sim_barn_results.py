@@ -3,6 +3,9 @@ from the file instead of running them again, and a file of another configuration
 import json
 import subprocess
 import sys
+import pytest
+
+pytestmark = pytest.mark.process
 
 ARGS = ["--in-process", "--ideal", "--worlds", "5,10", "--seeds", "1", "--json"]
 

@@ -11,6 +11,8 @@ import pytest
 from emos.actors.sim.barn_repo import load_barn_repo, parse_world_file, path_cell_to_world, reference_path_length
 from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START, default_worlds_file, load_barn_worlds
 
+pytestmark = pytest.mark.sim
+
 CYLINDER_MODEL = """    <model name='unit_cylinder_{i}'>
       <static>1</static>
       <pose frame=''>{x:.6f} {y:.6f} 0.000000 0.000000 0.000000 0.000000</pose>

@@ -9,6 +9,8 @@ from emos.actors.sim.barn_trial import TrialSpec, build_trial, run_trial
 from emos.actors.sim.barn_worlds import BarnWorld
 from emos.actors.sim.dynabarn import load_dynabarn
 
+pytestmark = pytest.mark.sim
+
 EMPTY = BarnWorld(idx=42, cylinders=np.zeros((0, 2)), path_length=10.0)
 
 

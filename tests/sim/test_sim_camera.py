@@ -5,6 +5,8 @@ import pytest
 
 from emos.actors.sim import Camera, CameraConfig
 
+pytestmark = pytest.mark.sim
+
 
 def _red_sphere(world, xyz, radius=0.05):
     pb = pytest.importorskip("pybullet")

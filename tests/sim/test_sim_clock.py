@@ -5,6 +5,8 @@ import pytest
 
 from emos.actors.sim import Lidar, LidarConfig, Odometry, OdometryConfig, SimClock
 
+pytestmark = pytest.mark.sim
+
 
 def test_lockstep_time_advances_only_with_step(make_world):
     world = make_world()

@@ -3,6 +3,8 @@ import pytest
 
 from emos.actors.sim import Box, ContactSensor, MovingObstacle
 
+pytestmark = pytest.mark.sim
+
 
 def test_driving_into_a_wall_is_detected_and_stops_the_robot(make_world):
     world = make_world()

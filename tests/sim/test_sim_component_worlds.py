@@ -12,6 +12,8 @@ from emos import msgs as M
 
 pytest.importorskip("pybullet", reason="pybullet (emos[sim]) is not installed")
 
+pytestmark = pytest.mark.sim
+
 
 def _grid_ranges(grid, x: float, y: float, angles: np.ndarray, range_max: float) -> np.ndarray:
     """Reference ray cast on the occupancy grid: march each ray in 1/5-cell steps."""

@@ -12,6 +12,8 @@ from emos.actors.sim.component.compute_charge import ComputeCharge
 from emos.transport.pubsub import Subscriber
 from tests.runtime.helpers import SystemUnderTest, kill_leftover_systems, wait_until
 
+pytestmark = [pytest.mark.sim, pytest.mark.process]
+
 
 def test_charge_sums_the_reports_of_a_tick_and_counts_misses():
     charge = ComputeCharge(deadline_s=0.1, physics_dt=0.01)

@@ -7,6 +7,8 @@ import pytest
 from emos.actors.sim.dynabarn import (CORRIDOR_HALF_WIDTH, DYNABARN_COUNT, default_file, from_dynabarn, generate,
                                       load_dynabarn, to_json)
 
+pytestmark = pytest.mark.sim
+
 
 def test_shipped_file_is_what_the_generator_makes():
     assert default_file().read_text() == to_json(generate())

@@ -4,6 +4,9 @@ from emos.actors.sim.barn import BarnRules, run_episode
 from emos.actors.sim.barn.controllers import make_controller
 from emos.actors.sim.barn_protocol import trial_seed
 from emos.actors.sim.dynabarn import load_dynabarn
+import pytest
+
+pytestmark = pytest.mark.sim
 
 
 def test_dynamic_navigator_passes_crossing_obstacles_that_the_static_one_runs_into():

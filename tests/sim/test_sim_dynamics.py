@@ -7,6 +7,8 @@ import pytest
 from emos.actors.sim.dynamics import IdealDrive, SkidSteerDrive, SkidSteerParams, make_drive, twist_between
 from emos.actors.sim.robots import HOLONOMIC, JACKAL, JACKAL_BARN, integrate
 
+pytestmark = pytest.mark.sim
+
 
 def _drive(model, commands, dt=0.01):
     """Body twists and the integrated pose of ``model`` driven by ``commands`` from rest."""

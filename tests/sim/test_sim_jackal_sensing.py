@@ -8,6 +8,8 @@ from emos.actors.sim import Lidar, Odometry, OdometryConfig
 from emos.actors.sim.jackal import JACKAL_LASER
 from emos.actors.sim.sensors import WheelImuOdometry, WheelImuOdometryConfig
 
+pytestmark = pytest.mark.sim
+
 
 def test_official_laser_geometry():
     assert JACKAL_LASER.beams == 720

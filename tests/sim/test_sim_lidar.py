@@ -5,6 +5,8 @@ import pytest
 
 from emos.actors.sim import Lidar, LidarConfig, Wall
 
+pytestmark = pytest.mark.sim
+
 
 def test_lidar_facing_a_wall_matches_the_analytic_range(make_world):
     world = make_world()

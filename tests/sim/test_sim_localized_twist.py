@@ -12,6 +12,8 @@ from emos.actors.sim.sensors import WheelImuOdometry
 from emos.io.topic import Topic
 from emos.msgs import PoseStamped
 
+pytestmark = pytest.mark.sim
+
 
 def test_a_left_turn_heading_north_reads_forward_and_counter_clockwise(make_world):
     world = make_world(ground=False, seed=1)

@@ -15,6 +15,8 @@ from tests.runtime.helpers import SystemUnderTest, kill_leftover_systems, wait_u
 
 pytest.importorskip("pybullet", reason="pybullet (emos[sim]) is not installed")
 
+pytestmark = [pytest.mark.sim, pytest.mark.process]
+
 
 @pytest.fixture(autouse=True)
 def _no_system_outlives_its_test():

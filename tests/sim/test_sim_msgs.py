@@ -1,6 +1,8 @@
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.sim
+
 msgs = pytest.importorskip("emos.msgs", reason="emos.msgs (runtime) is not importable")
 
 from emos.actors.sim import Camera, CameraConfig, Lidar, LidarConfig, Odometry, Wall  # noqa: E402

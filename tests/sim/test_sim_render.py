@@ -3,6 +3,8 @@ import pytest
 
 from emos.actors.sim import Box, World, render_topdown
 
+pytestmark = pytest.mark.sim
+
 
 def test_topdown_png_shows_obstacles_trail_plan_and_goal(tmp_path, make_world):
     world = make_world()

@@ -7,6 +7,8 @@ from emos.actors.sim import HOLONOMIC, JACKAL, RACECAR, TURTLEBOT3, Odometry, Od
 from emos.actors.sim.robots import accelerate, feasible_command, integrate
 from emos.geometry import wrap_angle
 
+pytestmark = pytest.mark.sim
+
 
 def test_commands_are_clipped_to_the_speed_limits(make_world):
     world = make_world(ground=False)

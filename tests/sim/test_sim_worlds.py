@@ -8,6 +8,8 @@ from emos.actors.sim.barn_worlds import BARN_CYLINDER_RADIUS, load_barn_worlds, 
 from emos.actors.sim.builders import from_barn, house_shapes
 from emos.actors.sim.mapfile import map_to_boxes, merge_cells, read_ros_map
 
+pytestmark = pytest.mark.sim
+
 
 def _barn_file(tmp_path, worlds):
     path = tmp_path / "worlds.json"

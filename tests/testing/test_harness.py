@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
@@ -12,6 +11,8 @@ from emos import msgs as M
 from emos.core import clock
 from emos.testing import ComponentHarness
 from emos.transport.context import SHM_DIR
+
+pytestmark = pytest.mark.unit
 
 
 class Counter(BaseComponent):

@@ -16,7 +16,7 @@ import pytest
 from emos.core.rpc import RpcClient
 from tests.ui.conftest import ARTIFACTS
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.browser, pytest.mark.process, pytest.mark.timeout(120)]
 
 
 def wait_for(predicate, timeout: float = 15.0, what: str = "condition"):

@@ -13,7 +13,7 @@ import pytest
 
 from tests.ui.conftest import HERE, free_port, start_recipe, stop_recipe, token_of, wait_link
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.process, pytest.mark.timeout(120)]
 
 
 def _health(run_id: str) -> dict:

@@ -22,7 +22,7 @@ import pytest
 from emos.core.rpc import RpcClient
 from tests.ui.conftest import free_port, run_system
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.process, pytest.mark.timeout(120)]
 
 JSON = {"Content-Type": "application/json"}
 # The wire protocol, spelled out here rather than imported: the page and scripts depend on it.

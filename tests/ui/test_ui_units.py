@@ -24,6 +24,8 @@ from emos.config import validators
 from emos.config.base import BaseComponentConfig, enum_converter
 from emos.msgs import Image, MapMetaData, OccupancyGrid
 
+pytestmark = pytest.mark.process
+
 
 def _serve(host: str, token: str, port: int = 5001):
     async def hello(request: web.Request) -> web.Response:

@@ -4,6 +4,9 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import pytest
+
+pytestmark = pytest.mark.process
 
 
 def test_navloop_json_shape_and_matched_commands():

@@ -13,6 +13,9 @@ import time
 
 from emos import msgs as M
 from tests.runtime.helpers import REPO, SystemUnderTest
+import pytest
+
+pytestmark = [pytest.mark.sim, pytest.mark.process]
 
 RECIPES = REPO / "recipes" / "events_and_resilience"
 

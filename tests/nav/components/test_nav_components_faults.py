@@ -13,6 +13,8 @@ from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
 
+pytestmark = pytest.mark.process
+
 HEADER = """
 from emos.actors.nav.components import *
 from emos.actors.nav import MapConfig

@@ -12,6 +12,9 @@ from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.agents.components_helpers import Probe
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
+import pytest
+
+pytestmark = [pytest.mark.sim, pytest.mark.process]
 
 GOAL_TOPIC = "/grounding_output"
 INFO_TOPIC = "/camera/aligned_depth_to_color/camera_info"  # the Planner's default depth_camera_info

@@ -12,6 +12,9 @@ import numpy as np
 from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 STACK = """
 from emos.actors.nav import RobotConfig, RobotType, RobotGeometry, LinearCtrlLimits, AngularCtrlLimits, RobotFrames

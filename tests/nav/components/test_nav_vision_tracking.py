@@ -10,6 +10,9 @@ import numpy as np
 from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
+import pytest
+
+pytestmark = pytest.mark.process
 
 RECIPE = """
 from emos.actors.nav.components import Controller, ControllerConfig

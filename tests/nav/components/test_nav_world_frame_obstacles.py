@@ -12,6 +12,8 @@ import pytest
 from emos import msgs as M
 from emos.actors.nav.components.convert import BadInput, grid_msg, grid_points_in_robot_frame
 
+pytestmark = pytest.mark.unit
+
 
 def _world_grid(cells: list[tuple[int, int]], origin: tuple[float, float, float]) -> M.OccupancyGrid:
     data = np.zeros((20, 30), dtype=np.int8)

@@ -7,6 +7,9 @@ import subprocess
 import sys
 
 from tests.runtime.helpers import REPO
+import pytest
+
+pytestmark = pytest.mark.process
 
 RECIPE = REPO / "recipes" / "point_navigation.py"
 

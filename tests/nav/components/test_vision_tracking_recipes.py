@@ -15,6 +15,8 @@ from emos import msgs as M
 from emos.actors.sim.person import Person
 from tests.runtime.helpers import REPO, SystemUnderTest
 
+pytestmark = [pytest.mark.sim, pytest.mark.process]
+
 FOLLOW_S = 20.0  # simulated seconds of following after the first detection (the person crosses ~3 times)
 MIN_FOLLOW_S = 12.0  # at least this much, when a loaded machine runs the simulation slower than real time
 
