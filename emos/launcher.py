@@ -276,7 +276,11 @@ class Launcher:
         code = self.system.run()
         self.exit_code, self.exit_reason = code, self.system.exit_reason
         Launcher.last_exit_code = code
-        print(self.system.summary(), flush=True)
+        # One write: `emos run` copies stdout and stderr to its log through two tee processes,
+        # and unbuffered (PYTHONUNBUFFERED) print writes the text and its newline apart, so the
+        # next log line could land inside the summary's last line.
+        sys.stdout.write(self.system.summary() + "\n")
+        sys.stdout.flush()
         log.info("bringup ended (exit code %d): %s", code, self.exit_reason)
         if code != 0 and os.environ.get("EMOS_RUN_CLI") != "1":
             raise SystemExit(code)
