@@ -65,14 +65,18 @@ def _arc_factors(dth: float, dt: float) -> tuple[float, float]:
     return math.sin(dth) / dth * dt, (1.0 - math.cos(dth)) / dth * dt
 
 
+def _ndim(value: Any) -> int:
+    return value.ndim if isinstance(value, np.ndarray) else int(np.ndim(value))
+
+
 def integrate_pose(pose: Any, twist: Any, dt: Any) -> np.ndarray:
     """The exact pose (x, y, yaw) after holding the body twist (vx, vy, omega) for ``dt`` s: arcs,
     not Euler steps, so long horizons with coarse steps stay exact. Broadcasts over leading axes
     (poses, twists and steps of a rollout); one pose and one twist take a scalar path, the
     simulator's per-tick case. The heading comes out wrapped to [-pi, pi)."""
-    if np.ndim(pose) == 1 and np.ndim(twist) == 1 and np.ndim(dt) == 0:
-        x, y, th = (float(v) for v in pose)
-        vx, vy, om = (float(v) for v in twist)
+    if _ndim(pose) == 1 and _ndim(twist) == 1 and not isinstance(dt, np.ndarray):
+        x, y, th = pose
+        vx, vy, om = twist
         step = float(dt)
         a, b = _arc_factors(om * step, step)
         dx_b, dy_b = vx * a - vy * b, vx * b + vy * a  # displacement in the start's body frame
