@@ -12,20 +12,24 @@ import logging
 import os
 import signal
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from attrs import define, field
 
+from emos.core import control as C
 from emos.core.component import BaseComponent
 from emos.core.node import ENV_SUPERVISOR_SOCKET, Node
+from emos.core.prctl import become_subreaper
 from emos.core.rpc import CONTROL_FRAME, RpcServer
 from emos.core.wiring import check_system
+from emos.ratelimit import RateLimitedLog
 from emos.supervisor.fallback_driver import FallbackDriver
 from emos.supervisor.heartbeat import HeartbeatMonitor
 from emos.supervisor.orchestration import Orchestration, fallback_summary, lifecycle_op, with_monitor
 from emos.supervisor.reaper import OrphanReaper
-from emos.supervisor.spawn import Zygote, become_subreaper
+from emos.supervisor.spawn import Zygote
 from emos.supervisor.tree import ChildSpec, RestartLedger, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
 from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
 from emos.transport.context import RunContext, remove_run_dir, remove_segments, set_current
@@ -83,7 +87,12 @@ class System:
         self.exit_reason = ""
         self.zygote: Zygote | None = None
         self._wakers_swept_at = time.monotonic()
-        self._hellos: dict[str, asyncio.Future[int]] = {}
+        # (component, pid) -> (the future its hello completes, the incarnation waiting on it).
+        # Keyed by pid too: a hello completes only the start of the process that sent it, never
+        # a later start of the same component (the observed race: a copy killed while starting
+        # said hello and drove the start of its successor).
+        self._hellos: dict[tuple[str, int], tuple[asyncio.Future[int], Any]] = {}
+        self._stale_hellos = RateLimitedLog(log, interval=5.0)  # a peer may repeat them: say so once per interval
         self._stop_requested: asyncio.Event | None = None
         self.root: Supervisor | None = None
         self.up = False  # every group started (the tree lists a group only once it is up)
@@ -107,10 +116,15 @@ class System:
             if process_indices:
                 # Forked first, while this process still has one thread and no event loop.
                 prefix, run_dir = self.ctx.shm_prefix, self.ctx.run_dir
+
+                def janitor() -> None:  # the zygote's clean-up when the launcher died under it
+                    remove_segments(prefix)
+                    remove_run_dir(run_dir)
+
                 self.zygote = Zygote(
                     [self._process_target(i) for i in range(len(self.components))],
                     [c.component_name for c in self.components],
-                    janitor=lambda: (remove_segments(prefix), remove_run_dir(run_dir)),
+                    janitor=janitor,
                 )
                 self.zygote.start()
             for i, c in enumerate(self.components):
@@ -193,14 +207,13 @@ class System:
                 return
             self.up = True
             log.info("system up: %d components (run %s)", len(self.components), self.ctx.run_id)
-            waiters = [asyncio.ensure_future(self._stop_requested.wait()), self.root.exited]
+            waiters: list[asyncio.Future[Any]] = [asyncio.ensure_future(self._stop_requested.wait()), self.root.exited]
             if self.options.duration:
                 waiters.append(asyncio.ensure_future(self._stop_after(self.options.duration)))
             done, pending = await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
             for p in pending:
                 if p is not self.root.exited:
                     p.cancel()
-            assert self.root.exited is not None
             if self.root.exited.done():
                 result = self.root.exited.result()
                 self.exit_code, self.exit_reason = EXIT_GAVE_UP, result.detail
@@ -271,11 +284,15 @@ class System:
             fallbacks.incarnation_changed(worker.name)
 
     def incarnation_ended(self, worker: Any) -> None:
-        if self.incarnations.get(worker.name) is worker:
-            del self.incarnations[worker.name]
+        name = worker.name
+        if self.incarnations.get(name) is worker:
+            del self.incarnations[name]
+        pending = self._hellos.get((name, worker.pid))
+        if pending is not None and pending[1] is worker:  # it died before saying hello: forget its wait
+            del self._hellos[(name, worker.pid)]
         fallbacks = getattr(self, "fallbacks", None)
         if fallbacks is not None:
-            fallbacks.incarnation_changed(worker.name)
+            fallbacks.incarnation_changed(name)
 
     def incarnation(self, name: str) -> Any | None:
         """The running incarnation of component ``name`` (from its spawn on), or None."""
@@ -302,16 +319,35 @@ class System:
         return "\n".join(lines)
 
     # ------------------------------------------------------------------ control socket
-    def expect_hello(self, name: str) -> "asyncio.Future[int]":
-        fut = asyncio.get_running_loop().create_future()
-        self._hellos[name] = fut
+    def expect_hello(self, name: str, pid: int | None = None) -> asyncio.Future[int]:
+        """A future that the hello of component ``name`` from process ``pid`` completes (with
+        the pid). ``pid`` defaults to that of the component's current incarnation: a worker
+        registers itself (``incarnation_started``) just before it waits for its hello. Threaded
+        incarnations share the launcher's pid, so for them the key is the name, as before."""
+        owner = self.incarnations.get(name)
+        if pid is None:
+            pid = getattr(owner, "pid", None)
+            if pid is None:
+                raise ValueError(f"expect_hello: component {name!r} has no running incarnation to take the pid of; pass pid=")
+        elif getattr(owner, "pid", None) != pid:
+            owner = None
+        fut: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        self._hellos[(name, int(pid))] = (fut, owner)
         return fut
 
     def _control_ops(self) -> dict[str, Callable]:
         async def hello(req: dict, stream: Any) -> bool:
-            fut = self._hellos.pop(str(req.get("component")), None)
-            if fut is not None and not fut.done():
-                fut.set_result(int(req.get("pid", 0)))
+            name, pid = str(req.get("component")), req.get("pid")
+            if isinstance(pid, bool) or not isinstance(pid, int):
+                raise ValueError(f"hello from component {name!r}: 'pid' must be an int, got {pid!r}")
+            waiting = self._hellos.pop((name, pid), None)
+            if waiting is None or waiting[0].done():
+                # A start that was abandoned (its group stopped or escalated) killed this process
+                # already, or it is no process we started: its hello must not complete another start.
+                self._stale_hellos.warning((name, pid), "supervisor: ignoring a hello from component %r pid %d: no start of that "
+                                           "process is waiting for it (a stale incarnation?)", name, pid)
+                return True
+            waiting[0].set_result(pid)
             return True
 
         async def tree(req: dict, stream: Any) -> dict:
@@ -327,12 +363,12 @@ class System:
             self.request_stop(str(req.get("reason", "stopped through the control socket")))
             return True
 
-        return {"hello": hello, "tree": tree, "events": events, "stop": stop, "lifecycle": lifecycle_op(lambda: self.fallbacks)}
+        return {C.SUPERVISOR_HELLO: hello, C.SUPERVISOR_TREE: tree, C.SUPERVISOR_EVENTS: events, C.SUPERVISOR_STOP: stop, C.SUPERVISOR_LIFECYCLE: lifecycle_op(lambda: self.fallbacks)}
 
 
 def find_runs() -> list[Path]:
     """Run directories of live systems of this user (newest first)."""
-    from emos.transport.context import runtime_root, run_is_alive
+    from emos.transport.context import run_is_alive, runtime_root
 
     runs = [p for p in runtime_root().iterdir() if (p / "supervisor.sock").exists() and run_is_alive(p.name)]
     return sorted(runs, key=lambda p: p.stat().st_mtime, reverse=True)

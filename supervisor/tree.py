@@ -29,10 +29,13 @@ import collections
 import contextvars
 import logging
 import time
+from collections.abc import Awaitable, Callable
 from enum import Enum
-from typing import Any, Awaitable, Callable, Protocol
+from typing import Any, Protocol
 
 from attrs import define, field
+
+from emos.errors import EmosError
 
 log = logging.getLogger("emos.supervisor")
 
@@ -63,7 +66,8 @@ class Exit:
 
 
 class Child(Protocol):
-    exited: "asyncio.Future[Exit]"
+    @property
+    def exited(self) -> asyncio.Future[Exit]: ...
 
     async def stop(self, timeout: float) -> Exit: ...
 
@@ -79,8 +83,13 @@ class ChildSpec:
     kind: str = "worker"
 
 
-class StartFailed(RuntimeError):
+class StartFailed(EmosError, RuntimeError):
     pass
+
+
+class StartCancelled(StartFailed):
+    """A child's start was abandoned because its group is stopping or escalating; the start's
+    own clean-up (a worker kills and reaps the process it spawned) has run by then."""
 
 
 # Why a child is (re)started. A child's own exit reasons (crash, killed, hang, normal, start_failed,
@@ -176,8 +185,20 @@ class Supervisor:
         self._child_locks: dict[str, asyncio.Lock] = {}
         self._stopping = False
         self._watchers: dict[str, asyncio.Task] = {}
-        self.exited: asyncio.Future[Exit] | None = None
+        # Starts in progress (child id -> the task running its spec.start()). They are part of
+        # the group's state: a child still waiting for its hello is not in ``running`` yet, and
+        # a stop or an escalation that skipped it would leave it alive next to the copy the
+        # parent starts when it restarts the group. Stopping and escalating cancel them.
+        self._starting: dict[str, asyncio.Task] = {}
+        self._exited: asyncio.Future[Exit] | None = None  # made by start(), on the running loop
         self.started_at = 0.0
+
+    @property
+    def exited(self) -> asyncio.Future[Exit]:
+        """Resolves with the supervisor's own Exit (shutdown or escalated); exists once started."""
+        if self._exited is None:
+            raise RuntimeError(f"supervisor {self.name!r} has not been started: it has no exit yet")
+        return self._exited
 
     # ------------------------------------------------------------------ events
     def _emit(self, event: str, child: str = "", **extra: Any) -> None:
@@ -190,10 +211,10 @@ class Supervisor:
             self.on_event(record)
 
     # ------------------------------------------------------------------ start / stop
-    async def start(self) -> "Supervisor":
+    async def start(self) -> Supervisor:
         loop = asyncio.get_running_loop()
         self._lock = asyncio.Lock()
-        self.exited = loop.create_future()
+        self._exited = loop.create_future()
         self._stopping = False
         self.started_at = time.monotonic()
         # A group started again by its parent starts each child again: that is their restart too.
@@ -202,8 +223,20 @@ class Supervisor:
         detail = "" if group_reason is None else f"group {self.name} restarted ({group_reason})"
         started: list[str] = []
         for spec in self.specs:
+            if self._stopping:
+                break  # a child that died meanwhile escalated: our exit says so, our escalation stopped the rest
             try:
                 await self._start_child(spec, reason, detail)
+            except StartCancelled:
+                break  # the same escalation cancelled this start
+            except asyncio.CancelledError:
+                # Our own start was cancelled (our parent is stopping or escalating): take down
+                # what we started and what is still starting, then let the cancellation through.
+                self._stopping = True
+                await self._cancel_starts()
+                for cid in reversed([s.id for s in self.specs if s.id in self.running]):
+                    await self._stop_child(cid)
+                raise
             except Exception as exc:
                 self.ledger.start_failed(spec.kind, spec.id)
                 self._emit("start_failed", spec.id, detail=str(exc))
@@ -214,12 +247,36 @@ class Supervisor:
         return self
 
     async def _start_child(self, spec: ChildSpec, reason: str | None = None, detail: str = "") -> int:
-        """Start ``spec`` (``reason``: why, None for its first start); returns its restarts so far."""
-        token = _GROUP_START_REASON.set(reason)  # seen by a sub-supervisor's start()
+        """Start ``spec`` (``reason``: why, None for its first start); returns its restarts so far.
+
+        Raises StartCancelled if the group stops or escalates before the child is up (or has
+        already begun to); the start runs as a task of its own, kept in ``_starting``, so that
+        ``_cancel_starts`` can end it without cancelling whoever asked for the start."""
+        if self._stopping:
+            raise StartCancelled(f"supervisor {self.name!r}: not starting {spec.id!r}: the group is stopping")
+        token = _GROUP_START_REASON.set(reason)  # seen by a sub-supervisor's start() (the task copies the context)
         try:
-            child = await spec.start()
+            task = asyncio.ensure_future(self._run_start(spec, reason, detail))
         finally:
             _GROUP_START_REASON.reset(token)
+        self._starting[spec.id] = task
+        try:
+            return await task
+        except asyncio.CancelledError:
+            me = asyncio.current_task()
+            if not task.cancelled() or (me is not None and me.cancelling()):
+                raise  # we are being cancelled ourselves: the start went with us
+            log.warning("[%s] start of %s abandoned: the group is stopping or escalating (what it spawned is killed and reaped)",
+                        self.name, spec.id)
+            raise StartCancelled(f"supervisor {self.name!r}: start of {spec.id!r} cancelled: the group is stopping") from None
+        finally:
+            if self._starting.get(spec.id) is task:
+                del self._starting[spec.id]
+
+    async def _run_start(self, spec: ChildSpec, reason: str | None, detail: str) -> int:
+        child = await spec.start()
+        # No await from here on: once the task is done the child is in ``running`` (and so
+        # stopped by a stop or an escalation), never in neither place.
         self.running[spec.id] = child
         self._watchers[spec.id] = asyncio.ensure_future(self._watch(spec.id, child))
         restarts = self.ledger.started(spec.kind, spec.id, reason, detail)
@@ -242,8 +299,9 @@ class Supervisor:
 
     async def stop(self, timeout: float | None = None) -> Exit:
         """Stop every child in reverse start order, then finish with reason ``shutdown``."""
-        assert self._lock is not None and self.exited is not None
+        assert self._lock is not None  # made by start()
         self._stopping = True
+        await self._cancel_starts()  # before the locks: a restart holding one may be waiting for a hello
         async with self._lock:
             for spec in reversed(self.specs):
                 if self.strategy == Strategy.ONE_FOR_ONE:
@@ -267,6 +325,17 @@ class Supervisor:
         result = await child.stop(spec.shutdown if spec else 5.0)
         self._emit("stopped", cid, detail=result.detail or result.reason)
         return result
+
+    async def _cancel_starts(self) -> None:
+        """Cancel every start in progress and wait until each has cleaned up after itself (a
+        worker kills and reaps the process it spawned; a sub-group stops what it started), so
+        that nothing of this incarnation of the group outlives its stop or escalation."""
+        me = asyncio.current_task()
+        tasks = [t for t in self._starting.values() if t is not me and not t.done()]
+        for t in tasks:
+            t.cancel()
+        if tasks:
+            await asyncio.wait(tasks)
 
     def _spec(self, cid: str) -> ChildSpec | None:
         return next((s for s in self.specs if s.id == cid), None)
@@ -308,7 +377,7 @@ class Supervisor:
             await self._restart_from(spec, why, detail)
             return True
 
-    def find(self, cid: str) -> "Supervisor | None":
+    def find(self, cid: str) -> Supervisor | None:
         """The (sub-)supervisor whose child ``cid`` is, searching running groups."""
         if any(s.id == cid for s in self.specs) and not isinstance(self.running.get(cid), Supervisor):
             return self
@@ -355,6 +424,8 @@ class Supervisor:
                         return
                     self._emit("restarted", spec.id, count=count, why=reason)
                     break
+                except StartCancelled:
+                    return  # a sibling escalated (or the group is stopping) while this one was starting
                 except Exception as exc:
                     self.ledger.start_failed(spec.kind, spec.id)
                     self._emit("start_failed", spec.id, detail=str(exc))
@@ -363,10 +434,10 @@ class Supervisor:
     async def _escalate(self, why: str) -> None:
         self._stopping = True
         self._emit("escalated", detail=why)
+        await self._cancel_starts()  # a child still starting is ours too: no copy of it may outlive us
         for spec in reversed(self.specs):
             if spec.id in self.running:
                 await self._stop_child(spec.id)
-        assert self.exited is not None
         if not self.exited.done():
             self.exited.set_result(Exit("escalated", f"supervisor {self.name}: {why}"))
 

@@ -17,9 +17,10 @@ from typing import TYPE_CHECKING, Any
 
 import psutil
 
+from emos.core import control as C
 from emos.core import lifecycle as L
 from emos.core.component import BaseComponent
-from emos.core.node import Node, control_socket
+from emos.core.node import Node
 from emos.core.rpc import AsyncRpcClient
 from emos.supervisor.spawn import ExitInfo, ProcessWatch
 from emos.supervisor.tree import Exit, StartFailed
@@ -33,7 +34,7 @@ log = logging.getLogger("emos.supervisor")
 class _Incarnation:
     """Shared bookkeeping of process and thread workers."""
 
-    def __init__(self, system: "System", index: int, component: BaseComponent, activate: bool):
+    def __init__(self, system: System, index: int, component: BaseComponent, activate: bool):
         self.system = system
         self.index = index
         self.component = component
@@ -46,18 +47,18 @@ class _Incarnation:
         self.started_wall = time.time()
         self._stop_reason: str | None = None  # set when *we* end it: shutdown or hang
 
-    async def _bring_up(self, died: "asyncio.Future[Any]") -> None:
-        hello = self.system.expect_hello(self.name)
+    async def _bring_up(self, died: asyncio.Future[Any]) -> None:
+        hello = self.system.expect_hello(self.name, pid=self.pid)
         done, _ = await asyncio.wait({hello, died}, timeout=self.system.options.start_timeout, return_when=asyncio.FIRST_COMPLETED)
         if died in done:
             raise StartFailed(f"component {self.name!r} ended while starting: {died.result()}")
         if not done:
             raise StartFailed(f"component {self.name!r} did not report within {self.system.options.start_timeout:g} s")
-        client = AsyncRpcClient(control_socket(self.system.ctx, self.name))
+        client = AsyncRpcClient(C.control_socket(self.system.ctx, self.name))
         try:
             target = L.LifecycleState.ACTIVE if self.activate else L.LifecycleState.INACTIVE
             for transition in L.path_to(L.LifecycleState.UNCONFIGURED, target):
-                call = asyncio.ensure_future(client.call("transition", transition=transition.value, timeout=self.system.options.start_timeout))
+                call = asyncio.ensure_future(client.call(C.TRANSITION, transition=transition.value, timeout=self.system.options.start_timeout))
                 done, _ = await asyncio.wait({call, died}, return_when=asyncio.FIRST_COMPLETED)
                 if died in done:
                     call.cancel()
@@ -100,7 +101,7 @@ _HEALTH_NAMES = {0: "HEALTHY", 1: "ALGORITHM_FAILURE", 2: "COMPONENT_FAILURE", 3
 class ProcessWorker(_Incarnation):
     mode = "process"
 
-    async def start(self) -> "ProcessWorker":
+    async def start(self) -> ProcessWorker:
         loop = asyncio.get_running_loop()
         self.pid = self.system.zygote.spawn(self.index)  # type: ignore[union-attr]
         self.system.reaper.worker_started(self.pid)
@@ -116,7 +117,7 @@ class ProcessWorker(_Incarnation):
             raise
         return self
 
-    def _on_exit(self, fut: "asyncio.Future[ExitInfo]") -> None:
+    def _on_exit(self, fut: asyncio.Future[ExitInfo]) -> None:
         info = fut.result()
         self.system.reaper.worker_ended(info.pid)
         self.system.heartbeats.unwatch(self.name, self)
@@ -140,7 +141,7 @@ class ProcessWorker(_Incarnation):
             self.watch.send(signal.SIGTERM)
             try:
                 await asyncio.wait_for(asyncio.shield(self.exited), timeout)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 log.warning("[%s] did not stop within %.1f s of SIGTERM: SIGKILL", self.name, timeout)
                 self.watch.send(signal.SIGKILL)
         return await asyncio.shield(self.exited)
@@ -158,7 +159,7 @@ class ThreadWorker(_Incarnation):
 
     mode = "thread"
 
-    async def start(self) -> "ThreadWorker":
+    async def start(self) -> ThreadWorker:
         loop = asyncio.get_running_loop()
         self.pid = os.getpid()
         component = self.system.fresh_component(self.index)
@@ -173,7 +174,12 @@ class ThreadWorker(_Incarnation):
             except BaseException as exc:  # the component's thread died: that is its crash
                 log.exception("[%s] thread crashed", self.name)
                 result = Exit("crash", f"{type(exc).__name__}: {exc}")
-            loop.call_soon_threadsafe(lambda: self._thread_done.done() or self._thread_done.set_result(result))
+
+            def finish() -> None:  # on the loop's thread: a future is not thread-safe
+                if not self._thread_done.done():
+                    self._thread_done.set_result(result)
+
+            loop.call_soon_threadsafe(finish)
 
         self.thread = threading.Thread(target=main, name=f"emos:{self.name}", daemon=True)
         self.system.incarnation_started(self)
@@ -187,7 +193,7 @@ class ThreadWorker(_Incarnation):
             raise
         return self
 
-    def _on_exit(self, fut: "asyncio.Future[Exit]") -> None:
+    def _on_exit(self, fut: asyncio.Future[Exit]) -> None:
         self.system.heartbeats.unwatch(self.name, self)
         self.system.incarnation_ended(self)
         result = fut.result()
@@ -204,7 +210,7 @@ class ThreadWorker(_Incarnation):
             self.node.request_exit()
             try:
                 await asyncio.wait_for(asyncio.shield(self.exited), timeout)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 log.error("[%s] thread did not stop within %.1f s; abandoning it", self.name, timeout)
                 if not self._thread_done.done():
                     self._thread_done.set_result(Exit("shutdown", "abandoned after stop timeout"))
