@@ -1,14 +1,14 @@
 """Maps the fixed top-level folders into the ``emos`` namespace.
 
-``actors/``, ``supervisor/`` and ``chaos/`` live at the top of the repository but import as
-``emos.actors``, ``emos.supervisor`` and ``emos.chaos``: a top-level ``supervisor`` package
+``actors/``, ``supervisor/``, ``chaos/`` and ``tools/`` live at the top of the repository but import
+as ``emos.actors``, ``emos.supervisor``, ``emos.chaos`` and ``emos.tools``: a top-level ``supervisor`` package
 would shadow supervisord's, which many robots have installed.
 """
 from pathlib import Path
 
 from setuptools import Extension, setup
 
-ROOTS = {"emos": "emos", "emos.actors": "actors", "emos.supervisor": "supervisor", "emos.chaos": "chaos"}
+ROOTS = {"emos": "emos", "emos.actors": "actors", "emos.supervisor": "supervisor", "emos.chaos": "chaos", "emos.tools": "tools"}
 
 
 def _packages() -> tuple[list[str], dict[str, str]]:
@@ -33,4 +33,4 @@ def _extensions() -> list[Extension]:
 
 
 packages, package_dir = _packages()
-setup(ext_modules=_extensions(), packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css", "LICENSE"]})
+setup(ext_modules=_extensions(), packages=packages, package_dir=package_dir, package_data={"": ["py.typed", "*.pyi", "*.json", "*.yaml", "*.tsv", "*.pgm", "*.png", "*.urdf", "*.html", "*.js", "*.css", "LICENSE"]})

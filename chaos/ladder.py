@@ -18,9 +18,10 @@ from __future__ import annotations
 from typing import Any
 
 from emos.chaos.history import History
+from emos.errors import ConfigError
 
 
-class LadderSpecError(ValueError):
+class LadderSpecError(ConfigError):
     """``expect.fallback_ladder`` is malformed (named in the message)."""
 
 

@@ -97,12 +97,12 @@ def timeline_png(history_file: Path, result: dict[str, Any], out: Path) -> Path 
         o = by_target.get(r["t"])
         length = (o["recover_ms"] or 0) / 1e3 if o else 0
         target = str(r["detail"].get("target"))
-        row = names.index(target) if target in names else None
+        target_row = names.index(target) if target in names else None
         colour = "#d62728" if (o is None or o["recovered"]) else "#000000"
-        if row is None:
+        if target_row is None:
             ax.axvline(r["t"], color=colour, lw=1, alpha=0.6)
         else:
-            ax.broken_barh([(r["t"], max(0.05, length))], (row - 0.45, 0.9), facecolor="none", edgecolor=colour, hatch="///", lw=1)
+            ax.broken_barh([(r["t"], max(0.05, length))], (target_row - 0.45, 0.9), facecolor="none", edgecolor=colour, hatch="///", lw=1)
         if len(result["outcomes"]) <= 40:  # past that, labels are ink, not information
             ax.text(r["t"], len(names) - 0.4, r["name"], rotation=90, fontsize=6, va="bottom", color=colour)
     ax.set_yticks(range(len(names)), names)

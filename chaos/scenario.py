@@ -44,8 +44,9 @@ from __future__ import annotations
 import json
 import random
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import yaml
 from attrs import define, field
@@ -53,17 +54,19 @@ from attrs import define, field
 from emos.chaos.checkers import judge_faults, moving_again, percentiles, stops_on_stale, verdict
 from emos.chaos.history import History
 from emos.chaos.ladder import check_ladder, parse_spec
-from emos.chaos.nemesis import FaultProxy, Nemesis, NemesisError, ProxyFault, make
+from emos.chaos.nemesis import FaultProxy, Nemesis, NemesisError, make
 from emos.chaos.nemesis.base import Compose
+from emos.chaos.nemesis.proxy import ProxyFault
 from emos.chaos.observe import StatusObserver, TopicObserver
 from emos.chaos.services import Service
 from emos.chaos.target import RunningSystem
+from emos.errors import ConfigError
 
 SHIPPED = Path(__file__).with_name("scenarios")
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ConfigError):
     """A scenario file that cannot be run; the message names the file and the key."""
 
 
@@ -100,7 +103,7 @@ class Scenario:
     motion: dict[str, Any] = field(factory=dict)
 
     @classmethod
-    def load(cls, name_or_path: str | Path, short: bool = False) -> "Scenario":
+    def load(cls, name_or_path: str | Path, short: bool = False) -> Scenario:
         path = Path(name_or_path)
         if not path.is_file():
             shipped = shipped_scenarios()

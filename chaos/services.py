@@ -17,8 +17,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from emos.errors import EmosError
 
-class ServiceError(RuntimeError):
+
+class ServiceError(EmosError, RuntimeError):
     """A scenario service that could not be started (named, with its log)."""
 
 

@@ -14,16 +14,18 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import psutil
 
 from emos.core.rpc import RpcClient
+from emos.errors import EmosError
 from emos.transport.context import ENV_RUN_ID, SHM_DIR, SHM_PREFIX, runtime_root
 
 
-class SystemUnderTestError(RuntimeError):
+class SystemUnderTestError(EmosError, RuntimeError):
     """The recipe did not come up, or could not be observed."""
 
 
@@ -84,7 +86,8 @@ class RunningSystem:
         cmd = [sys.executable, "-m", "emos", "run", str(self.recipe), "--duration", str(self.duration)]
         if self.recipe_args:
             cmd += ["--", *self.recipe_args]
-        self._log = open(self.log_path, "wb")
+        # Not a `with` block: the file stays open for the recipe's whole run and wait() closes it.
+        self._log = open(self.log_path, "wb")  # noqa: SIM115
         # Own session: a Ctrl-C of the chaos tool must not reach the system under test directly;
         # the tool stops it in order instead (and kills the whole group if that fails).
         with _signals_held(signal.SIGTERM, signal.SIGINT):

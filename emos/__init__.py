@@ -5,6 +5,11 @@ Recipes import from here (``from emos import Launcher, Topic, BaseComponent``) a
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from typing import Any
+
 __version__ = "0.1.0"
 
 _LAZY = {
@@ -27,12 +32,13 @@ _LAZY = {
     "use_network": "emos.transport.select",
     "NetServiceClient": "emos.transport.zenoh_rpc",
     "NetActionClient": "emos.transport.zenoh_rpc",
+    "EmosError": "emos.errors",
 }
 
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'emos' has no attribute {name!r}")

@@ -1,5 +1,5 @@
 import sys
 
-from emos.supervisor.cli import main
+from emos.tools.cli import main
 
 sys.exit(main())

@@ -18,6 +18,7 @@ from typing import Any
 import attrs
 
 from emos.config.base import BaseComponentConfig
+from emos.core import control as C
 from emos.core.component import BaseComponent
 from emos.events.action import Action, Literal
 from emos.events.runner import ActionRuntime
@@ -70,8 +71,8 @@ async def _call(rt: ActionRuntime, component: str, op: str, **payload: Any) -> A
 
 async def _reconfigure(rt: ActionRuntime, *, component: str, new_config: Any, keep_alive: bool, **_: Any) -> Any:
     if isinstance(new_config, str):
-        return await _call(rt, component, "configure_from_file", path=new_config, keep_alive=keep_alive)
-    return await _call(rt, component, "update_config_parameters", values=new_config, keep_alive=keep_alive)
+        return await _call(rt, component, C.CONFIGURE_FROM_FILE, path=new_config, keep_alive=keep_alive)
+    return await _call(rt, component, C.UPDATE_PARAMETERS, values=new_config, keep_alive=keep_alive)
 
 
 def reconfigure(*, component: BaseComponent, new_config: Any = None, keep_alive: bool = True, file: str | None = None) -> Action:
@@ -100,8 +101,8 @@ def _check_params(comp: BaseComponent, names: list[str], action: str) -> None:
         raise AttributeError(f"{action}({comp.component_name}): {type(comp.config).__name__} has no parameter {', '.join(unknown)}; parameters are {', '.join(sorted(known))}")
 
 
-async def _update(rt: ActionRuntime, *, component: str, values: dict, keep_alive: bool, **_: Any) -> Any:
-    return await _call(rt, component, "update_config_parameters", values=values, keep_alive=keep_alive)
+async def _update(rt: ActionRuntime, *, component: str, values: dict[str, Any], keep_alive: bool, **_: Any) -> Any:
+    return await _call(rt, component, C.UPDATE_PARAMETERS, values=values, keep_alive=keep_alive)
 
 
 def update_parameter(*, component: BaseComponent, param_name: str, new_value: Any, keep_alive: bool = True) -> Action:
@@ -139,7 +140,7 @@ def request_from_event(request_type: type, trigger_msg: Any) -> Any:
         return request_type()
 
 
-async def _service(rt: ActionRuntime, *, srv_name: str, srv_type: tuple, request: Any, from_event: bool, trigger_msg: Any = None,
+async def _service(rt: ActionRuntime, *, srv_name: str, srv_type: tuple[type, type], request: Any, from_event: bool, trigger_msg: Any = None,
                    component: str | None = None, **_: Any) -> Any:
     req_t, resp_t = srv_type
     req = request_from_event(req_t, trigger_msg) if from_event else request
@@ -148,14 +149,14 @@ async def _service(rt: ActionRuntime, *, srv_name: str, srv_type: tuple, request
     return response
 
 
-async def _goal(rt: ActionRuntime, *, server_name: str, action_type: tuple, goal: Any, from_event: bool, trigger_msg: Any = None,
+async def _goal(rt: ActionRuntime, *, server_name: str, action_type: tuple[type, type, type], goal: Any, from_event: bool, trigger_msg: Any = None,
                 component: str | None = None, **_: Any) -> Any:
     msg = request_from_event(action_type[0], trigger_msg) if from_event else goal
     # A goal may run for minutes (follow a person): send it and do not hold the caller.
     return await rt.send_goal(server_name, action_type, msg, component)
 
 
-def _types(value: Any, n: int, what: str) -> tuple:
+def _types(value: Any, n: int, what: str) -> tuple[Any, ...]:
     """(request, response) or (goal, feedback, result) from a tuple of types/names or an object
     with ``main_srv_type``-like attributes (Request/Response, Goal/Feedback/Result)."""
     if isinstance(value, (tuple, list)) and len(value) == n:

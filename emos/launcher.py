@@ -12,9 +12,15 @@ from __future__ import annotations
 import logging
 import os
 import sys
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, TypedDict
 
 from emos.core.component import BaseComponent
+from emos.frontends import load_frontend
+
+if TYPE_CHECKING:
+    from emos.events.action import Action
+    from emos.events.event import Event
 
 # The Monitor reads a message this long after it is woken (see Launcher.__init__). Measured with
 # `emos bench events` (docs/benchmarks-history.md, "The Monitor reads last"): with one core busy it keeps
@@ -26,6 +32,13 @@ log = logging.getLogger("emos.launcher")
 
 # Set by `emos run --duration`: recipes stop by themselves after that many seconds.
 _RUN_DURATION: float | None = None
+
+
+class SupervisionDefaults(TypedDict):
+    """``Launcher.default_policy``: the restart policy of every group that sets none of its own."""
+    strategy: str
+    max_restarts: int
+    max_seconds: float
 
 
 class Launcher:
@@ -80,7 +93,7 @@ class Launcher:
         self.heartbeat_timeout = heartbeat_timeout
         self.stop_timeout = stop_timeout
         self.fallback_reset_after = float(fallback_reset_after)
-        self.default_policy = dict(strategy=strategy, max_restarts=max_restarts, max_seconds=max_seconds)
+        self.default_policy: SupervisionDefaults = {"strategy": strategy, "max_restarts": max_restarts, "max_seconds": max_seconds}
         self._packages: list[Any] = []
         self._events_actions: list[Any] = []  # (Event, [Action]) pairs
         self._fallback_policies: dict[str, Any] = {}
@@ -97,7 +110,7 @@ class Launcher:
         components: Sequence[BaseComponent],
         package_name: str | None = None,
         executable_entry_point: str | None = None,
-        events_actions: dict | None = None,
+        events_actions: dict[Event, Action | list[Action]] | None = None,
         multiprocessing: bool | None = None,
         activate_all_components_on_start: bool | None = None,
         ros_log_level: str | None = None,
@@ -210,19 +223,16 @@ class Launcher:
         or a fresh random one. It is printed once at start-up as the link
         ``http://127.0.0.1:5001/?token=...`` and kept in ``<run dir>/ui.token`` (mode 0600) while
         the UI runs; it cannot be switched off. Further ``UIConfig`` fields may be given by name."""
-        from emos.actors.ui.launch import check_ui_request
-
-        self._ui = check_ui_request(inputs, outputs, port, host, settings)
+        # The UI is an actor: found through its entry point (emos.frontends), not imported here.
+        self._ui = load_frontend("ui").request(inputs=inputs, outputs=outputs, port=port, host=host, **settings)
 
     def enable_foxglove(self, port: int = 8765, host: str = "127.0.0.1", **config: Any) -> None:
         """Serve every topic live to Foxglove on ``ws://host:port``, from a supervised component
         (``foxglove_bridge``) in its own process. ``config``: more ``FoxgloveConfig`` fields
         (``topics``, ``exclude``, ``loop_rate``, ``distribution``, ``token``, ``allow_origins``);
         a host other than loopback requires ``token``."""
-        from emos.actors.viz import FoxgloveBridgeComponent, FoxgloveConfig
-
-        bridge = FoxgloveBridgeComponent(config=FoxgloveConfig(host=host, port=port, **config))
-        self.add_pkg(components=[bridge], package_name="foxglove", multiprocessing=True)
+        frontend = load_frontend("foxglove")
+        frontend.add(self, frontend.request(port=port, host=host, **config))
 
     # Launcher-wide fallback policies: for every component without its own handler of that level
     # (see emos.core.fallbacks for the order). Run by the supervisor (emos.supervisor.fallback_driver).
@@ -256,9 +266,7 @@ class Launcher:
             raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
         self._apply_shared()
         if self._ui is not None:
-            from emos.actors.ui.launch import add_ui
-
-            add_ui(self, self._ui)
+            load_frontend("ui").add(self, self._ui)
         from emos.supervisor.orchestration import Orchestration
 
         if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):
@@ -273,7 +281,7 @@ class Launcher:
             max_restarts=self.default_policy["max_restarts"], max_seconds=self.default_policy["max_seconds"],
         )
         self.system = System(self._packages, options, orchestration)
-        code = self.system.run()
+        code: int = self.system.run()  # System.run's exit code (the supervisor is typed as Any here: a layer above)
         self.exit_code, self.exit_reason = code, self.system.exit_reason
         Launcher.last_exit_code = code
         # One write: `emos run` copies stdout and stderr to its log through two tee processes,

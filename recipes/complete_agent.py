@@ -4,20 +4,40 @@ a general LLM, Go-to-X over the map, and a router that picks the right one for e
     emos serve models --script recipes/models/responder.yaml &
     emos run recipes/complete_agent.py
 
+multiprocessing_agent.py runs this same agent with every component in its own process.
+
 Inputs: ``audio0`` (or ``question`` as text), ``image_raw``, ``odom``, ``map``.
 Outputs: ``answer`` (text, and speech on the speakers when there are any), ``goal_point``.
 """
 import json
 import os
-from typing import Optional
 
 import numpy as np
 
 from emos import FixedInput, Launcher, Topic
-from emos.actors.agents import (LLM, MLLM, ChromaClient, ChromaDB, LLMConfig, MapConfig, MapEncoding, MapLayer,
-                                OllamaClient, OllamaModel, RoboMLHTTPClient, Route, SemanticRouter,
-                                SemanticRouterConfig, SpeechT5, SpeechToText, TextToSpeech, TextToSpeechConfig,
-                                Vision, VisionConfig, Whisper)
+from emos.actors.agents import (
+    LLM,
+    MLLM,
+    ChromaClient,
+    ChromaDB,
+    LLMConfig,
+    MapConfig,
+    MapEncoding,
+    MapLayer,
+    OllamaClient,
+    OllamaModel,
+    RoboMLHTTPClient,
+    Route,
+    SemanticRouter,
+    SemanticRouterConfig,
+    SpeechT5,
+    SpeechToText,
+    TextToSpeech,
+    TextToSpeechConfig,
+    Vision,
+    VisionConfig,
+    Whisper,
+)
 
 MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
 
@@ -95,7 +115,7 @@ introspector = MLLM(
 )
 
 
-def introspection_validation(output: str) -> Optional[str]:
+def introspection_validation(output: str) -> str | None:
     for option in ["office", "bedroom", "kitchen"]:
         if option in output.lower():
             return option
@@ -151,7 +171,7 @@ the coordinates in the following json format:\n {"position": coordinates}"""
 )
 
 
-def llm_answer_to_goal_point(output: str) -> Optional[np.ndarray]:
+def llm_answer_to_goal_point(output: str) -> np.ndarray | None:
     json_string = output[output.find("{") : output.rfind("}") + 1]
     try:
         json_dict = json.loads(json_string)
@@ -197,6 +217,11 @@ router = SemanticRouter(
     component_name="router",
 )
 
-launcher = Launcher()
-launcher.add_pkg(components=[mllm, llm, goto, introspector, map, router, speech_to_text, text_to_speech, vision])
-launcher.bringup()
+components = [mllm, llm, goto, introspector, map, router, speech_to_text, text_to_speech, vision]
+
+# Run as a script (emos run, python3), the recipe brings the agent up; imported (as
+# multiprocessing_agent.py does), it only builds the graph.
+if __name__ == "__main__":
+    launcher = Launcher()
+    launcher.add_pkg(components=components)
+    launcher.bringup()

@@ -3,6 +3,7 @@ speech out.
 
     emos serve models --script recipes/models/responder.yaml &     # the model server
     emos run recipes/conversational_agent.py
+    EMOS_UI=1 emos run recipes/conversational_agent.py          # with the spec's web UI
 
 Audio comes from the ``audio0`` topic (a microphone driver, or ``emos topic pub``) and the
 answer's audio goes to ``audio_out`` and, when this machine has a sound card, its speakers.
@@ -11,8 +12,19 @@ Ported from the spec by changing imports; the changes beyond imports are comment
 import os
 
 from emos import Launcher, Topic
-from emos.actors.agents import (VLM, OllamaClient, OllamaModel, RoboMLWSClient, SpeechT5, SpeechToText,
-                                SpeechToTextConfig, TextToSpeech, TextToSpeechConfig, VLMConfig, Whisper)
+from emos.actors.agents import (
+    VLM,
+    OllamaClient,
+    OllamaModel,
+    RoboMLWSClient,
+    SpeechT5,
+    SpeechToText,
+    SpeechToTextConfig,
+    TextToSpeech,
+    TextToSpeechConfig,
+    VLMConfig,
+    Whisper,
+)
 
 # Offline: every model is served by `emos serve models` on this port (see recipes/models/).
 MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
@@ -69,6 +81,9 @@ text_to_speech = TextToSpeech(
 )
 
 launcher = Launcher()
-# launcher.enable_ui(...) of the spec: the web UI is not part of EMOS yet.
+# The spec's web UI (speak or type a question, see the camera): with EMOS_UI=1, open the link
+# the run prints (docs/ui.md). Off by default, so a headless run (the tests) needs no port 5001.
+if os.environ.get("EMOS_UI") == "1":
+    launcher.enable_ui(inputs=[audio_in, text_query], outputs=[image0])
 launcher.add_pkg(components=[speech_to_text, mllm, text_to_speech])
 launcher.bringup()

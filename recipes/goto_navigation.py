@@ -8,7 +8,6 @@ The ``map`` collection is the one recipes/semantic_map.py fills.
 """
 import json
 import os
-from typing import Optional
 
 import numpy as np
 
@@ -45,7 +44,7 @@ the coordinates in the following json format:\n {"position": coordinates}"""
 )
 
 
-def llm_answer_to_goal_point(output: str) -> Optional[np.ndarray]:
+def llm_answer_to_goal_point(output: str) -> np.ndarray | None:
     # extract the json part of the output string (including brackets)
     json_string = output[output.find("{") : output.rfind("}") + 1]
     # if there is an error, return None, i.e. no output would be published to goal_point

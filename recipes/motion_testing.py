@@ -1,12 +1,14 @@
 """Motion testing: the MotionServer's circle test on the simulated robot, through the DriveManager.
 
     emos run recipes/motion_testing.py
-    emos topic pub /run_tests Bool '{"data": true}'      # start the tests
+    emos topic pub /run_tests Bool '{"data": true}'      # start the tests (or from the web UI)
 
 The MotionServer sends the test commands (``robot_command`` -> the DriveManager's ``command``
 input), the DriveManager's output goes to the robot and is what the MotionServer records
 (its ``command`` input), with the odometry as the measured response. Each test leaves a CSV
-and a PNG (commanded vs measured velocities, driven path) in ``tests_folder``.
+and a PNG (commanded vs measured velocities, driven path) in ``tests_folder``. As in the spec,
+the web UI (open the link the run prints; docs/ui.md) starts the tests and shows the map and
+the robot.
 """
 import os
 
@@ -15,7 +17,13 @@ import numpy as np
 from emos import Launcher, Topic
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components import (
-    DriveManager, DriveManagerConfig, MapServer, MapServerConfig, MotionServer, MotionServerConfig,
+    DriveManager,
+    DriveManagerConfig,
+    MapServer,
+    MapServerConfig,
+    MotionServer,
+    MotionServerConfig,
+    TopicsKeys,
 )
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.data import HOUSE_MAP
@@ -65,4 +73,9 @@ launcher.kompass(components=[map_server, driver, motion_server], multiprocessing
 launcher.inputs(location=odom_topic)  # the response we record
 launcher.robot = my_robot
 launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+# 7. Enable the web UI: the RUN_TESTS input as a button, the map and the robot
+launcher.enable_ui(
+    inputs=[motion_server.get_in_topic(TopicsKeys.RUN_TESTS)],
+    outputs=[map_server.get_out_topic(TopicsKeys.GLOBAL_MAP), odom_topic],
+)
 launcher.bringup()

@@ -7,16 +7,24 @@
 
 The spec's recipe runs against Webots or Gazebo; here the ``Simulator`` component (pybullet,
 headless) is the robot and the house, and the MapServer reads the same house as a ROS map.
-Watch the robot with ``emos topic echo /odometry/filtered`` and the components with
-``emos status``. (The spec's ``launcher.enable_ui`` arrives with the web UI component.)
+As in the spec, the web UI shows the map, the plan and the robot: open the link the run prints
+(docs/ui.md). ``emos topic echo /odometry/filtered`` and ``emos status`` show them too.
 """
 import numpy as np
 
 from emos import Launcher, Topic
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components import (
-    Controller, DriveManager, DriveManagerConfig, LocalMapper, LocalMapperConfig, MapServer, MapServerConfig,
-    Planner, PlannerConfig,
+    Controller,
+    DriveManager,
+    DriveManagerConfig,
+    LocalMapper,
+    LocalMapperConfig,
+    MapServer,
+    MapServerConfig,
+    Planner,
+    PlannerConfig,
+    TopicsKeys,
 )
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
@@ -71,6 +79,15 @@ launcher.inputs(location=odom_topic)
 # Set the robot config for all components (and the simulated robot)
 launcher.robot = my_robot
 launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+
+# Enable the web UI: the map, the robot and its plan in a browser
+launcher.enable_ui(
+    outputs=[
+        map_server.get_out_topic(TopicsKeys.GLOBAL_MAP),
+        odom_topic,
+        planner.get_out_topic(TopicsKeys.GLOBAL_PLAN),
+    ],
+)
 
 # Run the Recipe
 launcher.bringup()

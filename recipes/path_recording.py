@@ -18,15 +18,24 @@ From Python (another process)::
     save = ServiceClient("planner/save_plan_to_file", PathFromToFileRequest, PathFromToFileResponse)
     save.call(PathFromToFileRequest(file_location="/tmp", file_name="computed_path.csv"))
 
-Goals: ``emos topic pub /goal PointStamped '{"point": {"x": 7.0, "y": 2.5}}'``. (The spec
-exposes the services in the web UI, which arrives with the UI component.)
+Goals: ``emos topic pub /goal PointStamped '{"point": {"x": 7.0, "y": 2.5}}'``, or from the web
+UI, which shows the map, the plan and the robot (open the link the run prints; docs/ui.md). The
+spec also lists the three services as UI inputs; EMOS's UI sends topics and actions, so the
+services are called as above.
 """
 import numpy as np
 
 from emos import Launcher, Topic
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components import (
-    Controller, DriveManager, DriveManagerConfig, MapServer, MapServerConfig, Planner, PlannerConfig,
+    Controller,
+    DriveManager,
+    DriveManagerConfig,
+    MapServer,
+    MapServerConfig,
+    Planner,
+    PlannerConfig,
+    TopicsKeys,
 )
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
@@ -69,4 +78,13 @@ launcher.kompass(components=[map_server, planner, driver, controller], multiproc
 launcher.inputs(location=odom_topic)
 launcher.robot = my_robot
 launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+# 4. Enable the web UI: goals from the page; the map, the robot and its plan on it
+launcher.enable_ui(
+    inputs=[planner.ui_main_action_input],
+    outputs=[
+        map_server.get_out_topic(TopicsKeys.GLOBAL_MAP),
+        odom_topic,
+        planner.get_out_topic(TopicsKeys.GLOBAL_PLAN),
+    ],
+)
 launcher.bringup()

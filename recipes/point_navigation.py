@@ -1,16 +1,17 @@
 """Point navigation in the simulated house: the spec's point-navigation recipe, ported.
 
     emos run recipes/point_navigation.py          # or: python recipes/point_navigation.py
+    EMOS_UI=1 emos run recipes/point_navigation.py   # and watch it in the web UI
 
 The navigation stack of the spec (MapServer, Planner, Controller with Pure Pursuit on the
 LocalMapper's grid, DriveManager with safety zones) drives the robot through the house that
 the ``Simulator`` (pybullet, headless) stands in for Webots/Gazebo: to a first goal through the
 doorway in the middle wall, then to a second one through the doorway into the room above.
 
-Events are not part of EMOS yet, so goals and progress come from a small ``Mission``
-component defined here: it publishes each goal on the planner's ``goal_point`` topic, prints
-progress once a second (distance left, speed, every component's health), and when the robot
-arrives (``reached_end``) sends the next goal. At the end it writes ``summary.json`` and the
+Goals and progress come from a small ``Mission`` component defined here, so that the run needs
+nobody at the web UI and judges itself: it publishes each goal on the planner's ``goal_point``
+topic, prints progress once a second (distance left, speed, every component's health), and when
+the robot arrives (``reached_end``) sends the next goal. At the end it writes ``summary.json`` and the
 recipe draws ``point_navigation.png`` (map, plans, driven path). Exit code 0 only when both
 goals were reached without a collision; 1 otherwise (a time limit of ``MISSION_TIMEOUT`` s).
 Outputs go to ``$EMOS_NAV_OUT`` (default ``./point_navigation_out``).
@@ -32,11 +33,18 @@ import time
 import numpy as np
 
 from emos import BaseComponent, Launcher, Topic
-from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from emos.actors.nav import MapConfig
+from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components import (
-    Controller, DriveManager, DriveManagerConfig, LocalMapper, LocalMapperConfig, MapServer, MapServerConfig,
-    Planner, PlannerConfig, TopicsKeys,
+    Controller,
+    DriveManager,
+    DriveManagerConfig,
+    LocalMapper,
+    LocalMapperConfig,
+    MapServer,
+    MapServerConfig,
+    Planner,
+    PlannerConfig,
+    TopicsKeys,
 )
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
@@ -210,15 +218,10 @@ class Mission(BaseComponent):
         return "?" if msg is None else ("ok", "ALGO", "COMP", "SYS", "gen")[min(int(msg.status), 4)]
 
     def _finish(self) -> None:
-        from emos.core.node import control_socket
-        from emos.core.rpc import RpcClient
+        from emos.core import control
 
         self.done = True
-        client = RpcClient(control_socket(self.node.ctx, "sim"))
-        try:
-            status = client.call("execute_method", method="sim_status", timeout=5.0)
-        finally:
-            client.close()
+        status = control.ControlClient("sim", self.node.ctx, timeout=5.0).execute_method("sim_status")
         length = float(sum(math.dist(a, b) for a, b in zip(self.driven, self.driven[1:])))
         summary = {
             "reached": [r["reached"] for r in self.results] + [False] * (len(GOALS) - len(self.results)),
@@ -235,11 +238,8 @@ class Mission(BaseComponent):
                 json.dump({"goals": len(GOALS), "goals_reached": sum(summary["reached"]), "collisions": int(summary["collided"]),
                            "late_s": None if not nominal else round(summary["time_s"] - float(nominal), 1)}, f)
         print("[mission] " + json.dumps(summary), flush=True)
-        client = RpcClient(os.environ["EMOS_SUPERVISOR_SOCKET"])  # end the whole run
-        try:
-            client.call("stop", reason="mission finished", timeout=5.0)
-        finally:
-            client.close()
+        # End the whole run through the supervisor's socket.
+        control.call(os.environ["EMOS_SUPERVISOR_SOCKET"], control.SUPERVISOR_STOP, {"reason": "mission finished"}, timeout=5.0)
 
 
 def draw(summary: dict, png: str) -> None:
@@ -262,7 +262,7 @@ def draw(summary: dict, png: str) -> None:
     driven = np.asarray(summary["driven"])
     if len(driven):
         ax.plot(driven[:, 0], driven[:, 1], "-", color="tab:red", lw=2, label="driven")
-    for i, (gx, gy) in enumerate(GOALS):
+    for gx, gy in GOALS:
         ax.plot(gx, gy, "*", ms=14, color="gold", mec="k")
     ax.set_title(f"point navigation: success={summary['success']} t={summary['time_s']} s "
                  f"length={summary['path_length_m']} m clearance>={summary['min_clearance_m']} m")
@@ -280,11 +280,14 @@ launcher.add_pkg(components=[Mission()], package_name="mission", multiprocessing
 launcher.inputs(location=odom_topic)  # odometry for every navigation component
 launcher.robot = my_robot  # also the simulated robot's shape and limits
 launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
-# To watch the map, plan and odometry in a browser, as the spec's recipe does, add
-#   launcher.enable_ui(outputs=[map_server.get_out_topic(TopicsKeys.GLOBAL_MAP), odom_topic,
-#                               planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)])
-# and open the link it prints (docs/ui.md). This run leaves it out: the main job is headless and
-# must not need port 5001.
+# The spec's web UI (the map, the plan and the robot in a browser; goals from the page): with
+# EMOS_UI=1, open the link the run prints (docs/ui.md). Off by default: this recipe is the
+# headless main job (CI, the tests, the chaos scenario), which must not need port 5001.
+if os.environ.get("EMOS_UI") == "1":
+    launcher.enable_ui(
+        inputs=[planner.ui_main_action_input],
+        outputs=[map_server.get_out_topic(TopicsKeys.GLOBAL_MAP), odom_topic, planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)],
+    )
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
 if os.path.exists(summary_file):

@@ -8,8 +8,7 @@ The detector behind the RESP port is the server's on-board OpenCV detector (peop
 import os
 
 from emos import Launcher, Topic
-from emos.actors.agents import (MLLM, RoboMLHTTPClient, RoboMLRESPClient, TransformersMLLM, Vision, VisionConfig,
-                                VisionModel)
+from emos.actors.agents import MLLM, RoboMLHTTPClient, RoboMLRESPClient, TransformersMLLM, Vision, VisionConfig, VisionModel
 
 MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
 MODELS_RESP_PORT = int(os.environ.get("EMOS_MODELS_RESP_PORT", "6379"))

@@ -7,11 +7,22 @@ DB at the robot's position.
 Needs ``odom`` (Odometry) and ``map`` (OccupancyGrid) from the robot (or the simulator).
 """
 import os
-from typing import Optional
 
 from emos import FixedInput, Launcher, Topic
-from emos.actors.agents import (MLLM, ChromaClient, ChromaDB, MapConfig, MapEncoding, MapLayer, OllamaClient,
-                                OllamaModel, RoboMLRESPClient, Vision, VisionConfig, VisionModel)
+from emos.actors.agents import (
+    MLLM,
+    ChromaClient,
+    ChromaDB,
+    MapConfig,
+    MapEncoding,
+    MapLayer,
+    OllamaClient,
+    OllamaModel,
+    RoboMLRESPClient,
+    Vision,
+    VisionConfig,
+    VisionModel,
+)
 
 MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
 MODELS_RESP_PORT = int(os.environ.get("EMOS_MODELS_RESP_PORT", "6379"))
@@ -52,7 +63,7 @@ introspector = MLLM(
 )
 
 
-def introspection_validation(output: str) -> Optional[str]:
+def introspection_validation(output: str) -> str | None:
     for option in ["office", "bedroom", "kitchen"]:
         if option in output.lower():
             return option

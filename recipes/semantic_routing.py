@@ -6,13 +6,21 @@ or to the Go-to-X LLM, by the meaning of the question (vector mode).
 """
 import json
 import os
-from typing import Optional
 
 import numpy as np
 
 from emos import Launcher, Topic
-from emos.actors.agents import (LLM, ChromaClient, ChromaDB, LLMConfig, OllamaClient, OllamaModel, Route,
-                                SemanticRouter, SemanticRouterConfig)
+from emos.actors.agents import (
+    LLM,
+    ChromaClient,
+    ChromaDB,
+    LLMConfig,
+    OllamaClient,
+    OllamaModel,
+    Route,
+    SemanticRouter,
+    SemanticRouterConfig,
+)
 
 MODELS_PORT = int(os.environ.get("EMOS_MODELS_PORT", "8000"))
 
@@ -60,7 +68,7 @@ the coordinates in the following json format:\n {"position": coordinates}"""
 )
 
 
-def llm_answer_to_goal_point(output: str) -> Optional[np.ndarray]:
+def llm_answer_to_goal_point(output: str) -> np.ndarray | None:
     # errata: rfind (the last '}'), and a position that is a list or a "x, y, z" string
     json_string = output[output.find("{") : output.rfind("}") + 1]
     try:

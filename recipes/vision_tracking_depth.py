@@ -28,8 +28,8 @@ from emos import Launcher, Topic
 from emos.actors.agents import Vision, VisionConfig
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.components import Controller, ControllerConfig, DriveManager, LocalMapper
-from emos.actors.nav.controllers import VisionRGBDFollowerConfig
 from emos.actors.nav.components.track_target import StartVisionTracking
+from emos.actors.nav.controllers import VisionRGBDFollowerConfig
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.person import Person
 

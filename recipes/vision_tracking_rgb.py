@@ -25,10 +25,10 @@ from emos import Launcher, Topic
 from emos.actors.agents import Vision, VisionConfig
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.components import Controller, ControllerConfig, DriveManager
+from emos.actors.nav.components.track_target import StartVisionTracking
 from emos.actors.nav.controllers import VisionRGBFollowerConfig
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.person import Person
-from emos.actors.nav.components.track_target import StartVisionTracking
 
 # The simulated scene: the robot in the house's first room, a person pacing across the room
 # 2.4 m ahead, to either side further than the camera sees (+-0.53 rad against a half field of

@@ -27,9 +27,9 @@ import numpy as np
 
 def record(args: argparse.Namespace) -> int:
     from emos import msgs as M
-    from emos.actors.sim.barn.harness import BarnRules
-    from emos.actors.sim.barn.process import run_episode_process
-    from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, LOCALIZED_POSE_TOPIC, StackOptions
+    from emos.tools.barn.harness import BarnRules
+    from emos.tools.barn.process import run_episode_process
+    from emos.tools.barn.stack import GROUND_TRUTH_TOPIC, LOCALIZED_POSE_TOPIC, StackOptions
     from emos.transport.pubsub import Subscriber
 
     controller = "builtin-dynamic" if args.dynabarn else "builtin-robust"
@@ -92,8 +92,8 @@ def _at(rows: np.ndarray, stamp: float) -> np.ndarray:
 def replay(args: argparse.Namespace) -> int:
     from emos.actors.nav.components.local_mapper import memory_of
     from emos.actors.nav.controllers.sensors import LaserScan2D
-    from emos.actors.sim.barn.stack import StackOptions, build_system
     from emos.actors.sim.jackal import JACKAL_LASER
+    from emos.tools.barn.stack import StackOptions, build_system
 
     z = np.load(args.trace)
     dynabarn = bool(z["dynabarn"])

@@ -1,7 +1,7 @@
 """Where an 8 MiB ping-pong spends its time: EMOS over Zenoh against raw Zenoh, stage by stage.
 
 A diagnostic for ``emos bench net`` (docs/benchmarks-history.md, "EMOS over Zenoh on a quiet machine"):
-the same two ends as the benchmark (:class:`supervisor.bench.net._End`), in two processes joined
+the same two ends as the benchmark (:class:`emos.tools.bench.net._End`), in two processes joined
 over loopback TCP, with ``time.perf_counter_ns`` marks around the send (EMOS: encode, frame and
 ``put``; and ``put`` alone), the frame check and the decode on Zenoh's thread, and the take
 (``EMOS_CODEC=python`` for the Python codec, see emos/msgs/_ccodec.c).
@@ -35,11 +35,11 @@ import uuid
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from emos.msgs import UInt8MultiArray  # noqa: E402
-from emos.transport import zenoh_net  # noqa: E402
-from supervisor.bench import net as bench  # noqa: E402
+from emos.msgs import UInt8MultiArray
+from emos.tools.bench import net as bench
+from emos.transport import zenoh_net
 
 ROUND_TRIPS = 60
 clock = time.perf_counter_ns

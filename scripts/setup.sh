@@ -36,5 +36,5 @@ $PY -m pip install -q -e ".[${extras}]"
 # Bytecode now, once: every process of a run imports much of the package, and an environment
 # with PYTHONDONTWRITEBYTECODE=1 would otherwise compile it from source in each one (about half
 # a second per `emos run`). Python still checks each file's timestamp, so edits are picked up.
-$PY -m compileall -q -j 0 emos actors supervisor chaos >/dev/null
+$PY -m compileall -q -j 0 emos actors supervisor chaos tools >/dev/null
 echo "setup: done ($($PY -c 'import emos, sys; print("emos", emos.__version__, "on python", sys.version.split()[0])'))"

@@ -23,17 +23,19 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
+from emos.core import control as C
+from emos.core.control import AsyncControlClient
 from emos.core.fallbacks import HANDLERS, Fallback, FallbackTracker
 from emos.core.health import HealthLevel
-from emos.core.ratelimit import RepeatLimiter
 from emos.events.action import ActionError
-from emos.events.links import ComponentLinks
 from emos.events.runner import ActionRuntime, run_action
 from emos.io.topic import Topic
 from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
+from emos.ratelimit import RateLimitedLog
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 
@@ -48,7 +50,7 @@ log = logging.getLogger("emos.fallbacks")
 
 
 class FallbackDriver(ActionRuntime):
-    def __init__(self, system: "System", orchestration: "Orchestration", root: Callable[[], Any]):
+    def __init__(self, system: System, orchestration: Orchestration, root: Callable[[], Any]):
         from emos import actions as A
 
         self.system = system
@@ -57,7 +59,7 @@ class FallbackDriver(ActionRuntime):
         self.timeout = orchestration.action_timeout
         self._root = root
         self.loop = asyncio.get_running_loop()
-        self.links = ComponentLinks(self.ctx, queue_timeout=orchestration.action_timeout)
+        self.links = AsyncControlClient(self.ctx, queue_timeout=orchestration.action_timeout)
         self.trackers: dict[str, FallbackTracker] = {}
         self.giveups: dict[str, Fallback | None] = {}
         self.last_status: dict[str, ComponentStatus] = {}
@@ -67,7 +69,7 @@ class FallbackDriver(ActionRuntime):
         # name -> (wall time, event): set by the first status stamped after that time
         self._fresh: dict[str, tuple[float, asyncio.Event]] = {}
         self._publishers: dict[str, Publisher] = {}
-        self._errors = RepeatLimiter()
+        self._errors = RateLimitedLog(log, interval=5.0)
         self.waker = Waker(self.ctx)
         self.loop.add_reader(self.waker.fd, self._on_wake)
         self.subs: dict[str, Subscriber] = {}
@@ -199,10 +201,7 @@ class FallbackDriver(ActionRuntime):
         self.last_status.pop(name, None)
 
     def _report(self, name: str, what: str, exc: BaseException) -> None:
-        now_log, _, suppressed = self._errors.hit((name, what, type(exc).__name__))
-        if now_log:
-            log.error("[%s] fallback action %s failed: %s: %s%s", name, what, type(exc).__name__, exc,
-                      f" (and {suppressed} more times)" if suppressed else "")
+        self._errors.error((name, what, type(exc).__name__), "[%s] fallback action %s failed: %s: %s", name, what, type(exc).__name__, exc)
 
     def _record(self, name: str, event: str, **extra: Any) -> None:
         self.system._record({"t": time.monotonic(), "wall": time.time(), "supervisor": "fallbacks", "child": name, "event": event, **extra})
@@ -218,7 +217,7 @@ class FallbackDriver(ActionRuntime):
         ``why``: ``FALLBACK`` when a ladder of this driver asks (run_action calls this with the
         defaults), ``REQUESTED`` through the supervisor socket (``by`` says who, if told)."""
         if op in ("start", "stop"):
-            return await self.links.call(component, "transition", self.timeout, transition="activate" if op == "start" else "deactivate")
+            return await self.links.call(component, C.TRANSITION, self.timeout, transition="activate" if op == "start" else "deactivate")
         if op != "restart":
             raise ActionError(f"unknown lifecycle operation {op!r} (start, stop, restart)")
         # The incarnation to restart: for a ladder's own component, the one whose failure it

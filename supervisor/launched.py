@@ -11,8 +11,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from emos.errors import EmosError
 
-class SystemFailed(RuntimeError):
+
+class SystemFailed(EmosError, RuntimeError):
     """The launched system exited, or did not come up in time."""
 
 

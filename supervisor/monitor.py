@@ -18,18 +18,19 @@ import asyncio
 import json
 import os
 import time
-from typing import Any, Collection
+from collections.abc import Collection
+from typing import Any
 
 from emos.core.component import BaseComponent
+from emos.core.control import SUPERVISOR_LIFECYCLE, AsyncControlClient
 from emos.core.priority import lower_priority
-from emos.events.topic_group import TopicEvents
-from emos.core.ratelimit import RepeatLimiter
 from emos.core.rpc import AsyncRpcClient
 from emos.events.action import Action
 from emos.events.event import Blackboard, Event, EventTracker
-from emos.events.links import ComponentLinks
 from emos.events.runner import ActionRuntime, prepare, run_action
+from emos.events.topic_group import TopicEvents
 from emos.io.topic import Topic
+from emos.ratelimit import RateLimitedLog
 from emos.supervisor.monitor_net import ActionRoutes, place_inputs
 
 MONITOR_NAME = "emos_monitor"
@@ -70,7 +71,7 @@ class Monitor(BaseComponent):
             self.run_type = "Event"
         self._status_after_step = False  # a flood of event messages must not flood the status topic
 
-    def __deepcopy__(self, memo: dict) -> "Monitor":
+    def __deepcopy__(self, memo: dict) -> Monitor:
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
         return Monitor(self._entries, self._action_timeout, self._nice, self._local_components, self._defer_ms)
 
@@ -90,7 +91,7 @@ class Monitor(BaseComponent):
                 by_topic.setdefault(t, []).append(i)
         self.by_topic = {t: TopicEvents(indices, self.trackers) for t, indices in by_topic.items()}
         self.runtime = MonitorRuntime(self)
-        self._errors = RepeatLimiter()
+        self._errors = RateLimitedLog(interval=5.0)  # logs to get_logger(), given per call
         self._tasks: set[asyncio.Task] = set()
         self.stats = {"fired": 0, "actions_ok": 0, "actions_failed": 0}
         self.get_logger().info("[%s] watching %d events on %d topics", self.component_name, len(self._entries), len(self.in_topics))
@@ -117,7 +118,7 @@ class Monitor(BaseComponent):
         os.replace(tmp, self._fired_path)
 
     # -- evaluation -----------------------------------------------------------------------------
-    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None, **kwargs: Any) -> None:
         if topic is None:
             return
         now = time.monotonic()
@@ -164,10 +165,8 @@ class Monitor(BaseComponent):
         return firing
 
     def _event_error(self, index: int, topic: str, stage: str, exc: Exception) -> None:
-        log_now, _, suppressed = self._errors.hit((index, stage, type(exc).__name__))
-        if log_now:
-            self.get_logger().error("[%s] event %r on %s: %s: %s%s", self.component_name, self._entries[index][0], topic,
-                                    type(exc).__name__, exc, f" (and {suppressed} more times)" if suppressed else "")
+        self._errors.error((index, stage, type(exc).__name__), "[%s] event %r on %s: %s: %s", self.component_name,
+                           self._entries[index][0], topic, type(exc).__name__, exc, logger=self.get_logger())
 
     def _fire(self, index: int, topic: str, msg: Any) -> None:
         event, actions = self._entries[index]
@@ -192,11 +191,9 @@ class Monitor(BaseComponent):
             except BaseException as exc:
                 self.stats["actions_failed"] += 1
                 what = "timed out" if isinstance(exc, (asyncio.TimeoutError, TimeoutError)) and not str(exc) else f"failed: {type(exc).__name__}: {exc}"
-                log_now, _, suppressed = self._errors.hit((index, k, type(exc).__name__))
-                if log_now:
-                    more = f" (and {suppressed} more times)" if suppressed else ""
-                    self.get_logger().error("[%s] event %r: action %d/%d %s (component %s) %s%s", self.component_name, event, k + 1,
-                                            len(actions), action.describe(), action.component or "-", what, more)
+                self._errors.error((index, k, type(exc).__name__), "[%s] event %r: action %d/%d %s (component %s) %s",
+                                   self.component_name, event, k + 1, len(actions), action.describe(), action.component or "-",
+                                   what, logger=self.get_logger())
 
     def monitor_stats(self) -> dict:
         """Counts since this Monitor started (``emos component call emos_monitor execute_method``)."""
@@ -209,7 +206,7 @@ class MonitorRuntime(ActionRuntime):
         self.ctx = monitor.node.ctx
         self.log = monitor.get_logger()
         self.timeout = monitor._action_timeout
-        self.links = ComponentLinks(self.ctx, queue_timeout=monitor._action_timeout)
+        self.links = AsyncControlClient(self.ctx, queue_timeout=monitor._action_timeout)
         self.routes = ActionRoutes((*monitor._local_components, MONITOR_NAME), monitor._action_timeout)  # components of other runs
 
     async def call_component(self, component: str, op: str, timeout: float, **payload: Any) -> Any:
@@ -235,7 +232,7 @@ class MonitorRuntime(ActionRuntime):
             raise RuntimeError("no supervisor to send the lifecycle request to")
         client = AsyncRpcClient(sock)
         try:
-            return await client.call("lifecycle", component=component, request=op, wait_time=wait_time, by="event",
+            return await client.call(SUPERVISOR_LIFECYCLE, component=component, request=op, wait_time=wait_time, by="event",
                                      timeout=self.timeout + wait_time + 30.0)
         finally:
             await client.close()

@@ -27,7 +27,8 @@ import asyncio
 import concurrent.futures
 import logging
 import os
-from typing import Any, Collection
+from collections.abc import Collection
+from typing import Any
 
 import attrs
 
@@ -50,7 +51,7 @@ def status_owner(topic: Topic) -> str | None:
 def place_inputs(topics: dict[str, Topic], local_components: Collection[str]) -> dict[str, Topic]:
     """``topics`` (name -> Topic) with the transport of each component status topic settled."""
     from emos.transport.select import transport_of
-    from emos.transport.zenoh_net import ENV_ZENOH_CONFIG
+    from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
 
     local = {name.strip("/") for name in local_components}
     uses_zenoh = bool(os.environ.get(ENV_ZENOH_CONFIG))
@@ -76,7 +77,7 @@ def place_inputs(topics: dict[str, Topic], local_components: Collection[str]) ->
 
 
 def uses_zenoh() -> bool:
-    from emos.transport.zenoh_net import ENV_ZENOH_CONFIG
+    from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
 
     return bool(os.environ.get(ENV_ZENOH_CONFIG))
 

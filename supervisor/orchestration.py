@@ -8,7 +8,8 @@ supervisor (``fallback_driver.py``).
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from attrs import define, field
 
@@ -173,6 +174,10 @@ def lifecycle_op(driver: Callable[[], Any]) -> Any:
 
     from emos.supervisor.tree import REQUESTED
 
+    # Operations run without waiting (``wait: false``) are held here until done: the event loop
+    # keeps only weak references to tasks.
+    background_tasks: set[asyncio.Future[None]] = set()
+
     async def lifecycle(req: dict, stream: Any) -> Any:
         coro = driver().lifecycle(str(req.get("component", "")), str(req.get("request", "")), float(req.get("wait_time") or 0.0),
                                   why=REQUESTED, by=requester(req.get("by")))
@@ -185,7 +190,9 @@ def lifecycle_op(driver: Callable[[], Any]) -> Any:
             except Exception as exc:
                 logging.getLogger("emos.supervisor").error("lifecycle %s of %s failed: %s", req.get("request"), req.get("component"), exc)
 
-        asyncio.ensure_future(background())
+        task = asyncio.ensure_future(background())
+        background_tasks.add(task)
+        task.add_done_callback(background_tasks.discard)
         return True
 
     return lifecycle

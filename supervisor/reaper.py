@@ -56,7 +56,8 @@ import os
 import signal
 import threading
 import time
-from typing import Callable, Iterable, NamedTuple
+from collections.abc import Callable, Iterable
+from typing import NamedTuple
 
 import psutil
 
@@ -189,7 +190,7 @@ class AdoptedReaper:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="emos:adopted-reaper", daemon=True)
 
-    def start(self) -> "AdoptedReaper":
+    def start(self) -> AdoptedReaper:
         self._thread.start()
         return self
 

@@ -12,10 +12,12 @@ import os
 from pathlib import Path
 from typing import Any
 
+from emos.errors import EmosError
+
 ENV_HOME = "EMOS_HOME"
 
 
-class RecipeNotFound(LookupError):
+class RecipeNotFound(EmosError, LookupError):
     pass
 
 

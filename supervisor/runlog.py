@@ -56,14 +56,13 @@ def start_run_log(recipe: Path, argv: list[str]) -> Path | None:
         for n in range(1, 1000):  # runs of one recipe started in the same second (in parallel, too)
             path = folder / (f"{base}.log" if n == 1 else f"{base}~{n}.log")
             try:
-                f = open(path, "x")
+                with open(path, "x") as f:  # "x": a name another run took meanwhile is skipped
+                    f.write(f"# emos run {' '.join(argv)}\n# recipe {recipe.resolve()}  pid {os.getpid()}  started {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
             except FileExistsError:
                 continue
             break
         else:
             raise FileExistsError(f"{folder}: 999 logs named {base}*")
-        with f:
-            f.write(f"# emos run {' '.join(argv)}\n# recipe {recipe.resolve()}  pid {os.getpid()}  started {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
         os.chmod(path, 0o600)
     except OSError as exc:
         print(f"emos run: not keeping a log of this run ({exc})", file=sys.stderr)

@@ -5,9 +5,9 @@ is tried: a back-out must have been driven, a re-plan followed, before the robot
 stuck. The supervisor runs the ladders on the wall clock, but a component with
 ``use_sim_time`` lives on the simulator's clock, and under lockstep a loaded machine slows that
 clock down (several wall seconds per simulated second). Paced on the wall clock alone, a ladder
-then fired its steps a fifth of a simulated second apart: BARN world 242 through the processes
-spent its whole stuck recovery (four back-outs and four blocks) within about two simulated
-seconds, while the first back-out was still being driven, and gave up or backed into a wall.
+would fire its steps a fraction of a simulated second apart and spend its whole stuck recovery
+(every back-out and block) while the first back-out is still being driven, then give up or
+back into a wall.
 
 So after each step of such a component's ladder the driver also waits until the simulated clock
 has advanced by the step's period (on an idle machine the simulator runs faster than the wall
@@ -33,7 +33,7 @@ WALL_CAP_S = 30.0  # wall: the longest a ladder waits for a simulated clock that
 class SimPacer:
     """Reads the run's simulated clock (the newest ``/clock``) and waits for it to advance."""
 
-    def __init__(self, ctx: "RunContext", wall_cap: float = WALL_CAP_S, poll: float = POLL_S) -> None:
+    def __init__(self, ctx: RunContext, wall_cap: float = WALL_CAP_S, poll: float = POLL_S) -> None:
         from emos.core.clock import run_clock
 
         if not (wall_cap > 0 and poll > 0):

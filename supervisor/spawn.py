@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 import asyncio
-import ctypes
+import functools
 import logging
 import os
 import signal
@@ -27,49 +27,20 @@ import struct
 import sys
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import msgpack
 
+# The prctl helpers live in core (the Zenoh status bridge below the supervisor needs them too);
+# re-exported here for the zygote, the workers and existing callers.
+from emos.core.prctl import PR_SET_CHILD_SUBREAPER, PR_SET_NAME, PR_SET_PDEATHSIG, become_subreaper, die_with, prctl, set_process_name  # noqa: F401
+from emos.errors import EmosError
 from emos.supervisor.reaper import ENV_WORKER_PID, AdoptedReaper, end_descendants, kill_group, kill_worker_trees
 
 log = logging.getLogger("emos.supervisor")
 
-PR_SET_NAME = 15
-PR_SET_PDEATHSIG = 1
-PR_SET_CHILD_SUBREAPER = 36
 _LEN = struct.Struct("<I")
-
-try:
-    _libc = ctypes.CDLL(None, use_errno=True)
-except OSError:  # pragma: no cover - non-glibc systems
-    _libc = None
-
-
-def prctl(option: int, arg: int | bytes) -> None:
-    if _libc is None:
-        raise OSError("prctl is not available on this platform")
-    if _libc.prctl(option, arg if isinstance(arg, bytes) else ctypes.c_ulong(arg), 0, 0, 0) != 0:
-        err = ctypes.get_errno()
-        raise OSError(err, os.strerror(err))
-
-
-def become_subreaper() -> None:
-    prctl(PR_SET_CHILD_SUBREAPER, 1)
-
-
-def set_process_name(name: str) -> None:
-    """What ``ps``/``top`` show (15 bytes max): ``emos:<component>``."""
-    try:
-        prctl(PR_SET_NAME, name.encode()[:15])
-    except OSError:
-        pass
-
-
-def die_with(parent_pid: int, sig: int = signal.SIGTERM) -> bool:
-    """Ask for ``sig`` when ``parent_pid`` dies; False if it is already gone (or not our parent)."""
-    prctl(PR_SET_PDEATHSIG, sig)
-    return os.getppid() == parent_pid
 
 
 def _send(sock: socket.socket, obj: Any) -> None:
@@ -100,7 +71,7 @@ def _await_parent(pid: int, timeout: float = 2.0) -> None:
         time.sleep(0.0002)
 
 
-class ZygoteError(RuntimeError):
+class ZygoteError(EmosError, RuntimeError):
     pass
 
 
@@ -239,7 +210,7 @@ class Zygote:
                 break
             try:
                 reply, _ = self.primary.request({"op": "spawn", "index": index})
-            except socket.timeout:
+            except TimeoutError:
                 self._replace_primary(f"did not answer within {SPAWN_TIMEOUT_S:g} s")
                 continue
             except (OSError, EOFError) as exc:
@@ -290,15 +261,21 @@ class Zygote:
                 os._exit(0)
             if req.get("op") == "spawn":
                 try:
-                    pid = self._double_fork(lambda: self._worker_main(int(req["index"]), launcher), sock)
-                    self._latest[int(req["index"])] = pid
+                    index = int(req["index"])
+                    pid = self._double_fork(functools.partial(self._worker_main, index, launcher), sock)
+                    self._latest[index] = pid
                     _send(sock, {"pid": pid})
                 except Exception as exc:
                     _send(sock, {"error": f"{type(exc).__name__}: {exc}"})
             elif req.get("op") == "clone":
                 mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+
+                def clone_main(mine: socket.socket = mine, theirs: socket.socket = theirs) -> None:
+                    mine.close()  # the launcher's end: the clone keeps only its own
+                    self._run_zygote(theirs, launcher)
+
                 try:
-                    pid = self._double_fork(lambda: (mine.close(), self._run_zygote(theirs, launcher)), sock)
+                    pid = self._double_fork(clone_main, sock)
                     body = msgpack.packb({"pid": pid})
                     # The launcher's end of the clone's channel travels with the reply.
                     socket.send_fds(sock, [_LEN.pack(len(body)) + body], [mine.fileno()])

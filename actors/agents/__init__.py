@@ -12,29 +12,29 @@ from .errors import (
     MalformedResponseError,
     ModelClientError,
     ModelConnectionError,
+    ModelNotFoundError,
     ModelServerError,
     ModelTimeoutError,
-    ModelNotFoundError,
 )
 from .types import (
+    ActionChunk,
     ChatChunk,
     ChatMessage,
     ChatRequest,
     ChatResponse,
+    Detection2D,
+    DetectionRequest,
+    DetectionResponse,
     EmbeddingRequest,
     EmbeddingResponse,
     ImageData,
+    PolicyObservation,
     SpeechRequest,
     SpeechResponse,
     ToolCall,
     ToolSpec,
     TranscriptionRequest,
     TranscriptionResponse,
-    DetectionRequest,
-    DetectionResponse,
-    Detection2D,
-    PolicyObservation,
-    ActionChunk,
 )
 
 # public name -> submodule that defines it; resolved on first attribute access (PEP 562).
@@ -55,6 +55,35 @@ _LAZY: dict[str, str] = {
         "SemanticRouterConfig", "Route", "MapEncoding", "MapConfig", "MapLayer", "VideoMessageMaker",
         "VideoMessageMakerConfig", "VLA", "VLAConfig")},
 }
+
+# The public names: the request/response types and errors imported above, then the lazy ones.
+__all__ = [
+    "MalformedResponseError",
+    "ModelClientError",
+    "ModelConnectionError",
+    "ModelNotFoundError",
+    "ModelServerError",
+    "ModelTimeoutError",
+    "ActionChunk",
+    "ChatChunk",
+    "ChatMessage",
+    "ChatRequest",
+    "ChatResponse",
+    "Detection2D",
+    "DetectionRequest",
+    "DetectionResponse",
+    "EmbeddingRequest",
+    "EmbeddingResponse",
+    "ImageData",
+    "PolicyObservation",
+    "SpeechRequest",
+    "SpeechResponse",
+    "ToolCall",
+    "ToolSpec",
+    "TranscriptionRequest",
+    "TranscriptionResponse",
+]
+__all__ += sorted(_LAZY)
 
 
 def __getattr__(name: str) -> Any:

@@ -10,6 +10,10 @@ which backend failed.
 """
 from __future__ import annotations
 
+from typing import TypedDict
+
+from emos.errors import EmosError
+
 __all__ = [
     "ModelClientError",
     "ModelConnectionError",
@@ -31,7 +35,15 @@ def _where(client: str | None, model: str | None, url: str | None) -> str:
     return " ".join(parts)
 
 
-class ModelClientError(Exception):
+class ErrorContext(TypedDict):
+    """The keyword fields every error below takes (clients pass them as ``**context``)."""
+
+    client: str | None
+    model: str | None
+    url: str | None
+
+
+class ModelClientError(EmosError):
     """Base class: a model client could not produce a result."""
 
     def __init__(

@@ -19,6 +19,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from .errors import MalformedResponseError
 
 __all__ = [
@@ -105,7 +107,7 @@ class ImageData:
     mime_type: str = attrs.field(validator=attrs.validators.in_(("image/png", "image/jpeg", "image/webp", "image/gif")))
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> "ImageData":
+    def from_bytes(cls, data: bytes) -> ImageData:
         mime = sniff_image_mime(data)
         if mime is None:
             raise ValueError(
@@ -114,11 +116,11 @@ class ImageData:
         return cls(bytes(data), mime)
 
     @classmethod
-    def from_array(cls, array: np.ndarray) -> "ImageData":
+    def from_array(cls, array: np.ndarray) -> ImageData:
         return cls(encode_png(array), "image/png")
 
     @classmethod
-    def from_base64(cls, text: str) -> "ImageData":
+    def from_base64(cls, text: str) -> ImageData:
         """From plain base64 or a ``data:image/...;base64,`` URL."""
         if text.startswith("data:"):
             text = text.split(",", 1)[1] if "," in text else ""
@@ -129,7 +131,7 @@ class ImageData:
         return cls.from_bytes(raw)
 
     @classmethod
-    def coerce(cls, value: Any) -> "ImageData":
+    def coerce(cls, value: Any) -> ImageData:
         """Accept ImageData, encoded bytes, a numpy array or a base64/data-URL string."""
         if isinstance(value, ImageData):
             return value
@@ -211,7 +213,7 @@ def _json_schema(instance, attribute, value) -> None:
 class ToolSpec:
     """A tool offered to the model: name, description and a JSON-schema for its arguments."""
 
-    name: str = attrs.field(validator=[attrs.validators.instance_of(str), attrs.validators.min_len(1)])
+    name: str = attrs.field(validator=attrs.validators.and_(attrs.validators.instance_of(str), attrs.validators.min_len(1)))
     description: str = attrs.field(default="", validator=attrs.validators.instance_of(str))
     parameters: dict = attrs.field(factory=lambda: {"type": "object", "properties": {}}, validator=_json_schema)
 
@@ -249,7 +251,7 @@ class ChatMessage:
     tool_call_id: str | None = attrs.field(default=None)
     name: str | None = attrs.field(default=None)
 
-    def text_only(self) -> "ChatMessage":
+    def text_only(self) -> ChatMessage:
         """A copy without images: what chat history keeps (images would grow it unboundedly)."""
         return attrs.evolve(self, images=[])
 
@@ -279,16 +281,6 @@ def _tools(value: Any) -> list[ToolSpec]:
     return out
 
 
-def _optional_number(lo: float, hi: float):
-    def check(instance, attribute, value) -> None:
-        if value is None:
-            return
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (lo <= value <= hi):
-            raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected a number in [{lo}, {hi}], got {value!r}")
-
-    return check
-
-
 @attrs.define
 class ChatRequest:
     """A chat completion request; ``options`` carries backend-specific extras."""
@@ -296,8 +288,8 @@ class ChatRequest:
     messages: list[ChatMessage] = attrs.field(converter=_messages)
     tools: list[ToolSpec] = attrs.field(factory=list, converter=_tools)
     stream: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
-    temperature: float | None = attrs.field(default=None, validator=_optional_number(0.0, 2.0))
-    max_tokens: int | None = attrs.field(default=None, validator=_optional_number(1, 10**7))
+    temperature: float | None = attrs.field(default=None, validator=V.number(ge=0.0, le=2.0, allow_none=True))
+    max_tokens: int | None = attrs.field(default=None, validator=V.number(ge=1, le=10**7, allow_none=True))
     options: dict = attrs.field(factory=dict, validator=_dict_of_str_keys)
     #: the VLM planning task ("pointing", "affordance", "trajectory", "grounding", "general") for
     #: servers whose planning models take it (RoboML's PlanningInput); other protocols ignore it
@@ -371,9 +363,9 @@ AUDIO_MIME = {
 class SpeechRequest:
     """Text to synthesize. ``speed`` follows OpenAI (0.25..4.0, 1.0 = normal)."""
 
-    text: str = attrs.field(validator=[attrs.validators.instance_of(str), attrs.validators.min_len(1)])
+    text: str = attrs.field(validator=attrs.validators.and_(attrs.validators.instance_of(str), attrs.validators.min_len(1)))
     voice: str | None = None
-    speed: float | None = attrs.field(default=None, validator=_optional_number(0.25, 4.0))
+    speed: float | None = attrs.field(default=None, validator=V.number(ge=0.25, le=4.0, allow_none=True))
     response_format: str = attrs.field(default="wav", validator=attrs.validators.in_(AUDIO_FORMATS))
 
 
@@ -390,7 +382,7 @@ class TranscriptionRequest:
     audio: bytes = attrs.field(repr=lambda b: f"<{len(b)} bytes>", validator=attrs.validators.instance_of(bytes))
     filename: str = "audio.wav"
     language: str | None = None
-    temperature: float | None = attrs.field(default=None, validator=_optional_number(0.0, 1.0))
+    temperature: float | None = attrs.field(default=None, validator=V.number(ge=0.0, le=1.0, allow_none=True))
     prompt: str | None = None
 
 
@@ -403,17 +395,12 @@ class TranscriptionResponse:
 # --------------------------------------------------------------------------- detection
 
 
-def _threshold(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
-        raise ValueError(f"DetectionRequest.threshold: expected a number in [0, 1], got {value!r}")
-
-
 @attrs.define
 class DetectionRequest:
     """Images to run a detector on; one :class:`Detection2D` per image comes back."""
 
     images: list[ImageData] = attrs.field(converter=_images)
-    threshold: float = attrs.field(default=0.5, validator=_threshold)
+    threshold: float = attrs.field(default=0.5, validator=V.number(ge=0, le=1))
     labels_to_track: list[str] | None = None
 
     def __attrs_post_init__(self) -> None:

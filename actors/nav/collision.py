@@ -154,7 +154,7 @@ class MapCollisionChecker:
         self.fcl_calls = 0
 
     @classmethod
-    def from_robot(cls, grid: OccupancyGridMap, robot: Any, **kwargs: Any) -> "MapCollisionChecker":
+    def from_robot(cls, grid: OccupancyGridMap, robot: Any, **kwargs: Any) -> MapCollisionChecker:
         """Build from a ``RobotConfig`` (uses its geometry_type and geometry_params)."""
         return cls(grid, robot.geometry_type, robot.geometry_params, **kwargs)
 

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from emos.geometry import integrate_pose, wrap_angle
+
 from .robot import RobotConfig, RobotType
 
 __all__ = [
@@ -144,8 +145,8 @@ def ramp_commands(robot: RobotConfig, velocity: np.ndarray, targets: np.ndarray,
     """
     tgt = feasible_commands(robot, np.asarray(targets, dtype=np.float64).reshape(-1, 3))
     lim = (robot.ctrl_vx_limits, robot.ctrl_vy_limits, robot.ctrl_omega_limits)
-    acc = np.array([l.max_acc for l in lim]) * dt
-    dec = np.array([l.max_decel for l in lim]) * dt
+    acc = np.array([axis.max_acc for axis in lim]) * dt
+    dec = np.array([axis.max_decel for axis in lim]) * dt
     v = np.broadcast_to(np.asarray(velocity, dtype=np.float64).reshape(1, 3), tgt.shape).copy()
     out = np.empty((tgt.shape[0], steps, 3))
     for k in range(steps):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.errors import EmosError
 from emos.geometry import wrap_angle
 
 __all__ = ["PathFileError", "save_path_csv", "load_path_csv", "PathRecorder", "headings_along"]
@@ -21,7 +22,7 @@ __all__ = ["PathFileError", "save_path_csv", "load_path_csv", "PathRecorder", "h
 _HEADER = ("x", "y", "yaw")
 
 
-class PathFileError(ValueError):
+class PathFileError(EmosError, ValueError):
     """A path CSV that is missing, has a bad header or a bad row."""
 
 
@@ -62,8 +63,8 @@ def load_path_csv(file: str | os.PathLike) -> np.ndarray:
         text = src.read_text()
     except OSError as exc:
         raise PathFileError(f"cannot read path file {src}: {exc.strerror or exc}") from exc
-    rows = list(csv.reader(io.StringIO(text)))
-    rows = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)]
+    # (1-based line number, cells) of each non-blank line, so errors can name the line.
+    rows = [(i + 1, r) for i, r in enumerate(csv.reader(io.StringIO(text))) if r and any(c.strip() for c in r)]
     if not rows:
         raise PathFileError(f"{src}: empty file, expected a header row 'x,y,yaw'")
     line, header = rows[0]
@@ -134,9 +135,10 @@ class PathRecorder:
             turned = abs(wrap_angle(yaw - lyaw))
             if moved < self.min_distance and turned < self.min_angle:
                 return False
-            if self.recording_time_step is not None and self._last_stamp is not None:
-                if stamp - self._last_stamp < self.recording_time_step:  # type: ignore[operator]
-                    return False
+            # stamp is never None here when recording_time_step is set (checked above).
+            if (self.recording_time_step is not None and self._last_stamp is not None and stamp is not None
+                    and stamp - self._last_stamp < self.recording_time_step):
+                return False
         self._kept.append(pose)
         self._last_stamp = stamp
         return True
@@ -149,7 +151,7 @@ class PathRecorder:
         t = np.asarray(stamps, dtype=np.float64).reshape(-1)
         if len(t) != len(p):
             raise ValueError(f"PathRecorder.add_many: {len(p)} poses but {len(t)} stamps")
-        return sum(self.add(*row, stamp=float(ts)) for row, ts in zip(p, t))
+        return sum(self.add(x, y, yaw, stamp=float(ts)) for (x, y, yaw), ts in zip(p, t))
 
     def path(self, include_latest: bool = True) -> np.ndarray:
         """The recorded (N, 3) path; with ``include_latest`` the last offered pose closes it."""

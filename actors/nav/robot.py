@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
+
+from emos.config import validators as V
 
 __all__ = [
     "RobotType",
@@ -30,7 +32,7 @@ class RobotType(enum.Enum):
     OMNI = "OMNI"  # holonomic: vx, vy and omega independent
 
     @classmethod
-    def from_any(cls, value: "RobotType | str") -> "RobotType":
+    def from_any(cls, value: RobotType | str) -> RobotType:
         if isinstance(value, cls):
             return value
         if isinstance(value, str) and value.upper() in cls.__members__:
@@ -69,7 +71,7 @@ class RobotGeometry:
 
     Type = _GeometryType
 
-    PARAM_NAMES: dict[_GeometryType, tuple[str, ...]] = {
+    PARAM_NAMES: ClassVar[dict[_GeometryType, tuple[str, ...]]] = {
         _GeometryType.BOX: ("length", "width", "height"),
         _GeometryType.CYLINDER: ("radius", "length_z"),
         _GeometryType.SPHERE: ("radius",),
@@ -79,7 +81,7 @@ class RobotGeometry:
     }
 
     @classmethod
-    def get_type(cls, value: "_GeometryType | str") -> _GeometryType:
+    def get_type(cls, value: _GeometryType | str) -> _GeometryType:
         if isinstance(value, _GeometryType):
             return value
         if isinstance(value, str) and value.upper() in _GeometryType.__members__:
@@ -89,7 +91,7 @@ class RobotGeometry:
         )
 
     @classmethod
-    def validate_params(cls, geometry_type: "_GeometryType | str", params: Any) -> np.ndarray:
+    def validate_params(cls, geometry_type: _GeometryType | str, params: Any) -> np.ndarray:
         """Return ``params`` as a float64 array, or raise naming the expected layout."""
         gtype = cls.get_type(geometry_type)
         names = cls.PARAM_NAMES[gtype]
@@ -113,7 +115,7 @@ class RobotGeometry:
         return arr
 
     @classmethod
-    def radius(cls, geometry_type: "_GeometryType | str", params: Any) -> float:
+    def radius(cls, geometry_type: _GeometryType | str, params: Any) -> float:
         """Radius of the smallest circle around ``robot_base`` containing the 2D footprint."""
         gtype = cls.get_type(geometry_type)
         p = cls.validate_params(gtype, params)
@@ -124,7 +126,7 @@ class RobotGeometry:
         return float(p[0])
 
     @classmethod
-    def inner_radius(cls, geometry_type: "_GeometryType | str", params: Any) -> float:
+    def inner_radius(cls, geometry_type: _GeometryType | str, params: Any) -> float:
         """Radius of the largest circle around ``robot_base`` inside the 2D footprint."""
         gtype = cls.get_type(geometry_type)
         p = cls.validate_params(gtype, params)
@@ -135,7 +137,7 @@ class RobotGeometry:
         return float(p[0])
 
     @classmethod
-    def height(cls, geometry_type: "_GeometryType | str", params: Any) -> float:
+    def height(cls, geometry_type: _GeometryType | str, params: Any) -> float:
         """Full vertical extent of the body."""
         gtype = cls.get_type(geometry_type)
         p = cls.validate_params(gtype, params)
@@ -151,7 +153,7 @@ class RobotGeometry:
 
     @classmethod
     def footprint_distance(
-        cls, geometry_type: "_GeometryType | str", params: Any, points: np.ndarray
+        cls, geometry_type: _GeometryType | str, params: Any, points: np.ndarray
     ) -> np.ndarray:
         """Distance from each 2D point (robot frame, shape (..., 2)) to the footprint edge.
 
@@ -205,28 +207,12 @@ def _ellipse_distance(x: np.ndarray, y: np.ndarray, a: float, b: float) -> np.nd
     return np.where(inside, -dist, dist)
 
 
-def _to_robot_type(value: "RobotType | str") -> RobotType:
+def _to_robot_type(value: RobotType | str) -> RobotType:
     return RobotType.from_any(value)
 
 
-def _to_geometry_type(value: "_GeometryType | str") -> _GeometryType:
+def _to_geometry_type(value: _GeometryType | str) -> _GeometryType:
     return RobotGeometry.get_type(value)
-
-
-def _finite_number(name: str, *, positive: bool, allow_zero: bool = False):
-    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            raise TypeError(f"{type(instance).__name__}.{attribute.name}: expected a number, "
-                            f"got {value!r}")
-        if not math.isfinite(float(value)):
-            raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected a finite "
-                             f"number, got {value!r}")
-        if positive and (value < 0 or (value == 0 and not allow_zero)):
-            bound = ">= 0" if allow_zero else "> 0"
-            raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected {bound} "
-                             f"({name}), got {value!r}")
-
-    return check
 
 
 @attrs.define(frozen=True)
@@ -237,18 +223,18 @@ class LinearCtrlLimits:
     ``max_vel`` may be 0 to disable an axis (e.g. lateral motion of a non-omni robot).
     """
 
-    max_vel: float = attrs.field(converter=float, validator=_finite_number("speed", positive=True, allow_zero=True))
-    max_acc: float = attrs.field(converter=float, validator=_finite_number("acceleration", positive=True))
-    max_decel: float = attrs.field(converter=float, validator=_finite_number("deceleration", positive=True))
+    max_vel: float = attrs.field(converter=float, validator=V.number(ge=0, finite=True, what="a finite speed"))
+    max_acc: float = attrs.field(converter=float, validator=V.number(gt=0, finite=True, what="a finite acceleration"))
+    max_decel: float = attrs.field(converter=float, validator=V.number(gt=0, finite=True, what="a finite deceleration"))
 
 
 @attrs.define(frozen=True)
 class AngularCtrlLimits:
     """Limits on rotation (rad/s, rad/s^2) and the steering angle of Ackermann robots (rad)."""
 
-    max_vel: float = attrs.field(converter=float, validator=_finite_number("angular speed", positive=True, allow_zero=True))
-    max_acc: float = attrs.field(converter=float, validator=_finite_number("angular acceleration", positive=True))
-    max_decel: float = attrs.field(converter=float, validator=_finite_number("angular deceleration", positive=True))
+    max_vel: float = attrs.field(converter=float, validator=V.number(ge=0, finite=True, what="a finite angular speed"))
+    max_acc: float = attrs.field(converter=float, validator=V.number(gt=0, finite=True, what="a finite angular acceleration"))
+    max_decel: float = attrs.field(converter=float, validator=V.number(gt=0, finite=True, what="a finite angular deceleration"))
     max_steer: float = attrs.field(default=math.pi / 3, converter=float)
 
     @max_steer.validator
@@ -272,15 +258,6 @@ def _default_omega() -> AngularCtrlLimits:
     return AngularCtrlLimits(max_vel=1.0, max_acc=2.0, max_decel=2.0, max_steer=math.pi / 3)
 
 
-def _instance_of(cls: type):
-    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-        if not isinstance(value, cls):
-            raise TypeError(f"RobotConfig.{attribute.name}: expected {cls.__name__}, "
-                            f"got {type(value).__name__}: {value!r}")
-
-    return check
-
-
 @attrs.define(frozen=True, eq=False)
 class RobotConfig:
     """The robot's digital twin: motion model, geometry and control limits.
@@ -293,9 +270,9 @@ class RobotConfig:
     model_type: RobotType = attrs.field(converter=_to_robot_type)
     geometry_type: _GeometryType = attrs.field(converter=_to_geometry_type)
     geometry_params: np.ndarray = attrs.field()
-    ctrl_vx_limits: LinearCtrlLimits = attrs.field(factory=_default_vx, validator=_instance_of(LinearCtrlLimits))
-    ctrl_vy_limits: LinearCtrlLimits = attrs.field(factory=_default_vy, validator=_instance_of(LinearCtrlLimits))
-    ctrl_omega_limits: AngularCtrlLimits = attrs.field(factory=_default_omega, validator=_instance_of(AngularCtrlLimits))
+    ctrl_vx_limits: LinearCtrlLimits = attrs.field(factory=_default_vx, validator=V.instance_of(LinearCtrlLimits))
+    ctrl_vy_limits: LinearCtrlLimits = attrs.field(factory=_default_vy, validator=V.instance_of(LinearCtrlLimits))
+    ctrl_omega_limits: AngularCtrlLimits = attrs.field(factory=_default_omega, validator=V.instance_of(AngularCtrlLimits))
     wheel_base: float = attrs.field(default=0.0, converter=float)
 
     def __attrs_post_init__(self) -> None:
@@ -343,19 +320,13 @@ class RobotConfig:
         return RobotGeometry.footprint_distance(self.geometry_type, self.geometry_params, points)
 
 
-def _frame_name(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if not isinstance(value, str) or not value.strip():
-        raise ValueError(f"RobotFrames.{attribute.name}: expected a non-empty frame name, "
-                         f"got {value!r}")
-
-
 @attrs.define(frozen=True)
 class RobotFrames:
     """Names of the coordinate frames the navigation components look up."""
 
-    world: str = attrs.field(default="map", validator=_frame_name)
-    odom: str = attrs.field(default="odom", validator=_frame_name)
-    robot_base: str = attrs.field(default="base_link", validator=_frame_name)
-    scan: str = attrs.field(default="scan", validator=_frame_name)
-    rgb: str = attrs.field(default="camera/rgb", validator=_frame_name)
-    depth: str = attrs.field(default="camera/depth", validator=_frame_name)
+    world: str = attrs.field(default="map", validator=V.non_empty_str)
+    odom: str = attrs.field(default="odom", validator=V.non_empty_str)
+    robot_base: str = attrs.field(default="base_link", validator=V.non_empty_str)
+    scan: str = attrs.field(default="scan", validator=V.non_empty_str)
+    rgb: str = attrs.field(default="camera/rgb", validator=V.non_empty_str)
+    depth: str = attrs.field(default="camera/depth", validator=V.non_empty_str)

@@ -9,7 +9,8 @@ need not be parent and child directly (``base_link -> camera_link -> camera/dept
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections.abc import Iterator
 from types import ModuleType
-from typing import Iterator
 
 _EXTRA_HINT = "install the simulation extra: pip install 'emos[sim]'"
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from typing import Iterable
+from collections.abc import Iterable
 
 import attrs
 import numpy as np
@@ -145,7 +145,7 @@ class Trial:
 
     @classmethod
     def scored(cls, world: int | str, seed: int, outcome: TrialOutcome, path_length: float,
-               deadline: ControlDeadline | None = None, yaw_gain: float | None = None) -> "Trial":
+               deadline: ControlDeadline | None = None, yaw_gain: float | None = None) -> Trial:
         ok = outcome.success
         return cls(world, seed, ok, outcome.collided, outcome.timeout, outcome.time_s,
                    barn_metric(ok, outcome.time_s, path_length), barn_metric(ok, outcome.time_s, path_length, low=4.0),

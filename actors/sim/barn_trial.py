@@ -20,7 +20,8 @@ errors and yaw gain.
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import attrs
 import numpy as np
@@ -84,6 +85,10 @@ class TrialSpec:
         return self.charge_compute and not self.ideal
 
 
+#: The default spec of :func:`build_trial` and :func:`run_trial` (frozen, so one instance is shared).
+DEFAULT_TRIAL_SPEC = TrialSpec()
+
+
 @attrs.define(eq=False)
 class TrialWorld:
     """A built trial: the world and its robot and sensors, and where to go."""
@@ -114,7 +119,7 @@ def start_and_goal(entry: BarnWorld | DynaWorld) -> tuple[tuple[float, float, fl
     raise TypeError(f"expected a BarnWorld or a DynaWorld, got {type(entry).__name__}")
 
 
-def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = TrialSpec()) -> TrialWorld:
+def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = DEFAULT_TRIAL_SPEC) -> TrialWorld:
     """The world of ``entry`` with the spec's robot and sensors, seeded with ``seed``."""
     clock = SimClock(dt=spec.physics_dt, mode=ClockMode.LOCKSTEP)
     if isinstance(entry, BarnWorld):
@@ -132,6 +137,7 @@ def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = Trial
         slip = spec.slip if spec.noisy_odometry else 0.0
         robot = world.add_robot(spec.robot_name, start, slip=slip)
         lidar = world.add_sensor(Lidar(robot, spec.lidar))
+        odometry: Odometry | WheelImuOdometry
         if spec.ideal:
             odometry = world.add_sensor(Odometry(robot, OdometryConfig(rate_hz=spec.control_rate_hz,
                                                                        noisy=spec.noisy_odometry)))
@@ -143,7 +149,7 @@ def build_trial(entry: BarnWorld | DynaWorld, seed: int, spec: TrialSpec = Trial
         raise
 
 
-def run_trial(trial: TrialWorld, policy: Policy, spec: TrialSpec = TrialSpec(), seed: int = 0) -> Trial:
+def run_trial(trial: TrialWorld, policy: Policy, spec: TrialSpec = DEFAULT_TRIAL_SPEC, seed: int = 0) -> Trial:
     """Drive ``trial`` with ``policy`` until the protocol ends it; the world stays open."""
     world, robot = trial.world, trial.robot
     dt = world.clock.dt

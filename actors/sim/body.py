@@ -8,6 +8,7 @@ import attrs
 import numpy as np
 
 from emos.geometry import quaternion_of_yaw
+
 from . import _deps
 from .robots import RobotSpec, feasible_command, integrate
 
@@ -40,9 +41,9 @@ class SimRobot:
     relative standard deviation of a per-tick random error on the achieved velocity.
     """
 
-    def __init__(self, world: "World", spec: RobotSpec, name: str, pose: tuple[float, float, float],
+    def __init__(self, world: World, spec: RobotSpec, name: str, pose: tuple[float, float, float],
                  slip: float = 0.0, actuation_noise: float = 0.0, rng: np.random.Generator | None = None,
-                 drive: "DriveModel | str | None" = None) -> None:
+                 drive: DriveModel | str | None = None) -> None:
         from .dynamics import IdealDrive, make_drive
 
         if not 0.0 <= slip < 1.0:
@@ -105,6 +106,7 @@ class SimRobot:
         """Collision and visual shapes of the spec's parts, relative to a base at half height."""
         pb, c, s = _deps.pybullet(), self.world.client, self.spec
         axle = c.getQuaternionFromEuler([math.pi / 2, 0.0, 0.0])  # cylinder axis (z) onto y
+        dims: list[dict[str, Any]]  # keyword arguments of one shape: halfExtents, or radius and height
         kinds, dims, positions, orientations = [], [], [], []
         for part in s.collision:
             x, y, z = part.center

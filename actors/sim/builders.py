@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .barn_worlds import (BARN_CYLINDER_HEIGHT, BARN_CYLINDER_RADIUS, BarnWorld, load_barn_worlds)
+from .barn_worlds import BARN_CYLINDER_HEIGHT, BARN_CYLINDER_RADIUS, BarnWorld, load_barn_worlds
 from .mapfile import map_to_boxes, read_ros_map
 from .primitives import Box, Cylinder, Shape, Wall
 from .world import World

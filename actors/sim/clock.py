@@ -20,6 +20,8 @@ import time
 
 import attrs
 
+from emos.config import validators as V
+
 
 class ClockMode(str, enum.Enum):
     REALTIME = "realtime"
@@ -27,18 +29,13 @@ class ClockMode(str, enum.Enum):
     LOCKSTEP = "lockstep"
 
 
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not value > 0:
-        raise ValueError(f"SimClock.{attribute.name} must be > 0, got {value!r}")
-
-
 @attrs.define(eq=False)
 class SimClock:
     """Simulated time advanced in fixed ticks of ``dt`` seconds."""
 
-    dt: float = attrs.field(default=0.01, converter=float, validator=_positive)
+    dt: float = attrs.field(default=0.01, converter=float, validator=V.positive)
     mode: ClockMode = attrs.field(default=ClockMode.REALTIME, converter=ClockMode)
-    real_time_factor: float = attrs.field(default=1.0, converter=float, validator=_positive)
+    real_time_factor: float = attrs.field(default=1.0, converter=float, validator=V.positive)
     _ticks: int = attrs.field(default=0, init=False)
     _wall_start: float | None = attrs.field(default=None, init=False)
     _cond: threading.Condition = attrs.field(factory=threading.Condition, init=False)
@@ -83,7 +80,7 @@ class SimClock:
     def sleep(self, duration: float, timeout: float | None = None) -> bool:
         return self.sleep_until(self.now() + duration, timeout=timeout)
 
-    def rate(self, hz: float) -> "SimRate":
+    def rate(self, hz: float) -> SimRate:
         return SimRate(self, hz)
 
     def reset(self) -> None:

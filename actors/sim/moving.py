@@ -6,6 +6,8 @@ import math
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from .primitives import Box, Cylinder
 
 
@@ -29,13 +31,9 @@ class MovingObstacle:
 
     shape: Box | Cylinder = attrs.field(validator=attrs.validators.instance_of((Box, Cylinder)))
     waypoints: np.ndarray = attrs.field(converter=_waypoints)
-    speed: float = attrs.field(default=0.5, converter=float)
+    speed: float = attrs.field(default=0.5, converter=float, validator=V.number(gt=0, finite=True, what="a finite speed in m/s"))
     mode: str = attrs.field(default="pingpong", validator=attrs.validators.in_(("loop", "pingpong", "once")))
     name: str = attrs.field(default="mover")
-
-    def __attrs_post_init__(self) -> None:
-        if not (math.isfinite(self.speed) and self.speed > 0):
-            raise ValueError(f"MovingObstacle.speed must be > 0 m/s, got {self.speed!r}")
 
     def _path(self) -> np.ndarray:
         if self.mode == "loop":

@@ -29,7 +29,7 @@ def header(stamp: float, frame_id: str) -> Any:
     return m.Header(stamp=m.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
 
 
-def scan_to_msg(scan: "ScanReading") -> Any:
+def scan_to_msg(scan: ScanReading) -> Any:
     m = _msgs()
     return m.LaserScan(
         header=header(scan.stamp, scan.frame_id), angle_min=scan.angle_min, angle_max=scan.angle_max,
@@ -39,7 +39,7 @@ def scan_to_msg(scan: "ScanReading") -> Any:
     )
 
 
-def camera_to_msgs(reading: "CameraReading") -> tuple[Any, Any, Any]:
+def camera_to_msgs(reading: CameraReading) -> tuple[Any, Any, Any]:
     """(rgb8 Image, 32FC1 depth Image in metres, CameraInfo) sharing one header."""
     m = _msgs()
     h = header(reading.stamp, reading.frame_id)
@@ -51,13 +51,13 @@ def camera_to_msgs(reading: "CameraReading") -> tuple[Any, Any, Any]:
     return rgb, depth, info
 
 
-def cloud_to_msg(reading: "CameraReading", stride: int = 1, world_frame: bool = False, world_frame_id: str = "map") -> Any:
+def cloud_to_msg(reading: CameraReading, stride: int = 1, world_frame: bool = False, world_frame_id: str = "map") -> Any:
     m = _msgs()
     frame = world_frame_id if world_frame else reading.frame_id
     return m.PointCloud2.from_xyz(reading.point_cloud(stride, world_frame), header=header(reading.stamp, frame))
 
 
-def odometry_to_msg(odom: "OdometryReading", pose_variance: float = 0.0, twist_variance: float = 0.0) -> Any:
+def odometry_to_msg(odom: OdometryReading, pose_variance: float = 0.0, twist_variance: float = 0.0) -> Any:
     m = _msgs()
     pose_cov = np.zeros(36)
     twist_cov = np.zeros(36)

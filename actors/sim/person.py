@@ -16,8 +16,8 @@ from typing import Any
 import attrs
 import numpy as np
 
-from .primitives import Cylinder
 from .moving import MovingObstacle
+from .primitives import Cylinder
 
 PERSON_HEIGHT = 1.75  # m, billboard height; the figure fills most of it
 PERSON_WIDTH = 0.8  # m, billboard width (the texture's aspect is 1:2 at 128 x 256 px)

@@ -12,10 +12,12 @@ concave mesh body; moving obstacles stay separate convex bodies.
 from __future__ import annotations
 
 import math
-from typing import Union
+from typing import Any
 
 import attrs
 import numpy as np
+
+from emos.config import validators as V
 
 # Circumscribed polygon: the prism contains the true cylinder, radius error < 2 % of r.
 CYLINDER_SIDES = 16
@@ -31,18 +33,14 @@ def _xy(value: object) -> tuple[float, float]:
     return float(arr[0]), float(arr[1])
 
 
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{type(instance).__name__}.{attribute.name} must be a finite number > 0, got {value!r}")
-
-
-def _color(value: object) -> Color:
-    c = tuple(float(v) for v in value)  # type: ignore[attr-defined]
+def _color(value: Any) -> Color:
+    """Converter: any 3 or 4 numbers in [0, 1] -> RGBA."""
+    c = tuple(float(v) for v in value)
     if len(c) == 3:
         c = (*c, 1.0)
     if len(c) != 4 or not all(0.0 <= v <= 1.0 for v in c):
         raise ValueError(f"color must be 3 or 4 floats in [0, 1], got {value!r}")
-    return c  # type: ignore[return-value]
+    return c
 
 
 @attrs.define(frozen=True)
@@ -51,7 +49,7 @@ class Box:
 
     center: tuple[float, float] = attrs.field(converter=_xy)
     size: tuple[float, float] = attrs.field(converter=_xy)
-    height: float = attrs.field(default=1.0, converter=float, validator=_positive)
+    height: float = attrs.field(default=1.0, converter=float, validator=V.finite_positive)
     yaw: float = attrs.field(default=0.0, converter=float)
     color: Color = attrs.field(default=GREY, converter=_color)
 
@@ -71,8 +69,8 @@ class Cylinder:
     """A vertical cylinder standing on the floor."""
 
     center: tuple[float, float] = attrs.field(converter=_xy)
-    radius: float = attrs.field(converter=float, validator=_positive)
-    height: float = attrs.field(default=1.0, converter=float, validator=_positive)
+    radius: float = attrs.field(converter=float, validator=V.finite_positive)
+    height: float = attrs.field(default=1.0, converter=float, validator=V.finite_positive)
     color: Color = attrs.field(default=GREY, converter=_color)
 
     def footprint(self, sides: int = CYLINDER_SIDES) -> np.ndarray:
@@ -87,8 +85,8 @@ class Wall:
 
     start: tuple[float, float] = attrs.field(converter=_xy)
     end: tuple[float, float] = attrs.field(converter=_xy)
-    thickness: float = attrs.field(default=0.1, converter=float, validator=_positive)
-    height: float = attrs.field(default=1.0, converter=float, validator=_positive)
+    thickness: float = attrs.field(default=0.1, converter=float, validator=V.finite_positive)
+    height: float = attrs.field(default=1.0, converter=float, validator=V.finite_positive)
     color: Color = attrs.field(default=GREY, converter=_color)
 
     def __attrs_post_init__(self) -> None:
@@ -113,7 +111,7 @@ class Wall:
         return self.as_box().footprint()
 
 
-Shape = Union[Box, Cylinder, Wall]
+Shape = Box | Cylinder | Wall
 
 
 def extrude(polygons: np.ndarray, heights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ simulator builds, so a plan on the map matches the walls the robot meets.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

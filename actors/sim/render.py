@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,7 +22,7 @@ POINTS = (230, 150, 0)
 ESTIMATE = (150, 60, 190)  # where the navigation stack believed the robot was
 
 
-def render_topdown(world: "World", path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | np.ndarray | None = None,
+def render_topdown(world: World, path: str | Path | None = None, *, plan: Sequence[Sequence[float]] | np.ndarray | None = None,
                    goal: Sequence[float] | None = None, goal_radius: float = 0.0,
                    points: np.ndarray | None = None, bounds: tuple[float, float, float, float] | None = None,
                    pixels_per_m: float = 40.0, title: str | None = None, at_time: float | None = None,

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Iterable
 
 import attrs
 import numpy as np
 
+from emos.config import validators as V
 from emos.geometry import integrate_pose
 
 
@@ -22,16 +24,6 @@ class DriveType(str, enum.Enum):
     DIFFERENTIAL = "differential"
     ACKERMANN = "ackermann"
     OMNI = "omni"
-
-
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"RobotSpec.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
-def _pos(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"RobotSpec.{attribute.name} must be a finite number > 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
@@ -57,34 +49,39 @@ class CollisionPart:
         return self.size[0], self.size[1] / 2
 
 
+def _parts(value: Iterable[CollisionPart]) -> tuple[CollisionPart, ...]:
+    """Converter of ``RobotSpec.collision`` (a typed ``tuple``)."""
+    return tuple(value)
+
+
 @attrs.define(frozen=True)
 class RobotSpec:
     """What a simulated robot is: footprint box, drive and limits (SI units)."""
 
     name: str
     drive: DriveType = attrs.field(converter=DriveType)
-    length: float = attrs.field(converter=float, validator=_pos)
-    width: float = attrs.field(converter=float, validator=_pos)
-    height: float = attrs.field(converter=float, validator=_pos)
-    max_vx: float = attrs.field(converter=float, validator=_pos)
-    max_omega: float = attrs.field(converter=float, validator=_pos)
-    max_acc_x: float = attrs.field(converter=float, validator=_pos)
-    max_acc_omega: float = attrs.field(converter=float, validator=_pos)
-    max_vy: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
-    max_acc_y: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    length: float = attrs.field(converter=float, validator=V.finite_positive)
+    width: float = attrs.field(converter=float, validator=V.finite_positive)
+    height: float = attrs.field(converter=float, validator=V.finite_positive)
+    max_vx: float = attrs.field(converter=float, validator=V.finite_positive)
+    max_omega: float = attrs.field(converter=float, validator=V.finite_positive)
+    max_acc_x: float = attrs.field(converter=float, validator=V.finite_positive)
+    max_acc_omega: float = attrs.field(converter=float, validator=V.finite_positive)
+    max_vy: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
+    max_acc_y: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
     # Ackermann only: axle distance and steering limit.
-    wheelbase: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
-    max_steer: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    wheelbase: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
+    max_steer: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
     # Offset of the footprint centre ahead of the base frame origin (racecar: rear axle).
     center_offset: float = attrs.field(default=0.0, converter=float)
     urdf: str | None = None  # pybullet_data-relative visual model, if any
-    lidar_height: float = attrs.field(default=0.3, converter=float, validator=_pos)
+    lidar_height: float = attrs.field(default=0.3, converter=float, validator=V.finite_positive)
     color: tuple[float, float, float, float] = (0.15, 0.3, 0.8, 1.0)
     # > 0: the body is a vertical cylinder of this radius (length and width are its diameter).
-    radius: float = attrs.field(default=0.0, converter=float, validator=_nonneg)
+    radius: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
     # Non-empty: the collision shape is these parts (the official Jackal: chassis box and four
     # wheels), centred on the base frame; length and width must be their bounding box.
-    collision: tuple[CollisionPart, ...] = attrs.field(default=(), converter=tuple)
+    collision: tuple[CollisionPart, ...] = attrs.field(default=(), converter=_parts)
     # The drive model a robot of this spec gets unless told otherwise (see actors/sim/dynamics).
     default_drive: str = "ideal"
 

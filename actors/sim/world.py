@@ -9,7 +9,8 @@ import logging
 import math
 import os
 import threading
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -22,6 +23,8 @@ from .robots import RobotSpec, robot_spec
 from .sensors.base import Sensor
 
 log = logging.getLogger(__name__)
+
+SensorT = TypeVar("SensorT", bound=Sensor)
 
 
 def _reach(shape: Shape) -> float:
@@ -83,19 +86,19 @@ class World:
 
     # -- ready-made worlds (see builders.py) -----------------------------------------------
     @classmethod
-    def demo_house(cls, **kwargs: Any) -> "World":
+    def demo_house(cls, **kwargs: Any) -> World:
         from .builders import demo_house
 
         return demo_house(**kwargs)
 
     @classmethod
-    def from_map(cls, yaml_path: str, **kwargs: Any) -> "World":
+    def from_map(cls, yaml_path: str, **kwargs: Any) -> World:
         from .builders import from_map
 
         return from_map(yaml_path, **kwargs)
 
     @classmethod
-    def from_barn(cls, world: Any, worlds_file: str | None = None, **kwargs: Any) -> "World":
+    def from_barn(cls, world: Any, worlds_file: str | None = None, **kwargs: Any) -> World:
         from .builders import from_barn
 
         return from_barn(world, worlds_file, **kwargs)
@@ -187,7 +190,7 @@ class World:
         self._body_names[robot.body_id] = name
         return robot
 
-    def add_sensor(self, sensor: Sensor) -> Sensor:
+    def add_sensor(self, sensor: SensorT) -> SensorT:
         """Attach ``sensor``; its first reading is taken at the next tick."""
         if sensor.robot is not None and sensor.robot not in self.robots:  # None: fixed in the world
             raise ValueError(f"sensor {sensor.name!r} rides on a robot that is not in this world")
@@ -280,7 +283,7 @@ class World:
         except Exception:  # already disconnected
             pass
 
-    def __enter__(self) -> "World":
+    def __enter__(self) -> World:
         return self
 
     def __exit__(self, *exc: object) -> None:

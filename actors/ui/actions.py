@@ -4,8 +4,9 @@ from __future__ import annotations
 import asyncio
 import logging
 import uuid
+from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any
 
 from emos.actors.ui.codecs import summarize
 from emos.actors.ui.inputs import InputRefused, goal_field, goal_from_page
@@ -21,6 +22,14 @@ class ActionRunner:
     def __init__(self, actions: dict[str, ActionInput], socket_of: Callable[[str], Path]):
         self.actions, self.socket_of = actions, socket_of
         self._running: dict[str, tuple[str, asyncio.Task]] = {}  # action -> (goal id, task)
+        # Fire-and-forget sends and cancels: the loop keeps only weak references to tasks, so
+        # they are held here until done (else one could be collected half-way).
+        self._background: set[asyncio.Future[None]] = set()
+
+    def _spawn(self, coro: Awaitable[None]) -> None:
+        task = asyncio.ensure_future(coro)
+        self._background.add(task)
+        task.add_done_callback(self._background.discard)
 
     def describe(self) -> list[dict[str, Any]]:
         out = []
@@ -41,7 +50,7 @@ class ActionRunner:
             return {"op": "result", "id": rid, "ok": False, "error": str(exc)}
         previous = self._running.get(name)
         if previous is not None and not previous[1].done():
-            asyncio.ensure_future(self._cancel(action, previous[0]))  # a new goal replaces the running one
+            self._spawn(self._cancel(action, previous[0]))  # a new goal replaces the running one
         goal_id = uuid.uuid4().hex
         task = asyncio.ensure_future(self._run(action, goal, goal_id, reply))
         self._running[name] = (goal_id, task)
@@ -57,8 +66,8 @@ class ActionRunner:
         def on_stream(frame: Any) -> None:
             if isinstance(frame, dict) and "feedback" in frame:
                 feedback = codec.decode(action.feedback_type, frame["feedback"], copy=True)
-                asyncio.ensure_future(reply({"op": "action", "topic": action.name, "goal_id": goal_id, "state": "feedback",
-                                             "value": summarize(feedback)}))
+                self._spawn(reply({"op": "action", "topic": action.name, "goal_id": goal_id, "state": "feedback",
+                                   "value": summarize(feedback)}))
 
         client = AsyncRpcClient(self.socket_of(action.name))
         await reply({"op": "action", "topic": action.name, "goal_id": goal_id, "state": "sent", "value": summarize(goal)})
@@ -87,7 +96,7 @@ class ActionRunner:
         running = self._running.get(name)
         if running is None or running[1].done():
             return {"op": "result", "id": rid, "ok": False, "error": f"no goal running on {name}"}
-        asyncio.ensure_future(self._cancel(self.actions[name], running[0]))
+        self._spawn(self._cancel(self.actions[name], running[0]))
         return {"op": "result", "id": rid, "ok": True}
 
     def close(self) -> None:

@@ -26,8 +26,9 @@ import hashlib
 import hmac
 import re
 import secrets
+from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any
 
 from aiohttp import web
 
@@ -111,9 +112,9 @@ def make_middleware(bind_host: str, token: str, port: int, token_file: Path | No
         if request.query.get("token") and request.method == "GET" and request.path == "/":
             # Keep the token in a cookie and take it out of the address bar (and so out of the
             # history, bookmarks and screenshots).
-            response = web.Response(status=303, headers={"Location": "/"})
-            response.set_cookie(tok_cookie, token, httponly=True, samesite="Strict")
-            return response
+            redirect = web.Response(status=303, headers={"Location": "/"})
+            redirect.set_cookie(tok_cookie, token, httponly=True, samesite="Strict")
+            return redirect
         new_session = ""
         if request.method in ("GET", "HEAD") and request.path in SESSION_ROUTES:
             if not session:

@@ -7,20 +7,25 @@ HTTP and a websocket from its own event loop. ``Launcher.enable_ui`` creates it.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.widgets import output_kind
 from emos.core.action_input import ActionInput
 from emos.core.component import BaseComponent
+from emos.core.conventions import resolve_config
 from emos.io.topic import Topic
-
 
 BIND_RETRY_S = 2.0
 
 
 class UIComponent(BaseComponent):
+    @classmethod
+    def config_class(cls) -> type[UIConfig]:
+        return UIConfig
+
     def __init__(
         self,
         ui_inputs: Sequence[Topic] = (),
@@ -33,9 +38,8 @@ class UIComponent(BaseComponent):
         """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
         ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers.
         ``ui_actions``: actions the page sends goals to (``component.ui_main_action_input``)."""
-        config = config or UIConfig()
-        if not isinstance(config, UIConfig):
-            raise TypeError(f"UIComponent config must be a UIConfig, got {type(config).__name__}")
+        # Resolved before BaseComponent does it: the token is made here, ahead of super().__init__.
+        config = resolve_config(component_name, type(self).__name__, config, UIConfig)
         if not config.token:
             # Made here, in the launcher's process, so that a restarted UI process keeps it and
             # open pages (their cookie) stay signed in.
@@ -57,14 +61,15 @@ class UIComponent(BaseComponent):
         self._actions = {a.name: a for a in ui_actions}
         self._server: Any = None
         self._start_task: Any = None
+        self._stop_task: Any = None  # held until done: the loop keeps only weak references to tasks
         self._listening = False
 
     # -- lifecycle -------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
         from emos.actors.ui.server import UIServer
-        from emos.core.priority import lower_priority
         from emos.actors.ui.streams import make_hub
-        from emos.core.node import control_socket
+        from emos.core.control import control_socket
+        from emos.core.priority import lower_priority
         from emos.core.services import service_socket
         from emos.transport.context import encode_name
 
@@ -134,7 +139,7 @@ class UIComponent(BaseComponent):
             server, self._server = self._server, None
             server.close_listener()
             try:
-                asyncio.ensure_future(server.stop())
+                self._stop_task = asyncio.ensure_future(server.stop())
             except RuntimeError:  # no loop any more: the listener is closed, the rest goes with the process
                 pass
         if self._start_task is not None:
@@ -143,7 +148,7 @@ class UIComponent(BaseComponent):
         self._listening = False
 
     # -- every shown message -----------------------------------------------------------------------
-    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None, **kwargs: Any) -> None:
         if msg is not None and topic is not None:
             hub = self._hubs.get(topic.name)
             if hub is not None:

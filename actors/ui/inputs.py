@@ -12,16 +12,19 @@ from typing import Any
 import numpy as np
 
 from emos.actors.ui.widgets import input_kind
+from emos.core import clock
+from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs.geometry import Point, Pose, Quaternion
 from emos.msgs.registry import resolve
-from emos.msgs.std import Header, Time
+from emos.msgs.sensor import Image
+from emos.msgs.std import Header
 
 _INT_BOUNDS = {"Int32": (-(2**31), 2**31 - 1), "Int64": (-(2**63), 2**63 - 1), "UInt8": (0, 255)}
 AUDIO_RATE = 16000
 
 
-class InputRefused(ValueError):
+class InputRefused(EmosError, ValueError):
     """A value from the page that does not fit its topic."""
 
 
@@ -55,7 +58,7 @@ def message_from_page(topic: str, type_name: str, value: Any, frame_id: str = "m
         if not isinstance(value, dict) or "x" not in value or "y" not in value:
             raise InputRefused(f"{topic}: expected a goal {{x, y[, yaw]}} in metres, got {value!r}")
         x, y = _number(topic, value["x"]), _number(topic, value["y"])
-        header = Header(stamp=Time.now(), frame_id=str(value.get("frame_id") or frame_id))
+        header = Header(stamp=clock.stamp(), frame_id=str(value.get("frame_id") or frame_id))  # the run's clock, as the robot's own stamps
         if type_name == "PointStamped":
             return cls(header=header, point=Point(x=x, y=y, z=0.0))
         yaw = _number(topic, value.get("yaw", 0.0))
@@ -103,7 +106,7 @@ def message_from_upload(topic: str, type_name: str, body: bytes) -> Any:
                 rgb = np.asarray(PILImage.open(io.BytesIO(body)).convert("RGB"))
         except Exception as exc:
             raise InputRefused(f"{topic}: cannot read the uploaded picture ({exc})") from None
-        return cls.from_numpy(np.ascontiguousarray(rgb), encoding="rgb8", header=Header(stamp=Time.now()))
+        return Image.from_numpy(np.ascontiguousarray(rgb), encoding="rgb8", header=Header(stamp=clock.stamp()))
     raise InputRefused(f"{topic}: {type_name} does not take uploads")
 
 

@@ -6,21 +6,22 @@ import json
 import logging
 import socket
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from aiohttp import WSMsgType, web
 
 from emos.actors.ui import settings as settings_mod
 from emos.actors.ui.actions import ActionRunner
 from emos.actors.ui.auth import CSRF_KEY, SECURITY_HEADERS, make_middleware
-from emos.actors.ui.tokenfile import TokenFileRefused, remove_token_file, write_token_file
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
 from emos.actors.ui.streams import Client, Hub, serve_client
 from emos.actors.ui.system_view import SystemView
+from emos.actors.ui.tokenfile import TokenFileRefused, remove_token_file, write_token_file
 from emos.actors.ui.widgets import describe_fields, input_kind
 from emos.msgs.registry import resolve
 

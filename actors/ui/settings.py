@@ -3,8 +3,9 @@
 The form of a component is built from its config class (field types, enum choices and the ranges
 of ``in_range`` / ``in_`` validators), the current values come from the running component, and
 a change goes through :func:`apply_config_change`: the one place the UI changes a running
-component's configuration. Today that is the node's control socket (``update_config``), which
-validates in the component's own process and changes nothing if a value is refused.
+component's configuration. Today that is the node's control socket
+(``update_config_parameters``), which validates in the component's own process and changes
+nothing if a value is refused.
 """
 from __future__ import annotations
 
@@ -15,10 +16,12 @@ from typing import Any
 
 import attrs
 
+from emos.core import control as C
 from emos.core.rpc import AsyncRpcClient, RpcConnectionError, RpcError
+from emos.errors import EmosError
 
 
-class SettingRefused(ValueError):
+class SettingRefused(EmosError, ValueError):
     """A setting value that does not fit its field."""
 
 
@@ -122,7 +125,7 @@ async def apply_config_change(control_socket: Path, component: str, values: dict
     (the component keeps its old values), or ``ConnectionError`` if it is not reachable."""
     client = AsyncRpcClient(control_socket)
     try:
-        return await client.call("update_config_parameters", timeout=timeout, values=values)  # the reconfiguration service
+        return await client.call(C.UPDATE_PARAMETERS, timeout=timeout, values=values)  # the reconfiguration service
     except RpcError as exc:
         raise SettingRefused(f"{component}: {exc}") from None
     except (RpcConnectionError, OSError) as exc:
@@ -134,6 +137,6 @@ async def apply_config_change(control_socket: Path, component: str, values: dict
 async def read_config(control_socket: Path, timeout: float = 3.0) -> dict[str, Any]:
     client = AsyncRpcClient(control_socket)
     try:
-        return await client.call("info", timeout=timeout)
+        return await client.call(C.INFO, timeout=timeout)
     finally:
         await client.close()

@@ -23,14 +23,18 @@ import json
 import logging
 import struct
 import time
+from collections.abc import Callable
 from concurrent.futures import Executor
-from typing import Any, Callable
+from typing import Any
 
 from emos.actors.ui import codecs
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.widgets import FRAME_KINDS, LOG_KINDS
+from emos.ratelimit import RateLimitedLog
 
 log = logging.getLogger("emos.ui")
+# A message the page cannot show usually repeats with every frame: once, then counted per topic.
+_encode_errors = RateLimitedLog(log, interval=10.0)
 
 _LEN = struct.Struct(">I")
 
@@ -186,6 +190,7 @@ class FrameHub(Hub):
         self.stamp = 0.0
         self.encoded: tuple[int, bytes] | None = None  # (seq, binary frame)
         self._encoding = False
+        self._encode_task: asyncio.Future[None] | None = None  # held: the loop keeps only weak references
         self.encoded_count = 0
         self.errors = 0
 
@@ -222,8 +227,8 @@ class FrameHub(Hub):
             self.encoded_count += 1
         except Exception as exc:
             self.errors += 1
-            if self.errors == 1 or self.errors % 100 == 0:
-                log.error("[ui] cannot show %s (%s) on the page: %s (%d errors so far)", self.topic, self.type_name, exc, self.errors)
+            _encode_errors.error(self.topic, "[ui] cannot show %s (%s) on the page: %s (%d errors so far)", self.topic,
+                                 self.type_name, exc, self.errors)
             self.encoded = (seq, b"")  # do not retry this message
         finally:
             self._encoding = False
@@ -244,7 +249,7 @@ class FrameHub(Hub):
         elif self.encoded is not None and self.encoded[0] > client.sent[self.topic]:
             client.sent[self.topic] = self.encoded[0]  # that one failed to encode: skip it
         if (self.encoded is None or self.encoded[0] < self.seq) and not self._encoding:
-            asyncio.ensure_future(self._encode_latest(loop, executor))
+            self._encode_task = asyncio.ensure_future(self._encode_latest(loop, executor))
 
 
 def make_hub(topic: str, type_name: str, kind: str, config: UIConfig, overlay: bool = False) -> Hub:

@@ -7,9 +7,11 @@ restart as requested (by the UI), not as a crash.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
+from emos.core import control as C
 from emos.core.rpc import AsyncRpcClient
 
 ACTIONS = ("start", "stop", "restart")
@@ -60,17 +62,17 @@ class SystemView:
                 raise ConnectionError("this UI runs without a supervisor")
             sup = AsyncRpcClient(self.supervisor_socket)
             try:  # wait=False: the UI may be restarting itself
-                await sup.call("lifecycle", component=name, request="restart", by="ui", wait=False, timeout=10.0)
+                await sup.call(C.SUPERVISOR_LIFECYCLE, component=name, request="restart", by="ui", wait=False, timeout=10.0)
             finally:
                 await sup.close()
             return "restarting; its supervisor starts a fresh process"
         client = AsyncRpcClient(self.control_socket(name))
         try:
-            state = await client.call("get_state", timeout=3.0)
+            state = await client.call(C.GET_STATE, timeout=3.0)
             want = {"start": "activate", "stop": "deactivate"}[action]
             current = state.get("state")
             if (action == "start" and current == "active") or (action == "stop" and current != "active"):
                 return f"already {current}"
-            return str(await client.call("transition", timeout=10.0, transition=want))
+            return str(await client.call(C.TRANSITION, timeout=10.0, transition=want))
         finally:
             await client.close()

@@ -11,12 +11,13 @@ import os
 import stat
 from pathlib import Path
 
+from emos.errors import EmosError
 from emos.transport.trust import remove_owned
 
 FILE_MODE = 0o600
 
 
-class TokenFileRefused(PermissionError):
+class TokenFileRefused(EmosError, PermissionError):
     """The token file cannot be written safely (the path and the reason are in the message)."""
 
 

@@ -14,6 +14,7 @@ from attrs import define, field
 from emos.config import validators
 from emos.config.base import BaseComponentConfig
 from emos.core.component import BaseComponent
+from emos.core.conventions import resolve_config
 
 
 def _port(instance: Any, attribute: Any, value: Any) -> None:
@@ -91,18 +92,21 @@ def _check_exposure(component_name: str, config: FoxgloveConfig) -> None:
 class FoxgloveBridgeComponent(BaseComponent):
     """Serves the run's topics to Foxglove (see :mod:`emos.interop.foxglove_bridge`)."""
 
+    @classmethod
+    def config_class(cls) -> type[FoxgloveConfig]:
+        return FoxgloveConfig
+
     def __init__(self, component_name: str = "foxglove_bridge", config: FoxgloveConfig | None = None, **kwargs: Any) -> None:
-        config = config or FoxgloveConfig()
-        if not isinstance(config, FoxgloveConfig):
-            raise TypeError(f"component {component_name!r}: config must be a FoxgloveConfig, got {type(config).__name__}")
+        # Resolved before BaseComponent does it: the exposure check needs it first.
+        config = resolve_config(component_name, type(self).__name__, config, FoxgloveConfig)
         _check_exposure(component_name, config)
         super().__init__(component_name, config=config, **kwargs)
         self.config: FoxgloveConfig = config
         self.bridge: Any = None
 
     def custom_on_activate(self) -> None:
-        from emos.interop.foxglove_bridge import FoxgloveBridge
         from emos.hosts import is_loopback
+        from emos.interop.foxglove_bridge import FoxgloveBridge
 
         cfg = self.config
         self.bridge = FoxgloveBridge(self.node.ctx, cfg.host, cfg.port, cfg.topics or None, cfg.exclude,

@@ -4,7 +4,13 @@ from __future__ import annotations
 from emos.chaos.nemesis.base import Compose, Nemesis, NemesisError
 from emos.chaos.nemesis.method import MethodFault
 from emos.chaos.nemesis.process import (
-    HangComponent, KillComponent, KillGroup, KillMonitor, KillZygote, StarveComponent, TermDeafComponent,
+    HangComponent,
+    KillComponent,
+    KillGroup,
+    KillMonitor,
+    KillZygote,
+    StarveComponent,
+    TermDeafComponent,
 )
 from emos.chaos.nemesis.proxy import FaultProxy, ProxyFault
 from emos.chaos.nemesis.sensor import SensorFault

@@ -17,9 +17,10 @@ from typing import Any, ClassVar
 
 from emos.chaos.history import History, Record
 from emos.chaos.target import RunningSystem
+from emos.errors import ConfigError
 
 
-class NemesisError(ValueError):
+class NemesisError(ConfigError):
     """A nemesis was configured wrongly (named in the message)."""
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 from emos.chaos.history import Record
 from emos.chaos.nemesis.base import Nemesis, NemesisError
-from emos.core.rpc import RpcClient
+from emos.core import control as C
 
 
 class MethodFault(Nemesis):
@@ -33,8 +33,7 @@ class MethodFault(Nemesis):
     def start(self) -> Record | None:
         assert self.system is not None and self.system.run_dir is not None
         try:
-            with RpcClient(self.system.control_socket(self.component), timeout=2.0) as rpc:
-                rpc.call("execute_method", method=self.method, args=self.args, kwargs={})
+            C.call(self.system.control_socket(self.component), C.EXECUTE_METHOD, C.method_request(self.method, self.args), timeout=2.0)
         except (OSError, ConnectionError, TimeoutError):
             return None  # restarting: nothing to hit now
         record = self._fault(target=self.component, method=self.method, **({"witness": self.witness} if self.witness else {}))

@@ -13,8 +13,8 @@ from typing import Any
 
 from emos.chaos.history import Record
 from emos.chaos.nemesis.base import Nemesis, NemesisError
+from emos.core import control as C
 from emos.core.faults import MODES
-from emos.core.rpc import RpcClient
 
 
 class SensorFault(Nemesis):
@@ -31,12 +31,11 @@ class SensorFault(Nemesis):
 
     def _call(self, op: str, **req: Any) -> Any:
         assert self.system is not None and self.system.run_dir is not None
-        with RpcClient(self.system.control_socket(self.component), timeout=2.0) as rpc:
-            return rpc.call(op, **req)
+        return C.call(self.system.control_socket(self.component), op, req, timeout=2.0)
 
     def start(self) -> Record | None:
         try:
-            self._call("inject_fault", topic=self.topic, mode=self.mode, params=self.fault_params)
+            self._call(C.INJECT_FAULT, topic=self.topic, mode=self.mode, params=self.fault_params)
         except (OSError, ConnectionError, TimeoutError):
             return None  # the component is restarting: nothing to hit now
         return self._fault(target=self.target, component=self.component, topic=self.topic, mode=self.mode, stale=self.mode == "stall")
@@ -44,7 +43,7 @@ class SensorFault(Nemesis):
     def stop(self) -> None:
         if self.active is not None:
             try:
-                self._call("clear_fault", topic=self.topic)
+                self._call(C.CLEAR_FAULT, topic=self.topic)
             except (OSError, ConnectionError, TimeoutError):
                 pass  # a restarted component starts without faults
         super().stop()

@@ -1,12 +1,20 @@
 """Component configuration: attrs configs, validators, QoS, run types and config files."""
+from emos.config import qos
 from emos.config import validators as base_validators
 from emos.config.base import BaseAttrs, BaseComponentConfig, ComponentRunType
 from emos.config.loader import ConfigError, load_into, read_config_file
 from emos.config.qos import (
-    BEST_EFFORT, KEEP_ALL, KEEP_LAST, RELIABLE, TRANSIENT_LOCAL, VOLATILE, DurabilityPolicy, HistoryPolicy, QoSConfig,
+    BEST_EFFORT,
+    KEEP_ALL,
+    KEEP_LAST,
+    RELIABLE,
+    TRANSIENT_LOCAL,
+    VOLATILE,
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSConfig,
     ReliabilityPolicy,
 )
-from emos.config import qos
 
 __all__ = [
     "base_validators", "BaseAttrs", "BaseComponentConfig", "ComponentRunType", "ConfigError", "load_into",

@@ -1,8 +1,9 @@
 """The configuration every component shares, and how it runs."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from enum import Enum
-from typing import Any
+from typing import Any, TypeVar
 
 import attrs
 from attrs import define, field
@@ -19,7 +20,7 @@ class ComponentRunType(str, Enum):
     ACTION_SERVER = "ActionServer"  # when a goal arrives on its action
 
     @classmethod
-    def parse(cls, value: "ComponentRunType | str") -> "ComponentRunType":
+    def parse(cls, value: ComponentRunType | str) -> ComponentRunType:
         if isinstance(value, cls):
             return value
         if isinstance(value, str):
@@ -29,8 +30,11 @@ class ComponentRunType(str, Enum):
         raise ValueError(f"run_type must be one of {[m.value for m in cls]}, got {value!r}")
 
 
-def _enum_converter(enum_cls: type[Enum]) -> Any:
-    def convert(value: Any) -> Enum:
+_E = TypeVar("_E", bound=Enum)
+
+
+def _enum_converter(enum_cls: type[_E]) -> Callable[[Any], _E]:
+    def convert(value: Any) -> _E:
         if isinstance(value, enum_cls):
             return value
         if isinstance(value, str):
@@ -50,7 +54,7 @@ class BaseAttrs:
     """attrs base with dict round-trips: the same metadata drives files, CLI and UI forms."""
 
     def asdict(self) -> dict[str, Any]:
-        def ser(inst: Any, fld: attrs.Attribute, value: Any) -> Any:
+        def ser(inst: Any, fld: attrs.Attribute[Any], value: Any) -> Any:
             if isinstance(value, Enum):
                 return value.value if isinstance(value.value, (str, int, float)) else value.name
             if hasattr(value, "tolist"):

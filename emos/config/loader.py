@@ -15,12 +15,10 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.errors import ConfigError as ConfigError  # defined with the exception tree; still importable from here
+
 COMMON_SECTION = "/**"
 TOPIC_SECTIONS = ("inputs", "outputs")
-
-
-class ConfigError(ValueError):
-    """A config file or mapping that does not fit the config class."""
 
 
 def read_config_file(path: str | Path) -> dict[str, Any]:
@@ -119,7 +117,8 @@ def apply_mapping(config: Any, data: dict[str, Any], source: str, path: str = ""
 def _is_frozen(obj: Any) -> bool:
     from attr._make import _frozen_setattrs  # attrs' frozen classes all use this __setattr__
 
-    return type(obj).__setattr__ is _frozen_setattrs
+    setattr_of_class: object = type(obj).__setattr__
+    return setattr_of_class is _frozen_setattrs
 
 
 def _target_type(tp: Any) -> Any:

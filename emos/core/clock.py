@@ -25,9 +25,11 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from emos.msgs.std import Time
     from emos.transport.context import RunContext
     from emos.transport.waker import Waker
 
@@ -49,7 +51,7 @@ def _lock() -> threading.Lock:
 
 _state_lock = _lock()
 _driven_time: float | None = None  # set by SimTimeDriver: the newest tick a sim-time node saw
-_follower: "_PassiveFollower | None" = None
+_follower: _PassiveFollower | None = None
 
 
 def now() -> float:
@@ -59,6 +61,17 @@ def now() -> float:
     follower = _passive_follower()
     t = follower.time() if follower is not None else None
     return t if t is not None else time.time()
+
+
+def stamp() -> Time:
+    """``now()`` as a message stamp (a ``builtin_interfaces/Time``): what a component puts in the
+    headers it publishes, so the stamps it writes and the ages others compute with ``now()`` are
+    on one clock (simulated seconds when a simulator drives the run). ``Time.now()`` is the wall
+    clock, for stamps that other processes compare with wall time (the component status)."""
+    from emos.msgs.std import Time as _Time  # lazily, as the other message imports here
+
+    t = sim_time()
+    return _Time.now() if t is None else _Time.from_sec(t)  # the wall clock to the nanosecond
 
 
 def release_driven_time() -> None:
@@ -78,13 +91,13 @@ def sim_time() -> float | None:
     return follower.time() if follower is not None else None
 
 
-def run_clock(ctx: "RunContext") -> "_PassiveFollower":
+def run_clock(ctx: RunContext) -> _PassiveFollower:
     """A reader of the simulated clock of run ``ctx`` for a process that is no node (the
     supervisor): ``.time()`` is the newest ``/clock`` time, None while no simulator publishes it."""
     return _PassiveFollower(ctx)
 
 
-def _passive_follower() -> "_PassiveFollower | None":
+def _passive_follower() -> _PassiveFollower | None:
     global _follower
     if _follower is None:
         from emos.transport.context import RunContext
@@ -101,7 +114,7 @@ def _passive_follower() -> "_PassiveFollower | None":
 class _PassiveFollower:
     """Reads the newest ``/clock`` message of the run when asked (no wake-ups, no answers)."""
 
-    def __init__(self, ctx: "RunContext") -> None:
+    def __init__(self, ctx: RunContext) -> None:
         self.ctx = ctx
         self._sub: Any = None
         self._last_look = 0.0
@@ -117,7 +130,9 @@ class _PassiveFollower:
                 from emos.msgs import Clock
                 from emos.transport.pubsub import Subscriber
 
-                sub = Subscriber(self.ctx, CLOCK_TOPIC, Clock, queue_size=1)
+                # transient_local: the first read is the newest tick already published, not None
+                # until the next one (now() would read the wall clock in between).
+                sub = Subscriber(self.ctx, CLOCK_TOPIC, Clock, queue_size=1, transient_local=True)
                 if not sub.publishers():
                     sub.close()
                     return self._time
@@ -138,15 +153,15 @@ class SimTimer:
     The first tick after creation arms it; a callback's exception is logged (rate-limited) and
     the tick is still answered."""
 
-    def __init__(self, driver: "SimTimeDriver", period: float, callback: Callable[[], Any], name: str = "") -> None:
+    def __init__(self, driver: SimTimeDriver, period: float, callback: Callable[[], Any], name: str = "") -> None:
         if not period > 0:
             raise ValueError(f"timer period must be > 0 s, got {period}")
-        from emos.core.ratelimit import RepeatLimiter
+        from emos.ratelimit import RateLimitedLog
 
         self.period, self.callback, self.name = period, callback, name
-        self._driver: "SimTimeDriver | None" = driver
+        self._driver: SimTimeDriver | None = driver
         self._next: float | None = None
-        self._errors = RepeatLimiter()
+        self._errors = RateLimitedLog(log, interval=5.0)
         driver.timers.append(self)
 
     def fire_due(self, t: float) -> None:
@@ -158,9 +173,7 @@ class SimTimer:
         try:
             self.callback()
         except Exception as exc:
-            from emos.core.ratelimit import log_exception_limited
-
-            log_exception_limited(log, self._errors, exc, f"[{self.name}] timer")
+            self._errors.exception(exc, f"[{self.name}] timer")
         while self._next <= t + 1e-9:
             self._next += self.period
 
@@ -175,7 +188,7 @@ class SimTimeDriver:
     """Drives one node on simulated time and answers its ticks (used by ``Node`` when the
     component's config has ``use_sim_time``)."""
 
-    def __init__(self, ctx: "RunContext", name: str, waker: "Waker", period: Callable[[], float]) -> None:
+    def __init__(self, ctx: RunContext, name: str, waker: Waker, period: Callable[[], float]) -> None:
         from emos.msgs import Clock, LockstepAck
         from emos.transport.pubsub import Publisher, Subscriber
 

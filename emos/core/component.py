@@ -14,13 +14,16 @@ from __future__ import annotations
 
 import inspect
 import logging
-from typing import TYPE_CHECKING, Any, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from emos.config.base import BaseComponentConfig, ComponentRunType
 from emos.config.loader import load_into
+from emos.core.conventions import check_topics, resolve_config
 from emos.core.fallbacks import FallbackHooks
 from emos.core.health import Status
 from emos.core.lifecycle import LifecycleState
+from emos.errors import EmosError
 from emos.io.topic import Topic
 from emos.transport.limits import check_component_name
 
@@ -30,20 +33,13 @@ if TYPE_CHECKING:
 _COMPONENT_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_")
 
 
-class ComponentError(RuntimeError):
+class ComponentError(EmosError, RuntimeError):
     """A component used in a way its state does not allow."""
 
 
 def _check_topics(component: str, role: str, topics: Sequence[Topic] | None) -> list[Topic]:
-    if topics is None:
-        return []
-    if isinstance(topics, Topic):
-        topics = [topics]
-    out = []
-    for t in topics:
-        if not isinstance(t, Topic):
-            raise TypeError(f"component {component!r}: {role} must be Topic objects, got {type(t).__name__} {t!r}")
-        out.append(t)
+    # Plain components declare no types (spec None); subclasses check theirs (emos.core.conventions).
+    out = check_topics(component, "", role.rstrip("s"), topics, None)
     names = [t.name for t in out]
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
@@ -79,9 +75,9 @@ class BaseComponent(FallbackHooks):
             raise TypeError(f"component {component_name!r}: unexpected argument(s) {', '.join(sorted(kwargs))}")
         self.component_name = component_name
         self.node_name = component_name
-        if config is not None and not isinstance(config, BaseComponentConfig):
-            raise TypeError(f"component {component_name!r}: config must be a BaseComponentConfig, got {type(config).__name__}")
-        self.config: BaseComponentConfig = config if config is not None else getattr(self, "config", None) or BaseComponentConfig()
+        if config is None:  # a subclass may have set its config before calling us
+            config = getattr(self, "config", None)
+        self.config: BaseComponentConfig = resolve_config(component_name, type(self).__name__, config, type(self).config_class())
         self.in_topics = _check_topics(component_name, "inputs", inputs)
         self.out_topics = _check_topics(component_name, "outputs", outputs)
         self.config_file = config_file
@@ -101,6 +97,12 @@ class BaseComponent(FallbackHooks):
         self._logger = logging.getLogger(f"emos.{component_name}")
 
     # -- configuration --------------------------------------------------------------------------
+    @classmethod
+    def config_class(cls) -> type[BaseComponentConfig]:
+        """The config class this component runs with (subclasses narrow it); a recipe that gives
+        no config gets a default instance of it (see emos.core.conventions.resolve_config)."""
+        return BaseComponentConfig
+
     def _apply_config_file(self, path: str) -> None:
         topics = load_into(self.config, path, self.component_name)
         for section, attr in (("inputs", "in_topics"), ("outputs", "out_topics")):
@@ -172,7 +174,7 @@ class BaseComponent(FallbackHooks):
 
     # -- inside a running component ---------------------------------------------------------------
     @property
-    def node(self) -> "Node":
+    def node(self) -> Node:
         if self._node is None:
             raise ComponentError(f"component {self.component_name!r} is not running; this is only available once it has been brought up")
         return self._node
@@ -200,7 +202,7 @@ class BaseComponent(FallbackHooks):
         self.node.publish(topic, msg)
 
     @property
-    def health_status_publisher(self) -> "_StatusPublisher":
+    def health_status_publisher(self) -> _StatusPublisher:
         """Publishes a status at once, from a callback or another thread, as in the ROS-based
         EMOS: ``self.health_status_publisher.publish(self.health_status())``. The node publishes
         the status by itself otherwise: after a step that changed it, and at ``heartbeat_rate``."""
@@ -298,7 +300,7 @@ class _StatusPublisher:
 
     __slots__ = ("_node",)
 
-    def __init__(self, node: "Node"):
+    def __init__(self, node: Node):
         self._node = node
 
     def publish(self, msg: Any) -> None:

@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import functools
 import time
-from typing import Any, Callable, Sequence
+from collections.abc import Callable
+from typing import Any
 
+from emos.core.control import request_lifecycle
 from emos.core.health import HealthLevel
 
 DEFAULT_RESTART_AFTER_S = 0.25
@@ -115,7 +117,10 @@ class FallbackTracker:
 
     def observe(self, level: int, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
-        level = HealthLevel(level) if level in iter(HealthLevel) else HealthLevel.GENERAL
+        try:
+            level = HealthLevel(level)
+        except ValueError:  # a level this version does not know
+            level = HealthLevel.GENERAL
         if level in LEVEL_HANDLERS:
             self.healthy_since = None
             if self.failing_since is None or self.level not in LEVEL_HANDLERS:
@@ -203,9 +208,19 @@ def _fallback_arg(where: str, action: Any, fallback: Any) -> Any:
     return value
 
 
+def _lifecycle_request_method(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Mark ``start``/``stop``/``restart`` below: an Action of one of them (not of a subclass's
+    override, which has no mark) is a lifecycle request (see emos.events.action)."""
+    method._emos_lifecycle_request = True  # type: ignore[attr-defined]
+    return method
+
+
 class FallbackHooks:
     """The ``on_*_fail`` methods of :class:`~emos.core.component.BaseComponent`."""
 
+    # Lets emos.events.action tell a component's method from any other callable without
+    # importing the component module (which imports this one).
+    _emos_component = True
     _fallbacks: dict[str, Fallback]
     component_name: str
 
@@ -240,14 +255,17 @@ class FallbackHooks:
         return dict(self.__dict__.get("_fallbacks", {}))
 
     # -- lifecycle requests (as actions they go through the supervisor; see emos.actions) -------
+    @_lifecycle_request_method
     def start(self) -> None:
         """Ask the supervisor to activate this component."""
         self._lifecycle_request("start")
 
+    @_lifecycle_request_method
     def stop(self) -> None:
         """Ask the supervisor to deactivate this component."""
         self._lifecycle_request("stop")
 
+    @_lifecycle_request_method
     def restart(self, wait_time: float = 0.0) -> None:
         """Ask the supervisor to restart this component (counted against its restart intensity)."""
         self._lifecycle_request("restart", wait_time)
@@ -255,21 +273,11 @@ class FallbackHooks:
     def _lifecycle_request(self, op: str, wait_time: float = 0.0) -> None:
         node = getattr(self, "_node", None)
         if node is None:
-            from emos.core.component import ComponentError
-
-            raise ComponentError(f"component {self.component_name!r} is not running; use emos.actions.{op}(component=...) in a recipe")
-        from emos.core.reconfig import request_lifecycle
-
+            # BaseComponent.node raises its ComponentError while not running: the same error,
+            # saying what a recipe does instead (no import of the component module from here).
+            try:
+                node = self.node  # type: ignore[attr-defined]
+            except Exception as exc:
+                raise type(exc)(f"component {self.component_name!r} is not running; use emos.actions.{op}(component=...) in a recipe") from None
         request_lifecycle(node, op, wait_time)
 
-
-def launcher_fallback(action_name: str, components: Sequence[Any], max_retries: int | None, policy: str) -> None:
-    """Check a launcher-wide policy's action name against every component (at bringup)."""
-    from emos.core.component import BaseComponent
-
-    for comp in components:
-        if action_name in ("start", "stop", "restart"):
-            continue
-        method = getattr(comp, action_name, None)
-        if not callable(method) or action_name.startswith("_") or not isinstance(comp, BaseComponent):
-            raise ValueError(f"launcher.{policy}(action_name={action_name!r}): component {comp.component_name!r} has no public method {action_name!r}")

@@ -19,11 +19,14 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.core import control as C
+from emos.errors import EmosError
+
 MODES = ("stall", "slow", "nan", "inf", "truncate", "freeze", "jump")
 ENV_ENABLE = "EMOS_CHAOS"
 
 
-class FaultInjectionError(ValueError):
+class FaultInjectionError(EmosError, ValueError):
     """A fault that cannot be applied here (disabled, unknown mode, wrong message type)."""
 
 
@@ -98,20 +101,22 @@ class PublishFaults:
 def fault_ops(node: Any) -> dict[str, Any]:
     """Control-socket operations ``inject_fault`` and ``clear_fault`` for the chaos suite."""
 
-    async def inject_fault(req: dict, stream: Any) -> dict[str, Any]:
+    faults: PublishFaults = node.publish_faults
+
+    async def inject_fault(req: dict[str, Any], stream: Any) -> dict[str, Any]:
         topic = req.get("topic")
         outputs = {t.name: t for t in node.component.out_topics}
-        if topic not in outputs:
+        if not isinstance(topic, str) or topic not in outputs:
             raise FaultInjectionError(f"component {node.name!r} publishes no {topic!r}; its outputs: {', '.join(sorted(outputs)) or 'none'}")
         params = req.get("params") or {}
         if not isinstance(params, dict):
             raise FaultInjectionError("inject_fault expects 'params': a map")
-        return node.publish_faults.set(topic, outputs[topic].msg_type, str(req.get("mode")), **params)
+        return faults.set(topic, outputs[topic].msg_type, str(req.get("mode")), **params)
 
-    async def clear_fault(req: dict, stream: Any) -> int:
-        return node.publish_faults.clear(req.get("topic"))
+    async def clear_fault(req: dict[str, Any], stream: Any) -> int:
+        return faults.clear(req.get("topic"))
 
-    return {"inject_fault": inject_fault, "clear_fault": clear_fault}
+    return {C.INJECT_FAULT: inject_fault, C.CLEAR_FAULT: clear_fault}
 
 
 def _jumped(msg: Any, dx: float, dy: float) -> Any:

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Sequence
 from enum import IntEnum
-from typing import Sequence
 
 from emos.msgs.status import ComponentStatus
 from emos.msgs.std import Header, Time
@@ -81,6 +81,9 @@ class Status:
     def to_msg(self, lifecycle_state: str = "") -> ComponentStatus:
         with self._lock:
             return ComponentStatus(
+                # Wall time on purpose, even in a simulated run: the supervisor tells a status of
+                # this incarnation from an earlier one's by comparing it with the wall time the
+                # process started (supervisor/fallback_driver.py). Data stamps use emos.core.clock.
                 header=Header(stamp=Time.now()),
                 status=int(self.level),
                 src_algorithms=self.algorithms,

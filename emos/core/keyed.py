@@ -16,54 +16,26 @@ A recipe then rewires one role without restating the others, as in the ROS origi
     planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)
 
 A wrong key or a topic of a type the key does not accept fails here, at definition time, naming
-the component, the key and the accepted types. The flat ``in_topics`` / ``out_topics`` lists
-that the node opens are derived from the keyed tables, so nothing else in the runtime changes.
+the component, the key and the accepted types (the rule lives in :mod:`emos.core.conventions`,
+shared with the agents' ``ModelComponent``, which declares its topics as lists). The flat
+``in_topics`` / ``out_topics`` lists that the node opens are derived from the keyed tables, so
+nothing else in the runtime changes.
 """
 from __future__ import annotations
 
 import enum
-from typing import Any, ClassVar, Mapping, Sequence
-
-from attrs import define, field
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
 
 from emos.core.component import BaseComponent
+from emos.core.conventions import AllowedTopic, check_topics
+from emos.errors import EmosError
 from emos.io.topic import Topic, normalize_topic_name
-from emos.msgs.registry import canonical_name, resolve
+
+__all__ = ["AllowedTopic", "KeyedComponent", "UnknownTopicKey", "key_name"]
 
 
-def _type_names(value: Sequence[Any]) -> tuple[str, ...]:
-    if isinstance(value, (str, type)):
-        value = (value,)
-    names = tuple(canonical_name(resolve(v)) for v in value)  # unknown names fail at class definition
-    if not names:
-        raise ValueError("AllowedTopic.types must name at least one message type")
-    return names
-
-
-@define(frozen=True)
-class AllowedTopic:
-    """What one key accepts: message types, how many topics (``number``; ``-1`` = any), a default.
-
-    ``required``: the component cannot run without a topic for this key (bringup fails with the
-    key named); a key with no default and ``required=False`` is an optional feature the recipe
-    switches on by giving a topic (e.g. the controller's ``vision_tracking``).
-    """
-
-    types: tuple[str, ...] = field(converter=_type_names)
-    default: Topic | list[Topic] | None = None
-    number: int = 1
-    required: bool = False
-
-    def __attrs_post_init__(self) -> None:
-        if self.number == 0 or self.number < -1:
-            raise ValueError(f"AllowedTopic.number must be >= 1 or -1 (any), got {self.number}")
-
-
-def _short(type_name: str) -> str:
-    return type_name.rsplit("/", 1)[-1]
-
-
-class UnknownTopicKey(KeyError):
+class UnknownTopicKey(EmosError, KeyError):
     """A key the component does not have; the message lists the keys it has."""
 
     def __str__(self) -> str:
@@ -227,22 +199,7 @@ class KeyedComponent(BaseComponent):
                     f"component {self.component_name!r} ({type(self).__name__}) has no {role[:-1]} key {key!r}; "
                     f"its {role[:-1]} keys are: {', '.join(sorted(allowed)) or 'none'}"
                 )
-            given = [] if value is None else ([value] if isinstance(value, Topic) else list(value))
-            for t in given:
-                if not isinstance(t, Topic):
-                    raise TypeError(f"component {self.component_name!r}: {role[:-1]} {key!r} must be a Topic, got {type(t).__name__} {t!r}")
-                if t.type_name not in spec.types:
-                    raise TypeError(
-                        f"component {self.component_name!r} ({type(self).__name__}): {role[:-1]} {key!r} accepts "
-                        f"{' or '.join(_short(n) for n in spec.types)}, but topic {t.name!r} is {_short(t.type_name)}"
-                    )
-            if spec.number != -1 and len(given) > spec.number:
-                raise ValueError(
-                    f"component {self.component_name!r}: {role[:-1]} {key!r} takes at most {spec.number} topic(s), got {len(given)}"
-                )
-            if not given and spec.required:
-                raise ValueError(f"component {self.component_name!r}: {role[:-1]} {key!r} is required and cannot be removed")
-            staged[key] = given
+            staged[key] = check_topics(self.component_name, type(self).__name__, role[:-1], value, spec, key=key)
         replaced = {key: self._keyed[role].get(key, []) for key in staged}
         self._keyed[role].update(staged)
         if role == "inputs" and self._trigger:

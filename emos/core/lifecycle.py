@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from enum import Enum
 
+from emos.errors import EmosError
+
 
 class LifecycleState(str, Enum):
     UNCONFIGURED = "unconfigured"
@@ -48,7 +50,7 @@ TABLE: dict[tuple[LifecycleState, Transition], LifecycleState] = {
 }
 
 
-class InvalidTransition(RuntimeError):
+class InvalidTransition(EmosError, RuntimeError):
     pass
 
 

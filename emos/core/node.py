@@ -2,8 +2,9 @@
 
 A Node runs the same way in its own process and in a thread of the launcher (threaded mode):
 one uvloop event loop, one wake-up FIFO for all its subscriptions, a control socket
-``<run>/ctl/<component>.sock`` for lifecycle and parameter requests, and a status publisher on
-``<component>/status`` that is both the health report and the supervisor's heartbeat.
+``<run>/ctl/<component>.sock`` for lifecycle and parameter requests (its operations, path and
+clients: :mod:`emos.core.control`), and a status publisher on ``<component>/status`` that is
+both the health report and the supervisor's heartbeat.
 """
 from __future__ import annotations
 
@@ -14,21 +15,23 @@ import os
 import signal
 import threading
 import time
-from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from emos.config.base import ComponentRunType
-from emos.core.clock import SimTimeDriver, SimTimer
+from emos.core import control as C
 from emos.core import lifecycle as L
+from emos.core.clock import SimTimeDriver, SimTimer
 from emos.core.component import BaseComponent
-from emos.core.ratelimit import RepeatLimiter, log_exception_limited
+from emos.core.control import control_socket
 from emos.core.faults import PublishFaults, fault_ops
 from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
 from emos.core.services import ActionServer, ServiceServer
 from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs.status import ComponentStatus
-from emos.transport.context import RunContext, current, encode_name
+from emos.ratelimit import RateLimitedLog
+from emos.transport.context import RunContext, current
 from emos.transport.pubsub import Publisher
 from emos.transport.select import TopicPublisher, TopicSubscriber, open_publisher, open_server_bridge, open_subscriber, payload_decoder
 from emos.transport.waker import DEFAULT_SPIN_US, Waker
@@ -36,9 +39,7 @@ from emos.transport.waker import DEFAULT_SPIN_US, Waker
 ENV_SUPERVISOR_SOCKET = "EMOS_SUPERVISOR_SOCKET"
 ENV_WAKE_SPIN_US = "EMOS_WAKE_SPIN_US"
 
-
-def control_socket(ctx: RunContext, component_name: str) -> Path:
-    return ctx.run_dir / "ctl" / f"{encode_name(component_name)}.sock"
+__all__ = ["Node", "control_socket", "process_alive", "wake_spin_setting", "ENV_SUPERVISOR_SOCKET", "ENV_WAKE_SPIN_US"]
 
 
 _STAMP_THEN_ORDER = operator.itemgetter(0, 1)  # a backlog item: (stamp, order read, input, payload)
@@ -51,7 +52,9 @@ class _Input:
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
         self.decode = payload_decoder(sub, topic.msg_type)  # a ring's payload -> its message (network ones come decoded)
-        self.raw: bytearray | None = None
+        # The latest payload as take_raw gives it: a ring's read-only buffer, or a network
+        # subscriber's decoded message (see TopicSubscriber.take_raw); None before the first.
+        self.raw: Any = None
         self.stamp_ns = 0
         self.received_ns = 0
         self.decoded: Any = None
@@ -108,12 +111,13 @@ class Node:
         self.loop: asyncio.AbstractEventLoop | None = None
         self.exit_code = 0
         self._stop: asyncio.Event | None = None
+        self._exit_task: asyncio.Future[None] | None = None  # a signal's graceful exit (see _on_signal)
         self._waker: Waker | None = None
         self._inputs: dict[str, _Input] = {}
         # Publish stamp of the message that triggered the running step (None outside one): the
         # input's latest stamp may be newer when the step works through a backlog.
         self.trigger_stamp_ns: int | None = None
-        self._deferred: list[tuple[int, int, _Input, bytes]] = []  # triggering messages for the next pass (see _take_inputs)
+        self._deferred: list[tuple[int, int, _Input, Any]] = []  # triggering messages for the next pass (see _take_inputs)
         self._publishers: dict[str, tuple[TopicPublisher, threading.Lock]] = {}
         self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
@@ -122,15 +126,15 @@ class Node:
         self._status_revision = -1  # the health status revision last published (see _run_step)
         self._main_timer: _Timer | None = None
         self._heartbeat: _Timer | None = None  # started by _main: a node driven by hand has none
-        self._timers: list["_Timer | SimTimer"] = []
+        self._timers: list[_Timer | SimTimer] = []
         self._servers: list[Any] = []  # ServiceServer, ActionServer, and their Zenoh bridges
-        self._extra_servers: list[tuple[str, tuple]] = []
+        self._extra_servers: list[tuple[str, tuple[Any, ...]]] = []
         self._control: RpcServer | None = None
         self._supervisor: AsyncRpcClient | None = None
         self._step_kwargs = component._step_accepts_kwargs()
         self._sim_time: SimTimeDriver | None = None  # config.use_sim_time: steps and answers on /clock
         self._been_active = False  # answers /clock ticks only once it has been active (see _take_inputs)
-        self._step_errors = RepeatLimiter()
+        self._step_errors = RateLimitedLog(interval=5.0)
         self.steps = 0
 
     # ============================================================================ running
@@ -191,11 +195,12 @@ class Node:
         if not self.supervisor_socket:
             return
         self._supervisor = AsyncRpcClient(self.supervisor_socket)
-        await self._supervisor.call("hello", component=self.name, pid=os.getpid(), timeout=10.0)
+        await self._supervisor.call(C.SUPERVISOR_HELLO, component=self.name, pid=os.getpid(), timeout=10.0)
 
     def _on_signal(self, sig: int) -> None:
         self.log.info("[%s] %s received: shutting down", self.name, signal.Signals(sig).name)
-        asyncio.ensure_future(self._graceful_exit())
+        # Held so the task is not garbage-collected before it runs to the end.
+        self._exit_task = asyncio.ensure_future(self._graceful_exit())
 
     async def _graceful_exit(self, code: int = 0) -> None:
         if self.state != L.LifecycleState.FINALIZED:
@@ -314,7 +319,9 @@ class Node:
             timer.cancel()
         self._timers.clear()
         for server in self._servers:
-            await server.close()
+            closing = server.close()  # a server closes with await, its Zenoh bridge at once
+            if closing is not None:
+                await closing
         self._servers.clear()
 
     async def _on_cleanup(self) -> None:
@@ -358,7 +365,7 @@ class Node:
         except Exception as exc:
             # Catch, don't crash: the process lives on, reports COMPONENT_FAILURE, and fallbacks
             # (or the supervisor, if it never recovers) decide what happens next.
-            log_exception_limited(self.log, self._step_errors, exc, f"[{self.name}] execution step")
+            self._step_errors.exception(exc, f"[{self.name}] execution step", logger=self.log)
             comp.health_status.set_fail_component(component_names=[self.name], message=f"{type(exc).__name__}: {exc}")
         if sim_time is not None:  # what a simulator that charges compute time delays our outputs by
             sim_time.compute_s += time.thread_time() - cpu0
@@ -498,17 +505,17 @@ class Node:
     def stale_inputs(self) -> list[str]:
         stale = []
         for name, inp in self._inputs.items():
-            if inp.raw is None:
-                stale.append(name)
-            elif inp.topic.data_timeout and self._age_s(inp) > inp.topic.data_timeout:
+            if inp.raw is None or (inp.topic.data_timeout and self._age_s(inp) > inp.topic.data_timeout):
                 stale.append(name)
         return stale
 
     def publish(self, topic: Topic | str, msg: Any) -> None:
         # A name exactly as declared needs no normalizing (a key is its own normal form): that
         # check costs more than the rest of this method, on every message.
-        name = topic
-        entry = self._publishers.get(topic) if type(topic) is str else None
+        entry = None
+        if type(topic) is str:
+            name = topic
+            entry = self._publishers.get(topic)
         if entry is None:
             name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
             entry = self._publishers.get(name)
@@ -564,7 +571,7 @@ class Node:
             self.publish_status()
 
     # ============================================================================ timers and servers
-    def create_timer(self, period: float, callback: Callable[[], Any]) -> "_Timer | SimTimer":
+    def create_timer(self, period: float, callback: Callable[[], Any]) -> _Timer | SimTimer:
         """A periodic callback; on simulated time (``SimTimer``) in a ``use_sim_time`` node."""
         if self.loop is None:
             raise RuntimeError(f"component {self.name!r}: timers can only be created while running")
@@ -590,26 +597,19 @@ class Node:
             self._heartbeat.period = 1.0 / self.component.config.heartbeat_rate
 
     # ============================================================================ control socket
-    def _control_ops(self) -> dict[str, Callable]:
-        async def get_state(req: dict, stream: Any) -> dict:
+    def _control_ops(self) -> dict[str, Callable[..., Any]]:
+        async def get_state(req: dict[str, Any], stream: Any) -> dict[str, Any]:
             h = self.component.health_status
             return {"state": self.state.value, "health": h.level.name, "pid": os.getpid(), "steps": self.steps, "run_type": self.component.run_type.value}
 
-        async def transition(req: dict, stream: Any) -> str:
+        async def transition(req: dict[str, Any], stream: Any) -> str:
             return (await self.transition(req["transition"])).value
 
-        async def execute_method(req: dict, stream: Any) -> Any:
-            name = req.get("method", "")
-            if not isinstance(name, str) or name.startswith("_") or not callable(getattr(self.component, name, None)):
-                raise AttributeError(f"component {self.name!r} has no public method {name!r}")
-            result = getattr(self.component, name)(*req.get("args", []), **req.get("kwargs", {}))
-            return result if isinstance(result, (type(None), bool, int, float, str, list, dict)) else repr(result)
-
-        async def exit_(req: dict, stream: Any) -> bool:
+        async def exit_(req: dict[str, Any], stream: Any) -> bool:
             asyncio.get_running_loop().call_soon(lambda: asyncio.ensure_future(self._graceful_exit(int(req.get("code", 0)))))
             return True
 
-        async def info(req: dict, stream: Any) -> dict:
+        async def info(req: dict[str, Any], stream: Any) -> dict[str, Any]:
             return {
                 "component": self.name, "type": type(self.component).__name__, "state": self.state.value,
                 "inputs": {t.name: t.type_name for t in self.component.in_topics},
@@ -617,12 +617,9 @@ class Node:
                 "config": self.component.config.asdict(),
             }
 
-        reconfig = reconfig_ops(self)
-        return {"get_state": get_state, "transition": transition,
-                # The runtime's original name for a validated parameter update, kept as an alias.
-                "update_config": reconfig["update_config_parameters"],
-                "execute_method": execute_method, "exit": exit_, "info": info,
-                **reconfig, **fault_ops(self)}
+        # Calling a method (execute_method), parameters, files, topics, steps: emos.core.reconfig.
+        return {C.GET_STATE: get_state, C.TRANSITION: transition, C.EXIT: exit_, C.INFO: info,
+                **reconfig_ops(self), **fault_ops(self)}
 
 
 class _Timer:

@@ -6,10 +6,13 @@
                                to the state it was in
 ``update_config_parameter``    one parameter; ``update_config_parameters``: several (all or none)
 ``configure_from_file``        a YAML, TOML or JSON file (its ``/**`` and own sections)
-``execute_method``             call a public method of the component
-``run_action``                 a component-method action (arguments in the action wire format)
+``execute_method``             call a public method of the component (arguments and result in
+                               the wire format of :mod:`emos.core.control`); actions,
+                               fallbacks, the CLI and other runs all call methods this way
 ``run_step``                   one step of a component whose trigger is an Event
 =============================  ==============================================================
+
+The op names, the socket path, the wire format and the clients live in :mod:`emos.core.control`.
 
 Every parameter change is validated by the component's attrs config: a bad value is refused with
 the validator's message and the old value stays. ``keep_alive=False`` deactivates the component
@@ -18,26 +21,22 @@ are ordered with its steps, never concurrent with one.
 """
 from __future__ import annotations
 
-import asyncio
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
+from emos.core import control as C
 from emos.core import lifecycle as L
+from emos.core.control import ControlClient, decode_value, encode_result, public_method, request_lifecycle
 from emos.io.topic import Topic, normalize_topic_name
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # for annotations only: the node imports this module
     from emos.core.node import Node
 
-
-def _jsonable(result: Any) -> Any:
-    from emos.events.action import ActionError, encode_value
-
-    try:
-        return encode_value(result, "result")
-    except ActionError:
-        return repr(result)
+__all__ = ["reconfig_ops", "request_lifecycle", "ComponentServices"]
+T = TypeVar("T")
 
 
-async def _cycle(node: "Node", down_to: L.LifecycleState, change: Callable[[], Any]) -> Any:
+async def _cycle(node: Node, down_to: L.LifecycleState, change: Callable[[], T]) -> T:
     """Bring the node down to ``down_to`` (if it is above), apply ``change``, bring it back."""
     order = [L.LifecycleState.UNCONFIGURED, L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE]
     was = node.state
@@ -54,30 +53,31 @@ async def _cycle(node: "Node", down_to: L.LifecycleState, change: Callable[[], A
                 await node.transition(t)
 
 
-def reconfig_ops(node: "Node") -> dict[str, Callable]:
+def reconfig_ops(node: Node) -> dict[str, Callable[..., Any]]:
     comp = node.component
 
-    async def update_params(values: dict, keep_alive: bool) -> dict:
+    async def update_params(values: dict[str, Any], keep_alive: bool) -> dict[str, Any]:
         if not isinstance(values, dict) or not values:
             raise ValueError("expects 'values': a non-empty map of parameter names to values")
 
-        def apply() -> dict:
+        def apply() -> dict[str, Any]:
             comp.config.update(**values)  # all validated first; nothing changes on an error
             node.on_config_changed()
             comp.get_logger().info("[%s] parameters set: %s", comp.component_name, ", ".join(f"{k}={v!r}" for k, v in values.items()))
-            return comp.config.asdict()
+            config: dict[str, Any] = comp.config.asdict()
+            return config
 
         if keep_alive:
             return apply()
         return await _cycle(node, L.LifecycleState.INACTIVE, apply)
 
-    async def update_config_parameter(req: dict, stream: Any) -> dict:
+    async def update_config_parameter(req: dict[str, Any], stream: Any) -> dict[str, Any]:
         name = req.get("name")
         if not isinstance(name, str):
             raise ValueError("update_config_parameter expects 'name' (str) and 'value'")
         return await update_params({name: req.get("value")}, bool(req.get("keep_alive", True)))
 
-    async def update_config_parameters(req: dict, stream: Any) -> dict:
+    async def update_config_parameters(req: dict[str, Any], stream: Any) -> dict[str, Any]:
         values = req.get("values")
         if values is None and "names" in req:
             names, vals = list(req.get("names") or []), list(req.get("values_list") or req.get("new_values") or [])
@@ -86,19 +86,20 @@ def reconfig_ops(node: "Node") -> dict[str, Callable]:
             values = dict(zip(names, vals))
         return await update_params(values or {}, bool(req.get("keep_alive", True)))
 
-    async def configure_from_file(req: dict, stream: Any) -> dict:
+    async def configure_from_file(req: dict[str, Any], stream: Any) -> dict[str, Any]:
         path = str(req["path"])
 
-        def apply() -> dict:
+        def apply() -> dict[str, Any]:
             comp.configure(path)
             node.on_config_changed()
-            return comp.config.asdict()
+            config: dict[str, Any] = comp.config.asdict()
+            return config
 
         if bool(req.get("keep_alive", True)):
             return apply()
         return await _cycle(node, L.LifecycleState.INACTIVE, apply)
 
-    async def change_topic(req: dict, stream: Any) -> dict:
+    async def change_topic(req: dict[str, Any], stream: Any) -> dict[str, Any]:
         direction = req.get("direction", 0)
         direction = {"input": 0, "output": 1}.get(direction, direction) if isinstance(direction, str) else direction
         if direction not in (0, 1):
@@ -111,7 +112,7 @@ def reconfig_ops(node: "Node") -> dict[str, Callable]:
             raise KeyError(f"component {node.name!r} has no {'input' if direction == 0 else 'output'} {old_name!r}; it has {sorted(t.name for t in topics)}")
         new = Topic(name=str(req["new_name"]), msg_type=req.get("new_msg_type") or old.msg_type, qos_profile=old.qos_profile, data_timeout=old.data_timeout)
 
-        def swap() -> dict:
+        def swap() -> dict[str, Any]:
             topics[topics.index(old)] = new
             if old in comp._trigger:
                 comp._trigger[comp._trigger.index(old)] = new
@@ -119,52 +120,28 @@ def reconfig_ops(node: "Node") -> dict[str, Callable]:
 
         return await _cycle(node, L.LifecycleState.UNCONFIGURED, swap)
 
-    async def run_action(req: dict, stream: Any) -> Any:
-        from emos.events.action import decode_value
-
-        name = req.get("method", "")
-        method = getattr(comp, name, None) if isinstance(name, str) and not name.startswith("__") else None
-        if not callable(method):
-            raise AttributeError(f"component {node.name!r} ({type(comp).__name__}) has no method {name!r}")
-        args = decode_value(req.get("args") or [])
-        kwargs = decode_value(req.get("kwargs") or {})
+    async def execute_method(req: dict[str, Any], stream: Any) -> Any:
+        method = public_method(comp, req.get("method", ""), node.name)
+        args, kwargs = req.get("args") or [], req.get("kwargs") or {}
+        if not isinstance(args, list) or not isinstance(kwargs, dict):
+            raise TypeError(f"execute_method {node.name}.{req.get('method')}: 'args' must be a list and 'kwargs' a map, "
+                            f"got {type(args).__name__} and {type(kwargs).__name__}")
         try:
-            return _jsonable(method(*args, **kwargs))
+            return encode_result(method(*decode_value(args), **decode_value(kwargs)))
         finally:
-            node.publish_status()  # what the action did to the health is seen at once (fallbacks wait for it)
+            node.publish_status()  # what the method did to the health is seen at once (fallbacks wait for it)
 
-    async def run_step(req: dict, stream: Any) -> bool:
+    async def run_step(req: dict[str, Any], stream: Any) -> bool:
         if node.state != L.LifecycleState.ACTIVE:
             raise RuntimeError(f"component {node.name!r} is {node.state.value}, not active: step not run")
         node._run_step()
         return True
 
     return {
-        "update_config_parameter": update_config_parameter, "update_config_parameters": update_config_parameters,
-        "configure_from_file": configure_from_file, "change_topic": change_topic,
-        "run_action": run_action, "run_step": run_step,
+        C.UPDATE_PARAMETER: update_config_parameter, C.UPDATE_PARAMETERS: update_config_parameters,
+        C.CONFIGURE_FROM_FILE: configure_from_file, C.CHANGE_TOPIC: change_topic,
+        C.EXECUTE_METHOD: execute_method, C.RUN_STEP: run_step,
     }
-
-
-def request_lifecycle(node: "Node", op: str, wait_time: float = 0.0) -> None:
-    """From inside a component (``self.restart()``): ask the supervisor, without waiting for it
-    (a restart ends this very process)."""
-    loop = node.loop
-    if loop is None or node.supervisor_socket is None:
-        raise RuntimeError(f"component {node.name!r}: no supervisor to ask for {op}")
-
-    async def ask() -> None:
-        from emos.core.rpc import AsyncRpcClient
-
-        client = AsyncRpcClient(node.supervisor_socket)  # type: ignore[arg-type]
-        try:
-            await client.call("lifecycle", component=node.name, request=op, wait_time=wait_time, wait=False, by="component", timeout=10.0)
-        except Exception as exc:
-            node.log.error("[%s] %s request to the supervisor failed: %s", node.name, op, exc)
-        finally:
-            await client.close()
-
-    loop.call_soon_threadsafe(lambda: asyncio.ensure_future(ask()))
 
 
 class ComponentServices:
@@ -177,33 +154,32 @@ class ComponentServices:
     """
 
     def __init__(self, component_name: str, ctx: Any = None, timeout: float = 15.0):
-        from emos.core.node import control_socket
-        from emos.transport.context import current
-
         self.component_name = component_name
-        self.path = control_socket(ctx or current(), component_name)
+        self._client = ControlClient(component_name, ctx, timeout=timeout)
+        self.path = self._client.path
         self.timeout = timeout
 
-    def _call(self, op: str, **payload: Any) -> Any:
-        from emos.core.rpc import RpcClient
+    def _call(self, op: str, **payload: Any) -> dict[str, Any]:
+        """One of the reconfiguration operations, which all answer with a map."""
+        self._client.timeout = self.timeout
+        answer: dict[str, Any] = self._client.call(op, **payload)
+        return answer
 
-        with RpcClient(self.path, timeout=self.timeout) as rpc:
-            return rpc.call(op, **payload)
+    def change_topic(self, direction: int | str, old_name: str, new_name: str, new_msg_type: str | None = None) -> dict[str, Any]:
+        return self._call(C.CHANGE_TOPIC, direction=direction, old_name=old_name, new_name=new_name, new_msg_type=new_msg_type)
 
-    def change_topic(self, direction: int | str, old_name: str, new_name: str, new_msg_type: str | None = None) -> dict:
-        return self._call("change_topic", direction=direction, old_name=old_name, new_name=new_name, new_msg_type=new_msg_type)
+    def update_parameter(self, name: str, value: Any, keep_alive: bool = True) -> dict[str, Any]:
+        return self._call(C.UPDATE_PARAMETER, name=name, value=value, keep_alive=keep_alive)
 
-    def update_parameter(self, name: str, value: Any, keep_alive: bool = True) -> dict:
-        return self._call("update_config_parameter", name=name, value=value, keep_alive=keep_alive)
+    def update_parameters(self, values: dict[str, Any], keep_alive: bool = True) -> dict[str, Any]:
+        return self._call(C.UPDATE_PARAMETERS, values=values, keep_alive=keep_alive)
 
-    def update_parameters(self, values: dict[str, Any], keep_alive: bool = True) -> dict:
-        return self._call("update_config_parameters", values=values, keep_alive=keep_alive)
-
-    def configure_from_file(self, path: str, keep_alive: bool = True) -> dict:
-        return self._call("configure_from_file", path=path, keep_alive=keep_alive)
+    def configure_from_file(self, path: str, keep_alive: bool = True) -> dict[str, Any]:
+        return self._call(C.CONFIGURE_FROM_FILE, path=path, keep_alive=keep_alive)
 
     def execute_method(self, method: str, *args: Any, **kwargs: Any) -> Any:
-        return self._call("execute_method", method=method, args=list(args), kwargs=kwargs)
+        self._client.timeout = self.timeout
+        return self._client.execute_method(method, *args, **kwargs)
 
-    def info(self) -> dict:
-        return self._call("info")
+    def info(self) -> dict[str, Any]:
+        return self._call(C.INFO)

@@ -15,10 +15,13 @@ import logging
 import os
 import socket
 import struct
+from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any
 
 import msgpack
+
+from emos.errors import EmosError, TransportError
 
 log = logging.getLogger("emos.rpc")
 
@@ -30,14 +33,14 @@ _LEN = struct.Struct("<I")
 MAX_FRAME = 64 << 20
 CONTROL_FRAME = 1 << 20
 
-Handler = Callable[[dict, "StreamWriter"], Awaitable[Any]]
+Handler = Callable[[dict[str, Any], "StreamWriter"], Awaitable[Any]]
 
 
-class RpcError(RuntimeError):
+class RpcError(EmosError, RuntimeError):
     """The remote side answered with an error."""
 
 
-class RpcConnectionError(ConnectionError):
+class RpcConnectionError(TransportError, ConnectionError):
     """No connection, or the connection broke before an answer came."""
 
 
@@ -83,8 +86,8 @@ class RpcServer:
         self.handlers = handlers
         self.name = name
         self._server: asyncio.base_events.Server | None = None
-        self._tasks: set[asyncio.Task] = set()
-        self._connections: set[asyncio.Task] = set()
+        self._tasks: set[asyncio.Task[None]] = set()  # requests being answered (_answer)
+        self._connections: set[asyncio.Task[Any]] = set()  # the tasks serving each connection
 
     async def start(self) -> None:
         # Bind under a temporary name and rename once listening: whoever sees the socket file
@@ -137,7 +140,7 @@ class RpcServer:
                 self._connections.discard(me)
             writer.close()
 
-    async def _answer(self, req: dict, writer: asyncio.StreamWriter) -> None:
+    async def _answer(self, req: dict[str, Any], writer: asyncio.StreamWriter) -> None:
         rid = req.get("id")
         handler = self.handlers.get(req["op"])
         if handler is None:
@@ -220,7 +223,7 @@ class RpcClient:
                 if frame.get("ok"):
                     return frame.get("result")
                 raise RpcError(frame.get("error", "unknown error"))
-        except (socket.timeout, TimeoutError) as exc:
+        except TimeoutError as exc:
             self.close()
             raise TimeoutError(f"{self.path}: no answer to {op!r} within {sock.gettimeout()} s") from exc
         except OSError as exc:
@@ -235,7 +238,7 @@ class RpcClient:
             self._sock.close()
             self._sock = None
 
-    def __enter__(self) -> "RpcClient":
+    def __enter__(self) -> RpcClient:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -250,8 +253,8 @@ class AsyncRpcClient:
         self._ids = itertools.count(1)
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
-        self._pending: dict[int, tuple[asyncio.Future, Callable[[Any], None] | None]] = {}
-        self._pump: asyncio.Task | None = None
+        self._pending: dict[int, tuple[asyncio.Future[Any], Callable[[Any], None] | None]] = {}
+        self._pump: asyncio.Task[None] | None = None
 
     async def connect(self) -> None:
         try:
@@ -291,13 +294,13 @@ class AsyncRpcClient:
             await self.connect()
         assert self._writer is not None
         rid = next(self._ids)
-        fut: asyncio.Future = asyncio.get_running_loop().create_future()
+        fut: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
         self._pending[rid] = (fut, on_stream)
         try:
             self._writer.write(pack_frame({"id": rid, "op": op, **payload}))
             await self._writer.drain()
             return await asyncio.wait_for(fut, timeout)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             raise TimeoutError(f"{self.path}: no answer to {op!r} within {timeout} s") from None
         except (ConnectionError, OSError) as exc:
             raise RpcConnectionError(f"{self.path}: {op!r} failed: {exc}") from exc

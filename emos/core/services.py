@@ -11,13 +11,15 @@ from __future__ import annotations
 import asyncio
 import threading
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
+from emos.core.rpc import AsyncRpcClient, RpcClient, RpcServer
+from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs.registry import resolve
 from emos.transport.context import RunContext, current, encode_name
-from emos.core.rpc import AsyncRpcClient, RpcClient, RpcServer
 
 
 def service_socket(ctx: RunContext, name: str) -> Path:
@@ -32,10 +34,10 @@ class ServiceServer:
         self.callback = callback
         self.server = RpcServer(service_socket(ctx, name), {"call": self._call, "describe": self._describe}, name=f"{owner}:{name}")
 
-    async def _describe(self, req: dict, stream: Any) -> dict:
+    async def _describe(self, req: dict[str, Any], stream: Any) -> dict[str, Any]:
         return {"request": self.request_type.__name__, "response": self.response_type.__name__}
 
-    async def _call(self, req: dict, stream: Any) -> bytes:
+    async def _call(self, req: dict[str, Any], stream: Any) -> bytes:
         request = codec.decode(self.request_type, req["request"])
         response = self.callback(request)
         if asyncio.iscoroutine(response):
@@ -90,7 +92,7 @@ class GoalHandle:
         self._cancel.set()
 
 
-class ActionCanceled(Exception):
+class ActionCanceled(EmosError):
     """Raised to the client when its goal ended because it was canceled."""
 
 
@@ -102,7 +104,7 @@ class ActionServer:
         self.goals: dict[str, GoalHandle] = {}
         self.server = RpcServer(service_socket(ctx, name), {"goal": self._goal, "cancel": self._cancel}, name=f"{owner}:{name}")
 
-    async def _goal(self, req: dict, stream: Any) -> dict:
+    async def _goal(self, req: dict[str, Any], stream: Any) -> dict[str, Any]:
         loop = asyncio.get_running_loop()
         goal_id = str(req.get("goal_id") or uuid.uuid4())
         goal = codec.decode(self.goal_type, req["goal"], copy=True)
@@ -123,7 +125,7 @@ class ActionServer:
             raise TypeError(f"action {self.name!r} callback returned {type(result).__name__}, expected {self.result_type.__name__}")
         return {"result": codec.pack(result), "canceled": handle.is_cancel_requested}
 
-    async def _cancel(self, req: dict, stream: Any) -> bool:
+    async def _cancel(self, req: dict[str, Any], stream: Any) -> bool:
         handle = self.goals.get(str(req.get("goal_id")))
         if handle is None:
             return False

@@ -2,19 +2,19 @@
 from __future__ import annotations
 
 import logging
-from typing import Iterable
+from collections.abc import Iterable
 
 from emos.config.base import ComponentRunType
 from emos.config.loader import ConfigError, read_config_file, section_problems
 from emos.core.component import BaseComponent
+from emos.errors import EmosError
 from emos.msgs.registry import canonical_name
 from emos.transport.limits import check_socket_name
-
 
 log = logging.getLogger("emos.config")
 
 
-class TopicTypeConflict(TypeError):
+class TopicTypeConflict(EmosError, TypeError):
     """Two components declare one topic with different message types."""
 
 

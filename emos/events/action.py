@@ -20,23 +20,19 @@ runs (dynamic data injection); a topic with no message yet gives None.
 from __future__ import annotations
 
 import inspect
-import sys
-from enum import Enum
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
-import attrs
-import numpy as np
-
-from emos.events.conditions import MsgPath, resolve_path, _MISSING
+# The wire format of arguments (and ActionError) live with the rest of the control plane; they
+# are re-exported here, where recipes and older code import them from.
+from emos.core.control import LIFECYCLE_REQUESTS, ActionError, decode_value, encode_value, is_public_name
+from emos.events.conditions import _MISSING, MsgPath, resolve_path
 from emos.io.topic import Topic
-from emos.msgs import codec
-from emos.msgs.registry import canonical_name, resolve
 
-LIFECYCLE_METHODS = ("start", "stop", "restart")
+LIFECYCLE_METHODS = LIFECYCLE_REQUESTS
 
-
-class ActionError(RuntimeError):
-    """An action that cannot run: bad target, unencodable argument, unreachable component."""
+__all__ = ["Action", "ActionError", "Literal", "LIFECYCLE_METHODS", "resolve_bindings", "call_signature_error",
+           "encode_value", "decode_value"]
 
 
 class Action:
@@ -50,7 +46,7 @@ class Action:
         if not isinstance(kwargs, dict) or not all(isinstance(k, str) for k in kwargs):
             raise TypeError(f"Action: kwargs must be a dict with str keys, got {kwargs!r}")
         self.method = method
-        self.args: tuple = tuple(args)
+        self.args: tuple[Any, ...] = tuple(args)
         self.kwargs: dict[str, Any] = dict(kwargs)
         self.parsers: list[tuple[Callable[..., Any], str | None]] = []
         self.kind = "function"
@@ -60,34 +56,36 @@ class Action:
         self._classify()
 
     def _classify(self) -> None:
-        from emos.core.component import BaseComponent
-
         owner = getattr(self.method, "__self__", None)
-        if isinstance(owner, BaseComponent):
-            self.component = owner.component_name
+        component = getattr(owner, "component_name", None)
+        # A component (BaseComponent, through emos.core.fallbacks.FallbackHooks) says so with a
+        # class attribute: this module is imported by the component's, so it does not import it.
+        if getattr(owner, "_emos_component", False) is True and isinstance(component, str):
+            self.component = component
             name = self.method.__name__
-            # BaseComponent's own start/stop/restart are lifecycle requests; a subclass that
-            # overrides one (a DriveManager's stop = brake) is an ordinary component method.
-            base = getattr(BaseComponent, name, None)
-            if name in LIFECYCLE_METHODS and getattr(self.method, "__func__", None) is base:
+            # BaseComponent's own start/stop/restart are lifecycle requests (they carry a mark);
+            # a subclass that overrides one (a DriveManager's stop = brake) is an ordinary
+            # component method.
+            if name in LIFECYCLE_METHODS and getattr(self.method, "_emos_lifecycle_request", False) is True:
                 self.kind = "lifecycle"
                 if self.args or set(self.kwargs) - {"wait_time"}:
                     raise TypeError(f"Action: {self.component}.{name} takes only wait_time; got args={self.args!r} kwargs={self.kwargs!r}")
                 self.kwargs = {"component": self.component, "op": name, **self.kwargs}
             else:
                 self.kind = "component"
-                if name.startswith("__"):
-                    raise ValueError(f"Action: {self.component}.{name} is not a method an action may call")
+                if not is_public_name(name):
+                    # A component runs only its public methods for others (emos.core.control).
+                    raise ValueError(f"Action: {self.component}.{name} is not a method an action may call (only public methods: no leading '_')")
 
     @classmethod
-    def _predefined(cls, name: str, impl: Callable[..., Any], target: str | None = None, **kwargs: Any) -> "Action":
+    def _predefined(cls, name: str, impl: Callable[..., Any], target: str | None = None, **kwargs: Any) -> Action:
         action = cls(impl, kwargs=kwargs)
         action.kind = "predefined"
         action.predefined = name
         action.component = target
         return action
 
-    def event_parser(self, method: Callable[..., Any], output_mapping: str | None = None) -> "Action":
+    def event_parser(self, method: Callable[..., Any], output_mapping: str | None = None) -> Action:
         """Run ``method(msg=<the event's message>)`` when the action fires and pass its result as
         the keyword argument ``output_mapping`` (or as the first positional argument)."""
         if not callable(method):
@@ -166,53 +164,7 @@ def resolve_bindings(value: Any, latest: Callable[[str], Any]) -> Any:
     return value
 
 
-# ============================================================================ wire format
-# Arguments of component-method actions cross the control socket as msgpack: messages as their
-# topic frames, enums by class name (looked up among modules already imported, never imported)
-# and value, numpy as lists. Nothing arriving is unpickled.
-_MSG, _ENUM = "__emos_msg__", "__emos_enum__"
-
-
-def encode_value(value: Any, where: str) -> Any:
-    if value is None or isinstance(value, (bool, int, float, str, bytes)):
-        return value
-    if isinstance(value, Enum):
-        return {_ENUM: f"{type(value).__module__}:{type(value).__qualname__}", "v": encode_value(value.value, where)}
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, (list, tuple)):
-        return [encode_value(v, where) for v in value]
-    if isinstance(value, dict):
-        return {str(k): encode_value(v, where) for k, v in value.items()}
-    if attrs.has(type(value)):
-        try:
-            return {_MSG: canonical_name(type(value)), "b": codec.pack(value)}
-        except Exception:
-            pass
-    raise ActionError(f"{where}: cannot send a {type(value).__name__} to another process (messages, enums, numbers, str, lists and dicts can be sent)")
-
-
-def decode_value(value: Any) -> Any:
-    if isinstance(value, list):
-        return [decode_value(v) for v in value]
-    if isinstance(value, dict):
-        if _MSG in value:
-            return codec.decode(resolve(value[_MSG]), value["b"], copy=True)
-        if _ENUM in value:
-            module, _, qualname = str(value[_ENUM]).partition(":")
-            obj: Any = sys.modules.get(module)
-            for part in qualname.split("."):
-                obj = getattr(obj, part, None)
-            if not (isinstance(obj, type) and issubclass(obj, Enum)):
-                raise ActionError(f"enum {value[_ENUM]!r} is not known in this process")
-            return obj(decode_value(value["v"]))
-        return {k: decode_value(v) for k, v in value.items()}
-    return value
-
-
-def call_signature_error(fn: Callable[..., Any], args: tuple, kwargs: dict) -> str | None:
+def call_signature_error(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> str | None:
     """Why ``fn(*args, **kwargs)`` cannot bind, or None (checked when the recipe is loaded)."""
     try:
         inspect.signature(fn).bind(*args, **kwargs)

@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import keyword
 import operator
-from typing import Any, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 Compiled = Callable[[Callable[[str], Any], "str | None"], "bool | None"]
+CompiledGroup = Callable[[Callable[[str], Any], "str | None"], "tuple[bool | None, ...]"]
 
 _CMP_OPS = {"==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge}
 # Values that need no conversion before a comparison (a numpy array or scalar becomes a list or a
@@ -57,7 +59,7 @@ class _Writer:
         return self.topics[topic]
 
 
-def compile_tree(tree: Mapping) -> Compiled:
+def compile_tree(tree: Mapping[str, Any]) -> Compiled:
     """One function ``(fresh, trigger) -> True | False | None`` for a condition tree."""
     from emos.events.conditions import _MISSING, _leaf, resolve_path
 
@@ -79,10 +81,11 @@ def compile_tree(tree: Mapping) -> Compiled:
     exec(code, w.namespace)  # noqa: S102 - source built above from our own names only (see module doc)
     fn = w.namespace["condition"]
     fn.source = "\n".join(lines)  # for debugging: what a condition compiled to
-    return fn
+    condition: Compiled = fn
+    return condition
 
 
-def compile_group(trees: Sequence[Mapping]) -> Callable[[Callable[[str], Any], "str | None"], tuple]:
+def compile_group(trees: Sequence[Mapping[str, Any]]) -> CompiledGroup:
     """One function ``(fresh, trigger) -> (value of each tree, ...)`` for all the conditions a
     topic's message must be checked against: one call per message instead of one per event, and
     each topic's fresh message fetched once. A tree too deep for Python's parser on its own is
@@ -91,7 +94,7 @@ def compile_group(trees: Sequence[Mapping]) -> Callable[[Callable[[str], Any], "
 
     w = _Writer()
     w.namespace.update(_MISSING=_MISSING, _resolve_path=resolve_path, _leaf=_leaf)
-    results = []
+    results: list[str] = []
     for tree in trees:
         mark = len(w.lines)
         var = _node(w, tree, 1)
@@ -107,7 +110,8 @@ def compile_group(trees: Sequence[Mapping]) -> Callable[[Callable[[str], Any], "
     exec(compile("\n".join(lines), "<emos conditions>", "exec"), w.namespace)  # noqa: S102 - our own names only
     fn = w.namespace["conditions"]
     fn.source = "\n".join(lines)
-    return fn
+    conditions: CompiledGroup = fn
+    return conditions
 
 
 def _parses(body: list[str]) -> bool:
@@ -118,7 +122,7 @@ def _parses(body: list[str]) -> bool:
     return True
 
 
-def _node(w: _Writer, tree: Mapping, depth: int) -> str:
+def _node(w: _Writer, tree: Mapping[str, Any], depth: int) -> str:
     """Emit code that leaves the node's value in a variable; return the variable's name."""
     op = tree["op"]
     out = w.name("r")
@@ -126,7 +130,7 @@ def _node(w: _Writer, tree: Mapping, depth: int) -> str:
         stop, other = ("False", "True") if op == "and" else ("True", "False")
         parts: list[str] = []
         indent = depth
-        for i, arg in enumerate(tree["args"]):
+        for arg in tree["args"]:
             var = _node(w, arg, indent)
             parts.append(var)
             w.emit(indent, f"if {var} is {stop}:")
@@ -152,7 +156,7 @@ def _node(w: _Writer, tree: Mapping, depth: int) -> str:
     return out
 
 
-def _value(w: _Writer, tree: Mapping, msg: str, depth: int, out: str) -> None:
+def _value(w: _Writer, tree: Mapping[str, Any], msg: str, depth: int, out: str) -> None:
     """Emit: read the leaf's path's value into ``v``, then test it into ``out`` (None when unknown)."""
     path = tree["path"]
     steps = path["steps"]
@@ -175,7 +179,7 @@ def _value(w: _Writer, tree: Mapping, msg: str, depth: int, out: str) -> None:
     _test(w, tree, depth + 1, out)
 
 
-def _test(w: _Writer, tree: Mapping, depth: int, out: str) -> None:
+def _test(w: _Writer, tree: Mapping[str, Any], depth: int, out: str) -> None:
     op = tree["op"]
     if op == "cmp":
         fn, c = w.name("OP", _CMP_OPS[tree["cmp"]]), w.name("C", _Box(tree["value"]))

@@ -19,12 +19,14 @@ condition false but never true, negated or not.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Mapping
 from enum import Enum
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
 
+from emos.errors import EmosError
 from emos.msgs import fields as F
 from emos.msgs.registry import canonical_name
 
@@ -32,10 +34,10 @@ if TYPE_CHECKING:
     from emos.io.topic import Topic
 
 # A static type: ("message", cls) | ("scalar", "bool"|"int"|"float"|"number"|"str") | ("list", elem)
-TypeDesc = tuple
+TypeDesc = tuple[str, Any]
 
 
-class ConditionError(TypeError):
+class ConditionError(EmosError, TypeError):
     """A condition that cannot be built: unknown field, unsupported comparison, bad operand."""
 
 
@@ -48,7 +50,7 @@ def _describe(t: TypeDesc) -> str:
     return f"a list of {inner}" + ("" if inner.endswith("message") or inner.startswith("list") else "s")
 
 
-def _field_type(cls: type, fld: attrs.Attribute) -> TypeDesc:
+def _field_type(cls: type, fld: attrs.Attribute[Any]) -> TypeDesc:
     kind = fld.metadata.get("kind")
     if kind in (F.MESSAGE, F.OPTIONAL_MESSAGE):
         return ("message", fld.metadata["cls"]())
@@ -91,7 +93,14 @@ class MsgPath:
 
     __hash__ = None  # type: ignore[assignment]  # == builds a Condition
 
-    def __init__(self, topic: "Topic", steps: tuple = (), type_: TypeDesc | None = None, label: str = "msg"):
+    # Set once by __init__ (object.__setattr__: the class refuses assignment); declared here so that
+    # they are not taken for path steps, which __getattr__ builds.
+    _topic: Topic
+    _steps: tuple[dict[str, Any], ...]
+    _type: TypeDesc
+    _label: str
+
+    def __init__(self, topic: Topic, steps: tuple[dict[str, Any], ...] = (), type_: TypeDesc | None = None, label: str = "msg"):
         object.__setattr__(self, "_topic", topic)
         object.__setattr__(self, "_steps", steps)
         object.__setattr__(self, "_type", type_ if type_ is not None else ("message", topic.msg_type))
@@ -101,7 +110,7 @@ class MsgPath:
     def _where(self) -> str:
         return f"event condition on topic {self._topic.name!r} ({self._topic.type_name}), {self._label}"
 
-    def __getattr__(self, name: str) -> "MsgPath":
+    def __getattr__(self, name: str) -> MsgPath:
         if name.startswith("__"):
             raise AttributeError(name)
         t = self._type
@@ -122,26 +131,27 @@ class MsgPath:
     def __setattr__(self, name: str, value: Any) -> None:
         raise ConditionError(f"{self._where()}: a condition path is read-only (did you mean ==?)")
 
-    def __getitem__(self, index: int) -> "MsgPath":
+    def __getitem__(self, index: int) -> MsgPath:
         if self._type[0] != "list" or isinstance(index, bool) or not isinstance(index, int):
             raise ConditionError(f"{self._where()} is {_describe(self._type)}: only lists take an int index, got {index!r}")
         return MsgPath(self._topic, self._steps + ({"i": index},), self._type[1], f"{self._label}[{index}]")
 
-    def length(self) -> "MsgPath":
+    def length(self) -> MsgPath:
         """The number of elements of a list field (or characters of a str field)."""
         if not (self._type[0] == "list" or self._type == ("scalar", "str")):
             raise ConditionError(f"{self._where()} is {_describe(self._type)}: length() needs a list or a str")
         return MsgPath(self._topic, self._steps + ({"len": True},), ("scalar", "int"), f"{self._label}.length()")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"topic": self._topic.name, "steps": [dict(s) for s in self._steps]}
 
     # -- comparisons ---------------------------------------------------------------------------
-    def _leaf(self, op: str, **operands: Any) -> "Condition":
+    def _leaf(self, op: str, **operands: Any) -> Condition:
         return Condition({"op": op, "path": self.to_dict(), **operands}, {self._topic.name: self._topic})
 
     def _scalar_kind(self) -> str | None:
-        return self._type[1] if self._type[0] == "scalar" else None
+        kind: str | None = self._type[1] if self._type[0] == "scalar" else None
+        return kind
 
     def _check_value(self, op: str, value: Any, kind: str | None) -> None:
         where = f"{self._where()} {op} {value!r}"
@@ -150,7 +160,7 @@ class MsgPath:
         if kind in ("int", "float", "number", "bool") and not (_is_number(value) or isinstance(value, bool)):
             raise ConditionError(f"{where}: the field is {_describe(self._type)}, compare it with a number")
 
-    def _compare(self, op: str, value: Any) -> "Condition":
+    def _compare(self, op: str, value: Any) -> Condition:
         value = _plain(value, f"{self._where()} {op}")
         kind = self._scalar_kind()
         if op in ("==", "!="):
@@ -167,54 +177,54 @@ class MsgPath:
             self._check_value(op, value, kind)
         return self._leaf("cmp", cmp=op, value=value)
 
-    def __eq__(self, value: Any) -> "Condition":  # type: ignore[override]
+    def __eq__(self, value: Any) -> Condition:  # type: ignore[override]
         return self._compare("==", value)
 
-    def __ne__(self, value: Any) -> "Condition":  # type: ignore[override]
+    def __ne__(self, value: Any) -> Condition:  # type: ignore[override]
         return self._compare("!=", value)
 
-    def __lt__(self, value: Any) -> "Condition":
+    def __lt__(self, value: Any) -> Condition:
         return self._compare("<", value)
 
-    def __le__(self, value: Any) -> "Condition":
+    def __le__(self, value: Any) -> Condition:
         return self._compare("<=", value)
 
-    def __gt__(self, value: Any) -> "Condition":
+    def __gt__(self, value: Any) -> Condition:
         return self._compare(">", value)
 
-    def __ge__(self, value: Any) -> "Condition":
+    def __ge__(self, value: Any) -> Condition:
         return self._compare(">=", value)
 
     def _need_truthy(self, what: str) -> None:
         if self._scalar_kind() not in ("bool", "int"):
             raise ConditionError(f"{self._where()} is {_describe(self._type)}: {what} needs a bool (or int) field")
 
-    def is_true(self) -> "Condition":
+    def is_true(self) -> Condition:
         self._need_truthy("is_true()")
         return self._leaf("is_true")
 
-    def is_false(self) -> "Condition":
+    def is_false(self) -> Condition:
         self._need_truthy("is_false()")
         return self._leaf("is_false")
 
-    def __invert__(self) -> "Condition":
+    def __invert__(self) -> Condition:
         self._need_truthy("~")
         return self._leaf("is_false")
 
-    def _values(self, op: str, values: Iterable[Any], kind: str | None) -> list:
+    def _values(self, op: str, values: Iterable[Any], kind: str | None) -> list[Any]:
         if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
             raise ConditionError(f"{self._where()}.{op}(...): expects a list of values, got {values!r}")
-        out = _plain(list(values), f"{self._where()}.{op}")
+        out: list[Any] = _plain(list(values), f"{self._where()}.{op}")
         for v in out:
             self._check_value(f".{op}", v, kind)
         return out
 
-    def is_in(self, values: Iterable[Any]) -> "Condition":
+    def is_in(self, values: Iterable[Any]) -> Condition:
         if self._type[0] != "scalar":
             raise ConditionError(f"{self._where()} is {_describe(self._type)}: is_in() needs a single value; for lists use contains_any()")
         return self._leaf("in", values=self._values("is_in", values, self._scalar_kind()))
 
-    def not_in(self, values: Iterable[Any]) -> "Condition":
+    def not_in(self, values: Iterable[Any]) -> Condition:
         if self._type[0] != "scalar":
             raise ConditionError(f"{self._where()} is {_describe(self._type)}: not_in() needs a single value; for lists use not_contains_any()")
         return self._leaf("not_in", values=self._values("not_in", values, self._scalar_kind()))
@@ -223,22 +233,23 @@ class MsgPath:
         if self._type == ("scalar", "str"):
             return "str"
         if self._type[0] == "list" and self._type[1][0] == "scalar":
-            return self._type[1][1]
+            kind: str = self._type[1][1]
+            return kind
         raise ConditionError(f"{self._where()} is {_describe(self._type)}: {op}() needs a list of values or a str")
 
-    def contains(self, value: Any) -> "Condition":
+    def contains(self, value: Any) -> Condition:
         kind = self._elem_kind("contains")
         value = _plain(value, f"{self._where()}.contains")
         self._check_value(".contains", value, kind)
         return self._leaf("contains", value=value)
 
-    def contains_any(self, values: Iterable[Any]) -> "Condition":
+    def contains_any(self, values: Iterable[Any]) -> Condition:
         return self._leaf("contains_any", values=self._values("contains_any", values, self._elem_kind("contains_any")))
 
-    def contains_all(self, values: Iterable[Any]) -> "Condition":
+    def contains_all(self, values: Iterable[Any]) -> Condition:
         return self._leaf("contains_all", values=self._values("contains_all", values, self._elem_kind("contains_all")))
 
-    def not_contains_any(self, values: Iterable[Any]) -> "Condition":
+    def not_contains_any(self, values: Iterable[Any]) -> Condition:
         return self._leaf("not_contains_any", values=self._values("not_contains_any", values, self._elem_kind("not_contains_any")))
 
     def __bool__(self) -> bool:
@@ -248,12 +259,12 @@ class MsgPath:
         return f"MsgPath({self._topic.name}:{self._label})"
 
 
-def new_message(topic: "Topic") -> "Condition":
+def new_message(topic: Topic) -> Condition:
     """True when the message being evaluated arrived on ``topic`` (a bare Topic in a condition)."""
     return Condition({"op": "new_msg", "topic": topic.name}, {topic.name: topic})
 
 
-def as_condition(value: Any, where: str) -> "Condition":
+def as_condition(value: Any, where: str) -> Condition:
     from emos.io.topic import Topic
 
     if isinstance(value, Condition):
@@ -270,30 +281,30 @@ class Condition:
 
     __hash__ = object.__hash__
 
-    def __init__(self, tree: dict, topics: Mapping[str, "Topic"]):
+    def __init__(self, tree: dict[str, Any], topics: Mapping[str, Topic]):
         self.tree = tree
-        self.topics: dict[str, "Topic"] = dict(topics)
+        self.topics: dict[str, Topic] = dict(topics)
 
-    def _combine(self, op: str, other: Any) -> "Condition":
+    def _combine(self, op: str, other: Any) -> Condition:
         other = as_condition(other, f"condition {op}")
-        args = []
+        args: list[dict[str, Any]] = []
         for c in (self, other):
             args.extend(c.tree["args"] if c.tree["op"] == op else [c.tree])
         return Condition({"op": op, "args": args}, {**self.topics, **other.topics})
 
-    def __and__(self, other: Any) -> "Condition":
+    def __and__(self, other: Any) -> Condition:
         return self._combine("and", other)
 
-    def __rand__(self, other: Any) -> "Condition":
+    def __rand__(self, other: Any) -> Condition:
         return as_condition(other, "condition and")._combine("and", self)
 
-    def __or__(self, other: Any) -> "Condition":
+    def __or__(self, other: Any) -> Condition:
         return self._combine("or", other)
 
-    def __ror__(self, other: Any) -> "Condition":
+    def __ror__(self, other: Any) -> Condition:
         return as_condition(other, "condition or")._combine("or", self)
 
-    def __invert__(self) -> "Condition":
+    def __invert__(self) -> Condition:
         if self.tree["op"] == "not":
             return Condition(self.tree["arg"], self.topics)
         return Condition({"op": "not", "arg": self.tree}, self.topics)
@@ -301,7 +312,7 @@ class Condition:
     def __bool__(self) -> bool:
         raise ConditionError("a condition has no truth value at definition time; combine conditions with & | ~ (not and/or/not)")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain data: the tree plus, per topic, what evaluating it needs (type and data_timeout)."""
         return {"tree": self.tree, "topics": {n: {"msg_type": t.type_name, "data_timeout": t.data_timeout} for n, t in self.topics.items()}}
 
@@ -313,7 +324,7 @@ class Condition:
 _MISSING = object()
 
 
-def resolve_path(path: Mapping, msg: Any) -> Any:
+def resolve_path(path: Mapping[str, Any], msg: Any) -> Any:
     """The value a :class:`MsgPath` (as dict) names in ``msg``; ``_MISSING`` if an index is out of range."""
     value = msg
     for step in path["steps"]:
@@ -353,7 +364,7 @@ _CMP: dict[str, Callable[[Any, Any], bool]] = {
 }
 
 
-def _leaf(tree: Mapping, value: Any) -> bool | None:
+def _leaf(tree: Mapping[str, Any], value: Any) -> bool | None:
     op = tree["op"]
     if op == "cmp":
         return bool(_CMP[tree["cmp"]](value, tree["value"]))
@@ -376,7 +387,7 @@ def _leaf(tree: Mapping, value: Any) -> bool | None:
     raise ValueError(f"unknown condition operator {op!r}")
 
 
-def evaluate(tree: Mapping, fresh: Callable[[str], Any], trigger_topic: str | None = None) -> bool | None:
+def evaluate(tree: Mapping[str, Any], fresh: Callable[[str], Any], trigger_topic: str | None = None) -> bool | None:
     """Three-valued evaluation: True, False, or None (unknown: an input is missing or stale).
 
     ``fresh(topic_name)`` returns the latest *fresh* message of a topic or None.
@@ -418,7 +429,7 @@ def evaluate(tree: Mapping, fresh: Callable[[str], Any], trigger_topic: str | No
         return None
 
 
-def topics_of(tree: Mapping) -> set[str]:
+def topics_of(tree: Mapping[str, Any]) -> set[str]:
     op = tree["op"]
     if op in ("and", "or"):
         return set().union(*(topics_of(a) for a in tree["args"]))
@@ -429,7 +440,7 @@ def topics_of(tree: Mapping) -> set[str]:
     return {tree["path"]["topic"]}
 
 
-def render(tree: Mapping) -> str:
+def render(tree: Mapping[str, Any]) -> str:
     """A readable form of a condition tree, for logs."""
     op = tree["op"]
     if op in ("and", "or"):
@@ -453,7 +464,7 @@ def render(tree: Mapping) -> str:
 Compiled = Callable[[Callable[[str], Any], "str | None"], "bool | None"]
 
 
-def compile_condition(tree: Mapping) -> Compiled:
+def compile_condition(tree: Mapping[str, Any]) -> Compiled:
     """The condition as one generated function (see :mod:`emos.events.compiled`); same results
     as :func:`evaluate`, about ten times faster per armed event."""
     from emos.events.compiled import compile_tree

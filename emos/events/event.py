@@ -11,7 +11,8 @@ fired) and the :class:`Blackboard` the latest message of each topic, honouring `
 from __future__ import annotations
 
 import time
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import attrs
 import numpy as np
@@ -60,7 +61,7 @@ class Event:
     def topics(self) -> dict[str, Topic]:
         return self.condition.topics
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name, "condition": self.condition.to_dict(), "whole_topic": self.whole_topic,
             "on_change": self.on_change, "handle_once": self.handle_once, "keep_event_delay": self.keep_event_delay,
@@ -107,7 +108,7 @@ def message_content(msg: Any) -> Any:
 class EventTracker:
     """Decides, message by message, whether one event fires."""
 
-    def __init__(self, spec: Mapping, fired_before: bool = False):
+    def __init__(self, spec: Mapping[str, Any], fired_before: bool = False):
         self.spec = spec
         self.tree = spec["condition"]["tree"]
         self._evaluate = compile_condition(self.tree)

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
-from emos.events.action import Action, ActionError, encode_value, resolve_bindings
+from emos.core import control as C
+from emos.events.action import Action, ActionError, resolve_bindings
 from emos.io.topic import Topic
 from emos.transport.context import RunContext
 
@@ -38,7 +40,7 @@ class ActionRuntime:
 
         return await call_service_async(self.ctx, name, request, response_type, timeout=self.timeout)
 
-    async def send_goal(self, name: str, types: tuple, goal: Any, component: str | None = None) -> Any:
+    async def send_goal(self, name: str, types: tuple[Any, Any, Any], goal: Any, component: str | None = None) -> Any:
         """Send ``goal`` to action server ``name`` of this run and return without waiting for its
         result (a goal may run for minutes); ``component`` as for :meth:`call_service`."""
         from emos.core.services import ActionClient
@@ -50,19 +52,23 @@ class ActionRuntime:
     def latest(self, topic: str) -> Any | None:
         raise NotImplementedError
 
-    async def run_function(self, fn: Callable[..., Any], args: tuple, kwargs: dict, timeout: float | None) -> Any:
+    async def run_function(self, fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any], timeout: float | None) -> Any:
         """Run a recipe function in a worker thread; ``timeout=None`` detaches it (fire and forget)."""
         loop = asyncio.get_running_loop()
         fut = loop.run_in_executor(None, lambda: fn(*args, **kwargs))
         if timeout is None:
-            fut.add_done_callback(lambda f: f.cancelled() or f.exception() is None or self.log.error("background action %s failed: %s", getattr(fn, "__qualname__", fn), f.exception()))
+            def report(f: asyncio.Future[Any]) -> None:
+                if not f.cancelled() and f.exception() is not None:
+                    self.log.error("background action %s failed: %s", getattr(fn, "__qualname__", fn), f.exception())
+
+            fut.add_done_callback(report)
             return None
         return await asyncio.wait_for(asyncio.shield(fut), timeout)
 
     def periodic(self, key: str, period: float, duration: float | None, fn: Callable[[], Any]) -> None:
         """Call ``fn`` every ``period`` s for ``duration`` s (None: until stopped), replacing any
         earlier timer under the same ``key``."""
-        tasks: dict[str, asyncio.Task] = self.__dict__.setdefault("_periodic", {})
+        tasks: dict[str, asyncio.Task[None]] = self.__dict__.setdefault("_periodic", {})
         old = tasks.pop(key, None)
         if old is not None:
             old.cancel()
@@ -83,13 +89,13 @@ class ActionRuntime:
             task.cancel()
 
 
-def prepare(action: Action, latest: Callable[[str], Any]) -> tuple[tuple, dict]:
+def prepare(action: Action, latest: Callable[[str], Any]) -> tuple[tuple[Any, ...], dict[str, Any]]:
     """Resolve the action's topic bindings now (at fire time), before it is queued."""
     return tuple(resolve_bindings(action.args, latest)), dict(resolve_bindings(action.kwargs, latest))
 
 
 async def run_action(action: Action, rt: ActionRuntime, trigger_topic: str | None = None, trigger_msg: Any = None,
-                     prepared: tuple[tuple, dict] | None = None) -> Any:
+                     prepared: tuple[tuple[Any, ...], dict[str, Any]] | None = None) -> Any:
     """Run one action now; raises on failure (the caller reports it with its context)."""
     args, kwargs = prepared if prepared is not None else prepare(action, rt.latest)
     for parser, output in action.parsers:
@@ -102,15 +108,12 @@ async def run_action(action: Action, rt: ActionRuntime, trigger_topic: str | Non
     if kind == "component":
         assert action.component is not None
         where = f"action {action.describe()}"
-        return await rt.call_component(
-            action.component, "run_action", rt.timeout,
-            method=action.method_name, args=encode_value(list(args), where), kwargs=encode_value(kwargs, where),
-        )
+        return await rt.call_component(action.component, C.EXECUTE_METHOD, rt.timeout, **C.method_request(action.method_name, args, kwargs, where))
     if kind == "lifecycle":
         return await rt.lifecycle(kwargs["component"], kwargs["op"], float(kwargs.get("wait_time") or 0.0))
     if kind == "step":
         assert action.component is not None
-        return await rt.call_component(action.component, "run_step", rt.timeout)
+        return await rt.call_component(action.component, C.RUN_STEP, rt.timeout)
     if kind == "predefined":
         return await action.method(rt, trigger_topic=trigger_topic, trigger_msg=trigger_msg, **kwargs)
     if kind == "function":

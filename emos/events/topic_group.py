@@ -8,7 +8,8 @@ skipped; an ``on_change`` event sees every known value (it keeps its edge state)
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 from emos.events.compiled import compile_group
 from emos.events.event import EventTracker

@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import attrs
 import numpy as np
@@ -38,9 +39,12 @@ from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
 from emos.interop.tap import RunWatch, TopicTap
 from emos.msgs import codec
 from emos.msgs.geometry import TransformStamped
+from emos.ratelimit import RateLimitedLog
 from emos.transport.context import RunContext
 
 log = logging.getLogger("emos.interop")
+# Errors that repeat with every message: the first at once, then one counted line per topic per 10 s.
+_limited = RateLimitedLog(log, interval=10.0)
 
 MAX_JSON_ARRAY = 4096
 
@@ -179,8 +183,7 @@ class FoxgloveBridge:
                 self._send(route, frame, stamp)
             except Exception as exc:  # one bad message must not stop the viewer
                 n = self.errors[topic] = self.errors.get(topic, 0) + 1
-                if n == 1 or n % 100 == 0:
-                    log.error("Foxglove bridge: topic %s not forwarded (%d so far): %s", topic, n, exc)
+                _limited.error(f"forward:{topic}", "Foxglove bridge: topic %s not forwarded (%d so far): %s", topic, n, exc)
                 continue
             sent += 1
             self.sent[topic] = self.sent.get(topic, 0) + 1

@@ -29,10 +29,11 @@ import random
 import re
 import secrets
 import threading
-from typing import Iterable
+from collections.abc import Iterable
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from emos.transport.trust import RateLimitedLog
+from emos.errors import EmosError
+from emos.ratelimit import RateLimitedLog
 
 log = logging.getLogger("emos.interop")
 _refusals = RateLimitedLog(log)
@@ -112,7 +113,7 @@ def private_loopback_address() -> str:
     return f"127.{rng.randrange(256)}.{rng.randrange(256)}.{rng.randrange(2, 255)}"
 
 
-class _Refused(Exception):
+class _Refused(EmosError):
     def __init__(self, status: str, reason: str):
         super().__init__(reason)
         self.status, self.reason = status, reason
@@ -131,7 +132,7 @@ class HandshakeGate:
         self.accepted = 0
         self._pending = 0
         self.host = host
-        self._tasks: set[asyncio.Task] = set()
+        self._tasks: set[asyncio.Task[None]] = set()
         self._writers: set[asyncio.StreamWriter] = set()
         # Its own loop in its own thread: the caller (a component) may already run an event loop.
         self._loop = asyncio.new_event_loop()
@@ -164,9 +165,8 @@ class HandshakeGate:
             scheme, _, cred = value.partition(" ")
             if scheme.lower() == "bearer":
                 given.append(cred.strip())
-        if self.token is not None:
-            if not any(hmac.compare_digest(g.encode(), self.token.encode()) for g in given):
-                raise _Refused("401 Unauthorized", "missing or wrong token" + ("" if origin else " (no Origin: not a browser)"))
+        if self.token is not None and not any(hmac.compare_digest(g.encode(), self.token.encode()) for g in given):
+            raise _Refused("401 Unauthorized", "missing or wrong token" + ("" if origin else " (no Origin: not a browser)"))
         rest = [(k, v) for k, v in query if k != "token"]
         return urlunsplit(("", "", parts.path or "/", urlencode(rest), ""))
 
@@ -223,7 +223,7 @@ class HandshakeGate:
         self._pending += 1
         try:
             return await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), HANDSHAKE_TIMEOUT_S)
-        except (asyncio.TimeoutError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, ConnectionError) as exc:
+        except (TimeoutError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, ConnectionError) as exc:
             raise _Refused("400 Bad Request", f"no complete upgrade request ({type(exc).__name__})") from None
         finally:
             self._pending -= 1
@@ -281,7 +281,7 @@ async def _reply(writer: asyncio.StreamWriter, status: str, reason: str) -> None
         writer.write(f"HTTP/1.1 {status}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {len(body)}\r\n"
                      f"Connection: close\r\n\r\n".encode("latin-1") + body)
         await asyncio.wait_for(writer.drain(), 5)
-    except (OSError, asyncio.TimeoutError):
+    except (TimeoutError, OSError):
         pass
     finally:
         writer.close()

@@ -31,14 +31,24 @@ from typing import Any
 import attrs
 from attrs import define
 
-from emos.msgs import codec
-from emos.msgs.registry import canonical_name
-from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
 # Reading is in its own module; its names are also this one's, for the callers of read_bag here.
 from emos.interop.mcap_read import (  # noqa: F401
-    EMOS_ENCODING, EMOS_SCHEMA_ENCODING, MCAP_MAGIC, BagChannel, BagInfo, BagMessage, DamagedChunk, NotMcapFile,
-    ReadLimits, _mcap, read_bag, read_channels,
+    EMOS_ENCODING,
+    EMOS_SCHEMA_ENCODING,
+    MCAP_MAGIC,
+    BagChannel,
+    BagInfo,
+    BagMessage,
+    DamagedChunk,
+    NotMcapFile,
+    ReadLimits,
+    _mcap,
+    read_bag,
+    read_channels,
 )
+from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
+from emos.msgs import codec
+from emos.msgs.registry import canonical_name
 
 log = logging.getLogger("emos.interop")
 
@@ -82,7 +92,7 @@ class BagWriter:
     channels follow.
     """
 
-    def __init__(self, path: str | os.PathLike, compression: str = "none", chunk_size: int = 1 << 20,
+    def __init__(self, path: str | os.PathLike[str], compression: str = "none", chunk_size: int = 1 << 20,
                  distribution: str = DEFAULT_DISTRIBUTION, metadata: dict[str, str] | None = None):
         mcap = _mcap()
         if compression not in COMPRESSIONS:
@@ -93,7 +103,7 @@ class BagWriter:
         self.ros2 = codec_for(distribution)
         # Flushed whenever the writer emits a chunk (see write_frame), so a killed recorder
         # loses at most the chunk it was filling.
-        self._file = open(self.path, "wb")
+        self._file = open(self.path, "wb")  # noqa: SIM115 - the writer owns it until close()
         self._flushed_at = 0
         try:
             self._writer = mcap.writer.Writer(
@@ -172,7 +182,7 @@ class BagWriter:
         finally:
             self._file.close()
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(self, *exc: Any) -> None:

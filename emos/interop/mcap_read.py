@@ -16,12 +16,14 @@ import os
 import struct
 import zlib
 from array import array
-from typing import Any, Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
 
 import attrs
 from attrs import define, field
 
 from emos.config.validators import positive
+from emos.errors import EmosError
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, NotShared, codec_for
 from emos.io.topic import normalize_topic_name
 from emos.msgs import codec
@@ -35,9 +37,9 @@ EMOS_SCHEMA_ENCODING = "emos-msgpack-layout"  # its schema: JSON naming the type
 
 def _mcap() -> Any:
     try:
-        import mcap.writer  # noqa: F401
-        import mcap.reader  # noqa: F401
-        import mcap.stream_reader  # noqa: F401
+        import mcap.reader
+        import mcap.stream_reader
+        import mcap.writer
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise ImportError("recording needs the mcap package: pip install 'emos[ecosystem]'") from exc
     import mcap
@@ -62,7 +64,7 @@ _CHUNK_SLACK = 1 << 20
 MiB = 1 << 20
 
 
-class NotMcapFile(ValueError):
+class NotMcapFile(EmosError, ValueError):
     """The file does not start with the MCAP magic: it is something else, not a damaged recording."""
 
 
@@ -180,7 +182,7 @@ def _bag_channel(schema: Any, channel: Any, distribution: str) -> BagChannel:
     return BagChannel(topic, None, enc, name, f"message encoding {enc!r} is not one EMOS reads (cdr, {EMOS_ENCODING})")
 
 
-def read_bag(path: str | os.PathLike, topics: list[str] | None = None, info: BagInfo | None = None,
+def read_bag(path: str | os.PathLike[str], topics: list[str] | None = None, info: BagInfo | None = None,
              distribution: str = DEFAULT_DISTRIBUTION) -> Iterator[BagMessage]:
     """Messages of an MCAP file, chunk by chunk in file order (by log time within a chunk).
 
@@ -198,7 +200,7 @@ def read_bag(path: str | os.PathLike, topics: list[str] | None = None, info: Bag
         yield from _BagReader(f, info, distribution, wanted).messages()
 
 
-def read_channels(path: str | os.PathLike, info: BagInfo | None = None, distribution: str = DEFAULT_DISTRIBUTION) -> dict[int, BagChannel]:
+def read_channels(path: str | os.PathLike[str], info: BagInfo | None = None, distribution: str = DEFAULT_DISTRIBUTION) -> dict[int, BagChannel]:
     """The channels a file's summary lists (empty for a file without a usable summary), without
     reading its data; raises :class:`NotMcapFile` for a file that is not MCAP."""
     _mcap()
@@ -211,7 +213,7 @@ def read_channels(path: str | os.PathLike, info: BagInfo | None = None, distribu
     return info.channels
 
 
-class _ChunkDamage(Exception):
+class _ChunkDamage(EmosError):
     """Why a chunk cannot be trusted (the message names the problem)."""
 
 
@@ -538,7 +540,7 @@ class _BagReader:
             raise _ChunkDamage(f"its {compression} data does not decompress ({exc})") from exc
         return out
 
-    def _scan_chunk(self, raw: memoryview) -> tuple[Iterable[int], array]:
+    def _scan_chunk(self, raw: memoryview) -> tuple[Iterable[int], array[int]]:
         """Check a chunk's records and take in its schemas and channels. Returns the order to play
         its messages in and their (offset, length) pairs, flat; nothing at all if any record is
         malformed."""
@@ -595,7 +597,7 @@ class _BagReader:
             log.warning("%s: %s", self.name, damaged.describe())
 
 
-class _Stopped(Exception):
+class _Stopped(EmosError):
     """``should_stop()`` said so while a chunk was being read."""
 
 

@@ -14,8 +14,9 @@ import logging
 import os
 import stat
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 from attrs import define
 
@@ -23,12 +24,15 @@ from emos.interop.mcap_bag import PROFILE, BagWriter
 from emos.interop.mcap_read import BagChannel, BagInfo, ReadLimits, read_bag
 from emos.interop.ros2_cdr import DEFAULT_DISTRIBUTION, CdrError
 from emos.interop.tap import RunWatch, TopicTap, normalize_patterns
-from emos.transport.context import RunContext
 from emos.msgs.codec import DecodeError
 from emos.msgs.registry import canonical_name
+from emos.ratelimit import RateLimitedLog
+from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, list_topics
 
 log = logging.getLogger("emos.interop")
+# Errors that repeat with every message: the first at once, then one counted line per topic per 10 s.
+_limited = RateLimitedLog(log, interval=10.0)
 
 Progress = Callable[[str], None]
 
@@ -74,7 +78,8 @@ def _closing_records() -> bytes:
     rb = RecordBuilder()
     DataEnd(data_section_crc=0).write(rb)  # 0: "not computed", as the specification allows
     Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(rb)
-    return rb.end() + MCAP0_MAGIC
+    records: bytes = rb.end()
+    return records + MCAP0_MAGIC
 
 
 def _empty_mcap() -> bytes:
@@ -191,8 +196,7 @@ class Recorder:
                 raise
             except Exception as exc:  # one undecodable message must not end the recording
                 n = self.errors[topic] = self.errors.get(topic, 0) + 1
-                if n == 1 or n % 100 == 0:
-                    log.error("topic %s: message not recorded (%d so far): %s", topic, n, exc)
+                _limited.error(f"record:{topic}", "topic %s: message not recorded (%d so far): %s", topic, n, exc)
         return len(items)
 
     def report(self, elapsed: float) -> str:
@@ -325,8 +329,7 @@ class Player:
                 msg = m.decode(self.distribution)
             except (CdrError, DecodeError) as exc:  # a damaged message: skip it, keep playing
                 n = self.errors[m.topic] = self.errors.get(m.topic, 0) + 1
-                if n == 1 or n % 100 == 0:
-                    log.error("topic %s: message not played (%d so far): %s", m.topic, n, exc)
+                _limited.error(f"play:{m.topic}", "topic %s: message not played (%d so far): %s", m.topic, n, exc)
                 continue
             if t0_bag is None:
                 t0_bag, t0_wall = m.publish_ns, time.monotonic()

@@ -15,13 +15,18 @@ The codec does not know how bytes travel (MCAP files, the Foxglove bridge, later
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
 
+from emos.errors import EmosError
 from emos.msgs import fields as F
 from emos.msgs.registry import canonical_name, registered_types
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 log = logging.getLogger("emos.interop")
 
@@ -41,15 +46,15 @@ _NUMERIC = {
 _PLACEHOLDER = "structure_needs_at_least_one_member"
 
 
-class NotShared(LookupError):
+class NotShared(EmosError, LookupError):
     """A message type with no ROS 2 counterpart of the same layout."""
 
 
-class CdrError(ValueError):
+class CdrError(EmosError, ValueError):
     """Bytes that are not a valid CDR encoding of the expected ROS 2 type, or a value CDR cannot hold."""
 
 
-def _typestore(distribution: str) -> Any:
+def _typestore(distribution: str) -> Typestore:
     try:
         from rosbags.typesys import Stores, get_typestore
     except ImportError as exc:  # pragma: no cover - depends on the installation
@@ -178,7 +183,7 @@ class Ros2Codec:
 
         return to_ros, from_ros
 
-    def _field(self, owner: str, fname: str, kind: str, resolver: Any, ros: tuple) -> tuple[Callable, Callable]:
+    def _field(self, owner: str, fname: str, kind: str, resolver: Any, ros: tuple[Any, Any]) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
         node, spec = ros
         where = f"{owner}.{fname}"
         if kind == F.MESSAGE:

@@ -12,14 +12,18 @@ import logging
 import os
 import select
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from emos.msgs.registry import UnknownMessageType, resolve
+from emos.ratelimit import RateLimitedLog
 from emos.transport.context import SHM_DIR, RunContext, run_is_alive
 from emos.transport.pubsub import Subscriber, TopicTypeError, list_topics
 from emos.transport.waker import Waker
 
 log = logging.getLogger("emos.interop")
+# Errors that repeat with every message: the first at once, then one counted line per topic per 10 s.
+_limited = RateLimitedLog(log, interval=10.0)
 
 _MTIME_SLACK_NS = 50_000_000  # well above any kernel's timestamp tick
 
@@ -126,10 +130,9 @@ class TopicTap:
                 got = sub.take_raw()
             except TopicTypeError as exc:
                 # A second publisher with another type on the topic: keep reading the first one's
-                # messages, and say so (once per 100 reads: this repeats at every read).
+                # messages, and say so (rate-limited: this repeats at every read).
                 n = self.errors[topic] = self.errors.get(topic, 0) + 1
-                if n == 1 or n % 100 == 0:
-                    log.error("topic %s: %s (%d times)", topic, exc, n)
+                _limited.error(f"type:{topic}", "topic %s: %s (%d times)", topic, exc, n)
                 continue
             for stamp, frame, _pub in got:
                 out.append((topic, stamp, frame))

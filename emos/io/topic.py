@@ -94,7 +94,7 @@ class Topic(BaseAttrs):
         return out
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "Topic":
+    def from_dict(cls, data: dict[str, Any]) -> Topic:
         return cls(**data)
 
     def __repr__(self) -> str:

@@ -17,12 +17,13 @@ import re
 import struct
 import threading
 import types
-from typing import Any
+from typing import Any, TypeVar
 
 import attrs
 import msgpack
 import numpy as np
 
+from emos.errors import EmosError
 from emos.msgs import fields as F
 
 _ARRAY_EXT = 1
@@ -33,7 +34,7 @@ _ZEROS = bytes(_ALIGN)
 _MEMBER_DESCRIPTOR = types.MemberDescriptorType  # a __slots__ entry
 
 
-class DecodeError(ValueError):
+class DecodeError(EmosError, ValueError):
     """A frame that does not decode into the expected message type."""
 
 
@@ -87,7 +88,8 @@ class Encoded:
             if n < _BULK:
                 if n:
                     try:
-                        buf[pos : pos + n] = memoryview(arr).cast("B")  # cheapest for small arrays
+                        # numpy's stubs declare the buffer protocol only for Python >= 3.12:
+                        buf[pos : pos + n] = memoryview(arr).cast("B")  # type: ignore[arg-type]  # cheapest for small arrays
                     except TypeError:  # formats memoryview will not cast (e.g. big-endian, float16)
                         buf[pos : pos + n] = arr.reshape(-1).view(np.uint8).tobytes()
             else:
@@ -153,12 +155,16 @@ class _ArrayCollector:
 # Array headers (dtype, shape, offset) repeat from message to message on a topic (same image
 # size, same scan length), so both directions cache them: a dict lookup instead of a msgpack
 # round trip, a dtype parse and a product per array.
-_HEADERS_OUT: dict[tuple, tuple[np.dtype, msgpack.ExtType]] = {}
+_HEADERS_OUT: dict[tuple[int, tuple[int, ...], int], tuple[np.dtype, msgpack.ExtType]] = {}  # (id(dtype), shape, offset)
 _HEADERS_IN: dict[bytes, tuple[np.dtype, tuple[int, ...], int, int, int]] = {}
 _HEADER_CACHE_SIZE = 4096
 
 
-def _remember(cache: dict, key: Any, value: Any) -> None:
+_K = TypeVar("_K")
+_V = TypeVar("_V")
+
+
+def _remember(cache: dict[_K, _V], key: _K, value: _V) -> None:
     if len(cache) >= _HEADER_CACHE_SIZE:
         cache.clear()  # bounded: topics whose shapes keep changing must not grow memory
     cache[key] = value
@@ -219,7 +225,7 @@ def _compile_encoder(cls: type) -> Any:
         else:
             items.append(f"o.{name}")
     src = f"def encode_{cls.__name__}(o, A):\n    return [{', '.join(items)}]\n"
-    exec(compile(src, f"<emos encoder {cls.__name__}>", "exec"), env)
+    exec(compile(src, f"<emos encoder {cls.__name__}>", "exec"), env)  # noqa: S102 - source built above from the layout's field names only
     fn = env[f"encode_{cls.__name__}"]
     _ENCODERS[cls] = fn
     return fn
@@ -262,7 +268,7 @@ def _compile_decoder(cls: type) -> Any:
         else:
             lines.append(f"    {setter}v[{i}])")
     lines.append("    return o")
-    exec(compile("\n".join(lines) + "\n", f"<emos decoder {cls.__name__}>", "exec"), env)
+    exec(compile("\n".join(lines) + "\n", f"<emos decoder {cls.__name__}>", "exec"), env)  # noqa: S102 - field names only, as above
     fn = env[f"decode_{cls.__name__}"]
     _DECODERS[cls] = fn
     return fn
@@ -296,7 +302,8 @@ _packers = threading.local()
 
 def _packer() -> msgpack.Packer:
     try:
-        return _packers.packer
+        packer: msgpack.Packer = _packers.packer
+        return packer
     except AttributeError:
         packer = _packers.packer = msgpack.Packer(use_bin_type=True)
         return packer
@@ -364,14 +371,14 @@ def decode_python(cls: type, frame: Any, copy: bool = False, arrays: Any = None)
 _C_KINDS = {F.ARRAY: 1, F.MESSAGE: 2, F.OPTIONAL_MESSAGE: 3, F.MESSAGE_LIST: 4}  # anything else is a plain value
 
 
-def _c_plan(cls: type) -> tuple | None:
+def _c_plan(cls: type) -> tuple[tuple[int, Any, type | None], ...] | None:
     """What the C codec needs of ``cls``: per field, in order, (kind, the slot's member
     descriptor or the field's name, the nested message class or None); None if the C codec
     must leave ``cls`` to the Python one. The generated coders above read and set fields the
     same way."""
     if not attrs.has(cls) or cls.__new__ is not object.__new__:
         return None
-    plan = []
+    plan: list[tuple[int, Any, type | None]] = []
     for name, kind, resolver in _layout(cls):
         slot = cls.__dict__.get(name)
         code = _C_KINDS.get(kind, 0)
@@ -388,7 +395,7 @@ def _load_c_codec() -> Any:
         from emos.msgs import _ccodec
     except ImportError:  # installed without a C compiler: the Python codec alone, same frames
         return None
-    slots = (Encoded.meta, Encoded.arrays, Encoded.array_bytes)
+    slots = tuple(Encoded.__dict__[name] for name in Encoded.__slots__)  # the slots' member descriptors
     _ccodec.setup(Encoded, slots, _HEADERS_IN, _array_header, _c_plan, encode_python, decode_python)
     return _ccodec
 

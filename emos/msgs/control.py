@@ -38,14 +38,14 @@ class JointTrajectoryPoint(Message):
 @message_type("trajectory_msgs")
 class JointTrajectory(Message):
     header: Header = F.message(Header)
-    joint_names: list = F.string_list()
-    points: list = F.message_list(JointTrajectoryPoint)
+    joint_names: list[str] = F.string_list()
+    points: list[JointTrajectoryPoint] = F.message_list(JointTrajectoryPoint)
 
 
 @message_type("control_msgs")
 class JointJog(Message):
     header: Header = F.message(Header)
-    joint_names: list = F.string_list()
+    joint_names: list[str] = F.string_list()
     displacements: np.ndarray = F.array(dtype="float64", ndim=1)
     velocities: np.ndarray = F.array(dtype="float64", ndim=1)
     duration: float = F.float64()

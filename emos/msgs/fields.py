@@ -9,10 +9,13 @@ with the message class and field named.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import attrs
 import numpy as np
+
+from emos.errors import EmosError
 
 # Field kinds understood by the codec.
 PRIMITIVE = "primitive"  # bool, int, float, str: msgpack-native
@@ -23,7 +26,7 @@ STR_LIST = "str_list"  # list of strings
 OPTIONAL_MESSAGE = "optional_message"  # nested message or None
 
 
-class FieldTypeError(TypeError):
+class FieldTypeError(EmosError, TypeError):
     """A value of the wrong type was given for a message field."""
 
 
@@ -70,10 +73,10 @@ def _int_in(lo: int, hi: int) -> Callable[[Any], int]:
                 value = int(value)
             else:
                 raise TypeError
-        value = int(value)
-        if not lo <= value <= hi:
+        number = int(value)
+        if not lo <= number <= hi:
             raise ValueError
-        return value
+        return number
 
     return convert
 
@@ -170,7 +173,7 @@ def message(cls: Any) -> Any:
     """A nested message; ``cls`` may be a class or a zero-argument callable returning it."""
 
     def resolve() -> type:
-        return cls if isinstance(cls, type) else cls()  # type: ignore[return-value]
+        return cls if isinstance(cls, type) else cls()
 
     def convert(value: Any) -> Any:
         target = resolve()
@@ -188,7 +191,7 @@ def message(cls: Any) -> Any:
 
 def optional_message(cls: Any) -> Any:
     def resolve() -> type:
-        return cls if isinstance(cls, type) else cls()  # type: ignore[return-value]
+        return cls if isinstance(cls, type) else cls()
 
     def convert(value: Any) -> Any:
         if value is None or isinstance(value, resolve()):
@@ -202,9 +205,9 @@ def optional_message(cls: Any) -> Any:
 
 def message_list(cls: Any) -> Any:
     def resolve() -> type:
-        return cls if isinstance(cls, type) else cls()  # type: ignore[return-value]
+        return cls if isinstance(cls, type) else cls()
 
-    def convert(value: Any) -> list:
+    def convert(value: Any) -> list[Any]:
         target = resolve()
         if isinstance(value, (str, bytes)):
             raise TypeError

@@ -31,7 +31,7 @@ class Quaternion(Message):
     w: float = F.float64(1.0)
 
     @classmethod
-    def from_yaw(cls, yaw: float) -> "Quaternion":
+    def from_yaw(cls, yaw: float) -> Quaternion:
         x, y, z, w = quaternion_of_yaw(yaw)
         return cls(x=x, y=y, z=z, w=w)
 
@@ -117,4 +117,4 @@ def pose_xy_yaw(pose: Pose) -> np.ndarray:
 class TFMessage(Message):
     """A batch of transforms (``/tf``, ``/tf_static``): ``msg.transforms[i].transform.translation.x``."""
 
-    transforms: list = F.message_list(TransformStamped)
+    transforms: list[TransformStamped] = F.message_list(TransformStamped)

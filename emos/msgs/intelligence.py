@@ -21,8 +21,8 @@ class StreamingString(Message):
 @message_type("automatika_embodied_agents")
 class Video(Message):
     header: Header = F.message(Header)
-    frames: list = F.message_list(Image)
-    compressed_frames: list = F.message_list(CompressedImage)
+    frames: list[Image] = F.message_list(Image)
+    compressed_frames: list[CompressedImage] = F.message_list(CompressedImage)
 
 
 @message_type("automatika_embodied_agents")
@@ -31,7 +31,7 @@ class Detections(Message):
 
     header: Header = F.message(Header)
     scores: np.ndarray = F.array(dtype="float64", ndim=1)
-    labels: list = F.string_list()
+    labels: list[str] = F.string_list()
     boxes: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 4))
     image: Image | None = F.optional_message(Image)
 
@@ -44,7 +44,7 @@ class Detections(Message):
 @message_type("automatika_embodied_agents")
 class DetectionsMultiSource(Message):
     header: Header = F.message(Header)
-    detections: list = F.message_list(Detections)
+    detections: list[Detections] = F.message_list(Detections)
 
 
 @message_type("automatika_embodied_agents")
@@ -62,7 +62,7 @@ class Trackings(Message):
 
     header: Header = F.message(Header)
     ids: np.ndarray = F.array(dtype="int64", ndim=1)
-    labels: list = F.string_list()
+    labels: list[str] = F.string_list()
     boxes: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 4))
     centroids: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 2))
     estimated_velocities: np.ndarray = F.array(dtype="float64", ndim=2, shape=(-1, 2))
@@ -72,4 +72,4 @@ class Trackings(Message):
 @message_type("automatika_embodied_agents")
 class TrackingsMultiSource(Message):
     header: Header = F.message(Header)
-    trackings: list = F.message_list(Trackings)
+    trackings: list[Trackings] = F.message_list(Trackings)

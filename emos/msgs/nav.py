@@ -20,7 +20,7 @@ class Odometry(Message):
 @message_type("nav_msgs")
 class Path(Message):
     header: Header = F.message(Header)
-    poses: list = F.message_list(PoseStamped)
+    poses: list[PoseStamped] = F.message_list(PoseStamped)
 
 
 @message_type("nav_msgs")
@@ -40,6 +40,6 @@ class OccupancyGrid(Message):
     info: MapMetaData = F.message(MapMetaData)
     data: np.ndarray = F.array(dtype="int8", ndim=1)
 
-    def grid(self):
+    def grid(self) -> np.ndarray:
         """A (height, width) view of ``data``."""
         return self.data.reshape(self.info.height, self.info.width)

@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import difflib
 import hashlib
-from typing import TYPE_CHECKING, Any, Callable, TypeVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import attrs
 
+from emos.errors import EmosError
 from emos.msgs.fields import bind_field_names
 
 T = TypeVar("T")
@@ -32,7 +34,7 @@ _BY_NAME: dict[str, type] = {}  # short name and "pkg/msg/Name" -> class
 _CANONICAL: dict[type, str] = {}  # class -> "pkg/msg/Name"
 
 
-class UnknownMessageType(LookupError):
+class UnknownMessageType(EmosError, LookupError):
     """A message type name that no registered class answers to."""
 
 
@@ -47,7 +49,7 @@ def message_type(package: str = "emos_msgs", name: str | None = None) -> Callabl
 
     def wrap(cls: type[T]) -> type[T]:
         if not attrs.has(cls):
-            cls = attrs.define(kw_only=True, eq=True)(cls)  # type: ignore[assignment]
+            cls = attrs.define(kw_only=True, eq=True)(cls)
         bind_field_names(cls)
         short = name or cls.__name__
         full = f"{package}/msg/{short}"
@@ -57,7 +59,7 @@ def message_type(package: str = "emos_msgs", name: str | None = None) -> Callabl
         _BY_NAME[full] = cls
         _CANONICAL[cls] = full
         layout = ";".join(f"{f.name}:{f.metadata.get('kind')}" for f in attrs.fields(cls))  # type: ignore[arg-type]
-        cls._emos_fingerprint = hashlib.blake2b(f"{full}|{layout}".encode(), digest_size=8).hexdigest()  # type: ignore[attr-defined,union-attr]
+        cls._emos_fingerprint = hashlib.blake2b(f"{full}|{layout}".encode(), digest_size=8).hexdigest()  # type: ignore[union-attr]  # added here: no type can declare it
         return cls  # type: ignore[return-value]
 
     return wrap

@@ -35,7 +35,7 @@ class Image(Message):
     data: np.ndarray = F.bytes_array()
 
     @classmethod
-    def from_numpy(cls, array: np.ndarray, encoding: str = "rgb8", header: Header | None = None) -> "Image":
+    def from_numpy(cls, array: np.ndarray, encoding: str = "rgb8", header: Header | None = None) -> Image:
         """An image message whose ``data`` holds ``array``'s bytes (no copy if contiguous)."""
         if encoding not in IMAGE_ENCODINGS:
             raise ValueError(f"Image encoding {encoding!r} is not supported; use one of {', '.join(IMAGE_ENCODINGS)}")
@@ -47,7 +47,7 @@ class Image(Message):
         if arr.ndim == 3 and channels == 1 and arr.shape[2] == 1:
             arr = arr[:, :, 0]
         if arr.ndim != want_ndim or (channels > 1 and arr.shape[2] != channels):
-            raise ValueError(f"Image encoding {encoding!r} needs shape (h, w{', %d' % channels if channels > 1 else ''}), got {arr.shape}")
+            raise ValueError(f"Image encoding {encoding!r} needs shape (h, w{f', {channels}' if channels > 1 else ''}), got {arr.shape}")
         arr = np.ascontiguousarray(arr)
         h, w = arr.shape[:2]
         return cls(
@@ -105,7 +105,7 @@ class CameraInfo(Message):
     roi: RegionOfInterest = F.message(RegionOfInterest)
 
     @classmethod
-    def from_intrinsics(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float, header: Header | None = None) -> "CameraInfo":
+    def from_intrinsics(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float, header: Header | None = None) -> CameraInfo:
         k = np.array([fx, 0, cx, 0, fy, cy, 0, 0, 1], dtype=np.float64)
         p = np.array([fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], dtype=np.float64)
         return cls(header=header or Header(), width=width, height=height, k=k, r=np.eye(3).reshape(-1), p=p, d=np.zeros(5))
@@ -148,7 +148,8 @@ class LaserScan(Message):
         """Beams with a real return: finite and within [range_min, range_max]."""
         r = self.ranges
         with np.errstate(invalid="ignore"):
-            return np.isfinite(r) & (r >= self.range_min) & (r <= self.range_max)
+            mask: np.ndarray = np.isfinite(r) & (r >= self.range_min) & (r <= self.range_max)
+        return mask
 
 
 @message_type("sensor_msgs")
@@ -165,7 +166,7 @@ class PointCloud2(Message):
     header: Header = F.message(Header)
     height: int = F.integer(bits=32, signed=False)
     width: int = F.integer(bits=32, signed=False)
-    fields: list = F.message_list(PointField)
+    fields: list[PointField] = F.message_list(PointField)
     is_bigendian: bool = F.boolean()
     point_step: int = F.integer(bits=32, signed=False)
     row_step: int = F.integer(bits=32, signed=False)
@@ -173,7 +174,7 @@ class PointCloud2(Message):
     is_dense: bool = F.boolean()
 
     @classmethod
-    def from_xyz(cls, points: np.ndarray, header: Header | None = None) -> "PointCloud2":
+    def from_xyz(cls, points: np.ndarray, header: Header | None = None) -> PointCloud2:
         """An unorganised cloud of float32 x, y, z."""
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32))
         if pts.ndim != 2 or pts.shape[1] != 3:
@@ -202,7 +203,7 @@ class PointCloud2(Message):
 @message_type("sensor_msgs")
 class JointState(Message):
     header: Header = F.message(Header)
-    name: list = F.string_list()
+    name: list[str] = F.string_list()
     position: np.ndarray = F.array(dtype="float64", ndim=1)
     velocity: np.ndarray = F.array(dtype="float64", ndim=1)
     effort: np.ndarray = F.array(dtype="float64", ndim=1)

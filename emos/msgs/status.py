@@ -17,9 +17,9 @@ class ComponentStatus(Message):
     header: Header = F.message(Header)
     status: int = F.integer(bits=8, signed=False)
     # What failed: algorithm names, sub-component names or topic names, by level.
-    src_algorithms: list = F.string_list()
-    src_components: list = F.string_list()
-    src_topics: list = F.string_list()
+    src_algorithms: list[str] = F.string_list()
+    src_components: list[str] = F.string_list()
+    src_topics: list[str] = F.string_list()
     message: str = F.string()
     # Lifecycle state name and pid of the sender, so the supervisor and `emos status` see both.
     lifecycle_state: str = F.string()

@@ -15,12 +15,14 @@ class Time(Message):
     nanosec: int = F.integer(bits=32, signed=False)
 
     @classmethod
-    def now(cls) -> "Time":
+    def now(cls) -> Time:
+        """The wall clock. A component stamps what it publishes with ``emos.core.clock.stamp()``
+        instead, which follows the simulated clock when the run has one."""
         ns = time.time_ns()
         return cls(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
     @classmethod
-    def from_sec(cls, seconds: float) -> "Time":
+    def from_sec(cls, seconds: float) -> Time:
         ns = int(round(seconds * 1e9))
         return cls(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -95,7 +97,7 @@ class MultiArrayDimension(Message):
 
 @message_type("std_msgs")
 class MultiArrayLayout(Message):
-    dim: list = F.message_list(MultiArrayDimension)
+    dim: list[MultiArrayDimension] = F.message_list(MultiArrayDimension)
     data_offset: int = F.integer(bits=32, signed=False)
 
 

@@ -22,11 +22,12 @@ import re
 import shutil
 import stat
 import threading
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import psutil
 
+from emos.errors import TransportError
 from emos.transport.trust import rate_limited, remove_owned
 
 log = logging.getLogger("emos.transport")
@@ -40,7 +41,7 @@ TMP_DIR = Path("/tmp")
 _RUN_ID_RE = re.compile(r"^(\d+)-(\d+)$")
 
 
-class RuntimeDirError(PermissionError):
+class RuntimeDirError(TransportError, PermissionError):
     """The directory for run directories cannot be used safely (another user owns or opened it)."""
 
 
@@ -171,7 +172,7 @@ class RunContext:
 
     # -- construction ------------------------------------------------------------------------
     @classmethod
-    def create(cls) -> "RunContext":
+    def create(cls) -> RunContext:
         """A new run owned by this process; sweeps what dead runs left behind first."""
         sweep_stale_runs()
         run_id = make_run_id()
@@ -182,7 +183,7 @@ class RunContext:
         return ctx
 
     @classmethod
-    def from_env(cls) -> "RunContext | None":
+    def from_env(cls) -> RunContext | None:
         run_dir = os.environ.get(ENV_RUN_DIR)
         run_id = os.environ.get(ENV_RUN_ID)
         if not run_dir or not run_id:
@@ -306,8 +307,9 @@ def sweep_stale_runs() -> list[str]:
             run_id = name[len(SHM_PREFIX) :].split(".", 1)[0]
             if run_id not in dead and _our_regular_file(SHM_DIR / name) and not run_is_alive(run_id):
                 dead.add(run_id)
+    root: Path | None
     try:
-        root: Path | None = runtime_root()
+        root = runtime_root()
         for entry in root.iterdir():
             if _RUN_ID_RE.match(entry.name) and not run_is_alive(entry.name):
                 dead.add(entry.name)

@@ -30,7 +30,7 @@ class LoanBook:
         self.table = ring.pins()
         self.entries = self.table.claim(ring.fd, wanted) if wanted > 0 else []
         self.free = list(self.entries)
-        self._refs: dict[int, weakref.ref] = {}
+        self._refs: dict[int, weakref.ref[np.ndarray]] = {}  # pin entry -> the array lent on it
         self.closed = False
 
     @property

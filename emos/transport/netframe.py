@@ -24,6 +24,7 @@ from __future__ import annotations
 import struct
 from typing import Any
 
+from emos.errors import TransportError
 from emos.msgs import codec
 
 MAGIC = b"EMZ1"
@@ -33,7 +34,7 @@ _MAGIC_STAMP = struct.Struct("<4sQ")
 MAX_NAME_BYTES = 1024  # fingerprints are 16 hex digits; publisher names are component names
 
 
-class BadFrame(ValueError):
+class BadFrame(TransportError, ValueError):
     """Bytes on a key expression that are not an EMOS frame of the expected type."""
 
 
@@ -104,10 +105,10 @@ class FrameWriter:
         head = b"".join([_MAGIC_STAMP.pack(SPLIT_MAGIC, stamp_ns), self._lengths, *enc.head_chunks()])
         if len(enc.arrays) == 1:
             arr = enc.arrays[0]
-            owner = arr.base
+            owner: object = arr.base  # numpy's stubs say ndarray | None; it is whatever owns the memory
             # C-contiguous (the encoder makes it so) and as long as its owner: it is the whole
             # object, first byte to last, so the object's bytes are the array's.
-            if type(owner) in (bytes, bytearray) and len(owner) == arr.nbytes:
+            if (type(owner) is bytes or type(owner) is bytearray) and len(owner) == arr.nbytes:
                 return owner, head
         size = enc.array_bytes
         region = self._arrays if self._arrays is not None and len(self._arrays) == size else bytearray(size)

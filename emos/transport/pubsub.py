@@ -17,11 +17,13 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
+from emos.errors import TransportError
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name
 from emos.transport import ring as R
@@ -30,9 +32,10 @@ from emos.transport.fence import full_fence
 from emos.transport.generations import create_generation, latest_own_generation
 from emos.transport.limits import check_topic_name
 from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
+from emos.transport.ring import MessageTooLarge as MessageTooLarge  # re-exported; one class for the ring's and the topic's limit
 from emos.transport.screen import SegmentScreen
 from emos.transport.trust import UntrustedFile, rate_limited, remove_owned
-from emos.transport.waker import ANNOUNCE, WakeSender, Waker
+from emos.transport.waker import ANNOUNCE, Waker, WakeSender
 
 log = logging.getLogger("emos.transport")
 
@@ -46,16 +49,13 @@ REJECT_LOG_PERIOD_S = 10.0  # a publisher of the wrong type is logged at most th
 _SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow can do that once)
 
 
-class TopicTypeError(TypeError):
+class TopicTypeError(TransportError, TypeError):
     """Two ends of a topic disagree on its message type."""
 
 
-class MessageTooLarge(ValueError):
-    """A message exceeds the largest size a topic accepts."""
-
-
 def _fingerprint(cls: type) -> str:
-    return cls._emos_fingerprint  # type: ignore[attr-defined]
+    fingerprint: str = cls._emos_fingerprint  # type: ignore[attr-defined]  # set by @message_type
+    return fingerprint
 
 
 def parse_segment(ctx: RunContext, name: str) -> tuple[str, str, int] | None:
@@ -253,7 +253,7 @@ class _Source:
         self.ring, self.base = ring, base
         self.loans = LoanBook(ring, loans) if loans > 0 else None
 
-    def read(self, n: int) -> tuple[int, "np.ndarray | memoryview | None", int]:
+    def read(self, n: int) -> tuple[int, np.ndarray | memoryview | None, int]:
         """Message ``n``: a loaned view when it is big and an entry is free, else a copy.
 
         Either way the bytes are read-only, so code that works on small (copied) messages
@@ -517,10 +517,10 @@ class Subscriber:
                     src.cursor = max(src.cursor, src.ring.head)
             except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the reader
                 self._drop(src, exc)
-        src = self.sources.get(publisher_id)
-        return out[-self.queue_size :], (src.ring.writer_pid if src is not None else 0)
+        current = self.sources.get(publisher_id)
+        return out[-self.queue_size :], (current.ring.writer_pid if current is not None else 0)
 
-    def _drain(self, src: _Source, out: list) -> None:
+    def _drain(self, src: _Source, out: list[tuple[int, Any, str]]) -> None:
         # Drain the current generation before following a move, so nothing written there is lost.
         for _ in range(2):
             ring = src.ring

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.errors import TransportError
 from emos.transport import ring_check
 from emos.transport.context import SHM_DIR
 from emos.transport.fence import WEAK_ORDERING, full_fence
@@ -82,12 +83,16 @@ NOT_READY = 0  # not written yet, or being written
 LAPPED = 1  # overwritten by a newer message (the reader fell more than a ring behind)
 OK = 2
 
-class RingError(RuntimeError):
+class RingError(TransportError, RuntimeError):
     pass
 
 
-class MessageTooLarge(RingError):
-    pass
+class MessageTooLarge(RingError, ValueError):
+    """A message exceeds the largest size a slot (a ring) or a topic (a publisher's limit) accepts.
+
+    The one class for both: a ring raises it for a slot too small, a publisher for a message
+    over the topic's limit. ValueError is kept for callers of ``Publisher.publish`` that caught it
+    before the two were one class."""
 
 
 class RingCorrupt(RingError):
@@ -131,7 +136,7 @@ class Ring:
 
     # -- lifecycle -------------------------------------------------------------------------------
     @classmethod
-    def create(cls, name: str, slot_count: int, capacity: int, fingerprint: str, type_name: str, generation: int = 0, first: int = 0) -> "Ring":
+    def create(cls, name: str, slot_count: int, capacity: int, fingerprint: str, type_name: str, generation: int = 0, first: int = 0) -> Ring:
         """A new segment keeping ``slot_count`` messages of up to ``capacity`` bytes."""
         if not 1 <= slot_count <= MAX_DEPTH:
             raise ValueError(f"ring {name}: depth (slot_count) must be in 1..{MAX_DEPTH}, got {slot_count}")
@@ -170,7 +175,7 @@ class Ring:
         return cls(name, fd, mm)
 
     @classmethod
-    def attach(cls, name: str, generation: int | None = None) -> "Ring | None":
+    def attach(cls, name: str, generation: int | None = None) -> Ring | None:
         """Open an existing segment of ours; ``None`` if it vanished or is not initialised yet.
 
         Raises :class:`~emos.transport.trust.UntrustedFile` for a file that is not ours and
@@ -404,7 +409,7 @@ class Ring:
         view.flags.writeable = False  # other readers share these bytes
         return OK, view, q[idx + 2]
 
-    def pins(self) -> "PinTable":
+    def pins(self) -> PinTable:
         """The pin entries, through a mapping of their own that outlives :meth:`close`."""
         return PinTable(self.mm)
 
@@ -416,7 +421,7 @@ class Ring:
         return self.q[idx + 2] if self.q[idx] == 2 * n + 2 else None
 
     # -- wake-up registrations ---------------------------------------------------------------------
-    def _locked(self) -> "_Flock":
+    def _locked(self) -> _Flock:
         return _Flock(self.fd)
 
     def waiters(self) -> tuple[int, list[int]]:

@@ -43,7 +43,7 @@ def header_problem(u64: np.ndarray, size: int, generation: int | None = None) ->
     return None
 
 
-def damage(ring: "Ring") -> str | None:
+def damage(ring: Ring) -> str | None:
     """What is wrong with the message map and slot headers, or ``None`` if they hold together.
 
     For a writer re-opening its ring after a restart: O(depth), not for the hot path. It

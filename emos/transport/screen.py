@@ -11,11 +11,12 @@ from __future__ import annotations
 import logging
 import os
 import time
-from typing import Callable
+from collections.abc import Callable
 
+from emos.ratelimit import RateLimitedLog
 from emos.transport import ring as R
 from emos.transport.context import SHM_DIR
-from emos.transport.trust import RateLimitedLog, UntrustedFile, check_path
+from emos.transport.trust import UntrustedFile, check_path
 
 # A refused segment is looked at again after this long: our own writers never reuse a name for
 # other contents, but a damaged ring may be replaced meanwhile (under a new generation).
@@ -28,7 +29,7 @@ log = logging.getLogger("emos.transport")
 class SegmentScreen:
     """One subscriber's view of which segments of its topic it may read."""
 
-    def __init__(self, topic: str, prefix: str, parse: Callable[[str], "tuple[str, str, int] | None"]):
+    def __init__(self, topic: str, prefix: str, parse: Callable[[str], tuple[str, str, int] | None]):
         self.topic = topic
         self.prefix = prefix
         self.parse = parse

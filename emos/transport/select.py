@@ -16,7 +16,8 @@ changes.
 from __future__ import annotations
 
 import os
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
 from emos.transport.context import RunContext
 
@@ -72,7 +73,8 @@ def use_network(zenoh_config: str | None = None, topics: str | list[str] | None 
 
     ``topics`` / ``services``: ``"all"`` or names; ``group`` keeps robots on one network apart.
     Everything is checked here, so a typo fails before anything starts."""
-    from emos.transport.zenoh_net import ENV_NET_GROUP, ENV_ZENOH_CONFIG, net_group
+    from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
+    from emos.transport.zenoh_net import ENV_NET_GROUP, net_group
 
     def names(value: str | list[str], what: str) -> str:
         if isinstance(value, str):
@@ -164,7 +166,8 @@ def open_subscriber(ctx: RunContext, topic: Any, waker: Any = None, queue_size: 
 
 def open_server_bridge(ctx: RunContext, server: Any) -> Any | None:
     """A Zenoh queryable in front of a started service or action server, if the run shares it
-    over the network (``$EMOS_NET_SERVICES``); ``None`` otherwise. It has ``async close()``."""
+    over the network (``$EMOS_NET_SERVICES``); ``None`` otherwise. Its ``close()`` is synchronous
+    (the servers' is a coroutine: the node awaits what close() returns)."""
     if not os.environ.get(ENV_NET_SERVICES, "").strip():
         return None
     from emos.core.services import ActionServer

@@ -14,15 +14,19 @@ import errno
 import logging
 import os
 import stat
-import time
 from pathlib import Path
+
+from emos.errors import TransportError
+from emos.ratelimit import RateLimitedLog
+
+__all__ = ["SEGMENT_MODE", "UntrustedFile", "check_path", "distrust_reason", "open_owned", "rate_limited", "remove_owned"]
 
 log = logging.getLogger("emos.transport")
 
 SEGMENT_MODE = 0o600
 
 
-class UntrustedFile(OSError):
+class UntrustedFile(TransportError, OSError):
     """A file in a shared directory that is not ours to use (its path and why are in the message)."""
 
 
@@ -93,30 +97,5 @@ def remove_owned(path: Path, mode: int | None = SEGMENT_MODE) -> str | None:
     return None
 
 
-class RateLimitedLog:
-    """Warnings that repeat (a forged ring seen at every rescan) logged at most once per
-    ``interval`` seconds per key, with the number of repeats left out in between."""
-
-    def __init__(self, logger: logging.Logger = log, interval: float = 10.0):
-        self.logger = logger
-        self.interval = interval
-        self._last: dict[str, tuple[float, int]] = {}  # key -> (last emitted, repeats suppressed since)
-
-    def warning(self, key: str, msg: str, *args: object) -> bool:
-        """Log unless ``key`` was logged less than ``interval`` ago; returns whether it logged."""
-        now = time.monotonic()
-        last, suppressed = self._last.get(key, (-float("inf"), 0))
-        if now - last < self.interval:
-            self._last[key] = (last, suppressed + 1)
-            return False
-        if suppressed:
-            msg += f" ({suppressed} more like this in the last {now - last:.0f} s)"
-        self.logger.warning(msg, *args)
-        self._last[key] = (now, 0)
-        if len(self._last) > 4096:  # bounded: keys name segments, which an attacker can mint
-            oldest = min(self._last, key=lambda k: self._last[k][0])
-            del self._last[oldest]
-        return True
-
-
-rate_limited = RateLimitedLog()
+# The transport's shared instance (segments, wake-up files, clean-up), keyed by what it names.
+rate_limited = RateLimitedLog(log, interval=10.0)

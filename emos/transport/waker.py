@@ -41,8 +41,8 @@ import secrets
 import stat
 import struct
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from emos.transport.context import RunContext, make_run_id, run_is_alive
 from emos.transport.fence import full_fence
@@ -380,10 +380,10 @@ def sweep_dead_wakers(ctx: RunContext) -> int:
         except OSError:
             continue
         for entry in entries:
-            token = _token_of(entry.name)
+            reader = _token_of(entry.name)
             # A subscriber registers after its waker is made: an entry whose waker has no file
             # left belongs to a reader that is gone (or is closing, and removes it anyway).
-            if token is None or token in live or _lstat(fifo_path(ctx, token)) or _lstat(state_path(ctx, token)):
+            if reader is None or reader in live or _lstat(fifo_path(ctx, reader)) or _lstat(state_path(ctx, reader)):
                 continue
             st = _lstat(entry)
             if st is not None and stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid():

@@ -263,7 +263,8 @@ class _PeersLock:
 def _free_loopback_port() -> int:
     with socket.socket() as s:
         s.bind((LOOPBACK_HOST, 0))
-        return s.getsockname()[1]
+        port: int = s.getsockname()[1]
+        return port
 
 
 def open_loopback(zenoh: Any) -> tuple[Any, Path]:

@@ -6,8 +6,9 @@ one queryable per component on ``emos/<group>/_ctl_/<component>`` (a
 msgpack map; ``op`` says what to reach:
 
 ``control``    one operation of the component's control socket (``call``), among
-               :data:`CONTROL_CALLS` only: a component-method action (public methods only), a step,
-               parameters, a config file, its state. Not ``exit``, fault injection or topic rewiring.
+               :data:`CONTROL_CALLS` only: a public method (``execute_method``; older runs call it
+               ``run_action``, which is accepted too), a step, parameters, a config file, its
+               state. Not ``exit``, fault injection or topic rewiring.
 ``lifecycle``  ``start`` / ``stop`` / ``restart`` (``request``) through the run's supervisor, so a
                remote restart counts against the restart intensity like a local one.
 ``service``    a request to one of the run's services (``name``, ``request`` in EMOS's encoding).
@@ -31,29 +32,34 @@ from __future__ import annotations
 import logging
 import os
 import threading
-import time
 import uuid
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
-from emos.core.rpc import RpcClient, RpcConnectionError
+import attrs
+
+from emos.core import control as C
+from emos.core.retry import Backoff, retry
+from emos.core.rpc import RpcClient
 from emos.transport.context import RunContext
-from emos.transport.zenoh_rpc import (QueryBridge, RemoteServiceError, ServiceUnavailable, _pack, _replies, _unpack_reply,
-                                      timeout_of)
 from emos.transport.zenoh_net import KEY_ROOT, net_group
+from emos.transport.zenoh_rpc import QueryBridge, RemoteServiceError, ServiceUnavailable, _pack, _replies, _unpack_reply, timeout_of
 
 log = logging.getLogger("emos.transport.zenoh")
 ENV_NET_CONTROL = "EMOS_NET_CONTROL"
 CTL_MARK = "_ctl_"
 OPS = ("control", "lifecycle", "service", "goal")
-# The control-socket operations another run may ask for: what the Monitor's actions use, and the
-# state. Not ``exit``, ``transition``, fault injection or ``change_topic``.
-CONTROL_CALLS = ("run_action", "run_step", "update_config_parameter", "update_config_parameters", "configure_from_file", "get_state")
-LIFECYCLE_REQUESTS = ("start", "stop", "restart")
+# The control-socket operations another run may ask for (emos.core.control.REMOTE_CALLS), and the
+# names older runs use for some of them.
+CONTROL_CALLS = C.REMOTE_CALLS + tuple(C.LEGACY_REMOTE_CALLS)
+LIFECYCLE_REQUESTS = C.LIFECYCLE_REQUESTS
 _RESERVED_ARGS = ("id", "op", "timeout", "on_stream")  # the socket frame's and RpcClient.call's own
 MAX_TIMEOUT_S = 3600.0
 MAX_WAIT_S = 3600.0
 MAX_GOALS = 16  # goals from other runs running at once per component; more are refused
+# Asking again while no run answers (its helper starting, the link coming up): up to twice a second.
+NO_ANSWER_BACKOFF = Backoff(base=0.05, factor=2.0, cap=0.5, timeout=0.0)
 
 
 def control_key(component: str, group: str | None = None) -> str:
@@ -71,7 +77,7 @@ def control_enabled() -> bool:
     return value in ("on", "1", "true")
 
 
-def _str(req: dict, field: str, allowed: Iterable[str] | None = None) -> str:
+def _str(req: dict[str, Any], field: str, allowed: Iterable[str] | None = None) -> str:
     value = req.get(field)
     if not isinstance(value, str) or not value:
         raise ValueError(f"{field!r} must be a non-empty str, got {type(value).__name__}")
@@ -80,7 +86,7 @@ def _str(req: dict, field: str, allowed: Iterable[str] | None = None) -> str:
     return value
 
 
-def _bytes(req: dict, field: str) -> bytes:
+def _bytes(req: dict[str, Any], field: str) -> bytes:
     value = req.get(field)
     if not isinstance(value, bytes):
         raise ValueError(f"{field!r} must be bytes (an EMOS-encoded message), got {type(value).__name__}")
@@ -93,26 +99,26 @@ class ComponentControl(QueryBridge):
     what = "control"
 
     def __init__(self, ctx: RunContext, component: str, config_path: str | None = None):
-        from emos.core.node import control_socket
-
         self.ctx, self.component = ctx, component
-        self.control_path = control_socket(ctx, component)
+        self.control_path = C.control_socket(ctx, component)
         self.supervisor_path = ctx.run_dir / "supervisor.sock"
         self._goals = threading.BoundedSemaphore(MAX_GOALS)
         super().__init__(control_key(component), OPS, config_path, label=component)
 
-    def handle(self, query: Any, req: dict) -> None:
+    def handle(self, query: Any, req: dict[str, Any]) -> None:
         op = req["op"]
         timeout = timeout_of(req, 10.0, MAX_TIMEOUT_S)
         if op == "control":
-            call = _str(req, "call", CONTROL_CALLS)
+            asked = _str(req, "call", CONTROL_CALLS)
+            call = C.LEGACY_REMOTE_CALLS.get(asked, asked)
             args = req.get("args", {})
             if not isinstance(args, dict) or not all(isinstance(k, str) and k not in _RESERVED_ARGS for k in args):
                 raise ValueError(f"'args' must be a map of str keys other than {', '.join(_RESERVED_ARGS)}")
             method = args.get("method")
-            if call == "run_action" and (not isinstance(method, str) or method.startswith("_")):
-                # Another run may call what a recipe may name: a public method, never the internals.
-                raise ValueError(f"run_action from another run calls only a public method, got {str(method)[:60]!r}")
+            if call == C.EXECUTE_METHOD and not C.is_public_name(method):
+                # Another run may call what a recipe may name: a public method, never the internals
+                # (the component refuses them too; said here before anything is forwarded).
+                raise ValueError(f"{asked} from another run calls only a public method, got {str(method)[:60]!r}")
             result = self._retrying(self.control_path, call, timeout, args)
         elif op == "lifecycle":
             request = _str(req, "request", LIFECYCLE_REQUESTS)
@@ -120,7 +126,7 @@ class ComponentControl(QueryBridge):
             if isinstance(wait, bool) or not isinstance(wait, (int, float)) or not 0 <= wait <= MAX_WAIT_S:  # NaN fails too
                 raise ValueError(f"'wait_time' must be a number of seconds in [0, {MAX_WAIT_S:g}], got {wait!r}")
             with RpcClient(self.supervisor_path, timeout=timeout + float(wait) + 30.0) as rpc:
-                result = rpc.call("lifecycle", component=self.component, request=request, wait_time=float(wait), by="remote")
+                result = rpc.call(C.SUPERVISOR_LIFECYCLE, component=self.component, request=request, wait_time=float(wait), by="remote")
         elif op == "service":
             result = self._retrying(self._server_socket(req), "call", timeout, {"request": _bytes(req, "request")})
         else:  # goal: handed over, not waited for (a goal may run for minutes)
@@ -136,7 +142,7 @@ class ComponentControl(QueryBridge):
             result = goal_id
         query.reply(self.key, _pack({"ok": result}))
 
-    def _server_socket(self, req: dict) -> Path:
+    def _server_socket(self, req: dict[str, Any]) -> Path:
         from emos.core.services import service_socket
 
         name = _str(req, "name")
@@ -144,20 +150,10 @@ class ComponentControl(QueryBridge):
             raise ValueError(f"'name' is not a service name: {name[:60]!r}")
         return service_socket(self.ctx, name)
 
-    def _retrying(self, path: Path, call: str, timeout: float, args: dict) -> Any:
+    def _retrying(self, path: Path, call: str, timeout: float, args: dict[str, Any]) -> Any:
         """``call`` on ``path``, retried while nothing listens there (a component restarting)
         for up to ``timeout`` seconds, as a local action waits for the next incarnation."""
-        deadline = time.monotonic() + timeout
-        delay = 0.01
-        while True:
-            try:
-                with RpcClient(path, timeout=timeout) as rpc:
-                    return rpc.call(call, **args)
-            except RpcConnectionError as exc:
-                if time.monotonic() + delay >= deadline:
-                    raise RpcConnectionError(f"component {self.component!r} unreachable for {timeout:g} s ({exc}); {call} not delivered") from None
-                time.sleep(delay)
-                delay = min(delay * 2, 0.2)
+        return C.call(path, call, args, timeout=timeout, queue_timeout=timeout, what=f"component {self.component!r}")
 
     def _goal(self, path: Path, goal: bytes, goal_id: str) -> None:
         try:
@@ -203,7 +199,7 @@ class RemoteControl:
     def __init__(self, config_path: str | None = None, group: str | None = None):
         self.config_path, self.group = config_path, group
 
-    def request(self, component: str, req: dict, timeout: float) -> Any:
+    def request(self, component: str, req: dict[str, Any], timeout: float) -> Any:
         """Send ``req`` and return the reply's result. While no run answers (its helper starting,
         the network link coming up), ask again for up to ``timeout`` seconds, as a local action
         waits for a restarting component; then :class:`ServiceUnavailable`. An error reply raises
@@ -212,16 +208,15 @@ class RemoteControl:
         what = f"component {component!r} ({req.get('op')} {req.get('call') or req.get('request') or req.get('name') or ''})"
         # Zenoh's own deadline leaves the remote side its whole ``timeout`` (and a restart its wait).
         wait = timeout + float(req.get("wait_time") or 0.0) + (30.0 if req.get("op") == "lifecycle" else 2.0)
-        deadline = time.monotonic() + timeout
-        delay = 0.05
-        while True:
+
+        def ask() -> Any:
             for reply in _replies(key, {**req, "timeout": timeout}, wait, self.config_path):
                 return _unpack_reply(what, reply).get("ok")
-            if time.monotonic() + delay >= deadline:
-                raise ServiceUnavailable(f"component {component!r}: no run of group {self.group or net_group()!r} answered on {key} "
-                                         f"for {timeout:g} s (is it running, with --zenoh, and is its control on?)")
-            time.sleep(delay)
-            delay = min(delay * 2, 0.5)
+            raise ServiceUnavailable(f"component {component!r}: no run of group {self.group or net_group()!r} answered on {key} "
+                                     f"for {timeout:g} s (is it running, with --zenoh, and is its control on?)")
+
+        # An error reply (RemoteServiceError) is the component's answer: raised at once.
+        return retry(ask, attrs.evolve(NO_ANSWER_BACKOFF, timeout=timeout), retry_on=ServiceUnavailable)
 
 
 __all__ = ["ComponentControl", "ControlBridges", "RemoteControl", "RemoteServiceError", "ServiceUnavailable", "control_key",

@@ -37,13 +37,15 @@ import os
 import re
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
+from emos.errors import TransportError
 from emos.msgs.registry import canonical_name
+from emos.ratelimit import RateLimitedLog
 from emos.transport import zenoh_config
 from emos.transport.context import encode_name
 from emos.transport.netframe import SPLIT_MAGIC, BadFrame, FrameWriter, SplitPayload, encode_framed, read_frame, read_message
-from emos.transport.trust import RateLimitedLog
 from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -55,7 +57,7 @@ _GROUP_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _warn = RateLimitedLog(log, interval=10.0)
 
 
-class NetUnavailable(RuntimeError):
+class NetUnavailable(TransportError, RuntimeError):
     """A topic was marked for the network but Zenoh cannot be used."""
 
 

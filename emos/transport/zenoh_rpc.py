@@ -19,16 +19,18 @@ import logging
 import os
 import threading
 import uuid
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import msgpack
 
 from emos.core.rpc import RpcClient
 from emos.core.services import ActionCanceled, service_socket
+from emos.errors import EmosError, TransportError
 from emos.msgs import codec
 from emos.msgs.registry import resolve
+from emos.ratelimit import RateLimitedLog
 from emos.transport.context import RunContext
-from emos.transport.trust import RateLimitedLog
 from emos.transport.zenoh_net import KEY_ROOT, _zenoh, net_group, session
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -38,11 +40,11 @@ _OPS = {"service": ("call",), "action": ("goal", "cancel")}
 _warn = RateLimitedLog(log, interval=10.0)
 
 
-class RemoteServiceError(RuntimeError):
+class RemoteServiceError(EmosError, RuntimeError):
     """The remote server answered with an error (its message is kept)."""
 
 
-class ServiceUnavailable(TimeoutError):
+class ServiceUnavailable(TransportError, TimeoutError):
     """No host of the group answered: no server declared there (yet), or the query timed out."""
 
 
@@ -113,7 +115,7 @@ class QueryBridge:
         except Exception as reply_exc:  # noqa: BLE001 - the caller may have gone
             log.debug("%s %s: error reply failed: %s", self.what, self.label, reply_exc)
 
-    def _parse(self, query: Any) -> dict:
+    def _parse(self, query: Any) -> dict[str, Any]:
         payload = query.payload
         if payload is None:
             raise ValueError("a query without a payload")
@@ -125,7 +127,7 @@ class QueryBridge:
             raise ValueError(f"a {self.what} accepts ops {self.ops}, got {str(req)[:80]}")
         return req
 
-    def handle(self, query: Any, req: dict) -> None:
+    def handle(self, query: Any, req: dict[str, Any]) -> None:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -137,7 +139,7 @@ class QueryBridge:
                 log.debug("%s %s: undeclaring: %s", self.what, self.label, exc)
 
 
-def timeout_of(req: dict, default: float, limit: float) -> float:
+def timeout_of(req: dict[str, Any], default: float, limit: float) -> float:
     """The ``timeout`` a remote request asks for, as a number in (0, limit], else ``default``."""
     value = req.get("timeout", default)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= limit:
@@ -155,7 +157,7 @@ class NetServiceBridge(QueryBridge):
         self.path = service_socket(ctx, name)
         super().__init__(service_key(name), _OPS[kind], config_path, label=name)
 
-    def handle(self, query: Any, req: dict) -> None:
+    def handle(self, query: Any, req: dict[str, Any]) -> None:
         op = req["op"]
         if op == "call":
             with RpcClient(self.path, timeout=timeout_of(req, 10.0, 24 * 3600.0)) as rpc:
@@ -174,11 +176,8 @@ class NetServiceBridge(QueryBridge):
                 done = bool(rpc.call("cancel", goal_id=str(req.get("goal_id"))))
             query.reply(self.key, _pack({"ok": done}))
 
-    async def close(self) -> None:  # type: ignore[override] - the node closes its servers with await
-        QueryBridge.close(self)
 
-
-def _replies(key: str, request: dict, timeout: float, config_path: str | None) -> Any:
+def _replies(key: str, request: dict[str, Any], timeout: float, config_path: str | None) -> Any:
     zenoh = _zenoh()
     return session(config_path).get(
         key, payload=_pack(request), timeout=timeout, target=zenoh.QueryTarget.BEST_MATCHING,
@@ -186,7 +185,7 @@ def _replies(key: str, request: dict, timeout: float, config_path: str | None) -
     )
 
 
-def _unpack_reply(name: str, reply: Any) -> dict:
+def _unpack_reply(name: str, reply: Any) -> dict[str, Any]:
     if reply.ok is None:
         try:
             detail = msgpack.unpackb(reply.err.payload.to_bytes(), raw=False).get("error", "?")

@@ -25,8 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from emos.transport.context import RunContext
-from emos.transport.zenoh_net import ENV_ZENOH_CONFIG, KEY_ROOT, net_group, session
+from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
 from emos.transport.zenoh_control import ControlBridges, control_enabled
+from emos.transport.zenoh_net import KEY_ROOT, net_group, session
 from emos.transport.zenoh_status_mirror import StatusMirror
 
 log = logging.getLogger("emos.transport.zenoh")
@@ -38,7 +39,7 @@ def status_key(run_id: str = "*", group: str | None = None) -> str:
     return f"{KEY_ROOT}/{group or net_group()}/{RUN_MARK}/{run_id}"
 
 
-def start_status_bridge(run_dir: Path, run_id: str) -> subprocess.Popen | None:
+def start_status_bridge(run_dir: Path, run_id: str) -> subprocess.Popen[bytes] | None:
     """Start the helper if this run uses Zenoh (``$EMOS_ZENOH_CONFIG``); None otherwise."""
     if not os.environ.get(ENV_ZENOH_CONFIG):
         return None
@@ -46,7 +47,7 @@ def start_status_bridge(run_dir: Path, run_id: str) -> subprocess.Popen | None:
     return subprocess.Popen([sys.executable, "-m", "emos.transport.zenoh_status", str(run_dir), run_id, str(os.getpid())], stdin=subprocess.DEVNULL)
 
 
-def stop_status_bridge(proc: subprocess.Popen | None) -> None:
+def stop_status_bridge(proc: subprocess.Popen[bytes] | None) -> None:
     if proc is None or proc.poll() is not None:
         return
     proc.terminate()
@@ -134,8 +135,9 @@ def _worker_names(sock: Path) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
-    from emos.supervisor.spawn import die_with
     import signal
+
+    from emos.core.prctl import die_with
 
     run_dir, run_id, parent = Path(argv[0]), argv[1], int(argv[2])
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))

@@ -23,11 +23,12 @@ from __future__ import annotations
 import logging
 import select
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
-from emos.core.ratelimit import RepeatLimiter
 from emos.msgs import codec
 from emos.msgs.status import ComponentStatus
+from emos.ratelimit import RateLimitedLog
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
 from emos.transport.waker import Waker
@@ -43,7 +44,7 @@ def status_topic(component: str) -> str:
     return f"/{component.strip('/')}/status"
 
 
-def _signature(status: ComponentStatus) -> tuple:
+def _signature(status: ComponentStatus) -> tuple[object, ...]:
     """What makes a status different from the previous one (not its stamp)."""
     return (status.status, status.lifecycle_state, status.message, tuple(status.src_algorithms),
             tuple(status.src_components), tuple(status.src_topics), status.pid)
@@ -59,8 +60,8 @@ class StatusMirror:
         self.waker = Waker(ctx)
         self._subs: dict[str, Subscriber] = {}
         self._pubs: dict[str, Any] = {}
-        self._last: dict[str, tuple[tuple, float]] = {}  # name -> (signature, monotonic time sent)
-        self._errors = RepeatLimiter()
+        self._last: dict[str, tuple[tuple[object, ...], float]] = {}  # name -> (signature, monotonic time sent)
+        self._errors = RateLimitedLog(log, interval=5.0)
         self.forwarded = 0
         self._last_wake = 0.0
 
@@ -121,10 +122,7 @@ class StatusMirror:
         return sent
 
     def _report(self, name: str, what: str, exc: BaseException) -> None:
-        log_now, _, suppressed = self._errors.hit((name, what))
-        if log_now:
-            log.warning("status of %s over Zenoh: %s: %s: %s%s", name, what, type(exc).__name__, exc,
-                        f" (and {suppressed} more times)" if suppressed else "")
+        self._errors.warning((name, what), "status of %s over Zenoh: %s: %s: %s", name, what, type(exc).__name__, exc)
 
     def close(self) -> None:
         for sub in self._subs.values():

@@ -6,9 +6,9 @@ from tests.runtime.helpers import kill_leftover_systems
 @pytest.fixture(scope="session")
 def model_server():
     """One real ``emos serve models`` for every component test of the session."""
-    from tests.agents.fixtures.server_process import start_server
-
     import httpx
+
+    from tests.agents.fixtures.server_process import start_server
 
     proc = start_server()
     # Load the server's embedding model now, once, rather than inside the first test that

@@ -82,7 +82,9 @@ def test_a_server_that_never_answers_times_out(kind):
         with pytest.raises((ModelTimeoutError, ModelConnectionError)) as info:
             infer(client)
         elapsed = time.monotonic() - started
-        assert elapsed < 5.0
+        # The configured 0.5 s timeouts ended the call, not the 30 s defaults (half of those: a
+        # bound a loaded machine cannot reach through scheduling delays alone).
+        assert elapsed < 15.0
         # HTTP, RESP and gRPC calls get through TCP and then wait: that is a timeout, not a refusal.
         # The WebSocket handshake itself is what hangs for the WS client: bounded by connect_timeout.
         if kind in ("generic", "ollama", "roboml_http", "roboml_resp"):

@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.fixtures.server_process import start_server
 from tests.agents.fixtures.stub_servers import ScriptedHTTP
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 
@@ -87,7 +88,7 @@ launcher.bringup()
         pids = {c: system.pid(c) for c in ("junk", "tools")}
         probe.pub("/q", M.String(data="hello"))
         for name in ("junk", "tools"):
-            wait_until(lambda: probe.status(name).status == M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, 15,
+            wait_until(lambda name=name: probe.status(name).status == M.ComponentStatus.STATUS_FAILURE_ALGORITHM_LEVEL, 15,
                        what=f"{name} to report an algorithm failure")
             assert "MalformedResponseError" in probe.status(name).message
         assert "tool-call arguments" in probe.status("tools").message

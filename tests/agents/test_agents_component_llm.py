@@ -4,12 +4,12 @@ from __future__ import annotations
 import socket
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.fixtures.server_process import start_server
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 

@@ -5,12 +5,12 @@ import io
 import wave
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.agents.test_agents_local_models import _figure
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 
@@ -84,7 +84,7 @@ launcher.bringup()
     try:
         probe.sub("/audio", "Audio"), probe.sub("/heard", "String"), probe.sub("/heard_vad", "String")
         for name in ("tts", "stt", "stt_vad"):
-            wait_until(lambda: probe.status(name).status == M.ComponentStatus.STATUS_HEALTHY, 60, what=f"{name} ready")
+            wait_until(lambda name=name: probe.status(name).status == M.ComponentStatus.STATUS_HEALTHY, 60, what=f"{name} ready")
         probe.pub("/text_in", M.String(data="what is the weather like"))
         (spoken,) = probe.collect("/audio", "Audio", timeout=60)
         wav = spoken.data.tobytes()

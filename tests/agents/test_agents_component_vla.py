@@ -7,11 +7,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from tests.agents.components_helpers import AGENT_HEADER, Probe
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 
@@ -76,8 +76,11 @@ launcher.bringup()
     arm = Arm(probe)
     try:
         arm.thread.start()
-        from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
-                                                                 VisionLanguageActionResult)
+        from emos.actors.agents.components.vla_interface import (
+            VisionLanguageActionFeedback,
+            VisionLanguageActionGoal,
+            VisionLanguageActionResult,
+        )
         from emos.core.services import ActionClient
 
         client = ActionClient("vla_with_smolvla/vision_language_action", VisionLanguageActionGoal,
@@ -130,8 +133,11 @@ launcher.bringup()
     arm = Arm(probe)
     try:
         arm.thread.start()
-        from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
-                                                                 VisionLanguageActionResult)
+        from emos.actors.agents.components.vla_interface import (
+            VisionLanguageActionFeedback,
+            VisionLanguageActionGoal,
+            VisionLanguageActionResult,
+        )
         from emos.core.services import ActionClient
 
         client = ActionClient("vla/vision_language_action", VisionLanguageActionGoal,

@@ -10,8 +10,23 @@ import pytest
 
 from emos import Event, FixedInput, Topic
 from emos import msgs as M
-from emos.actors.agents import (LLM, MLLM, VLM, ChromaClient, ChromaDB, LLMConfig, MapEncoding, MapLayer, OllamaClient,
-                                OllamaModel, Route, SemanticRouter, SpeechToTextConfig, Vision, VisionConfig)
+from emos.actors.agents import (
+    LLM,
+    MLLM,
+    VLM,
+    ChromaClient,
+    ChromaDB,
+    LLMConfig,
+    MapEncoding,
+    MapLayer,
+    OllamaClient,
+    OllamaModel,
+    Route,
+    SemanticRouter,
+    SpeechToTextConfig,
+    Vision,
+    VisionConfig,
+)
 from emos.actors.agents.components.convert import OutputConversionError, to_message
 from emos.actors.agents.logic.tracking import CentroidTracker
 from emos.core.offload import StepWorker

@@ -12,9 +12,9 @@ pytestmark = pytest.mark.unit
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from emos.actors.agents.local.audio import read_wav, resample, write_wav
-from emos.actors.agents.local.embeddings import SentenceEmbedder
-from emos.actors.agents.local.tts import EspeakTTS, TTSError
+from emos.actors.agents.local.audio import read_wav, resample, write_wav  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.local.embeddings import SentenceEmbedder  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.local.tts import EspeakTTS, TTSError  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
 
 
 # ----------------------------------------------------------------- embeddings
@@ -145,6 +145,7 @@ def test_haar_detects_the_face_in_a_real_photograph():
     mpl_data = pytest.importorskip("matplotlib", reason="the test photograph ships with matplotlib "
                                    "(emos[plots])").get_data_path()
     import cv2
+
     from emos.actors.agents.local.vision import LocalDetector
 
     photo = cv2.imread(os.path.join(mpl_data, "sample_data", "grace_hopper.jpg"))[:, :, ::-1].copy()

@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from emos.actors.agents.local.vision import Detection
 from emos.actors.agents.logic.detections import detections_to_text
 from emos.actors.agents.logic.history import ChatHistory
 from emos.actors.agents.logic.preprocess import PreprocessorChain
 from emos.actors.agents.logic.streaming import StreamChunker, chunk_stream
 from emos.actors.agents.logic.templates import PromptBuilder, PromptTemplate, TemplateVariableError
-from emos.actors.agents.local.vision import Detection
 from emos.actors.agents.types import ChatChunk, ChatMessage, ImageData, ToolCall
 
 pytestmark = pytest.mark.unit

@@ -11,9 +11,9 @@ pytestmark = pytest.mark.unit
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from emos.actors.agents.db import ChromaClient, ChromaDB
-from emos.actors.agents.logic.rag import RAGSettings, format_hits, retrieve, with_context
-from emos.actors.agents.logic.templates import PromptBuilder
+from emos.actors.agents.db import ChromaClient, ChromaDB  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.logic.rag import RAGSettings, format_hits, retrieve, with_context  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.logic.templates import PromptBuilder  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
 
 
 @pytest.fixture()

@@ -11,8 +11,8 @@ pytestmark = pytest.mark.unit
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from emos.actors.agents.db import ChromaClient, ChromaDB
-from emos.actors.agents.logic.map_encoding import MapConfig, MapEncoder, MapLayer
+from emos.actors.agents.db import ChromaClient, ChromaDB  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.logic.map_encoding import MapConfig, MapEncoder, MapLayer  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
 
 
 @pytest.fixture()

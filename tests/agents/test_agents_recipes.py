@@ -3,6 +3,7 @@ server (recipes/models/responder.yaml as the stand-in chat model), fed and read 
 from __future__ import annotations
 
 import io
+import shutil
 import time
 import wave
 from pathlib import Path
@@ -35,6 +36,8 @@ def recipe_server():
 
 def _run(tmp_path, recipe: str, server, components: list[str]) -> tuple[SystemUnderTest, Probe]:
     env = {"EMOS_MODELS_PORT": str(server.port), "EMOS_MODELS_RESP_PORT": str(server.resp_port), "HOME": str(tmp_path)}
+    # multiprocessing_agent.py builds on complete_agent.py, the recipe beside it
+    shutil.copy(RECIPES / "complete_agent.py", tmp_path / "complete_agent.py")
     system = SystemUnderTest(tmp_path, (RECIPES / recipe).read_text(), duration=240, env=env)
     system.wait_up(components=components, timeout=90)
     return system, Probe(system)
@@ -197,8 +200,11 @@ def test_vla_manipulation_closes_the_loop_on_the_simulated_arm(tmp_path, recipe_
     import shutil
     import threading
 
-    from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
-                                                             VisionLanguageActionResult)
+    from emos.actors.agents.components.vla_interface import (
+        VisionLanguageActionFeedback,
+        VisionLanguageActionGoal,
+        VisionLanguageActionResult,
+    )
     from emos.core.services import ActionCanceled, ActionClient
 
     joints = ["Rotation", "Pitch", "Elbow", "Wrist_Pitch", "Wrist_Roll", "Jaw"]
@@ -271,8 +277,11 @@ def test_event_driven_vla_stops_the_player_on_the_referees_yes(tmp_path, recipe_
     as a success, long before its max_timesteps failsafe."""
     import shutil
 
-    from emos.actors.agents.components.vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal,
-                                                             VisionLanguageActionResult)
+    from emos.actors.agents.components.vla_interface import (
+        VisionLanguageActionFeedback,
+        VisionLanguageActionGoal,
+        VisionLanguageActionResult,
+    )
     from emos.core.services import ActionClient
 
     shutil.copytree(RECIPES / "models", tmp_path / "models")  # the recipe reads files beside itself

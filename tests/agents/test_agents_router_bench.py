@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+
 import pytest
 
 pytestmark = [pytest.mark.process, pytest.mark.statistical]
@@ -13,7 +14,7 @@ pytestmark = [pytest.mark.process, pytest.mark.statistical]
 
 def test_bench_agents_json_contract():
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    out = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "agents", "--json",
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "bench", "agents", "--json",
                           "--entries", "300", "--queries", "20", "--repeats", "1", "--llm-queries", "5",
                           "--vision-seconds", "3", "--swaps", "1"],
                          capture_output=True, text=True, env=env, timeout=240, check=True)

@@ -11,10 +11,9 @@ pytestmark = [pytest.mark.unit, pytest.mark.statistical]
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from emos.actors.agents.db import ChromaClient, ChromaDB
-from emos.actors.agents.logic.router import Route, SemanticRouterConfig, VectorRouter
-
 from emos.actors.agents.data import DATA_DIR as DATA  # noqa: E402  (shipped in the package)
+from emos.actors.agents.db import ChromaClient, ChromaDB  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
+from emos.actors.agents.logic.router import Route, SemanticRouterConfig, VectorRouter  # noqa: E402 - after HF_HUB_OFFLINE is set: huggingface_hub reads it on import
 
 
 def load_labeled_set() -> tuple[dict[str, Route], str, list[tuple[str, str]]]:

@@ -20,7 +20,6 @@ from emos.actors.agents.clients import GenericHTTPClient, OllamaClient, RoboMLHT
 from emos.actors.agents.clients.resp import RespError, encode_command, read_reply
 from emos.actors.agents.models import GenericLLM, OllamaModel, TransformersLLM
 from emos.actors.agents.types import ChatMessage, ChatRequest
-
 from tests.runtime.helpers import wait_until
 
 from .fixtures.server_process import READY, start_server
@@ -285,7 +284,7 @@ def test_a_taken_port_is_named_in_one_line_and_fails(option, name):
     port = taken.getsockname()[1]
     args = {"--port": "0", option: str(port)}
     try:
-        done = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "serve", "models",
+        done = subprocess.run([sys.executable, "-m", "emos.tools.cli", "serve", "models",
                                *[word for pair in args.items() for word in pair]],
                               capture_output=True, text=True, timeout=120)
     finally:
@@ -296,7 +295,7 @@ def test_a_taken_port_is_named_in_one_line_and_fails(option, name):
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_signals_end_it_cleanly_with_the_shell_exit_code(sig, code):
-    proc = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "serve", "models", "--port", "0",
+    proc = subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "serve", "models", "--port", "0",
                              "--resp-port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     held = None
     try:

@@ -6,7 +6,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 
 import httpx
 import msgpack
@@ -105,12 +104,13 @@ def test_transcription_requires_multipart(http):
 
 
 def test_websocket_rejects_non_msgpack_frames(server):
+    from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect
 
     httpx.post(f"http://127.0.0.1:{server.port}/add_node", params={"node_name": "wsbad", "node_model": "TransformersLLM"})
     with connect(f"ws://127.0.0.1:{server.port}/wsbad/ws_inference") as ws:
         ws.send("text frame")
-        with pytest.raises(Exception):
+        with pytest.raises(ConnectionClosed):  # the server closes with 1003 (unsupported data)
             ws.recv(timeout=5)
         assert ws.close_code == 1003
 
@@ -135,7 +135,7 @@ def test_resp_speaks_the_protocol(server):
 
 
 def run_cli(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "serve", "models", *args],
+    return subprocess.run([sys.executable, "-m", "emos.tools.cli", "serve", "models", *args],
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -164,19 +164,22 @@ def test_sigterm_with_open_connections_exits_cleanly_and_the_port_is_reusable():
     resp = socket.create_connection(("127.0.0.1", first.resp_port))
     keep = httpx.Client(base_url=f"http://127.0.0.1:{port}")
     keep.get("/v1/models")
-    started = time.monotonic()
-    assert first.stop(timeout=10) == 143
-    assert time.monotonic() - started < 8.0
+    # Exit code 143 is the server's own SIGTERM exit: open connections that held it up would get
+    # it SIGKILLed at the end of this wait (a hang bound: a loaded machine takes seconds to exit).
+    assert first.stop(timeout=60) == 143
+    # ... and it closed them itself: the RESP peer reads end-of-stream, not a reset or a hang.
+    resp.settimeout(30)
+    assert resp.recv(1) == b""
     ws.close()
     resp.close()
     keep.close()
     # A chaos-style hard kill, then a restart on the same port.
-    second = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "serve", "models", "--port", str(port)],
+    second = subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "serve", "models", "--port", str(port)],
                               stdout=subprocess.PIPE, text=True)
     assert "ready" in second.stdout.readline()
     second.send_signal(signal.SIGKILL)
     second.wait(10)
-    third = subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "serve", "models", "--port", str(port)],
+    third = subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "serve", "models", "--port", str(port)],
                              stdout=subprocess.PIPE, text=True)
     try:
         assert "ready" in third.stdout.readline()

@@ -1,13 +1,13 @@
 """Which image travels with a Vision component's detections (consumers such as the Controller's
 vision followers read the image size and, for RGBD, the depth from it)."""
 import numpy as np
+import pytest
 
 from emos import Topic
 from emos.actors.agents import Vision, VisionConfig
 from emos.actors.agents.components.vision import _attached_image
 from emos.msgs import CompressedImage, Header, Image
 from emos.msgs.control import RGBD
-import pytest
 
 pytestmark = pytest.mark.unit
 

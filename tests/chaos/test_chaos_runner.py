@@ -11,10 +11,10 @@ import textwrap
 import time
 
 import psutil
+import pytest
 
 from emos.chaos.target import RunningSystem
 from emos.transport.context import runtime_root
-import pytest
 
 pytestmark = pytest.mark.process
 
@@ -112,7 +112,7 @@ def test_sigterm_between_runs_keeps_the_finished_runs_results_and_stops_the_syst
 
 
 def test_emos_status_says_when_later_groups_are_still_starting():
-    from emos.supervisor.cli_status import render
+    from emos.tools.cli.status import render
 
     answer = {"run_id": "r1", "pid": 7, "uptime_s": 1.5,
               "tree": {"name": "root", "kind": "supervisor", "strategy": "one_for_one", "children": [

@@ -43,7 +43,7 @@ def home(tmp_path, monkeypatch):
 
 
 def emos(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", *args], capture_output=True, text=True, timeout=timeout,
+    return subprocess.run([sys.executable, "-m", "emos.tools.cli", *args], capture_output=True, text=True, timeout=timeout,
                           cwd=ROOT, env=dict(os.environ))
 
 

@@ -24,7 +24,7 @@ HAS_ANALYZE = shutil.which("systemd-analyze") is not None
 
 
 def emos(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", *args], check=False, capture_output=True, text=True, timeout=120,
+    return subprocess.run([sys.executable, "-m", "emos.tools.cli", *args], check=False, capture_output=True, text=True, timeout=120,
                           cwd=ROOT, env={**os.environ, **(env or {})})
 
 
@@ -94,7 +94,7 @@ def test_percent_dollar_quotes_and_spaces_in_the_recipe_path_reach_the_service_u
     assert out.returncode == 0, out.stdout + out.stderr
     assert "wrote" in out.stdout
     text = (units / "patrol.service").read_text()
-    assert exec_argv(text) == [sys.executable, "-m", "emos.supervisor.cli", "run", str(recipe.resolve())]
+    assert exec_argv(text) == [sys.executable, "-m", "emos", "run", str(recipe.resolve())]
     assert unspecify(unit_values(text, "WorkingDirectory")[0]) == str(recipe.resolve().parent)
     assert unspecify(unit_values(text, "Description")[0]) == "patrol at 100% of $speed"
     if HAS_ANALYZE:

@@ -10,14 +10,14 @@ import pytest
 
 pytest.importorskip("mcap")
 
-from mcap.reader import make_reader  # noqa: E402
-from mcap.writer import Writer  # noqa: E402
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
-from emos.interop.mcap_bag import EMOS_ENCODING, BagInfo, BagWriter, read_bag  # noqa: E402
-from emos.interop.record import Player  # noqa: E402
-from emos.msgs import ComponentStatus, Detections, Image, String, codec, scan_from_ranges  # noqa: E402
-from emos.transport.context import RunContext  # noqa: E402
-from emos.transport.pubsub import Subscriber  # noqa: E402
+from emos.interop.mcap_bag import EMOS_ENCODING, BagInfo, BagWriter, read_bag
+from emos.interop.record import Player
+from emos.msgs import ComponentStatus, Detections, Image, String, codec, scan_from_ranges
+from emos.transport.context import RunContext
+from emos.transport.pubsub import Subscriber
 
 pytestmark = pytest.mark.unit
 

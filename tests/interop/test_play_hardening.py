@@ -33,7 +33,7 @@ from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message, Schem
 from mcap.stream_reader import breakup_chunk  # noqa: E402
 from mcap.writer import Writer  # noqa: E402
 
-from emos.interop.mcap_bag import EMOS_ENCODING, EMOS_SCHEMA_ENCODING, BagInfo, ReadLimits, BagWriter, emos_schema, read_bag  # noqa: E402
+from emos.interop.mcap_bag import EMOS_ENCODING, EMOS_SCHEMA_ENCODING, BagInfo, BagWriter, ReadLimits, emos_schema, read_bag  # noqa: E402
 from emos.interop.ros2_cdr import codec_for  # noqa: E402
 from emos.msgs import Image, String, codec  # noqa: E402
 from emos.msgs.registry import canonical_name  # noqa: E402
@@ -103,7 +103,7 @@ class Play:
         self.returncode: int | None = None
         self.maxrss_kb = 0
 
-    def finish(self, timeout: float = HANG) -> "Play":
+    def finish(self, timeout: float = HANG) -> Play:
         try:
             self.returncode = self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
@@ -384,7 +384,7 @@ def test_topics_emos_cannot_carry_are_skipped_by_name_and_the_rest_plays(system,
         sid = w.register_schema(canonical_name(String), EMOS_SCHEMA_ENCODING, emos_schema(String))
         ids = {topic: w.register_channel(topic, EMOS_ENCODING, sid) for topic in ("/ok", "a b", long_name, "")}
         for k in range(3):
-            for topic, cid in ids.items():
+            for cid in ids.values():
                 w.add_message(cid, log_time=k, publish_time=k, data=codec.pack(String(data=f"{k}")))
         w.finish()
     collector = Collector(system, "/ok", String)

@@ -13,8 +13,8 @@ import pytest
 pytest.importorskip("mcap")
 pytest.importorskip("rosbags")
 
-from emos.interop.mcap_bag import BagInfo, read_bag  # noqa: E402
-from tests.runtime.helpers import SystemUnderTest  # noqa: E402
+from emos.interop.mcap_bag import BagInfo, read_bag
+from tests.runtime.helpers import SystemUnderTest
 
 pytestmark = pytest.mark.process
 

@@ -16,12 +16,24 @@ import pytest
 
 pytest.importorskip("rosbags")
 
-from emos.interop.ros2_cdr import CdrError, NotShared, Ros2Codec, codec_for  # noqa: E402
-from emos.msgs import (  # noqa: E402
-    ComponentStatus, Detections, Empty, Header, Image, LaserScan, MapMetaData, OccupancyGrid, Pose, String, Time,
-    Vector3, codec, registered_types,
+from emos.interop.ros2_cdr import CdrError, NotShared, Ros2Codec, codec_for
+from emos.msgs import (
+    ComponentStatus,
+    Detections,
+    Empty,
+    Header,
+    Image,
+    LaserScan,
+    MapMetaData,
+    OccupancyGrid,
+    Pose,
+    String,
+    Time,
+    Vector3,
+    codec,
+    registered_types,
 )
-from emos.msgs import fields as F  # noqa: E402
+from emos.msgs import fields as F
 
 pytestmark = pytest.mark.unit
 
@@ -71,7 +83,7 @@ def builtin(msg):
 
 def test_every_standard_type_is_shared_and_nothing_else():
     shared = CODEC.shared_types()
-    for name, cls in registered_types().items():
+    for name in registered_types():
         expected = name.split("/")[0] in SHARED_PACKAGES
         assert (name in shared) == expected, name
     assert len(shared) >= 40

@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from emos.actors.nav.controllers import ControllersID, ControlStatus, make_controller
 from tests.nav.sim2d import World, make_robot, run_closed_loop, straight_path
-import pytest
 
 pytestmark = pytest.mark.unit
 

@@ -43,7 +43,7 @@ def test_scipy_k_d_tree_is_imported_when_a_controller_is_built_not_with_the_pack
 
     code = """
 import sys
-import emos.actors.nav, emos.actors.sim.barn.stack
+import emos.actors.nav, emos.tools.barn.stack
 assert "scipy.spatial" not in sys.modules, "imported with the package"
 from emos.actors.nav.controllers import Stanley
 from emos.actors.nav.robot import RobotConfig, RobotGeometry, RobotType

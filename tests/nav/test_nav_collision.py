@@ -1,10 +1,9 @@
 """fcl shapes from robot geometry, merged obstacle boxes, and the map collision checker."""
 import math
 
+import fcl
 import numpy as np
 import pytest
-
-import fcl
 
 from emos.actors.nav.collision import MapCollisionChecker, geometry_to_fcl, occupied_rectangles
 from emos.actors.nav.maps import OccupancyGridMap

@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from emos.actors.nav import bench
+from emos.tools.bench import nav as bench
 
 pytestmark = pytest.mark.process
 

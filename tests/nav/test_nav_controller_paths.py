@@ -3,7 +3,7 @@ with and without an obstacle on the path (tests/nav/sim2d.py simulates the robot
 import numpy as np
 import pytest
 
-from emos.actors.nav.controllers import DWA, DVZ, PurePursuit, PurePursuitConfig, Stanley
+from emos.actors.nav.controllers import DVZ, DWA, PurePursuit, PurePursuitConfig, Stanley
 from emos.actors.nav.controllers.base import ControlStatus
 
 from .sim2d import World, circle_path, make_robot, run_closed_loop, straight_path, u_turn_path
@@ -109,9 +109,9 @@ def test_slalom_through_three_obstacles(name, model):
 @pytest.mark.parametrize("model", MODELS)
 def test_sensorless_stanley_behind_drive_safety_stops_before_the_obstacle(model):
     """The spec pairs Stanley (no obstacle handling) with the DriveManager's safety zones."""
+    from emos.actors.nav.controllers.clearance import pose_clearance
     from emos.actors.nav.kinematics import integrate
     from emos.actors.nav.safety import DriveSafety, SafetyZonesConfig
-    from emos.actors.nav.controllers.clearance import pose_clearance
 
     robot = make_robot(model)
     stanley = Stanley(robot)

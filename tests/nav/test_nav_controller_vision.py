@@ -31,8 +31,13 @@ def camera(pose, target):
     xr, yr = to_robot_frame(pose, np.asarray(target, dtype=float))
     if xr < 0.2:
         return None, np.zeros((H, W), np.uint16)
-    u = lambda y: K.fx * (-y) / xr + K.cx
-    v = lambda z: K.fy * (CAM_Z - z) / xr + K.cy
+
+    def u(y):  # image column of a point at lateral offset y
+        return K.fx * (-y) / xr + K.cx
+
+    def v(z):  # image row of a point at height z
+        return K.fy * (CAM_Z - z) / xr + K.cy
+
     u0, u1 = u(yr + PERSON[0] / 2), u(yr - PERSON[0] / 2)
     v0, v1 = v(PERSON[1]), v(0.0)
     u0c, u1c, v0c, v1c = max(u0, 0), min(u1, W), max(v0, 0), min(v1, H)

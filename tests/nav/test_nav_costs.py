@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+import emos.actors.nav.costs.kernels as kernels
 from emos.actors.nav.costs import (
     PathDistanceField,
     TrajectoryCostsWeights,
@@ -12,7 +13,6 @@ from emos.actors.nav.costs import (
     reference_path_cost,
     smoothness_cost,
 )
-import emos.actors.nav.costs.kernels as kernels
 
 pytestmark = pytest.mark.unit
 
@@ -39,9 +39,8 @@ def test_reference_path_cost_is_mean_lateral_offset():
 
 
 def test_goal_cost_normalized_by_path_length():
-    path = np.array([[0.0, 0.0], [4.0, 0.0]])
     trajs = np.stack([straight(0.0), straight(3.0)])
-    # ends at (1, 0) and (1, 3); goal (4, 0); path length 4
+    # ends at (1, 0) and (1, 3); goal (4, 0); path (0, 0) -> (4, 0), length 4
     np.testing.assert_allclose(goal_cost(trajs, [4.0, 0.0], 4.0), [3.0 / 4.0, np.hypot(3, 3) / 4.0])
 
 

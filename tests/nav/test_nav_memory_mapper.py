@@ -4,11 +4,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from emos.actors.nav.controllers.sensors import LaserScan2D
 from emos.actors.nav.mapping import MemoryMapper
 from tests.nav.components.fake_base import BOXES, ROOM, ray_boxes
-import pytest
 
 pytestmark = pytest.mark.unit
 

@@ -11,8 +11,7 @@ import pytest
 
 from emos import msgs as M
 from emos.actors.nav.components.convert import BadInput
-from emos.actors.nav.components.pixel_goals import (camera_on_base, depth_in_metres, intrinsics_of, pixel_goal_in_world,
-                                                    pixel_targets)
+from emos.actors.nav.components.pixel_goals import camera_on_base, depth_in_metres, intrinsics_of, pixel_goal_in_world, pixel_targets
 from emos.actors.nav.controllers.vision_common import CameraIntrinsics
 from emos.actors.nav.transforms import TransformTree, quaternion_matrix, transform_matrix
 

@@ -253,18 +253,17 @@ def test_cancel_from_another_thread(rooms):
     anytime = OMPLGeometricPlanner(OMPLConfig(planner_id="RRTstar", planning_timeout=30.0), robot)
     anytime.set_map(rooms)
     assert anytime.cancel() is False  # nothing running
-    timer = threading.Timer(0.5, anytime.cancel)
+    # Cancelled once it has had time to find a first path (milliseconds on an idle machine; 0.5 s
+    # was not always enough with the cores busy, and a cancel before any path is the case below).
+    timer = threading.Timer(3.0, anytime.cancel)
     timer.start()
-    t0 = time.perf_counter()
     result = anytime.plan(SW_ROOM, NE_ROOM)
-    assert time.perf_counter() - t0 < 5.0
-    assert result.solved and result.planning_time_s < 5.0
+    # Ended by the cancel, not by its 30 s budget (the margin is for a loaded machine).
+    assert result.solved and result.planning_time_s < 20.0
     assert_disc_path_clear(result.path, rooms, RADIUS)
     # ... a query that has nothing yet reports CANCELLED.
     stuck = OMPLGeometricPlanner(OMPLConfig(planner_id="RRTConnect", planning_timeout=30.0), cylinder_robot(0.2))
     stuck.set_map(rooms)
     threading.Timer(0.3, stuck.cancel).start()
-    t0 = time.perf_counter()
     result = stuck.plan(SW_ROOM, CLOSET)
-    assert time.perf_counter() - t0 < 5.0
-    assert not result.solved and result.status == "CANCELLED"
+    assert not result.solved and result.status == "CANCELLED" and result.planning_time_s < 20.0  # not its 30 s budget

@@ -1,6 +1,7 @@
 """The planning table that ``emos bench nav`` embeds."""
-from emos.actors.nav.bench_planning import format_table, run_planning_table
 import pytest
+
+from emos.tools.bench.nav_planning import format_table, run_planning_table
 
 pytestmark = pytest.mark.unit
 

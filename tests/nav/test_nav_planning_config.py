@@ -1,5 +1,4 @@
 """Planner ids, planner parameters and OMPLConfig validation."""
-import math
 
 import numpy as np
 import pytest

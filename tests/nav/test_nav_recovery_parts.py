@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emos.actors.nav.components.progress import ProgressChecker
 from emos.actors.nav.maps import OccupancyGridMap
 from emos.actors.nav.planning.costfield import CLEARANCE_BAND
 from emos.actors.nav.planning.grid_planner import CostToGoPlanner
 from emos.actors.nav.robot import RobotConfig
+from emos.actors.nav.stuck import ProgressChecker
 
 pytestmark = pytest.mark.unit
 

@@ -81,10 +81,10 @@ def test_robust_navigator_drives_a_realistic_barn_world():
     measured tune run; with the compute charge that depends on timing, so only the robust
     navigator is checked)."""
     pytest.importorskip("pybullet")
-    from emos.actors.sim.barn import run_episode
-    from emos.actors.sim.barn.controllers import make_controller
     from emos.actors.sim.barn_protocol import trial_seed
     from emos.actors.sim.barn_worlds import load_barn_worlds
+    from emos.tools.barn import run_episode
+    from emos.tools.barn.controllers import make_controller
 
     world = load_barn_worlds()[19]
     robust = run_episode(world, make_controller("builtin-robust"), seed=trial_seed(19, 0))

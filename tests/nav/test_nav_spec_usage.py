@@ -11,8 +11,20 @@ def test_planner_controller_driver_mapper_server_usage_examples(tmp_path):
     from emos import Topic
     from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
     from emos.actors.nav.components import (
-        Controller, ControllerConfig, DriveManager, DriveManagerConfig, LocalMapper, LocalMapperConfig, MapperConfig,
-        MapServer, MapServerConfig, MotionServer, MotionServerConfig, Planner, PlannerConfig, TopicsKeys,
+        Controller,
+        ControllerConfig,
+        DriveManager,
+        DriveManagerConfig,
+        LocalMapper,
+        LocalMapperConfig,
+        MapperConfig,
+        MapServer,
+        MapServerConfig,
+        MotionServer,
+        MotionServerConfig,
+        Planner,
+        PlannerConfig,
+        TopicsKeys,
     )
     from emos.config import ComponentRunType
 

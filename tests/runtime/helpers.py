@@ -7,8 +7,9 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import psutil
 
@@ -39,7 +40,13 @@ launcher.bringup()
 """
 
 
-def wait_until(pred: Callable[[], Any], timeout: float = 10.0, interval: float = 0.02, what: str = "condition") -> Any:
+# The default waits of these helpers only bound a hang: a condition that holds returns at once, so
+# they are generous (a loaded machine takes many times longer to restart a process than an idle
+# one, and a test must not depend on the machine being idle).
+HANG_S = 60.0
+
+
+def wait_until(pred: Callable[[], Any], timeout: float = HANG_S, interval: float = 0.02, what: str = "condition") -> Any:
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         value = pred()
@@ -49,7 +56,7 @@ def wait_until(pred: Callable[[], Any], timeout: float = 10.0, interval: float =
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
-_STARTED: list["SystemUnderTest"] = []
+_STARTED: list[SystemUnderTest] = []
 
 
 def kill_leftover_systems() -> None:
@@ -70,13 +77,13 @@ class SystemUnderTest:
         if duration:
             cmd += ["--duration", str(duration)]
         self.log_path = tmp_path / "system.log"
-        self._log = open(self.log_path, "wb")
+        self._log = open(self.log_path, "wb")  # noqa: SIM115 - open while the system runs; stop/wait_exit/kill_all close it
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}, cwd=tmp_path)
         self.run_dir: Path | None = None
         self.ctx: RunContext | None = None
         self.rpc: RpcClient | None = None
 
-    def wait_up(self, timeout: float = 30.0, components: list[str] | None = None) -> "SystemUnderTest":
+    def wait_up(self, timeout: float = 2 * HANG_S, components: list[str] | None = None) -> SystemUnderTest:
         def find() -> Path | None:
             if self.proc.poll() is not None:
                 raise AssertionError(f"system exited early with {self.proc.returncode}:\n{self.output()}")
@@ -118,7 +125,7 @@ class SystemUnderTest:
         assert self.rpc is not None
         return self.rpc.call("events", since=since)
 
-    def wait_new_pid(self, name: str, old: int | None, timeout: float = 10.0) -> int:
+    def wait_new_pid(self, name: str, old: int | None, timeout: float = HANG_S) -> int:
         def new() -> int | None:
             w = self.workers().get(name, {})
             pid = w.get("pid")

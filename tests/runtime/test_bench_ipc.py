@@ -13,7 +13,7 @@ import uuid
 import psutil
 import pytest
 
-from emos.supervisor.bench import ipc_pingpong
+from emos.tools.bench import ipc_pingpong
 from emos.transport.context import SHM_DIR, runtime_root
 from tests.runtime.helpers import REPO
 
@@ -66,7 +66,7 @@ def _check_component(part: dict, messages: int) -> None:
         assert set(row) == COMPONENT_ROW_KEYS, row
         assert row["transport"] == "emos_component"
         assert 0 < row["p50_us"] <= row["p99_us"], row
-        from emos.supervisor.bench.ipc import _samples_for
+        from emos.tools.bench.ipc import _samples_for
 
         assert row["round_trips"] == _samples_for(row["payload_bytes"], messages) and row["seq_mismatches"] == 0, row
 
@@ -134,7 +134,7 @@ def test_bench_ipc_bad_arguments_exit_2_with_a_clear_message(args: list[str], ex
 def test_pingpong_returns_exactly_the_requested_samples_after_warmup(transport: str) -> None:
     code = (
         "import json\n"
-        "from emos.supervisor.bench import ipc_pingpong\n"
+        "from emos.tools.bench import ipc_pingpong\n"
         f"print(json.dumps(ipc_pingpong.latency_us({transport!r}, 1024, 7)))\n"
     )
     result, left = _run_python(["-c", code], timeout=60.0)
@@ -196,7 +196,7 @@ def test_sequence_numbers_tell_a_stale_reply_from_the_expected_one() -> None:
 
 
 def test_a_sequence_mismatch_is_an_error_in_the_result(monkeypatch) -> None:
-    from emos.supervisor.bench import ipc
+    from emos.tools.bench import ipc
 
     def mismatching(transport, size, count, depth=2):
         raise ipc_pingpong.SequenceMismatch(transport, size, 3)

@@ -38,7 +38,7 @@ def _leftovers_since(shm_before: set[str], runs_before: set[str]) -> list[str]:
 
 
 def test_bench_net_both_modes_json_shape_and_no_leftovers(tmp_path, monkeypatch, request):
-    from emos.supervisor.bench.net import _messages_for
+    from emos.tools.bench.net import _messages_for
 
     scratch = tmp_path / "tmp"  # the benchmark's temporary files (its Zenoh configurations) go here
     scratch.mkdir()

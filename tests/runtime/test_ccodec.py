@@ -18,7 +18,8 @@ import attrs
 import numpy as np
 import pytest
 
-from emos.msgs import codec, fields as F
+from emos.msgs import codec
+from emos.msgs import fields as F
 from emos.msgs.registry import registered_types
 from emos.transport import netframe
 from emos.transport.netframe import FrameWriter

@@ -2,8 +2,9 @@
 import subprocess
 import sys
 
-from emos.supervisor import cli
 import pytest
+
+from emos.tools import cli
 
 pytestmark = pytest.mark.process
 

@@ -2,8 +2,9 @@
 import subprocess
 import sys
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
 import pytest
+
+from tests.runtime.helpers import SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 

@@ -4,9 +4,9 @@ import signal
 import time
 
 import psutil
+import pytest
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 

@@ -4,10 +4,10 @@ import socket
 import struct
 
 import msgpack
+import pytest
 
 from emos.core.rpc import CONTROL_FRAME
 from tests.runtime.helpers import SystemUnderTest
-import pytest
 
 pytestmark = pytest.mark.process
 

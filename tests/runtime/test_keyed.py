@@ -1,5 +1,7 @@
 """Keyed inputs/outputs (Kompass-style) and the launcher's shared wiring."""
 import enum
+from collections.abc import Mapping
+from typing import ClassVar
 
 import pytest
 
@@ -14,12 +16,12 @@ class Keys(str, enum.Enum):
 
 
 class Follower(KeyedComponent):
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path")),
         "location": AllowedTopic(types=("Odometry", "PoseStamped"), default=Topic(name="/odom", msg_type="Odometry")),
         "vision": AllowedTopic(types=("Detections",)),
     }
-    allowed_outputs = {"command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist"), required=True)}
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {"command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist"), required=True)}
 
 
 def test_defaults_and_replacement_by_key():

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from emos import msgs as M
-from emos.msgs import codec, fields as F
+from emos.msgs import codec
+from emos.msgs import fields as F
 from emos.msgs.registry import UnknownMessageType, message_type, registered_types, resolve
 
 pytestmark = pytest.mark.unit

@@ -7,8 +7,9 @@ import subprocess
 import sys
 import time
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
 import pytest
+
+from tests.runtime.helpers import SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 

@@ -331,7 +331,7 @@ launcher.bringup()
         for z in zygotes:  # the primary, then the spare that replaced it
             os.kill(z.pid, signal.SIGKILL)
             # No component restarts meanwhile: the launcher must notice by itself, not at the next spawn.
-            wait_until(lambda: replaced(z), timeout=10, what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
+            wait_until(lambda z=z: replaced(z), timeout=10, what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
         assert not {z.pid for z in zygotes} & {z.pid for z in _zygotes(system)}
         pid = system.pid("w")
         os.kill(pid, signal.SIGKILL)

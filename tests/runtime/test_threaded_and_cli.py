@@ -2,10 +2,10 @@
 import json
 import subprocess
 import sys
-import time
+
+import pytest
 
 from tests.runtime.helpers import SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 

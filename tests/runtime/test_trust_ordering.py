@@ -45,7 +45,7 @@ def test_on_a_weakly_ordered_cpu_the_writer_fences_each_step_of_the_seqlock(ctx,
     pub = Publisher(ctx, "/t", M.Int64, publisher_id="p", depth=4)
     try:
         ring = pub.ring
-        for i in range(5):  # wrap the ring once, so map entries hold older messages
+        for _ in range(5):  # wrap the ring once, so map entries hold older messages
             ring.write(b"x" * 8)
         n = ring.head
         _WATCHED[:] = [ring, n]
@@ -187,7 +187,7 @@ def test_starting_and_stopping_publisher_subscriber_pairs_never_loses_the_first_
                 end = time.monotonic() + 10
                 while not got and time.monotonic() < end:
                     if select.select([waker.fd], [], [], 0.5)[0]:
-                        waker.serve(lambda: got.extend(sub.take()), sub.has_news)
+                        waker.serve(lambda got=got, sub=sub: got.extend(sub.take()), sub.has_news)
                 assert _line(echo) == "done", f"round {i}: the echo never saw our ping"
                 assert [(m.data.size, int(m.data[0])) for m in got] == [(size, i % 256)], f"round {i}: no reply woke us"
             finally:

@@ -20,8 +20,15 @@ from emos.transport import context
 from emos.transport.context import SHM_DIR, RunContext, RuntimeDirError
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
-from tests.runtime.helpers import SystemUnderTest, wait_until
-from tests.runtime.trust_helpers import attacker, forged_ring, planted, publish_bad_message, shared_tmp, write_own_file  # noqa: F401
+from tests.runtime.helpers import SystemUnderTest
+from tests.runtime.trust_helpers import (  # noqa: F401 - the fixtures are imported to register them here
+    attacker_fixture,
+    forged_ring,
+    planted_fixture,
+    publish_bad_message,
+    shared_tmp_fixture,
+    write_own_file,
+)
 
 pytestmark = pytest.mark.process
 
@@ -132,7 +139,7 @@ def test_a_runtime_directory_another_user_controls_is_refused_with_a_clear_error
 
 
 def _cli(*args: str, env: dict) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", *args], env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "emos.tools.cli", *args], env=env, capture_output=True,
                           text=True, timeout=120)
 
 

@@ -3,10 +3,11 @@ published while the subscriber parks is never left unannounced."""
 import threading
 import time
 
+import pytest
+
 from emos import msgs as M
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import PARKED, SPINNING, Waker
-import pytest
 
 pytestmark = pytest.mark.unit
 

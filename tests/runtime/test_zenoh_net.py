@@ -285,7 +285,7 @@ def test_a_service_and_an_action_served_over_zenoh_to_a_process_outside_the_run(
         # The supervisor's status, from outside the run: what `emos status --remote` prints.
         import argparse
 
-        from emos.supervisor import cli_status
+        from emos.tools.cli import status as cli_status
 
         def remote_tree():
             capsys.readouterr()

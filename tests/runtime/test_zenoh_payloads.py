@@ -412,7 +412,8 @@ def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(ne
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     other = tmp_path / "other.json5"
-    listen = json.loads(open(conf).read())["listen"]["endpoints"]
+    with open(conf) as f:
+        listen = json.load(f)["listen"]["endpoints"]
     other.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]}, "connect": {"endpoints": listen},
                                  "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}}}))
     before = {n for n in os.listdir("/dev/shm") if n.endswith(".zenoh")}

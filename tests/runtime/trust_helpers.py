@@ -60,8 +60,10 @@ class Attacker:
         self.planted.clear()
 
 
-@pytest.fixture(scope="module")
-def attacker():
+# The fixtures carry their names in name=, so a test module that imports them (to register them)
+# binds other names than its tests' parameters (no redefinition of an imported name).
+@pytest.fixture(scope="module", name="attacker")
+def attacker_fixture():
     """A fresh unprivileged user for this module, removed (with its home) afterwards."""
     if os.geteuid() != 0 or shutil.which("useradd") is None or shutil.which("runuser") is None:
         pytest.skip("creating a second local user needs root, useradd and runuser")
@@ -77,8 +79,8 @@ def attacker():
         subprocess.run(["userdel", "-r", name], capture_output=True)
 
 
-@pytest.fixture
-def planted(attacker):
+@pytest.fixture(name="planted")
+def planted_fixture(attacker):
     """The attacker, with whatever a test plants removed after it, pass or fail."""
     try:
         yield attacker
@@ -86,8 +88,8 @@ def planted(attacker):
         attacker.remove_planted()
 
 
-@pytest.fixture
-def shared_tmp():
+@pytest.fixture(name="shared_tmp")
+def shared_tmp_fixture():
     """A world-writable sticky directory like /tmp or /dev/shm, private to one test."""
     path = Path(tempfile.mkdtemp(prefix="t9a-trust-"))
     os.chmod(path, 0o1777)
@@ -140,4 +142,4 @@ def publish_bad_message(path: Path) -> None:
         del q
 
 
-__all__ = ["Attacker", "attacker", "planted", "shared_tmp", "forged_ring", "publish_bad_message", "write_own_file", "SHM_DIR"]
+__all__ = ["Attacker", "attacker_fixture", "planted_fixture", "shared_tmp_fixture", "forged_ring", "publish_bad_message", "write_own_file", "SHM_DIR"]

@@ -5,8 +5,8 @@ import sys
 import numpy as np
 import pytest
 
-from emos.actors.sim.barn import BarnRules, run_episode, summarize
 from emos.actors.sim.barn_worlds import BarnWorld, barn_metric, load_barn_worlds
+from emos.tools.barn import BarnRules, run_episode, summarize
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -82,7 +82,7 @@ def test_builtin_navigator_solves_a_real_barn_world():
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "barn", *args],
+    return subprocess.run([sys.executable, "-m", "emos.tools.cli", "bench", "barn", *args],
                           capture_output=True, text=True, timeout=120)
 
 
@@ -126,7 +126,7 @@ def test_cli_reports_a_missing_world_file_clearly(tmp_path):
 
 def test_navigation_core_controllers_drive_barn_through_the_adapter():
     pytest.importorskip("emos.actors.nav.controllers", reason="navigation core (emos.actors.nav) not importable")
-    from emos.actors.sim.barn.controllers import make_controller
+    from emos.tools.barn.controllers import make_controller
 
     nav = make_controller("navcore-purepursuit")
     r = run_episode(load_barn_worlds()[3], nav)
@@ -138,10 +138,10 @@ def test_navigation_core_controllers_drive_barn_through_the_adapter():
 def test_every_shipped_world_keeps_a_route_through_the_navigators_soft_band():
     """The built-in navigator makes gaps narrower than half-width + lethal_bias expensive;
     with the whole map known, every shipped world must still have a route that avoids them."""
-    from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START
+    from emos.actors.nav.mapping import HitGrid
     from emos.actors.nav.navigator import GridNavigator
     from emos.actors.nav.planning.costfield import CostField
-    from emos.actors.nav.mapping import HitGrid
+    from emos.actors.sim.barn_worlds import BARN_GOAL, BARN_START
     from emos.actors.sim.robots import JACKAL
 
     band = JACKAL.width / 2 + GridNavigator().lethal_bias

@@ -10,11 +10,11 @@ import subprocess
 import sys
 
 import numpy as np
-
-from emos.actors.sim.barn.harness import BarnRules
-from emos.actors.sim.barn.stack import GROUND_TRUTH_TOPIC, NAV_COMPONENTS, StackOptions, build_system
-from tests.runtime.helpers import REPO
 import pytest
+
+from emos.tools.barn.harness import BarnRules
+from emos.tools.barn.stack import GROUND_TRUTH_TOPIC, NAV_COMPONENTS, StackOptions, build_system
+from tests.runtime.helpers import REPO
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -100,7 +100,7 @@ def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
 
 
 def test_pose_drift_compares_the_belief_with_the_truth_of_the_same_time():
-    from emos.actors.sim.barn.process import _PoseDrift
+    from emos.tools.barn.process import _PoseDrift
 
     drift = _PoseDrift(keep=4)
     assert drift.describe() == ""  # nothing seen yet: the reason stays "time limit"
@@ -195,8 +195,8 @@ def test_a_trials_system_dies_with_a_benchmark_killed_outright():
     import psutil
 
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    code = ("from emos.actors.sim.barn.harness import BarnRules; from emos.actors.sim.barn.process import run_episode_process; "
-            "from emos.actors.sim.barn.stack import StackOptions; from emos.actors.sim.barn_worlds import load_barn_worlds; "
+    code = ("from emos.tools.barn.harness import BarnRules; from emos.tools.barn.process import run_episode_process; "
+            "from emos.tools.barn.stack import StackOptions; from emos.actors.sim.barn_worlds import load_barn_worlds; "
             "run_episode_process(load_barn_worlds()[3], StackOptions(world=3, rules=BarnRules(ideal=True)), wall_timeout=120.0)")
     bench = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:

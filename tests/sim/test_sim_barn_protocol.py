@@ -2,8 +2,17 @@
 import numpy as np
 import pytest
 
-from emos.actors.sim.barn_protocol import (ControlDeadline, MotionTimer, Trial, TrialMonitor, TrialOutcome, per_world,
-                                           summarize_trials, trial_seed, tuning_split)
+from emos.actors.sim.barn_protocol import (
+    ControlDeadline,
+    MotionTimer,
+    Trial,
+    TrialMonitor,
+    TrialOutcome,
+    per_world,
+    summarize_trials,
+    trial_seed,
+    tuning_split,
+)
 from emos.actors.sim.barn_worlds import barn_metric
 
 pytestmark = pytest.mark.sim

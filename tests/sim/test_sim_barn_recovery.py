@@ -4,11 +4,12 @@ in the Planner, and gives up (reported) when the ladder is spent. Real processes
 pybullet worlds (the BARN stack of ``emos bench barn``)."""
 from __future__ import annotations
 
-from emos.actors.sim.barn.harness import BarnRules
-from emos.actors.sim.barn.process import run_episode_process
-from emos.actors.sim.barn.stack import RecoveryOptions, StackOptions, build_system
-from emos.actors.sim.barn_worlds import load_barn_worlds
 import pytest
+
+from emos.actors.sim.barn_worlds import load_barn_worlds
+from emos.tools.barn.harness import BarnRules
+from emos.tools.barn.process import run_episode_process
+from emos.tools.barn.stack import RecoveryOptions, StackOptions, build_system
 
 pytestmark = pytest.mark.sim
 
@@ -29,11 +30,10 @@ def test_a_robot_stuck_in_a_dead_end_backs_out_and_reaches_the_goal(tmp_path):
     # the lidar only reveals from inside. Process-mode trials are not reproducible to the tick
     # (which of two consumers' outputs a step sees within a tick varies): a run may see the
     # dead end early enough not to stall, so several runs for one that stalls. A stalled run
-    # must back out (the ladder's first step) and then reach the goal. Known limits, measured
-    # over 66 runs of this world through the processes (2026-11-25; the session-start code
-    # too): about 1 stalled run in 8 times out (the re-plan after the back-out leads into the
-    # same dead end again), and about 1 in 20 collides (a contact with a cylinder near
-    # (-0.52, 6.52) after back-outs and blocks; 1 in 12 on the session-start code). Both are
+    # must back out (the ladder's first step) and then reach the goal. Known limits of the
+    # navigation on this world through the processes: about 1 stalled run in 8 times out (the
+    # re-plan after the back-out leads into the same dead end again), and about 1 in 20 collides
+    # (a contact with a cylinder near (-0.52, 6.52) after back-outs and blocks). Both are
     # navigation defects this test does not hide: each is logged with its run's tail, and three
     # failed stalled runs fail the test (under 1 % at those rates), as does a recovery that does
     # not work (every run fails).

@@ -8,11 +8,11 @@ import sys
 
 import attrs
 import numpy as np
-
-from emos.actors.sim.barn.harness import EpisodeResult
-from emos.actors.sim.barn.report import build_report
-from tests.runtime.helpers import REPO
 import pytest
+
+from emos.tools.barn.harness import EpisodeResult
+from emos.tools.barn.report import build_report
+from tests.runtime.helpers import REPO
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -82,7 +82,7 @@ def test_two_files_are_compared_on_the_pairs_both_hold(tmp_path):
     _write(new, [_trial(1, 11), _trial(1, 12), _trial(2, 21, **failed), _trial(5, 51), _trial(9, 91)])  # 9: only here
     _write(old, [_trial(1, 11, **failed), _trial(1, 12), _trial(2, 21), _trial(5, 51, **failed), _trial(3, 31)],
            config={"controller": "builtin-robust", "code": "before"})
-    from emos.actors.sim.barn.report import build_comparison
+    from emos.tools.barn.report import build_comparison
 
     got = build_comparison(new, old)
     assert got["pairs"] == 4 and got["config_differs_in"] == ["code"]
@@ -101,7 +101,7 @@ def test_two_files_are_compared_on_the_pairs_both_hold(tmp_path):
 
 
 def test_the_outcome_grid_has_a_column_per_world_and_a_row_per_seed():
-    from emos.actors.sim.barn import report_plot as rp
+    from emos.tools.barn import report_plot as rp
 
     trials = [_trial(5, 52, success=False, collided=True), _trial(5, 51, time_s=30.0, metric=0.3),
               _trial(1, 11), _trial(1, 12, success=False, timeout=True), _trial(7, 71)]
@@ -117,7 +117,7 @@ def test_the_outcome_grid_has_a_column_per_world_and_a_row_per_seed():
 def test_the_cli_draws_the_outcome_map_and_a_collision_shows_in_red(tmp_path):
     from PIL import Image
 
-    from emos.actors.sim.barn.report_plot import COLLISION, COLOURS
+    from emos.tools.barn.report_plot import COLLISION, COLOURS
 
     red = np.round(COLOURS[COLLISION] * 255).astype(int)
 
@@ -151,7 +151,7 @@ def test_the_cli_draws_the_outcome_map_and_a_collision_shows_in_red(tmp_path):
 def test_a_run_s_progress_estimates_the_time_left_from_the_trials_it_ran_itself():
     import time
 
-    from emos.actors.sim.barn import _time_left
+    from emos.tools.barn import _time_left
 
     trials = {(idx, k): None for idx in (1, 2, 3) for k in (0, 1)}
     resumed = {(1, 0), (1, 1), (3, 1)}  # read back from the results file: free

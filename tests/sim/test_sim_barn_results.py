@@ -3,6 +3,7 @@ from the file instead of running them again, and a file of another configuration
 import json
 import subprocess
 import sys
+
 import pytest
 
 pytestmark = pytest.mark.process

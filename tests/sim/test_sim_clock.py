@@ -38,7 +38,9 @@ def test_realtime_pacing_follows_the_wall_clock(make_world):
     t0 = time.monotonic()
     world.run_for(0.4)
     wall = time.monotonic() - t0
-    assert wall == pytest.approx(0.1, abs=0.05)  # 0.4 s simulated at 4x real time
+    # 0.4 s simulated at 4x real time: never sooner than 0.1 s of wall time (the pacing); later
+    # only by what the machine's load costs, and far from the 0.4 s of ignoring the factor.
+    assert 0.1 - 0.005 <= wall < 0.35
 
 
 def test_fast_mode_runs_in_the_background_and_others_wait_on_sim_time(make_world):

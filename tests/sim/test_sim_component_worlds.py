@@ -90,12 +90,14 @@ def test_shipped_house_map_is_the_rasterized_house():
 
 def test_the_local_detector_sees_the_walking_person_and_loses_it_behind_the_wall():
     pytest.importorskip("cv2", reason="the local detector needs OpenCV (emos[agents])")
+    import io
+
+    from PIL import Image
+
     from emos.actors.agents.local.vision import LocalDetector
     from emos.actors.sim import Camera, CameraConfig, Lidar, LidarConfig, SimClock
-    from emos.actors.sim.person import PERSON_RADIUS, house_with_person
     from emos.actors.sim.component.publishing import jpeg as frame_jpeg
-    from PIL import Image
-    import io
+    from emos.actors.sim.person import PERSON_RADIUS, house_with_person
 
     world = house_with_person(clock=SimClock(mode="lockstep"))
     detector = LocalDetector(labels=("person",))

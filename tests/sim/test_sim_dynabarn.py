@@ -4,8 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from emos.actors.sim.dynabarn import (CORRIDOR_HALF_WIDTH, DYNABARN_COUNT, default_file, from_dynabarn, generate,
-                                      load_dynabarn, to_json)
+from emos.actors.sim.dynabarn import CORRIDOR_HALF_WIDTH, DYNABARN_COUNT, default_file, from_dynabarn, generate, load_dynabarn, to_json
 
 pytestmark = pytest.mark.sim
 
@@ -30,7 +29,7 @@ def test_worlds_get_harder_and_obstacles_cross_the_corridor():
         for c in w.crossers:
             (ax, ay), (bx, by) = c.track
             assert abs(ay - by) > 2 * (CORRIDOR_HALF_WIDTH - 0.5)  # across, wall to wall
-            assert 0.5 < min(ax, bx) and max(ax, bx) < 20.5  # between start and goal (slants included)
+            assert min(ax, bx) > 0.5 and max(ax, bx) < 20.5  # between start and goal (slants included)
 
 
 def test_a_dynabarn_world_moves_its_obstacles_in_simulated_time(make_world):
@@ -85,7 +84,7 @@ def test_simulator_config_takes_the_realistic_options():
 def test_a_trial_picture_shows_the_whole_corridor():
     # A crosser can push the robot against either side wall; both must be in the picture
     # (the window once ended 1.5 m above the centre line and cut collisions near y = +2.2 off).
-    from emos.actors.sim.barn.harness import picture_bounds
+    from emos.tools.barn.harness import picture_bounds
 
     xmin, ymin, xmax, ymax = picture_bounds(load_dynabarn()[44])
     assert ymin < -CORRIDOR_HALF_WIDTH and ymax > CORRIDOR_HALF_WIDTH

@@ -1,10 +1,11 @@
 """A real pybullet moving-obstacle world (DynaBARN-style, realistic robot): the navigator that
 tracks movers reaches the goal without a collision where the static-world navigator collides."""
-from emos.actors.sim.barn import BarnRules, run_episode
-from emos.actors.sim.barn.controllers import make_controller
+import pytest
+
 from emos.actors.sim.barn_protocol import trial_seed
 from emos.actors.sim.dynabarn import load_dynabarn
-import pytest
+from emos.tools.barn import BarnRules, run_episode
+from emos.tools.barn.controllers import make_controller
 
 pytestmark = pytest.mark.sim
 

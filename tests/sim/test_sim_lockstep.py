@@ -1,7 +1,6 @@
 """Lockstep: the simulator waits for its consumers, so load changes wall time only."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
@@ -37,6 +36,7 @@ class Driver(BaseComponent):
     def _execution_step(self):
         t = clock.now()
         while os.path.exists(os.environ["PAUSE_FLAG"]):
+            open(os.environ["PAUSE_FLAG"] + ".held", "a").close()  # the test waits for this
             time.sleep(0.02)
         load = float(os.environ.get("LOAD_S", "0"))
         if load:
@@ -106,7 +106,8 @@ def _run(tmp_path, name: str, load_s: float, pause_check: bool = False) -> list[
         if pause_check:
             wait_until(lambda: sim_time() > 1.0, 60, what="simulated time past 1 s")
             pause.touch()
-            time.sleep(0.5)  # the driver is now stuck in a step, and so is the simulator
+            held = work / "pause.held"
+            wait_until(held.exists, 60, what="the driver held in a step")  # and so is the simulator
             frozen = sim_time()
             time.sleep(1.5)
             assert sim_time() == frozen, "the sim clock advanced while a lockstep consumer had not answered"

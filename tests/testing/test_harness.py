@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from emos import BaseComponent, Topic
@@ -102,48 +101,108 @@ def test_bad_use_is_refused_naming_the_thing():
         ComponentHarness("counter")
 
 
-# ------------------------------------------------------------------ the DriveManager, on robot time
+# ------------------------------------------------------------------ closed loops, records, services
 
-def _robot():
-    from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
+class Follower(BaseComponent):
+    """Timed: publishes the last /target it got, plus one; serves /follower/reset (a Trigger)."""
 
-    return RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
-                       geometry_params=np.array([0.15, 0.3]),
-                       ctrl_vx_limits=LinearCtrlLimits(max_vel=0.5, max_acc=1.5, max_decel=2.5),
-                       ctrl_omega_limits=AngularCtrlLimits(max_vel=1.5, max_acc=3.0, max_decel=3.0))
+    def custom_on_configure(self) -> None:
+        self.create_service("follower/reset", M.TriggerRequest, M.TriggerResponse, self._reset)
+
+    def custom_on_activate(self) -> None:
+        self.offset = 1
+
+    def _reset(self, request):
+        self.offset = 100
+        self.publish("/cmd", M.Int32(data=-1))  # a service may publish, outside any step
+        return M.TriggerResponse(success=True, message=f"reset at {clock.now():.2f}")
+
+    def _execution_step(self) -> None:
+        target = self.get_input("/target")
+        if target is not None:
+            self.publish("/cmd", M.Int32(data=target.data + self.offset))
+        self.health_status.set_healthy()
 
 
-def _open_room_inputs(h: ComponentHarness) -> None:
-    """What a base standing in the middle of an empty 10 m room publishes."""
-    odom = M.Odometry()
-    odom.header.frame_id = "map"
-    odom.pose.pose.position.x, odom.pose.pose.position.y = 5.0, 5.0
-    odom.pose.pose.orientation = M.Quaternion.from_yaw(0.0)
-    h.feed("/odom", odom)
-    h.feed("/scan", M.LaserScan(angle_min=-math.pi, angle_max=math.pi - math.pi / 180, angle_increment=math.pi / 180,
-                                range_min=0.05, range_max=10.0, ranges=np.full(360, 5.0, dtype=np.float32)))
+def _follower():
+    c = Follower(component_name="follower", inputs=[Topic(name="target", msg_type="Int32")], outputs=[Topic(name="cmd", msg_type="Int32")])
+    c.config.loop_rate = 10.0
+    return c
 
 
-def _drive_for(h: ComponentHarness, seconds: float) -> list[float]:
-    """The controller keeps asking for 0.2 m/s at every tick; returns the speeds sent to the base."""
-    sent: list[float] = []
-    end = h.time + seconds
-    while h.time < end - 1e-9:
-        _open_room_inputs(h)
-        h.feed("/control", M.Twist(linear=M.Vector3(x=0.2)))
+def test_each_tick_closes_the_loop_and_the_record_keeps_more_than_a_ring_holds():
+    """A world that answers each command before the next tick: ``each_tick`` runs with the clock
+    at the previous tick, and sees what the component published at it."""
+    seen = []
+
+    def world(h: ComponentHarness) -> None:
+        last = h.latest("/cmd")
+        seen.append((round(h.time, 3), None if last is None else last.data))
+        h.feed("/target", M.Int32(data=0 if last is None else last.data))
+
+    with ComponentHarness(_follower()) as h:
+        start = h.mark()
+        h.advance(30.0, each_tick=world)  # 300 ticks: far more than the 64 a ring of /cmd keeps
+        assert seen[:3] == [(0.0, None), (0.1, 1), (0.2, 2)]
+        assert [m.data for m in h.outputs("/cmd")] == list(range(1, 301))
+        assert h.outputs("/cmd") == []  # read on from where it last read
+        middle = h.mark()
+        h.advance(0.2, each_tick=world)
+        assert [m.data for m in h.since("/cmd", middle)] == [301, 302]
+        assert len(h.since("/cmd", start)) == 302  # since() does not move outputs()
+        assert [(t, m.data) for t, m in h.since("/cmd", middle, times=True)] == [(pytest.approx(30.1), 301), (pytest.approx(30.2), 302)]
+        assert [m.data for m in h.outputs("/cmd")] == [301, 302]
+
+
+def test_play_feeds_a_stream_one_message_per_period_on_the_clock():
+    with ComponentHarness(_follower(), start_time=5.0) as h:
+        h.play("/target", [M.Int32(data=d) for d in (10, 20, 30)])
+        assert h.time == pytest.approx(5.3)
+        assert [m.data for m in h.outputs("/cmd")] == [11, 21, 31]
+        h.play("target", [M.Int32(data=40), M.Int32(data=50)], period=0.5)  # 5 steps per message
+        assert [m.data for m in h.outputs("/cmd")] == [41] * 5 + [51] * 5 and h.time == pytest.approx(6.3)
+        with pytest.raises(ValueError, match="play takes a finite period > 0 s, got 0"):
+            h.play("/target", [M.Int32(data=1)], period=0)
+
+
+def test_call_serves_a_service_through_its_socket_without_moving_the_clock():
+    with ComponentHarness(_follower(), start_time=2.0) as h:
+        h.feed("/target", M.Int32(data=1))
+        h.advance(0.1)
+        assert h.outputs("/cmd")[-1].data == 2
+        res = h.call("/follower/reset", M.TriggerRequest())
+        assert res.success and res.message == "reset at 2.10" and h.time == pytest.approx(2.1)
+        assert [m.data for m in h.outputs("/cmd")] == [-1]  # what the service published is recorded
+        h.advance(0.1)
+        assert h.latest("/cmd").data == 101
+        with pytest.raises(KeyError, match="serves no service 'follower/nope' while active; services: \\['follower/reset'\\]"):
+            h.call("follower/nope", M.TriggerRequest())
+
+
+class Worker(BaseComponent):
+    """Timed: its first step starts a thread that publishes once it is released."""
+
+    def custom_on_activate(self) -> None:
+        import threading
+
+        self.release, self.thread = threading.Event(), None
+
+    def _execution_step(self) -> None:
+        import threading
+
+        if self.thread is None:
+            self.thread = threading.Thread(target=lambda: self.release.wait(30) and self.publish("/count", M.Int32(data=7)), daemon=True)
+            self.thread.start()
+        self.health_status.set_healthy()
+
+
+def test_wait_for_runs_the_loop_until_a_components_own_thread_has_published():
+    c = Worker(component_name="worker", outputs=[Topic(name="count", msg_type="Int32")])
+    c.config.loop_rate = 1.0
+    with ComponentHarness(c) as h:
         h.advance(h.tick)
-        sent += [c.linear.x for c in h.outputs("/cmd_vel")]
-    return sent
-
-
-def test_the_drive_manager_holds_the_robot_for_stop_hold_time_whatever_the_controller_sends():
-    from emos.actors.nav.components import DriveManager, DriveManagerConfig
-
-    driver = DriveManager(component_name="driver", config=DriveManagerConfig(robot=_robot(), stop_hold_time=1.0, loop_rate=20.0))
-    with ComponentHarness(driver, start_time=10.0) as h:
-        assert max(_drive_for(h, 1.0)) > 0.15  # it drives
-        assert driver.stop() is True
-        held = _drive_for(h, 0.95)
-        assert held and all(v == 0.0 for v in held)  # commands kept coming at 20 Hz, the robot stood
-        after = _drive_for(h, 0.5)
-        assert max(after) > 0.1  # driving again once the hold of 1.0 robot-seconds is over
+        with pytest.raises(TimeoutError, match="component 'worker': no count of 7 within 0.2 s of wall time \\(clock at 1.000 s\\)"):
+            h.wait_for(lambda: h.latest("/count"), timeout=0.2, what="count of 7")
+        c.release.set()
+        assert h.wait_for(lambda: h.latest("/count")).data == 7 and h.time == pytest.approx(1.0)  # the clock stood still
+        c.thread.join(5)

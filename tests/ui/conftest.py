@@ -80,9 +80,9 @@ class UISystem(NamedTuple):
 
 def start_recipe(recipe: Path, env_extra: dict[str, str], log_path: Path) -> subprocess.Popen:
     env = dict(os.environ, **env_extra)
-    log = open(log_path, "w")
-    return subprocess.Popen([sys.executable, "-m", "emos.supervisor.cli", "run", str(recipe)], env=env, stdout=log,
-                            stderr=subprocess.STDOUT, start_new_session=True, cwd=ROOT)
+    with open(log_path, "w") as log:  # the child writes to its own copy of the descriptor
+        return subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "run", str(recipe)], env=env, stdout=log,
+                                stderr=subprocess.STDOUT, start_new_session=True, cwd=ROOT)
 
 
 def stop_recipe(proc: subprocess.Popen) -> None:

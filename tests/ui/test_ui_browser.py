@@ -355,7 +355,7 @@ def test_a_page_that_never_confirms_gets_no_backlog(ui_system):
                 while (left := deadline - asyncio.get_running_loop().time()) > 0:
                     try:
                         msg = await ws.receive(timeout=left)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         break
                     if msg.type == aiohttp.WSMsgType.BINARY and b'"/camera"' in msg.data[:200]:
                         frames += 1  # never acknowledged
@@ -377,7 +377,7 @@ def test_topic_plot_records_a_field_of_the_running_system(ui_system, tmp_path):
     with urllib.request.urlopen(request, timeout=10) as r:
         run_id = json.loads(r.read())["run_id"]
     out = tmp_path / "odom.csv"
-    cmd = [sys.executable, "-m", "emos.supervisor.cli", "topic", "plot", "--run", run_id, "/odom"]
+    cmd = [sys.executable, "-m", "emos.tools.cli", "topic", "plot", "--run", run_id, "/odom"]
     done = subprocess.run(cmd + ["pose.pose.position.x", "--duration", "2.5", "--output", str(out)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     rows = out.read_text().splitlines()

@@ -17,7 +17,7 @@ pytestmark = [pytest.mark.process, pytest.mark.timeout(120)]
 
 
 def _health(run_id: str) -> dict:
-    out = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "status", "--json", "--run", run_id],
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "status", "--json", "--run", run_id],
                          capture_output=True, text=True, timeout=30)
     tree = json.loads(out.stdout)["tree"]
     return {w["name"]: w.get("health") for g in tree["children"] for w in g["children"]}

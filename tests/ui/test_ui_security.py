@@ -68,10 +68,10 @@ def signed_in(system) -> tuple[dict[str, str], str]:
     auth = {"Authorization": f"Bearer {system.token}"}
 
     async def go() -> tuple[str, str]:
-        async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as s:
-            async with s.get(f"http://127.0.0.1:{system.port}/api/session", headers=auth) as r:
-                assert r.status == 200, await r.text()
-                return r.cookies[session_cookie(system.port)].value, (await r.json())["csrf"]
+        async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as s, \
+                s.get(f"http://127.0.0.1:{system.port}/api/session", headers=auth) as r:
+            assert r.status == 200, await r.text()
+            return r.cookies[session_cookie(system.port)].value, (await r.json())["csrf"]
     session, csrf = asyncio.run(go())
     return {**auth, "Cookie": f"{session_cookie(system.port)}={session}"}, csrf
 

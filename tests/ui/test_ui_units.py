@@ -10,8 +10,8 @@ import wave
 import numpy as np
 import pytest
 from aiohttp import web
-from attrs import define, field
 from aiohttp.test_utils import TestClient, TestServer
+from attrs import define, field
 
 from emos import BaseComponent, Launcher, Topic
 from emos.actors.ui.auth import make_middleware, token_cookie

@@ -7,14 +7,23 @@ chunk per thread hop, so an ``async for`` sees chunks as soon as the server send
 from __future__ import annotations
 
 import asyncio
-from typing import Any, AsyncIterator, Iterator
+import enum
+from collections.abc import AsyncIterator, Iterator
+from typing import Any
 
 from ..types import ChatChunk
 from .base import ModelClient
 
 __all__ = ["AsyncClient"]
 
-_END = object()
+
+class _End(enum.Enum):
+    """The end-of-stream sentinel (an enum member, so that ``is _END`` narrows its type)."""
+
+    END = enum.auto()
+
+
+_END = _End.END
 
 
 class AsyncClient:

@@ -9,10 +9,12 @@ cheap to build in a recipe, then :meth:`serialize` turns it into a plain dict th
 from __future__ import annotations
 
 import logging
-import time
-from typing import Any, Callable, ClassVar, Iterator, TypeVar
+from collections.abc import Callable, Iterator
+from typing import Any, ClassVar, TypeVar
 
-from ..errors import ModelClientError, ModelConnectionError, ModelServerError, ModelTimeoutError
+from emos.core.retry import Backoff, retry
+
+from ..errors import ErrorContext, ModelClientError, ModelConnectionError, ModelServerError, ModelTimeoutError
 from ..models import Model, model_from_dict
 from ..types import (
     ChatChunk,
@@ -31,7 +33,7 @@ __all__ = ["ModelClient", "client_from_serialized", "CLIENT_TYPES"]
 T = TypeVar("T")
 
 #: class name -> client class; filled by subclasses, used by client_from_serialized.
-CLIENT_TYPES: dict[str, type["ModelClient"]] = {}
+CLIENT_TYPES: dict[str, type[ModelClient]] = {}
 
 LOG_LEVELS = ("debug", "info", "warn", "warning", "error", "fatal")
 
@@ -89,6 +91,8 @@ class ModelClient:
         _positive(f"{type(self).__name__}.connect_timeout", connect_timeout)
         if isinstance(max_retries, bool) or not isinstance(max_retries, int) or max_retries < 0:
             raise ValueError(f"{type(self).__name__}.max_retries: expected an integer >= 0, got {max_retries!r}")
+        if isinstance(retry_backoff, bool) or not isinstance(retry_backoff, (int, float)) or not retry_backoff >= 0:
+            raise ValueError(f"{type(self).__name__}.retry_backoff: expected a number of seconds >= 0, got {retry_backoff!r}")
         if logging_level.lower() not in LOG_LEVELS:
             raise ValueError(f"{type(self).__name__}.logging_level: expected one of {LOG_LEVELS}, got {logging_level!r}")
         self.model = model
@@ -125,7 +129,7 @@ class ModelClient:
             return f"{scheme}://{authority}{slash}{path}"
         return f"http://{self.host}:{self.port}" if self.port else f"http://{self.host}"
 
-    def _error_context(self, url: str | None = None) -> dict[str, str | None]:
+    def _error_context(self, url: str | None = None) -> ErrorContext:
         return {"client": type(self).__name__, "model": self.model_name, "url": url or self.url}
 
     # ------------------------------------------------------------------ public API
@@ -203,24 +207,18 @@ class ModelClient:
         return {}
 
     @classmethod
-    def from_serialized(cls, data: dict[str, Any]) -> "ModelClient":
+    def from_serialized(cls, data: dict[str, Any]) -> ModelClient:
         return client_from_serialized(data)
 
     # ------------------------------------------------------------------ retries
     def _retrying(self, call: Callable[[], T]) -> T:
         """Run ``call``, retrying connection failures, timeouts and transient statuses."""
-        attempt = 0
-        while True:
-            try:
-                return call()
-            except (ModelConnectionError, ModelTimeoutError, ModelServerError) as exc:
-                transient = not isinstance(exc, ModelServerError) or exc.status in RETRYABLE_STATUS
-                if not transient or attempt >= self.max_retries:
-                    raise
-                attempt += 1
-                delay = self.retry_backoff * (2 ** (attempt - 1))
-                self.logger.warning("attempt %d failed (%s); retrying in %.2fs", attempt, exc, delay)
-                time.sleep(delay)
+        return retry(
+            call, Backoff(attempts=self.max_retries + 1, base=self.retry_backoff, factor=2.0),
+            retry_on=(ModelConnectionError, ModelTimeoutError, ModelServerError),
+            retry_if=lambda exc: not isinstance(exc, ModelServerError) or exc.status in RETRYABLE_STATUS,
+            on_retry=lambda exc, attempt, delay: self.logger.warning("attempt %d failed (%s); retrying in %.2fs", attempt, exc, delay),
+        )
 
     # ------------------------------------------------------------------ hooks
     def _check_connection(self) -> None:

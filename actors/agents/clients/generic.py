@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 from ..errors import MalformedResponseError, ModelNotFoundError
 from ..models import GenericSTT, GenericTTS

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import contextlib
 import json
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import httpx
 
-from ..errors import MalformedResponseError, ModelConnectionError, ModelServerError, ModelTimeoutError
+from ..errors import ErrorContext, MalformedResponseError, ModelConnectionError, ModelServerError, ModelTimeoutError
 
 __all__ = ["HTTPTransport"]
 
@@ -28,7 +29,7 @@ class HTTPTransport:
         timeout: float,
         connect_timeout: float,
         headers: dict[str, str] | None = None,
-        context: dict[str, str | None],
+        context: ErrorContext,
     ) -> None:
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
@@ -52,7 +53,7 @@ class HTTPTransport:
             self._client.close()
             self._client = None
 
-    def context_for(self, path: str) -> dict[str, str | None]:
+    def context_for(self, path: str) -> ErrorContext:
         return {**self.context, "url": f"{self.base_url}{path}"}
 
     @contextlib.contextmanager
@@ -101,21 +102,19 @@ class HTTPTransport:
 
     def stream_lines(self, method: str, path: str, **kwargs: Any) -> Iterator[str]:
         """Yield the response body line by line (for SSE and NDJSON), errors typed."""
-        with self._mapped(path):
-            with self.client.stream(method, path, **kwargs) as response:
-                if response.status_code >= 400:
-                    response.read()
-                    self._check_status(response, path)
-                yield from response.iter_lines()
+        with self._mapped(path), self.client.stream(method, path, **kwargs) as response:
+            if response.status_code >= 400:
+                response.read()
+                self._check_status(response, path)
+            yield from response.iter_lines()
 
     def stream_text(self, method: str, path: str, **kwargs: Any) -> Iterator[str]:
         """Yield decoded text pieces as they arrive (RoboML streams plain text)."""
-        with self._mapped(path):
-            with self.client.stream(method, path, **kwargs) as response:
-                if response.status_code >= 400:
-                    response.read()
-                    self._check_status(response, path)
-                yield from response.iter_text()
+        with self._mapped(path), self.client.stream(method, path, **kwargs) as response:
+            if response.status_code >= 400:
+                response.read()
+                self._check_status(response, path)
+            yield from response.iter_text()
 
     def json_lines(self, lines: Iterator[str], path: str) -> Iterator[dict]:
         """Parse NDJSON, one object per non-empty line."""

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import io
 import pickle
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any
 
 __all__ = [
     "HELPERS_MODULE", "SERVICE", "TRANSFER_BEGIN", "TRANSFER_MIDDLE", "TRANSFER_END",
@@ -146,7 +147,12 @@ class TimedAction(TimedData):
 _WIRE_CLASSES = {cls: cls.__name__ for cls in (RemotePolicyConfig, TimedData, TimedObservation, TimedAction)}
 
 
-class _WirePickler(pickle._Pickler):  # the pure-Python pickler lets us name globals ourselves
+# The pure-Python pickler lets us name globals ourselves. typeshed declares only its public
+# surface (no save, save_global, write, memoize, which the subclass below uses): typed as Any.
+_PurePythonPickler: Any = pickle._Pickler
+
+
+class _WirePickler(_PurePythonPickler):
     def save_global(self, obj: Any, name: str | None = None) -> None:
         wire_name = _WIRE_CLASSES.get(obj)
         if wire_name is None:
@@ -181,9 +187,12 @@ class _AllowListUnpickler(pickle.Unpickler):
 
             return collections.OrderedDict
         if module in ("numpy.core.multiarray", "numpy._core.multiarray") and name in ("_reconstruct", "scalar"):
+            import importlib
+
             import numpy as np
 
-            return getattr(np._core.multiarray if hasattr(np, "_core") else np.core.multiarray, name)
+            multiarray = importlib.import_module("numpy._core.multiarray" if hasattr(np, "_core") else "numpy.core.multiarray")
+            return getattr(multiarray, name)
         if (module, name) in (("numpy", "ndarray"), ("numpy", "dtype")):
             import numpy as np
 

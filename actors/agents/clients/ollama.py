@@ -2,9 +2,11 @@
 keep_alive preload and unload, over Ollama's HTTP API."""
 from __future__ import annotations
 
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 from ..errors import MalformedResponseError, ModelNotFoundError, ModelServerError
+from ..models.ollama import OllamaModel
 from ..types import ChatChunk, ChatRequest, ChatResponse, EmbeddingRequest, EmbeddingResponse
 from . import ollama_codec
 from .base import ModelClient
@@ -18,6 +20,7 @@ class OllamaClient(ModelClient):
 
     SUPPORTED_MODELS = ("OllamaModel",)
     DEFAULT_PORT = 11434
+    model: OllamaModel  # SUPPORTED_MODELS: the base class refuses any other spec
 
     def __init__(self, model, host: str = "127.0.0.1", port: int | None = 11434, inference_timeout: float = 30,
                  init_on_activation: bool = True, logging_level: str = "info", *, pull_if_missing: bool = True,

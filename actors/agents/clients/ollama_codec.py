@@ -7,10 +7,11 @@ completion": request, streamed NDJSON objects ending with ``"done": true``, tool
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
-from typing import Any, Iterable, Iterator
+from collections.abc import Iterable, Iterator
+from datetime import UTC, datetime
+from typing import Any
 
-from ..errors import MalformedResponseError
+from ..errors import ErrorContext, MalformedResponseError
 from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ImageData, ToolCall, ToolSpec, decode_tool_arguments
 
 __all__ = [
@@ -23,7 +24,7 @@ __all__ = [
     "ollama_timestamp",
 ]
 
-Context = dict[str, Any]
+Context = ErrorContext
 
 
 def message_to_ollama(message: ChatMessage) -> dict[str, Any]:
@@ -141,7 +142,7 @@ def chat_request_from_ollama(body: dict[str, Any]) -> tuple[str, ChatRequest]:
 
 
 def ollama_timestamp() -> str:
-    return datetime.now(timezone.utc).isoformat().replace("+00:00", "Z")
+    return datetime.now(UTC).isoformat().replace("+00:00", "Z")
 
 
 def chat_message_to_ollama(model: str, content: str, tool_calls: list[ToolCall], done: bool,

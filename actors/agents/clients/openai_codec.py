@@ -9,9 +9,10 @@ from __future__ import annotations
 import json
 import time
 import uuid
-from typing import Any, Iterable, Iterator
+from collections.abc import Iterable, Iterator
+from typing import Any
 
-from ..errors import MalformedResponseError
+from ..errors import ErrorContext, MalformedResponseError
 from ..types import (
     ChatChunk,
     ChatMessage,
@@ -35,7 +36,7 @@ __all__ = [
     "completion_id",
 ]
 
-Context = dict[str, Any]
+Context = ErrorContext
 
 
 # ------------------------------------------------------------------ client side: requests

@@ -6,7 +6,10 @@ Reference: https://redis.io/docs/latest/develop/reference/protocol-spec/
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
+
+from emos.errors import EmosError
 
 __all__ = ["encode_command", "encode_reply", "read_reply", "RespError", "ProtocolError", "MAX_BULK"]
 
@@ -14,11 +17,11 @@ __all__ = ["encode_command", "encode_reply", "read_reply", "RespError", "Protoco
 MAX_BULK = 256 * 1024 * 1024
 
 
-class RespError(Exception):
+class RespError(EmosError):
     """An error reply (``-ERR ...``) from the server."""
 
 
-class ProtocolError(ValueError):
+class ProtocolError(EmosError, ValueError):
     """Bytes that are not RESP."""
 
 

@@ -1,7 +1,8 @@
 """RoboMLHTTPClient: models served as nodes on a RoboML server, over HTTP (text streaming)."""
 from __future__ import annotations
 
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 from ..errors import MalformedResponseError, ModelServerError
 from ..types import ChatChunk, ChatRequest, DetectionRequest

@@ -13,7 +13,7 @@ from typing import Any
 
 import msgpack
 
-from ..errors import MalformedResponseError, ModelClientError
+from ..errors import ErrorContext, MalformedResponseError, ModelClientError
 from ..types import (
     ChatMessage,
     ChatRequest,
@@ -42,7 +42,7 @@ MODEL_KINDS = {
 REQUEST_KINDS = {ChatRequest: "chat", SpeechRequest: "tts", TranscriptionRequest: "stt", DetectionRequest: "detect"}
 
 
-def kind_of(request: Any, model_type: str, ctx: dict) -> str:
+def kind_of(request: Any, model_type: str, ctx: ErrorContext) -> str:
     kind = REQUEST_KINDS.get(type(request))
     if kind is None:
         raise TypeError(f"RoboML clients take ChatRequest, SpeechRequest, TranscriptionRequest or DetectionRequest, got {type(request).__name__}")
@@ -82,14 +82,14 @@ def build_payload(request: Any, kind: str, *, raw_bytes: bool = False) -> dict[s
     return payload
 
 
-def parse_output(body: Any, kind: str, model: str, ctx: dict) -> Any:
+def parse_output(body: Any, kind: str, model: str, ctx: ErrorContext) -> Any:
     """Decode ``{"output": ...}`` into the response type matching ``kind``."""
     if not isinstance(body, dict) or "output" not in body:
         raise MalformedResponseError("a RoboML result object with 'output'", body, **ctx)
     return parse_value(body["output"], kind, model, ctx)
 
 
-def parse_value(output: Any, kind: str, model: str, ctx: dict) -> Any:
+def parse_value(output: Any, kind: str, model: str, ctx: ErrorContext) -> Any:
     if kind == "chat":
         if isinstance(output, bytes):  # a structured planning answer over msgpack (WebSocket)
             try:

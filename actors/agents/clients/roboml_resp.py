@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import socket
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import msgpack
 
@@ -44,11 +45,13 @@ class RoboMLRESPClient(ModelClient):
                 self._sock.close()
         self._sock = self._file = None
 
-    def _connect(self) -> None:
+    def _connect(self) -> socket.socket:
+        """The open connection (made on first use, or after close())."""
         if self._sock is None:
             sock = socket.create_connection((self.host, self.port), timeout=self.connect_timeout)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._sock, self._file = sock, sock.makefile("rb")
+        return self._sock
 
     def _readexactly(self, n: int) -> bytes:
         data = self._file.read(n)
@@ -60,11 +63,11 @@ class RoboMLRESPClient(ModelClient):
         """Send one command and return its decoded reply; failures are typed errors."""
         ctx = self._error_context()
         try:
-            self._connect()
-            self._sock.settimeout(timeout or self.inference_timeout)
-            self._sock.sendall(encode_command(*args))
+            sock = self._connect()
+            sock.settimeout(timeout or self.inference_timeout)
+            sock.sendall(encode_command(*args))
             reply = read_reply(self._file.readline, self._readexactly)
-        except (socket.timeout, TimeoutError):
+        except TimeoutError:
             self.close()  # the late reply would be read as the next command's answer
             raise ModelTimeoutError("no RESP reply within the timeout", **ctx) from None
         except ProtocolError as exc:

@@ -8,11 +8,12 @@ audio bytes, or msgpack for structured outputs).
 from __future__ import annotations
 
 import contextlib
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import msgpack
 
-from ..errors import MalformedResponseError, ModelConnectionError, ModelServerError, ModelTimeoutError
+from ..errors import ErrorContext, MalformedResponseError, ModelConnectionError, ModelServerError, ModelTimeoutError
 from ..types import ChatChunk, ChatRequest
 from . import roboml_codec
 from .roboml import RoboMLHTTPClient
@@ -46,7 +47,7 @@ class RoboMLWSClient(RoboMLHTTPClient):
                 self._ws.close()
             self._ws = None
 
-    def _ctx(self) -> dict[str, Any]:
+    def _ctx(self) -> ErrorContext:
         return self._error_context(self.websocket_url)
 
     @contextlib.contextmanager
@@ -86,11 +87,11 @@ class RoboMLWSClient(RoboMLHTTPClient):
         if self._ws is None:
             from websockets.sync.client import connect
 
-            options = {"open_timeout": self.connect_timeout, "max_size": 64 * 1024 * 1024, "compression": None}
+            timeout, max_size = self.connect_timeout, 64 * 1024 * 1024
             try:  # websockets >= 15: a held (not context-managed) connection is "legacy" mode
-                self._ws = connect(self.websocket_url, proxy=None, legacy=True, **options)
+                self._ws = connect(self.websocket_url, proxy=None, legacy=True, open_timeout=timeout, max_size=max_size, compression=None)
             except TypeError:  # older websockets: no proxy/legacy keywords, direct connection is the default
-                self._ws = connect(self.websocket_url, **options)
+                self._ws = connect(self.websocket_url, open_timeout=timeout, max_size=max_size, compression=None)
         return self._ws
 
     def _send(self, payload: dict[str, Any]) -> Any:

@@ -1,7 +1,7 @@
 """Server-sent events: the wire format of OpenAI streaming (``data: {...}`` ... ``data: [DONE]``)."""
 from __future__ import annotations
 
-from typing import Iterable, Iterator
+from collections.abc import Iterable, Iterator
 
 __all__ = ["iter_sse_data", "SSE_DONE", "format_sse"]
 

@@ -18,13 +18,15 @@ from __future__ import annotations
 import copy
 import threading
 import time
-from typing import Any, Callable, ClassVar, Mapping, Sequence, TypeVar
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar, TypeVar
 
 from attrs import define, field
 
 from emos.config import validators as V
 from emos.config.base import BaseComponentConfig
 from emos.core.component import BaseComponent
+from emos.core.conventions import check_topics, resolve_config, role_spec
 from emos.core.fallbacks import component_fallback
 from emos.core.offload import StepWorker
 from emos.io.fixed import FixedInput
@@ -82,8 +84,11 @@ class _ErrorLog:
             return
         repeats = self._count.pop(key, 0)
         self._last[key] = now
-        suffix = f" (and {repeats} more like it in the last {self.period:.0f} s)" if repeats else ""
-        self.logger.error(message + suffix, *args)
+        if repeats:
+            # ``message`` is the caller's %-template: format it first, then append the count.
+            self.logger.error("%s (and %d more like it in the last %.0f s)", message % args, repeats, self.period)
+        else:
+            self.logger.error(message, *args)
 
 
 def _fresh_client(client: Any) -> Any:
@@ -96,10 +101,6 @@ def _fresh_client(client: Any) -> Any:
         except Exception:
             pass
     return copy.deepcopy(client)
-
-
-def _type_names(types: Sequence[type]) -> str:
-    return ", ".join(t.__name__ for t in types)
 
 
 class ModelComponent(BaseComponent):
@@ -126,13 +127,12 @@ class ModelComponent(BaseComponent):
         callback_group: Any = None,
         **kwargs: Any,
     ) -> None:
-        config = config if config is not None else self.CONFIG_CLASS()
-        if not isinstance(config, self.CONFIG_CLASS):
-            raise TypeError(f"component {component_name!r}: {type(self).__name__} needs a {self.CONFIG_CLASS.__name__}, got {type(config).__name__}")
-        inputs = list(inputs or [])
-        outputs = list(outputs or [])
-        self._check_types(component_name, "input", inputs, self.ALLOWED_INPUTS)
-        self._check_types(component_name, "output", outputs, self.ALLOWED_OUTPUTS)
+        # The config and the topics are checked by the rules every component shares
+        # (emos.core.conventions); ours are one list per role, typed by ALLOWED_INPUTS/OUTPUTS.
+        config = resolve_config(component_name, type(self).__name__, config, self.config_class())
+        kind = type(self).__name__
+        inputs = check_topics(component_name, kind, "input", list(inputs or []), role_spec(self.ALLOWED_INPUTS))
+        outputs = check_topics(component_name, kind, "output", list(outputs or []), role_spec(self.ALLOWED_OUTPUTS))
         self._fixed: dict[str, FixedInput] = {t.name: t for t in inputs if isinstance(t, FixedInput)}
         self._all_inputs: list[Topic] = list(inputs)
         if isinstance(trigger, FixedInput) or (isinstance(trigger, (list, tuple)) and any(isinstance(t, FixedInput) for t in trigger)):
@@ -164,14 +164,9 @@ class ModelComponent(BaseComponent):
             self.on_component_fail(action=Action(self.reconnect_model_client))
 
     # ------------------------------------------------------------------ definition-time checks
-    @staticmethod
-    def _check_types(component: str, role: str, topics: Sequence[Topic], allowed: tuple[type, ...]) -> None:
-        for t in topics:
-            if not isinstance(t, Topic):
-                raise TypeError(f"component {component!r}: {role}s must be Topic objects, got {type(t).__name__}")
-            if allowed and not issubclass(t.msg_type, allowed):
-                raise TypeError(f"component {component!r}: {role} {t.name!r} carries {t.type_name}, but this component "
-                                f"takes {role}s of type {_type_names(allowed)}")
+    @classmethod
+    def config_class(cls) -> type[ModelComponentConfig]:
+        return cls.CONFIG_CLASS
 
     def _check_client(self, client: Any) -> None:
         for attr in ("inference", "check_connection"):
@@ -404,7 +399,7 @@ class ModelComponent(BaseComponent):
                 self.get_logger().warning("[%s] closing the DB client: %s", self.component_name, exc)
 
     # ------------------------------------------------------------------ steps
-    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None, **kwargs: Any) -> None:
         inputs = self.gather_inputs(msg, topic)
         missing = self.missing_inputs(inputs)
         if missing:
@@ -450,7 +445,12 @@ class ModelComponent(BaseComponent):
         worker = self._worker
         if worker is not None and not worker.busy:
             if not self._resources_ready:
-                worker.submit(lambda: self.ensure_resources() and self._publish_status())
+
+                def reopen() -> None:  # worker thread
+                    if self.ensure_resources():
+                        self._publish_status()
+
+                worker.submit(reopen)
             if self.model_client is not None and not self._client_ready:
                 worker.submit(self._reconnect_in_worker)
         return self._resources_ready and (self.model_client is None or self._client_ready)
@@ -479,7 +479,7 @@ class ModelComponent(BaseComponent):
         self._publish_status()
 
     # ------------------------------------------------------------------ copies (threaded restarts)
-    def __deepcopy__(self, memo: dict) -> "ModelComponent":
+    def __deepcopy__(self, memo: dict) -> ModelComponent:
         """A pristine copy for a restart in threaded mode: model clients are rebuilt from their
         serialized form (live sockets and locks are not copied), runtime state starts empty,
         and parts that cannot be copied (compiled templates, registered tools) are shared:

@@ -12,12 +12,14 @@ from typing import Any
 
 import numpy as np
 
+from emos.core import clock
+from emos.errors import EmosError
 from emos.msgs import geometry as G
 from emos.msgs import intelligence as I
 from emos.msgs import nav as N
 from emos.msgs import sensor as S
 from emos.msgs import std as D
-from emos.msgs.std import Header, Time
+from emos.msgs.std import Header
 
 from ..logic.detections import NOTHING
 
@@ -28,16 +30,17 @@ TEXTUAL_TYPES = (D.String, I.StreamingString, I.Detections, I.DetectionsMultiSou
 POSITION_TYPES = (G.PoseStamped, G.Pose, G.Point, G.PointStamped)
 
 
-class OutputConversionError(TypeError):
+class OutputConversionError(EmosError, TypeError):
     """A component's output cannot be published on a topic of that type."""
 
 
-class ImageInputError(ValueError):
+class ImageInputError(EmosError, ValueError):
     """An image message that cannot be read as pixels (wrong shape, encoding or size)."""
 
 
 def header_now(frame_id: str = "") -> Header:
-    return Header(stamp=Time.now(), frame_id=frame_id)
+    """A header stamped on the node's clock (simulated seconds when a simulator drives the run)."""
+    return Header(stamp=clock.stamp(), frame_id=frame_id)
 
 
 # ------------------------------------------------------------------------------ inputs
@@ -138,9 +141,8 @@ def to_message(msg_type: type, value: Any, topic: str = "output", frame_id: str 
             return D.String(data=value)
         raise OutputConversionError(f"output {topic!r} (String) needs text, got {type(value).__name__}; "
                                     "add a publisher preprocessor that returns a str")
-    if msg_type is I.StreamingString:
-        if isinstance(value, str):
-            return I.StreamingString(stream=False, done=True, data=value)
+    if msg_type is I.StreamingString and isinstance(value, str):
+        return I.StreamingString(stream=False, done=True, data=value)
     if msg_type in POSITION_TYPES:
         x, y, z = _vector(value, topic, name)
         point = G.Point(x=x, y=y, z=z)

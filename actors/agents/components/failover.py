@@ -9,8 +9,10 @@ the request being processed, so that request is answered instead of lost.
 """
 from __future__ import annotations
 
-import time
-from typing import Any, Callable, TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from emos.core.retry import Backoff, retry
 
 from ..errors import ModelClientError, ModelConnectionError, ModelTimeoutError
 
@@ -32,29 +34,34 @@ class ModelFailover:
 
     def call(self, send: Callable[[Any], T], *, retry_allowed: Callable[[], bool] = lambda: True) -> T:
         comp = self.component
-        after = comp.config.model_failover_after
         tried: set[str] = {comp.model_client_name}
-        failures = 0
         while True:
             client = comp.model_client
-            try:
-                result = send(client)
-            except ModelClientError as exc:
-                failures += 1
-                comp._on_model_error(exc)
-                if not retry_allowed():  # e.g. part of a stream already went out: re-sending would repeat it
+
+            def attempt(client: Any = client) -> T:  # this loop's client, bound now
+                try:
+                    return send(client)
+                except ModelClientError as exc:
+                    comp._on_model_error(exc)
                     raise
-                if failures < after:
-                    time.sleep(comp.config.model_retry_backoff)
-                    continue
+
+            after = comp.config.model_failover_after
+            try:
+                # The same client up to ``model_failover_after`` times, ``model_retry_backoff``
+                # apart; never again once retry_allowed() says no (e.g. part of a stream already
+                # went out: re-sending would repeat it).
+                result = retry(attempt, Backoff(attempts=after, base=comp.config.model_retry_backoff, factor=1.0),
+                               retry_on=ModelClientError, retry_if=lambda exc: retry_allowed())
+            except ModelClientError as exc:
+                if not retry_allowed():
+                    raise
                 backup = next((name for name in comp.additional_model_clients if name not in tried), None)
                 if backup is None:
                     raise
                 tried.add(backup)
                 comp.get_logger().warning("[%s] %d failure(s) of model client %r (%s); switching to %r",
-                                          comp.component_name, failures, comp.model_client_name, exc, backup)
+                                          comp.component_name, after, comp.model_client_name, exc, backup)
                 comp.change_model_client(backup)
-                failures = 0
                 continue
             comp._on_model_success()
             return result

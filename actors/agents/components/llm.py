@@ -9,7 +9,8 @@ unfinished tail as if it were the end of the answer.
 from __future__ import annotations
 
 import os
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 from attrs import define, field
 
@@ -114,7 +115,7 @@ class LLM(ModelComponent):
         cfg = self.config
         self._history = ChatHistory(cfg.history_size, cfg.history_reset_phrase, cfg.system_prompt) if cfg.chat_history else None
 
-    def missing_inputs(self, inputs: dict[str, Any]) -> list[str]:
+    def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:
         if any(t.name in inputs for t in self.text_inputs):
             return []
         return [t.name for t in self.text_inputs]

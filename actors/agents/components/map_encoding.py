@@ -9,11 +9,13 @@ reports and retries, never a crash.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
 
 from attrs import define, field
 
 from emos.config import validators as V
+from emos.core import clock
 from emos.io.topic import Topic
 from emos.msgs import geometry as G
 from emos.msgs import nav as N
@@ -79,12 +81,12 @@ class MapEncoding(ModelComponent):
         self._stored.clear()
         self._pre_defined_done = False
 
-    def _execution_step(self, msg: Any = None, topic: Topic | None = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None, **kwargs: Any) -> None:
         if self._worker is not None and self._worker.busy:
             return  # the previous write is still going: this trigger's data is stored next time
         super()._execution_step(msg, topic)
 
-    def missing_inputs(self, inputs: dict[str, Any]) -> list[str]:
+    def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:
         return [t.name for t in (self.position, self.map_topic) if t.name not in inputs]
 
     def prepare(self, inputs: dict[str, Any], trigger: Topic | None) -> Callable[[], None] | None:
@@ -97,9 +99,11 @@ class MapEncoding(ModelComponent):
             if msg is None or self._stored.get(layer.name) == id(msg):
                 continue
             observations.append((layer.name, text_of(msg), id(msg)))
-        return lambda: self._write(resolution, position, observations)
+        at = clock.now()  # observed now on the node's clock (simulated seconds under a simulator)
+        return lambda: self._write(resolution, position, observations, at)
 
-    def _write(self, resolution: float, position: Any, observations: list[tuple[str, str, int]]) -> None:
+    def _write(self, resolution: float, position: Any, observations: list[tuple[str, str, int]],
+               at: float | None = None) -> None:
         if not resolution > 0:
             self.health_status.set_fail_system(topic_names=[self.map_topic.name],
                                                message=f"{self.map_topic.name}: map resolution {resolution} is not > 0")
@@ -107,10 +111,10 @@ class MapEncoding(ModelComponent):
         try:
             self._encoder.set_resolution(resolution)
             if not self._pre_defined_done:
-                self.entries_written += len(self._encoder.add_pre_defined())
+                self.entries_written += len(self._encoder.add_pre_defined(timestamp=at))
                 self._pre_defined_done = True
             for layer, text, ident in observations:
-                self.entries_written += len(self._encoder.encode(layer, text, position) and [1] or [])
+                self.entries_written += len(self._encoder.encode(layer, text, position, timestamp=at) and [1] or [])
                 self._stored[layer] = ident
         except Exception as exc:  # the store refused the write (read-only, corrupt, full disk)
             self.health_status.set_fail_component(component_names=[self.component_name],

@@ -10,7 +10,8 @@ consumer such as the Planner can place them in the world.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
@@ -19,8 +20,16 @@ from emos.msgs import intelligence as I
 from emos.msgs import std as D
 from emos.msgs.control import RGBD
 
-from ..logic.vlm_tasks import (TASKS, AffordanceResult, GeneralResult, GroundingResult, PointingResult,
-                               TrajectoryResult, VLMParseError, parse_vlm_output)
+from ..logic.vlm_tasks import (
+    TASKS,
+    AffordanceResult,
+    GeneralResult,
+    GroundingResult,
+    PointingResult,
+    TrajectoryResult,
+    VLMParseError,
+    parse_vlm_output,
+)
 from ..types import ChatMessage, ChatRequest, ImageData
 from .convert import IMAGE_TYPES, TEXTUAL_TYPES, ImageInputError, header_now, image_of
 from .llm import LLM, LLM_OUTPUTS, LLMConfig
@@ -56,7 +65,7 @@ class MLLM(LLM):
     def image_inputs(self) -> list:
         return [t for t in self.input_topics if issubclass(t.msg_type, IMAGE_TYPES + (RGBD,))]
 
-    def missing_inputs(self, inputs: dict[str, Any]) -> list[str]:
+    def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:
         missing = super().missing_inputs(inputs)
         if not any(t.name in inputs for t in self.image_inputs):
             missing += [t.name for t in self.image_inputs]
@@ -118,12 +127,12 @@ class MLLM(LLM):
         # Stamped and framed as the depth image when there is one: the result is about that frame.
         header = depth.header if depth is not None else header_now()
         if isinstance(result, (PointingResult, TrajectoryResult)):
-            msg = I.PointsOfInterest(header=header, points=result.points, image=depth)
-            self.publish_all(msg, (I.PointsOfInterest,))
+            points = I.PointsOfInterest(header=header, points=result.points, image=depth)
+            self.publish_all(points, (I.PointsOfInterest,))
         elif isinstance(result, (GroundingResult, AffordanceResult)):
             labels = [lbl or task for lbl in getattr(result, "labels", [])] or [task] * len(result.boxes)
-            msg = I.Detections(header=header, scores=np.ones(len(result.boxes)), labels=labels, boxes=result.boxes, image=depth)
-            self.publish_all(msg, (I.Detections,))
+            detections = I.Detections(header=header, scores=np.ones(len(result.boxes)), labels=labels, boxes=result.boxes, image=depth)
+            self.publish_all(detections, (I.Detections,))
         elif not isinstance(result, GeneralResult):  # pragma: no cover - parse_vlm_output covers every task
             raise TypeError(f"unexpected VLM result {type(result).__name__}")
         self._remember(user, text)

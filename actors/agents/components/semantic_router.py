@@ -7,7 +7,8 @@ the route through a tool call; no valid call means the default route.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar
 
 from attrs import define, field
 
@@ -25,17 +26,12 @@ from .convert import text_of
 __all__ = ["SemanticRouter", "SemanticRouterConfig", "Route"]
 
 
-def _max_distance(instance: Any, attribute: Any, value: Any) -> None:
-    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0):
-        raise ValueError(f"SemanticRouterConfig.maximum_distance: expected a positive number or None, got {value!r}")
-
-
 @define(kw_only=True)
 class SemanticRouterConfig(ModelComponentConfig):
     router_name: str = field(default="router", validator=lambda i, a, v: _name(v))
     distance_func: str = field(default="l2", validator=V.in_(DISTANCES))
     #: in the units of distance_func; None = the default for it (see logic.router)
-    maximum_distance: float | None = field(default=None, validator=_max_distance)
+    maximum_distance: float | None = field(default=None, validator=V.positive_or_none)
 
     @property
     def settings(self) -> RouterSettings:

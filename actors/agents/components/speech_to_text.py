@@ -12,7 +12,8 @@ downloaded here), so it costs one transcription per utterance.
 from __future__ import annotations
 
 import re
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
@@ -101,7 +102,7 @@ class SpeechToText(ModelComponent):
                                   speech_pad_ms=cfg.speech_pad_ms)
             self._vad.segments(np.zeros(RATE // 10, np.float32), RATE)  # load the model now
 
-    def missing_inputs(self, inputs: dict[str, Any]) -> list[str]:
+    def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:
         return [] if self.in_topics[0].name in inputs else [self.in_topics[0].name]
 
     def prepare(self, inputs: dict[str, Any], trigger: Topic | None) -> Callable[[], None] | None:

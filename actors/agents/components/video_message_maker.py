@@ -9,7 +9,8 @@ at ``max_video_frames``.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
@@ -46,7 +47,8 @@ def motion(previous: np.ndarray, current: np.ndarray, method: str, flow_kwargs: 
         return float(np.mean(np.abs(current.astype(np.int16) - previous.astype(np.int16)))) / 255.0
     import cv2
 
-    flow = cv2.calcOpticalFlowFarneback(previous, current, None, **flow_kwargs)
+    # flow=None: cv2 allocates the output; opencv's stubs leave None out of that parameter's type.
+    flow = cv2.calcOpticalFlowFarneback(previous, current, None, **flow_kwargs)  # type: ignore[call-overload]
     return float(np.mean(np.linalg.norm(flow, axis=2)))
 
 

@@ -13,13 +13,14 @@ to rgb8), so consumers know the image size and can read the pixels.
 """
 from __future__ import annotations
 
-import time
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
 
 from emos.config import validators as V
+from emos.core import clock
 from emos.io.topic import Topic
 from emos.msgs import intelligence as I
 from emos.msgs.control import RGBD
@@ -86,7 +87,7 @@ class Vision(ModelComponent):
         self._trackers = {t.name: CentroidTracker(self.config.tracking_distance_threshold, self.config.tracking_max_age)
                           for t in self.in_topics}
 
-    def missing_inputs(self, inputs: dict[str, Any]) -> list[str]:
+    def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:
         return [] if any(t.name in inputs for t in self.in_topics) else [t.name for t in self.in_topics]
 
     def prepare(self, inputs: dict[str, Any], trigger: Topic | None) -> Callable[[], None] | None:
@@ -101,7 +102,7 @@ class Vision(ModelComponent):
                 self.health_status.set_fail_system(topic_names=[t.name], message=str(exc))
                 self._errors(f"image:{t.name}", "[%s] %s", self.component_name, exc)
                 return None
-        received = time.time()
+        received = clock.now()  # the node's clock: track velocities in simulated m/s under a simulator
         return lambda: self._detect(frames, received)
 
     def _detect(self, frames: list[tuple[str, np.ndarray, Any]], stamp: float) -> None:

@@ -28,8 +28,7 @@ from emos.msgs import std as D
 from ..types import ActionChunk, PolicyObservation
 from .base import ModelComponent, ModelComponentConfig
 from .convert import header_now, image_of
-from .vla_interface import (VisionLanguageActionFeedback, VisionLanguageActionGoal, VisionLanguageActionResult,
-                            joint_limits_from_urdf)
+from .vla_interface import VisionLanguageActionFeedback, VisionLanguageActionGoal, VisionLanguageActionResult, joint_limits_from_urdf
 
 ACTION_OUTPUTS = (S.JointState, C.JointTrajectory, C.JointJog, D.Float64MultiArray)
 STATE_TYPES = ("positions", "velocities", "efforts")
@@ -92,7 +91,7 @@ class VLA(ModelComponent):
             raise ValueError(f"component {component_name!r}: VLA needs an output for its joint commands")
         self._check_policy(config)
         self.limits = self._limits(config)
-        self.termination = {"mode": "timesteps", "max_timesteps": config.max_timesteps}
+        self.termination: dict[str, Any] = {"mode": "timesteps", "max_timesteps": config.max_timesteps}
         # (Event, [Action]) pairs this component needs the Monitor to run (its stop event); the
         # Launcher's orchestration collects them with the recipe's own events.
         self._own_events_actions: list[tuple[Any, list[Any]]] = []
@@ -194,6 +193,8 @@ class VLA(ModelComponent):
             if topic.name not in inputs:
                 return f"no image on {topic.name}"
             observation[key] = image_of(inputs[topic.name], topic.name)
+        # Wall time on purpose: the LeRobot policy server compares it with its own wall clock
+        # (latency, action chunk timing); the robot's time travels as ``timestep``.
         return PolicyObservation(observation=observation, timestep=timestep, timestamp=time.time())
 
     def _main_action_callback(self, goal_handle: Any) -> VisionLanguageActionResult:
@@ -222,7 +223,12 @@ class VLA(ModelComponent):
                     time.sleep(min(period, 0.05))
                     continue
                 last_input = time.monotonic()
-                fresh = self.call_model(lambda client: client.inference(observation))
+
+                # this step's observation bound as a default, whenever call_model runs it
+                def infer(client: Any, observation: PolicyObservation = observation) -> Any:
+                    return client.inference(observation)
+
+                fresh = self.call_model(infer)
                 if fresh is not None:
                     chunk = fresh
             action = self._action_for(chunk, step)

@@ -47,10 +47,12 @@ def joint_limits_from_urdf(path: str | Path) -> dict[str, tuple[float, float]]:
             continue
         limit = joint.find("limit")
         name = joint.get("name")
-        if limit is None or name is None or limit.get("lower") is None or limit.get("upper") is None:
+        lower_text = limit.get("lower") if limit is not None else None
+        upper_text = limit.get("upper") if limit is not None else None
+        if name is None or lower_text is None or upper_text is None:
             continue
         try:
-            lower, upper = float(limit.get("lower")), float(limit.get("upper"))
+            lower, upper = float(lower_text), float(upper_text)
         except ValueError:
             raise ValueError(f"robot_urdf_file {str(path)!r}: joint {name!r} has non-numeric limits") from None
         if lower > upper:

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from emos.errors import EmosError
+
 from ..errors import MalformedResponseError, ModelConnectionError, ModelServerError, ModelTimeoutError
 from .spec import ChromaDB
 
@@ -19,7 +21,7 @@ INCLUDE_QUERY = ["documents", "metadatas", "distances"]
 INCLUDE_GET = ["documents", "metadatas"]
 
 
-class CollectionMissing(LookupError):
+class CollectionMissing(EmosError, LookupError):
     pass
 
 

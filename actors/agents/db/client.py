@@ -4,7 +4,8 @@ from __future__ import annotations
 import re
 import threading
 import uuid
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import attrs
 import numpy as np
@@ -225,7 +226,7 @@ class ChromaClient:
         return {"client_type": type(self).__name__, "db": attrs.asdict(self.db)}
 
     @classmethod
-    def from_serialized(cls, data: dict[str, Any]) -> "ChromaClient":
+    def from_serialized(cls, data: dict[str, Any]) -> ChromaClient:
         if not isinstance(data, dict) or data.get("client_type") != cls.__name__ or "db" not in data:
             raise ValueError(f"serialized ChromaClient: expected {{'client_type': 'ChromaClient', 'db': {{...}}}}, "
                              f"got {data!r}")

@@ -1,7 +1,8 @@
 """Embedding backends for the vector store: the local sentence-transformers model or Ollama."""
 from __future__ import annotations
 
-from typing import Protocol, Sequence
+from collections.abc import Sequence
+from typing import Protocol
 
 import httpx
 import numpy as np

@@ -5,25 +5,12 @@ import os
 
 import attrs
 
+from emos.config import validators as V
+
 EMBEDDING_BACKENDS = ("sentence-transformers", "ollama")
 #: Chroma's three HNSW spaces. "l2" is the *squared* Euclidean distance.
 DISTANCES = ("l2", "ip", "cosine")
 DEFAULT_PATH = os.path.join(os.path.expanduser("~"), ".cache", "emos", "chroma")
-
-
-def _port(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 < value < 65536:
-        raise ValueError(f"ChromaDB.{attribute.name}: expected a TCP port in 1..65535, got {value!r}")
-
-
-def _positive(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-        raise ValueError(f"ChromaDB.{attribute.name}: expected a positive number of seconds, got {value!r}")
-
-
-def _non_empty(instance, attribute, value) -> None:
-    if not isinstance(value, str) or not value.strip():
-        raise ValueError(f"ChromaDB.{attribute.name}: expected a non-empty string, got {value!r}")
 
 
 @attrs.define(kw_only=True)
@@ -36,21 +23,21 @@ class ChromaDB:
     downloads) an embedding model of its own.
     """
 
-    name: str = attrs.field(default="chroma", validator=_non_empty)
-    path: str = attrs.field(default=DEFAULT_PATH, validator=_non_empty,
+    name: str = attrs.field(default="chroma", validator=V.non_empty_str)
+    path: str = attrs.field(default=DEFAULT_PATH, validator=V.non_empty_str,
                             converter=lambda p: os.path.expanduser(p) if isinstance(p, str) else p)
-    host: str | None = attrs.field(default=None, validator=attrs.validators.optional(_non_empty))
-    port: int = attrs.field(default=8000, validator=_port)
-    tenant: str = attrs.field(default="default_tenant", validator=_non_empty)
-    database: str = attrs.field(default="default_database", validator=_non_empty)
+    host: str | None = attrs.field(default=None, validator=attrs.validators.optional(V.non_empty_str))
+    port: int = attrs.field(default=8000, validator=V.number(ge=1, le=65535, integer=True, what="a TCP port"))
+    tenant: str = attrs.field(default="default_tenant", validator=V.non_empty_str)
+    database: str = attrs.field(default="default_database", validator=V.non_empty_str)
     embeddings: str = attrs.field(default="sentence-transformers",
                                   validator=attrs.validators.in_(EMBEDDING_BACKENDS))
     #: sentence-transformers: a local model directory (None = the packaged all-MiniLM-L6-v2);
     #: ollama: the embedding model name.
-    checkpoint: str | None = attrs.field(default=None, validator=attrs.validators.optional(_non_empty))
-    ollama_host: str = attrs.field(default="127.0.0.1", validator=_non_empty)
-    ollama_port: int = attrs.field(default=11434, validator=_port)
-    request_timeout: float = attrs.field(default=30.0, validator=_positive)
+    checkpoint: str | None = attrs.field(default=None, validator=attrs.validators.optional(V.non_empty_str))
+    ollama_host: str = attrs.field(default="127.0.0.1", validator=V.non_empty_str)
+    ollama_port: int = attrs.field(default=11434, validator=V.number(ge=1, le=65535, integer=True, what="a TCP port"))
+    request_timeout: float = attrs.field(default=30.0, validator=V.number(gt=0, what="a number of seconds"))
 
     @property
     def is_server(self) -> bool:

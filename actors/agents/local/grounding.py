@@ -9,7 +9,7 @@ no box), limited to the classes the detector knows.
 from __future__ import annotations
 
 import re
-from typing import Sequence
+from collections.abc import Sequence
 
 from .vision import LABELS, Detection
 

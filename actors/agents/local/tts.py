@@ -8,10 +8,12 @@ from __future__ import annotations
 import shutil
 import subprocess
 
+from emos.errors import EmosError
+
 _MIN_WPM, _MAX_WPM = 80, 500
 
 
-class TTSError(RuntimeError):
+class TTSError(EmosError, RuntimeError):
     """espeak-ng failed to synthesize the given text."""
 
 

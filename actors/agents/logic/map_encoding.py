@@ -9,10 +9,13 @@ holds ``coordinates`` ([x, y, z], x and y at the cell centre), ``layer_name``, `
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import attrs
 import numpy as np
+
+from emos.config import validators as V
 
 from ..db.spec import DISTANCES
 
@@ -50,17 +53,12 @@ def _layer_name(value: Any) -> str:
 class MapLayer:
     subscribes_to: Any = attrs.field()
     temporal_change: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
-    resolution_multiple: int = attrs.field(default=1)
+    resolution_multiple: int = attrs.field(default=1, validator=V.int_at_least(1))
     pre_defined: list[tuple[np.ndarray, str]] = attrs.field(factory=list, converter=_pre_defined)
 
     @subscribes_to.validator
     def _check_topic(self, attribute, value) -> None:
         _layer_name(value)
-
-    @resolution_multiple.validator
-    def _check_multiple(self, attribute, value) -> None:
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"MapLayer.resolution_multiple: expected an integer >= 1, got {value!r}")
 
     @property
     def name(self) -> str:

@@ -3,7 +3,8 @@ published on one topic. A function returning None means "publish nothing this ti
 from __future__ import annotations
 
 import inspect
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 class PreprocessorChain:

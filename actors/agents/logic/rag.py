@@ -6,6 +6,8 @@ from typing import Protocol
 
 import attrs
 
+from emos.config import validators as V
+
 from ..db.results import Hit
 from ..db.spec import DISTANCES
 
@@ -15,11 +17,6 @@ class VectorStore(Protocol):
               where: dict | None = None) -> list[Hit]: ...
 
 
-def _positive_int(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{attribute.name}: expected a positive integer, got {value!r}")
-
-
 @attrs.define(kw_only=True)
 class RAGSettings:
     """The LLMConfig fields that drive retrieval (same names and defaults)."""
@@ -27,7 +24,7 @@ class RAGSettings:
     enable_rag: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
     collection_name: str | None = attrs.field(default=None)
     distance_func: str = attrs.field(default="l2", validator=attrs.validators.in_(DISTANCES))
-    n_results: int = attrs.field(default=1, validator=_positive_int)
+    n_results: int = attrs.field(default=1, validator=V.int_at_least(1))
     add_metadata: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
 
     def __attrs_post_init__(self) -> None:

@@ -8,9 +8,12 @@ model's tool call decides; no (valid) call means the default route.
 from __future__ import annotations
 
 import re
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import attrs
+
+from emos.config import validators as V
 
 from ..db.spec import DISTANCES
 from ..types import ChatMessage, ChatRequest, ChatResponse, ToolSpec
@@ -62,14 +65,7 @@ class SemanticRouterConfig:
     router_name: str = attrs.field(validator=attrs.validators.and_(attrs.validators.instance_of(str),
                                                                    attrs.validators.min_len(1)))
     distance_func: str = attrs.field(default="l2", validator=attrs.validators.in_(DISTANCES))
-    maximum_distance: float | None = attrs.field(default=None)
-
-    @maximum_distance.validator
-    def _check_distance(self, attribute, value) -> None:
-        if value is None:
-            return
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-            raise ValueError(f"maximum_distance: expected a positive number, got {value!r}")
+    maximum_distance: float | None = attrs.field(default=None, validator=V.positive_or_none)
 
     @property
     def effective_maximum_distance(self) -> float:

@@ -2,7 +2,7 @@
 can start on the first sentence while the model is still writing."""
 from __future__ import annotations
 
-from typing import Iterable, Iterator
+from collections.abc import Iterable, Iterator
 
 from ..types import ChatChunk
 

@@ -7,13 +7,15 @@ silently empty prompt (jinja2's default would render "" for it).
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
+
+from emos.errors import EmosError
 
 _TEMPLATE_SUFFIXES = (".jinja", ".jinja2", ".j2", ".txt", ".tmpl")
 
 
-class TemplateVariableError(ValueError):
+class TemplateVariableError(EmosError, ValueError):
     """A template needs variables that were not given."""
 
 

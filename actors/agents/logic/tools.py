@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import inspect
 import json
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import attrs
+
+from emos.errors import EmosError
 
 from ..types import ChatMessage, ChatRequest, ChatResponse, ToolCall, ToolSpec
 
@@ -22,7 +25,7 @@ _PY_TYPES = {"str": "string", "string": "string", "float": "number", "number": "
              "object": "object", "list": "array", "array": "array", "none": "null", "null": "null"}
 
 
-class ToolError(RuntimeError):
+class ToolError(EmosError, RuntimeError):
     """A tool call could not be carried out."""
 
 

@@ -7,7 +7,7 @@ component's tracker when the model server does not track.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import attrs
 import numpy as np
@@ -59,14 +59,16 @@ class CentroidTracker:
         for _, d, tid in sorted(pairs):
             if d in assigned or tid in used:
                 continue
-            assigned[d], _ = tid, used.add(tid)
+            assigned[d] = tid
+            used.add(tid)
         ids, velocities = [], []
         for d, c in enumerate(centroids):
-            tid = assigned.get(d)
-            if tid is None:
+            match = assigned.get(d)
+            if match is None:
                 tid, self._next_id = self._next_id, self._next_id + 1
                 velocity = np.zeros(2)
             else:
+                tid = match
                 old = self.tracks[tid]
                 dt = stamp - old.stamp
                 velocity = (c - old.centroid) / dt if dt > 0 else old.velocity

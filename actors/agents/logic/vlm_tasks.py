@@ -15,6 +15,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.errors import EmosError
+
 TASKS = ("general", "pointing", "affordance", "trajectory", "grounding")
 _POINT_KEYS = ("point_2d", "point", "points", "coordinates")
 _BOX_KEYS = ("bbox_2d", "bbox", "box", "boxes")
@@ -23,7 +25,7 @@ _GROUP = re.compile(rf"[\(\[]\s*({_NUMBER}(?:\s*,\s*{_NUMBER})+)\s*[\)\]]")
 _FENCE = re.compile(r"```(?:json|python)?\s*(.*?)```", re.S)
 
 
-class VLMParseError(ValueError):
+class VLMParseError(EmosError, ValueError):
     """The model text does not contain the structure the task asks for."""
 
     def __init__(self, task: str, expected: str, text: str) -> None:

@@ -7,29 +7,24 @@ line that made it, not minutes later on the robot.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import attrs
 
+from emos.config import validators as V
+
 __all__ = ["Model", "model_from_dict", "MODEL_TYPES", "non_empty_str", "optional_positive", "options_validator"]
 
+# Kept under their old names for the model specs that import them from here.
+non_empty_str = V.non_empty_str
+optional_positive = V.positive_or_none
+
 #: class name -> class, filled by Model subclasses; used to rebuild specs in other processes.
-MODEL_TYPES: dict[str, type["Model"]] = {}
+MODEL_TYPES: dict[str, type[Model]] = {}
 
 
-def non_empty_str(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if not isinstance(value, str) or not value.strip():
-        raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected a non-empty string, got {value!r}")
-
-
-def optional_positive(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-        raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected a positive number or None, got {value!r}")
-
-
-def options_validator(allowed: dict[str, type | tuple[type, ...]]):
+def options_validator(allowed: Mapping[str, type | tuple[type, ...]]):
     """Validator for an ``options`` dict: only known keys, each with its expected type."""
 
     def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import attrs
 
+from emos.config import validators as V
+
 from .base import Model, options_validator
 from .languages import LANGUAGE_CODES
 
@@ -36,25 +38,15 @@ class GenericMLLM(GenericLLM):
     """A multimodal (image + text) LLM on an OpenAI-compatible server."""
 
 
-def _speed(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.25 <= value <= 4.0:
-        raise ValueError(f"{type(instance).__name__}.speed: expected a number in [0.25, 4.0], got {value!r}")
-
-
 @attrs.define(kw_only=True)
 class GenericTTS(Model):
     """Text to speech on ``/v1/audio/speech``."""
 
     checkpoint: str = attrs.field(default="tts-1", validator=attrs.validators.instance_of(str))
     voice: str = attrs.field(default="alloy", validator=attrs.validators.instance_of(str))
-    speed: float = attrs.field(default=1.0, validator=_speed)
+    speed: float = attrs.field(default=1.0, validator=V.number(ge=0.25, le=4.0))
 
     INIT_FIELDS = ("checkpoint", "voice", "speed")
-
-
-def _temperature01(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
-        raise ValueError(f"{type(instance).__name__}.temperature: expected a number in [0, 1], got {value!r}")
 
 
 def _language(instance, attribute, value) -> None:
@@ -69,7 +61,7 @@ class GenericSTT(Model):
     """Speech to text on ``/v1/audio/transcriptions``; ``language`` None means auto-detect."""
 
     checkpoint: str = attrs.field(default="whisper-1", validator=attrs.validators.instance_of(str))
-    temperature: float = attrs.field(default=0.0, validator=_temperature01)
+    temperature: float = attrs.field(default=0.0, validator=V.number(ge=0, le=1))
     language: str | None = attrs.field(default=None, validator=_language)
 
     INIT_FIELDS = ("checkpoint", "language", "temperature")

@@ -12,6 +12,8 @@ from typing import Any
 
 import attrs
 
+from emos.config import validators as V
+
 from .base import Model
 
 __all__ = ["LeRobotPolicy", "features_from_dataset_info"]
@@ -53,11 +55,6 @@ def _load_info(source: str) -> dict[str, Any]:
         raise ValueError(f"LeRobotPolicy.dataset_info_file: {path} is not valid JSON ({exc})") from None
 
 
-def _positive_int(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"LeRobotPolicy.{attribute.name}: expected an integer >= 1, got {value!r}")
-
-
 @attrs.define(kw_only=True)
 class LeRobotPolicy(Model):
     """A LeRobot policy checkpoint. ``dataset_info_file`` (path or URL of ``info.json``) fills
@@ -66,7 +63,7 @@ class LeRobotPolicy(Model):
 
     checkpoint: str = attrs.field(default="lerobot/smolvla_base", validator=attrs.validators.instance_of(str))
     policy_type: str = attrs.field(default="smolvla", validator=attrs.validators.in_(POLICY_TYPES))
-    actions_per_chunk: int = attrs.field(default=50, validator=_positive_int)
+    actions_per_chunk: int = attrs.field(default=50, validator=V.int_at_least(1))
     policy_device: str = attrs.field(default="cuda", validator=attrs.validators.in_(("cpu", "cuda", "mps")))
     dataset_info_file: str | None = attrs.field(
         default=None, validator=attrs.validators.optional(attrs.validators.instance_of(str))

@@ -12,6 +12,9 @@ WHISPER_SIZES = (
     "medium.en", "distil-medium.en", "large-v1", "large-v2", "large-v3", "large", "distil-large-v2",
     "distil-large-v3", "large-v3-turbo", "turbo",
 )
+WHISPER_COMPUTE_TYPES: tuple[str | None, ...] = ("int8", "float16", "float32", None)
+# Typed as the field is: attrs takes the validator's type from the default's (else plain str).
+_DEFAULT_COMPUTE_TYPE: str | None = "int8"
 
 
 def _whisper_checkpoint(instance, attribute, value) -> None:
@@ -26,7 +29,7 @@ class Whisper(Model):
 
     checkpoint: str = attrs.field(default="small.en", validator=_whisper_checkpoint)
     compute_type: str | None = attrs.field(
-        default="int8", validator=attrs.validators.in_(("int8", "float16", "float32", None))
+        default=_DEFAULT_COMPUTE_TYPE, validator=attrs.validators.in_(WHISPER_COMPUTE_TYPES)
     )
 
     INIT_FIELDS = ("checkpoint", "compute_type")

@@ -7,7 +7,9 @@ from .base import Model
 
 __all__ = ["TransformersLLM", "TransformersMLLM", "RoboBrain2"]
 
-QUANTIZATIONS = ("4bit", "8bit", None)
+QUANTIZATIONS: tuple[str | None, ...] = ("4bit", "8bit", None)
+# Typed as the field is: attrs takes the validator's type from the default's (else plain str).
+_DEFAULT_QUANTIZATION: str | None = "4bit"
 
 
 @attrs.define(kw_only=True)
@@ -15,7 +17,7 @@ class TransformersLLM(Model):
     """An LLM checkpoint from HuggingFace / ModelScope; ``quantization`` is "4bit", "8bit" or None."""
 
     checkpoint: str = attrs.field(default="microsoft/Phi-3-mini-4k-instruct", validator=attrs.validators.instance_of(str))
-    quantization: str | None = attrs.field(default="4bit", validator=attrs.validators.in_(QUANTIZATIONS))
+    quantization: str | None = attrs.field(default=_DEFAULT_QUANTIZATION, validator=attrs.validators.in_(QUANTIZATIONS))
     system_prompt: str | None = attrs.field(
         default=None, validator=attrs.validators.optional(attrs.validators.instance_of(str))
     )

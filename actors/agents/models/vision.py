@@ -3,14 +3,11 @@ from __future__ import annotations
 
 import attrs
 
+from emos.config import validators as V
+
 from .base import Model
 
 __all__ = ["VisionModel"]
-
-
-def _positive_int(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"VisionModel.{attribute.name.lstrip('_')}: expected an integer >= 1, got {value!r}")
 
 
 @attrs.define(kw_only=True)
@@ -25,9 +22,9 @@ class VisionModel(Model):
     cache_dir: str = attrs.field(default="mmdet", validator=attrs.validators.instance_of(str))
     setup_trackers: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
     tracking_distance_function: str = attrs.field(default="euclidean", validator=attrs.validators.instance_of(str))
-    tracking_distance_threshold: int = attrs.field(default=30, validator=_positive_int)
+    tracking_distance_threshold: int = attrs.field(default=30, validator=V.int_at_least(1))
     deploy_tensorrt: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
-    _num_trackers: int = attrs.field(default=1, validator=_positive_int)
+    _num_trackers: int = attrs.field(default=1, validator=V.int_at_least(1))
 
     INIT_FIELDS = (
         "checkpoint", "cache_dir", "setup_trackers", "tracking_distance_function",

@@ -11,6 +11,8 @@ from typing import Any
 
 from aiohttp import web
 
+from emos.errors import EmosError
+
 from .backends import LocalModels
 from .guard import make_guard
 from .limits import MAX_HTTP_BODY, ByteBudget
@@ -37,7 +39,7 @@ def build_app(models: LocalModels, host: str = "127.0.0.1",
     return app, nodes
 
 
-class ListenError(OSError):
+class ListenError(EmosError, OSError):
     """A listener could not bind; the message names which one, its address and why."""
 
 
@@ -112,7 +114,7 @@ async def serve(models: LocalModels, host: str = "127.0.0.1", port: int = 8000, 
             loop.add_signal_handler(sig, on_signal, sig)
         except (NotImplementedError, RuntimeError):  # not the main thread (tests run it in one)
             pass
-    bound = [s.getsockname()[1] for s in site._server.sockets]  # port 0 -> the real port
+    bound = [address[1] for address in runner.addresses]  # port 0 -> the real port (the one site: ours)
     resp_bound = resp.port if resp else None
     log.info("serving on http://%s:%s (RESP %s)", host, bound[0], resp_bound)
     # One parseable line so supervisors and tests know when (and where) the server listens.

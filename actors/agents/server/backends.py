@@ -10,7 +10,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..types import ChatChunk, ChatRequest, ChatResponse
+from emos.errors import EmosError
+
+from ..types import ChatRequest, ChatResponse
 from .responder import ScriptedResponder
 
 __all__ = ["LocalModels", "BackendUnavailable", "ChatBackend", "EMBEDDING_NAMES"]
@@ -22,7 +24,7 @@ TTS_NAME = "espeak-ng"
 OPENAI_VOICES = {"alloy", "ash", "ballad", "coral", "echo", "fable", "nova", "onyx", "sage", "shimmer", "verse"}
 
 
-class BackendUnavailable(RuntimeError):
+class BackendUnavailable(EmosError, RuntimeError):
     """A capability this server cannot provide here (answered with HTTP 501)."""
 
 
@@ -73,7 +75,8 @@ class LocalModels:
     def all_names(self) -> list[str]:
         return [*self.chat, EMBEDDING_NAMES[0], TTS_NAME]
 
-    def has(self, name: str) -> bool:
+    def has(self, name: object) -> bool:
+        """Whether ``name`` names a local model (any value from a request body may be asked)."""
         if not isinstance(name, str):
             return False
         return name in self.chat or name in EMBEDDING_NAMES or name == TTS_NAME

@@ -19,12 +19,12 @@ API's own shape, never aiohttp's bare 500 page.
 from __future__ import annotations
 
 import logging
-from typing import Awaitable, Callable
+from collections.abc import Awaitable, Callable
 
 from aiohttp import web
 
 from emos.hosts import LOOPBACK_NAMES, host_of, is_loopback, same_origin
-from emos.transport.trust import RateLimitedLog
+from emos.ratelimit import RateLimitedLog
 
 from .limits import MAX_HTTP_BODY, ByteBudget, MiB
 

@@ -30,7 +30,7 @@ class HoldPositionPolicyServer:
         self.observations: queue.Queue = queue.Queue(maxsize=1)
         self.received = 0
         self._lock = threading.Lock()
-        handlers = {
+        handlers: dict[str, Any] = {
             "Ready": grpc.unary_unary_rpc_method_handler(self._ready),
             "SendPolicyInstructions": grpc.unary_unary_rpc_method_handler(self._setup),
             "SendObservations": grpc.stream_unary_rpc_method_handler(self._observations),
@@ -49,7 +49,7 @@ class HoldPositionPolicyServer:
         if self.port == 0:
             raise OSError(f"cannot bind the LeRobot policy server to {host}:{port}")
 
-    def start(self) -> "HoldPositionPolicyServer":
+    def start(self) -> HoldPositionPolicyServer:
         self.server.start()
         return self
 
@@ -108,12 +108,14 @@ class HoldPositionPolicyServer:
             observation = self.observations.get(timeout=1.0)
         except queue.Empty:
             return b""  # an empty Actions message: nothing to act on yet
-        names = self.config.lerobot_features["observation.state"]["names"]
+        config = self.config
+        assert config is not None  # context.abort above raises, and a set config is never unset
+        names = config.lerobot_features["observation.state"]["names"]
         missing = [n for n in names if n not in observation.observation]
         if missing:
             context.abort(self._grpc.StatusCode.INVALID_ARGUMENT, f"observation lacks joints {missing}")
         hold = torch.tensor([float(observation.observation[n]) for n in names], dtype=torch.float32)
         now = time.time()
         actions = [wire.TimedAction(timestamp=now + i / FPS, timestep=observation.timestep + i, action=hold.clone())
-                   for i in range(self.config.actions_per_chunk)]
+                   for i in range(config.actions_per_chunk)]
         return wire.encode_bytes_message(wire.dumps_wire(actions))

@@ -6,11 +6,12 @@ lazy so the server starts without it unless ``--gguf`` is given.
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, decode_tool_arguments, ToolCall
 from ..clients.openai_codec import message_to_openai
+from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ToolCall, decode_tool_arguments
 
 __all__ = ["LlamaCppResponder"]
 

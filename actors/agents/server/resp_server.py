@@ -8,12 +8,21 @@ from typing import Any
 
 import msgpack
 
-from emos.transport.trust import RateLimitedLog
+from emos.errors import EmosError
+from emos.ratelimit import RateLimitedLog
 
 from ..clients.resp import ProtocolError, encode_reply
 from .common import in_thread
-from .limits import (MAX_MSGPACK_ITEMS, MAX_RESP_BULK, MAX_RESP_COMMAND, MAX_RESP_CONNECTIONS, MAX_RESP_ELEMENTS,
-                     ByteBudget, MiB, unpack_msgpack)
+from .limits import (
+    MAX_MSGPACK_ITEMS,
+    MAX_RESP_BULK,
+    MAX_RESP_COMMAND,
+    MAX_RESP_CONNECTIONS,
+    MAX_RESP_ELEMENTS,
+    ByteBudget,
+    MiB,
+    unpack_msgpack,
+)
 from .roboml_nodes import NodeError, RoboMLNodes
 
 __all__ = ["start_resp_server", "RespServer"]
@@ -29,7 +38,7 @@ STALL_S = 60.0
 LINE_LIMIT = 1024 * 1024
 
 
-class Busy(Exception):
+class Busy(EmosError):
     """The server-wide byte budget is spent: the command is refused and the connection closed."""
 
 
@@ -159,6 +168,8 @@ class RespServer:
 
     @property
     def port(self) -> int:
+        if self.server is None:
+            raise RuntimeError("RESP server: not listening, so it has no port yet")
         return self.server.sockets[0].getsockname()[1]
 
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -172,6 +183,7 @@ class RespServer:
             writer.close()
             return
         task = asyncio.current_task()
+        assert task is not None  # the server runs each connection's handler as a task
         self.connections.add(task)
         self.writers.add(writer)
         command = Command(self.budget)
@@ -185,7 +197,7 @@ class RespServer:
                     _warn.warning(f"busy:{who}", "RESP port %s: closed the connection of %s: %s", self.port, peer, exc)
                     writer.write(encode_reply(exc))
                     break
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     _warn.warning(f"stall:{who}", "RESP port %s: closed the connection of %s: a command stalled "
                                   "for %.0f s", self.port, peer, STALL_S)
                     break

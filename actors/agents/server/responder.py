@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import attrs
 import yaml
@@ -95,7 +96,7 @@ def load_script(source: str | Path | dict | None) -> tuple[list[Rule], str, list
         arguments_json = (call or {}).get("arguments_json")
         if arguments_json is not None and not isinstance(arguments_json, str):
             raise ValueError(f"responder script rule {i}: arguments_json must be a string (a JSON template)")
-        rules.append(Rule(pattern, reply=raw.get("reply"), tool_name=call and call["name"],
+        rules.append(Rule(pattern, reply=raw.get("reply"), tool_name=None if call is None else call["name"],
                           tool_arguments=(call or {}).get("arguments") or {}, tool_arguments_json=arguments_json))
     models = data.get("models") or []
     if not isinstance(models, list) or not all(isinstance(m, str) for m in models):

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import base64
 import threading
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
+
+from emos.errors import EmosError
 
 from ..types import ChatMessage, ChatRequest, ImageData
 from .backends import BackendUnavailable, LocalModels
@@ -36,7 +39,7 @@ RESERVED = {"v1", "api", "add_node", "remove_node"}
 PLANNING_TASKS = ("grounding", "pointing")
 
 
-class NodeError(Exception):
+class NodeError(EmosError):
     def __init__(self, status: int, message: str) -> None:
         super().__init__(message)
         self.status = status
@@ -124,6 +127,7 @@ class RoboMLNodes:
         request = ChatRequest(messages=messages, temperature=data.get("temperature"),
                               max_tokens=data.get("max_new_tokens"), stream=bool(data.get("stream")))
         backend = self.models.chat_backend("")
+        assert backend is not None  # "" names the default chat model, which LocalModels always has
         if request.stream:
             return (c.content for c in backend.stream(request, node["type"]) if c.content)
         return {"output": backend.respond(request, node["type"]).message.content or ""}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import weakref
 
 import msgpack
-from aiohttp import WSMsgType, WSCloseCode, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from .common import in_thread, iterate_in_thread, read_json
 from .guard import takes_json, takes_no_body

@@ -2,15 +2,17 @@
 inputs read by key, and rate-limited reports of bad or missing input."""
 from __future__ import annotations
 
-import time
 from typing import Any
 
-import attrs
 import numpy as np
 from attrs import define, field
 
-from emos.config.base import BaseComponentConfig
-from emos.core.keyed import KeyedComponent
+from emos.config import validators as V
+from emos.config.base import BaseComponentConfig, ComponentRunType
+from emos.core.keyed import KeyedComponent, key_name
+from emos.errors import ConfigError
+from emos.io.topic import Topic
+from emos.ratelimit import RateLimitedLog
 
 from ..robot import RobotConfig, RobotFrames, RobotGeometry, RobotType
 from .convert import BadInput, pose_of, velocity_of
@@ -25,40 +27,13 @@ def default_robot() -> RobotConfig:
                        geometry_params=np.array([0.1, 0.3]))
 
 
-def _instance(cls: type):
-    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-        if not isinstance(value, cls):
-            raise TypeError(f"{type(instance).__name__}.{attribute.name}: expected a {cls.__name__}, got {type(value).__name__} {value!r}")
-
-    return check
-
-
 @define(kw_only=True)
 class NavComponentConfig(BaseComponentConfig):
     """``robot``: kinematics, footprint and limits; ``frames``: frame names (both set for every
     component at once by ``launcher.robot`` / ``launcher.frames``)."""
 
-    robot: RobotConfig = field(factory=default_robot, validator=_instance(RobotConfig))
-    frames: RobotFrames = field(factory=RobotFrames, validator=_instance(RobotFrames))
-
-
-class _RateLimited:
-    """Log the first occurrence of a problem at once, then at most every ``period`` s with a count."""
-
-    def __init__(self, period: float = 5.0) -> None:
-        self.period = period
-        self._seen: dict[str, tuple[float, int]] = {}
-
-    def __call__(self, log: Any, level: int, key: str, message: str) -> None:
-        now = time.monotonic()
-        last, count = self._seen.get(key, (-1e18, 0))
-        count += 1
-        if now - last >= self.period:
-            suffix = f" ({count} times in the last {self.period:g} s)" if count > 1 else ""
-            log.log(level, "%s%s", message, suffix)
-            self._seen[key] = (now, 0)
-        else:
-            self._seen[key] = (last, count)
+    robot: RobotConfig = field(factory=default_robot, validator=V.instance_of(RobotConfig))
+    frames: RobotFrames = field(factory=RobotFrames, validator=V.instance_of(RobotFrames))
 
 
 class NavComponent(KeyedComponent):
@@ -67,13 +42,8 @@ class NavComponent(KeyedComponent):
     config: NavComponentConfig
 
     def __init__(self, component_name: str, config: NavComponentConfig | None = None, **kwargs: Any) -> None:
-        config_cls = type(self).config_class()
-        if config is None:
-            config = config_cls()
-        elif not isinstance(config, config_cls):
-            raise TypeError(f"component {component_name!r} ({type(self).__name__}): config must be a {config_cls.__name__}, got {type(config).__name__}")
         super().__init__(component_name, config=config, **kwargs)
-        self._report = _RateLimited()
+        self._report = RateLimitedLog(interval=5.0)  # logs to get_logger(), given per call
 
     @classmethod
     def config_class(cls) -> type[NavComponentConfig]:
@@ -94,6 +64,26 @@ class NavComponent(KeyedComponent):
     def topic_name(self, key: Any) -> str:
         topic = self.get_in_topic(key)
         return topic.name if topic is not None else str(key)
+
+    def default_trigger(self, key: Any) -> None:
+        """An event-driven component given no trigger steps on each message of ``key`` (called
+        when it configures). Without a topic on that key it could never step: a clear error."""
+        if self.run_type != ComponentRunType.EVENT or self._trigger:
+            return
+        topic = self.get_in_topic(key)
+        if topic is None:
+            raise ConfigError(f"component {self.component_name!r} ({type(self).__name__}) runs on events but has no "
+                              f"trigger and no {key_name(key)!r} input to step on: give it that input or a trigger")
+        self._trigger = [topic]
+
+    def required_out_topic(self, key: Any) -> Topic:
+        """The topic of an output key declared ``required`` (the launcher starts no component
+        without one, so only a component run by hand can lack it: a clear error then)."""
+        topic = self.get_out_topic(key)
+        if topic is None:
+            raise ConfigError(f"component {self.component_name!r} ({type(self).__name__}) has no topic on its "
+                              f"required output {key_name(key)!r}")
+        return topic
 
     def robot_state(self, max_age: float | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
         """(pose, body velocity or None) from the ``location`` input; None (and a SYSTEM failure
@@ -116,16 +106,13 @@ class NavComponent(KeyedComponent):
     # -- reporting -----------------------------------------------------------------------------------
     def fail_input(self, key: Any, message: str) -> None:
         """An input is missing, stale or malformed: SYSTEM failure naming its topic."""
-        import logging
-
         self.health_status.set_fail_system(topic_names=[self.topic_name(key)], message=message)
-        self._report(self.get_logger(), logging.WARNING, f"input:{key}", f"[{self.component_name}] {message}")
+        self._report.warning(f"input:{key}", "[%s] %s", self.component_name, message, logger=self.get_logger())
 
     def fail_algorithm(self, algorithm: str, message: str) -> None:
-        import logging
-
         self.health_status.set_fail_algorithm(algorithm_names=[algorithm], message=message)
-        self._report(self.get_logger(), logging.WARNING, f"algo:{algorithm}:{message[:40]}", f"[{self.component_name}] {algorithm}: {message}")
+        self._report.warning(f"algo:{algorithm}:{message[:40]}", "[%s] %s: %s", self.component_name, algorithm, message,
+                             logger=self.get_logger())
 
 
 def rate_field(default: float) -> Any:

@@ -14,31 +14,32 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
 from attrs import define, field
 
-from emos.config.base import ComponentRunType
-from emos.core import clock
 from emos.config.validators import in_, in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.control import TwistArray
-from emos.msgs.geometry import TwistStamped
-from emos.msgs.std import Header, Time
+from emos.msgs.geometry import Twist, TwistStamped
 from emos.msgs.sensor import LaserScan
+from emos.msgs.std import Header
 
 from ..controllers import ControllersID, ControlResult, ControlStatus
+from ..controllers.clearance import warm_up as clearance_warm_up
 from ..controllers.follower import PathFollower
 from ..controllers.registry import CONTROLLERS, make_controller
 from ..kinematics import integrate
+from ..stuck import ProgressChecker, StallHold
 from .base import NavComponent, NavComponentConfig, rate_field
 from .controller_vision import VisionTracking
 from .convert import BadInput, grid2d_of, grid_points_in_robot_frame, path_msg, path_of, points_of, scan_of, twist_msg
 from .interfaces import ControlPathFeedback, ControlPathGoal, ControlPathResult
-from .progress import ProgressChecker
 
 __all__ = ["Controller", "ControllerConfig"]
 
@@ -89,7 +90,7 @@ class ControllerConfig(NavComponentConfig):
 
 
 class Controller(VisionTracking, NavComponent):
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path")),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
         "sensor_data": AllowedTopic(types=("LaserScan", "PointCloud2"), default=Topic(name="/scan", msg_type="LaserScan")),
@@ -99,7 +100,7 @@ class Controller(VisionTracking, NavComponent):
         "depth_camera_info": AllowedTopic(types=("CameraInfo",)),
         "depth_image": AllowedTopic(types=("Image",)),
     }
-    allowed_outputs = {
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
         "multi_command": AllowedTopic(types=("TwistArray",), default=Topic(name="/control_list", msg_type="TwistArray")),
         "interpolation": AllowedTopic(types=("Path",), default=Topic(name="/interpolated_path", msg_type="Path")),
@@ -108,6 +109,11 @@ class Controller(VisionTracking, NavComponent):
     }
     main_action_type = (ControlPathGoal, ControlPathFeedback, ControlPathResult)
     config: ControllerConfig
+    # Step state, set by custom_on_configure (set_algorithm tells a running controller from a
+    # configured-only one by whether _progress exists yet, so they get no class default).
+    _stall: StallHold
+    _progress: ProgressChecker | None
+    _failing_since: float | None
 
     def __init__(self, component_name: str, config: ControllerConfig | None = None, **kwargs: Any) -> None:
         super().__init__(component_name, config=config, **kwargs)
@@ -124,7 +130,7 @@ class Controller(VisionTracking, NavComponent):
 
     @algorithm.setter
     def algorithm(self, value: ControllersID | str) -> None:
-        self.config.algorithm = value  # type: ignore[assignment]
+        self.config.algorithm = value
 
     plugin = algorithm  # the name the spec's usage example uses
 
@@ -139,9 +145,10 @@ class Controller(VisionTracking, NavComponent):
         is cleared: the new one has not failed yet, and a fallback ladder that switched must
         judge it by its own steps, not by its predecessor's report."""
         previous = self.config.algorithm
-        self.config.algorithm = algorithm  # type: ignore[assignment]
+        self.config.algorithm = algorithm
         if self.config.algorithm != previous and self._node is not None and hasattr(self, "_progress"):  # running
-            self._stalled_at, self._failing_since = None, None
+            self._stall.clear()
+            self._failing_since = None
             if self._progress is not None:
                 self._progress.reset()
             if self.health_status.is_algorithm_fail:
@@ -174,9 +181,7 @@ class Controller(VisionTracking, NavComponent):
 
     # -- lifecycle --------------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
-        if self.run_type == ComponentRunType.EVENT and not self._trigger:
-            key = "sensor_data" if self.config.use_direct_sensor else "local_map"
-            self._trigger = [self.get_in_topic(key)]
+        self.default_trigger("sensor_data" if self.config.use_direct_sensor else "local_map")
         self._follower: Any = None
         self._follower_id: str | None = None
         self._plan_stamp: Any = None
@@ -184,11 +189,17 @@ class Controller(VisionTracking, NavComponent):
         self._sequence: tuple[np.ndarray, int] | None = None
         self._last_cmd = np.zeros(3)
         self._action_active = False
-        self._failing_since: float | None = None
-        self._stalled_at: np.ndarray | None = None  # where the last stall was reported (held until the robot moves)
+        self._failing_since = None
+        self._stall = StallHold(release=0.1)  # a reported stall holds until the robot has moved 0.1 m
         cfg = self.config
         self._progress = ProgressChecker(cfg.progress_timeout, cfg.progress_distance) if cfg.progress_timeout > 0 else None
         self.configure_vision()
+        # The followers' k-d tree (scipy, a fraction of a second to seconds of CPU to import) is
+        # imported here, not when the first step with a plan builds the follower: that step then
+        # judged its inputs by the wall clock after the import, found /odom "stale" whenever the
+        # import took more than location_timeout (a busy machine), and a SYSTEM failure restarted
+        # the controller, whose new process imported it in its first step again.
+        clearance_warm_up()
 
     def custom_on_activate(self) -> None:
         if self.config.ctrl_publish_type != "Array":
@@ -269,7 +280,7 @@ class Controller(VisionTracking, NavComponent):
         return scan_of(msg)
 
     # -- path following ----------------------------------------------------------------------------------
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         if self._action_active or self.tracking_active:
             return  # an action drives the robot now
         plan = self.latest("plan")
@@ -352,16 +363,16 @@ class Controller(VisionTracking, NavComponent):
         waiting = follower.waiting
         if self._progress is not None and (progress is None or result.status is ControlStatus.GOAL_REACHED or waiting):
             self._progress.reset()
-        elif self._progress is not None and self._progress.update(now, float(progress.remaining)):
-            self._stalled_at = np.array(pose[:2], dtype=float)
+        elif self._progress is not None and progress is not None and self._progress.update(now, float(progress.remaining)):
+            self._stall.hold(pose[:2])
             self.fail_algorithm(self.algorithm.value, f"no progress: {self._progress.describe()} "
                                 f"({progress.remaining:.2f} m of plan left)")
             self.node.publish_status()  # at once: fallbacks act on it
             return
-        if self._stalled_at is not None and math.dist(pose[:2], self._stalled_at) < 0.1:
+        if self._stall.holding(pose[:2]):
             return  # the stall holds until a recovery has moved the robot
-        self._stalled_at = None
-        if failing and now - self._failing_since >= self.config.failure_tolerance:  # type: ignore[operator]
+        # failing implies _failing_since is set (just above); the None check only narrows the type.
+        if failing and self._failing_since is not None and now - self._failing_since >= self.config.failure_tolerance:
             self.fail_algorithm(self.algorithm.value, f"{result.status.value}: no valid trajectory" if result.status is ControlStatus.BLOCKED else result.status.value)
         else:
             self.health_status.set_healthy()
@@ -389,10 +400,10 @@ class Controller(VisionTracking, NavComponent):
         out = self.get_out_topic("command")
         if out is None:
             return
-        msg = twist_msg(cmd)
+        msg: Twist | TwistStamped = twist_msg(cmd)
         if out.msg_type is TwistStamped:
             # Stamped with the time of the sensor data it was computed from (its age downstream).
-            stamp = getattr(self, "_source_stamp", None) or Time.now()
+            stamp = getattr(self, "_source_stamp", None) or clock.stamp()
             msg = TwistStamped(header=Header(stamp=stamp, frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(out, msg)
 

@@ -131,9 +131,9 @@ class VisionTracking:
                         continue
                     pose, vel = state
                     depth = self._depth(msg, follower.config.depth_conversion_factor)
-                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth,
+                    result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth,  # type: ignore[attr-defined]
                                               new_measurement=msg is not last_msg)
-                    last_msg = msg  # type: ignore[attr-defined]
+                    last_msg = msg
                 else:
                     result = follower.compute(box, self._last_cmd)  # type: ignore[attr-defined]
                 self.publish_result(result)  # type: ignore[attr-defined]

@@ -11,10 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from emos.msgs.std import Header, Time
+from emos.core import clock
+from emos.errors import EmosError
 from emos.msgs.geometry import Point, Pose, PoseStamped, Quaternion, Twist, Vector3
 from emos.msgs.nav import MapMetaData, OccupancyGrid, Odometry, Path
 from emos.msgs.sensor import LaserScan, PointCloud2
+from emos.msgs.std import Header, Time
 
 from ..controllers.sensors import LaserScan2D, OccupancyGrid2D
 from ..maps.grid import OccupancyGridMap
@@ -25,7 +27,7 @@ __all__ = [
 ]
 
 
-class BadInput(ValueError):
+class BadInput(EmosError, ValueError):
     """An input message the navigation algorithms cannot use (the message names it)."""
 
 
@@ -148,16 +150,17 @@ def grid_points_in_robot_frame(msg: OccupancyGrid, pose: np.ndarray, max_range: 
     return out
 
 
-def grid_msg(data: np.ndarray, resolution: float, origin: tuple[float, float, float], frame_id: str) -> OccupancyGrid:
+def grid_msg(data: np.ndarray, resolution: float, origin: tuple[float, float, float] | np.ndarray, frame_id: str) -> OccupancyGrid:
     rows, cols = data.shape
-    info = MapMetaData(map_load_time=Time.now(), resolution=float(resolution), width=cols, height=rows,
+    stamp = clock.stamp()  # the node's clock, as every stamp a component writes (simulated under a simulator)
+    info = MapMetaData(map_load_time=stamp, resolution=float(resolution), width=cols, height=rows,
                        origin=Pose(position=Point(x=float(origin[0]), y=float(origin[1])), orientation=Quaternion.from_yaw(float(origin[2]))))
-    return OccupancyGrid(header=Header(stamp=Time.now(), frame_id=frame_id), info=info,
+    return OccupancyGrid(header=Header(stamp=stamp, frame_id=frame_id), info=info,
                          data=np.ascontiguousarray(data, dtype=np.int8).reshape(-1))
 
 
 def pose_stamped(x: float, y: float, yaw: float, frame_id: str, stamp: Time | None = None) -> PoseStamped:
-    return PoseStamped(header=Header(stamp=stamp or Time.now(), frame_id=frame_id),
+    return PoseStamped(header=Header(stamp=stamp or clock.stamp(), frame_id=frame_id),
                        pose=Pose(position=Point(x=float(x), y=float(y)), orientation=Quaternion.from_yaw(float(yaw))))
 
 
@@ -176,7 +179,7 @@ def localized_odometry(corrected: PoseStamped, measured: Odometry, child_frame_i
 
 def path_msg(poses: np.ndarray, frame_id: str) -> Path:
     """(N, 2|3) poses -> Path (yaw 0 when only x, y are given)."""
-    stamp = Time.now()
+    stamp = clock.stamp()
     arr = np.asarray(poses, dtype=np.float64)
     yaw = arr[:, 2] if arr.shape[1] > 2 else np.zeros(len(arr))
     return Path(header=Header(stamp=stamp, frame_id=frame_id),

@@ -13,7 +13,8 @@ The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
@@ -22,11 +23,11 @@ from emos.config.validators import in_range
 from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
-from emos.msgs.geometry import TwistStamped
+from emos.msgs.geometry import Twist, TwistStamped
 from emos.msgs.nav import Odometry
 from emos.msgs.sensor import LaserScan
 from emos.msgs.srv import TriggerRequest, TriggerResponse
-from emos.msgs.std import Bool, Header, Time
+from emos.msgs.std import Bool, Header
 
 from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig
 from ..safety import maneuvers as M
@@ -79,13 +80,13 @@ class DriveManagerConfig(NavComponentConfig):
 
 
 class DriveManager(NavComponent):
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
         "multi_command": AllowedTopic(types=("TwistArray",), default=Topic(name="/control_list", msg_type="TwistArray")),
         "sensor_data": AllowedTopic(types=("LaserScan", "Float64", "Float32"), default=Topic(name="/scan", msg_type="LaserScan"), number=11),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry")),
     }
-    allowed_outputs = {
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "robot_command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/cmd_vel", msg_type="Twist"), required=True),
         "emergency_stop": AllowedTopic(types=("Bool",), default=Topic(name="/emergency_stop", msg_type="Bool")),
     }
@@ -138,7 +139,7 @@ class DriveManager(NavComponent):
         return serve
 
     # -- the command path ------------------------------------------------------------------------------
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         # Event: a command arrived. Timed: the main timer (which also plays maneuvers).
         if msg is None:
             self._watchdog()
@@ -162,6 +163,7 @@ class DriveManager(NavComponent):
             return None
         key, age = best
         msg = self.latest(key)
+        assert msg is not None  # the key has an age, so a message has arrived
         if key == "multi_command":
             if len(msg.linear_velocities) == 0:
                 raise BadInput("multi_command: empty TwistArray")
@@ -214,6 +216,7 @@ class DriveManager(NavComponent):
         from emos.core.node import process_alive
 
         topic = self.get_in_topic(key)
+        assert topic is not None  # key names the input the current command came in on
         # A newer message (each arrival is decoded into a new object; its age cannot tell: on
         # simulated time it does not grow while the simulator waits): note who can have sent it.
         if msg is not self._cmd_seen.get(key):
@@ -264,7 +267,7 @@ class DriveManager(NavComponent):
         """The scan plus remembered obstacles where it cannot see (points in the robot frame);
         the scan alone when nothing is remembered there. For motion backwards."""
         pose = self._pose() if self._blind_spot is not None else None
-        blind = self._blind_spot.blind_points(pose, scan) if pose is not None else ()
+        blind = self._blind_spot.blind_points(pose, scan) if self._blind_spot is not None and pose is not None else ()
         return np.vstack([scan.points(), blind]) if len(blind) else scan
 
     def _range_sensors_min(self) -> float:
@@ -332,12 +335,12 @@ class DriveManager(NavComponent):
     def _send(self, cmd: np.ndarray, check: ZoneCheck, stop: bool = False) -> None:
         if stop:
             self._safety.filter.reset(np.zeros(3))
-        topic = self.get_out_topic("robot_command")
-        msg = twist_msg(cmd)
+        topic = self.required_out_topic("robot_command")
+        msg: Twist | TwistStamped = twist_msg(cmd)
         if topic.msg_type is TwistStamped:
             # A stamped command keeps the time of the data behind it; otherwise: now.
             stamp = getattr(self, "_command_stamp", None) if not stop else None
-            msg = TwistStamped(header=Header(stamp=stamp or Time.now(), frame_id=self.config.frames.robot_base), twist=msg)
+            msg = TwistStamped(header=Header(stamp=stamp or clock.stamp(), frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(topic, msg)
         self._last_out = np.array(cmd, dtype=float)
         estop = bool(check.emergency_stop) and not stop
@@ -373,9 +376,9 @@ class DriveManager(NavComponent):
         if ok and np.any(np.abs(self._last_out) > 1e-3):
             # The base is still moving (a controller's command): the scan and pose this plan
             # was checked on fall behind a robot that turns on. Stop it first, then plan the
-            # maneuver again on a scan taken at rest (_play_maneuver). World 242: a back-out
-            # planned while the robot turned at 2 rad/s swung its rear into a post the rear
-            # blind sector hid.
+            # maneuver again on a scan taken at rest (_play_maneuver): a back-out planned while
+            # the robot turns (at 2 rad/s, say) swings its rear into what the laser's rear blind
+            # sector hides.
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             self._settling = (build, clock.now())
         return ok, message

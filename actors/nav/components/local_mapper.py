@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
+import numpy as np
 from attrs import define, field
 from attrs.validators import in_
 
@@ -39,14 +41,14 @@ def _bounds(value: Any) -> tuple[float, float, float, float] | None:
     vals = tuple(float(v) for v in value)
     if len(vals) != 4 or not all(math.isfinite(v) for v in vals) or not (vals[2] > vals[0] and vals[3] > vals[1]):
         raise ValueError(f"mapping_bounds: expected finite (xmin, ymin, xmax, ymax) with max > min, got {value!r}")
-    return vals  # type: ignore[return-value]
+    return vals
 
 
 def _sensor_pose(value: Any) -> tuple[float, float, float]:
     vals = tuple(float(v) for v in value)
     if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
         raise ValueError(f"sensor_pose: expected finite (x, y, yaw) of the sensor on the robot, got {value!r}")
-    return vals  # type: ignore[return-value]
+    return vals
 
 
 def _memory_decay(value: Any) -> EvidenceConfig | None:
@@ -100,13 +102,13 @@ class LocalMapperConfig(NavComponentConfig):
                              "set mapping_bounds too (or leave memory_decay None)")
 
 
-def memory_of(cfg: "LocalMapperConfig") -> MemoryMapper | None:
+def memory_of(cfg: LocalMapperConfig) -> MemoryMapper | None:
     """The obstacle memory (with scan matching) a LocalMapper of this config keeps, or None
     without ``mapping_bounds``; also what an offline replay of its scans builds."""
     if cfg.mapping_bounds is None:
         return None
     decay = cfg.memory_decay
-    forgetting = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
+    forgetting: dict[str, Any] = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
     return MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
                         match_margin=cfg.match_margin, **forgetting)
 
@@ -118,11 +120,11 @@ class LocalMapper(NavComponent):
     it arrives (the low-latency choice; the trigger defaults to the ``sensor_data`` topic).
     """
 
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry")),
     }
-    allowed_outputs = {
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "local_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/occupancy_layer", msg_type="OccupancyGrid"), required=True),
         "mapping": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/local_map/memory", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL))),
         "localized_pose": AllowedTopic(types=("PoseStamped", "Odometry"), default=Topic(name="/local_map/pose", msg_type="PoseStamped")),
@@ -139,8 +141,7 @@ class LocalMapper(NavComponent):
             raise ValueError(f"{self.component_name}: localized_pose {out.name} is an Odometry (the corrected pose with the "
                              f"measured twist), so the location input must be an Odometry topic too; got "
                              f"{'none' if loc is None else f'{loc.name} ({loc.msg_type.__name__})'}")
-        if self.run_type == ComponentRunType.EVENT and not self._trigger:
-            self._trigger = [self.get_in_topic("sensor_data")]
+        self.default_trigger("sensor_data")
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
         self._memory = memory_of(self.config)
         self._memory_published = -math.inf
@@ -162,7 +163,7 @@ class LocalMapper(NavComponent):
         if self._scan_is_stale():
             self.node.publish_status()  # at once: events and fallbacks act on it
 
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         scan_msg = msg if msg is not None else self.latest("sensor_data")
         if scan_msg is None:
             self.fail_input("sensor_data", f"no scan on {self.topic_name('sensor_data')} yet")
@@ -189,7 +190,9 @@ class LocalMapper(NavComponent):
                 return
         grid = self._builder.update(scan, pose)
         o = self._builder.origin
+        origin: tuple[float, float, float] | np.ndarray
         if in_world:
+            assert pose is not None  # read from the location above, which a world-frame map needs
             # Placed where the robot was at the scan, in the frame of the pose the robot is
             # located by: the memory's corrected pose when there is one, else the odometry's.
             at = self._update_memory(scan, pose, loc, scan_msg.header.stamp) if self._memory is not None else pose
@@ -198,7 +201,7 @@ class LocalMapper(NavComponent):
             origin, frame = (o[0], o[1], 0.0), self.config.frames.robot_base
         out = grid_msg(grid, self.config.map_params.resolution, origin, frame)
         out.header.stamp = scan_msg.header.stamp  # the map is as old as the scan it shows
-        self.publish(self.get_out_topic("local_map"), out)
+        self.publish(self.required_out_topic("local_map"), out)
         if self._memory is not None and not in_world:
             self._update_memory(scan, pose, loc, scan_msg.header.stamp)
         self.health_status.set_healthy()
@@ -206,17 +209,17 @@ class LocalMapper(NavComponent):
     def _update_memory(self, scan: Any, odom_pose: Any, location: Any, stamp: Any) -> Any:
         """Add the scan to the memory, publish the corrected pose (and the memory when due);
         return the corrected pose."""
+        assert self._memory is not None  # called only in mapping mode, which has a memory
         corrected = self._memory.update(scan, odom_pose)
         world = self.config.frames.world
         out = self.get_out_topic("localized_pose")
         if out is not None:
             # Stamped with its scan: the pose is where the robot was when the scan was taken (and
             # under a simulator the stamp is on the simulated clock, not the machine's).
-            msg = pose_stamped(corrected[0], corrected[1], corrected[2], world, stamp=stamp)
-            if out.msg_type is Odometry:
-                # With the measured twist of the odometry it corrects: a controller's response
-                # model needs what the base does, not what it was told.
-                msg = localized_odometry(msg, location, self.config.frames.robot_base)
+            pose = pose_stamped(corrected[0], corrected[1], corrected[2], world, stamp=stamp)
+            # As an Odometry with the measured twist of the odometry it corrects: a controller's
+            # response model needs what the base does, not what it was told.
+            msg = localized_odometry(pose, location, self.config.frames.robot_base) if out.msg_type is Odometry else pose
             self.publish(out, msg)
         now = clock.now()  # simulated seconds under a simulator: the map's age must not follow the machine's speed
         out = self.get_out_topic("mapping")

@@ -8,18 +8,20 @@ changed. The ``<name>/save_map`` service (``Save2dMapToFile``) writes the map as
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
 
 from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.sensor import PointCloud2
-from emos.msgs.std import Header, Time
+from emos.msgs.std import Header
 
 from ..maps import MapFileError, load_map, save_map
 from ..maps.grid import OccupancyGridMap
@@ -51,12 +53,12 @@ class MapServerConfig(NavComponentConfig):
 
 
 class MapServer(NavComponent):
-    allowed_inputs: dict = {}
-    allowed_outputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {}
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "global_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
         "spatial_sensor": AllowedTopic(types=("PointCloud2",), default=Topic(name="/row_point_cloud", msg_type="PointCloud2")),
     }
-    key_aliases = {"map": "global_map"}
+    key_aliases: ClassVar[Mapping[str, str]] = {"map": "global_map"}
     config: MapServerConfig
 
     @classmethod
@@ -101,12 +103,12 @@ class MapServer(NavComponent):
 
     def _publish(self) -> None:
         g = self._grid
-        self.publish(self.get_out_topic("global_map"), grid_msg(g.data, g.resolution, g.origin, self._frame()))
+        self.publish(self.required_out_topic("global_map"), grid_msg(g.data, g.resolution, g.origin, self._frame()))
         out = self.get_out_topic("spatial_sensor")
         if self.config.pc_publish_row and self._cloud is not None and out is not None:
-            self.publish(out, PointCloud2.from_xyz(self._cloud, Header(stamp=Time.now(), frame_id=self._frame())))
+            self.publish(out, PointCloud2.from_xyz(self._cloud, Header(stamp=clock.stamp(), frame_id=self._frame())))
 
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         rate = self.config.map_file_read_rate
         if rate > 0:
             self._since_read += 1.0 / self.config.loop_rate

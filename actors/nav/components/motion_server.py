@@ -14,8 +14,9 @@ import math
 import os
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
@@ -52,12 +53,12 @@ class MotionServerConfig(NavComponentConfig):
 
 
 class MotionServer(NavComponent):
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "run_tests": AllowedTopic(types=("Bool",), default=Topic(name="/run_tests", msg_type="Bool")),
         "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/cmd_vel", msg_type="Twist")),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
     }
-    allowed_outputs = {
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "robot_command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/cmd_vel", msg_type="Twist")),
     }
     main_action_type = (MotionRecordingGoal, MotionRecordingFeedback, MotionRecordingResult)
@@ -68,8 +69,7 @@ class MotionServer(NavComponent):
         return MotionServerConfig
 
     def custom_on_configure(self) -> None:
-        if self.run_type == ComponentRunType.EVENT and not self._trigger:
-            self._trigger = [self.get_in_topic("run_tests")]
+        self.default_trigger("run_tests")
         self._queue: list[tuple[str, Any]] = []  # (test name, command at time t)
         self._test: tuple[str, Any, float, list] | None = None
         self._started_once = False
@@ -96,7 +96,7 @@ class MotionServer(NavComponent):
             self._queue.append(("circle", lambda t: (v, w)))
         return bool(self._queue)
 
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         if msg is not None and getattr(msg, "data", False):
             self.start_tests()
         if self._test is None and not self._queue:

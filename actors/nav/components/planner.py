@@ -21,7 +21,8 @@ import concurrent.futures
 import math
 import threading
 import time
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
@@ -30,10 +31,11 @@ from attrs import define, field
 from emos.config.base import ComponentRunType
 from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs.nav import Path
-from emos.msgs.std import Bool, Header, Time
+from emos.msgs.std import Bool, Header
 
 from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
@@ -80,7 +82,7 @@ class _MainInterface:
 
 
 class Planner(PixelGoals, PathFiles, NavComponent):
-    allowed_inputs = {
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
         "goal_point": AllowedTopic(types=("PointStamped", "PoseStamped", "Odometry") + PIXEL_GOAL_TYPES, default=Topic(name="/goal", msg_type="PointStamped")),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
@@ -89,7 +91,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         "depth_camera_info": AllowedTopic(types=("CameraInfo",), default=Topic(name="/camera/aligned_depth_to_color/camera_info", msg_type="CameraInfo")),
         "tf": AllowedTopic(types=("TFMessage",), default=Topic(name="/tf", msg_type="TFMessage")),
     }
-    allowed_outputs = {
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path"), required=True),
         "reached_end": AllowedTopic(types=("Bool",), default=Topic(name="/reached_end", msg_type="Bool")),
     }
@@ -110,15 +112,14 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         """Where a UI sends goals: the ``goal_point`` topic (Timed, Event), else the main
         service or action with its request type."""
         if self.run_type == ComponentRunType.SERVER:
-            return _MainInterface(self.main_srv_name, "service", self.main_srv_type)  # type: ignore[arg-type]
+            return _MainInterface(self.main_srv_name, "service", self.main_srv_type)
         if self.run_type == ComponentRunType.ACTION_SERVER:
-            return _MainInterface(self.main_action_name, "action", self.main_action_type)  # type: ignore[arg-type]
+            return _MainInterface(self.main_action_name, "action", self.main_action_type)
         return self.get_in_topic("goal_point")
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
-        if self.run_type == ComponentRunType.EVENT and not self._trigger:
-            self._trigger = [self.get_in_topic("goal_point")]
+        self.default_trigger("goal_point")
         self._algo = make_global_planner(self.config.planner_id, self.config.robot, self.config.ompl)
         self._lock = threading.Lock()  # one query at a time on the planner
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.component_name}-plan")
@@ -172,7 +173,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {msg}")
                 return False, msg, np.zeros((0, 3))
             self.last_plan = result.path
-            self.publish(self.get_out_topic("plan"), path_msg(result.path, self.config.frames.world))
+            self.publish(self.required_out_topic("plan"), path_msg(result.path, self.config.frames.world))
             self.health_status.set_healthy()
             return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path
 
@@ -234,7 +235,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             if out is not None:
                 self.publish(out, Bool(data=False))
 
-    def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
         goal_msg = msg if msg is not None else self.latest("goal_point")
         if goal_msg is not None:
             self._take_goal(goal_msg)
@@ -271,7 +272,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             loop = asyncio.get_running_loop()
             ok, message, path = await loop.run_in_executor(self._pool, self.plan_once, goal)
             self.node.publish_status()
-            plan = path_msg(path, self.config.frames.world) if ok else Path(header=Header(stamp=Time.now(), frame_id=self.config.frames.world))
+            plan = path_msg(path, self.config.frames.world) if ok else Path(header=Header(stamp=clock.stamp(), frame_id=self.config.frames.world))
             return PlanPathResponse(success=ok, message=message, plan=plan)
 
         return serve()

@@ -17,7 +17,10 @@ import numpy as np
 
 from .convert import path_msg
 from .interfaces import (
-    PathFromToFileRequest, PathFromToFileResponse, StartPathRecordingRequest, StartPathRecordingResponse,
+    PathFromToFileRequest,
+    PathFromToFileResponse,
+    StartPathRecordingRequest,
+    StartPathRecordingResponse,
 )
 
 __all__ = ["PathFiles", "read_path_csv", "write_path_csv"]
@@ -58,6 +61,11 @@ def _file(request: PathFromToFileRequest) -> Path:
 class PathFiles:
     """Mixin of the Planner (uses its inputs, config and publishing)."""
 
+    # Shared with the Planner, which sets both when it configures: a loaded path replaces the
+    # plan and the goal it was re-planned towards.
+    _goal: np.ndarray | None
+    last_plan: np.ndarray | None
+
     def create_path_services(self) -> None:
         name = self.component_name  # type: ignore[attr-defined]
         self._recording: list | None = None
@@ -72,11 +80,12 @@ class PathFiles:
             target = _file(request)
         except ValueError as exc:
             return PathFromToFileResponse(success=False, message=str(exc))
+        poses: np.ndarray | None
         if self._recording is not None:
             poses, what = np.asarray(self._recording, dtype=float).reshape(-1, 3), "recorded path"
             self._stop_recording()
         else:
-            poses, what = self.last_plan, "plan"  # type: ignore[attr-defined]
+            poses, what = self.last_plan, "plan"
         if poses is None or len(poses) < 2:
             return PathFromToFileResponse(success=False, message=f"no {what} to save (need at least 2 poses)")
         try:
@@ -90,8 +99,8 @@ class PathFiles:
             poses = read_path_csv(_file(request))
         except ValueError as exc:
             return PathFromToFileResponse(success=False, message=str(exc))
-        self._goal = None  # type: ignore[attr-defined]  # stop re-planning over the loaded path
-        self.last_plan = poses  # type: ignore[attr-defined]
+        self._goal = None  # stop re-planning over the loaded path
+        self.last_plan = poses
         self.publish(self.get_out_topic("plan"), path_msg(poses, self.config.frames.world))  # type: ignore[attr-defined]
         return PathFromToFileResponse(success=True, message=f"{len(poses)} poses loaded and published")
 

@@ -5,11 +5,11 @@ from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
 from .registry import CONTROLLERS, make_controller
+from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 from .stanley import Stanley, StanleyConfig
 from .vision_common import BoundingBox, CameraIntrinsics
 from .vision_rgb import VisionRGBFollower, VisionRGBFollowerConfig
 from .vision_rgbd import VisionRGBDFollower, VisionRGBDFollowerConfig
-from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 
 __all__ = [
     "ArcSampler",

@@ -11,7 +11,8 @@ the mapless BARN navigator, usable by the Controller like any other algorithm.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
+from typing import Any
 
 import attrs
 import numpy as np
@@ -94,11 +95,9 @@ class ArcSampler(PathFollower):
             from ..mapping.tracking import ScanTracker
 
             self._tracker = ScanTracker(self.config.movers.tracker)
-
-    @property
-    def tracks_movers(self) -> bool:
-        """True when configured for moving obstacles (``compute`` then takes a ``scan``)."""
-        return self._tracker is not None
+        # The capability (PathFollower.tracks_movers): configured for moving obstacles, so
+        # ``compute`` takes a ``scan``.
+        self.tracks_movers = self._tracker is not None
 
     def _split_movers(self, pose: np.ndarray, points: np.ndarray,
                       scan: LaserScan2D | None) -> tuple[np.ndarray, PredictedMovers | None]:
@@ -156,9 +155,10 @@ class ArcSampler(PathFollower):
         return cost_to_go
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None,
-                scan: LaserScan2D | None = None) -> ControlResult:
+                scan: LaserScan2D | None = None, **inputs: Any) -> ControlResult:
         """One control step. ``scan`` (with ``movers``, sensor frame, mounted at ``scan_pose``):
         the scan to track movers in when ``obstacles`` is not that scan (a local map)."""
+        self.no_other_inputs(inputs)
         if scan is not None and not isinstance(scan, LaserScan2D):
             raise TypeError(f"ArcSampler.compute: scan must be a LaserScan2D or None, got {type(scan).__name__}")
         self.waiting = False

@@ -6,10 +6,13 @@ All candidates are checked at once with numpy: (arcs, time samples, points) arra
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import attrs
 import numpy as np
+
+from emos.config import validators as V
 
 from ..kinematics import integrate
 from ..robot import RobotConfig, RobotGeometry
@@ -19,34 +22,19 @@ if TYPE_CHECKING:
     from .response import ResponseConfig
 
 
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"ArcConfig.{attribute.name} must be a finite number > 0, got {value!r}")
-
-
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"ArcConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
-def _count(instance: object, attribute: attrs.Attribute, value: int) -> None:
-    if not (isinstance(value, int) and value >= 2):
-        raise ValueError(f"ArcConfig.{attribute.name} must be an integer >= 2, got {value!r}")
-
-
 @attrs.define
 class ArcConfig:
-    horizon: float = attrs.field(default=1.0, validator=_positive)  # s of constant-velocity motion checked
-    step: float = attrs.field(default=0.06, validator=_positive)  # m between collision samples (< obstacle size)
-    speeds: int = attrs.field(default=7, validator=_count)  # forward speeds from 0 to max
-    turns: int = attrs.field(default=17, validator=_count)  # angular velocities from -max to max
-    max_speed: float = attrs.field(default=2.0, validator=_positive)
-    max_turn: float = attrs.field(default=3.0, validator=_positive)
-    margin: float = attrs.field(default=0.015, validator=_nonneg)  # m around the footprint, hard check
-    safe_clearance: float = attrs.field(default=0.12, validator=_nonneg)  # closer (+ speed term) costs extra
-    clearance_weight: float = attrs.field(default=6.0, validator=_nonneg)
-    lookahead: float = attrs.field(default=0.4, validator=_nonneg)  # m past the arc end, scored too
-    reverse_speed: float = attrs.field(default=0.3, validator=_nonneg)  # m/s of backing-up arcs (0: none)
+    horizon: float = attrs.field(default=1.0, validator=V.finite_positive)  # s of constant-velocity motion checked
+    step: float = attrs.field(default=0.06, validator=V.finite_positive)  # m between collision samples (< obstacle size)
+    speeds: int = attrs.field(default=7, validator=V.int_at_least(2))  # forward speeds from 0 to max
+    turns: int = attrs.field(default=17, validator=V.int_at_least(2))  # angular velocities from -max to max
+    max_speed: float = attrs.field(default=2.0, validator=V.finite_positive)
+    max_turn: float = attrs.field(default=3.0, validator=V.finite_positive)
+    margin: float = attrs.field(default=0.015, validator=V.finite_non_negative)  # m around the footprint, hard check
+    safe_clearance: float = attrs.field(default=0.12, validator=V.finite_non_negative)  # closer (+ speed term) costs extra
+    clearance_weight: float = attrs.field(default=6.0, validator=V.finite_non_negative)
+    lookahead: float = attrs.field(default=0.4, validator=V.finite_non_negative)  # m past the arc end, scored too
+    reverse_speed: float = attrs.field(default=0.3, validator=V.finite_non_negative)  # m/s of backing-up arcs (0: none)
     reverse_cost: float = 1.0  # extra cost of backing up, so it is only chosen to get unstuck
 
 
@@ -60,7 +48,7 @@ class BoxFootprint:
     center_offset: float = 0.0
 
     @classmethod
-    def of(cls, robot: RobotConfig, center_offset: float = 0.0) -> "BoxFootprint":
+    def of(cls, robot: RobotConfig, center_offset: float = 0.0) -> BoxFootprint:
         if robot.geometry_type is RobotGeometry.Type.BOX:
             return cls(float(robot.geometry_params[0]), float(robot.geometry_params[1]), center_offset)
         return cls(2.0 * robot.radius, 2.0 * robot.radius, center_offset)
@@ -74,7 +62,7 @@ class ArcPlanner:
     """Samples (v, omega) arcs within the robot's limits and picks the best clear one."""
 
     def __init__(self, robot: RobotConfig, config: ArcConfig | None = None, center_offset: float = 0.0,
-                 response: "ResponseConfig | None" = None) -> None:
+                 response: ResponseConfig | None = None) -> None:
         self.robot = robot
         # None: arcs are the commanded ones. Set: checked and scored as the base achieves them
         # (see response.py), when choose() is given the measured twist and the yaw gain.
@@ -131,7 +119,7 @@ class ArcPlanner:
         px_all = (c0 * rel[:, 0] + s0 * rel[:, 1]).astype(np.float32)
         py_all = (-s0 * rel[:, 0] + c0 * rel[:, 1]).astype(np.float32)
         d2 = px_all**2 + py_all**2
-        for v, turns, dx, dy, ct, st, _, reach in (self.groups if groups is None else groups):
+        for _v, turns, dx, dy, ct, st, _, reach in (self.groups if groups is None else groups):
             near = d2 <= reach * reach
             if not near.any():
                 out.append(np.full(len(turns), np.inf))
@@ -157,7 +145,7 @@ class ArcPlanner:
 
     def choose(self, pose: np.ndarray, points: np.ndarray, cost_to_go: Callable[[np.ndarray], np.ndarray],
                reverse_cost: float | None = None, twist: np.ndarray | None = None,
-               yaw_gain: float | None = None, movers: "PredictedMovers | None" = None) -> tuple[float, float] | None:
+               yaw_gain: float | None = None, movers: PredictedMovers | None = None) -> tuple[float, float] | None:
         """Best (v, omega) from ``pose`` among arcs clear of world ``points``; None if none is.
         ``reverse_cost`` overrides the configured cost of backing up (recovery makes it < 0).
         With a response model, ``twist`` (measured) and ``yaw_gain``: arcs as achieved, and a
@@ -181,7 +169,7 @@ class ArcPlanner:
         x0, y0, th0 = pose
         c0, s0 = math.cos(th0), math.sin(th0)
         ends = []
-        for v, turns, dx, dy, _, _, wt, _ in (self.groups if groups is None else groups):
+        for _v, _turns, dx, dy, _, _, wt, _ in (self.groups if groups is None else groups):
             ex = x0 + c0 * dx[:, -1] - s0 * dy[:, -1]
             ey = y0 + s0 * dx[:, -1] + c0 * dy[:, -1]
             ends.append(np.c_[ex, ey, th0 + wt[:, -1]])

@@ -8,6 +8,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.config.validators import in_range  # the nav configs import it from here
+
 __all__ = ["ControllersID", "ControlResult", "ControlStatus", "in_range", "FollowerConfig", "setters", "robot_state"]
 
 # Validate on every assignment, not only at construction.
@@ -26,7 +28,7 @@ class ControllersID(str, enum.Enum):
     ARC_SAMPLER = "ArcSampler"  # sampled constant-velocity arcs scored by cost-to-go (BARN's local planner)
 
     @classmethod
-    def from_any(cls, value: "ControllersID | str") -> "ControllersID":
+    def from_any(cls, value: ControllersID | str) -> ControllersID:
         if isinstance(value, cls):
             return value
         for member in cls:
@@ -66,7 +68,7 @@ class ControlResult:
         return self.commands[0]
 
     @classmethod
-    def stop(cls, pose: np.ndarray, status: ControlStatus, steps: int = 1, **info: Any) -> "ControlResult":
+    def stop(cls, pose: np.ndarray, status: ControlStatus, steps: int = 1, **info: Any) -> ControlResult:
         return cls(np.zeros((max(steps, 1), 3)), np.asarray(pose, dtype=np.float64).reshape(1, 3), status, info)
 
 
@@ -80,19 +82,6 @@ def robot_state(pose: Any, velocity: Any) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"{name}: expected 3 finite numbers {expected}, got {value!r}")
         out.append(arr)
     return out[0], out[1]
-
-
-def in_range(lo: float, hi: float):
-    """attrs validator: ``lo <= value <= hi`` and finite, with a message naming the field."""
-
-    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise TypeError(f"{type(instance).__name__}.{attribute.name}: expected a number, got {value!r}")
-        if not (math.isfinite(float(value)) and lo <= value <= hi):
-            raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected a value in "
-                             f"[{lo:g}, {hi:g}], got {value!r}")
-
-    return check
 
 
 def _field(default: Any, lo: float, hi: float, conv: type = float) -> Any:

@@ -24,11 +24,13 @@ touch anything.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
 
 from emos.geometry import wrap_angle
+
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state
 from .follower import PathFollower
@@ -84,7 +86,8 @@ class DVZ(PathFollower):
         self._follower.set_path(path)
         self.progress = self._follower.progress
 
-    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None, **inputs: Any) -> ControlResult:
+        self.no_other_inputs(inputs)
         pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)

@@ -12,6 +12,7 @@ path direction is more than ``rotate_in_place_angle`` away (rotate-then-move).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
@@ -20,9 +21,9 @@ from ..costs import TrajectoryCostsWeights, evaluate_costs
 from ..kinematics import dynamic_window, feasible_commands, rollout, wrap_angle
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig, field, robot_state, setters
-from .follower import PathFollower
 from .clearance import voxel_downsample
 from .detour import detour_reference
+from .follower import PathFollower
 from .sensors import ObstacleInput, sensor_offset
 
 __all__ = ["DWAConfig", "DWA", "dwa_samples"]
@@ -111,7 +112,8 @@ class DWA(PathFollower):
             obstacles, robot.radius, self.config.safety_margin, self._detour_side)
         return seg
 
-    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None, **inputs: Any) -> ControlResult:
+        self.no_other_inputs(inputs)
         pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)
@@ -148,7 +150,7 @@ class DWA(PathFollower):
             reference_path=segment, goal=segment[-1],
             obstacle_min_distance=np.where(np.isinf(clear[idx]), np.inf, clear[idx] + self.robot.radius),
             robot_radius=self.robot.radius, dt=dt,
-            acc_limits=np.array([l.max_acc for l in lim]), initial_velocity=velocity,
+            acc_limits=np.array([axis.max_acc for axis in lim]), initial_velocity=velocity,
             # Progress relative to what the horizon can cover: measured against the whole
             # segment, one step of progress from standstill is too small to outweigh the
             # obstacle term and the robot parks in front of obstacles it could pass.

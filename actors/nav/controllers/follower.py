@@ -57,6 +57,12 @@ class PathFollower:
         obstacles of this step (robot frame, mounted at ``sensor_pose``)."""
         raise NotImplementedError(f"{type(self).__name__} does not implement compute")
 
+    def no_other_inputs(self, inputs: dict[str, Any]) -> None:
+        """For ``compute``: extra ``inputs`` come only with a capability that asks for them (as
+        ``scan`` with ``tracks_movers``); any other is an error, as an unknown keyword is."""
+        if inputs:
+            raise TypeError(f"{type(self).__name__}.compute() got unexpected inputs: {', '.join(sorted(inputs))}")
+
     def goal_reached(self, pose: np.ndarray) -> bool:
         return self.progress is not None and self.progress.goal_reached(pose, self.config.goal_dist_tolerance)
 

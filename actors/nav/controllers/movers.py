@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 if TYPE_CHECKING:
     from ..mapping.tracking import TrackerConfig
     from .arcs import ArcPlanner
@@ -23,22 +25,17 @@ if TYPE_CHECKING:
 __all__ = ["MoverConfig", "PredictedMovers", "PredictionConfig", "near_movers"]
 
 
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"PredictionConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
 @attrs.define(frozen=True)
 class PredictionConfig:
-    hold: float = attrs.field(default=1.0, validator=_nonneg)  # s standing at the arc's end, checked too
-    hold_step: float = attrs.field(default=0.1, validator=_nonneg)  # s between the hold's samples
-    margin: float = attrs.field(default=0.06, validator=_nonneg)  # m kept from a predicted mover
-    margin_rate: float = attrs.field(default=0.1, validator=_nonneg)  # m per s of prediction
-    safe_clearance: float = attrs.field(default=0.5, validator=_nonneg)  # closer to a mover costs extra
-    weight: float = attrs.field(default=2.0, validator=_nonneg)  # cost per m inside safe_clearance
+    hold: float = attrs.field(default=1.0, validator=V.finite_non_negative)  # s standing at the arc's end, checked too
+    hold_step: float = attrs.field(default=0.1, validator=V.finite_non_negative)  # s between the hold's samples
+    margin: float = attrs.field(default=0.06, validator=V.finite_non_negative)  # m kept from a predicted mover
+    margin_rate: float = attrs.field(default=0.1, validator=V.finite_non_negative)  # m per s of prediction
+    safe_clearance: float = attrs.field(default=0.5, validator=V.finite_non_negative)  # closer to a mover costs extra
+    weight: float = attrs.field(default=2.0, validator=V.finite_non_negative)  # cost per m inside safe_clearance
 
 
-def _tracker_config(value: object) -> "TrackerConfig":
+def _tracker_config(value: object) -> TrackerConfig:
     from ..mapping.tracking import TrackerConfig
 
     if isinstance(value, TrackerConfig):
@@ -56,15 +53,10 @@ def _prediction_config(value: object) -> PredictionConfig:
     raise TypeError(f"MoverConfig.prediction: expected a PredictionConfig or a dict, got {type(value).__name__}")
 
 
-def _default_tracker() -> "TrackerConfig":
+def _default_tracker() -> TrackerConfig:
     from ..mapping.tracking import TrackerConfig
 
     return TrackerConfig()
-
-
-def _mover_distance(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"MoverConfig.{attribute.name} must be a finite number of metres >= 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
@@ -75,10 +67,10 @@ class MoverConfig:
     ``footprint_pad`` (m): obstacle points within a moving track's circle plus this are the
     mover's own (a grid or memory that holds them is not asked about them as static)."""
 
-    tracker: "TrackerConfig" = attrs.field(factory=_default_tracker, converter=_tracker_config)
+    tracker: TrackerConfig = attrs.field(factory=_default_tracker, converter=_tracker_config)
     prediction: PredictionConfig = attrs.field(factory=PredictionConfig, converter=_prediction_config)
-    wait_radius: float = attrs.field(default=3.0, validator=_mover_distance)
-    footprint_pad: float = attrs.field(default=0.15, validator=_mover_distance)
+    wait_radius: float = attrs.field(default=3.0, validator=V.number(ge=0, finite=True, what="a finite number of metres"))
+    footprint_pad: float = attrs.field(default=0.15, validator=V.number(ge=0, finite=True, what="a finite number of metres"))
 
 
 def near_movers(xy: np.ndarray, centres: np.ndarray, radii: np.ndarray, pad: float) -> np.ndarray:
@@ -108,7 +100,7 @@ class PredictedMovers:
     def __len__(self) -> int:
         return len(self.centres)
 
-    def clearances(self, planner: "ArcPlanner", pose: np.ndarray, groups: list) -> np.ndarray:
+    def clearances(self, planner: ArcPlanner, pose: np.ndarray, groups: list) -> np.ndarray:
         """Per arc (the planner's order): smallest footprint-to-mover gap over the arc and the
         hold after it, less the time-growing margin (m; <= 0 means predicted contact)."""
         cfg = self.config
@@ -124,7 +116,7 @@ class PredictedMovers:
         vy = -s0 * self.velocities[:, 0] + c0 * self.velocities[:, 1]
         n_hold = int(round(cfg.hold / cfg.hold_step)) if cfg.hold > 0 and cfg.hold_step > 0 else 0
         out = []
-        for (v, turns, dx, dy, ct, st, _wt, _reach), t in zip(groups, planner._times):
+        for (_v, _turns, dx, dy, ct, st, _wt, _reach), t in zip(groups, planner._times):
             if n_hold:
                 horizon = float(t[-1])
                 t = np.concatenate([t, horizon + cfg.hold_step * np.arange(1, n_hold + 1)])

@@ -9,6 +9,7 @@ velocity offsets of ``path_search_step`` (alternating sides, smallest first, up 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
@@ -75,8 +76,9 @@ class PurePursuit(PathFollower):
             v = w_max / abs(curvature)
         return np.array([v, 0.0, v * curvature]), False
 
-    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None, **inputs: Any) -> ControlResult:
         """One control step from the current world ``pose`` and body ``velocity``."""
+        self.no_other_inputs(inputs)
         pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)

@@ -12,23 +12,16 @@ margin that grows with speed.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
 
-
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"ResponseConfig.{attribute.name} must be a finite number > 0, got {value!r}")
+from emos.config import validators as V
 
 
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"ResponseConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
-def _bounds(value: object) -> tuple[float, float]:
-    low, high = (float(v) for v in value)  # type: ignore[attr-defined]
+def _bounds(value: Any) -> tuple[float, float]:
+    low, high = (float(v) for v in value)
     if not (0 < low <= high):
         raise ValueError(f"ResponseConfig.gain_bounds must satisfy 0 < low <= high, got {value!r}")
     return (low, high)
@@ -38,18 +31,14 @@ def _bounds(value: object) -> tuple[float, float]:
 class ResponseConfig:
     """Assumed response of the base (the Jackal's defaults) and how to estimate its yaw gain."""
 
-    yaw_lag: float = attrs.field(default=0.4, validator=_positive)  # s, body yaw rate behind the command
-    speed_acc: float = attrs.field(default=4.5, validator=_positive)  # m/s^2 the speed can change (traction)
-    lateral_acc: float = attrs.field(default=3.4, validator=_positive)  # m/s^2, v * omega saturates here
-    prior_gain: float = attrs.field(default=0.8, validator=_positive)  # yaw gain until estimated
+    yaw_lag: float = attrs.field(default=0.4, validator=V.finite_positive)  # s, body yaw rate behind the command
+    speed_acc: float = attrs.field(default=4.5, validator=V.finite_positive)  # m/s^2 the speed can change (traction)
+    lateral_acc: float = attrs.field(default=3.4, validator=V.finite_positive)  # m/s^2, v * omega saturates here
+    prior_gain: float = attrs.field(default=0.8, validator=V.finite_positive)  # yaw gain until estimated
     gain_bounds: tuple[float, float] = attrs.field(default=(0.4, 1.2), converter=_bounds)
-    forgetting: float = attrs.field(default=0.97, validator=_positive)  # per control step
-    min_excitation: float = attrs.field(default=1.0, validator=_nonneg)  # (rad/s)^2 of turning seen before trusting
-    speed_margin: float = attrs.field(default=0.04, validator=_nonneg)  # m of extra margin per m/s
-
-    def __attrs_post_init__(self) -> None:
-        if not self.forgetting <= 1.0:
-            raise ValueError(f"ResponseConfig.forgetting must be in (0, 1], got {self.forgetting!r}")
+    forgetting: float = attrs.field(default=0.97, validator=V.number(gt=0, le=1))  # per control step
+    min_excitation: float = attrs.field(default=1.0, validator=V.finite_non_negative)  # (rad/s)^2 of turning seen before trusting
+    speed_margin: float = attrs.field(default=0.04, validator=V.finite_non_negative)  # m of extra margin per m/s
 
 
 class YawGainEstimator:

@@ -6,11 +6,11 @@ algorithms never care which sensor produced them. Later the message layer fills 
 from __future__ import annotations
 
 import math
-from typing import Union
 
 import attrs
 import numpy as np
 
+from emos.config import validators as V
 from emos.geometry import yaw_of_quaternion
 
 __all__ = ["LaserScan2D", "OccupancyGrid2D", "ObstacleInput", "obstacle_points", "sensor_offset"]
@@ -79,7 +79,7 @@ class OccupancyGrid2D:
     """
 
     data: np.ndarray = attrs.field(converter=np.asarray)
-    resolution: float = attrs.field(converter=float)
+    resolution: float = attrs.field(converter=float, validator=V.number(gt=0, finite=True, what="a finite cell size in m"))
     origin: tuple[float, float] = attrs.field(default=(0.0, 0.0), converter=lambda o: (float(o[0]), float(o[1])))
     occupied_threshold: int = attrs.field(default=50)
 
@@ -87,11 +87,6 @@ class OccupancyGrid2D:
     def _check_data(self, attribute, value) -> None:
         if value.ndim != 2:
             raise ValueError(f"OccupancyGrid2D.data: expected a 2D array, got shape {value.shape}")
-
-    @resolution.validator
-    def _check_res(self, attribute, value) -> None:
-        if not (value > 0 and math.isfinite(value)):
-            raise ValueError(f"OccupancyGrid2D.resolution: expected > 0 m/cell, got {value}")
 
     def occupied_points(self) -> np.ndarray:
         """Centres (M, 2) of occupied cells."""
@@ -101,7 +96,7 @@ class OccupancyGrid2D:
         return np.stack([x, y], axis=-1).astype(np.float64)
 
 
-ObstacleInput = Union[LaserScan2D, OccupancyGrid2D, np.ndarray, None]
+ObstacleInput = LaserScan2D | OccupancyGrid2D | np.ndarray | None
 
 
 def sensor_offset(position: np.ndarray | list[float], rotation_quat: np.ndarray | list[float]) -> tuple[float, float, float]:

@@ -11,6 +11,7 @@ with lateral velocity. Stanley is a pure path follower: it does not look at obst
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
@@ -55,8 +56,9 @@ class Stanley(PathFollower):
         delta = cfg.heading_gain * psi_e + math.atan2(cfg.cross_track_gain * e, max(abs(speed), cfg.cross_track_min_linear_vel))
         return float(delta), float(e), float(psi_e)
 
-    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None) -> ControlResult:
+    def compute(self, pose: np.ndarray, velocity: np.ndarray, obstacles: ObstacleInput = None, **inputs: Any) -> ControlResult:
         """One control step (``obstacles`` is accepted for a uniform interface and ignored)."""
+        self.no_other_inputs(inputs)
         pose, velocity = robot_state(pose, velocity)
         if self.progress is None:
             return self._no_path(pose)

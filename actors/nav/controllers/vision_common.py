@@ -6,15 +6,12 @@ import math
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from ..robot import RobotConfig
 from .base import ControlStatus
 
 __all__ = ["BoundingBox", "CameraIntrinsics", "TargetSearch", "median_depth"]
-
-
-def _positive(instance, attribute, value) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{type(instance).__name__}.{attribute.name}: expected > 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
@@ -23,10 +20,10 @@ class BoundingBox:
 
     x: float = attrs.field(converter=float)
     y: float = attrs.field(converter=float)
-    width: float = attrs.field(converter=float, validator=_positive)
-    height: float = attrs.field(converter=float, validator=_positive)
-    image_width: int = attrs.field(converter=int, validator=_positive)
-    image_height: int = attrs.field(converter=int, validator=_positive)
+    width: float = attrs.field(converter=float, validator=V.finite_positive)
+    height: float = attrs.field(converter=float, validator=V.finite_positive)
+    image_width: int = attrs.field(converter=int, validator=V.finite_positive)
+    image_height: int = attrs.field(converter=int, validator=V.finite_positive)
 
     @property
     def center(self) -> tuple[float, float]:
@@ -47,8 +44,8 @@ class BoundingBox:
 class CameraIntrinsics:
     """Pinhole intrinsics (pixels), as in a CameraInfo K matrix."""
 
-    fx: float = attrs.field(converter=float, validator=_positive)
-    fy: float = attrs.field(converter=float, validator=_positive)
+    fx: float = attrs.field(converter=float, validator=V.finite_positive)
+    fy: float = attrs.field(converter=float, validator=V.finite_positive)
     cx: float = attrs.field(converter=float)
     cy: float = attrs.field(converter=float)
 

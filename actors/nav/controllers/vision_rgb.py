@@ -47,11 +47,13 @@ class VisionRGBFollower:
         """Forget the reference size: the next detection defines the distance to keep."""
         self.reference_size = None
 
-    def compute(self, target: BoundingBox | None, velocity: np.ndarray = np.zeros(3),
-                pose: np.ndarray = np.zeros(3)) -> ControlResult:
+    def compute(self, target: BoundingBox | None, velocity: np.ndarray | None = None,
+                pose: np.ndarray | None = None) -> ControlResult:
+        """One step towards ``target``; ``velocity`` and ``pose`` default to zero (robot at rest at the origin)."""
         cfg = self.config
         robot = self.robot
-        pose, velocity = robot_state(pose, velocity)
+        pose, velocity = robot_state(np.zeros(3) if pose is None else pose,
+                                     np.zeros(3) if velocity is None else velocity)
         if target is None:
             cmd, status = self.search.step()
         else:

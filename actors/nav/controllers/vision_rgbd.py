@@ -149,6 +149,7 @@ class VisionRGBDFollower:
         self._since_measurement += dt
         if target is not None and depth_image is not None and not new_measurement and self.tracker.position is not None:
             predicted = self.tracker.predict(dt)
+            assert predicted is not None  # the tracker has a position, so it predicts one
             return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
         measured = None
         if target is not None and depth_image is not None:
@@ -217,7 +218,7 @@ class VisionRGBDFollower:
         costs = evaluate_costs(
             weights, trajs[idx], np.broadcast_to(samples[idx][:, None], (idx.size, cfg.prediction_horizon, 3)),
             reference_path=reference, goal=goal[:2], obstacle_min_distance=clear[idx] + robot.radius, robot_radius=robot.radius,
-            dt=dt, acc_limits=np.array([l.max_acc for l in lim]), initial_velocity=velocity)
+            dt=dt, acc_limits=np.array([axis.max_acc for axis in lim]), initial_velocity=velocity)
         end = trajs[idx, -1]
         facing = np.abs(wrap_angle(np.arctan2(lead[1] - end[:, 1], lead[0] - end[:, 0]) - end[:, 2]))
         # Facing the target matters once there; on the way (e.g. around an obstacle) it must

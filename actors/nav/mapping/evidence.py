@@ -14,24 +14,14 @@ new hit lands where the lidar recently saw free space (a sign of motion).
 """
 from __future__ import annotations
 
-import math
-
 import attrs
 import numpy as np
+
+from emos.config import validators as V
 
 from .hit_grid import HitGrid
 
 __all__ = ["EvidenceConfig", "EvidenceGrid"]
-
-
-def _cap(instance: object, attribute: attrs.Attribute, value: object) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"EvidenceConfig.cap must be an integer >= 1 (scans), got {value!r}")
-
-
-def _free_range(instance: object, attribute: attrs.Attribute, value: object) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
-        raise ValueError(f"EvidenceConfig.free_range must be a finite number of metres > 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
@@ -40,11 +30,11 @@ class EvidenceConfig:
     holds (scans that saw through its hit point release it after that many), ``free_range``
     (m) of each beam that counts as seeing free space (farther, a beam decays nothing)."""
 
-    cap: int = attrs.field(default=4, validator=_cap)
-    free_range: float = attrs.field(default=8.0, validator=_free_range)
+    cap: int = attrs.field(default=4, validator=V.int_at_least(1))
+    free_range: float = attrs.field(default=8.0, validator=V.number(gt=0, finite=True, what="a finite number of metres"))
 
     @classmethod
-    def of(cls, value: object, owner: str) -> "EvidenceConfig | None":
+    def of(cls, value: object, owner: str) -> EvidenceConfig | None:
         """``value`` as a config: an EvidenceConfig, a dict of its fields, or None (never forget)."""
         if value is None or isinstance(value, cls):
             return value

@@ -9,6 +9,7 @@ hit), and the navigator keeps the map <- odometry correction that this implies.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from ..maps.edt import euclidean_distance_transform
 from .hit_grid import HitGrid
 
 
-def compose(correction: np.ndarray, pose: np.ndarray) -> np.ndarray:
+def compose(correction: np.ndarray | Sequence[float], pose: np.ndarray | Sequence[float]) -> np.ndarray:
     """SE(2) ``correction`` applied to ``pose`` (both x, y, yaw)."""
     tx, ty, tt = correction
     c, s = math.cos(tt), math.sin(tt)

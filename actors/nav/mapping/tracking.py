@@ -19,29 +19,26 @@ from collections import deque
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 __all__ = ["ScanTracker", "Track", "TrackerConfig", "segment"]
-
-
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"TrackerConfig.{attribute.name} must be a finite number > 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
 class TrackerConfig:
-    cluster_gap: float = attrs.field(default=0.15, validator=_positive)  # m between neighbours of one cluster
-    max_extent: float = attrs.field(default=1.0, validator=_positive)  # m; wider clusters are structure
+    cluster_gap: float = attrs.field(default=0.15, validator=V.finite_positive)  # m between neighbours of one cluster
+    max_extent: float = attrs.field(default=1.0, validator=V.finite_positive)  # m; wider clusters are structure
     min_points: int = attrs.field(default=3, validator=attrs.validators.ge(1))
-    gate: float = attrs.field(default=0.45, validator=_positive)  # m around a track's prediction
-    window: float = attrs.field(default=1.0, validator=_positive)  # s of centres in the velocity fit
+    gate: float = attrs.field(default=0.45, validator=V.finite_positive)  # m around a track's prediction
+    window: float = attrs.field(default=1.0, validator=V.finite_positive)  # s of centres in the velocity fit
     min_observations: int = attrs.field(default=6, validator=attrs.validators.ge(2))
-    min_span: float = attrs.field(default=0.5, validator=_positive)  # s the fit must cover
-    moving_speed: float = attrs.field(default=0.15, validator=_positive)  # m/s
-    max_speed: float = attrs.field(default=3.0, validator=_positive)  # faster is a wrong association
-    coast_time: float = attrs.field(default=0.6, validator=_positive)  # s a lost track is predicted
-    release_time: float = attrs.field(default=1.0, validator=_positive)  # s slow before moving is revoked
-    max_range: float = attrs.field(default=12.0, validator=_positive)  # m; farther returns are not tracked
-    max_residual: float = attrs.field(default=0.03, validator=_positive)  # m RMS of centres off the fitted line
+    min_span: float = attrs.field(default=0.5, validator=V.finite_positive)  # s the fit must cover
+    moving_speed: float = attrs.field(default=0.15, validator=V.finite_positive)  # m/s
+    max_speed: float = attrs.field(default=3.0, validator=V.finite_positive)  # faster is a wrong association
+    coast_time: float = attrs.field(default=0.6, validator=V.finite_positive)  # s a lost track is predicted
+    release_time: float = attrs.field(default=1.0, validator=V.finite_positive)  # s slow before moving is revoked
+    max_range: float = attrs.field(default=12.0, validator=V.finite_positive)  # m; farther returns are not tracked
+    max_residual: float = attrs.field(default=0.03, validator=V.finite_positive)  # m RMS of centres off the fitted line
     min_fresh: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))  # share of hits in fresh space
 
 
@@ -125,7 +122,7 @@ class ScanTracker:
             track.moving = False
             track.slow_since = None
 
-    def update(self, stamp: float, points: np.ndarray, origin: tuple[float, float],
+    def update(self, stamp: float, points: np.ndarray, origin: tuple[float, float] | np.ndarray,
                angle_increment: float = 0.0, fresh: np.ndarray | None = None) -> np.ndarray:
         """Feed one scan's hit points (N, 2, world frame, beam order) seen from ``origin``.
         ``fresh`` (optional, bool per point): the point lies where the lidar recently saw free
@@ -178,9 +175,9 @@ class ScanTracker:
                 continue
             reach = [cfg.gate + float(np.hypot(*self.tracks[ti].velocity)) * (stamp - self.tracks[ti].last_seen)
                      for ti in lost]
-            dist = [float(np.hypot(*(self.tracks[ti].position - centres[ci]))) for ti in lost]
-            k = int(np.argmin(np.asarray(dist) - np.asarray(reach)))
-            if dist[k] <= reach[k]:
+            dists = [float(np.hypot(*(self.tracks[ti].position - centres[ci]))) for ti in lost]
+            k = int(np.argmin(np.asarray(dists) - np.asarray(reach)))
+            if dists[k] <= reach[k]:
                 track = self.tracks[lost.pop(k)]
                 track.history.clear()
                 track.velocity = np.zeros(2)

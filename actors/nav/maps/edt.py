@@ -106,8 +106,8 @@ def squared_distance_transform_1d(f: np.ndarray) -> np.ndarray:
     before_line = np.r_[0, np.cumsum(kk)[:-1]]
     j = np.searchsorted(keys, queries.ravel(), side="left").reshape(r.size, n) - before_line[:, None]
     vj = np.take_along_axis(v[r], j, axis=1)
-    q = np.arange(n)[None, :]
-    out[r] = (q - vj) ** 2 + np.take_along_axis(f[r], vj, axis=1)
+    positions = np.arange(n)[None, :]
+    out[r] = (positions - vj) ** 2 + np.take_along_axis(f[r], vj, axis=1)
     return out
 
 

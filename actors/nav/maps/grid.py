@@ -13,6 +13,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 __all__ = ["OccupancyGridMap", "UNKNOWN", "FREE", "OCCUPIED"]
 
 UNKNOWN = -1
@@ -47,11 +49,6 @@ def _to_int8(value: Any) -> np.ndarray:
     return np.ascontiguousarray(arr.astype(np.int8))
 
 
-def _positive_finite(instance: Any, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"OccupancyGridMap.{attribute.name}: expected a finite value > 0, got {value!r}")
-
-
 def _origin(value: Any) -> tuple[float, float, float]:
     try:
         vals = tuple(float(v) for v in value)
@@ -59,7 +56,7 @@ def _origin(value: Any) -> tuple[float, float, float]:
         raise TypeError(f"OccupancyGridMap.origin: expected (x, y, yaw), got {value!r}") from exc
     if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
         raise ValueError(f"OccupancyGridMap.origin: expected 3 finite numbers (x, y, yaw), got {value!r}")
-    return vals  # type: ignore[return-value]
+    return vals
 
 
 @attrs.define(eq=False)
@@ -67,7 +64,7 @@ class OccupancyGridMap:
     """A 2D occupancy grid: int8 cells, resolution (m/cell) and origin pose (x, y, yaw)."""
 
     data: np.ndarray = attrs.field(converter=_to_int8)
-    resolution: float = attrs.field(converter=float, validator=_positive_finite)
+    resolution: float = attrs.field(converter=float, validator=V.finite_positive)
     origin: tuple[float, float, float] = attrs.field(default=(0.0, 0.0, 0.0), converter=_origin)
     frame_id: str = attrs.field(default="map")
 
@@ -154,7 +151,7 @@ class OccupancyGridMap:
         """Known cells whose value is <= ``threshold``."""
         return (self.data >= 0) & (self.data <= threshold)
 
-    def copy_with(self, data: np.ndarray) -> "OccupancyGridMap":
+    def copy_with(self, data: np.ndarray) -> OccupancyGridMap:
         """Same geometry, new cell values."""
         if np.shape(data) != self.data.shape:
             raise ValueError(f"copy_with: expected data of shape {self.data.shape}, got {np.shape(data)}")
@@ -173,7 +170,7 @@ class OccupancyGridMap:
         resolution: float,
         origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
         frame_id: str = "map",
-    ) -> "OccupancyGridMap":
+    ) -> OccupancyGridMap:
         """Build from a ROS-style flat array (``index = iy * width + ix``)."""
         arr = np.asarray(flat)
         if arr.size != width * height:

@@ -13,10 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
+from emos.errors import EmosError
+
 __all__ = ["MapImageError", "read_pgm", "write_pgm", "read_image"]
 
 
-class MapImageError(ValueError):
+class MapImageError(EmosError, ValueError):
     """A map image that cannot be read (missing, truncated, unsupported format)."""
 
 
@@ -118,8 +120,9 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, int, np.ndarray | N
             f"reading {p.suffix or 'non-PGM'} map images needs Pillow: pip install 'emos[sim]'"
         ) from exc
     try:
-        with Image.open(p) as img:
-            img.load()
+        with Image.open(p) as opened:
+            opened.load()
+            img: Image.Image = opened  # convert() below returns a plain Image, not an ImageFile
             mode = img.mode
             if mode in ("1", "L", "P", "I", "I;16", "RGB", "RGBA", "LA", "PA"):
                 pass

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from emos.errors import EmosError
+
 from .grid import OccupancyGridMap
 from .image_io import MapImageError, read_image, write_pgm
 
@@ -32,7 +34,7 @@ MAP_MODES = ("trinary", "scale", "raw")
 _REQUIRED = ("image", "resolution", "origin", "free_thresh", "occupied_thresh", "negate")
 
 
-class MapFileError(ValueError):
+class MapFileError(EmosError, ValueError):
     """A map YAML that is missing a key, has a bad value, or points at an unreadable image."""
 
 

@@ -49,7 +49,7 @@ def read_pcd(path: str | os.PathLike) -> np.ndarray:
     missing = [f for f in "xyz" if f not in fields]
     if missing:
         raise MapFileError(f"{p}: PCD has no field(s) {', '.join(missing)} (fields: {' '.join(fields)})")
-    cols: list[tuple[str, type]] = []
+    cols: list[tuple[str, np.dtype]] = []
     for name, size, typ, count in zip(fields, sizes, types, counts):
         dtype = _SIZES.get((typ.upper(), size))
         if dtype is None:

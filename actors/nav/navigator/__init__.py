@@ -1,8 +1,8 @@
 """Navigators for maps nobody gave the robot: lidar obstacle memory with scan matching, the
 cost-to-go field as global plan, and the arc sampler (or a path follower) as local control.
 A harness (``emos bench barn``) calls ``reset(task)`` then ``step(observation)``."""
-from .interface import NavTask, Navigator, Observation, Scan
 from .dynamic import DynamicConfig, DynamicGridNavigator
+from .interface import Navigator, NavTask, Observation, Scan
 from .mapless import GridNavigator
 from .with_controller import NAVCORE_CONTROLLERS, NavCoreNavigator
 

@@ -22,6 +22,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from ..controllers.movers import MoverConfig, PredictedMovers, near_movers
 from ..mapping import compose, correction_between
 from ..mapping.evidence import EvidenceConfig, EvidenceGrid
@@ -32,11 +34,6 @@ from .mapless import GridNavigator
 __all__ = ["DynamicConfig", "DynamicGridNavigator"]
 
 
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ValueError(f"DynamicConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
 @attrs.define(frozen=True)
 class DynamicConfig:
     """``movers``: tracking, predicted arc checks and the wait radius (a mover this near:
@@ -45,13 +42,14 @@ class DynamicConfig:
 
     movers: MoverConfig = attrs.field(factory=MoverConfig, validator=attrs.validators.instance_of(MoverConfig))
     evidence: EvidenceConfig = attrs.field(factory=EvidenceConfig, validator=attrs.validators.instance_of(EvidenceConfig))
-    fresh_time: float = attrs.field(default=1.0, validator=_nonneg)
+    fresh_time: float = attrs.field(default=1.0, validator=V.finite_non_negative)
 
 
 class DynamicGridNavigator(GridNavigator):
     """``GridNavigator`` with evidence decay, mover tracking and predicted arc checks."""
 
     name = "builtin-dynamic"
+    grid: EvidenceGrid  # built by make_grid below
 
     def __init__(self, dynamic: DynamicConfig | None = None, **kwargs: Any) -> None:
         if kwargs.get("carve_range", 0.0):
@@ -70,7 +68,7 @@ class DynamicGridNavigator(GridNavigator):
 
     def _beams(self, pose: np.ndarray, scan: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(sensor origin (2,), unit directions (N, 2), ranges (N,)) in the map frame."""
-        mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
+        mx, my, myaw = self._task.scan_mount
         x, y, yaw = pose
         c, s = math.cos(yaw), math.sin(yaw)
         origin = np.array([x + c * mx - s * my, y + s * mx + c * my])
@@ -90,7 +88,7 @@ class DynamicGridNavigator(GridNavigator):
         hit = np.isfinite(r)
         world = origin + r[hit, None] * d[hit]
         static = ~self._near_movers(world, obs.stamp)
-        mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
+        mx, my, myaw = self._task.scan_mount
         a = obs.scan.angle_min + obs.scan.angle_increment * np.flatnonzero(hit)
         rr = r[hit]
         local = np.c_[mx + rr * np.cos(a + myaw), my + rr * np.sin(a + myaw)][static]
@@ -103,12 +101,13 @@ class DynamicGridNavigator(GridNavigator):
     def _insert_scan(self, obs: Observation) -> None:
         """Track clusters, decay the memory along the beams, remember the static returns."""
         scan = obs.scan
+        assert scan is not None  # update() inserts only observations that carry a scan
         origin, d, r = self._beams(np.asarray(obs.pose, dtype=float), scan)
         hit = np.isfinite(r)
         world = origin + r[hit, None] * d[hit]
         # Motion evidence: hits where beams passed within the last ``fresh_time`` s and no
         # older obstacle is remembered (asked before this scan marks its own free space).
-        grid: EvidenceGrid = self.grid  # type: ignore[assignment]
+        grid = self.grid
         fresh = grid.moved_into(world, obs.stamp, self.dynamic.fresh_time)
         moving = self.tracker.update(obs.stamp, world, origin, float(scan.angle_increment), fresh)
         free = self.dynamic.evidence.free_range
@@ -131,6 +130,6 @@ class DynamicGridNavigator(GridNavigator):
         centres, _, _ = self.tracker.movers(obs.stamp)
         if len(centres) and np.min(np.hypot(centres[:, 0] - obs.pose[0], centres[:, 1] - obs.pose[1])) \
                 <= self.dynamic.movers.wait_radius:
-            self._progress_ref = None
+            self._progress.reset()
             return False
         return super()._stuck(obs)

@@ -12,6 +12,7 @@ import numpy as np
 from ..controllers.arcs import ArcConfig, ArcPlanner
 from ..mapping import HitGrid, ScanMatcher, compose, correction_between
 from ..planning.costfield import CLEARANCE_BAND, footprint_field, tightest_spot
+from ..stuck import BackOutThenBlock, ProgressChecker, Recovery
 from .interface import NavTask, Observation
 
 UNREACHABLE = 1e3  # metres-equivalent cost of ending an arc where the field has no path
@@ -52,6 +53,13 @@ class GridNavigator:
         self.plan: np.ndarray | None = None
         self.task: NavTask | None = None
 
+    @property
+    def _task(self) -> NavTask:
+        """The task of this run; the navigator needs one (``reset``) before it steps."""
+        if self.task is None:
+            raise RuntimeError(f"{type(self).__name__}: no task yet; call reset(task) before step()")
+        return self.task
+
     def reset(self, task: NavTask) -> None:
         self.task = task
         spec = self.arcs_footprint(task)
@@ -74,10 +82,10 @@ class GridNavigator:
         self._goal_cell = self._cell((gx, gy))
         self._planned_version = -1
         self._last_plan = -math.inf
-        self._progress_ref: tuple[float, float] | None = None  # (stamp, cost-to-go) to beat
+        # Stuck: no progress along the cost-to-go; recovery: back out, then block (stuck.py).
+        self._progress = ProgressChecker(self.stuck_time, self.stuck_progress)
+        self._recovery = BackOutThenBlock(self.stuck_time, self.recovery_time)
         self.virtual_blocks: list[tuple[float, float]] = []
-        self._recover_until = -math.inf
-        self._last_recovery = -math.inf
         self._correction = np.zeros(3)  # map <- odometry
         self._matcher = ScanMatcher() if self.localize else None
         self.plan = None
@@ -102,7 +110,7 @@ class GridNavigator:
         cols = np.clip(cols, 0, self.grid.shape[1] - 1)
         ctg = self.field.ctg_filled[rows, cols]
         # Outside the window: straight-line distance to the goal plus a penalty.
-        straight = np.hypot(xy[:, 0] - self.task.goal[0], xy[:, 1] - self.task.goal[1])  # type: ignore[union-attr]
+        straight = np.hypot(xy[:, 0] - self._task.goal[0], xy[:, 1] - self._task.goal[1])
         ctg = np.where(inside, ctg, straight + 5.0)
         return np.where(np.isfinite(ctg), ctg, UNREACHABLE)
 
@@ -127,14 +135,15 @@ class GridNavigator:
     def _insert_scan(self, obs: Observation) -> None:
         """Place the scan with the robot's own pose estimate (odometry) and the lidar mount,
         never with the simulator's ground truth; carve free space along the beams first."""
-        mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
+        mx, my, myaw = self._task.scan_mount
         scan = obs.scan
+        assert scan is not None  # update() inserts only observations that carry a scan
         x, y, yaw = obs.pose
         c, s = math.cos(yaw), math.sin(yaw)
         sx, sy, syaw = x + c * mx - s * my, y + s * mx + c * my, yaw + myaw
-        angles = syaw + scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))  # type: ignore[union-attr]
+        angles = syaw + scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
         d = np.c_[np.cos(angles), np.sin(angles)]
-        r = scan.ranges.astype(float)  # type: ignore[union-attr]
+        r = scan.ranges.astype(float)
         hit = np.isfinite(r)
         if self.carve_range > 0:
             # Stop a cell and a half short of each hit; beams without a return carve up to
@@ -150,7 +159,7 @@ class GridNavigator:
             return obs
         guess = compose(self._correction, obs.pose)
         if obs.scan is not None:
-            mx, my, myaw = self.task.scan_mount  # type: ignore[union-attr]
+            mx, my, myaw = self._task.scan_mount
             p = obs.scan.points()
             cm, sm = math.cos(myaw), math.sin(myaw)
             local = np.c_[mx + cm * p[:, 0] - sm * p[:, 1], my + sm * p[:, 0] + cm * p[:, 1]]
@@ -168,20 +177,17 @@ class GridNavigator:
         stale = self.grid.version != self._planned_version
         if self._planned_version < 0 or (stale and obs.stamp - self._last_plan >= self.replan_period):
             self._replan(obs)
-        if self._stuck(obs):
-            # First time: back out for a while (pockets, a nose against a wall). Stuck again
-            # soon after: the route itself is impossible, so block its tightest spot.
-            if obs.stamp - self._last_recovery < 3 * self.stuck_time + self.recovery_time:
-                self._block_bottleneck(obs)
-                self._replan(obs)
-            self._last_recovery = obs.stamp
-            self._recover_until = obs.stamp + self.recovery_time
-        return obs.stamp < self._recover_until
+        if self._stuck(obs) and self._recovery.on_stall(obs.stamp) is Recovery.BLOCK_AND_BACK_OUT:
+            # Stuck again soon after backing out: the route itself is impossible, so block its
+            # tightest spot (and back out again).
+            self._block_bottleneck(obs)
+            self._replan(obs)
+        return self._recovery.backing_out(obs.stamp)
 
     def step(self, obs: Observation) -> tuple[float, float, float]:
         obs = self.localized(obs)
         recovering = self.update(obs)
-        reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.arcs.spec.circumscribed_radius + 0.3  # type: ignore[union-attr]
+        reach = self.arcs.cfg.horizon * self.arcs.cfg.max_speed + self.arcs.spec.circumscribed_radius + 0.3
         points = self.grid.points_near((obs.pose[0], obs.pose[1]), reach)
         gain = None
         if self._gain is not None:
@@ -204,15 +210,8 @@ class GridNavigator:
         return None
 
     def _stuck(self, obs: Observation) -> bool:
-        """No real progress along the cost-to-go for ``stuck_time`` seconds."""
-        here = float(self.cost_to_go(np.array([obs.pose[:2]]))[0])
-        if self._progress_ref is None or here < self._progress_ref[1] - self.stuck_progress:
-            self._progress_ref = (obs.stamp, here)
-            return False
-        if obs.stamp - self._progress_ref[0] >= self.stuck_time:
-            self._progress_ref = (obs.stamp, here)
-            return True
-        return False
+        """No real progress (``stuck_progress`` m) along the cost-to-go for ``stuck_time`` seconds."""
+        return self._progress.update(obs.stamp, float(self.cost_to_go(np.array([obs.pose[:2]]))[0]))
 
     def _block_bottleneck(self, obs: Observation) -> None:
         """The plan leads somewhere the robot cannot go (a gap narrower than it looks, say):
@@ -220,7 +219,7 @@ class GridNavigator:
         routes around it."""
         if self.plan is None:
             return
-        keep_out = self.arcs.spec.circumscribed_radius + 0.15  # type: ignore[union-attr]
+        keep_out = self.arcs.spec.circumscribed_radius + 0.15
 
         def clearance_at(xy: np.ndarray) -> np.ndarray:
             rows, cols, _ = self.grid.cell_of(xy)

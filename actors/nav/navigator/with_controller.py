@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from .mapless import GridNavigator
 from .interface import NavTask, Observation
+from .mapless import GridNavigator
 
 # navigator name -> class names in emos.actors.nav.controllers (controller, config).
 NAVCORE_CONTROLLERS = {

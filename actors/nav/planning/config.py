@@ -1,10 +1,11 @@
 """Configuration of the OMPL global planner (the spec's ``ompl`` block plus grid settings)."""
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import attrs
+
+from emos.config import validators as V
 
 from .registry import planner_spec, resolve_planner_name
 
@@ -21,16 +22,6 @@ _KNOWN_OMPL_OBJECTIVES = (
     "MinimaxObjective",
     "StateCostIntegralObjective",
 )
-
-
-def _positive(instance: Any, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"OMPLConfig.{attribute.name}: expected a finite value > 0, got {value!r}")
-
-
-def _non_negative(instance: Any, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"OMPLConfig.{attribute.name}: expected a finite value >= 0, got {value!r}")
 
 
 def _log_level(instance: Any, attribute: attrs.Attribute, value: str) -> None:
@@ -56,11 +47,6 @@ def _planner_id(instance: Any, attribute: attrs.Attribute, value: str) -> None:
     resolve_planner_name(value)  # raises with the list of available planners
 
 
-def _threshold(instance: Any, attribute: attrs.Attribute, value: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
-        raise ValueError(f"OMPLConfig.{attribute.name}: expected an integer in 0..100, got {value!r}")
-
-
 @attrs.define
 class OMPLConfig:
     """OMPL planning settings. Names and defaults of the first six follow the spec's ``ompl`` block.
@@ -80,14 +66,14 @@ class OMPLConfig:
     """
 
     log_level: str = attrs.field(default="WARN", validator=_log_level)
-    planning_timeout: float = attrs.field(default=10.0, converter=float, validator=_positive)
-    simplification_timeout: float = attrs.field(default=0.01, converter=float, validator=_non_negative)
-    goal_tolerance: float = attrs.field(default=0.01, converter=float, validator=_positive)
+    planning_timeout: float = attrs.field(default=10.0, converter=float, validator=V.finite_positive)
+    simplification_timeout: float = attrs.field(default=0.01, converter=float, validator=V.finite_non_negative)
+    goal_tolerance: float = attrs.field(default=0.01, converter=float, validator=V.finite_positive)
     optimization_objective: str = attrs.field(default="PathLengthOptimizationObjective", validator=_objective)
     planner_id: str = attrs.field(default="ompl.geometric.KPIECE1", validator=_planner_id)
     planner_params: dict[str, Any] = attrs.field(factory=dict)
-    path_resolution: float = attrs.field(default=0.05, converter=float, validator=_positive)
-    occupied_threshold: int = attrs.field(default=65, validator=_threshold)
+    path_resolution: float = attrs.field(default=0.05, converter=float, validator=V.finite_positive)
+    occupied_threshold: int = attrs.field(default=65, validator=V.number(ge=0, le=100, integer=True))
     unknown_is_occupied: bool = attrs.field(default=True, converter=bool)
     simplify: bool = attrs.field(default=True, converter=bool)
     first_solution: bool = attrs.field(default=False, converter=bool)
@@ -99,7 +85,7 @@ class OMPLConfig:
         planner_spec(self.planner_id).validate(value)
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> "OMPLConfig":
+    def from_dict(cls, values: dict[str, Any]) -> OMPLConfig:
         """Build from a config-file mapping such as the spec's ``ompl:`` YAML block."""
         if not isinstance(values, dict):
             raise TypeError(f"OMPLConfig.from_dict: expected a mapping, got {type(values).__name__}")

@@ -7,7 +7,7 @@ path by following predecessors.
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -21,7 +21,7 @@ CENTRING_RANGE = 0.45
 
 
 def footprint_field(shape: tuple[int, int], resolution: float, half_width: float,
-                    band: float = CLEARANCE_BAND, centring: float = CENTRING_RANGE) -> "CostField":
+                    band: float = CLEARANCE_BAND, centring: float = CENTRING_RANGE) -> CostField:
     """The cost field every navigation layer uses for a robot of half-width ``half_width``
     (a box's half-width, a disc's radius: the largest circle inside the footprint): lethal
     closer than the half-width (less half a cell, since obstacles fill their cells: the robot
@@ -33,7 +33,7 @@ def footprint_field(shape: tuple[int, int], resolution: float, half_width: float
     return CostField(shape, resolution, lethal, inflation_radius=soft + centring, soft_radius=soft)
 
 
-def tightest_spot(plan: np.ndarray, clearance_at: "Callable[[np.ndarray], np.ndarray]", robot_xy: Sequence[float],
+def tightest_spot(plan: np.ndarray, clearance_at: Callable[[np.ndarray], np.ndarray], robot_xy: Sequence[float] | np.ndarray,
                   keep_out: float, ahead: float = 2.5) -> tuple[float, float] | None:
     """The point of the next ``ahead`` m of ``plan`` (N, >= 2) with the least clearance, at
     least ``keep_out`` m from the robot (never block the ground it stands on: that would box

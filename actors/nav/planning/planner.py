@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,9 @@ ANY_HEADING_SAMPLES = 16
 
 def _ompl() -> tuple[Any, Any, Any]:
     try:
-        from ompl import base as ob, geometric as og, util as ou
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError("global planning needs the OMPL bindings: pip install 'emos[nav]'") from exc
     return ob, og, ou
@@ -173,6 +176,7 @@ class OMPLGeometricPlanner:
         if not (math.isfinite(budget) and budget > 0):
             raise ValueError(f"plan: timeout must be > 0 s, got {timeout!r}")
         sx, sy, syaw = _pose("start", start, allow_xy=False)
+        assert syaw is not None  # allow_xy=False: a start always has its yaw
         gx, gy, gyaw = _pose("goal", goal, allow_xy=True)
         grid = self.checker.grid
         for name, (x, y) in (("start", (sx, sy)), ("goal", (gx, gy))):

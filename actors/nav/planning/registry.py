@@ -8,9 +8,12 @@ Parameters"); a name the planner does not know is an error that lists the valid 
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import attrs
+
+from emos.errors import ConfigError, EmosError
 
 __all__ = [
     "SPEC_PLANNERS",
@@ -32,11 +35,11 @@ SPEC_PLANNERS: tuple[str, ...] = (
 )
 
 
-class UnknownPlannerError(ValueError):
+class UnknownPlannerError(ConfigError):
     """A planner id that names no OMPL geometric planner at all."""
 
 
-class PlannerNotAvailableError(ValueError):
+class PlannerNotAvailableError(EmosError, ValueError):
     """A planner EMOS knows (from the spec's list) that the installed binding does not expose."""
 
 

@@ -13,6 +13,7 @@ import attrs
 import numpy as np
 
 from emos.geometry import wrap_angle
+
 from ..controllers.base import in_range, setters
 from ..controllers.sensors import LaserScan2D
 from ..robot import RobotConfig, RobotGeometry

@@ -10,8 +10,9 @@ effort, and grasped objects are held by contact friction.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
@@ -48,7 +49,7 @@ class ArmConfig:
 class SimArm:
     """An arm fixed to the world. ``command(names, positions)`` sets joint targets."""
 
-    def __init__(self, world: "World", config: ArmConfig | None = None, initial: dict[str, float] | None = None) -> None:
+    def __init__(self, world: World, config: ArmConfig | None = None, initial: dict[str, float] | None = None) -> None:
         self.world, self.config = world, config or ArmConfig()
         c = world.client
         yaw = self.config.base_yaw
@@ -193,12 +194,12 @@ class PosedCamera(Camera):
 
 def look_at(eye: Sequence[float], target: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """Camera pose (position, optical rotation: columns x right, y down, z forward) looking at a point."""
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    forward = (target - eye) / np.linalg.norm(target - eye)
+    position, aim = np.asarray(eye, float), np.asarray(target, float)
+    forward = (aim - position) / np.linalg.norm(aim - position)
     right = np.cross(forward, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     down = np.cross(forward, right)
-    return eye, np.c_[right, down, forward]
+    return position, np.c_[right, down, forward]
 
 
 def wrist_camera_pose(arm: SimArm) -> tuple[np.ndarray, np.ndarray]:

@@ -40,9 +40,17 @@ def bowl_shapes(center: tuple[float, float], radius: float = BOWL_RADIUS, height
     return parts
 
 
-def tabletop_world(**world_kwargs: Any) -> World:
+class TabletopWorld(World):
+    """A :class:`World` with the table-top scene's parts, set by :func:`tabletop_world`."""
+
+    arm: SimArm
+    oranges: list[int]  # pybullet body ids
+    front_camera_pose: tuple[np.ndarray, np.ndarray]  # (position, optical rotation), see look_at
+
+
+def tabletop_world(**world_kwargs: Any) -> TabletopWorld:
     """A dynamic world with the arm on a table, three oranges and a bowl (see module constants)."""
-    world = World(name="tabletop", **world_kwargs)
+    world = TabletopWorld(name="tabletop", **world_kwargs)
     world.enable_dynamics()
     world.add(Box((0.0, 0.0), TABLE_SIZE, TABLE_HEIGHT, color=(0.6, 0.45, 0.3, 1.0)))
     world.add(bowl_shapes(BOWL_CENTER))
@@ -76,5 +84,5 @@ def _orange(world: World, xy: tuple[float, float]) -> int:
     return int(body)
 
 
-def orange_positions(world: World) -> np.ndarray:
+def orange_positions(world: TabletopWorld) -> np.ndarray:
     return np.array([world.client.getBasePositionAndOrientation(b)[0] for b in world.oranges])

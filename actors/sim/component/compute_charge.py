@@ -15,9 +15,13 @@ import logging
 import math
 from typing import Any
 
+from emos.ratelimit import RateLimitedLog
+
 from ..barn_protocol import ControlDeadline
 
 log = logging.getLogger("emos.sim")
+# A broken consumer answers every tick: its first bad report at once, then counted per 10 s.
+_limited = RateLimitedLog(log, interval=10.0)
 
 
 class ComputeCharge:
@@ -32,9 +36,8 @@ class ComputeCharge:
         if isinstance(compute_s, bool) or not isinstance(compute_s, (int, float)) or not math.isfinite(compute_s) \
                 or not 0 <= compute_s < 3600:
             self.bad_reports += 1  # a broken or foreign answer charges nothing, and says so
-            if self.bad_reports in (1, 10, 100) or self.bad_reports % 1000 == 0:
-                log.warning("lockstep: %s reported a compute time of %r s (#%d such report); not charged",
-                            consumer, compute_s, self.bad_reports)
+            _limited.warning(f"report:{consumer}", "lockstep: %s reported a compute time of %r s (#%d such report); not charged",
+                             consumer, compute_s, self.bad_reports)
             return
         self._tick_s += float(compute_s)
 

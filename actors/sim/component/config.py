@@ -12,6 +12,7 @@ from typing import Any
 import attrs
 from attrs import define, field
 
+from emos.config import validators as V
 from emos.config.base import BaseComponentConfig
 
 from ..clock import ClockMode
@@ -77,9 +78,9 @@ def check_world(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
             idx = int(value.split(":", 1)[1])
         except ValueError:
             raise ValueError(f"SimulatorConfig.world {value!r}: a DynaBARN world is 'dynabarn:<index>', e.g. 'dynabarn:0'") from None
-        worlds = load_dynabarn()
-        if idx not in worlds:
-            raise ValueError(f"SimulatorConfig.world {value!r}: no DynaBARN world {idx} (indices {min(worlds)}..{max(worlds)})")
+        entries = load_dynabarn()
+        if idx not in entries:
+            raise ValueError(f"SimulatorConfig.world {value!r}: no DynaBARN world {idx} (indices {min(entries)}..{max(entries)})")
         return
     if value.endswith((".yaml", ".yml")):
         from emos.actors.nav.maps.map_yaml import read_map_yaml
@@ -118,21 +119,6 @@ def _optional_choice(*choices: str) -> Any:
         if value is not None and value not in choices:
             raise ValueError(f"SimulatorConfig.{attribute.name} must be None or one of {', '.join(choices)}, got {value!r}")
     return check
-
-
-def _rate(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"SimulatorConfig.{attribute.name} must be a rate in Hz > 0, got {value!r}")
-
-
-def _nonneg(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise ValueError(f"SimulatorConfig.{attribute.name} must be a number >= 0, got {value!r}")
-
-
-def _positive(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"SimulatorConfig.{attribute.name} must be a number > 0, got {value!r}")
 
 
 def _spawn(value: Any) -> tuple[float, float, float] | None:
@@ -174,13 +160,6 @@ def _movers(value: Any) -> list:
     return items
 
 
-def _int_at_least(low: int) -> Any:
-    def check(instance: Any, attribute: attrs.Attribute, value: Any) -> None:
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise ValueError(f"SimulatorConfig.{attribute.name} must be an integer >= {low}, got {value!r}")
-    return check
-
-
 @define(kw_only=True)
 class SimulatorConfig(BaseComponentConfig):
     """Parameters of the :class:`Simulator`. Rates are in Hz of *simulated* time."""
@@ -201,26 +180,26 @@ class SimulatorConfig(BaseComponentConfig):
     frames: Any = field(factory=_frames_default, converter=_frames, validator=_check_frames)
     """Frame names (``RobotFrames``); ``launcher.frames`` overrides them at bringup."""
 
-    physics_rate: float = field(default=100.0, validator=_rate)
-    clock_rate: float = field(default=50.0, validator=_rate)
+    physics_rate: float = field(default=100.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
+    clock_rate: float = field(default=50.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
     """How often /clock is published; in lockstep, how often the consumers are waited for."""
     clock_mode: ClockMode = field(default=ClockMode.REALTIME, converter=ClockMode)
-    real_time_factor: float = field(default=1.0, validator=_positive)
+    real_time_factor: float = field(default=1.0, validator=V.finite_positive)
     lockstep_consumers: list[str] = field(factory=list, converter=_consumers)
     """Components (with ``use_sim_time``) that must answer every /clock tick in lockstep."""
-    compute_deadline: float | None = field(default=None, validator=attrs.validators.optional(_positive))
+    compute_deadline: float | None = field(default=None, validator=attrs.validators.optional(V.finite_positive))
     """Lockstep only: charge the consumers' compute time. A command that arrives with a tick acts
     only after the CPU time the consumers' steps took for that tick (summed: the stack on one
     core), as on a robot whose computer takes that long; a tick whose charge exceeds this many
     seconds (the control period) counts as a deadline miss. None: commands act at once."""
-    command_timeout: float = field(default=0.5, validator=_positive)
+    command_timeout: float = field(default=0.5, validator=V.finite_positive)
     """Simulated seconds without a new command after which the robot stops (a base's watchdog)."""
-    command_array_step: float = field(default=0.1, validator=_positive)
+    command_array_step: float = field(default=0.1, validator=V.finite_positive)
     """Seconds each entry of a TwistArray command lasts (the controller's time step)."""
 
-    joint_state_rate: float = field(default=30.0, validator=_rate)
+    joint_state_rate: float = field(default=30.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
     """Arm joint states (the ``tabletop`` world)."""
-    odom_rate: float = field(default=50.0, validator=_rate)
+    odom_rate: float = field(default=50.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
     odom_noise: bool = False
     """True: wheel odometry with drift (OdometryConfig.noisy); False: ground truth."""
     odometry_mode: str | None = field(default=None, validator=_optional_choice("truth", "wheel", "wheel-imu"))
@@ -233,20 +212,20 @@ class SimulatorConfig(BaseComponentConfig):
     scan_preset: str | None = field(default=None, validator=_optional_choice("jackal"))
     """``jackal``: the BARN Jackal's laser (sensors in jackal.py: 720 beams over +-2.356 rad,
     0.1-30 m, 50 Hz, 1 cm noise, 0.055 m ahead) instead of the ``scan_*`` fields."""
-    scan_rate: float = field(default=10.0, validator=_rate)
-    scan_beams: int = field(default=360, validator=_int_at_least(2))
-    scan_fov_deg: float = field(default=360.0, validator=_positive)
-    scan_range_max: float = field(default=10.0, validator=_positive)
-    scan_noise_std: float = field(default=0.0, validator=_nonneg)
-    camera_rate: float = field(default=10.0, validator=_rate)
-    camera_width: int = field(default=320, validator=_int_at_least(8))
-    camera_height: int = field(default=240, validator=_int_at_least(8))
-    camera_vfov_deg: float = field(default=60.0, validator=_positive)
-    jpeg_quality: int = field(default=85, validator=_int_at_least(1))
-    slip: float = field(default=0.0, validator=_nonneg)
-    actuation_noise: float = field(default=0.0, validator=_nonneg)
-    seed: int = field(default=0, validator=_int_at_least(0))
-    loop_rate: float = field(default=10.0, validator=_rate)
+    scan_rate: float = field(default=10.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
+    scan_beams: int = field(default=360, validator=V.int_at_least(2))
+    scan_fov_deg: float = field(default=360.0, validator=V.finite_positive)
+    scan_range_max: float = field(default=10.0, validator=V.finite_positive)
+    scan_noise_std: float = field(default=0.0, validator=V.finite_non_negative)
+    camera_rate: float = field(default=10.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
+    camera_width: int = field(default=320, validator=V.int_at_least(8))
+    camera_height: int = field(default=240, validator=V.int_at_least(8))
+    camera_vfov_deg: float = field(default=60.0, validator=V.finite_positive)
+    jpeg_quality: int = field(default=85, validator=V.int_at_least(1))
+    slip: float = field(default=0.0, validator=V.finite_non_negative)
+    actuation_noise: float = field(default=0.0, validator=V.finite_non_negative)
+    seed: int = field(default=0, validator=V.int_at_least(0))
+    loop_rate: float = field(default=10.0, validator=V.number(gt=0, finite=True, what="a rate in Hz"))
     """How often the component's own step runs (health reports); physics runs in its own thread."""
 
     def __attrs_post_init__(self) -> None:

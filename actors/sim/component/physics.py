@@ -10,19 +10,22 @@ import logging
 import select
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from emos import msgs as M
 from emos.core.clock import CLOCK_TOPIC, ack_topic
+from emos.ratelimit import RateLimitedLog
 from emos.transport.pubsub import Subscriber
 from emos.transport.waker import Waker
 
+from ..body import SimRobot
 from ..clock import ClockMode
+from ..msgs import header
 from ..sensors.camera import Camera
 from ..sensors.lidar import Lidar
 from ..sensors.odometry import Odometry
 from ..sensors.wheel_imu import WheelImuOdometry
-from ..msgs import header
 from .commands import CommandFollower, joint_targets
 from .compute_charge import ComputeCharge
 from .config import SimulatorConfig
@@ -30,6 +33,8 @@ from .publishing import CameraMessages, occupancy_msg, tf_tree
 from .worlds import SimSetup
 
 log = logging.getLogger("emos.sim")
+# Problems that repeat every tick (lag, bad commands): the first at once, then counted per 10 s.
+_limited = RateLimitedLog(log, interval=10.0)
 
 WAIT_SLICE_S = 0.25  # lockstep: republish the tick this often while waiting (late joiners)
 WARN_AFTER_S = 5.0  # lockstep: say who we wait for after this long, then every WARN_AFTER_S
@@ -132,7 +137,7 @@ class PhysicsLoop(threading.Thread):
                 for sensor, reading in world.step():
                     self._send_reading(sensor, reading)
                 if "ground_truth" in self.outputs and self.setup.robot is not None:
-                    self._send("ground_truth", self._ground_truth())
+                    self._send("ground_truth", self._ground_truth(self.setup.robot))
                 if not self.lockstep and cfg.clock_mode is ClockMode.REALTIME:
                     target = wall_start + (world.clock.ticks - start_ticks) * dt / cfg.real_time_factor
                     delay = target - time.monotonic()
@@ -142,20 +147,19 @@ class PhysicsLoop(threading.Thread):
                         # A real world does not run faster to catch up after a stall: re-anchor.
                         wall_start -= delay
                         self.lag_resets += 1
-                        if self.lag_resets in (1, 10, 100) or self.lag_resets % 1000 == 0:
-                            log.warning("[%s] realtime: %.2f s behind the wall clock (#%d); simulated time slowed "
-                                        "down instead of racing to catch up", self.component_name, -delay, self.lag_resets)
+                        _limited.warning(f"lag:{self.component_name}", "[%s] realtime: %.2f s behind the wall clock (#%d); simulated "
+                                         "time slowed down instead of racing to catch up", self.component_name, -delay, self.lag_resets)
             self._send_clock()
 
     def _send(self, key: str, msg: Any) -> None:
         self._publish(key, msg)
         self.published[key] = self.published.get(key, 0) + 1
 
-    def _ground_truth(self) -> Any:
+    def _ground_truth(self, robot: SimRobot) -> Any:
         from ..msgs import odometry_to_msg
         from ..sensors.odometry import OdometryReading
 
-        robot, frames = self.setup.robot, self.cfg.frames
+        frames = self.cfg.frames
         (x, y, yaw), (vx, vy, w) = (float(v) for v in robot.pose), (float(v) for v in robot.twist)
         return odometry_to_msg(OdometryReading(self.sim_time, frames.world, frames.robot_base, x, y, yaw, vx, vy, w))
 
@@ -170,6 +174,7 @@ class PhysicsLoop(threading.Thread):
             if "odom" in self.outputs:
                 self._send("odom", reading.to_msg())
             if "tf" in self.outputs:
+                assert setup.robot is not None  # odometry is measured on the robot, so there is one
                 self._send("tf", tf_tree(frames, reading, setup.robot.pose, setup.lidar, setup.camera))
         elif isinstance(sensor, Lidar):
             self._send("scan", reading.to_msg())
@@ -211,12 +216,13 @@ class PhysicsLoop(threading.Thread):
             self.follower.receive(msg, self.sim_time)
         except (ValueError, TypeError) as exc:
             self.follower.stop()
+            assert self._command_sub is not None  # commands arrive only through it
             self._reject(self._command_sub.topic, exc)
 
     def _reject(self, topic: str, exc: Exception) -> None:
         self._bad_commands += 1
-        if self._bad_commands in (1, 10, 100) or self._bad_commands % 1000 == 0:
-            log.error("[%s] rejected command #%d on %s: %s", self.component_name, self._bad_commands, topic, exc)
+        _limited.error(f"command:{self.component_name}:{topic}", "[%s] rejected command #%d on %s: %s", self.component_name,
+                       self._bad_commands, topic, exc)
 
     def _wait_for_answers(self) -> bool:
         """Lockstep: block until every consumer answered the current tick; False when stopping."""

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from emos.geometry import quaternion_of_yaw
 from emos import msgs as M
+from emos.geometry import quaternion_of_yaw
 
 from ..msgs import camera_to_msgs, header
 from ..sensors.camera import Camera, CameraReading
@@ -60,7 +60,8 @@ def camera_mount(camera: Camera) -> tuple[tuple[float, float, float], tuple[floa
     forward = np.array([math.cos(heading) * math.cos(pitch), math.sin(heading) * math.cos(pitch), -math.sin(pitch)])
     right = np.array([math.sin(heading), -math.cos(heading), 0.0])
     down = np.cross(forward, right)
-    return tuple(float(v) for v in cfg.mount_xyz), quaternion_from_matrix(np.c_[right, down, forward])  # type: ignore[return-value]
+    mx, my, mz = (float(v) for v in cfg.mount_xyz)
+    return (mx, my, mz), quaternion_from_matrix(np.c_[right, down, forward])
 
 
 def tf_tree(frames: Any, odom: OdometryReading, true_pose: np.ndarray, lidar: Lidar | None,
@@ -74,7 +75,8 @@ def tf_tree(frames: Any, odom: OdometryReading, true_pose: np.ndarray, lidar: Li
     stamp = odom.stamp
     out = []
     if frames.world != frames.odom:
-        correction = _compose(tuple(float(v) for v in true_pose), _inverse((odom.x, odom.y, odom.yaw)))
+        tx, ty, tyaw = (float(v) for v in true_pose)
+        correction = _compose((tx, ty, tyaw), _inverse((odom.x, odom.y, odom.yaw)))
         out.append(transform(stamp, frames.world, frames.odom, (correction[0], correction[1], 0.0), quaternion_of_yaw(correction[2])))
     out.append(transform(stamp, frames.odom, frames.robot_base, (odom.x, odom.y, 0.0), quaternion_of_yaw(odom.yaw)))
     if lidar is not None:

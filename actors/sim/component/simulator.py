@@ -41,7 +41,8 @@ and the arm holds its last joint targets (a position-controlled arm's safe behav
 """
 from __future__ import annotations
 
-from typing import Any, ClassVar, Mapping
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 from emos.core.keyed import AllowedTopic, KeyedComponent
 from emos.io.topic import Topic
@@ -80,12 +81,14 @@ class Simulator(KeyedComponent):
     }
 
     def __init__(self, component_name: str, config: SimulatorConfig | None = None, **kwargs: Any) -> None:
-        if config is not None and not isinstance(config, SimulatorConfig):
-            raise TypeError(f"component {component_name!r}: Simulator config must be a SimulatorConfig, got {type(config).__name__}")
-        self.config: SimulatorConfig = config or SimulatorConfig()
-        super().__init__(component_name, config=self.config, **kwargs)
+        super().__init__(component_name, config=config, **kwargs)
+        self.config: SimulatorConfig
         self.setup: SimSetup | None = None
         self.physics: PhysicsLoop | None = None
+
+    @classmethod
+    def config_class(cls) -> type[SimulatorConfig]:
+        return SimulatorConfig
 
     # -- lifecycle -------------------------------------------------------------------------------
     def custom_on_configure(self) -> None:
@@ -116,7 +119,7 @@ class Simulator(KeyedComponent):
     def custom_on_activate(self) -> None:
         assert self.setup is not None, "configure builds the world before activate"
         wanted = self._wanted_outputs()
-        topics = {key: self.get_out_topic(key) for key in wanted}
+        topics = {key: topic for key in wanted if (topic := self.get_out_topic(key)) is not None}  # all: wanted ones have a topic
         inputs = {key: self.get_in_topic(key) for key in self.allowed_inputs}
         map_grid = self._map_grid() if "map" in wanted else None
 
@@ -142,7 +145,7 @@ class Simulator(KeyedComponent):
         self._close_world()
         return True
 
-    def _execution_step(self) -> None:
+    def _execution_step(self, **kwargs: Any) -> None:
         physics = self.physics
         if physics is None:
             self.health_status.set_healthy()

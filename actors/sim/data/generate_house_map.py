@@ -10,8 +10,12 @@ The map covers x in [-0.5, 10.5] and y in [-0.5, 8.5] m at 0.05 m per cell: the 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from emos.actors.nav.maps import OccupancyGridMap
 
 RESOLUTION = 0.05
 ORIGIN = (-0.5, -0.5, 0.0)
@@ -19,7 +23,7 @@ SIZE = (180, 220)  # rows (y), cols (x)
 HOUSE_EXTENT = (0.0, 0.0, 10.0, 8.0)  # inside of the outer walls' centre lines
 
 
-def house_grid() -> "object":
+def house_grid() -> OccupancyGridMap:
     """The house as an ``OccupancyGridMap`` (0 free, 100 occupied, -1 outside the house)."""
     from emos.actors.nav.maps import OccupancyGridMap
 

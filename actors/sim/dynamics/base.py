@@ -26,7 +26,7 @@ class DriveModel:
     name: str = "drive"
     command_timeout: float | None = None
 
-    def bind(self, spec: "RobotSpec", rng: np.random.Generator) -> None:
+    def bind(self, spec: RobotSpec, rng: np.random.Generator) -> None:
         """Attach to a robot; ``rng`` is the robot's seeded stream (per-episode draws come from it)."""
         self.spec, self.rng = spec, rng
 

@@ -23,27 +23,20 @@ Calibration (tests/sim/test_sim_dynamics.py): against the pybullet wheeled Jacka
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import attrs
 import numpy as np
 
-from ..robots import accelerate
+from emos.config import validators as V
+
+from ..robots import RobotSpec, accelerate
 from .base import DriveModel
 
 
-def _positive(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"SkidSteerParams.{attribute.name} must be a finite number > 0, got {value!r}")
-
-
-def _unit_interval(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and 0 <= value < 1):
-        raise ValueError(f"SkidSteerParams.{attribute.name} must be in [0, 1), got {value!r}")
-
-
-def _gain_range(value: object) -> tuple[float, float]:
+def _gain_range(value: Any) -> tuple[float, float]:
     try:
-        low, high = (float(v) for v in value)  # type: ignore[attr-defined]
+        low, high = (float(v) for v in value)
     except (TypeError, ValueError):
         raise ValueError(f"SkidSteerParams.yaw_gain_range must be (low, high), got {value!r}") from None
     if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high <= 2):
@@ -55,20 +48,20 @@ def _gain_range(value: object) -> tuple[float, float]:
 class SkidSteerParams:
     """Parameters of :class:`SkidSteerDrive` (SI units); the defaults are the Jackal's."""
 
-    friction: float = attrs.field(default=0.5, converter=float, validator=_positive)
-    gravity: float = attrs.field(default=9.81, converter=float, validator=_positive)
-    max_lateral_acc: float = attrs.field(default=3.6, converter=float, validator=_positive)
+    friction: float = attrs.field(default=0.5, converter=float, validator=V.finite_positive)
+    gravity: float = attrs.field(default=9.81, converter=float, validator=V.finite_positive)
+    max_lateral_acc: float = attrs.field(default=3.6, converter=float, validator=V.finite_positive)
     """v * omega saturates here (measured 3.57 m/s^2 on the wheeled model, ~3.8 reported)."""
-    lag: float = attrs.field(default=0.04, converter=float, validator=_positive)
+    lag: float = attrs.field(default=0.04, converter=float, validator=V.finite_positive)
     """Time constant (s) of the wheel speeds behind the controller's output."""
-    yaw_lag: float = attrs.field(default=0.4, converter=float, validator=_positive)
+    yaw_lag: float = attrs.field(default=0.4, converter=float, validator=V.finite_positive)
     """Time constant (s) of the body's yaw rate behind the wheels: the scrubbing wheels must
     break their sideways grip before the body turns (the wheeled model needs ~1 s to reach a
     2 rad/s turn from straight driving)."""
     yaw_gain_range: tuple[float, float] = attrs.field(default=(0.6, 1.0), converter=_gain_range)
-    turn_speed_loss: float = attrs.field(default=0.07, converter=float, validator=_unit_interval)
+    turn_speed_loss: float = attrs.field(default=0.07, converter=float, validator=V.number(ge=0, lt=1, finite=True))
     """Fraction of forward speed lost per rad/s of commanded yaw rate (scrubbing wheels)."""
-    command_timeout: float = attrs.field(default=0.25, converter=float, validator=_positive)
+    command_timeout: float = attrs.field(default=0.25, converter=float, validator=V.finite_positive)
 
     @property
     def max_longitudinal_acc(self) -> float:
@@ -91,7 +84,7 @@ class SkidSteerDrive(DriveModel):
         self._wheels = np.zeros(3)
         self._body = np.zeros(3)
 
-    def bind(self, spec, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]
+    def bind(self, spec: RobotSpec, rng: np.random.Generator) -> None:
         super().bind(spec, rng)
         if spec.drive.value != "differential":
             raise ValueError(f"SkidSteerDrive models a differential (skid-steer) base; robot {spec.name!r} "

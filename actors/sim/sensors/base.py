@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,16 +26,23 @@ class Sensor:
 
     rate_hz: float = 10.0
 
-    def __init__(self, robot: "SimRobot", name: str) -> None:
+    def __init__(self, robot: SimRobot, name: str) -> None:
         self.robot = robot
         self.name = name
         self.latest: Any = None
-        self.world: "World | None" = None
+        self.world: World | None = None
         self.rng = np.random.default_rng(0)
         self._callbacks: list[Callable[[Any], None]] = []
 
-    def bind(self, world: "World", rng: np.random.Generator) -> None:
+    def bind(self, world: World, rng: np.random.Generator) -> None:
         self.world, self.rng = world, rng
+
+    @property
+    def bound_world(self) -> World:
+        """The world the sensor is in (``World.add_sensor`` binds it before any tick or read)."""
+        if self.world is None:
+            raise RuntimeError(f"sensor {self.name!r} is in no world yet: World.add_sensor binds it")
+        return self.world
 
     def subscribe(self, callback: Callable[[Any], None]) -> None:
         self._callbacks.append(callback)

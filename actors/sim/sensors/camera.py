@@ -7,28 +7,25 @@ from typing import TYPE_CHECKING, Any
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from .. import _deps
-from .base import Sensor, check_rate
+from .base import Sensor
 
 if TYPE_CHECKING:
     from ..body import SimRobot
-
-
-def _pos_int(instance: object, attribute: attrs.Attribute, value: int) -> None:
-    if value < 1:
-        raise ValueError(f"CameraConfig.{attribute.name} must be >= 1, got {value!r}")
 
 
 @attrs.define(frozen=True)
 class CameraConfig:
     """Pinhole camera. ``vfov_deg`` is the vertical field of view; pixels are square."""
 
-    width: int = attrs.field(default=320, converter=int, validator=_pos_int)
-    height: int = attrs.field(default=240, converter=int, validator=_pos_int)
-    vfov_deg: float = attrs.field(default=60.0, converter=float)
+    width: int = attrs.field(default=320, converter=int, validator=V.int_at_least(1))
+    height: int = attrs.field(default=240, converter=int, validator=V.int_at_least(1))
+    vfov_deg: float = attrs.field(default=60.0, converter=float, validator=V.number(ge=1, lt=179))
     near: float = attrs.field(default=0.05, converter=float)
     far: float = attrs.field(default=20.0, converter=float)
-    rate_hz: float = attrs.field(default=10.0, converter=float)
+    rate_hz: float = attrs.field(default=10.0, converter=float, validator=V.finite_positive)
     # Mount in the base frame: position (m) and yaw / pitch (rad, pitch > 0 looks down).
     mount_xyz: tuple[float, float, float] = attrs.field(default=(0.2, 0.0, 0.4), converter=lambda v: tuple(float(x) for x in v))
     mount_yaw: float = attrs.field(default=0.0, converter=float)
@@ -36,13 +33,10 @@ class CameraConfig:
     frame_id: str = "camera_optical"
 
     def __attrs_post_init__(self) -> None:
-        if not 1.0 <= self.vfov_deg < 179.0:
-            raise ValueError(f"CameraConfig.vfov_deg must be in [1, 179), got {self.vfov_deg!r}")
         if not 0 < self.near < self.far:
             raise ValueError(f"CameraConfig needs 0 < near < far, got near={self.near!r}, far={self.far!r}")
         if abs(self.mount_pitch) >= math.pi / 2:
             raise ValueError(f"CameraConfig.mount_pitch must be within (-pi/2, pi/2), got {self.mount_pitch!r}")
-        check_rate("CameraConfig", self.rate_hz)
 
     def intrinsics(self) -> np.ndarray:
         """K (3x3) in ROS pixel convention: pixel (0, 0) is the centre of the top-left pixel."""
@@ -98,7 +92,7 @@ def depth_to_points(depth: np.ndarray, k: np.ndarray, stride: int = 1,
 
 
 class Camera(Sensor):
-    def __init__(self, robot: "SimRobot", config: CameraConfig | None = None, name: str = "camera") -> None:
+    def __init__(self, robot: SimRobot, config: CameraConfig | None = None, name: str = "camera") -> None:
         super().__init__(robot, name)
         self.config = config or CameraConfig()
         self.rate_hz = self.config.rate_hz
@@ -118,7 +112,7 @@ class Camera(Sensor):
 
     def read(self, stamp: float) -> CameraReading:
         cfg, pb = self.config, _deps.pybullet()
-        client = self.world.client  # type: ignore[union-attr]
+        client = self.bound_world.client
         if self._projection is None:
             self._projection = cfg.projection_matrix()
         position, rotation = self.pose()

@@ -23,7 +23,7 @@ class ContactReading:
 
 
 class ContactSensor(Sensor):
-    def __init__(self, robot: "SimRobot", rate_hz: float = 50.0, name: str = "contacts") -> None:
+    def __init__(self, robot: SimRobot, rate_hz: float = 50.0, name: str = "contacts") -> None:
         super().__init__(robot, name)
         self.rate_hz = check_rate("ContactSensor", rate_hz)
         self._pending: list[Contact] = []

@@ -7,27 +7,24 @@ from typing import TYPE_CHECKING, Any
 import attrs
 import numpy as np
 
-from .base import Sensor, check_rate
+from emos.config import validators as V
+
+from .base import Sensor
 
 if TYPE_CHECKING:
     from ..body import SimRobot
-
-
-def _finite_pos(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"LidarConfig.{attribute.name} must be a finite number > 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
 class LidarConfig:
     """Defaults model BARN's Hokuyo UST-10LX: 270 deg, 0.25 deg steps, 10 m range."""
 
-    fov_deg: float = attrs.field(default=270.0, converter=float, validator=_finite_pos)
-    beams: int = attrs.field(default=1081, converter=int)
-    range_min: float = attrs.field(default=0.06, converter=float, validator=_finite_pos)
-    range_max: float = attrs.field(default=10.0, converter=float, validator=_finite_pos)
-    noise_std: float = attrs.field(default=0.0, converter=float)
-    rate_hz: float = attrs.field(default=20.0, converter=float)
+    fov_deg: float = attrs.field(default=270.0, converter=float, validator=V.number(gt=0, le=360))
+    beams: int = attrs.field(default=1081, converter=int, validator=V.int_at_least(2))
+    range_min: float = attrs.field(default=0.06, converter=float, validator=V.finite_positive)
+    range_max: float = attrs.field(default=10.0, converter=float, validator=V.finite_positive)
+    noise_std: float = attrs.field(default=0.0, converter=float, validator=V.finite_non_negative)
+    rate_hz: float = attrs.field(default=20.0, converter=float, validator=V.finite_positive)
     # Mount on the robot: x, y (m) in the base frame, z (m; None = the robot's lidar height), yaw.
     mount_xy: tuple[float, float] = attrs.field(default=(0.0, 0.0), converter=lambda v: (float(v[0]), float(v[1])))
     mount_z: float | None = None
@@ -35,15 +32,8 @@ class LidarConfig:
     frame_id: str = "laser"
 
     def __attrs_post_init__(self) -> None:
-        if not 0 < self.fov_deg <= 360:
-            raise ValueError(f"LidarConfig.fov_deg must be in (0, 360], got {self.fov_deg!r}")
-        if self.beams < 2:
-            raise ValueError(f"LidarConfig.beams must be >= 2, got {self.beams!r}")
         if self.range_min >= self.range_max:
             raise ValueError(f"LidarConfig.range_min ({self.range_min}) must be < range_max ({self.range_max})")
-        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
-            raise ValueError(f"LidarConfig.noise_std must be >= 0, got {self.noise_std!r}")
-        check_rate("LidarConfig", self.rate_hz)
 
     @property
     def angle_min(self) -> float:
@@ -99,7 +89,7 @@ class ScanReading:
 
 
 class Lidar(Sensor):
-    def __init__(self, robot: "SimRobot", config: LidarConfig | None = None, name: str = "lidar") -> None:
+    def __init__(self, robot: SimRobot, config: LidarConfig | None = None, name: str = "lidar") -> None:
         super().__init__(robot, name)
         self.config = config or LidarConfig()
         self.rate_hz = self.config.rate_hz
@@ -115,7 +105,8 @@ class Lidar(Sensor):
     def _reach(self, sx: float, sy: float, d: np.ndarray) -> np.ndarray:
         """Each ray's length: the range, or less where it leaves everything it could hit."""
         cfg = self.config
-        bounds = self.world.ray_bounds() if hasattr(self.world, "ray_bounds") else None  # type: ignore[union-attr]
+        world = self.bound_world
+        bounds = world.ray_bounds() if hasattr(world, "ray_bounds") else None
         full = np.full(len(d), cfg.range_max)
         if bounds is None:
             return full
@@ -140,7 +131,7 @@ class Lidar(Sensor):
         start[:, :2] = (sx, sy) + d * cfg.range_min
         end[:, :2] = (sx, sy) + d * reach[:, None]
         start[:, 2] = end[:, 2] = self._z
-        client = self.world.client  # type: ignore[union-attr]
+        client = self.bound_world.client
         # numpy arrays go straight in (no tolist); zip(*) splits the result columns in C.
         results = client.rayTestBatch(start, end, numThreads=1)
         ids, _, fractions, _, _ = zip(*results)

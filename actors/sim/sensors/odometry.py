@@ -1,22 +1,18 @@
 """Odometry: ground truth, or wheel odometry with noise that drifts like the real thing."""
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from ..robots import integrate
-from .base import Sensor, check_rate
+from .base import Sensor
 
 if TYPE_CHECKING:
     from ..body import SimRobot
-
-
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"OdometryConfig.{attribute.name} must be >= 0, got {value!r}")
 
 
 @attrs.define(frozen=True)
@@ -24,15 +20,12 @@ class OdometryConfig:
     """``noisy=False`` reports the true pose and twist. ``noisy=True`` integrates the wheel
     twist (which ignores slip) with relative Gaussian errors per reading, so the pose drifts."""
 
-    rate_hz: float = attrs.field(default=50.0, converter=float)
+    rate_hz: float = attrs.field(default=50.0, converter=float, validator=V.finite_positive)
     noisy: bool = False
-    linear_noise: float = attrs.field(default=0.02, converter=float, validator=_nonneg)
-    angular_noise: float = attrs.field(default=0.03, converter=float, validator=_nonneg)
+    linear_noise: float = attrs.field(default=0.02, converter=float, validator=V.finite_non_negative)
+    angular_noise: float = attrs.field(default=0.03, converter=float, validator=V.finite_non_negative)
     frame_id: str = "odom"
     child_frame_id: str = "base_link"
-
-    def __attrs_post_init__(self) -> None:
-        check_rate("OdometryConfig", self.rate_hz)
 
 
 @attrs.define(frozen=True, eq=False)
@@ -62,7 +55,7 @@ class OdometryReading:
 
 
 class Odometry(Sensor):
-    def __init__(self, robot: "SimRobot", config: OdometryConfig | None = None, name: str = "odom") -> None:
+    def __init__(self, robot: SimRobot, config: OdometryConfig | None = None, name: str = "odom") -> None:
         super().__init__(robot, name)
         self.config = config or OdometryConfig()
         self.rate_hz = self.config.rate_hz

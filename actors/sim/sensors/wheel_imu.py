@@ -13,14 +13,15 @@ are :class:`OdometryReading`, so everything that takes odometry takes it.
 """
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from ..robots import integrate
-from .base import Sensor, check_rate
+from .base import Sensor
 from .odometry import OdometryReading
 
 if TYPE_CHECKING:
@@ -28,33 +29,25 @@ if TYPE_CHECKING:
     from ..world import World
 
 
-def _nonneg(instance: object, attribute: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"WheelImuOdometryConfig.{attribute.name} must be a finite number >= 0, got {value!r}")
-
-
 @attrs.define(frozen=True)
 class WheelImuOdometryConfig:
-    rate_hz: float = attrs.field(default=50.0, converter=float)
-    wheel_scale_std: float = attrs.field(default=0.01, converter=float, validator=_nonneg)
+    rate_hz: float = attrs.field(default=50.0, converter=float, validator=V.finite_positive)
+    wheel_scale_std: float = attrs.field(default=0.01, converter=float, validator=V.finite_non_negative)
     """Relative error of the wheel radius, drawn once per episode (tyre wear, load)."""
-    wheel_noise: float = attrs.field(default=0.02, converter=float, validator=_nonneg)
+    wheel_noise: float = attrs.field(default=0.02, converter=float, validator=V.finite_non_negative)
     """Relative standard deviation of the per-tick wheel-speed error."""
-    gyro_bias_std: float = attrs.field(default=0.005, converter=float, validator=_nonneg)
+    gyro_bias_std: float = attrs.field(default=0.005, converter=float, validator=V.finite_non_negative)
     """rad/s; the bias is drawn once per episode (a MEMS gyro after its start-up calibration)."""
-    gyro_noise: float = attrs.field(default=0.02, converter=float, validator=_nonneg)
+    gyro_noise: float = attrs.field(default=0.02, converter=float, validator=V.finite_non_negative)
     """rad/s, standard deviation of each tick's gyro reading error."""
     frame_id: str = "odom"
     child_frame_id: str = "base_link"
-
-    def __attrs_post_init__(self) -> None:
-        check_rate("WheelImuOdometryConfig", self.rate_hz)
 
 
 class WheelImuOdometry(Sensor):
     """Odometry from wheel encoders and a gyro (see the module docstring)."""
 
-    def __init__(self, robot: "SimRobot", config: WheelImuOdometryConfig | None = None, name: str = "odom") -> None:
+    def __init__(self, robot: SimRobot, config: WheelImuOdometryConfig | None = None, name: str = "odom") -> None:
         super().__init__(robot, name)
         self.config = config or WheelImuOdometryConfig()
         self.rate_hz = self.config.rate_hz
@@ -63,7 +56,7 @@ class WheelImuOdometry(Sensor):
         self.wheel_scale = 1.0
         self.gyro_bias = 0.0
 
-    def bind(self, world: "World", rng: np.random.Generator) -> None:
+    def bind(self, world: World, rng: np.random.Generator) -> None:
         super().bind(world, rng)
         self._draw()
 
@@ -80,7 +73,7 @@ class WheelImuOdometry(Sensor):
 
     def on_tick(self, stamp: float) -> None:
         cfg, robot = self.config, self.robot
-        dt = self.world.clock.dt  # type: ignore[union-attr]
+        dt = self.bound_world.clock.dt
         wheel_v = float(robot.wheel_twist[0])
         v = wheel_v * self.wheel_scale * (1.0 + cfg.wheel_noise * float(self.rng.standard_normal()))
         omega = float(robot.twist[2]) + self.gyro_bias + cfg.gyro_noise * float(self.rng.standard_normal())

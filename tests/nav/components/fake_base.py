@@ -50,7 +50,6 @@ class FakeBase(BaseComponent):
 
     def custom_on_activate(self) -> None:
         self.pose = np.array(self.start, dtype=float)
-        self.angles = -0.5 * self.fov + np.arange(360) * (self.fov / 360)
 
     def _execution_step(self) -> None:
         dt = 1.0 / self.config.loop_rate
@@ -60,19 +59,28 @@ class FakeBase(BaseComponent):
             v, w = cmd.linear.x, cmd.angular.z
         x, y, th = self.pose
         self.pose = np.array([x + v * math.cos(th) * dt, y + v * math.sin(th) * dt, th + w * dt])
+        odom, scan = base_messages(self.pose, v, w, self.fov)
         freeze = os.environ.get("FAKE_BASE_FREEZE_ODOM")
         if not (freeze and os.path.exists(freeze)):
-            odom = M.Odometry()
-            odom.header.frame_id = "map"
-            odom.pose.pose.position.x, odom.pose.pose.position.y = float(self.pose[0]), float(self.pose[1])
-            odom.pose.pose.orientation = M.Quaternion.from_yaw(float(self.pose[2]))
-            odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
             self.publish("/odom", odom)
-        r = ray_boxes(self.pose[0], self.pose[1], self.angles + self.pose[2], [ROOM] + BOXES)
-        scan = M.LaserScan(angle_min=-0.5 * self.fov, angle_max=0.5 * self.fov - self.fov / 360, angle_increment=self.fov / 360,
-                           range_min=0.05, range_max=10.0, ranges=r.astype(np.float32))
         self.publish("/scan", scan)
         self.health_status.set_healthy()
+
+
+def base_messages(pose, v: float, w: float, fov: float, boxes=BOXES) -> tuple[M.Odometry, M.LaserScan]:
+    """What the base at ``pose`` (x, y, yaw), moving at ``v`` m/s and ``w`` rad/s, publishes:
+    odometry in the map frame, and a 360-beam scan of the room and ``boxes`` over ``fov`` (rad)
+    centred ahead."""
+    odom = M.Odometry()
+    odom.header.frame_id = "map"
+    odom.pose.pose.position.x, odom.pose.pose.position.y = float(pose[0]), float(pose[1])
+    odom.pose.pose.orientation = M.Quaternion.from_yaw(float(pose[2]))
+    odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
+    angles = -0.5 * fov + np.arange(360) * (fov / 360)
+    r = ray_boxes(pose[0], pose[1], angles + pose[2], [ROOM, *boxes])
+    scan = M.LaserScan(angle_min=-0.5 * fov, angle_max=0.5 * fov - fov / 360, angle_increment=fov / 360,
+                       range_min=0.05, range_max=10.0, ranges=r.astype(np.float32))
+    return odom, scan
 
 
 def write_room_map(path) -> str:

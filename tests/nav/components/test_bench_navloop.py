@@ -4,13 +4,14 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+
 import pytest
 
 pytestmark = pytest.mark.process
 
 
 def test_navloop_json_shape_and_matched_commands():
-    out = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "navloop", "--duration", "3", "--warmup", "1.5", "--json"],
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "bench", "navloop", "--duration", "3", "--warmup", "1.5", "--json"],
                          capture_output=True, text=True, timeout=150)
     assert out.returncode == 0, out.stderr[-3000:]
     data = json.loads(out.stdout)
@@ -22,6 +23,6 @@ def test_navloop_json_shape_and_matched_commands():
 
 
 def test_navloop_rejects_an_unknown_algorithm():
-    out = subprocess.run([sys.executable, "-m", "emos.supervisor.cli", "bench", "navloop", "--algorithm", "MPC", "--json"],
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "bench", "navloop", "--algorithm", "MPC", "--json"],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode != 0 and "MPC" in out.stderr

@@ -11,9 +11,10 @@ import math
 import re
 import time
 
+import pytest
+
 from emos import msgs as M
 from tests.runtime.helpers import REPO, SystemUnderTest
-import pytest
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -147,7 +148,7 @@ def test_external_reflexes_person_switches_the_controller_to_following(tmp_path)
         before = [(x, y) for t, x, y, _ in run.stamped if t < seen[0]]
         assert before and max(math.dist(p, spawn[:2]) for p in before) < 0.02  # idle until the person appeared
         assert found is not None, f"the robot never turned to the person\n{run.system.output()[-3000:]}"
-        print("aligned at t=%.1f: robot (%.2f, %.2f, yaw %.2f), bearing error %.2f (unmoved: %.2f)" % found)
+        print("aligned at t={:.1f}: robot ({:.2f}, {:.2f}, yaw {:.2f}), bearing error {:.2f} (unmoved: {:.2f})".format(*found))
     finally:
         detections.close()
         run.close()

@@ -7,12 +7,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.agents.components_helpers import Probe
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
-import pytest
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -111,7 +111,7 @@ launcher.bringup()
             assert math.dist(plan_end(), expected) < 0.05  # still planning to the good goal
         out = system.output()
         assert f"[planner] goal_point {GOAL_TOPIC} (Detections): the message carries no depth image" in out
-        assert f"[planner] no CameraInfo received yet" not in out  # the topic is named first:
+        assert "[planner] no CameraInfo received yet" not in out  # the topic is named first:
         assert f"[planner] depth_camera_info {INFO_TOPIC}: no CameraInfo received yet" in out
     finally:
         probe.close()

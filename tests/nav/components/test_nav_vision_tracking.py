@@ -6,11 +6,11 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from emos import msgs as M
 from emos.core.health import HealthLevel
 from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
-import pytest
 
 pytestmark = pytest.mark.process
 
@@ -68,9 +68,9 @@ def test_track_vision_target_turns_to_the_target_and_fails_when_it_is_lost(tmp_p
         visible.clear()  # the person leaves the image
         second.join(30)
         assert "r2" in result and not result["r2"].success and "lost" in result["r2"].message
-        wait_until(lambda: any(s.status == HealthLevel.ALGORITHM_FAILURE and "lost" in s.message for s in status.take()), 5,
+        wait_until(lambda: any(s.status == HealthLevel.ALGORITHM_FAILURE and "lost" in s.message for s in status.take()), 30,
                    what="ALGORITHM failure naming the lost target")
-        last = wait_until(lambda: next(iter(cmd.take()[-1:]), None), 5, what="a final command")
+        last = wait_until(lambda: next(iter(cmd.take()[-1:]), None), 30, what="a final command")
         assert last.linear.x == 0.0 and last.angular.z == 0.0
     finally:
         stop.set()

@@ -6,8 +6,9 @@ import os
 import subprocess
 import sys
 
-from tests.runtime.helpers import REPO
 import pytest
+
+from tests.runtime.helpers import REPO
 
 pytestmark = pytest.mark.process
 

@@ -41,7 +41,9 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
         odom = Subscriber(system.ctx, "/odom", M.Odometry, queue_size=1000)
         dets = Subscriber(system.ctx, detections, M.Detections, queue_size=100)
         samples, seen, t_first = [], 0, None
-        wall_deadline = time.monotonic() + 40
+        # The loop ends after FOLLOW_S simulated seconds; the wall deadline only bounds a hang (a
+        # loaded machine runs the simulation at a fraction of real time).
+        wall_deadline = time.monotonic() + 300
         while time.monotonic() < wall_deadline:
             time.sleep(0.2)
             seen += sum("person" in list(d.labels) for d in dets.take())
@@ -86,7 +88,7 @@ def test_robot_turns_with_the_walking_person_and_keeps_its_distance(tmp_path, re
     assert r["yaw"].max() - r["yaw"].min() > swing, info  # ... but the robot turned both ways with it,
     assert r["err"].max() < 0.35, info  # kept it well inside the view (half width ~0.66 rad),
     assert r["err"].mean() < 0.7 * r["static"].mean(), info  # nearer the centre than standing still would
-    assert 1.0 < r["dist"].min() and r["dist"].max() < 3.5, info  # and at a bounded distance
+    assert r["dist"].min() > 1.0 and r["dist"].max() < 3.5, info  # and at a bounded distance
     assert "lost" not in r["log"], info  # the tracking action never gave up
 
 

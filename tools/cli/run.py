@@ -1,0 +1,96 @@
+"""``emos run RECIPE.py``: execute a recipe as ``__main__`` under the supervisor."""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import runpy
+import sys
+
+EXIT_NO_BRINGUP = 5  # the supervisor's own codes: 3 gave up, 4 a component failed to start
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number of seconds > 0, got {text!r}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recipe", help="recipe name (see `emos ls`) or path of the recipe script")
+    parser.add_argument("--duration", type=_seconds, default=None, help="stop by itself after this many seconds")
+    parser.add_argument("--no-log", action="store_true", help="do not keep a copy of the output in ~/emos/logs")
+    parser.add_argument("--zenoh", metavar="CONFIG", default=None,
+                        help="Zenoh configuration file (mode, endpoints, TLS, access control) to reach other hosts; "
+                             "without one, Zenoh stays on this host's loopback")
+    parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
+    parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
+    parser.add_argument("--net-control", action="store_true",
+                        help="with --zenoh: let the Monitors of other runs in the group act on this run's components "
+                             "(methods, parameters, start/stop/restart, their services and goals)")
+    parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
+
+
+def run(args: argparse.Namespace) -> int:
+    from emos.supervisor.recipes import RecipeNotFound, resolve_recipe
+
+    try:
+        path = resolve_recipe(args.recipe)
+    except RecipeNotFound as exc:
+        print(f"emos run: {exc}", file=sys.stderr)
+        return 2
+    if not args.no_log:
+        from emos.supervisor.runlog import start_run_log
+
+        start_run_log(path, sys.argv[1:])
+    import emos.launcher as launcher_mod
+
+    launcher_mod._RUN_DURATION = args.duration
+    os.environ["EMOS_RUN_CLI"] = "1"
+    problem = _network_options(args)
+    if problem:
+        print(f"emos run: {problem}", file=sys.stderr)
+        return 2
+    sys.argv = [str(path), *args.args]
+    sys.path.insert(0, str(path.resolve().parent))
+    launcher_mod.Launcher.last_exit_code = None
+    runpy.run_path(str(path), run_name="__main__")
+    code = launcher_mod.Launcher.last_exit_code
+    if code is None:
+        # A recipe that only defines components ran nothing: say so rather than succeed.
+        print(f"emos run: {path} finished without bringing anything up: it never called Launcher.bringup()", file=sys.stderr)
+        return EXIT_NO_BRINGUP
+    return code
+
+
+def _network_options(args: argparse.Namespace) -> str | None:
+    """Export ``--zenoh`` / ``--net-topics`` to the run (components inherit the environment)."""
+    from emos.transport.select import ENV_NET_TOPICS, net_topics_option
+    from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
+
+    if args.zenoh is not None:
+        path = os.path.abspath(args.zenoh)
+        if not os.path.isfile(path):
+            return f"--zenoh {args.zenoh!r}: no such Zenoh configuration file"
+        os.environ[ENV_ZENOH_CONFIG] = path
+    if args.net_control:
+        if args.zenoh is None and not os.environ.get(ENV_ZENOH_CONFIG):
+            return "--net-control serves this run's components over Zenoh: give --zenoh CONFIG too"
+        from emos.transport.zenoh_control import ENV_NET_CONTROL
+
+        os.environ[ENV_NET_CONTROL] = "on"
+    if args.net_services is not None:
+        from emos.transport.select import ENV_NET_SERVICES
+
+        os.environ[ENV_NET_SERVICES] = args.net_services
+    if args.net_topics is not None:
+        os.environ[ENV_NET_TOPICS] = args.net_topics
+        try:
+            net_topics_option()
+        except ValueError as exc:
+            return f"--net-topics: {exc}"
+    return None
