@@ -163,10 +163,15 @@ class SystemUnderTest:
             return left
         if self.run_dir is not None and self.run_dir.exists():
             left.append(str(self.run_dir))
+        # A zygote and its workers are forks of the launcher: they carry its command line (the
+        # test's own recipe path) but not EMOS_RUN_ID, which the launcher set after it started
+        # (/proc/<pid>/environ shows a process's environment as it was exec'd).
+        script = str(self.script)
         for p in psutil.process_iter(["name"]):
             if p.info["name"] and p.info["name"].startswith("emos:"):
                 try:
-                    if p.environ().get("EMOS_RUN_ID") == self.ctx.run_id and p.status() != psutil.STATUS_ZOMBIE:
+                    ours = script in p.cmdline() or p.environ().get("EMOS_RUN_ID") == self.ctx.run_id
+                    if ours and p.status() != psutil.STATUS_ZOMBIE:
                         left.append(f"process {p.pid} {p.info['name']}")
                 except psutil.Error:
                     pass

@@ -10,7 +10,7 @@ import pytest
 
 from emos.msgs import Image
 from emos.transport.pubsub import Publisher
-from tests.runtime.helpers import LISTENER, SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, LISTENER, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -50,7 +50,7 @@ def test_sigterm_to_topic_echo_removes_its_wakeup_fifo(system):
     # Wait for the FIFO itself (made after its state page): then the echo is past its set-up.
     wait_until(lambda: any(not n.endswith(".state") for n in _fifos(system) - before), what="the echo's FIFO")
     echo.send_signal(signal.SIGTERM)
-    out, err = echo.communicate(timeout=10)
+    out, err = echo.communicate(timeout=HANG_S)
     assert echo.returncode == 143, err
     assert "Traceback" not in err
     assert _fifos(system) == before
@@ -60,7 +60,7 @@ def test_ctrl_c_on_topic_echo_exits_130_without_a_traceback(system):
     echo = _emos("topic", "echo", "/listener/status", "--run", system.run_dir.name)
     wait_until(lambda: echo.stdout.readline().strip() != "", what="a first message")
     echo.send_signal(signal.SIGINT)
-    _, err = echo.communicate(timeout=10)
+    _, err = echo.communicate(timeout=HANG_S)
     assert echo.returncode == 130 and "Traceback" not in err, err
 
 
@@ -82,7 +82,7 @@ def test_sigterm_to_topic_pub_removes_its_ring(system):
     pub = _emos("topic", "pub", "/shared", "String", '{"data": "hi"}', "--rate", "20", "--count", "0", "--run", system.run_dir.name)
     wait_until(lambda: _segments(system, "shared"), what="the CLI's ring")
     pub.send_signal(signal.SIGTERM)
-    _, err = pub.communicate(timeout=10)
+    _, err = pub.communicate(timeout=HANG_S)
     assert pub.returncode == 143 and "Traceback" not in err, err
     assert _segments(system, "shared") == []
 
@@ -98,7 +98,7 @@ def test_topic_pub_refuses_a_type_the_topic_does_not_carry(system):
         assert "/shared carries std_msgs/msg/String" in err and "not std_msgs/msg/Int64" in err
     finally:
         good.terminate()
-        good.communicate(timeout=10)
+        good.communicate(timeout=HANG_S)
 
 
 def test_a_wrong_type_publisher_is_ignored_and_reported_once_with_a_count(system):
@@ -166,7 +166,7 @@ def test_ctrl_c_at_the_terminal_ends_emos_bench_quietly_with_its_helpers(mode):
             bench.wait()
     assert bench.returncode == 130, err
     assert "Traceback" not in err, err
-    wait_until(lambda: _helpers_of(token) == [], timeout=15, what="the benchmark's helpers to end")
+    wait_until(lambda: _helpers_of(token) == [], timeout=HANG_S, what="the benchmark's helpers to end")
 
 
 def test_ctrl_c_ends_serve_models_cleanly():
@@ -189,7 +189,7 @@ def test_sigterm_at_any_moment_of_topic_echo_leaves_nothing(system):
         echo = _emos("topic", "echo", "/listener/status", "--run", system.run_dir.name)
         time.sleep(delay)
         echo.send_signal(signal.SIGTERM)
-        _, err = echo.communicate(timeout=10)
+        _, err = echo.communicate(timeout=HANG_S)
         # -15: the signal came before Python set up its handler (and before any FIFO existed).
         assert echo.returncode in (143, -signal.SIGTERM) and "Traceback" not in err, err
         assert _fifos(system) == before, delay

@@ -13,7 +13,7 @@ import uuid
 import psutil
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -100,11 +100,11 @@ def test_no_daemon_outlives_its_crashed_incarnation_in_a_crash_loop(tmp_path, mo
         daemons = wait_until(lambda: len(_daemons(folder)) >= 5 and _daemons(folder), timeout=60, what="5 incarnations and their daemons")
         # Every incarnation but the newest has ended: each of their daemons must be gone (the
         # newest one's may still run, or be going with its incarnation).
-        wait_until(lambda: not any(_alive(p) for p in daemons[:-1]), timeout=10, what=f"the daemons of ended incarnations {daemons[:-1]} to die")
+        wait_until(lambda: not any(_alive(p) for p in daemons[:-1]), timeout=HANG_S, what=f"the daemons of ended incarnations {daemons[:-1]} to die")
         assert len(_alive_with(marker)) <= 2, _alive_with(marker)
     finally:
         assert system.stop() == 0, system.output()[-3000:]
-    wait_until(lambda: not _alive_with(marker), timeout=10, what="no daemon left after the run")
+    wait_until(lambda: not _alive_with(marker), timeout=HANG_S, what="no daemon left after the run")
     assert system.leftovers() == []
 
 
@@ -121,12 +121,12 @@ def test_the_daemon_of_a_sigkilled_component_dies_and_the_run_leaves_none(tmp_pa
         old = system.pid("spawner")
         os.kill(old, signal.SIGKILL)  # no clean-up in the worker: the supervisor must do it
         system.wait_new_pid("spawner", old, timeout=30)
-        wait_until(lambda: not _alive(first[0]), timeout=10, what="the SIGKILLed incarnation's daemon to die")
+        wait_until(lambda: not _alive(first[0]), timeout=HANG_S, what="the SIGKILLed incarnation's daemon to die")
         second = wait_until(lambda: len(_daemons(folder)) == 2 and _daemons(folder)[1], timeout=30, what="the new incarnation's daemon")
         assert _alive(second) and _alive_with(marker) == [second]
     finally:
         assert system.stop() == 0, system.output()[-3000:]
-    wait_until(lambda: not _alive_with(marker), timeout=10, what="no daemon left after the run")
+    wait_until(lambda: not _alive_with(marker), timeout=HANG_S, what="no daemon left after the run")
     assert system.leftovers() == []
 
 
@@ -137,7 +137,7 @@ def test_the_daemon_of_a_threaded_component_dies_with_the_run(tmp_path):
         assert len(_alive_with(marker)) == 1
     finally:
         assert system.stop() == 0, system.output()[-3000:]
-    wait_until(lambda: not _alive_with(marker), timeout=10, what="no daemon left after the run")
+    wait_until(lambda: not _alive_with(marker), timeout=HANG_S, what="no daemon left after the run")
 
 
 def test_the_daemon_dies_when_the_launcher_is_sigkilled(tmp_path):
@@ -145,7 +145,7 @@ def test_the_daemon_dies_when_the_launcher_is_sigkilled(tmp_path):
     wait_until(lambda: _daemons(folder), timeout=30, what="the daemon")
     assert len(_alive_with(marker)) == 1
     system.kill_all()  # the worker gets SIGTERM (parent-death signal) and ends what is below it
-    wait_until(lambda: not _alive_with(marker), timeout=15, what="no daemon left after the launcher's death")
+    wait_until(lambda: not _alive_with(marker), timeout=HANG_S, what="no daemon left after the launcher's death")
 
 
 def _zombie_or_alive(pid: int) -> bool:
@@ -187,7 +187,7 @@ launcher.bringup()
         wait_until(lambda: (out / "own").exists() and (out / "own").read_text(), timeout=30, what="the own child's exit code")
         assert (out / "own").read_text() == "7"
         worker = system.pid("parent")
-        wait_until(lambda: not _zombie_or_alive(orphan), timeout=15, what=f"the adopted orphan {orphan} to end and be reaped")
+        wait_until(lambda: not _zombie_or_alive(orphan), timeout=HANG_S, what=f"the adopted orphan {orphan} to end and be reaped")
         assert system.pid("parent") == worker
         assert not [c for c in psutil.Process(worker).children() if c.status() == psutil.STATUS_ZOMBIE]
     finally:

@@ -4,7 +4,7 @@ import sys
 
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -36,12 +36,12 @@ def _run(tmp_path, multi: bool) -> None:
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )
     try:
-        wait_until(flag.exists, timeout=10, what="the component to hang")
+        wait_until(flag.exists, timeout=HANG_S, what="the component to hang")
         # Detected while the forger still publishes on its status topic.
         wait_until(lambda: any(e["event"] == "exit" and e["child"] == "hanger" and e["reason"] == "hang" for e in system.events()),
-                   timeout=10, what="the hang to be detected")
+                   timeout=HANG_S, what="the hang to be detected")
         assert forger.poll() is None, forger.stderr.read()
-        wait_until(lambda: system.state("hanger") == "active", timeout=10, what="a fresh hanger")
+        wait_until(lambda: system.state("hanger") == "active", timeout=HANG_S, what="a fresh hanger")
     finally:
         forger.terminate()
         forger.wait(10)

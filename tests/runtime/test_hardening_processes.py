@@ -6,7 +6,7 @@ import time
 import psutil
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -59,15 +59,15 @@ launcher.bringup()
         os.kill(old, signal.SIGKILL)
         system.wait_new_pid("forker", old)
         # The three children of the dead incarnation (the setsid one included) die and are reaped.
-        wait_until(lambda: not any(_alive(p) for p in first), timeout=10, what="the dead component's children to die")
-        wait_until(lambda: _zombie_children(system.proc.pid) == [], timeout=10, what="no zombies under the launcher")
+        wait_until(lambda: not any(_alive(p) for p in first), timeout=HANG_S, what="the dead component's children to die")
+        wait_until(lambda: _zombie_children(system.proc.pid) == [], timeout=HANG_S, what="no zombies under the launcher")
         wait_until(lambda: len(_logged_pids(pid_log)) == 6, what="the new incarnation's children")
         second = _logged_pids(pid_log)[3:]
         assert all(_alive(p) for p in second)
     finally:
         assert system.stop() == 0
     # Stopping the system takes the live incarnation's children too.
-    wait_until(lambda: not any(_alive(p) for p in second), timeout=10, what="children to die with the system")
+    wait_until(lambda: not any(_alive(p) for p in second), timeout=HANG_S, what="children to die with the system")
     assert system.leftovers() == []
 
 
@@ -97,8 +97,8 @@ launcher.bringup()
         time.sleep(0.3)
         pids = _logged_pids(pid_log)
         # All but the newest incarnation's child are gone, and nothing waits to be reaped.
-        wait_until(lambda: sum(_alive(p) for p in pids) <= 1, timeout=10, what="children of crashed incarnations to die")
-        wait_until(lambda: len(_zombie_children(system.proc.pid)) <= 1, timeout=10, what="zombies reaped")
+        wait_until(lambda: sum(_alive(p) for p in pids) <= 1, timeout=HANG_S, what="children of crashed incarnations to die")
+        wait_until(lambda: len(_zombie_children(system.proc.pid)) <= 1, timeout=HANG_S, what="zombies reaped")
     finally:
         assert system.stop() == 0
     assert not any(_alive(p) for p in _logged_pids(pid_log))
@@ -115,7 +115,7 @@ launcher.bringup()
 """, env={"PID_LOG": str(pid_log)}).wait_up(components=["forker"])
     pids = wait_until(lambda: len(_logged_pids(pid_log)) == 3 and _logged_pids(pid_log), what="3 children")
     system.kill_all()
-    wait_until(lambda: not any(_alive(p) for p in pids), timeout=10, what="children to die with the launcher")
+    wait_until(lambda: not any(_alive(p) for p in pids), timeout=HANG_S, what="children to die with the launcher")
 
 
 def test_children_of_threaded_components_die_with_the_run(tmp_path):
@@ -130,4 +130,4 @@ launcher.bringup()
         pids = wait_until(lambda: len(_logged_pids(pid_log)) == 3 and _logged_pids(pid_log), what="3 children")
     finally:
         assert system.stop() == 0
-    wait_until(lambda: not any(_alive(p) for p in pids), timeout=10, what="the threaded component's children to die with the run")
+    wait_until(lambda: not any(_alive(p) for p in pids), timeout=HANG_S, what="the threaded component's children to die with the run")

@@ -6,7 +6,7 @@ import time
 import psutil
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -136,7 +136,7 @@ launcher.bringup()
         pid = system.pid("frozen")
         t0 = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
-        new = system.wait_new_pid("frozen", pid, timeout=10)
+        new = system.wait_new_pid("frozen", pid, timeout=HANG_S)
         assert new != pid
         hang = [e for e in system.events() if e["event"] == "exit" and e["child"] == "frozen"]
         assert hang and hang[0]["reason"] == "hang"
@@ -214,7 +214,7 @@ launcher.bringup()
     assert system.ctx.all_segments()
     system.proc.kill()
     system.proc.wait()
-    wait_until(lambda: system.leftovers() == [], timeout=10, what="segments, run directory and workers to go")
+    wait_until(lambda: system.leftovers() == [], timeout=HANG_S, what="segments, run directory and workers to go")
     assert not any(psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE for p in pids.values())
 
 
@@ -300,7 +300,7 @@ launcher.bringup()
             os.kill(z.pid, sig)
             pid = system.pid("w")
             os.kill(pid, signal.SIGKILL)
-            pid = system.wait_new_pid("w", pid, timeout=15)
+            pid = system.wait_new_pid("w", pid, timeout=HANG_S)
             if sig == signal.SIGSTOP and psutil.pid_exists(z.pid):
                 try:
                     os.kill(z.pid, signal.SIGCONT)
@@ -331,11 +331,11 @@ launcher.bringup()
         for z in zygotes:  # the primary, then the spare that replaced it
             os.kill(z.pid, signal.SIGKILL)
             # No component restarts meanwhile: the launcher must notice by itself, not at the next spawn.
-            wait_until(lambda z=z: replaced(z), timeout=10, what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
+            wait_until(lambda z=z: replaced(z), timeout=HANG_S, what=f"zygote {z.pid} reaped (no zombie) and two zygotes again")
         assert not {z.pid for z in zygotes} & {z.pid for z in _zygotes(system)}
         pid = system.pid("w")
         os.kill(pid, signal.SIGKILL)
-        system.wait_new_pid("w", pid, timeout=15)  # and restarts still work
+        system.wait_new_pid("w", pid, timeout=HANG_S)  # and restarts still work
     finally:
         assert system.stop() == 0
     assert system.leftovers() == []

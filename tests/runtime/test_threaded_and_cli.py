@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from tests.runtime.helpers import SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
 
@@ -54,7 +54,7 @@ def test_threaded_mode_restarts_a_crashed_component(tmp_path):
 def test_threaded_mode_detects_a_hung_component(tmp_path):
     system = SystemUnderTest(tmp_path, THREADED, env={"MISBEHAVE": "hang"}).wait_up(components=["good", "bad"])
     try:
-        wait_until(lambda: _restarts_of(system, "bad"), timeout=15, what="a restart of the hung thread")
+        wait_until(lambda: _restarts_of(system, "bad"), timeout=HANG_S, what="a restart of the hung thread")
         exits = [e for e in system.events() if e["event"] == "exit" and e["child"] == "bad"]
         assert exits[0]["reason"] == "hang"
     finally:

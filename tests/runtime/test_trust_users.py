@@ -20,7 +20,7 @@ from emos.transport import context
 from emos.transport.context import SHM_DIR, RunContext, RuntimeDirError
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
-from tests.runtime.helpers import SystemUnderTest
+from tests.runtime.helpers import HANG_S, SystemUnderTest
 from tests.runtime.trust_helpers import (  # noqa: F401 - the fixtures are imported to register them here
     attacker_fixture,
     forged_ring,
@@ -210,7 +210,7 @@ def test_forged_status_rings_neither_stop_hang_detection_nor_emos_status(tmp_pat
         assert "w" in json.dumps(json.loads(status.stdout))
         pid = system.pid("w")
         os.kill(pid, signal.SIGSTOP)  # a hang: only the heartbeat can tell
-        new = system.wait_new_pid("w", pid, timeout=15)
+        new = system.wait_new_pid("w", pid, timeout=HANG_S)
         assert new != pid
         assert any(e["event"] == "exit" and e["child"] == "w" and e["reason"] == "hang" for e in system.events())
         assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
