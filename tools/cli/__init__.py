@@ -114,7 +114,11 @@ def _chosen_path(argv: list[str]) -> list[str]:
 
 def _terminated(signum: int, frame: object) -> None:
     # SIGTERM unwinds like Ctrl-C, so every command's `finally` releases what it holds (a
-    # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM.
+    # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM. Noted first, for
+    # the loops that check it should this SystemExit land where Python swallows it.
+    from emos.tools.cli.common import note_termination
+
+    note_termination(signum)
     raise SystemExit(128 + signum)
 
 

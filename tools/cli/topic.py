@@ -25,7 +25,7 @@ from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs import fields as F
 from emos.msgs.registry import UnknownMessageType, canonical_name, resolve
-from emos.tools.cli.common import add_run_argument, join_run, signals_deferred
+from emos.tools.cli.common import add_run_argument, exit_if_terminated, join_run, signals_deferred
 from emos.transport.context import decode_name
 from emos.transport.pubsub import Publisher, Subscriber, list_topics
 from emos.transport.waker import Waker, sweep_dead_wakers
@@ -301,6 +301,7 @@ def run(args: argparse.Namespace) -> int:
                     raise SystemExit(f"emos topic pub: {exc}") from None
             due = time.monotonic()
             while args.count == 0 or sent < args.count:
+                exit_if_terminated()
                 pub.publish(msg)
                 sent += 1
                 if period and (args.count == 0 or sent < args.count):
@@ -328,6 +329,7 @@ def run(args: argparse.Namespace) -> int:
         if args.action == "echo":
             seen, t_end = 0, time.monotonic() + args.timeout if args.timeout else None
             while (not args.count or seen < args.count) and (t_end is None or time.monotonic() < t_end):
+                exit_if_terminated()
                 select.select([waker.fd], [], [], 0.2)
                 waker.drain()
                 for msg in sub.take():
@@ -340,6 +342,7 @@ def run(args: argparse.Namespace) -> int:
             stamps: list[int] = []
             t_end = time.monotonic() + args.window
             while time.monotonic() < t_end:
+                exit_if_terminated()
                 select.select([waker.fd], [], [], 0.1)
                 waker.drain()
                 stamps.extend(stamp for stamp, _, _ in sub.take_raw())
