@@ -24,11 +24,7 @@ _MAX_MESSAGE = 64 * 1024 * 1024
 
 
 def _grpc() -> Any:
-    try:
-        import grpc
-    except ImportError:
-        raise ImportError("LeRobotClient needs grpcio: pip install grpcio (and torch, from 'emos[agents]')") from None
-    return grpc
+    return wire.import_grpc()
 
 
 def _to_numpy(action: Any) -> np.ndarray:

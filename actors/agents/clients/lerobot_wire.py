@@ -16,6 +16,7 @@ installing lerobot we:
 from __future__ import annotations
 
 import io
+import os
 import pickle
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -25,7 +26,7 @@ __all__ = [
     "HELPERS_MODULE", "SERVICE", "TRANSFER_BEGIN", "TRANSFER_MIDDLE", "TRANSFER_END",
     "RemotePolicyConfig", "TimedObservation", "TimedAction",
     "encode_bytes_message", "encode_chunk", "decode_fields", "chunk_payload",
-    "dumps_wire", "loads_wire",
+    "dumps_wire", "loads_wire", "import_grpc",
 ]
 
 HELPERS_MODULE = "lerobot.async_inference.helpers"
@@ -215,3 +216,19 @@ class _AllowListUnpickler(pickle.Unpickler):
 def loads_wire(data: bytes) -> Any:
     """Unpickle a LeRobot payload, allowing only the wire classes, tensors and numpy arrays."""
     return _AllowListUnpickler(io.BytesIO(data)).load()
+
+
+def import_grpc() -> Any:
+    """grpc, imported with its fork support off (both our LeRobot client and server use this).
+
+    The processes that hold a gRPC channel or server only ever fork to exec (subprocess), which
+    needs no fork support; with it on, a fork races gRPC's poller thread (grpc/grpc#43055: the
+    child's restarted poller meets a closed epoll descriptor, "epoll_wait error: Bad file
+    descriptor"), which ended the model server at start-up now and then on a busy machine.
+    An explicit setting in the environment wins."""
+    os.environ.setdefault("GRPC_ENABLE_FORK_SUPPORT", "false")
+    try:
+        import grpc
+    except ImportError:
+        raise ImportError("LeRobot needs grpcio: pip install grpcio (and torch, from 'emos[agents]')") from None
+    return grpc

@@ -23,8 +23,7 @@ FPS = 30.0
 
 class HoldPositionPolicyServer:
     def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
-        import grpc
-
+        grpc = wire.import_grpc()
         self._grpc = grpc
         self.config: wire.RemotePolicyConfig | None = None
         self.observations: queue.Queue = queue.Queue(maxsize=1)
