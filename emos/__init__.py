@@ -22,6 +22,8 @@ _LAZY = {
     "ComponentRunType": "emos.config.base",
     "base_validators": "emos.config",
     "ServiceClient": "emos.core.services",
+    "ServiceClientConfig": "emos.core.service_config",
+    "ComponentFallbacks": "emos.core.component_fallbacks",
     "ActionClient": "emos.core.services",
     "msgs": "emos.msgs",
     "Event": "emos.events.event",

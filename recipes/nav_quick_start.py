@@ -1,15 +1,18 @@
-"""Simulation quick start: the spec's navigation stack driving the simulated robot in the house.
+"""Simulation quick start: the spec's navigation stack driving the simulated robot in the spec's map.
 
     emos run recipes/nav_quick_start.py
     # then, from another terminal, send a goal (x, y in metres, map frame):
-    emos topic pub /goal PointStamped '{"header": {"frame_id": "map"}, "point": {"x": 7.0, "y": 2.5}}'
+    emos topic pub /goal PointStamped '{"header": {"frame_id": "map"}, "point": {"x": 1.2, "y": 3.3}}'
     emos topic echo /reached_end
 
-The spec's recipe runs against Webots or Gazebo; here the ``Simulator`` component (pybullet,
-headless) is the robot and the house, and the MapServer reads the same house as a ROS map.
+The spec's recipe runs against Webots and loads ``turtlebot3_webots.yaml`` from the
+``kompass_sim`` share directory; here the ``Simulator`` component (pybullet, headless) is the
+robot and builds the arena from that same map, so the MapServer's map and the walls agree.
 As in the spec, the web UI shows the map, the plan and the robot: open the link the run prints
 (docs/ui.md). ``emos topic echo /odometry/filtered`` and ``emos status`` show them too.
 """
+import os
+
 import numpy as np
 
 from emos import Launcher, Topic
@@ -28,7 +31,9 @@ from emos.actors.nav.components import (
 )
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
-from emos.actors.sim.data import HOUSE_MAP
+from emos.packages import get_package_share_directory
+
+kompass_sim_dir = get_package_share_directory(package_name="kompass_sim")
 
 # Setup your robot configuration
 my_robot = RobotConfig(
@@ -58,13 +63,14 @@ driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
 local_mapper_config = LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05))
 local_mapper = LocalMapper(component_name="mapper", config=local_mapper_config)
 
-# Configure the global Map Server (the house the simulator builds, as a ROS map)
-map_server_config = MapServerConfig(loop_rate=1.0, map_file_path=str(HOUSE_MAP), grid_resolution=0.5, pc_publish_row=False)
+# Configure the global Map Server
+map_file = os.path.join(kompass_sim_dir, "maps", "turtlebot3_webots.yaml")
+map_server_config = MapServerConfig(loop_rate=1.0, map_file_path=map_file, grid_resolution=0.5, pc_publish_row=False)
 map_server = MapServer(component_name="global_map_server", config=map_server_config)
 
-# The simulated robot (instead of Webots / Gazebo)
+# The simulated robot in the arena built from the same map (instead of Webots), where Webots starts it
 odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
-sim = Simulator("sim", config=SimulatorConfig(world="house", spawn=(1.5, 1.5, 0.0)))
+sim = Simulator("sim", config=SimulatorConfig(world=map_file, spawn=(0.0, 0.0, 0.0)))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(odom=odom_topic)
 

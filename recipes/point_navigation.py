@@ -1,12 +1,14 @@
-"""Point navigation in the simulated house: the spec's point-navigation recipe, ported.
+"""Point navigation in the spec's TurtleBot3 arena: the spec's point-navigation recipe, ported.
 
     emos run recipes/point_navigation.py          # or: python recipes/point_navigation.py
     EMOS_UI=1 emos run recipes/point_navigation.py   # and watch it in the web UI
 
 The navigation stack of the spec (MapServer, Planner, Controller with Pure Pursuit on the
-LocalMapper's grid, DriveManager with safety zones) drives the robot through the house that
-the ``Simulator`` (pybullet, headless) stands in for Webots/Gazebo: to a first goal through the
-doorway in the middle wall, then to a second one through the doorway into the room above.
+LocalMapper's grid, DriveManager with safety zones) drives the robot in the spec's map, the
+TurtleBot3 Webots arena (``turtlebot3_webots.yaml`` in the ``kompass_sim`` share directory),
+which the ``Simulator`` (pybullet, headless) builds from the same file in place of Webots: to a
+first goal round the table in front of the robot, then to a second one past the armchair at the
+other end of the room.
 
 Goals and progress come from a small ``Mission`` component defined here, so that the run needs
 nobody at the web UI and judges itself: it publishes each goal on the planner's ``goal_point``
@@ -48,12 +50,15 @@ from emos.actors.nav.components import (
 )
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
-from emos.actors.sim.data import HOUSE_MAP
 from emos.config.base import BaseComponentConfig
 from emos.msgs import Header, Point, PointStamped
+from emos.packages import get_package_share_directory
+
+kompass_sim_dir = get_package_share_directory(package_name="kompass_sim")
+map_file = os.path.join(kompass_sim_dir, "maps", "turtlebot3_webots.yaml")
 
 OUT_DIR = os.path.abspath(os.environ.get("EMOS_NAV_OUT", "point_navigation_out"))
-GOALS = [(7.0, 2.5), (8.6, 5.5)]  # through the middle doorway, then up through the right one
+GOALS = [(1.5, -3.2), (-0.2, 2.4)]  # round the table, then up the room past the armchair
 MISSION_TIMEOUT = float(os.environ.get("EMOS_NAV_TIMEOUT", "240"))
 NAV_COMPONENTS = ["global_map_server", "planner", "controller", "drive_manager", "mapper"]
 
@@ -80,19 +85,20 @@ driver = DriveManager(
 )
 driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))  # no ROS distributions here: Twist
 
-# 3. Mapping: a 3 x 3 m local grid, and the house map from the simulator's data
+# 3. Mapping: a 3 x 3 m local grid, and the spec's map of the Webots arena
 local_mapper = LocalMapper(
     component_name="mapper",
     config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)),
 )
 map_server = MapServer(
     component_name="global_map_server",
-    config=MapServerConfig(map_file_path=str(HOUSE_MAP), grid_resolution=0.5),
+    config=MapServerConfig(map_file_path=map_file, grid_resolution=0.5),
 )
 
-# 4. The simulated robot and house (instead of Webots / Gazebo)
+# 4. The simulated robot and arena, built from the same map (instead of Webots); the robot
+# starts where the map's frame starts, as in Webots
 odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
-sim = Simulator("sim", config=SimulatorConfig(world="house", spawn=(1.5, 1.5, 0.0)))
+sim = Simulator("sim", config=SimulatorConfig(world=map_file, spawn=(0.0, 0.0, 0.0)))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(odom=odom_topic)
 
@@ -111,7 +117,7 @@ class Mission(BaseComponent):
     def custom_on_activate(self) -> None:
         from emos.actors.nav.maps import distance_map, load_map
 
-        self.clearance_map = load_map(HOUSE_MAP)
+        self.clearance_map = load_map(map_file)
         self.distance = distance_map(self.clearance_map)
         self.t0 = time.monotonic()
         self.index = -1
@@ -243,7 +249,7 @@ class Mission(BaseComponent):
 
 
 def draw(summary: dict, png: str) -> None:
-    """Top-down picture: the house map, each plan, and the driven path."""
+    """Top-down picture: the map, each plan, and the driven path."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -251,7 +257,7 @@ def draw(summary: dict, png: str) -> None:
 
     from emos.actors.nav.maps import load_map
 
-    grid = load_map(HOUSE_MAP)
+    grid = load_map(map_file)
     xmin, ymin, xmax, ymax = grid.world_bounds()
     shade = np.where(grid.data >= 65, 0.0, np.where(grid.data < 0, 0.6, 1.0))
     fig, ax = plt.subplots(figsize=(8, 6.5))

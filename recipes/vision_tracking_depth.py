@@ -44,7 +44,7 @@ image0 = Topic(name="/camera/rgbd", msg_type="RGBD")
 detections_topic = Topic(name="detections", msg_type="Detections")
 
 # The people detector sees the camera's full 400 x 300 frames (its default scales to 320 x 240)
-detection_config = VisionConfig(threshold=0.5, enable_local_classifier=True, input_width=400, input_height=300)
+detection_config = VisionConfig(threshold=0.5, enable_visualization=True, enable_local_classifier=True, input_width=400, input_height=300)
 vision = Vision(
     inputs=[image0],
     outputs=[detections_topic],

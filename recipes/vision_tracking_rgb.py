@@ -15,7 +15,8 @@ Differences from the spec's recipe, and why:
 * ``include_image=True`` makes the frame travel with the detections: the follower needs the
   image size and a ``Detections`` message carries it only with its image;
 * the follower's ``rotation_gain`` is 3 instead of its default 1 (see below);
-* ``enable_visualization`` (a pop-up window) is left out: the simulator runs headless;
+* ``enable_visualization=True`` publishes the annotated frames on ``/detection_component/visualization``
+  (an Image topic for the web UI or Foxglove) instead of the original's pop-up window;
 * the tracking is started by ``StartVisionTracking``, the ``ros2 action send_goal`` of the spec:
   it sends the controller's ``track_vision_target`` goal with the label ``person``.
 """
@@ -45,7 +46,7 @@ detections_topic = Topic(name="detections", msg_type="Detections")
 trackings_topic = Topic(name="trackings", msg_type="Trackings")
 
 # Select the vision component configuration (on-board people detector, see the module doc)
-detection_config = VisionConfig(threshold=0.5, enable_local_classifier=True, include_image=True)
+detection_config = VisionConfig(threshold=0.5, enable_visualization=True, enable_local_classifier=True, include_image=True)
 
 vision = Vision(
     inputs=[image0],

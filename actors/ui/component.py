@@ -16,6 +16,7 @@ from emos.actors.ui.widgets import output_kind
 from emos.core.action_input import ActionInput
 from emos.core.component import BaseComponent
 from emos.core.conventions import resolve_config
+from emos.core.service_config import ServiceClientConfig
 from emos.io.topic import Topic
 
 BIND_RETRY_S = 2.0
@@ -33,6 +34,7 @@ class UIComponent(BaseComponent):
         components: Sequence[BaseComponent] = (),
         ui_actions: Sequence[ActionInput] = (),
         config: UIConfig | None = None,
+        ui_services: Sequence[Any] = (),
         component_name: str = "ui",
     ) -> None:
         """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
@@ -59,6 +61,10 @@ class UIComponent(BaseComponent):
             if not isinstance(a, ActionInput):
                 raise TypeError(f"UIComponent ui_actions must be ActionInput objects, got {type(a).__name__}")
         self._actions = {a.name: a for a in ui_actions}
+        for s in ui_services:
+            if not isinstance(s, ServiceClientConfig):
+                raise TypeError(f"UIComponent ui_services must be ServiceClientConfig objects, got {type(s).__name__}")
+        self._services = {s.name: s for s in ui_services}
         self._server: Any = None
         self._start_task: Any = None
         self._stop_task: Any = None  # held until done: the loop keeps only weak references to tasks
@@ -85,7 +91,7 @@ class UIComponent(BaseComponent):
             self.config, hubs, {t.name: t.msg_type.__name__ for t in self.out_topics}, self._settings_of,
             publish=self.publish, control_socket=lambda name: Path(control_socket(node.ctx, name)),
             supervisor_socket=node.supervisor_socket, own_name=self.component_name,
-            actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)),
+            actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)), services=self._services,
             token_file=Path(node.ctx.run_dir) / f"{encode_name(self.component_name)}.token",
         )
         self._listening = False

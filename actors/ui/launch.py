@@ -11,6 +11,7 @@ import attrs
 from emos.actors.ui.auth import new_token
 from emos.actors.ui.config import UIConfig
 from emos.core.action_input import ActionInput
+from emos.core.service_config import ServiceClientConfig
 from emos.io.topic import Topic
 
 ENV_TOKEN = "EMOS_UI_TOKEN"
@@ -20,12 +21,12 @@ UI_NAME = "ui"
 def _topics(role: str, items: Sequence[Any] | None, actions_allowed: bool = False) -> list[Any]:
     if items is None:
         return []
-    if isinstance(items, (Topic, ActionInput)):
+    if isinstance(items, (Topic, ActionInput, ServiceClientConfig)):
         items = [items]
     out = []
     for item in items:
-        if not isinstance(item, Topic) and not (actions_allowed and isinstance(item, ActionInput)):
-            what = "Topic objects or a component's ui_main_action_input" if actions_allowed else "Topic objects"
+        if not isinstance(item, Topic) and not (actions_allowed and isinstance(item, (ActionInput, ServiceClientConfig))):
+            what = "Topic objects, a component's ui_main_action_input or ServiceClientConfig" if actions_allowed else "Topic objects"
             raise TypeError(f"enable_ui({role}=...) takes {what}, got {type(item).__name__} {item!r}")
         out.append(item)
     return out
@@ -63,8 +64,9 @@ def add_ui(launcher: Any, request: dict[str, Any]) -> None:
         config.title = f"EMOS · {os.path.splitext(os.path.basename(sys.argv[0]))[0]}"
     topics = [t for t in request["inputs"] if isinstance(t, Topic)]
     actions = [a for a in request["inputs"] if isinstance(a, ActionInput)]
-    ui = UIComponent(ui_inputs=topics, ui_outputs=request["outputs"], ui_actions=actions, components=components, config=config,
-                     component_name=UI_NAME)
+    services = [s for s in request["inputs"] if isinstance(s, ServiceClientConfig)]
+    ui = UIComponent(ui_inputs=topics, ui_outputs=request["outputs"], ui_actions=actions, ui_services=services, components=components,
+                     config=config, component_name=UI_NAME)
     launcher.add_pkg(components=[ui], package_name="ui", multiprocessing=True)
     # Printed once, here: this link signs the browser in. The UI's own log line (and every
     # restart's) names the token file instead of repeating the token.

@@ -19,6 +19,7 @@ from emos.actors.ui.actions import ActionRunner
 from emos.actors.ui.auth import CSRF_KEY, SECURITY_HEADERS, make_middleware
 from emos.actors.ui.config import UIConfig
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
+from emos.actors.ui.services import with_services
 from emos.actors.ui.streams import Client, Hub, serve_client
 from emos.actors.ui.system_view import SystemView
 from emos.actors.ui.tokenfile import TokenFileRefused, remove_token_file, write_token_file
@@ -54,14 +55,15 @@ class UIServer:
     def __init__(self, config: UIConfig, hubs: list[Hub], inputs: dict[str, str], components: dict[str, Any],
                  publish: Callable[[str, Any], None], control_socket: Callable[[str], Path], supervisor_socket: str | None,
                  own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None,
-                 token_file: Path | None = None):
+                 token_file: Path | None = None, services: dict[str, Any] | None = None):
         """``token_file``: where the access token is kept (mode 0600) while the UI listens."""
         self.config, self.hubs, self.inputs = config, hubs, inputs
         self.token_file = token_file
         self.components = components  # name -> config object (its class drives the form)
         self.publish, self.control_socket, self.own_name = publish, control_socket, own_name
         self.system = SystemView(supervisor_socket, control_socket, own_name)
-        self.actions = ActionRunner(actions or {}, action_socket or (lambda name: Path(name)))
+        socket_of = action_socket or (lambda name: Path(name))
+        self.actions = with_services(ActionRunner(actions or {}, socket_of), services, socket_of)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ui-encode")
         self.clients: set[Client] = set()
         self._closed = asyncio.Event()

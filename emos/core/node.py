@@ -27,7 +27,7 @@ from emos.core.control import control_socket
 from emos.core.faults import PublishFaults, fault_ops
 from emos.core.reconfig import reconfig_ops
 from emos.core.rpc import CONTROL_FRAME, AsyncRpcClient, RpcServer
-from emos.core.services import ActionServer, ServiceServer
+from emos.core.services import ActionServer, ServiceServer, describe_interfaces
 from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs.status import ComponentStatus
 from emos.ratelimit import RateLimitedLog
@@ -118,6 +118,11 @@ class Node:
         # input's latest stamp may be newer when the step works through a backlog.
         self.trigger_stamp_ns: int | None = None
         self._deferred: list[tuple[int, int, _Input, Any]] = []  # triggering messages for the next pass (see _take_inputs)
+        # Triggering messages that arrived while the component was not active (still configuring
+        # or activating, or deactivated): stepped once it is active, up to each topic's queue
+        # size (the newest); what fell out is counted per topic and said once at activation.
+        self._held: list[tuple[int, int, _Input, Any]] = []
+        self._held_dropped: dict[str, int] = {}
         self._publishers: dict[str, tuple[TopicPublisher, threading.Lock]] = {}
         self.publish_faults = PublishFaults()
         self._status_pub: Publisher | None = None
@@ -257,6 +262,8 @@ class Node:
         self._been_active = self._been_active or target == L.LifecycleState.ACTIVE
         self.log.debug("[%s] %s -> %s", self.name, transition.value, target.value)
         self.publish_status()
+        if target == L.LifecycleState.ACTIVE:
+            self._on_wake()  # now active: step what arrived while it was not (see _take_inputs)
         return target
 
     async def _on_configure(self) -> None:
@@ -298,7 +305,6 @@ class Node:
             else:
                 name, goal, fb, res, callback = args
                 await self._start_server(ActionServer(self.ctx, name, goal, fb, res, callback, owner=self.name))
-        self._on_wake()  # messages that arrived while inactive may trigger a first step
 
     async def _start_server(self, server: ServiceServer | ActionServer) -> None:
         await server.start()
@@ -326,6 +332,7 @@ class Node:
 
     async def _on_cleanup(self) -> None:
         self._close_topics()
+        self._extra_servers.clear()  # declared at configure (create_service): the next configure declares them again
         self.component.custom_on_cleanup()
 
     async def _on_shutdown(self) -> None:
@@ -339,6 +346,7 @@ class Node:
     async def _release_all(self) -> None:
         await self._stop_activity()
         self._close_topics()
+        self._extra_servers.clear()
 
     def _close_topics(self) -> None:
         for pub, _ in self._publishers.values():
@@ -413,6 +421,9 @@ class Node:
         # backlog on two topics must not read all of one before the other, or it would pair
         # one topic's newest message with the other's oldest, a state that never existed.
         backlog, self._deferred = (self._deferred if active else []), []
+        if active and self._held:
+            backlog, self._held = self._held + backlog, []
+            self._report_held_drops()
         for inp in self._inputs.values():
             items = inp.sub.take_raw()
             if not items:
@@ -420,11 +431,13 @@ class Node:
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
             inp.sim_at = sim_clock.time_at(stamp) if sim_clock is not None else None
-            if active and inp.topic in triggers:
-                if len(items) == 1:  # the usual case: no generator to run
+            if inp.topic in triggers:
+                if active and len(items) == 1:  # the usual case: no generator to run
                     backlog.append((stamp, len(backlog), inp, raw))
-                else:
+                elif active:
                     backlog.extend((stamp_i, len(backlog), inp, raw_i) for stamp_i, raw_i, _ in items)
+                else:
+                    self._hold(inp, [(stamp_i, raw_i) for stamp_i, raw_i, _ in items])
         if len(triggers) > 1 and backlog:
             # A message stamped while the rings were being read may have an earlier-stamped
             # sibling on a ring read before it was written: it waits for the next pass (at once).
@@ -450,6 +463,23 @@ class Node:
             # for it (republishing the tick) instead of running on while its inputs are dropped,
             # so whether a consumer sees the first scans does not depend on how fast it started.
             self._sim_time.handle(tick, self._run_step if timed else None, answer=self._been_active)
+
+    def _hold(self, inp: _Input, items: list[tuple[int, Any]]) -> None:
+        """Keep triggering messages that arrived while not active, the newest ``queue_size`` of
+        each topic (as its ring would), for the first pass once active."""
+        self._held.extend((stamp, len(self._held), inp, raw) for stamp, raw in items)
+        keep = max(1, int(inp.topic.qos_profile.queue_size))
+        mine = [item for item in self._held if item[2] is inp]
+        if len(mine) > keep:
+            drop = {id(item) for item in mine[:-keep]}
+            self._held = [item for item in self._held if id(item) not in drop]
+            self._held_dropped[inp.topic.name] = self._held_dropped.get(inp.topic.name, 0) + len(drop)
+
+    def _report_held_drops(self) -> None:
+        for topic, count in self._held_dropped.items():
+            self.log.warning("[%s] %d message(s) on %s arrived while the component was not active and were not stepped "
+                             "(beyond the topic's queue_size, the newest are kept for when it is active)", self.name, count, topic)
+        self._held_dropped.clear()
 
     def _input(self, topic: Topic | str) -> _Input:
         name = topic.name if isinstance(topic, Topic) else normalize_topic_name(topic)
@@ -589,6 +619,19 @@ class Node:
     def add_action_server(self, name: str, goal_type: Any, feedback_type: Any, result_type: Any, callback: Any) -> None:
         self._extra_servers.append(("action", (name, goal_type, feedback_type, result_type, callback)))
 
+    def interfaces(self) -> list[tuple[str, str, tuple[Any, ...]]]:
+        """``(kind, name, types)`` of the services and actions the component serves while it is
+        active: its main one (Server / ActionServer run types) and those it created."""
+        comp = self.component
+        out: list[tuple[str, str, tuple[Any, ...]]] = []
+        if comp.run_type == ComponentRunType.SERVER and comp.main_srv_type is not None:
+            out.append(("service", comp.main_srv_name, tuple(comp.main_srv_type)))
+        elif comp.run_type == ComponentRunType.ACTION_SERVER and comp.main_action_type is not None:
+            out.append(("action", comp.main_action_name, tuple(comp.main_action_type)))
+        for kind, args in self._extra_servers:
+            out.append((kind, args[0], tuple(args[1:-1])))  # name, types..., callback
+        return list({name: (kind, name, types) for kind, name, types in out}.values())  # one per name (socket)
+
     def on_config_changed(self) -> None:
         """Re-arm the main timer and heartbeat after a rate parameter changed."""
         if self._main_timer is not None and self.loop is not None:
@@ -615,6 +658,8 @@ class Node:
                 "inputs": {t.name: t.type_name for t in self.component.in_topics},
                 "outputs": {t.name: t.type_name for t in self.component.out_topics},
                 "config": self.component.config.asdict(),
+                # What `emos service list/call` and `emos action list/send_goal` find and type-check.
+                **describe_interfaces(self.interfaces(), {s.name for s in self._servers if isinstance(s, (ServiceServer, ActionServer))}),
             }
 
         # Calling a method (execute_method), parameters, files, topics, steps: emos.core.reconfig.

@@ -18,7 +18,7 @@ from typing import Any
 from emos.core.rpc import AsyncRpcClient, RpcClient, RpcServer
 from emos.errors import EmosError
 from emos.msgs import codec
-from emos.msgs.registry import resolve
+from emos.msgs.registry import UnknownMessageType, canonical_name, resolve
 from emos.transport.context import RunContext, current, encode_name
 
 
@@ -93,7 +93,12 @@ class GoalHandle:
 
 
 class ActionCanceled(EmosError):
-    """Raised to the client when its goal ended because it was canceled."""
+    """Raised to the client when its goal ended because it was canceled; ``result`` is what the
+    server returned when it stopped (the CLI prints it, as ``ros2 action send_goal`` does)."""
+
+    def __init__(self, message: str, result: Any = None):
+        super().__init__(message)
+        self.result = result
 
 
 class ActionServer:
@@ -166,12 +171,35 @@ class ActionClient:
             reply = rpc.call("goal", on_stream=on_stream, goal=codec.pack(goal), goal_id=goal_id)
         result = codec.decode(self.result_type, reply["result"], copy=True)
         if reply.get("canceled"):
-            raise ActionCanceled(f"action {self.name!r}: goal {goal_id} was canceled") from None
+            raise ActionCanceled(f"action {self.name!r}: goal {goal_id} was canceled", result) from None
         return result
 
     def cancel(self, goal_id: str) -> bool:
         with RpcClient(self.path, timeout=5.0) as rpc:
             return bool(rpc.call("cancel", goal_id=goal_id))
+
+
+# What each type of a service or an action is called, in order (ServiceServer, ActionServer).
+SERVICE_ROLES = ("request", "response")
+ACTION_ROLES = ("goal", "feedback", "result")
+
+
+def describe_interfaces(declared: list[tuple[str, str, tuple[Any, ...]]], serving: set[str]) -> dict[str, list[dict[str, Any]]]:
+    """The ``services`` and ``actions`` of a component's ``info`` answer, from its declared
+    ``(kind, name, types)``: each with its name, whether it is served now (only while the
+    component is active), and per role the type's canonical name and the module that defines it
+    (so a client such as ``emos service call`` can load a type it has not imported yet)."""
+    out: dict[str, list[dict[str, Any]]] = {"services": [], "actions": []}
+    for kind, name, types in declared:
+        entry: dict[str, Any] = {"name": name, "serving": name in serving}
+        for role, given in zip(SERVICE_ROLES if kind == "service" else ACTION_ROLES, types):
+            try:
+                cls = resolve(given)
+                entry[role] = {"type": canonical_name(cls), "module": cls.__module__}
+            except UnknownMessageType:  # the server itself would refuse to start; say what was given
+                entry[role] = {"type": str(given), "module": ""}
+        out["services" if kind == "service" else "actions"].append(entry)
+    return out
 
 
 async def call_service_async(ctx: RunContext, name: str, request: Any, response_type: Any, timeout: float = 10.0) -> Any:

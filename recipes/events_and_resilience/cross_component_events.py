@@ -41,6 +41,7 @@ import time
 import numpy as np
 
 from emos import Action, BaseComponent, ComponentStatus, Event, Launcher, Topic
+from emos import events as event
 from emos.actions import ComponentActions, LogInfo, update_parameter
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.components import Controller, ControllerConfig, DriveManager, LocalMapper, Planner, PlannerConfig
@@ -89,8 +90,11 @@ event_mapper_fault = Event(mapper.status_topic.msg.status != ComponentStatus.STA
 activate_direct_sensor_mode = update_parameter(component=controller, param_name="use_direct_sensor", new_value=True)
 
 # 3. RViz click -> Planner goal (the spec's event.OnGreater("rviz_goal", topic, 0, ["header", "stamp", "sec"]))
-clicked_point = Topic(name="/clicked_point", msg_type="PointStamped")
-event_clicked_point = Event(clicked_point.msg.header.stamp.sec > 0)
+event_clicked_point = event.OnGreater(
+    "rviz_goal",
+    Topic(name="/clicked_point", msg_type="PointStamped"),
+    0, ["header", "stamp", "sec"],
+)
 send_goal = ComponentActions.send_action_goal(
     action_name="/planner/plan_path",
     action_type=PlanPath,
@@ -122,6 +126,7 @@ events_actions = {
 
 # --- The robot (Simulator) and the stand-ins (see the docstring) --------------------------------
 odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
+clicked_point = Topic(name="/clicked_point", msg_type="PointStamped")  # the Operator stand-in clicks here
 scan = Topic(name="/scan", msg_type="LaserScan")
 mapper_scan = Topic(name="/mapper/scan", msg_type="LaserScan")
 sim = Simulator("sim", config=SimulatorConfig(world="house", spawn=ROBOT_SPAWN, obstacles=[BLOCKING_WALL]))

@@ -59,6 +59,25 @@ def wait_until(pred: Callable[[], Any], timeout: float = HANG_S, interval: float
 _STARTED: list[SystemUnderTest] = []
 
 
+def shm_in_use(pid: int | None = None) -> set[str]:
+    """Names of the /dev/shm files that process ``pid`` (every process when None) maps or holds
+    open. A segment nobody uses is a leak; one that another test's live process uses is not (the
+    suite runs tests side by side: pytest -n 2)."""
+    pids = [pid] if pid is not None else [int(d) for d in os.listdir("/proc") if d.isdigit()]
+    used: set[str] = set()
+    for p in pids:
+        try:
+            with open(f"/proc/{p}/maps") as f:
+                used.update(line.split("/dev/shm/", 1)[1].split(" (deleted)")[0].strip() for line in f if "/dev/shm/" in line)
+            for fd in os.listdir(f"/proc/{p}/fd"):
+                target = os.readlink(f"/proc/{p}/fd/{fd}")
+                if target.startswith("/dev/shm/"):
+                    used.add(target[len("/dev/shm/"):].split(" (deleted)")[0])
+        except OSError:  # the process ended, or is not ours to read
+            continue
+    return used
+
+
 def kill_leftover_systems() -> None:
     """Called after every test (tests/runtime/conftest.py): no test leaves a system running."""
     while _STARTED:

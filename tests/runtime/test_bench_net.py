@@ -14,6 +14,7 @@ import tempfile
 import pytest
 
 from emos.transport.context import SHM_DIR, run_is_alive, runtime_root
+from tests.runtime.helpers import shm_in_use
 from tests.runtime.test_bench_ipc import _run_python
 
 pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is not installed")
@@ -33,7 +34,9 @@ def _leftovers_since(shm_before: set[str], runs_before: set[str]) -> list[str]:
         run_id = name.split(".")[1] if name.startswith("emos.") and name.count(".") >= 2 else ""
         return bool(run_id) and not run_is_alive(run_id)
 
-    left = [n for n in set(os.listdir(SHM_DIR)) - shm_before if leaked(n)]
+    new = set(os.listdir(SHM_DIR)) - shm_before
+    in_use = shm_in_use() if new else set()  # another test's live segments are not this one's leaks
+    left = [n for n in new - in_use if leaked(n)]
     return left + sorted(set(d.name for d in runtime_root().iterdir()) - runs_before - {"zenoh-peers"})
 
 

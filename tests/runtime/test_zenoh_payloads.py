@@ -5,6 +5,7 @@ reader's queue, never wakes it, never raises into it), and arrays of every size 
 for byte."""
 import json
 import logging
+import os
 import socket
 import struct
 import threading
@@ -17,6 +18,7 @@ import pytest
 from emos.msgs import Image, LaserScan, UInt8MultiArray, codec
 from emos.transport import select
 from emos.transport.netframe import FrameWriter, frame_prefix, read_frame, write_frame
+from tests.runtime.helpers import shm_in_use
 
 pytestmark = pytest.mark.unit
 
@@ -397,8 +399,6 @@ def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(ne
     shared-memory pools that receivers keep mapped for life (eclipse-zenoh/zenoh#2787): EMOS
     turns that off, so a 1 MiB exchange creates no Zenoh segment in /dev/shm; a configuration
     file that says anything about shared_memory is taken as written."""
-    import os
-
     conf, group = net
     zen = zenoh_net._zenoh()
     assert json.loads(zenoh_net._load_config(zen, conf).get_json("transport/shared_memory/enabled")) is False
@@ -416,7 +416,8 @@ def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(ne
         listen = json.load(f)["listen"]["endpoints"]
     other.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]}, "connect": {"endpoints": listen},
                                  "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}}}))
-    before = {n for n in os.listdir("/dev/shm") if n.endswith(".zenoh")}
+    # This process's segments only: other tests may be using Zenoh's shared memory beside this one.
+    before = {n for n in shm_in_use(os.getpid()) if n.endswith(".zenoh")}
     sub = zenoh_net.ZenohSubscriber("/big", UInt8MultiArray, config_path=conf, group=group)
     pub = zenoh_net.ZenohPublisher("/big", UInt8MultiArray, publisher_id="far", config_path=str(other), group=group)
     try:
@@ -424,7 +425,7 @@ def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(ne
         got = []
         assert _wait(lambda: (pub.publish(UInt8MultiArray(data=data)), got.extend(sub.take()), bool(got))[2])
         assert np.array_equal(got[0].data, data)
-        assert {n for n in os.listdir("/dev/shm") if n.endswith(".zenoh")} - before == set()
+        assert {n for n in shm_in_use(os.getpid()) if n.endswith(".zenoh")} - before == set()
     finally:
         pub.close()
         sub.close()

@@ -8,6 +8,7 @@ import pytest
 from emos import BaseComponent, Topic
 from emos import msgs as M
 from emos.core import clock
+from emos.core.lifecycle import Transition
 from emos.testing import ComponentHarness
 from emos.transport.context import SHM_DIR
 
@@ -206,3 +207,47 @@ def test_wait_for_runs_the_loop_until_a_components_own_thread_has_published():
         c.release.set()
         assert h.wait_for(lambda: h.latest("/count")).data == 7 and h.time == pytest.approx(1.0)  # the clock stood still
         c.thread.join(5)
+
+
+def test_triggering_messages_that_arrive_before_activation_are_stepped_once_active(caplog):
+    """A query published while its component is still configuring or activating (a model that
+    loads at activation) is answered once the component is active, not taken and dropped."""
+    c = Echo(component_name="echo", inputs=[Topic(name="in", msg_type="Int32"), Topic(name="other", msg_type="Int32")],
+             outputs=[Topic(name="out", msg_type="Int32")])
+    c.trigger = c.in_topics[0]
+    c.in_topics[0].qos_profile.queue_size = 3
+    with ComponentHarness(c, activate=False) as h:
+        for batch in ((0, 1, 2), (3, 4)):
+            for i in batch:
+                h.feed("in", M.Int32(data=i))
+            h.step()  # the node takes them while configured, not active: no step yet
+        assert h.outputs("/out") == []
+        with caplog.at_level("WARNING"):
+            h.activate()
+        assert [m.data for m in h.outputs("/out")] == [4, 6, 8]  # the newest queue_size, in order
+        assert "2 message(s) on /in arrived while the component was not active" in caplog.text
+        h.feed("in", M.Int32(data=7))
+        h.step()
+        assert [m.data for m in h.outputs("/out")] == [14]
+
+
+class Served(BaseComponent):
+    """Declares a service at configure, as the Planner and the MapServer do."""
+
+    def custom_on_configure(self) -> None:
+        self.create_service(f"{self.component_name}/ping", M.TriggerRequest, M.TriggerResponse, lambda req: M.TriggerResponse(success=True))
+
+    def _execution_step(self) -> None:
+        self.health_status.set_healthy()
+
+
+def test_a_component_configured_again_after_cleanup_serves_each_service_once():
+    c = Served(component_name="served")
+    with ComponentHarness(c) as h:
+        assert [name for _, name, _ in h.node.interfaces()] == ["served/ping"]
+        h.deactivate()
+        h._transition(Transition.CLEANUP)
+        h._transition(Transition.CONFIGURE)
+        h.activate()
+        assert len(h.node._extra_servers) == 1
+        assert h.call("served/ping", M.TriggerRequest()).success

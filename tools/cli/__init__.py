@@ -21,7 +21,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "ls": ("emos.tools.cli.ls", "list the recipes on this machine"),
     "info": ("emos.tools.cli.info", "show the sensors and topics a recipe needs, without running it"),
     "logs": ("emos.tools.cli.logs", "list the logs of past runs, or show one"),
-    "service": ("emos.tools.cli.service", "run a recipe as a systemd service: create, remove, status"),
+    "service": ("emos.tools.cli.service", "run a recipe as a systemd service (create, remove, status); call or list components' services"),
+    "action": ("emos.tools.cli.action", "list components' actions, or send one a goal: feedback as it comes, Ctrl-C cancels it"),
     "version": ("emos.tools.cli.version", "show the EMOS version"),
     "component": ("emos.tools.cli.component", "list components, show one, or call its reconfiguration services"),
     "record": ("emos.tools.cli.record", "record a running system's topics into an MCAP file"),
@@ -164,8 +165,20 @@ def _main(argv: list[str] | None = None) -> int:
     if example and not leaf.epilog:
         leaf.formatter_class = argparse.RawDescriptionHelpFormatter
         leaf.epilog = "examples:\n  " + example.replace("\n", "\n  ")
-    args = leaf.parse_args(argv[2 if table is not None else 1 :])
+    rest = argv[2 if table is not None else 1 :]
+    args = leaf.parse_intermixed_args(rest) if table is None and _intermixable(leaf, entry[0]) else leaf.parse_args(rest)
     return int(module.run(args) or 0)
+
+
+def _intermixable(parser: argparse.ArgumentParser, module: str) -> bool:
+    """Whether options may also go between the words of a positional that takes several
+    (``emos record /scan --run X /odom``). Verb groups (subparsers) get their options on every
+    verb instead (emos.tools.cli.common.options_anywhere); ``emos run`` hands the words after
+    its recipe to the recipe, and argparse cannot intermix REMAINDER arguments."""
+    if module == COMMANDS["run"][0]:
+        return False
+    return not any(isinstance(a, argparse._SubParsersAction) or a.nargs in (argparse.REMAINDER, argparse.PARSER)
+                   for a in parser._actions)
 
 
 if __name__ == "__main__":

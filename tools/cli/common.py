@@ -5,18 +5,62 @@ import argparse
 import contextlib
 import signal
 import sys
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+
+import psutil
 
 from emos.transport.context import RunContext
 
 
 def add_run_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--run", help="run id of the system (default: the newest running one)")
+    parser.add_argument("--run", default=None, metavar="RUN_ID",
+                        help="run id of the system; may be left out when only one system is running (with several, the command lists them)")
+
+
+def options_anywhere(group: argparse.ArgumentParser, verbs: Iterable[argparse.ArgumentParser],
+                     add: Callable[[argparse.ArgumentParser], None]) -> None:
+    """Give the options ``add`` defines to a verb group's parser and to each verb's, so that
+    ``emos component --run X info NAME`` and ``emos component info --run X NAME`` mean the same.
+
+    argparse copies everything a verb's parser holds over the group's namespace, defaults
+    included, so in the verbs' copies the default is SUPPRESS: an option left out after the
+    verb keeps the value (or the default) the group's parser gave it."""
+    add(group)
+    for verb in verbs:
+        before = len(verb._actions)
+        add(verb)
+        for action in verb._actions[before:]:
+            if action.help and "%(default)" in action.help:
+                action.help = action.help.replace("%(default)s", str(action.default))
+            action.default = argparse.SUPPRESS
+
+
+def _describe_run(path: Path) -> str:
+    """``RUN_ID (COMMAND, up N s)`` of a live run, for the lines that say which run is used.
+    The run id starts with the launcher's pid; its command line is shown as printable text only."""
+    run_id = path.name
+    try:
+        proc = psutil.Process(int(run_id.split("-", 1)[0]))
+        words = proc.cmdline()
+        up = time.time() - proc.create_time()
+    except (ValueError, psutil.Error):
+        return run_id
+    if words and Path(words[0]).name.startswith("python"):
+        words = words[2:] if words[1:2] == ["-m"] else words[1:]  # "emos run x.py", not "python3 -m emos run x.py"
+    command = "".join(ch for ch in " ".join(words) if ch.isprintable())
+    if len(command) > 80:
+        command = command[:77] + "..."
+    return f"{run_id} ({command or '?'}, up {up:.0f} s)"
 
 
 def join_run(run_id: str | None) -> RunContext:
-    """A non-owning context for a live run; exits with a clear message if there is none."""
+    """A non-owning context for a live run; exits with a clear message if there is none.
+
+    Without ``--run`` the one live run is used, and a line on stderr says which; with more than
+    one live run of this user the choice is ambiguous, and the command refuses, listing them
+    (no run is "the newest" by accident: two recipes started together are both new)."""
     from emos.supervisor.system import find_runs
     from emos.transport.context import runtime_root
 
@@ -27,8 +71,12 @@ def join_run(run_id: str | None) -> RunContext:
             sys.exit(f"emos: no running system with run id {run_id!r}; running: {[p.name for p in runs] or 'none'}")
     elif not runs:
         sys.exit("emos: no EMOS system is running for this user (start one with `emos run RECIPE.py`)")
+    elif len(runs) > 1:
+        listing = "\n".join(f"  {_describe_run(p)}" for p in runs)
+        sys.exit(f"emos: {len(runs)} EMOS systems are running; say which one with --run RUN_ID:\n{listing}")
     else:
         path = runs[0]
+        print(f"emos: using run {_describe_run(path)}", file=sys.stderr, flush=True)
     return RunContext(path.name, Path(path), owner=False)
 
 

@@ -12,6 +12,11 @@ SERVICE is one of the live-reconfiguration services every component serves:
 ``execute_method method=NAME [args=...]``; or a lifecycle request: ``start``, ``stop``, ``restart``
 (through the supervisor). Values are parsed as YAML scalars (``5`` is an int, ``true`` a bool,
 ``[1, 2]`` a list); the component's config validates them and refuses bad ones with its message.
+The services and actions a component declares itself (the Planner's ``save_plan_to_file``, its
+``plan_path`` action) are called with ``emos service call`` and ``emos action send_goal``.
+
+``--run`` and ``--timeout`` go before or after the verb. Without ``--run`` the one live run is
+used (a line on stderr names it); with several live runs the command lists them and stops.
 """
 from __future__ import annotations
 
@@ -24,19 +29,29 @@ import yaml
 
 from emos.core import control as C
 from emos.core.rpc import RpcClient, RpcConnectionError, RpcError
-from emos.tools.cli.common import add_run_argument, join_run
+from emos.tools.cli.common import add_run_argument, join_run, options_anywhere
 
 SERVICES = (C.UPDATE_PARAMETER, C.UPDATE_PARAMETERS, C.CONFIGURE_FROM_FILE, C.CHANGE_TOPIC, C.EXECUTE_METHOD)
 LIFECYCLE = ("start", "stop", "restart")
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+def _shared(parser: argparse.ArgumentParser) -> None:
     add_run_argument(parser)
-    parser.add_argument("verb", choices=("list", "info", "call"))
-    parser.add_argument("name", nargs="?", help="component name")
-    parser.add_argument("service", nargs="?", help=f"one of {', '.join(SERVICES + LIFECYCLE)}")
-    parser.add_argument("params", nargs="*", metavar="key=value")
-    parser.add_argument("--timeout", type=float, default=15.0, help="seconds to wait for the answer")
+    parser.add_argument("--timeout", type=float, default=15.0, help="seconds to wait for the answer (default %(default)s)")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="verb", required=True, metavar="{list,info,call}")
+    verbs = [
+        sub.add_parser("list", help="the components of the run"),
+        sub.add_parser("info", help="one component's state, topics, config, services and actions"),
+        sub.add_parser("call", help="call a reconfiguration service or a lifecycle request of a component"),
+    ]
+    for verb in verbs[1:]:
+        verb.add_argument("name", help="component name (see `emos component list`)")
+    verbs[2].add_argument("service", help=f"one of {', '.join(SERVICES + LIFECYCLE)}")
+    verbs[2].add_argument("params", nargs="*", metavar="key=value")
+    options_anywhere(parser, verbs, _shared)  # --run and --timeout before or after the verb
 
 
 def parse_params(pairs: list[str]) -> dict[str, Any]:
@@ -82,14 +97,13 @@ def run(args: argparse.Namespace) -> int:
         for name in _workers(tree):
             print(name)
         return 0
-    if not args.name:
-        sys.exit(f"emos component {args.verb}: give the component name (emos component list)")
     if args.verb == "info":
         return _call(C.control_socket(ctx, args.name), C.INFO, {}, args.timeout, args.name)
     if args.service in LIFECYCLE:
         return _call(ctx.run_dir / "supervisor.sock", C.SUPERVISOR_LIFECYCLE, {"component": args.name, "request": args.service, "by": "cli"}, args.timeout, args.name)
     if args.service not in SERVICES:
-        sys.exit(f"emos component call: SERVICE must be one of {', '.join(SERVICES + LIFECYCLE)}, got {args.service!r}")
+        sys.exit(f"emos component call: SERVICE must be one of {', '.join(SERVICES + LIFECYCLE)}, got {args.service!r} "
+                 f"(a service of the component's own: `emos service call {args.name} {args.service} '{{...}}'`)")
     try:
         payload = request(args.service, parse_params(args.params))
     except ValueError as exc:

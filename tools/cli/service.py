@@ -1,4 +1,5 @@
-"""``emos service create|remove|status RECIPE``: a recipe as a systemd service.
+"""``emos service create|remove|status RECIPE``: a recipe as a systemd service; and
+``emos service call|list``: the services of a running system's components (:mod:`.service_call`).
 
 ``create`` writes a unit that runs the recipe with ``emos run`` (so each start keeps its log),
 restarts it when it fails (``Restart=on-failure``: a supervisor that gave up exits 3), and
@@ -29,8 +30,11 @@ from pathlib import Path
 
 from emos.errors import EmosError
 from emos.supervisor.recipes import ENV_HOME, RecipeNotFound, resolve_recipe
+from emos.tools.cli.common import add_run_argument, options_anywhere
 
 EXAMPLES = """examples:
+  emos service call planner save_plan_to_file '{"file_location": "/tmp", "file_name": "path.csv"}'
+  emos service list planner                                 # its services with request -> response types
   sudo emos service create ui_demo                          # /etc/systemd/system/emos-ui_demo.service, enabled and started
   emos service create ~/robot/patrol.py --name patrol --restart-time 5s --no-enable
   emos service create ui_demo --print                       # only show the unit
@@ -53,11 +57,7 @@ class UnitError(EmosError, ValueError):
     """A value that cannot be written into a systemd unit as given."""
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EXAMPLES
-    parser.add_argument("action", choices=("create", "remove", "status"))
-    parser.add_argument("recipe", help="recipe name (see `emos ls`) or path of a recipe script; for remove and status, the recipe or the service name")
+def _unit_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--name", help="service name without .service (default: emos-<recipe>)")
     parser.add_argument("--service-description", default=None, help="the unit's Description (default: EMOS recipe <name>)")
     parser.add_argument("--install-path", default="/etc/systemd/system", help="folder of the unit file (default: %(default)s)")
@@ -65,6 +65,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-enable", action="store_true", help="write the unit but do not enable or start it")
     parser.add_argument("--user", default=None, help="run as this existing user (default: the user running this command, unless root)")
     parser.add_argument("--print", action="store_true", help="print the unit instead of installing it")
+
+
+def _call_options(parser: argparse.ArgumentParser) -> None:
+    add_run_argument(parser)
+    parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for an answer (default %(default)s)")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from emos.tools.cli import service_call
+
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = EXAMPLES
+    sub = parser.add_subparsers(dest="action", required=True, metavar="{create,remove,status,call,list}")
+    units = []
+    for verb, help_text in (("create", "write (and install, enable, start) the unit of a recipe"),
+                            ("remove", "disable and remove the unit"), ("status", "the unit file and its systemd status")):
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        p.add_argument("recipe", help="recipe name (see `emos ls`) or path of a recipe script; for remove and status, the recipe or the service name")
+        units.append(p)
+    call = sub.add_parser("call", help="call a service of a component of the running system (as `ros2 service call`)",
+                          description="call a service of a component of the running system, print the response as JSON")
+    service_call.add_call_arguments(call)
+    listed = sub.add_parser("list", help="the services of a component (or of all) with their types (as `ros2 service list -t`)")
+    service_call.add_list_arguments(listed)
+    # Every option before or after the verb: the unit options with the unit verbs, --run with call and list.
+    options_anywhere(parser, units, _unit_options)
+    options_anywhere(parser, [call, listed], _call_options)
 
 
 def systemd_running() -> bool:
@@ -365,6 +392,10 @@ def _default_user() -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action in ("call", "list"):
+        from emos.tools.cli import service_call
+
+        return service_call.run_call(args) if args.action == "call" else service_call.run_list(args)
     try:
         for option, value in (("RECIPE", args.recipe), ("--name", args.name), ("--service-description", args.service_description),
                               ("--install-path", args.install_path), ("--restart-time", args.restart_time), ("--user", args.user)):

@@ -25,7 +25,7 @@ from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs import fields as F
 from emos.msgs.registry import UnknownMessageType, canonical_name, resolve
-from emos.tools.cli.common import add_run_argument, exit_if_terminated, join_run, signals_deferred
+from emos.tools.cli.common import add_run_argument, exit_if_terminated, join_run, options_anywhere, signals_deferred
 from emos.transport.context import decode_name
 from emos.transport.pubsub import Publisher, Subscriber, list_topics
 from emos.transport.waker import Waker, sweep_dead_wakers
@@ -82,26 +82,27 @@ def _seconds(option: str, positive: bool):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", required=True)
+    verbs = []
     p = sub.add_parser("list", help="topics, their types, publishers and subscribers")
-    add_run_argument(p)
+    verbs.append(p)
     p.add_argument("--json", action="store_true")
     p.add_argument("--network", metavar="ZENOH_CONFIG", nargs="?", const="", default=None,
                    help="only the topics published over Zenoh by any host of the group ($EMOS_NET_GROUP), "
                         "through this Zenoh configuration file (default: $EMOS_ZENOH_CONFIG; with neither, only the "
                         "loopback sessions of this host and user); needs no local run")
     p = sub.add_parser("echo", help="print messages as they arrive")
-    add_run_argument(p)
+    verbs.append(p)
     p.add_argument("topic")
     p.add_argument("--count", "-n", type=_at_least("--count", 0, " (0: no limit)"), default=0, help="stop after N messages (default 0: no limit)")
     p.add_argument("--timeout", type=_seconds("--timeout", positive=False), default=0.0, help="stop after S seconds (default 0: no limit)")
     p.add_argument("--arrays", type=_at_least("--arrays", 0), default=8, help="print at most this many array elements")
     p = sub.add_parser("hz", help="measure the publishing rate")
-    add_run_argument(p)
+    verbs.append(p)
     p.add_argument("topic")
     p.add_argument("--window", type=_seconds("--window", positive=True), default=2.0, help="seconds per report")
     p.add_argument("--reports", type=_at_least("--reports", 0, " (0: no limit)"), default=0, help="stop after N reports (default 0: no limit)")
     p = sub.add_parser("pub", help="publish a message given as JSON (or YAML) fields")
-    add_run_argument(p)
+    verbs.append(p)
     p.add_argument("topic")
     p.add_argument("msg_type")
     p.add_argument("fields", nargs="?", default="{}", help='e.g. \'{"data": 1.5}\'')
@@ -112,15 +113,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from emos.tools.cli import topic_plot as cli_topic_plot
 
     p = sub.add_parser("plot", help="plot numeric fields over time, live or saved (--output FILE)")
-    add_run_argument(p)
+    verbs.append(p)
     cli_topic_plot.add_arguments(p)
+    options_anywhere(parser, verbs, add_run_argument)  # --run before or after the verb
 
 
 class BadMessage(EmosError, ValueError):
     """FIELDS or MSG_TYPE of ``emos topic pub`` that cannot make a message (one-line reason)."""
 
 
-def _parse_fields(text: str) -> Any:
+def _parse_fields(text: str, what: str = "FIELDS") -> Any:
     try:
         return json.loads(text)
     except json.JSONDecodeError as json_exc:
@@ -132,7 +134,7 @@ def _parse_fields(text: str) -> Any:
             where = getattr(exc, "problem_mark", None)
             problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
             at = f" at line {where.line + 1} column {where.column + 1}" if where is not None else ""
-            raise BadMessage(f"FIELDS {text!r} is neither JSON ({json_exc.msg} at column {json_exc.colno}) nor YAML ({problem}{at})") from None
+            raise BadMessage(f"{what} {text!r} is neither JSON ({json_exc.msg} at column {json_exc.colno}) nor YAML ({problem}{at})") from None
 
 
 def _field_path(cls: type, data: dict, prefix: str = "") -> str:
@@ -154,19 +156,21 @@ def _field_path(cls: type, data: dict, prefix: str = "") -> str:
     return prefix
 
 
-def build_message(type_name: str, text: str) -> Any:
-    """The message ``emos topic pub`` was asked for; BadMessage says in one line what is wrong."""
+def build_message(type_name: str | type, text: str, what: str = "FIELDS") -> Any:
+    """The message ``emos topic pub`` was asked for (and ``emos service call`` / ``emos action
+    send_goal``, whose ``what`` is REQUEST / GOAL); BadMessage says in one line what is wrong,
+    naming the field and what it expects."""
     try:
         cls = resolve(type_name)
     except UnknownMessageType as exc:
         raise BadMessage(f"MSG_TYPE: {exc.args[0] if exc.args else exc} (e.g. String, Twist, std_msgs/msg/Float64)") from None
-    fields = _parse_fields(text)
+    fields = _parse_fields(text, what)
     if fields is None:
         fields = {}
     name = canonical_name(cls)
     if not isinstance(fields, dict):
         names = ", ".join(f.name for f in attrs.fields(cls))
-        raise BadMessage(f"FIELDS must be a JSON (or YAML) mapping of {name} fields ({names}), "
+        raise BadMessage(f"{what} must be a JSON (or YAML) mapping of {name} fields ({names}), "
                          f"e.g. '{{\"field\": value}}'; got {type(fields).__name__} {text!r}")
     try:
         return codec.from_builtin(cls, fields)
@@ -181,7 +185,7 @@ def build_message(type_name: str, text: str) -> Any:
             reason = f"field {owned.group(1)} {owned.group(2)}"
         elif path:
             reason = f"in field {path.rstrip('.')}: {reason}"
-        raise BadMessage(f"bad FIELDS for {name}: {reason}") from None
+        raise BadMessage(f"bad {what} for {name}: {reason}") from None
 
 
 def _normal(topic: str) -> str:

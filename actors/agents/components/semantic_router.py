@@ -4,6 +4,12 @@ Vector mode (a ``db_client``): route samples live in a vector-DB collection name
 ``router_name``; a query goes to the route of its nearest sample when that sample lies within
 ``maximum_distance``, else to ``default_route``. LLM mode (a ``model_client``): the model picks
 the route through a tool call; no valid call means the default route.
+
+Vector mode loads the embedding model and stores the route samples at activation, in the model
+worker, before any query: a query that arrives meanwhile waits in the worker's queue and is
+routed once the router can serve. While it loads, the status is GENERAL with a message that says
+so (not HEALTHY: it cannot route yet). A query that is not routed (the queue overflowed, the store
+could not be opened) is logged, rate-limited, with a count naming the component and topic.
 """
 from __future__ import annotations
 
@@ -16,6 +22,7 @@ from emos.config import validators as V
 from emos.io.topic import Topic
 from emos.msgs import intelligence as I
 from emos.msgs import std as D
+from emos.ratelimit import RateLimitedLog
 
 from ..db.spec import DISTANCES
 from ..logic.router import LLMRouter, Route, RouteDecision, VectorRouter
@@ -78,20 +85,55 @@ class SemanticRouter(ModelComponent):
         else:
             self._router = LLMRouter(routes, self._chat, self.default_route)
         self.decisions = 0
+        self.dropped_queries = 0  # queries that were not routed (each one logged, rate-limited)
+        self._drops = RateLimitedLog(self.get_logger(), interval=5.0)
 
     def _chat(self, request: Any) -> Any:
         return self.call_model(lambda client: client.chat(request))
 
     def activate_resources(self) -> None:
-        super().activate_resources()
+        vector = isinstance(self._router, VectorRouter)
+        loading = f"{self.component_name}: loading the embedding model and the route samples"
+        if vector:
+            # Not ready until the model is loaded (17-85 s on a loaded 2-core machine): say so,
+            # rather than HEALTHY while queries wait.
+            self.health_status.set_general(loading)
+            self._publish_status()
+        super().activate_resources()  # opens the DB client, which loads its embedding model
         if isinstance(self._router, VectorRouter):
             self._router.config = self.config.settings
             self._router.initialize()
+        if vector and self.health_status.message == loading:  # ready (a newer report, if any, stays)
+            self.health_status.set_healthy()
+            self._publish_status()
+
+    # ------------------------------------------------------------------ queries not routed
+    def _dropped(self, count: int, why: str) -> None:
+        self.dropped_queries += count
+        topic = self.in_topics[0].name
+        self._drops.warning(("drop", why), "[%s] %d query(ies) on %s not routed: %s (%d in all)",
+                            self.component_name, count, topic, why, self.dropped_queries)
+
+    def _execution_step(self, msg: Any = None, topic: Topic | None = None, **kwargs: Any) -> None:
+        worker = self._worker
+        before = worker.dropped if worker is not None else 0
+        super()._execution_step(msg, topic)
+        if worker is not None and worker.dropped > before:
+            self._dropped(worker.dropped - before, f"more than max_pending={self.config.max_pending} queries waiting; "
+                                                   "the oldest was dropped")
+
+    def _run_job(self, job: Callable[[], None]) -> None:
+        if not self.ensure_resources():
+            self._dropped(1, "its resources (DB, embedding model) cannot be opened; the status says why")
+            self._publish_status()
+            return
+        super()._run_job(job)
 
     def prepare(self, inputs: dict[str, Any], trigger: Topic | None) -> Callable[[], None] | None:
         msg = inputs.get(self.in_topics[0].name)
         query = text_of(msg).strip() if msg is not None else ""
         if not query:
+            self._drops.warning("empty", "[%s] ignoring an empty query on %s", self.component_name, self.in_topics[0].name)
             return None
         return lambda: self._route(query)
 
@@ -99,8 +141,7 @@ class SemanticRouter(ModelComponent):
         decision: RouteDecision = self._router.decide(query)
         target = decision.route.routes_to
         if decision.is_default:
-            self.get_logger().info("[%s] %r: no route close enough (nearest %r at %s); default route %s",
-                                   self.component_name, query, decision.matched_sample, decision.distance, target.name)
+            self.get_logger().info("[%s] %r: %s; default route %s", self.component_name, query, decision.reason, target.name)
         self.publish(target, D.String(data=query))
         self.decisions += 1
         self.health_status.set_healthy()

@@ -10,6 +10,11 @@ An ``RGBD`` input is detected on its colour image and its depth image travels wi
 detections (``Detections.image``), so a depth follower needs no second, unsynchronised
 subscription. With ``include_image`` the frame travels with them (a compressed frame decoded
 to rgb8), so consumers know the image size and can read the pixels.
+
+With ``enable_visualization`` (the spec's debugging pop-up window) the frame with its boxes and
+labels drawn on it is published as an ``Image`` on ``<component_name>/visualization``
+(``vision.visualization_topic``) for the web UI, Foxglove or ``emos topic echo``: a robot is
+usually headless, so no window is opened (see ``vision_viz``).
 """
 from __future__ import annotations
 
@@ -30,6 +35,7 @@ from ..logic.tracking import CentroidTracker
 from ..types import Detection2D, DetectionRequest
 from .base import ModelComponent, ModelComponentConfig
 from .convert import IMAGE_TYPES, ImageInputError, header_now, image_of
+from .vision_viz import annotate, tile
 
 DETECTION_OUTPUTS = (I.Detections, I.DetectionsMultiSource, I.Trackings, I.TrackingsMultiSource)
 
@@ -49,6 +55,11 @@ class VisionConfig(ModelComponentConfig):
     #: attach the frame to each Detections/Trackings message (downstream consumers that need
     #: the pixels, e.g. visual trackers, then need no second subscription)
     include_image: bool = field(default=False)
+    #: publish each frame with its detections drawn on it on ``<component_name>/visualization``
+    #: (an Image topic; the spec's debugging window, made headless). Decided when the component is
+    #: defined: the topic is one of its outputs from then on, and setting it to False later only
+    #: pauses the pictures.
+    enable_visualization: bool = field(default=False, validator=V.instance_of(bool))
 
 
 class Vision(ModelComponent):
@@ -73,6 +84,13 @@ class Vision(ModelComponent):
             raise ValueError(f"component {component_name!r}: Vision needs an image input")
         if not self.out_topics:
             raise ValueError(f"component {component_name!r}: Vision needs a Detections or Trackings output")
+        self.visualization_topic: Topic | None = None
+        if self.config.enable_visualization:  # self.config: a config_file may have set it
+            self.visualization_topic = Topic(name=f"{component_name}/visualization", msg_type="Image")
+            if any(t.name == self.visualization_topic.name for t in self.out_topics):
+                raise ValueError(f"component {component_name!r}: enable_visualization publishes on "
+                                 f"{self.visualization_topic.name!r}, which is already one of its outputs")
+            self.out_topics.append(self.visualization_topic)
         self._local: Any = None
         self._trackers: dict[str, CentroidTracker] = {}
         self.frames_processed = 0
@@ -120,6 +138,8 @@ class Vision(ModelComponent):
             keep = set(self.config.labels_to_track)
             results = [_filter(r, keep) for r in results]
         self._publish(frames, results, stamp)
+        if self.visualization_topic is not None and self.config.enable_visualization:
+            self._publish_visualization(frames, results)
         self.frames_processed += 1
         self.health_status.set_healthy()
 
@@ -152,6 +172,12 @@ class Vision(ModelComponent):
                 self.publish_output(topic, trackings[0])
             elif topic.msg_type is I.TrackingsMultiSource:
                 self.publish_output(topic, I.TrackingsMultiSource(header=header_now(), trackings=trackings))
+
+    def _publish_visualization(self, frames: list[tuple[str, np.ndarray, Any]], results: list[Detection2D]) -> None:
+        assert self.visualization_topic is not None
+        picture = tile([annotate(arr, result) for (_, arr, _), result in zip(frames, results)])
+        header = getattr(frames[0][2], "header", None) or header_now()
+        self.publish(self.visualization_topic, Image.from_numpy(picture, encoding="rgb8", header=header))
 
 
 def _attached_image(msg: Any, rgb: np.ndarray, header: Any, include_image: bool) -> Image | None:

@@ -10,7 +10,7 @@ from typing import Any
 import attrs
 import numpy as np
 
-from ..errors import ModelConnectionError
+from ..errors import MalformedResponseError, ModelConnectionError
 from .backends import CollectionMissing, EmbeddedBackend, HTTPBackend
 from .embedding import Embedder, make_embedder
 from .results import Hit, Record, hits_from_query, records_from_get
@@ -50,12 +50,20 @@ class ChromaClient:
         self._backend: EmbeddedBackend | HTTPBackend | None = None
         self._lock = threading.RLock()
         self._users = 0
+        self._warm = False  # the embedder has embedded once (see load_embedder)
 
     # ------------------------------------------------------------------ lifecycle
     def initialize(self) -> None:
-        """Open the store (and check a server answers). Each successful call is balanced by one
-        :meth:`deinitialize`: components sharing one client (threads of one process) keep it
-        open until the last of them lets go."""
+        """Make the client ready to serve: open the store (and check a server answers), then
+        load the embedding model (see :meth:`load_embedder`). Each successful call is balanced
+        by one :meth:`deinitialize`: components sharing one client (threads of one process)
+        keep it open until the last of them lets go."""
+        with self._lock:
+            self._open_store()
+            self.load_embedder()
+            self._users += 1
+
+    def _open_store(self) -> None:
         with self._lock:
             try:
                 self._open_backend().heartbeat()
@@ -69,7 +77,21 @@ class ChromaClient:
                 self._backend = None
                 raise ModelConnectionError(f"cannot open the embedded store at {self.db.path!r} ({exc})",
                                            client="ChromaClient") from exc
-            self._users += 1
+
+    def load_embedder(self) -> None:
+        """Load the embedding model now and embed one short text, so that the first real write
+        or query does not pay for it: loading all-MiniLM-L6-v2 (torch and its weights) took
+        17-85 s on a loaded 2-core machine, and a first map write that paid for it blocked for
+        85 s. With Ollama embeddings the one request makes the server load its model (and
+        fails here, typed, if the server cannot be reached). Idempotent and cheap once loaded."""
+        with self._lock:
+            if self._warm:
+                return
+            vectors = np.asarray(self.embedder.embed(["ready"]))
+            if vectors.ndim != 2 or vectors.shape[0] != 1:
+                raise MalformedResponseError("one embedding row for one text", f"shape {vectors.shape}",
+                                             client="ChromaClient")
+            self._warm = True
 
     def _open_backend(self) -> EmbeddedBackend | HTTPBackend:
         with self._lock:
@@ -241,6 +263,7 @@ class ChromaClient:
         self._backend = None
         self._lock = threading.RLock()
         self._users = 0
+        self._warm = False
 
 
 def _texts(what: str, values: Sequence[str]) -> list[str]:

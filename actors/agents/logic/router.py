@@ -80,6 +80,9 @@ class RouteDecision:
     distance: float | None = None     # vector mode: distance to the nearest sample
     matched_sample: str | None = None
     is_default: bool = False
+    #: why the default route was taken, in words of the mode that decided (a vector router has a
+    #: nearest sample and a distance, a model has only its tool calls); "" for a matched route
+    reason: str = ""
 
 
 def _check_routes(routes: Sequence[Route], default_route: Route | None) -> list[Route]:
@@ -124,9 +127,18 @@ class VectorRouter:
         if not hits:
             raise RuntimeError(f"router collection {self.config.router_name!r} is empty: call initialize() first")
         hit = hits[0]
-        route = self._by_name.get(hit.metadata.get("route_name"))
-        if route is None or hit.distance > self.config.effective_maximum_distance:
-            return RouteDecision(self.default_route, hit.distance, hit.document, is_default=True)
+        route_name = hit.metadata.get("route_name")
+        route = self._by_name.get(route_name)
+        if route is None:
+            # A collection written by another router of the same name (a stale store).
+            return RouteDecision(self.default_route, hit.distance, hit.document, is_default=True,
+                                 reason=f"the nearest sample {hit.document!r} belongs to no route of this router "
+                                        f"({route_name!r})")
+        limit = self.config.effective_maximum_distance
+        if hit.distance > limit:
+            return RouteDecision(self.default_route, hit.distance, hit.document, is_default=True,
+                                 reason=f"no route close enough (nearest sample {hit.document!r} at "
+                                        f"{self.config.distance_func} distance {hit.distance:.3f} > {limit:g})")
         return RouteDecision(route, hit.distance, hit.document)
 
 
@@ -161,8 +173,12 @@ class LLMRouter:
         request = ChatRequest(messages=[ChatMessage(role="system", content=self.system_prompt),
                                         ChatMessage(role="user", content=query)], tools=self.tools)
         response = self.chat(request)
-        for call in response.message.tool_calls:
-            route = self._by_tool.get(call.name)
+        calls = [call.name for call in response.message.tool_calls]
+        for name in calls:
+            route = self._by_tool.get(name)
             if route is not None:
                 return RouteDecision(route)
-        return RouteDecision(self.default_route, is_default=True)
+        # The names come from the model: shortened, so a rambling answer cannot flood the log.
+        reason = (f"the model called no route tool (it called {', '.join(repr(n[:64]) for n in calls[:4])})" if calls
+                  else "the model called no route tool")
+        return RouteDecision(self.default_route, is_default=True, reason=reason)

@@ -176,3 +176,24 @@ class StartPathRecordingRequest(Message):
 class StartPathRecordingResponse(Message):
     success: bool = F.boolean()
     message: str = F.string()
+
+
+# -- Service types (``kompass_interfaces.srv``): what ``ServiceClientConfig(srv_type=...)``,
+# ``send_srv_request(srv_type=...)`` and ``trigger_service`` take ----------------------------------
+class PathFromToFile:
+    """The Planner's ``save_plan_to_file`` and ``load_plan_from_file`` services:
+    ``PathFromToFile.Request(file_location=..., file_name=...)``, ``PathFromToFile.Response``."""
+
+    Request, Response = PathFromToFileRequest, PathFromToFileResponse
+
+
+class StartPathRecording:
+    """The Planner's ``start_path_recording`` service: ``StartPathRecording.Request(recording_time_step=0.1)``."""
+
+    Request, Response = StartPathRecordingRequest, StartPathRecordingResponse
+
+
+class Save2dMapToFile:
+    """The MapServer's ``save_map`` service: ``Save2dMapToFile.Request(file_location=..., file_name=...)``."""
+
+    Request, Response = SaveMapRequest, SaveMapResponse

@@ -59,9 +59,7 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     sensor_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=vec4, on_setattr=setters, eq=False)
     octree_resolution: float = field(0.1, 1e-9, 1e3)
     max_num_threads: int = field(1, 1, 100, int)
-    costs_weights: TrajectoryCostsWeights = attrs.field(factory=lambda: TrajectoryCostsWeights(
-        reference_path_distance_weight=0.0, goal_distance_weight=3.0, obstacles_distance_weight=0.5,
-        smoothness_weight=0.1, jerk_weight=0.0))
+    costs_weights: TrajectoryCostsWeights = attrs.field(factory=TrajectoryCostsWeights)
 
     @target_distance.validator
     def _check_distance(self, attribute, value) -> None:

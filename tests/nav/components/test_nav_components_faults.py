@@ -93,8 +93,9 @@ launcher.bringup()
 def test_motion_server_step_test_records_csv_and_plot(tmp_path):
     folder = tmp_path / "tests"
     system = _system(tmp_path, f"""
-ms = MotionServer(component_name="motion", config=MotionServerConfig(test_period=1.5, run_circle_test=False,
+ms = MotionServer(component_name="motion", config=MotionServerConfig(test_period=1.5, run_step_test=True, run_circle_test=False,
                   step_test_velocity=0.3, step_test_duration=0.8, tests_folder={str(folder)!r}))
+ms.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))  # no DriveManager here: straight to the base (default: /control)
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[FakeBase(start=(1.0, 1.0, 0.0))])
 launcher.kompass(components=[ms], multiprocessing=True)
