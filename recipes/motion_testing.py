@@ -3,12 +3,14 @@
     emos run recipes/motion_testing.py
     emos topic pub /run_tests Bool '{"data": true}'      # start the tests (or from the web UI)
 
-The MotionServer sends the test commands (``robot_command`` -> the DriveManager's ``command``
-input), the DriveManager's output goes to the robot and is what the MotionServer records
-(its ``command`` input), with the odometry as the measured response. Each test leaves a CSV
-and a PNG (commanded vs measured velocities, driven path) in ``tests_folder``. As in the spec,
-the web UI (open the link the run prints; docs/ui.md) starts the tests and shows the map and
-the robot.
+The MotionServer sends the test commands on its default ``robot_command`` topic, ``/control``:
+the DriveManager's default ``command`` input. The DriveManager's output (``/cmd_vel``) goes to
+the robot and is what the MotionServer records (its ``command`` input), with the odometry as
+the measured response. The circle test is the spec's sequence of three 10 s circles at half the
+robot's limits (forward, inverse, backward), then the robot stops. Each test leaves a CSV and
+a PNG (commanded vs measured velocities, driven path) in ``tests_folder``, named by the test
+(``motion_server_circle_forward_<time>.csv``, ...). As in the spec, the web UI (open the link
+the run prints; docs/ui.md) starts the tests and shows the map and the robot.
 """
 import os
 
@@ -26,7 +28,9 @@ from emos.actors.nav.components import (
     TopicsKeys,
 )
 from emos.actors.sim import Simulator, SimulatorConfig
-from emos.actors.sim.data import HOUSE_MAP
+from emos.packages import get_package_share_directory
+
+kompass_sim_dir = get_package_share_directory(package_name="kompass_sim")
 
 # 1. Robot
 my_robot = RobotConfig(
@@ -50,19 +54,20 @@ motion_server.run_type = "Event"  # wait for a trigger to start
 # 3. Drive Manager: the safety layer between the MotionServer and the robot
 driver = DriveManager(component_name="drive_manager", config=DriveManagerConfig(critical_zone_distance=0.05))
 
-# 4. Wiring: the MotionServer's commands go through the driver; the driver's output is recorded
+# 4. Wiring, as in the spec: the driver publishes the final command; the MotionServer records
+# that same topic. Its tests go out on its default output, /control, the driver's command input.
 cmd_topic = Topic(name="/cmd_vel", msg_type="Twist")
 driver.outputs(robot_command=cmd_topic)
 motion_server.inputs(command=cmd_topic)
-motion_server.outputs(robot_command=Topic(name="/control", msg_type="Twist"))  # the driver's command input
 
-# 5. Context (Map Server) and the simulated robot, spawned in the open part of a room
+# 5. Context (Map Server: the spec's map of the TurtleBot3 arena) and the simulated robot in the
+# arena built from that map, spawned where the three circles stay clear of the furniture
 map_server = MapServer(
     component_name="global_map_server",
-    config=MapServerConfig(map_file_path=str(HOUSE_MAP), grid_resolution=0.5),
+    config=MapServerConfig(map_file_path=os.path.join(kompass_sim_dir, "maps", "turtlebot3_webots.yaml"), grid_resolution=0.5),
 )
 odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
-sim = Simulator("sim", config=SimulatorConfig(world="house", spawn=(2.5, 2.0, 0.0)))
+sim = Simulator("sim", config=SimulatorConfig(world=map_server.config.map_file_path, spawn=(1.0, -2.9, np.pi / 2)))
 sim.inputs(command=cmd_topic)
 sim.outputs(odom=odom_topic)
 

@@ -47,12 +47,23 @@ class HeartbeatMonitor:
         self._foreign_logged: dict[str, float] = {}
         self._task = asyncio.ensure_future(self._check_loop())
 
+    def expect(self, name: str, pid: int | None) -> None:
+        """A new incarnation of ``name`` runs as ``pid`` and is starting: its status is its own
+        from now on. It publishes from configure on, before it is watched; without this, every
+        restart logged the new process's first beats as a foreign publisher's (the monitor
+        still held the dead incarnation's pid)."""
+        self._subscribe(name)
+        self.pids[name] = int(pid or 0)
+
     def watch(self, name: str, worker: Any) -> None:
-        if name not in self.subs:
-            self.subs[name] = Subscriber(self.ctx, f"/{name}/status", ComponentStatus, waker=self.waker, queue_size=4)
+        self._subscribe(name)
         self.pids[name] = int(worker.pid or 0)
         self.watched[name] = (worker, time.monotonic())
         self._on_wake()
+
+    def _subscribe(self, name: str) -> None:
+        if name not in self.subs:
+            self.subs[name] = Subscriber(self.ctx, f"/{name}/status", ComponentStatus, waker=self.waker, queue_size=4)
 
     def unwatch(self, name: str, worker: Any) -> None:
         current = self.watched.get(name)
@@ -74,7 +85,10 @@ class HeartbeatMonitor:
             if not items:
                 continue
             if writer_pid != self.pids.get(name):
-                self._count_foreign(name, len(items), f"ring of {name!r} written by pid {writer_pid}, not by the component's pid {self.pids.get(name)}")
+                # Counted (and said) only against a watched incarnation: while none is (between a
+                # death and the next start), what is left of the dead one's beats is just dropped.
+                if name in self.watched:
+                    self._count_foreign(name, len(items), f"ring of {name!r} written by pid {writer_pid}, not by the component's pid {self.pids.get(name)}")
                 continue
             try:
                 self.status[name] = codec.decode(ComponentStatus, items[-1][1])

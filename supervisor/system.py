@@ -28,10 +28,11 @@ from emos.ratelimit import RateLimitedLog
 from emos.supervisor.fallback_driver import FallbackDriver
 from emos.supervisor.heartbeat import HeartbeatMonitor
 from emos.supervisor.orchestration import Orchestration, fallback_summary, lifecycle_op, with_monitor
+from emos.supervisor.pristine import pristine_copy
 from emos.supervisor.reaper import OrphanReaper
 from emos.supervisor.spawn import Zygote
 from emos.supervisor.tree import ChildSpec, RestartLedger, RestartType, StartFailed, Strategy, Supervisor, supervisor_spec
-from emos.supervisor.workers import ProcessWorker, ThreadWorker, pristine_copy
+from emos.supervisor.workers import ProcessWorker, ThreadWorker
 from emos.transport.context import RunContext, remove_run_dir, remove_segments, set_current
 from emos.transport.waker import sweep_dead_wakers
 
@@ -180,8 +181,12 @@ class System:
         return target
 
     def fresh_component(self, index: int) -> BaseComponent:
-        original = self._pristine.get(index, self.components[index])
-        return pristine_copy(original)
+        """What a start in threaded mode runs: a copy of the pristine copy made before anything
+        ran. Without one (the component could not be copied, as was said then), the object."""
+        original = self._pristine.get(index)
+        if original is None:
+            return pristine_copy(self.components[index])
+        return original if original is self.components[index] else pristine_copy(original)
 
     # ------------------------------------------------------------------ main coroutine
     async def _main(self) -> None:

@@ -7,7 +7,6 @@ through the pidfd (process) or the thread's end, hangs through missed status hea
 from __future__ import annotations
 
 import asyncio
-import copy
 import logging
 import os
 import signal
@@ -48,6 +47,7 @@ class _Incarnation:
         self._stop_reason: str | None = None  # set when *we* end it: shutdown or hang
 
     async def _bring_up(self, died: asyncio.Future[Any]) -> None:
+        self.system.heartbeats.expect(self.name, self.pid)
         hello = self.system.expect_hello(self.name, pid=self.pid)
         done, _ = await asyncio.wait({hello, died}, timeout=self.system.options.start_timeout, return_when=asyncio.FIRST_COMPLETED)
         if died in done:
@@ -224,12 +224,3 @@ class ThreadWorker(_Incarnation):
         self.node.request_exit()
         if not self._thread_done.done():
             self._thread_done.set_result(Exit("hang", "abandoned"))
-
-
-def pristine_copy(component: BaseComponent) -> BaseComponent:
-    """A fresh copy for a restart in threaded mode; processes get theirs from the zygote."""
-    try:
-        return copy.deepcopy(component)
-    except Exception as exc:
-        log.warning("[%s] cannot deep-copy the component (%s); restarts in threaded mode reuse the same object", component.component_name, exc)
-        return component

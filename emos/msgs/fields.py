@@ -122,6 +122,9 @@ def array(dtype: Any = None, ndim: int | None = None, shape: tuple[int, ...] | N
     """
     target = np.dtype(dtype) if dtype is not None else None
     expected = "an array" + (f" of {target}" if target is not None else "") + (f" with shape {shape}" if shape else "")
+    # An empty list (``[]`` from JSON, YAML or the CLI) has no shape of its own: it is the empty
+    # array of any shape with a free (-1) dimension, e.g. (0, 4) for boxes of shape (-1, 4).
+    empty = tuple(0 if s == -1 else s for s in shape) if shape is not None and -1 in shape else None
 
     def convert(value: Any) -> np.ndarray:
         if isinstance(value, (str, bytes)) and not isinstance(value, (bytes, bytearray)):
@@ -129,6 +132,8 @@ def array(dtype: Any = None, ndim: int | None = None, shape: tuple[int, ...] | N
         arr = np.asarray(value, dtype=target) if target is not None else np.asarray(value)
         if arr.dtype == object:
             raise TypeError
+        if empty is not None and arr.shape == (0,) and len(empty) != 1:
+            arr = arr.reshape(empty)
         if ndim is not None and arr.ndim != ndim:
             if arr.size == 0:
                 arr = arr.reshape((0,) * ndim)

@@ -166,10 +166,12 @@ def test_vla_mapping_limits_and_command_types(tmp_path):
         VLA(inputs=[state, *cams.values()], outputs=[Topic(name="cmd", msg_type="JointState")],
             model_client=LeRobotClient(policy), component_name="vla",
             config=VLAConfig(joint_names_map=joints, camera_inputs_map=cams, robot_urdf_file=str(urdf)))
+    # The dataset info is read at configure (issue 33 D8), and the maps are checked against it there.
+    short = VLA(inputs=[state, *cams.values()], outputs=[Topic(name="cmd", msg_type="JointState")],
+                model_client=LeRobotClient(LeRobotPolicy(name="p", checkpoint="x", dataset_info_file=info)), component_name="vla",
+                config=VLAConfig(joint_names_map=joints, camera_inputs_map={"front": cams["front"]}))
     with pytest.raises(ValueError, match=r"camera_inputs_map lacks the policy's cameras \['wrist'\]"):
-        VLA(inputs=[state, *cams.values()], outputs=[Topic(name="cmd", msg_type="JointState")],
-            model_client=LeRobotClient(policy), component_name="vla",
-            config=VLAConfig(joint_names_map=joints, camera_inputs_map={"front": cams["front"]}))
+        short.custom_on_configure()
     outputs = [Topic(name="cmd", msg_type="JointState"), Topic(name="traj", msg_type="JointTrajectory"),
                Topic(name="jog", msg_type="JointJog")]
     vla = VLA(inputs=[state, *cams.values()], outputs=outputs, model_client=LeRobotClient(policy), component_name="vla",

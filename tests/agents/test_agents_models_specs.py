@@ -123,6 +123,8 @@ def test_unknown_model_type_in_a_dict_is_rejected():
 
 def test_lerobot_policy_reads_features_from_a_dataset_info_file():
     policy = LeRobotPolicy(name="arm", dataset_info_file=str(FIXTURES / "lerobot_info.json"), policy_device="cpu")
+    assert policy.dataset_info_pending and policy.image_keys is None  # defining it reads nothing (issue 33 D8)
+    policy.load_dataset_info()  # what the VLA's configure does
     assert policy.image_keys == ["observation.images.front", "observation.images.wrist"]
     assert policy.joint_keys[0] == "shoulder_pan.pos" and len(policy.joint_keys) == 6
     assert set(policy.features) == {"observation.state", "observation.images.front", "observation.images.wrist"}
@@ -136,11 +138,12 @@ def test_lerobot_policy_reads_features_from_a_dataset_info_file():
 
 
 def test_lerobot_policy_rejects_a_missing_or_malformed_info_file(tmp_path):
+    # When the file is loaded (the VLA's configure), not when the policy is defined.
     with pytest.raises(ValueError, match="existing info.json"):
-        LeRobotPolicy(name="arm", dataset_info_file=str(tmp_path / "missing.json"))
+        LeRobotPolicy(name="arm", dataset_info_file=str(tmp_path / "missing.json")).load_dataset_info()
     bad = tmp_path / "info.json"
     bad.write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
-        LeRobotPolicy(name="arm", dataset_info_file=str(bad))
+        LeRobotPolicy(name="arm", dataset_info_file=str(bad)).load_dataset_info()
     with pytest.raises(ValueError, match="'action'"):
         features_from_dataset_info({"features": {"observation.state": {"names": ["a"]}}})

@@ -2,9 +2,11 @@
 
 Every text (each streamed piece of an LLM answer, too) is synthesized in arrival order. With
 ``play_on_device=True`` the audio is played through the default (or ``device``) output with
-sounddevice when this machine has one; without an output device the component says so once and
-keeps publishing. ``say(text)`` speaks on demand (an action target) and ``stop_playback()``
-cuts the current playback and drops what is queued.
+sounddevice when this machine has one. Without that output device (none here, no PortAudio, a
+name or index that matches none) the component keeps publishing, but its health is
+SYSTEM_FAILURE naming the device for as long as it runs, so ``on_system_fail`` fallbacks and
+events can act (a restart looks for the device again). ``say(text)`` speaks on demand (an action
+target) and ``stop_playback()`` cuts the current playback and drops what is queued.
 """
 from __future__ import annotations
 
@@ -40,8 +42,15 @@ class TextToSpeechConfig(ModelComponentConfig):
     speed: float | None = field(default=None)
 
 
+def device_label(device: int | str | None) -> str:
+    """How a report names the output device: the configured one, or the default."""
+    return "the default audio output device" if device is None else f"audio output device {device!r}"
+
+
 class _Player:
-    """Plays WAV bytes one after the other on an output device, in its own thread."""
+    """Plays WAV bytes one after the other on an output device, in its own thread.
+
+    ``problem`` says why the device cannot be used (None when it can): then nothing plays."""
 
     def __init__(self, device: Any, buffer_size: int, log: Any) -> None:
         self.device, self.log = device, log
@@ -49,20 +58,20 @@ class _Player:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="tts-playback", daemon=True)
         self._sd: Any = None
-        self.available = self._open()
+        self.problem = self._open()
+        self.available = self.problem is None
         if self.available:
             self._thread.start()
 
-    def _open(self) -> bool:
+    def _open(self) -> str | None:
         try:
             import sounddevice as sd
 
             sd.query_devices(self.device, kind="output")
-        except Exception as exc:  # no PortAudio, no device: publishing still works
-            self.log.warning("play_on_device: no audio output device here (%s); audio is only published", exc)
-            return False
+        except Exception as exc:  # no PortAudio, no such device: publishing still works
+            return f"play_on_device: {device_label(self.device)} is not available here ({type(exc).__name__}: {exc})"
         self._sd = sd
-        return True
+        return None
 
     def play(self, wav: bytes) -> None:
         if not self.available:
@@ -117,12 +126,34 @@ class TextToSpeech(ModelComponent):
         if not self.out_topics and not self.config.play_on_device:
             raise ValueError(f"component {component_name!r}: TextToSpeech with no output topic needs play_on_device=True")
         self._player: _Player | None = None
+        self._device_problem: str | None = None  # why play_on_device cannot play (None: it can)
         self.utterances = 0
 
     def activate_resources(self) -> None:
         super().activate_resources()
+        self._device_problem = None
         if self.config.play_on_device:
             self._player = _Player(self.config.device, self.config.buffer_size, self.get_logger())
+            if self._player.problem is not None:
+                self._device_problem = f"{self._player.problem}; audio is only published"
+                self.get_logger().error("[%s] %s", self.component_name, self._device_problem)
+                self._set_healthy()
+                self._publish_status()
+
+    def _set_healthy(self) -> None:
+        """Healthy, unless the device to play on is missing: that lasts as long as this run of
+        the component, whatever else works (a SYSTEM_FAILURE that fallbacks and events see)."""
+        if self._device_problem is not None:
+            self.health_status.set_fail_system(message=self._device_problem)
+        else:
+            self.health_status.set_healthy()
+
+    def _clear_model_failure(self) -> None:
+        if self._device_problem is None:
+            super()._clear_model_failure()
+            return
+        self._set_healthy()
+        self._publish_status()
 
     def release_resources(self) -> None:
         if self._player is not None:
@@ -150,7 +181,7 @@ class TextToSpeech(ModelComponent):
         if self._player is not None:
             self._player.play(response.audio)
         self.utterances += 1
-        self.health_status.set_healthy()
+        self._set_healthy()
 
     # ------------------------------------------------------------------ actions
     def say(self, text: str) -> bool:

@@ -98,8 +98,19 @@ class VLA(ModelComponent):
         self._stop_event_at: float | None = None  # monotonic time of the last stop-event firing
 
     # ------------------------------------------------------------------ definition-time checks
+    def custom_on_configure(self) -> None:
+        """Load the policy's dataset info (a file or URL, never read at definition) and check
+        it against the maps: a missing file fails the start here, with the file named."""
+        super().custom_on_configure()
+        policy = self.model_client.model
+        if getattr(policy, "dataset_info_pending", False):
+            policy.load_dataset_info()
+            self._check_policy(self.config)
+
     def _check_policy(self, config: VLAConfig) -> None:
         policy = self.model_client.model
+        if getattr(policy, "dataset_info_pending", False):
+            return  # checked at configure, once the dataset info is read
         joint_keys = getattr(policy, "joint_keys", None)
         if joint_keys:
             missing = [k for k in joint_keys if k not in config.joint_names_map]

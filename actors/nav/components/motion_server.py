@@ -6,6 +6,11 @@ robot) and the measured motion from ``location``. Each test ends in a CSV in ``t
 and a PNG plot of commanded vs measured velocities. Run types: Timed (run the tests once after
 activation), Event (run them when ``run_tests`` receives True), ActionServer
 (``MotionRecording``: record what happens for ``duration`` s, no commands sent).
+
+The default topics are Kompass's: the tests go out on ``/control`` (the DriveManager's
+``command`` input) and the ``command`` input records ``/cmd_vel`` (the DriveManager's output).
+Publishing the tests on ``/cmd_vel`` would put them beside the DriveManager's own commands
+(zeros while it has no input) on the robot's topic: the robot would get both.
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
+from attrs.validators import optional
 
 from emos.config.base import ComponentRunType
 from emos.config.validators import in_range
@@ -30,7 +36,7 @@ from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, pose_of, twist_msg, twist_of, velocity_of
 from .interfaces import MotionRecordingFeedback, MotionRecordingGoal, MotionRecordingResult
 
-__all__ = ["MotionServer", "MotionServerConfig", "plot_recording"]
+__all__ = ["MotionServer", "MotionServerConfig", "circle_tests", "plot_recording"]
 
 COLUMNS = ("t", "cmd_vx", "cmd_vy", "cmd_omega", "x", "y", "yaw", "vx", "vy", "omega")
 
@@ -38,17 +44,20 @@ COLUMNS = ("t", "cmd_vx", "cmd_vy", "cmd_omega", "x", "y", "yaw", "vx", "vy", "o
 @define(kw_only=True)
 class MotionServerConfig(NavComponentConfig):
     """``test_period`` (s) per test. Step test: ``step_test_velocity`` m/s forward for
-    ``step_test_duration`` s, then stop for the rest of the period. Circle test:
-    ``circle_test_velocity`` m/s with ``circle_test_omega`` rad/s for the whole period."""
+    ``step_test_duration`` s, then stop for the rest of the period. Circle test (the spec's
+    sequence of three, one CSV each): ``circle_forward`` drives ``circle_test_velocity`` m/s
+    with ``circle_test_omega`` rad/s, ``circle_inverse`` the negative velocity with the same
+    turn rate, ``circle_backward`` both negated (the forward circle driven in reverse). Unset,
+    they are half the robot's ``ctrl_vx_limits.max_vel`` / ``ctrl_omega_limits.max_vel``."""
 
     loop_rate: float = rate_field(10.0)
     test_period: float = field(default=10.0, validator=in_range(min_value=0.1, max_value=3600.0))
-    run_step_test: bool = field(default=True)
+    run_step_test: bool = field(default=False)
     run_circle_test: bool = field(default=True)
     step_test_velocity: float = field(default=1.0, validator=in_range(min_value=-100.0, max_value=100.0))
     step_test_duration: float = field(default=5.0, validator=in_range(min_value=0.05, max_value=3600.0))
-    circle_test_velocity: float = field(default=0.3, validator=in_range(min_value=-100.0, max_value=100.0))
-    circle_test_omega: float = field(default=0.5, validator=in_range(min_value=-100.0, max_value=100.0))
+    circle_test_velocity: float | None = field(default=None, validator=optional(in_range(min_value=-100.0, max_value=100.0)))
+    circle_test_omega: float | None = field(default=None, validator=optional(in_range(min_value=-100.0, max_value=100.0)))
     tests_folder: str = field(default="~/.emos/motion_tests")
 
 
@@ -59,7 +68,8 @@ class MotionServer(NavComponent):
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
     }
     allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "robot_command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/cmd_vel", msg_type="Twist")),
+        # Kompass's default: the DriveManager's command input, never the robot's own topic.
+        "robot_command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
     }
     main_action_type = (MotionRecordingGoal, MotionRecordingFeedback, MotionRecordingResult)
     config: MotionServerConfig
@@ -92,8 +102,8 @@ class MotionServer(NavComponent):
             v, d = cfg.step_test_velocity, cfg.step_test_duration
             self._queue.append(("step", lambda t: (v if t < d else 0.0, 0.0)))
         if cfg.run_circle_test:
-            v, w = cfg.circle_test_velocity, cfg.circle_test_omega
-            self._queue.append(("circle", lambda t: (v, w)))
+            for name, (v, w) in circle_tests(cfg).items():
+                self._queue.append((name, lambda t, v=v, w=w: (v, w)))
         return bool(self._queue)
 
     def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
@@ -128,6 +138,7 @@ class MotionServer(NavComponent):
                 return
             name, profile = self._queue.pop(0)
             self._test = (name, profile, time.monotonic(), [])
+            self.get_logger().info("[%s] starting the %s test (%.1f s)", self.component_name, name, self.config.test_period)
         name, profile, t0, rows = self._test
         t = time.monotonic() - t0
         out = self.get_out_topic("robot_command")
@@ -136,6 +147,8 @@ class MotionServer(NavComponent):
                 self.publish(out, twist_msg(np.zeros(3)))
             self._finish(name, rows)
             self._test = None
+            if not self._queue:
+                self.get_logger().info("[%s] motion tests done, the robot is stopped", self.component_name)
             return
         v, w = profile(t)
         if out is not None:
@@ -193,6 +206,13 @@ class MotionServer(NavComponent):
             time.sleep(goal.timestep)
         path = self._finish(goal.name or "recording", rows)
         return MotionRecordingResult(success=bool(rows), message=f"{len(rows)} samples", file=path)
+
+
+def circle_tests(cfg: MotionServerConfig) -> dict[str, tuple[float, float]]:
+    """The circle tests in the order they run: name -> (linear velocity, angular velocity)."""
+    v = cfg.circle_test_velocity if cfg.circle_test_velocity is not None else cfg.robot.ctrl_vx_limits.max_vel / 2
+    w = cfg.circle_test_omega if cfg.circle_test_omega is not None else cfg.robot.ctrl_omega_limits.max_vel / 2
+    return {"circle_forward": (v, w), "circle_inverse": (-v, w), "circle_backward": (-v, -w)}
 
 
 def plot_recording(csv_path: str | os.PathLike, png_path: str | os.PathLike, title: str = "") -> None:
