@@ -25,7 +25,9 @@ def server():
 
 
 def test_ollama_backend_embeds_like_the_local_model_and_drives_queries(server, tmp_path):
-    db = ChromaDB(path=str(tmp_path / "s"), embeddings="ollama", checkpoint="all-minilm", ollama_port=server.port)
+    # The server loads its embedding model on the first request, as Ollama does: 6 s on an idle
+    # machine, over a minute on a busy one. The timeout here only bounds a hang.
+    db = ChromaDB(path=str(tmp_path / "s"), embeddings="ollama", checkpoint="all-minilm", ollama_port=server.port, request_timeout=300.0)
     client = ChromaClient(db)
     assert isinstance(client.embedder, OllamaEmbedder)
     texts = ["go to the kitchen", "what is the capital of France?"]

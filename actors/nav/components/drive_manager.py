@@ -186,6 +186,11 @@ class DriveManager(NavComponent):
         cmd, age, key = latest
         src = self.latest(key)
         self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
+        if age > cfg.cmd_timeout and not np.any(cmd):
+            # The last word was "stand still" (a controller or a motion test that finished): the
+            # robot keeps standing still, and a source that said so and went quiet is no fault.
+            self._command = np.zeros(3)
+            return None
         if age > cfg.cmd_timeout:
             return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
         if not self._publisher_alive(key, src):

@@ -171,3 +171,26 @@ def test_a_fresh_drive_manager_holds_without_failing_until_its_first_scan_is_ove
         assert not h.health.is_system_fail
         h.play("/control", [M.Twist(linear=M.Vector3(x=0.2))] * 4)
         assert h.health.is_system_fail and "no odometry yet" in h.health.to_msg().message
+
+
+@pytest.mark.parametrize("last_word", ["drive", "stand still"])
+def test_a_silent_command_source_stops_the_robot_and_is_a_fault_unless_it_last_said_stand_still(last_word):
+    """A controller that goes quiet mid-drive (its last command says drive) is a fault: the robot
+    stops and the input is reported. One whose last command was zero (a controller or a motion
+    test that finished) left the robot standing still on purpose: no fault, no stream of errors."""
+    driver = _driver(cmd_timeout=0.5, loop_rate=20.0)
+    base = RoomBase(start=(1.0, 3.2, 0.0))
+    base.control = M.Twist(linear=M.Vector3(x=0.2))
+    with ComponentHarness(driver) as h:
+        h.advance(1.0, each_tick=base)
+        assert max(c.linear.x for c in h.outputs("/cmd_vel")) > 0.15
+        if last_word == "stand still":
+            base.control = M.Twist()
+            h.advance(0.5, each_tick=base)
+        base.control = None  # the source goes quiet
+        h.advance(2.0, each_tick=base)
+        assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in h.outputs("/cmd_vel")[-10:])
+        if last_word == "drive":
+            assert not h.health.is_healthy and "no command for" in h.health.to_msg().message
+        else:
+            assert h.health.is_healthy, h.health.to_msg().message
