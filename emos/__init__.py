@@ -35,6 +35,7 @@ _LAZY = {
     "NetServiceClient": "emos.transport.zenoh_rpc",
     "NetActionClient": "emos.transport.zenoh_rpc",
     "EmosError": "emos.errors",
+    "executable_main": "emos.entrypoint",
 }
 
 __all__ = sorted(_LAZY)

@@ -21,7 +21,7 @@ from emos.errors import EmosError
 GROUP = "emos.frontends"
 
 # The pip extra that brings each shipped frontend's dependencies, for the error message.
-EXTRAS = {"ui": "ui", "foxglove": "ecosystem"}
+EXTRAS = {"ui": "ui", "foxglove": "ecosystem", "ros2": "ros2"}
 
 
 class Frontend(Protocol):

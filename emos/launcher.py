@@ -267,6 +267,11 @@ class Launcher:
         self._apply_shared()
         if self._ui is not None:
             load_frontend("ui").add(self, self._ui)
+        # `emos run --ros2` / emos.transport.select.use_ros2(): the ROS 2 bridge (an actor, found
+        # through its entry point), unless the recipe added one itself.
+        if os.environ.get("EMOS_ROS2") == "1" and not any(c.component_name == "ros2_bridge" for p in self._packages for c in p.components):
+            ros2 = load_frontend("ros2")
+            ros2.add(self, ros2.request())
         from emos.supervisor.orchestration import Orchestration
 
         if self.fallback_rate is not None and (isinstance(self.fallback_rate, bool) or not isinstance(self.fallback_rate, (int, float)) or self.fallback_rate <= 0):

@@ -3,7 +3,8 @@
 player's goal as a success the moment the answer contains YES.
 
     emos serve models --lerobot-port 8080 --script recipes/models/responder.yaml &
-    emos run recipes/event_driven_vla.py     # then send a goal to vla_player/vision_language_action
+    emos run recipes/event_driven_vla.py
+    emos action send_goal vla_player vision_language_action '{"task": "pick up the oranges and place them in the bowl"}'
 
 Ported from the spec by changing imports, with its errata fixed (the joint and camera maps
 defined, ``event_task_success`` as the stop event, ``trigger=10.0`` for the referee). The

@@ -17,6 +17,11 @@ Goals for the planner (Option A of the page): ``emos topic pub /goal PointStampe
 '{"point": {"x": 1.2, "y": 3.3}}'``. The services from Python (any process of the run)::
 
     save_path_srv.call(file_location="/tmp/", file_name="computed_path.csv")
+
+and from a terminal (``ros2 service call`` of a ROS 2 system)::
+
+    emos service call planner start_path_recording '{"recording_time_step": 0.1}'
+    emos service call planner save_plan_to_file '{"file_location": "/tmp/", "file_name": "recorded_path.csv"}'
 """
 import os
 

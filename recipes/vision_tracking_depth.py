@@ -1,6 +1,8 @@
 """Vision tracking with depth: the spec's vision-tracking-depth recipe, ported to the simulator.
 
     emos run recipes/vision_tracking_depth.py        # or: python recipes/vision_tracking_depth.py
+    # then, as on the spec's page, from another terminal:
+    emos action send_goal controller track_vision_target '{"label": "person"}'   # Ctrl-C cancels
 
 The ``Vision`` component detects people in the colour image of the ``RGBD`` stream (on-board
 classifier, ``enable_local_classifier=True``: OpenCV's HOG people detector) and publishes the
@@ -14,9 +16,10 @@ robot and its RealSense: a person walks to and fro across the room in front of t
 Differences from the spec's recipe, and why:
 * the simulator's topics replace the RealSense driver's (same names for the RGBD stream and the
   depth camera info);
-* the tracking is started by ``StartVisionTracking``, the spec's ``ros2 action send_goal``: it
-  sends the controller's ``track_vision_target`` goal with the label ``person``;
-* ``add_pkg``'s ROS package/executable names are left out: there is no ROS package to name;
+* the page's ``ros2 action send_goal .../track_vision_target ...`` is
+  ``emos action send_goal controller track_vision_target '{"label": "person"}'`` (above);
+* the simulator joins the Vision component's package (``add_pkg`` takes the page's ROS package
+  and executable names, and needs neither: there is no ROS package);
 * the follower keeps ``target_distance=2.4`` m and knows the camera's mount on the robot, and the
   simulated camera is 400 x 300 with a 70 deg vertical field of view: OpenCV's HOG detector
   needs the person's whole figure at >= 128 px, so closer (or in a smaller picture) it would
@@ -28,7 +31,6 @@ from emos import Launcher, Topic
 from emos.actors.agents import Vision, VisionConfig
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.components import Controller, ControllerConfig, DriveManager, LocalMapper
-from emos.actors.nav.components.track_target import StartVisionTracking
 from emos.actors.nav.controllers import VisionRGBDFollowerConfig
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.person import Person
@@ -44,7 +46,7 @@ image0 = Topic(name="/camera/rgbd", msg_type="RGBD")
 detections_topic = Topic(name="detections", msg_type="Detections")
 
 # The people detector sees the camera's full 400 x 300 frames (its default scales to 320 x 240)
-detection_config = VisionConfig(threshold=0.5, enable_visualization=True, enable_local_classifier=True, input_width=400, input_height=300)
+detection_config = VisionConfig(threshold=0.5, enable_local_classifier=True, input_width=400, input_height=300)
 vision = Vision(
     inputs=[image0],
     outputs=[detections_topic],
@@ -86,12 +88,12 @@ sim = Simulator("sim", config=SimulatorConfig(
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(rgbd=image0, depth_camera_info=depth_cam_info_topic)
 
-# Trigger the following action (the spec's `ros2 action send_goal ... "{label: 'person'}"`)
-start = StartVisionTracking(component_name="start_tracking", controller_name="controller", label="person")
-
 # Bring it up with the launcher
 launcher = Launcher()
-launcher.add_pkg(components=[vision, sim, start], ros_log_level="warn", multiprocessing=True)
+launcher.add_pkg(components=[vision, sim], ros_log_level="warn",
+                 package_name="automatika_embodied_agents",
+                 executable_entry_point="executable",
+                 multiprocessing=True)
 launcher.kompass(components=[controller, mapper, driver])
 # Set the robot config for all components
 launcher.robot = my_robot

@@ -1,6 +1,8 @@
 """Vision tracking with RGB: the spec's vision-tracking-rgb recipe, ported to the simulator.
 
     emos run recipes/vision_tracking_rgb.py          # or: python recipes/vision_tracking_rgb.py
+    # then, as on the spec's page ("Trigger the Following Action"), from another terminal:
+    emos action send_goal my_controller track_vision_target '{"label": "person"}'   # Ctrl-C cancels
 
 A ``Vision`` component detects people in the camera frames and the ``Controller``'s
 ``VisionRGBFollower`` keeps the person centred in the image and at the distance it had when
@@ -17,8 +19,8 @@ Differences from the spec's recipe, and why:
 * the follower's ``rotation_gain`` is 3 instead of its default 1 (see below);
 * ``enable_visualization=True`` publishes the annotated frames on ``/detection_component/visualization``
   (an Image topic for the web UI or Foxglove) instead of the original's pop-up window;
-* the tracking is started by ``StartVisionTracking``, the ``ros2 action send_goal`` of the spec:
-  it sends the controller's ``track_vision_target`` goal with the label ``person``.
+* the page's ``ros2 action send_goal /my_controller/track_vision_target ...`` is
+  ``emos action send_goal my_controller track_vision_target '{"label": "person"}'`` (above).
 """
 import numpy as np
 
@@ -26,7 +28,6 @@ from emos import Launcher, Topic
 from emos.actors.agents import Vision, VisionConfig
 from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.components import Controller, ControllerConfig, DriveManager
-from emos.actors.nav.components.track_target import StartVisionTracking
 from emos.actors.nav.controllers import VisionRGBFollowerConfig
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.person import Person
@@ -90,11 +91,8 @@ sim = Simulator("sim", config=SimulatorConfig(
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(camera=image0)
 
-# Trigger the following action (the spec's `ros2 action send_goal ... "{label: 'person'}"`)
-start = StartVisionTracking(component_name="start_tracking", controller_name="my_controller", label="person")
-
 launcher = Launcher()
-launcher.add_pkg(components=[vision, sim, start], ros_log_level="warn")
+launcher.add_pkg(components=[vision, sim], ros_log_level="warn")
 launcher.kompass(components=[controller, driver])
 # Set the robot config for all components
 launcher.robot = my_robot

@@ -2,7 +2,9 @@
 SO-101-like arm from its joint states and two cameras.
 
     emos serve models --lerobot-port 8080 &      # stand-in policy server (holds the arm's pose)
-    emos run recipes/vla_manipulation.py         # then send a goal to vla_with_smolvla/vision_language_action
+    emos run recipes/vla_manipulation.py
+    # then, as on the spec's page (its `ros2 action send_goal /vla_with_smolvla/vision_language_action ...`):
+    emos action send_goal vla_with_smolvla vision_language_action '{"task": "pick up the oranges and place them in the bowl"}'
 
 The ``Simulator``'s table-top world (pybullet: the arm, three oranges, a bowl) stands in for
 the spec's Isaac Sim scene: it publishes ``joint_states``, ``camera`` and ``wrist_camera`` and

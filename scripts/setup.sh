@@ -31,8 +31,16 @@ fi
 # torch first, pinned: the CPU build is on local disk; an unpinned torch pulls CUDA wheels.
 $PY -m pip install -q "torch==2.13.0"
 extras="all"
-[ $want_test = 1 ] && extras="all,test"
+# ROS 2 (the extra ros2: the Jazzy wheels from PyPI) for the ROS 2 bridge's tests only: the
+# runtime and the main job stay ROS-free.
+[ $want_test = 1 ] && extras="all,test,ros2"
 $PY -m pip install -q -e ".[${extras}]"
+if [ $want_test = 1 ]; then
+  # The wheels bring ros-wheels-bootstrapper, a .pth file that re-executes *every* Python process
+  # with LD_LIBRARY_PATH set. EMOS loads the ROS 2 libraries itself where it needs them
+  # (emos/interop/ros2/env.py), so the rest of the suite's processes stay as they are without ROS.
+  $PY -m pip uninstall -y -q ros-wheels-bootstrapper >/dev/null 2>&1 || true
+fi
 # Bytecode now, once: every process of a run imports much of the package, and an environment
 # with PYTHONDONTWRITEBYTECODE=1 would otherwise compile it from source in each one (about half
 # a second per `emos run`). Python still checks each file's timestamp, so edits are picked up.

@@ -65,6 +65,9 @@ class Package:
 class SystemOptions:
     heartbeat_timeout: float = 2.0
     start_timeout: float = 30.0
+    # Activation may wait for the component's own resources (an embedding model: 17-85 s on a
+    # busy machine; BaseComponent.custom_on_activate): a hang bound, not a budget.
+    activate_timeout: float = 300.0
     stop_timeout: float = 5.0
     max_restarts: int = 3  # of whole groups, at the root
     max_seconds: float = 30.0

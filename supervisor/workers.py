@@ -58,7 +58,8 @@ class _Incarnation:
         try:
             target = L.LifecycleState.ACTIVE if self.activate else L.LifecycleState.INACTIVE
             for transition in L.path_to(L.LifecycleState.UNCONFIGURED, target):
-                call = asyncio.ensure_future(client.call(C.TRANSITION, transition=transition.value, timeout=self.system.options.start_timeout))
+                timeout = self.system.options.activate_timeout if transition == L.Transition.ACTIVATE else self.system.options.start_timeout
+                call = asyncio.ensure_future(client.call(C.TRANSITION, transition=transition.value, timeout=timeout))
                 done, _ = await asyncio.wait({call, died}, return_when=asyncio.FIRST_COMPLETED)
                 if died in done:
                     call.cancel()

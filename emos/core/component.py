@@ -12,6 +12,7 @@ lifecycle hooks below. Subclasses override:
 """
 from __future__ import annotations
 
+import concurrent.futures
 import inspect
 import logging
 from collections.abc import Sequence
@@ -259,8 +260,12 @@ class BaseComponent(FallbackHooks):
     def custom_on_configure(self) -> None:
         pass
 
-    def custom_on_activate(self) -> None:
-        pass
+    def custom_on_activate(self) -> concurrent.futures.Future[Any] | None:
+        """Start what the component needs to run. A component that can serve only after a slow
+        start (a model loading in a worker thread) returns a Future that completes when it can:
+        the node reports ACTIVE only then, and meanwhile serves its heartbeat and control socket,
+        and keeps the triggering messages that arrive for its first steps."""
+        return None
 
     def custom_on_deactivate(self) -> None:
         pass

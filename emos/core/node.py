@@ -287,7 +287,11 @@ class Node:
 
     async def _on_activate(self) -> None:
         comp = self.component
-        comp.custom_on_activate()
+        ready = comp.custom_on_activate()
+        if ready is not None:
+            # It can serve once this completes (BaseComponent.custom_on_activate): the loop keeps
+            # serving the heartbeat and the control socket while the state stays INACTIVE.
+            await asyncio.wrap_future(ready)
         run_type = comp.run_type
         assert self.loop is not None
         if run_type == ComponentRunType.TIMED and self._sim_time is None:

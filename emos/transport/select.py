@@ -115,6 +115,25 @@ def use_network(zenoh_config: str | None = None, topics: str | list[str] | None 
         os.environ[ENV_NET_SERVICES] = names(services, "services")
 
 
+def use_ros2(topics: str | list[str] | None = None, domain_id: int | None = None) -> str:
+    """The recipe's way to what ``emos run --ros2 --ros2-topics ... --ros-domain-id N`` does: the
+    run gets a supervised ROS 2 bridge (emos.interop.ros2.bridge) for ``topics`` (``"all"``, the
+    default, or names / wildcards) on ROS 2 domain ``domain_id`` (default ``$ROS_DOMAIN_ID``, else
+    0). Call it before ``Launcher.bringup()``. Checked here: a bad name, a bad domain, or no ROS 2
+    installed fails at once (the error says what to install). Returns which ROS 2 is used, in one line."""
+    from emos.interop.ros2 import env
+    from emos.interop.ros2.options import ENV_ROS2, ENV_ROS2_DOMAIN, ENV_ROS2_TOPICS, check_domain, parse_topics
+
+    names = parse_topics(topics, "use_ros2: topics")
+    domain = check_domain(domain_id)
+    install = env.require()
+    os.environ[ENV_ROS2] = "1"
+    os.environ[ENV_ROS2_TOPICS] = ",".join(names) or "all"
+    if domain is not None:
+        os.environ[ENV_ROS2_DOMAIN] = str(domain)
+    return install.describe()
+
+
 def net_topics_option() -> tuple[bool, frozenset[str]]:
     """``(all topics, named topics)`` from ``$EMOS_NET_TOPICS``."""
     raw = os.environ.get(ENV_NET_TOPICS, "").strip()

@@ -1,10 +1,10 @@
 """Issue 33 D3 and D6: a SemanticRouter whose embedding model loads at start-up.
 
 D3: the model (all-MiniLM-L6-v2, 17-85 s to load on a loaded machine) loads at activation, and a
-routing query published during that load was dropped without a word. Now the router says it is
-not ready (status GENERAL, "loading ...") until it can route, queries that arrive meanwhile wait
-and are routed, and a query that is not routed (its queue overflowed) is logged with a count
-naming the component and topic. D6: in LLM mode a default-route decision no longer logs
+routing query published during that load was dropped without a word. Now the router is not
+ACTIVE until it can route (and says why: status GENERAL, "loading ..."), queries that arrive
+meanwhile wait and are routed, and a query that is not routed (its queue overflowed) is logged
+with a count naming the component and topic. D6: in LLM mode a default-route decision no longer logs
 "nearest None at None" (there is no nearest sample in LLM mode).
 """
 from __future__ import annotations
@@ -41,20 +41,28 @@ tight = SemanticRouter(inputs=[Topic(name="question2", msg_type="String")], rout
 launcher = Launcher()
 launcher.add_pkg(components=[router, tight])
 launcher.bringup()
-""", duration=600).wait_up(components=["router", "tight"])
+""", duration=600).wait_up()  # the run is up; its routers are still starting
     probe = Probe(system)
     try:
         probe.sub("/goto_in", "String"), probe.sub("/text_in_llm", "String")
-        # Right after the run is up, before the model is loaded (torch alone takes seconds).
+        statuses = {name: probe.sub(f"/{name}/status", "ComponentStatus") for name in ("router", "tight")}
+
+        def loading(name: str):
+            said = statuses[name].latest()
+            return said if said is not None and "loading the embedding model" in said.message else None
+
+        for name in ("router", "tight"):
+            said = wait_until(lambda name=name: loading(name), 2 * HANG_S, what=f"{name} saying it loads its model")
+            # Not ACTIVE until it can route: the launcher and `emos status` show it still starting.
+            assert said.status == GENERAL and said.lifecycle_state != "active", said
+        # Published while the model loads (torch alone takes seconds): they wait (the tight
+        # router keeps one: max_pending=1).
         probe.pub("/question", M.String(data="please walk over to the kitchen"))
         probe.pub("/question2", M.String(data="first: go to the door"))
         probe.pub("/question2", M.String(data="second: go to the door"))
-        for name in ("router", "tight"):
-            said = probe.status(name)
-            assert said.status == GENERAL and "loading the embedding model" in said.message, (
-                f"{name} should say it is not ready while its model loads, said {said}")
-        routed = probe.collect("/goto_in", "String", count=2, timeout=2 * HANG_S)
-        wait_until(lambda: probe.status("router").status == HEALTHY, HANG_S, what="the router healthy once loaded")
+        routed = probe.collect("/goto_in", "String", count=2, timeout=4 * HANG_S)
+        wait_until(lambda: system.state("router") == "active" and probe.status("router").status == HEALTHY, HANG_S,
+                   what="the router active and healthy once loaded")
         log = system.output()
     finally:
         probe.close()

@@ -87,14 +87,17 @@ def kill_leftover_systems() -> None:
 class SystemUnderTest:
     """A recipe running under ``emos run`` in its own process."""
 
-    def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None, prefix: list[str] | None = None):
-        """``prefix``: a command that execs the rest in place (``ip netns exec NS``), keeping the pid."""
+    def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None, prefix: list[str] | None = None,
+                 args: list[str] | None = None):
+        """``prefix``: a command that execs the rest in place (``ip netns exec NS``), keeping the pid.
+        ``args``: more options of ``emos run`` (``--ros2``, ...)."""
         _STARTED.append(self)
         self.script = tmp_path / "recipe.py"
         self.script.write_text(RECIPE_HEADER + textwrap.dedent(body))
         cmd = [*(prefix or []), sys.executable, "-m", "emos", "run", str(self.script)]
         if duration:
             cmd += ["--duration", str(duration)]
+        cmd += args or []
         self.log_path = tmp_path / "system.log"
         self._log = open(self.log_path, "wb")  # noqa: SIM115 - open while the system runs; stop/wait_exit/kill_all close it
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}, cwd=tmp_path)

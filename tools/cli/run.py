@@ -32,6 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--net-control", action="store_true",
                         help="with --zenoh: let the Monitors of other runs in the group act on this run's components "
                              "(methods, parameters, start/stop/restart, their services and goals)")
+    parser.add_argument("--ros2", action="store_true",
+                        help="bridge the run's topics to live ROS 2 nodes (a supervised bridge process; needs ROS 2: pip install 'emos[ros2]')")
+    parser.add_argument("--ros2-topics", metavar="TOPICS", default=None,
+                        help="with --ros2: 'all' (default) or topic names / wildcards separated by ','")
+    parser.add_argument("--ros-domain-id", metavar="N", type=int, default=None, help="with --ros2: the ROS 2 domain id (default: $ROS_DOMAIN_ID, else 0)")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
@@ -51,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
     launcher_mod._RUN_DURATION = args.duration
     os.environ["EMOS_RUN_CLI"] = "1"
-    problem = _network_options(args)
+    problem = _network_options(args) or _ros2_options(args)
     if problem:
         print(f"emos run: {problem}", file=sys.stderr)
         return 2
@@ -93,4 +98,22 @@ def _network_options(args: argparse.Namespace) -> str | None:
             net_topics_option()
         except ValueError as exc:
             return f"--net-topics: {exc}"
+    return None
+
+
+def _ros2_options(args: argparse.Namespace) -> str | None:
+    """Export ``--ros2`` / ``--ros2-topics`` / ``--ros-domain-id`` to the run (emos.transport.select.use_ros2
+    checks them); without ROS 2 installed, fail now, saying what to install."""
+    ros2 = getattr(args, "ros2", False)
+    if not ros2:
+        if getattr(args, "ros2_topics", None) is not None or getattr(args, "ros_domain_id", None) is not None:
+            return "--ros2-topics and --ros-domain-id go with --ros2"
+        return None
+    from emos.transport.select import use_ros2
+
+    try:
+        install = use_ros2(topics=args.ros2_topics, domain_id=args.ros_domain_id)
+    except (ImportError, ValueError, TypeError) as exc:
+        return f"--ros2: {exc}"
+    print(f"emos run: bridging to {install}", file=sys.stderr)
     return None

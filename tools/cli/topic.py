@@ -16,6 +16,7 @@ import math
 import re
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import attrs
@@ -252,8 +253,25 @@ def _print_topics(topics: dict, as_json: bool) -> int:
         print(json.dumps(topics, indent=2))
     else:
         for name, info in sorted(topics.items()):
-            print(f"{name:<40} {info['type']:<40} pubs={len(info['publishers'])} subs={info.get('subscribers', 0)}")
+            bridged = f"  ros2 ({info['ros2']['direction']} {info['ros2']['type']})" if "ros2" in info else ""
+            print(f"{name:<40} {info['type']:<40} pubs={len(info['publishers'])} subs={info.get('subscribers', 0)}{bridged}")
     return 0
+
+
+def _with_ros2_marks(ctx, topics: dict) -> dict:
+    """Marks the topics the run's ROS 2 bridge carries (``<run dir>/ros2_bridge.json``, written by
+    the bridge: read as untrusted, a bad file only loses the marks)."""
+    from emos.interop.ros2.options import STATE_FILE
+
+    try:
+        state = json.loads((Path(ctx.run_dir) / STATE_FILE).read_text())
+        bridged = state["topics"] if isinstance(state, dict) and isinstance(state.get("topics"), dict) else {}
+    except (OSError, ValueError):
+        return topics
+    for name, info in bridged.items():
+        if name in topics and isinstance(info, dict) and isinstance(info.get("direction"), str) and isinstance(info.get("type"), str):
+            topics[name]["ros2"] = {"direction": info["direction"], "type": info["type"]}
+    return topics
 
 
 def _short(value, n: int):
@@ -285,7 +303,7 @@ def run(args: argparse.Namespace) -> int:
     ctx = join_run(args.run)
     sweep_dead_wakers(ctx)  # readers killed outright left theirs (module doc)
     if args.action == "list":
-        return _print_topics(list_topics(ctx), args.json)
+        return _print_topics(_with_ros2_marks(ctx, list_topics(ctx)), args.json)
     topic = args.topic if args.topic.startswith("/") else "/" + args.topic
     if args.action == "pub":
         cls = type(msg)

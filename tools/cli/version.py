@@ -12,6 +12,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import emos
+    from emos.interop.ros2 import env as ros2_env
 
     print(f"emos {emos.__version__} (python {sys.version.split()[0]})")
+    print(ros2_env.describe())  # which ROS 2 `emos run --ros2` would use, or what to install
     return 0

@@ -15,6 +15,7 @@
 """
 from __future__ import annotations
 
+import concurrent.futures
 import copy
 import threading
 import time
@@ -330,19 +331,31 @@ class ModelComponent(BaseComponent):
         return list(self._all_inputs)
 
     # ------------------------------------------------------------------ lifecycle
-    def custom_on_activate(self) -> None:
+    def custom_on_activate(self) -> concurrent.futures.Future[Any]:
+        """Opens the resources in the worker thread. The component is ACTIVE once its own
+        resources (the DB, local models: an embedding model takes 17-85 s to load on a busy
+        machine) are open or have failed, so it can serve what it is sent; the model server is
+        not waited for (a dead server must not hold up the robot: its ladder reconnects)."""
         self._worker = StepWorker(self.component_name, self.PENDING_POLICY, self.config.max_pending,
                                   on_error=self._on_job_error)
         self._worker.start()
         self._client_ready = False
-        self._worker.submit(self._activate_in_worker)
+        ready: concurrent.futures.Future[Any] = concurrent.futures.Future()
+        if not self._worker.submit(lambda: self._activate_in_worker(ready)):
+            ready.set_result(None)
         if self.model_client is not None:
             self.create_timer(self.config.reconnect_period, self._reconnect_tick)
+        return ready
 
-    def _activate_in_worker(self) -> None:
+    def _activate_in_worker(self, ready: concurrent.futures.Future[Any] | None = None) -> None:
         """Open the DB and the model client without blocking the loop; report, don't crash."""
         self._resources_ready = False
-        if not self.ensure_resources():
+        try:
+            opened = self.ensure_resources()
+        finally:
+            if ready is not None and not ready.done():
+                ready.set_result(None)  # open or failed (and reported): the node goes ACTIVE
+        if not opened:
             self._publish_status()
             return
         if self.model_client is None:

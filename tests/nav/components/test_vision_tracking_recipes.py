@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import math
 import re
+import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -36,8 +39,14 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
     spawn, path, speed = _constants(source)
     person = Person(waypoints=np.array(path), speed=speed, mode="pingpong")
     system = SystemUnderTest(tmp_path, source, env={"PYTHONPATH": str(REPO)})
+    cli = None
     try:
-        system.wait_up(timeout=60)
+        # The spec starts the tracking from the command line (`ros2 action send_goal`): so do we.
+        controller = re.search(r'Controller\(component_name="(\w+)"', source).group(1)
+        system.wait_up(timeout=60, components=[controller])
+        cli = subprocess.Popen([sys.executable, "-m", "emos", "action", "send_goal", "--run", system.ctx.run_id,
+                                controller, "track_vision_target", '{"label": "person"}'],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
         odom = Subscriber(system.ctx, "/odom", M.Odometry, queue_size=1000)
         dets = Subscriber(system.ctx, detections, M.Detections, queue_size=100)
         samples, seen, t_first = [], 0, None
@@ -72,6 +81,9 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
         return {"err": np.abs(a[:, 0]), "static": np.abs(a[:, 1]), "dist": a[:, 2], "yaw": a[:, 3],
                 "log": system.output()[-3000:]}
     finally:
+        if cli is not None:
+            cli.send_signal(signal.SIGINT)  # Ctrl-C: cancels the goal on the controller
+            cli.wait(60)
         system.stop()
 
 

@@ -1,0 +1,421 @@
+"""A run's topics on the ROS 2 graph, and ROS 2 topics as ordinary EMOS inputs.
+
+Why a bridge and not a ``ros2`` transport under every component
+------------------------------------------------------------------
+A transport would put rclpy, a DDS participant (threads, sockets, discovery traffic, Fast DDS's
+shared-memory files) and ~130 ROS 2 libraries into *every* component process that touches a
+bridged topic, and make their start-up, crash and restart behaviour depend on DDS's. One
+supervised process that holds the only rclpy node instead:
+
+* keeps components as they are: they read and write our rings; a topic is bridged or not by
+  the run option, with no change to the recipe;
+* has one participant on the graph (node ``emos_bridge``), one place for QoS matching,
+  discovery and bad-input handling, one set of DDS resources to clean up;
+* is restarted by the supervisor like any component when it dies; components do not notice
+  beyond a gap in the bridged streams;
+* costs one extra copy per message (ring -> CDR), measured in docs/ros2.md.
+
+How
+---
+* EMOS -> ROS 2: every topic of the run that has an EMOS publisher, is wanted (``topics``: all,
+  or names), and whose type is shared with ROS 2 (:mod:`emos.interop.ros2_cdr`) gets an rclpy
+  publisher of the same name and ROS 2 type; messages go as CDR bytes (``publish(bytes)``, no
+  rclpy message objects).
+* ROS 2 -> EMOS: every wanted ROS 2 topic with a publisher other than this bridge, whose type has
+  an EMOS class, gets a raw rclpy subscription (bytes) and an EMOS publisher (ring) of the same
+  name; EMOS components subscribe to it as to any topic.
+* A topic goes one way only: the side that had a publisher first. ``/rosout`` and
+  ``/parameter_events`` are bridged only when named.
+* Bad input is dropped with one rate-limited line naming the topic and the types: a ROS 2 type
+  EMOS has no class for, a topic whose type differs between the sides, bytes that do not decode,
+  a ROS 2 interface package that is not installed.
+* Incompatible QoS between the bridge and a ROS 2 node is reported once per topic and policy.
+* Services of shared types go both ways (:mod:`emos.interop.ros2.services`).
+"""
+from __future__ import annotations
+
+import fnmatch
+import importlib
+import logging
+import os
+import threading
+import time
+from collections.abc import Iterable
+from typing import Any, cast
+
+from emos.config.qos import QoSConfig
+from emos.interop.ros2 import env
+from emos.interop.ros2 import qos as Q
+from emos.interop.ros2.options import STATE_FILE
+from emos.interop.ros2_cdr import DISTRIBUTIONS, CdrError, NotShared, codec_for
+from emos.msgs import codec
+from emos.msgs.registry import UnknownMessageType, resolve
+from emos.ratelimit import RateLimitedLog
+from emos.transport.context import RunContext
+from emos.transport.pubsub import Publisher, Subscriber, TopicTypeError, list_topics
+from emos.transport.waker import Waker
+
+log = logging.getLogger("emos.ros2")
+_limited = RateLimitedLog(log, interval=10.0)
+
+PUBLISHER_ID = "ros2_bridge"  # the bridge's rings: never bridged back out
+ROS_INTERNAL = frozenset({"/rosout", "/parameter_events"})
+# Fast DDS's shared-memory transport leaves /dev/shm/fastrtps_* and sem.fastrtps_* behind when a
+# process is SIGKILLed (they carry no pid, so a restarted bridge cannot tell its own from a live
+# node's). The bridge talks UDP only instead: a killed bridge leaves nothing, at the cost of one
+# loopback copy per message. See _udp_only().
+ENV_FASTDDS_TRANSPORTS = "FASTDDS_BUILTIN_TRANSPORTS"
+ENV_FASTDDS_PROFILES = "FASTRTPS_DEFAULT_PROFILES_FILE"
+_UDP_LOOPBACK_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<!-- Written by the EMOS ROS 2 bridge: UDP on the loopback interface only, no shared memory. -->
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor>
+      <transport_id>emos_udp_loopback</transport_id>
+      <type>UDPv4</type>
+      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
+    </transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="emos_bridge" is_default_profile="true">
+    <rtps>
+      <userTransports><transport_id>emos_udp_loopback</transport_id></userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports>
+    </rtps>
+  </participant>
+</profiles>
+"""
+
+
+def _udp_only(ctx: RunContext) -> str:
+    """Make this process's Fast DDS participant use UDP only; returns how, for the log.
+
+    ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` does it, except when discovery is limited to this host
+    (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` or the older ``ROS_LOCALHOST_ONLY=1``): then
+    rmw_fastrtps installs its own transports, shared memory included. In that case we give Fast
+    DDS an XML profile of UDP on 127.0.0.1 (the same reach) and take the variables out of this
+    process's environment. A user's own Fast DDS profile file is used as it is."""
+    if os.environ.get(ENV_FASTDDS_PROFILES):
+        return f"Fast DDS profile {os.environ[ENV_FASTDDS_PROFILES]} (the user's)"
+    localhost = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST" or os.environ.get("ROS_LOCALHOST_ONLY") == "1"
+    if not localhost:
+        os.environ.setdefault(ENV_FASTDDS_TRANSPORTS, "UDPv4")
+        return f"Fast DDS transports {os.environ[ENV_FASTDDS_TRANSPORTS]}"
+    path = ctx.run_dir / "ros2_fastdds_udp_loopback.xml"
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(_UDP_LOOPBACK_PROFILE)
+    os.replace(tmp, path)
+    os.environ[ENV_FASTDDS_PROFILES] = str(path)
+    os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    return "UDP on 127.0.0.1 only (discovery range LOCALHOST)"
+
+
+class _Out:
+    __slots__ = ("sub", "pub", "cls", "ros_type", "sent", "errors")
+
+    def __init__(self, sub: Subscriber, pub: Any, cls: type, ros_type: str):
+        self.sub, self.pub, self.cls, self.ros_type = sub, pub, cls, ros_type
+        self.sent = self.errors = 0
+
+
+class _In:
+    __slots__ = ("sub", "pub", "cls", "ros_type", "received", "errors")
+
+    def __init__(self, pub: Publisher, cls: type, ros_type: str):
+        self.pub, self.cls, self.ros_type = pub, cls, ros_type
+        self.sub: Any = None
+        self.received = self.errors = 0
+
+
+class Ros2Bridge:
+    """Bridges the wanted topics of the run ``ctx`` to the ROS 2 graph of ``domain_id``.
+
+    ``topics``: names or wildcards (``None`` or empty: all). ``qos``: per topic name, a QoSConfig,
+    its fields or a profile name (:mod:`emos.interop.ros2.qos`). Runs two threads: rclpy's
+    executor (ROS 2 -> EMOS) and the forwarder (EMOS -> ROS 2, and discovery every
+    ``discover_every`` s). :attr:`failure` is set if either dies.
+    """
+
+    def __init__(self, ctx: RunContext, topics: Iterable[str] | None = None, domain_id: int | None = None,
+                 node_name: str = "emos_bridge", qos: dict[str, Any] | None = None, discover_every: float = 0.5):
+        self.install = env.ensure_loadable()
+        self.transport = _udp_only(ctx)
+        import rclpy
+        from rclpy.executors import MultiThreadedExecutor
+
+        self.ctx = ctx
+        self.patterns = [t if t.startswith("/") or "*" in t[:1] else "/" + t for t in (topics or [])]
+        self.qos = {("/" + k.lstrip("/")): Q.as_qos(v, f"qos[{k!r}]") for k, v in (qos or {}).items()}
+        self.discover_every = discover_every
+        self.codec = codec_for(self.install.distro if self.install.distro in DISTRIBUTIONS else "jazzy")
+        self.out: dict[str, _Out] = {}
+        self.inn: dict[str, _In] = {}
+        self._skipped: set[tuple[str, str]] = set()
+        self._incompatible: set[tuple[str, str, str]] = set()
+        self._lock = threading.Lock()  # out/inn tables: the forwarder adds, close() removes
+        self._stop = threading.Event()
+        self.failure: str | None = None
+        self.context = rclpy.context.Context()
+        from rclpy.signals import SignalHandlerOptions
+
+        # The component's own SIGTERM handling stops it in order: rclpy must not take the signals over.
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            self.node: Any = rclpy.create_node(node_name, context=self.context, start_parameter_services=False)
+            self.node_name = self.node.get_name()
+            self.node_namespace = self.node.get_namespace()
+            # Three threads: the topics (the node's default, mutually exclusive group: one writer
+            # per EMOS ring), calls to EMOS services, answers of ROS 2 servers (services.py).
+            self.executor = MultiThreadedExecutor(num_threads=3, context=self.context)
+            self.executor.add_node(self.node)
+            self.waker = Waker(ctx, background=True)
+            from emos.interop.ros2.services import ServiceBridge
+
+            self.services = ServiceBridge(ctx, self.node, self.wanted, self._skip_once)
+        except BaseException:
+            rclpy.shutdown(context=self.context)
+            raise
+        self.domain_id = self.context.get_domain_id()
+        self._threads = [threading.Thread(target=self._guard, args=(self._spin,), name="ros2-executor", daemon=True),
+                         threading.Thread(target=self._guard, args=(self._forward,), name="ros2-forwarder", daemon=True)]
+        for t in self._threads:
+            t.start()
+        log.info("ROS 2 bridge: node /%s on domain %d, %s, %s; topics: %s", self.node_name, self.domain_id, self.install.describe(),
+                 self.transport, ", ".join(self.patterns) or "all")
+
+    # -- threads -------------------------------------------------------------------------------
+    def _guard(self, body: Any) -> None:
+        try:
+            body()
+        except Exception as exc:  # reported as the component's failure: the supervisor restarts it
+            if not self._stop.is_set():
+                self.failure = f"{threading.current_thread().name}: {type(exc).__name__}: {exc}"
+                log.exception("ROS 2 bridge: %s", self.failure)
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.1)
+
+    def _forward(self) -> None:
+        import select
+
+        next_discovery = 0.0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= next_discovery:
+                next_discovery = now + self.discover_every
+                self.discover()
+            select.select([self.waker.fd], [], [], 0.05)
+            self.waker.drain()
+            self.forward_once()
+
+    # -- which topics --------------------------------------------------------------------------
+    def wanted(self, topic: str) -> bool:
+        if not self.patterns:
+            return topic not in ROS_INTERNAL
+        return any(fnmatch.fnmatchcase(topic, p) for p in self.patterns)
+
+    def _skip_once(self, topic: str, why: str, level: int = logging.WARNING) -> None:
+        if (topic, why) not in self._skipped:
+            self._skipped.add((topic, why))
+            log.log(level, "ROS 2 bridge: %s not bridged: %s", topic, why)
+
+    def discover(self) -> None:
+        """Open the bridges of topics that appeared on either side since the last call."""
+        def count() -> int:
+            return len(self.out) + len(self.inn) + len(self.services.to_ros) + len(self.services.to_emos)
+
+        before = count()
+        self._discover()
+        if count() != before:
+            self._write_state()
+
+    def _write_state(self) -> None:
+        """``<run dir>/ros2_bridge.json``: the bridged topics, their direction and ROS 2 type, for
+        ``emos topic list`` (written whole and renamed, so a reader never sees half of it)."""
+        import json
+
+        state = {"node": f"{self.node_namespace.rstrip('/')}/{self.node_name}", "domain_id": self.domain_id,
+                 "topics": {t: {"direction": v["direction"], "type": v["type"]} for t, v in self.summary().items()},
+                 "services": {**{n: "emos->ros2" for n in self.services.to_ros}, **{n: "ros2->emos" for n in self.services.to_emos}}}
+        path = self.ctx.run_dir / STATE_FILE
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        try:
+            tmp.write_text(json.dumps(state, indent=1, sort_keys=True))
+            os.replace(tmp, path)
+        except OSError as exc:
+            _limited.warning("state", "ROS 2 bridge: cannot write %s: %s", path, exc)
+
+    def _discover(self) -> None:
+        self.services.discover()
+        emos_topics = list_topics(self.ctx)
+        for topic, info in emos_topics.items():
+            pubs = [p for p in info.get("publishers", []) if p != PUBLISHER_ID]
+            if pubs and topic not in self.out and topic not in self.inn and self.wanted(topic):
+                self._open_out(topic, info["type"])
+        for topic, types in self.node.get_topic_names_and_types():
+            route = self.out.get(topic) or self.inn.get(topic)
+            if route is not None:
+                others = sorted(set(types) - {route.ros_type})
+                if others:  # DDS keeps the two types apart: nothing flows between them
+                    self._skip_once(topic, f"type differs between the sides: EMOS {route.ros_type}, ROS 2 {', '.join(others)}")
+                continue
+            if not self.wanted(topic):
+                continue
+            publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
+                          if (p.node_name, p.node_namespace) != (self.node_name, self.node_namespace)]
+            if publishers:
+                self._open_in(topic, types, publishers, emos_topics.get(topic))
+
+    def _open_out(self, topic: str, type_name: str) -> None:
+        try:
+            cls = resolve(type_name)
+            ros_type = self.codec.ros_type(cls)
+        except UnknownMessageType:
+            self._skip_once(topic, f"EMOS type {type_name} is not known in this process")
+            return
+        except NotShared as exc:
+            self._skip_once(topic, f"EMOS type {type_name} has no ROS 2 counterpart ({exc})", logging.INFO)
+            return
+        msg_cls = self._ros_class(topic, ros_type)
+        if msg_cls is None:
+            return
+        qos = self.qos.get(topic) or Q.default_for(topic)
+        from rclpy.event_handler import PublisherEventCallbacks
+
+        events = PublisherEventCallbacks(incompatible_qos=lambda info: self._incompatible_qos(topic, "EMOS -> ROS 2", qos, info))
+        pub = self.node.create_publisher(msg_cls, topic, Q.to_ros(qos), event_callbacks=events)
+        try:
+            sub = Subscriber(self.ctx, topic, cls, waker=self.waker, queue_size=max(qos.queue_size, 16), transient_local=qos.transient_local, loans=1)
+        except BaseException:
+            self.node.destroy_publisher(pub)
+            raise
+        with self._lock:
+            self.out[topic] = _Out(sub, pub, cls, ros_type)
+        log.info("ROS 2 bridge: %s (%s) EMOS -> ROS 2, %s", topic, ros_type, Q.describe(qos))
+
+    def _open_in(self, topic: str, types: list[str], publishers: list[Any], emos_info: dict[str, Any] | None) -> None:
+        if len(types) != 1:
+            self._skip_once(topic, f"ROS 2 publishers disagree on its type ({', '.join(types)})")
+            return
+        ros_type = types[0]
+        try:
+            cls = self.codec.class_for(ros_type)
+        except NotShared as exc:
+            self._skip_once(topic, f"ROS 2 type {ros_type} has no EMOS counterpart ({exc})")
+            return
+        emos_type = (emos_info or {}).get("type")
+        if emos_type not in (None, "?") and emos_type != ros_type:
+            self._skip_once(topic, f"type differs between the sides: EMOS {emos_type}, ROS 2 {ros_type}")
+            return
+        msg_cls = self._ros_class(topic, ros_type)
+        if msg_cls is None:
+            return
+        qos = self.qos.get(topic) or Q.matching_subscription([p.qos_profile for p in publishers])
+        pub = Publisher(self.ctx, topic, cls, publisher_id=PUBLISHER_ID, depth=max(qos.queue_size, 10))
+        route = _In(pub, cls, ros_type)
+        from rclpy.event_handler import SubscriptionEventCallbacks
+
+        events = SubscriptionEventCallbacks(incompatible_qos=lambda info: self._incompatible_qos(topic, "ROS 2 -> EMOS", qos, info))
+        try:
+            route.sub = self.node.create_subscription(msg_cls, topic, lambda data: self._receive(topic, route, cast(bytes, data)), Q.to_ros(qos),
+                                                      raw=True, event_callbacks=events)
+        except BaseException:
+            pub.close()
+            raise
+        with self._lock:
+            self.inn[topic] = route
+        log.info("ROS 2 bridge: %s (%s) ROS 2 -> EMOS, %s", topic, ros_type, Q.describe(qos))
+
+    def _ros_class(self, topic: str, ros_type: str) -> Any:
+        package, _, name = ros_type.partition("/msg/")
+        try:
+            env.prepare_package(package)
+            return getattr(importlib.import_module(f"{package}.msg"), name)
+        except (ImportError, AttributeError) as exc:
+            dist = f"ros-{self.install.distro}-{package.replace('_', '-')}"
+            self._skip_once(topic, f"{ros_type} needs the ROS 2 package {package}, which rclpy cannot import ({exc}): pip install {dist}")
+            return None
+
+    def _incompatible_qos(self, topic: str, direction: str, ours: QoSConfig, info: Any) -> None:
+        policy = getattr(getattr(info, "last_policy_kind", None), "name", str(getattr(info, "last_policy_kind", "?")))
+        key = (topic, direction, policy)
+        if key not in self._incompatible:
+            self._incompatible.add(key)
+            log.warning("ROS 2 bridge: topic %s (%s): a ROS 2 node's QoS is incompatible with the bridge's %s on policy %s; "
+                        "no messages flow between them", topic, direction, Q.describe(ours), policy)
+
+    # -- moving messages -----------------------------------------------------------------------
+    def forward_once(self) -> int:
+        """EMOS -> ROS 2: publish what arrived on the bridged rings; returns how many."""
+        sent = 0
+        for topic, route in list(self.out.items()):
+            try:
+                got = route.sub.take_raw()
+            except TopicTypeError as exc:
+                route.errors += 1
+                _limited.error(f"type:{topic}", "ROS 2 bridge: topic %s (%s): %s", topic, route.ros_type, exc)
+                continue
+            for _stamp, frame, _pub in got:
+                try:
+                    data = self.codec.serialize(codec.decode(route.cls, frame))
+                except Exception as exc:  # one bad message must not stop the topic or the bridge
+                    route.errors += 1
+                    _limited.error(f"out:{topic}", "ROS 2 bridge: topic %s: an EMOS %s message not sent as %s: %s",
+                                   topic, route.cls.__name__, route.ros_type, exc)
+                    continue
+                route.pub.publish(data)
+                route.sent += 1
+                sent += 1
+        return sent
+
+    def _receive(self, topic: str, route: _In, data: bytes) -> None:
+        """ROS 2 -> EMOS (rclpy's executor thread): one raw CDR sample."""
+        try:
+            msg = self.codec.deserialize(route.cls, data)
+        except CdrError as exc:
+            route.errors += 1
+            _limited.warning(f"in:{topic}", "ROS 2 bridge: topic %s: a malformed %s sample (%d bytes) dropped: %s",
+                             topic, route.ros_type, len(data), exc)
+            return
+        try:
+            route.pub.publish(msg)
+        except Exception as exc:  # a value our codec refuses (e.g. too big for a ring)
+            route.errors += 1
+            _limited.warning(f"in-pub:{topic}", "ROS 2 bridge: topic %s: a %s sample not published to EMOS: %s", topic, route.ros_type, exc)
+            return
+        route.received += 1
+
+    # -- state ---------------------------------------------------------------------------------
+    def alive(self) -> bool:
+        return self.failure is None and all(t.is_alive() for t in self._threads)
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        out = {t: {"direction": "emos->ros2", "type": r.ros_type, "messages": r.sent, "errors": r.errors} for t, r in self.out.items()}
+        out.update({t: {"direction": "ros2->emos", "type": r.ros_type, "messages": r.received, "errors": r.errors}
+                    for t, r in self.inn.items()})
+        return out
+
+    def close(self) -> None:
+        import rclpy
+
+        self._stop.set()
+        for t in self._threads:
+            if t is not threading.current_thread():
+                t.join(timeout=5.0)
+        with self._lock:
+            outs, ins = list(self.out.values()), list(self.inn.values())
+            self.out.clear()
+            self.inn.clear()
+        for o in outs:
+            o.sub.close()
+        for i in ins:
+            i.pub.close()
+        try:
+            self.services.close()
+            self.executor.shutdown(timeout_sec=1.0)
+            self.node.destroy_node()
+        finally:
+            if self.context.ok():
+                rclpy.shutdown(context=self.context)
+            self.waker.close()

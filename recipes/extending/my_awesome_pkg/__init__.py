@@ -1,0 +1,1 @@
+"""The extending page's package (advanced/extending.md): a custom component and its config."""

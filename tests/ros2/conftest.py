@@ -1,0 +1,115 @@
+"""ROS 2 tests: real rclpy programs (tests/ros2/peers) beside real EMOS runs.
+
+Skipped, with the reason, only when this Python has no ROS 2 (scripts/setup.sh --test installs
+the Jazzy wheels, so CI runs them). Discovery stays on this host (ROS_AUTOMATIC_DISCOVERY_RANGE),
+and each module uses its own random domain ids, so nothing here meets another run's nodes.
+"""
+from __future__ import annotations
+
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from emos.interop.ros2 import env
+from tests.runtime.helpers import HANG_S
+
+PEERS = Path(__file__).parent / "peers"
+REPO = Path(__file__).resolve().parents[2]
+
+if env.find() is None:
+    pytest.skip("ROS 2 is not installed in this Python (pip install 'emos[ros2]', or scripts/setup.sh --test)", allow_module_level=True)
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # inherited by every run and peer of the tests
+
+
+def fastdds_files() -> set[str]:
+    """Fast DDS's /dev/shm files that no live process maps or holds open: what a dead node left
+    behind (a live node's files, this test's or another test's beside it, are not leftovers)."""
+    from tests.runtime.helpers import shm_in_use
+
+    found = {n for n in os.listdir("/dev/shm") if "fastrtps" in n or "fastdds" in n}
+    return found - shm_in_use() if found else found
+
+
+def free_domains(n: int) -> list[int]:
+    return random.sample(range(20, 100), n)
+
+
+class Peer:
+    """A plain rclpy program from tests/ros2/peers, its output lines collected as they come."""
+
+    def __init__(self, script: str, *args: object, udp_only: bool = False):
+        """``udp_only``: Fast DDS without shared memory (loopback UDP), for a peer the test SIGKILLs,
+        which would otherwise leave its /dev/shm/fastrtps_* files behind as any ROS 2 node does."""
+        environ = dict(os.environ)
+        if udp_only:
+            from emos.interop.ros2.bridge import _UDP_LOOPBACK_PROFILE
+
+            profile = Path(tempfile.mkdtemp(prefix="emos-ros2-peer-")) / "udp.xml"
+            profile.write_text(_UDP_LOOPBACK_PROFILE)
+            environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+            environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
+            self._profile_dir = profile.parent
+        self.proc = subprocess.Popen([sys.executable, str(PEERS / script), *map(str, args)], stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, cwd=PEERS, env=environ)
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        _PEERS.append(self)
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+
+    def wait_for(self, pred, timeout: float = HANG_S, what: str = "a line") -> str:
+        end = time.monotonic() + timeout
+        seen = 0
+        with self._cond:
+            while True:
+                for line in self.lines[seen:]:
+                    if pred(line):
+                        return line
+                seen = len(self.lines)
+                left = end - time.monotonic()
+                if left <= 0 or (self.proc.poll() is not None and seen == len(self.lines)):
+                    raise AssertionError(f"peer {self.proc.args[1:]}: no {what} (exit {self.proc.poll()}); output:\n" + "\n".join(self.lines[-40:]))
+                self._cond.wait(min(left, 0.2))
+
+    def got(self) -> list[str]:
+        with self._cond:
+            return [line for line in self.lines if line.startswith("got ")]
+
+    def stop(self, sig: int = signal.SIGTERM) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        code = self.proc.wait()
+        if getattr(self, "_profile_dir", None) is not None:
+            shutil.rmtree(self._profile_dir, ignore_errors=True)
+        return code
+
+
+_PEERS: list[Peer] = []
+
+
+@pytest.fixture(autouse=True)
+def _nothing_outlives_its_test():
+    yield
+    while _PEERS:
+        _PEERS.pop().stop()
