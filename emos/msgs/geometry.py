@@ -72,6 +72,14 @@ class PoseWithCovarianceStamped(Message):
 
 
 @message_type("geometry_msgs")
+class PoseArray(Message):
+    """Poses in one frame (a localizer's particle cloud): ``msg.poses[i].position.x``."""
+
+    header: Header = F.message(Header)
+    poses: list[Pose] = F.message_list(Pose)
+
+
+@message_type("geometry_msgs")
 class PointStamped(Message):
     header: Header = F.message(Header)
     point: Point = F.message(Point)

@@ -12,11 +12,13 @@ from .controller import Controller, ControllerConfig
 from .drive_manager import DriveManager, DriveManagerConfig
 from .keys import TopicsKeys
 from .local_mapper import LocalMapper, LocalMapperConfig
+from .localizer import Localizer, LocalizerConfig
 from .map_server import MapServer, MapServerConfig
 from .motion_server import MotionServer, MotionServerConfig
 from .planner import Planner, PlannerConfig
 
 __all__ = [
     "Controller", "ControllerConfig", "DriveManager", "DriveManagerConfig", "LocalMapper", "LocalMapperConfig",
+    "Localizer", "LocalizerConfig",
     "MapConfig", "MapperConfig", "MapServer", "MapServerConfig", "MotionServer", "MotionServerConfig", "Planner", "PlannerConfig", "TopicsKeys",
 ]

@@ -1,0 +1,345 @@
+"""Monte Carlo localization (the AMCL family), pure numpy: :class:`ParticleFilter`.
+
+One call per laser scan, :meth:`ParticleFilter.update` with the odometry pose at the scan:
+
+1. Motion: once the odometry moved ``update_min_d`` or turned ``update_min_a`` since the last
+   sensor update, every particle is moved by a draw of the odometry motion model
+   (``localization.motion``). A step larger than ``jump_distance``/``jump_angle`` between two
+   consecutive calls is an odometry jump: it is reported, and each particle takes a random
+   fraction of it (a slip and a real move both stay possible) so the cloud, and the covariance,
+   grow instead of following the jump blindly.
+2. Sensor: the likelihood field (``localization.likelihood``) scores each particle; the weights
+   are multiplied by the likelihoods.
+3. Every ``resample_interval`` updates, resampling: the particle count comes from KLD sampling
+   (Fox 2003, as AMCL computes it: bins of 0.5 m x 0.5 m x 10 deg, bounded by
+   ``min_particles``/``max_particles``); the particles are drawn by low-variance (systematic)
+   resampling; with ``recovery_alpha_slow``/``recovery_alpha_fast`` set, a fraction
+   ``max(0, 1 - w_fast / w_slow)`` of them is replaced by random poses in free space (Augmented
+   MCL; while injecting, ``max_particles`` are drawn), so a robot whose scans stop matching (kidnapped, or a wrong initial pose) is found again.
+   The averages track the per-beam geometric mean likelihood (the mean of exp(log L / beams)),
+   a number between z_rand / range and z_hit that does not depend on the beam count. Unlike
+   AMCL, the averages are not reset after an injection: AMCL's reset re-seeds both at the
+   current, poor level, so it injects once per drop and a robot not found by that one batch
+   stays lost; here injection goes on while the short-term average stays below the long-term
+   one, and stops once the scans match again.
+
+The estimate is the weighted mean of the heaviest cluster (the particles within 1 m and 0.5 rad
+of the heaviest 1 m x 1 m x 45 deg bin); its covariance is the weighted spread of all particles
+around it, so a cloud split between two places reports a large covariance, as it should.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from emos.geometry import wrap_angle
+
+from ..maps.grid import OccupancyGridMap
+from .likelihood import LikelihoodField, select_beams
+from .motion import relative_pose, sample_odometry_motion
+from .params import AmclParams
+
+__all__ = ["ParticleFilter", "kld_limit", "low_variance_resample"]
+
+_KLD_BIN = (0.5, 0.5, math.radians(10.0))
+
+
+def kld_limit(k: np.ndarray | int, pf_err: float, pf_z: float, min_particles: int, max_particles: int) -> np.ndarray:
+    """Particles KLD sampling asks for when the samples fill ``k`` bins (AMCL's formula, with
+    ``pf_z`` used as the normal quantile, as AMCL does). One bin asks for ``min_particles``
+    (the formula's limit); AMCL returns ``max_particles`` there, which makes a cloud that
+    converged into a single bin the most expensive one."""
+    k = np.asarray(k, dtype=np.float64)
+    km1 = np.maximum(k - 1.0, 1.0)
+    b = 2.0 / (9.0 * km1)
+    n = np.ceil(km1 / (2.0 * pf_err) * (1.0 - b + np.sqrt(b) * pf_z) ** 3)
+    n = np.where(k <= 1, min_particles, n)
+    return np.clip(n, min_particles, max_particles).astype(np.int64)
+
+
+def low_variance_resample(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of ``n`` particles drawn by systematic resampling (one random offset, then evenly
+    spaced pointers into the cumulative weights): each particle with weight w is drawn
+    floor(n w) or ceil(n w) times, the least random of the unbiased schemes."""
+    cum = np.cumsum(weights)
+    cum /= cum[-1]
+    pointers = (rng.random() + np.arange(n)) / n
+    return np.minimum(np.searchsorted(cum, pointers, side="right"), len(weights) - 1)
+
+
+def _bins(poses: np.ndarray, size: tuple[float, float, float]) -> np.ndarray:
+    """One integer key per pose for the (x, y, yaw) bin it falls in."""
+    ix = np.floor(poses[:, 0] / size[0]).astype(np.int64)
+    iy = np.floor(poses[:, 1] / size[1]).astype(np.int64)
+    ia = np.floor(wrap_angle(poses[:, 2]) / size[2]).astype(np.int64)
+    return (ix * 1_000_003 + iy) * 1_009 + ia
+
+
+class ParticleFilter:
+    """Monte Carlo localization against one occupancy grid (see the module docstring).
+
+    ``sensor_pose``: (x, y, yaw) of the scanner on the robot. ``seed``: the random generator's
+    seed (None: fresh entropy). ``on_problem(key, message)``: where problems with the data are
+    reported (an odometry jump, a scan without one valid beam); default: a warning log.
+    """
+
+    def __init__(self, params: AmclParams, grid: OccupancyGridMap, *, sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 seed: int | None = None, on_problem: Callable[[str, str], None] | None = None) -> None:
+        self.params = params
+        self.sensor_pose = sensor_pose
+        self.rng = np.random.default_rng(seed)
+        self._problem = on_problem or (lambda key, msg: logging.getLogger("emos.nav.localization").warning("%s", msg))
+        self.set_map(grid)
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self._odom_last: np.ndarray | None = None     # odometry pose of the last call
+        self._odom_updated: np.ndarray | None = None  # odometry pose of the last sensor update
+        self._jumped = False
+        self._updates = 0
+        self.w_slow = 0.0
+        self.w_fast = 0.0
+        self.estimate = np.zeros(3)
+        self.covariance = np.diag([1e6, 1e6, 1e6])
+        self.initialized = False
+        self.beams_used = 0
+        self.beta = 1.0
+        self._injecting = False
+
+    # -- the map and the initial state ---------------------------------------------------------------
+    def set_map(self, grid: OccupancyGridMap) -> None:
+        """Use ``grid`` from now on (the particles stay where they are)."""
+        p = self.params
+        self.field = LikelihoodField(grid, sigma_hit=p.sigma_hit, z_hit=p.z_hit, z_rand=p.z_rand,
+                                     max_dist=p.laser_likelihood_max_dist, laser_max_range=self._max_range(math.inf))
+        self.grid = grid
+
+    def _max_range(self, scan_max: float) -> float:
+        # Nav2: laser_max_range -1 (or any negative value) means the scan's own range_max.
+        mx = self.params.laser_max_range
+        return scan_max if mx <= 0 else mx
+
+    def _reset_odometry(self) -> None:
+        self._odom_updated = None
+        self._updates = 0
+        self.w_slow = self.w_fast = 0.0
+
+    def initialize(self, pose: np.ndarray, covariance: np.ndarray | None = None) -> None:
+        """Particles around ``pose`` (x, y, yaw), Gaussian with ``covariance`` (3x3; default the
+        ``initial_cov_*`` parameters). A pose off the map, or a non-finite one, is a ValueError."""
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"initial pose: expected finite (x, y, yaw), got {pose.tolist()}")
+        cell = self.grid.world_to_grid(pose[None, :2])
+        if not bool(self.grid.in_bounds(cell)[0]):
+            xmin, ymin, xmax, ymax = self.grid.world_bounds()
+            raise ValueError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is outside the map "
+                             f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}]")
+        p = self.params
+        cov = np.diag([p.initial_cov_xy, p.initial_cov_xy, p.initial_cov_yaw]) if covariance is None else np.asarray(covariance, dtype=np.float64)
+        if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+            raise ValueError(f"initial covariance: expected a finite 3x3 matrix, got shape {cov.shape}")
+        cov = 0.5 * (cov + cov.T) + np.eye(3) * 1e-12
+        try:
+            chol = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            chol = np.diag(np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+        n = p.max_particles
+        self.particles = pose + self.rng.normal(size=(n, 3)) @ chol.T
+        self.particles[:, 2] = wrap_angle(self.particles[:, 2])
+        self.weights = np.full(n, 1.0 / n)
+        self._reset_odometry()
+        self._estimate()
+        self.initialized = True
+
+    def global_localization(self) -> None:
+        """Particles spread uniformly over the free space of the map, any heading (ValueError if
+        the map has no free cell: an unknown-only map cannot localize anyone)."""
+        free = self.field.free_cells
+        if len(free) == 0:
+            raise ValueError("global localization: the map has no free cell (unknown or occupied only)")
+        self.particles = self._random_free_poses(self.params.max_particles)
+        n = len(self.particles)
+        self.weights = np.full(n, 1.0 / n)
+        self._reset_odometry()
+        self._estimate()
+        self.initialized = True
+
+    def _random_free_poses(self, n: int) -> np.ndarray:
+        free = self.field.free_cells
+        pick = free[self.rng.integers(0, len(free), n)]
+        local = (pick[:, ::-1] + self.rng.random((n, 2))) * self.grid.resolution  # (col, row) -> metres
+        world = self.grid.map_to_world(local)
+        return np.column_stack([world, self.rng.uniform(-math.pi, math.pi, n)])
+
+    # -- one scan ------------------------------------------------------------------------------------
+    def update(self, odom_pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray, *, scan_max: float = math.inf,
+               scan_min: float = 0.0, force: bool = False) -> bool:
+        """Feed one scan and the odometry pose at its time; True if the filter updated (moved
+        enough, or ``force``). Raises ValueError on a non-finite odometry pose."""
+        if not self.initialized:
+            raise RuntimeError("ParticleFilter.update: set an initial pose or call global_localization first")
+        odom = np.asarray(odom_pose, dtype=np.float64)
+        if odom.shape != (3,) or not np.all(np.isfinite(odom)):
+            raise ValueError(f"odometry pose: expected finite (x, y, yaw), got {odom.tolist()}")
+        p = self.params
+        if self._odom_last is not None:
+            step = relative_pose(self._odom_last, odom)
+            if math.hypot(step[0], step[1]) > p.jump_distance or abs(step[2]) > p.jump_angle:
+                self._jumped = True
+                self._problem("jump", f"odometry jumped {math.hypot(step[0], step[1]):.2f} m / {math.degrees(step[2]):.0f} deg "
+                                      f"between two scans (limits {p.jump_distance:g} m / {math.degrees(p.jump_angle):.0f} deg): "
+                                      "spreading the particles over the jump")
+        self._odom_last = odom
+        first = self._odom_updated is None
+        if not first:
+            assert self._odom_updated is not None  # for mypy: set whenever not first
+            d = relative_pose(self._odom_updated, odom)
+            if not force and not self._jumped and math.hypot(d[0], d[1]) < p.update_min_d and abs(d[2]) < p.update_min_a:
+                return False
+            scale = self.rng.random(len(self.particles)) if self._jumped else None
+            self.particles = sample_odometry_motion(self.particles, self._odom_updated, odom,
+                                                    (p.alpha1, p.alpha2, p.alpha3, p.alpha4), self.rng, scale)
+        self._jumped = False
+        self._odom_updated = odom
+        max_range = self._max_range(scan_max)
+        min_range = scan_min if p.laser_min_range < 0 else p.laser_min_range
+        r, a = select_beams(ranges, angles, p.max_beams, min_range, max_range)
+        self.beams_used = len(r)
+        if len(r) == 0:
+            self._problem("beams", "scan has no valid beam (all NaN, inf, zero or out of range): motion update only")
+            self._estimate()
+            return True
+        loglik = self.field.log_likelihood(self.particles, r, a, self.sensor_pose)
+        # Not while injecting: a random particle that lands on the robot must be able to win.
+        self.beta = 1.0 if self._injecting else self._tempering(loglik)
+        logw = np.log(np.maximum(self.weights, 1e-300)) + self.beta * loglik
+        logw -= logw.max()
+        w = np.exp(logw)
+        self.weights = w / w.sum()
+        # Recovery: running averages of the per-beam likelihood (see the module docstring).
+        w_avg = float(np.mean(np.exp(loglik / len(r))))
+        if self.w_slow == 0.0:
+            self.w_slow = self.w_fast = w_avg
+        else:
+            self.w_slow += p.recovery_alpha_slow * (w_avg - self.w_slow)
+            self.w_fast += p.recovery_alpha_fast * (w_avg - self.w_fast)
+        self._estimate()
+        if p.refine_estimate:
+            # Every valid beam: the search scores 27 poses a round, not thousands.
+            self._refine(*select_beams(ranges, angles, 100_000, min_range, max_range))
+        self._updates += 1
+        if self._updates % p.resample_interval == 0:
+            self._resample()
+        return True
+
+    def _tempering(self, loglik: np.ndarray) -> float:
+        """The exponent (0, 1] on this scan's likelihood that keeps the effective sample size
+        at ``min_ess_fraction`` of the particles at least (1 when the full likelihood does).
+        Beams are not independent (neighbours see the same wall), so their product overstates
+        the evidence; with a poor prior (global localization, a kidnapping, a jump) it would
+        put all the weight on whichever particle happens to sit nearest, and resampling would
+        keep only that one. Tempered, the cloud narrows over a few scans instead of one."""
+        target = self.params.min_ess_fraction * len(loglik)
+        if target <= 1.0:
+            return 1.0
+        logw0 = np.log(np.maximum(self.weights, 1e-300))
+        centred = loglik - loglik.max()
+
+        def ess(beta: float) -> float:
+            lw = logw0 + beta * centred
+            w = np.exp(lw - lw.max())
+            return float(w.sum() ** 2 / (w @ w))
+
+        if ess(1.0) >= target:
+            return 1.0
+        lo, hi = 0.0, 1.0
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if ess(mid) >= target else (lo, mid)
+        return max(lo, 1e-6)
+
+    def _resample(self) -> None:
+        p = self.params
+        # KLD: the count at which the drawn samples' bins stop asking for more. Draw max_particles
+        # in a random order, count the bins the first n fill, take the first n that is enough.
+        cand = self.particles[low_variance_resample(self.weights, p.max_particles, self.rng)]
+        cand = cand[self.rng.permutation(len(cand))]
+        keys = _bins(cand, _KLD_BIN)
+        _, first = np.unique(keys, return_index=True)
+        new_bin = np.zeros(len(cand), dtype=np.int64)
+        new_bin[first] = 1
+        k = np.cumsum(new_bin)
+        limits = kld_limit(k, p.pf_err, p.pf_z, p.min_particles, p.max_particles)
+        enough = np.flatnonzero(np.arange(1, len(cand) + 1) >= limits)
+        n = int(enough[0] + 1) if len(enough) else p.max_particles
+        n = max(min(n, p.max_particles), p.min_particles)
+        w_diff = 0.0 if self.w_slow <= 0 or p.recovery_alpha_slow == 0 or p.recovery_alpha_fast == 0 else max(0.0, 1.0 - self.w_fast / self.w_slow)
+        self._injecting = w_diff > 0
+        if w_diff > 0:
+            n = p.max_particles  # searching: the whole budget, so the random share has a chance to land near
+        out = self.particles[low_variance_resample(self.weights, n, self.rng)]
+        if w_diff > 0 and len(self.field.free_cells):
+            inject = self.rng.random(n) < w_diff
+            if inject.any():
+                out[inject] = self._random_free_poses(int(inject.sum()))
+        self.particles = out
+        self.weights = np.full(n, 1.0 / n)
+
+    # -- the estimate --------------------------------------------------------------------------------
+    def _estimate(self) -> None:
+        parts, w = self.particles, self.weights
+        keys = _bins(parts, (1.0, 1.0, math.radians(45.0)))
+        uniq, inv = np.unique(keys, return_inverse=True)
+        best = np.bincount(inv, weights=w, minlength=len(uniq)).argmax()
+        seed = inv == best
+        centre = self._weighted_mean(parts[seed], w[seed])
+        d = parts[:, :2] - centre[:2]
+        near = (np.einsum("ij,ij->i", d, d) <= 1.0) & (np.abs(wrap_angle(parts[:, 2] - centre[2])) <= 0.5)
+        self.estimate = self._weighted_mean(parts[near], w[near])
+        diff = parts - self.estimate
+        diff[:, 2] = wrap_angle(diff[:, 2])
+        wn = w / w.sum()
+        self.covariance = (diff * wn[:, None]).T @ diff
+
+    def _refine(self, ranges: np.ndarray, angles: np.ndarray) -> None:
+        """Polish the estimate to the nearest peak of the scan's likelihood (every valid beam):
+        a coarse-to-fine pattern search, 27 poses a round, steps halving from 4 cm / 1 deg to
+        5 mm / 0.125 deg, a step taken only when it raises the likelihood. The particles sample
+        the posterior only as densely as their count allows (2000 over 0.3 m x 10 deg leave
+        centimetres and degrees between neighbours); the search finds the peak between them.
+        The particles are left as they are. (Adding the predicted cloud as a Gaussian prior
+        to the search was tried: it made the Radish tracking errors worse, not better.)"""
+
+        def score(poses: np.ndarray) -> np.ndarray:
+            return self.field.log_likelihood(poses, ranges, angles, self.sensor_pose)
+
+        best = self.estimate.copy()
+        value = float(score(best[None, :])[0])
+        steps = np.array([-1.0, 0.0, 1.0])
+        grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+        dxy, dth = 0.04, math.radians(1.0)
+        for _ in range(4):
+            for _ in range(3):  # move while it improves, at most 3 times per step size
+                cand = best + grid * np.array([dxy, dxy, dth])
+                values = score(cand)
+                i = int(values.argmax())
+                if values[i] <= value + 1e-9:
+                    break
+                best, value = cand[i], float(values[i])
+            dxy, dth = dxy / 2.0, dth / 2.0
+        best[2] = float(wrap_angle(float(best[2])))
+        self.estimate = best
+
+    @staticmethod
+    def _weighted_mean(parts: np.ndarray, w: np.ndarray) -> np.ndarray:
+        total = w.sum()
+        wn = w / total if total > 0 else np.full(len(w), 1.0 / len(w))
+        yaw = math.atan2(float(wn @ np.sin(parts[:, 2])), float(wn @ np.cos(parts[:, 2])))
+        return np.array([float(wn @ parts[:, 0]), float(wn @ parts[:, 1]), yaw])
+
+    @property
+    def particle_count(self) -> int:
+        return len(self.particles)

@@ -1,0 +1,104 @@
+"""The parameters of the Monte Carlo localizer, with Nav2 AMCL's names and defaults.
+
+Nav2 names the KLD parameters ``pf_err`` and ``pf_z`` (ROS 1 amcl: ``kld_err``, ``kld_z``);
+both spellings are accepted by :meth:`AmclParams.of`. Parameters that are not Nav2's are marked.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from attrs import define, field, fields
+
+from emos.config.validators import in_range
+
+__all__ = ["AmclParams"]
+
+_ALIASES = {"kld_err": "pf_err", "kld_z": "pf_z", "odom_alpha1": "alpha1", "odom_alpha2": "alpha2",
+            "odom_alpha3": "alpha3", "odom_alpha4": "alpha4", "laser_max_beams": "max_beams",
+            "laser_z_hit": "z_hit", "laser_z_rand": "z_rand", "laser_sigma_hit": "sigma_hit"}
+
+
+def _alpha() -> Any:
+    return field(default=0.2, validator=in_range(min_value=0.0, max_value=100.0))
+
+
+@define(kw_only=True)
+class AmclParams:
+    """Monte Carlo localization parameters.
+
+    Odometry model: ``alpha1``..``alpha4`` (see ``localization.motion``). Filter:
+    ``min_particles``/``max_particles`` (bounds of the KLD-adaptive particle count), ``pf_err``
+    and ``pf_z`` (KLD sampling: the error bound and the normal quantile, used as AMCL uses them),
+    ``resample_interval`` (sensor updates between resamplings), ``update_min_d`` (m) and
+    ``update_min_a`` (rad): the motion that triggers a sensor update, ``recovery_alpha_slow`` /
+    ``recovery_alpha_fast``: decay rates of the long- and short-term average likelihood; when the
+    short one drops below the long one, random particles are injected (0 and 0: never).
+    Sensor model (likelihood field): ``z_hit``, ``z_rand``, ``sigma_hit`` (m),
+    ``laser_likelihood_max_dist`` (m), ``laser_max_range`` / ``laser_min_range`` (m; a reading
+    at or beyond the max is no echo; -1: use the scan's own), ``max_beams``.
+
+    Not Nav2's: ``jump_distance`` (m) / ``jump_angle`` (rad): an odometry step larger than this
+    between two consecutive odometry poses is treated as a jump (a wheel slip, a reset): logged,
+    and the particles spread over anywhere between not moving and moving all of it.
+    ``min_ess_fraction``: temper a scan's likelihood (raise it to a power <= 1) so that at
+    least this fraction of the particles stays effective (0: never temper, as Nav2).
+    ``refine_estimate``: polish the published estimate to the scan's nearest likelihood peak
+    (a local search around the particles' mean; the particles are not moved).
+    ``initial_cov_xy`` (m^2) / ``initial_cov_yaw`` (rad^2): the spread of an initial pose given
+    without covariance (ROS amcl's ``initial_cov_xx``, ``initial_cov_aa``).
+    """
+
+    alpha1: float = _alpha()
+    alpha2: float = _alpha()
+    alpha3: float = _alpha()
+    alpha4: float = _alpha()
+    min_particles: int = field(default=500, validator=in_range(min_value=1, max_value=10_000_000))
+    max_particles: int = field(default=2000, validator=in_range(min_value=1, max_value=10_000_000))
+    pf_err: float = field(default=0.05, validator=in_range(min_value=1e-6, max_value=1.0))
+    pf_z: float = field(default=0.99, validator=in_range(min_value=0.0, max_value=10.0))
+    resample_interval: int = field(default=1, validator=in_range(min_value=1, max_value=1000))
+    update_min_d: float = field(default=0.25, validator=in_range(min_value=0.0, max_value=100.0))
+    update_min_a: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=2 * math.pi))
+    recovery_alpha_slow: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1.0))
+    recovery_alpha_fast: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1.0))
+    z_hit: float = field(default=0.5, validator=in_range(min_value=0.0, max_value=1.0))
+    z_rand: float = field(default=0.5, validator=in_range(min_value=0.0, max_value=1.0))
+    sigma_hit: float = field(default=0.2, validator=in_range(min_value=1e-4, max_value=100.0))
+    laser_likelihood_max_dist: float = field(default=2.0, validator=in_range(min_value=1e-3, max_value=1000.0))
+    laser_max_range: float = field(default=100.0)
+    laser_min_range: float = field(default=-1.0)
+    max_beams: int = field(default=60, validator=in_range(min_value=1, max_value=100_000))
+    jump_distance: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=1e6))
+    jump_angle: float = field(default=math.pi / 2, validator=in_range(min_value=1e-3, max_value=1e6))
+    refine_estimate: bool = field(default=True)
+    min_ess_fraction: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1.0))
+    initial_cov_xy: float = field(default=0.25, validator=in_range(min_value=0.0, max_value=1e6))
+    initial_cov_yaw: float = field(default=(math.pi / 12) ** 2, validator=in_range(min_value=0.0, max_value=100.0))
+
+    def __attrs_post_init__(self) -> None:
+        if self.min_particles > self.max_particles:
+            raise ValueError(f"AmclParams: min_particles ({self.min_particles}) must not exceed max_particles "
+                             f"({self.max_particles})")
+        if self.z_hit + self.z_rand <= 0:
+            raise ValueError("AmclParams: z_hit + z_rand must be > 0 (every scan would be impossible)")
+        for name in ("laser_max_range", "laser_min_range"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise ValueError(f"AmclParams.{name}: expected a finite number, got {value!r}")
+
+    @classmethod
+    def of(cls, value: Any, where: str = "AmclParams") -> AmclParams:
+        """An AmclParams from itself or a dict (Nav2 or ROS 1 names); unknown keys are an error."""
+        if isinstance(value, cls):
+            return value
+        if not isinstance(value, dict):
+            raise TypeError(f"{where}: expected AmclParams or a dict of its fields, got {type(value).__name__}")
+        known = {f.name for f in fields(cls)}
+        out: dict[str, Any] = {}
+        for key, v in value.items():
+            name = _ALIASES.get(str(key), str(key))
+            if name not in known:
+                raise ValueError(f"{where}: unknown parameter {key!r}; expected one of {sorted(known)}")
+            out[name] = v
+        return cls(**out)

@@ -1,0 +1,51 @@
+"""A small asymmetric room, a ray-casting laser in it and a path through it, for the
+localization tests (the filter and the Localizer component)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from emos.actors.nav.maps import OccupancyGridMap
+
+ACES_LOG = Path(__file__).parent / "data" / "aces-corrected.log.gz"
+
+RES = 0.05
+ROOM_W, ROOM_H = 10.0, 8.0
+# Boxes (xmin, ymin, xmax, ymax), placed so that no two places of the room look alike.
+BOXES = [(2.0, 2.0, 3.0, 2.6), (6.8, 6.0, 7.3, 7.5), (7.5, 1.0, 8.7, 1.4), (1.0, 5.5, 1.6, 6.1)]
+BEAMS = np.linspace(-math.pi, math.pi, 181)[:-1]  # 180 beams, 2 degrees apart, all around
+MAX_RANGE = 12.0
+
+
+def room_map() -> OccupancyGridMap:
+    rows, cols = int(ROOM_H / RES), int(ROOM_W / RES)
+    data = np.zeros((rows, cols), dtype=np.int8)
+    data[:2, :] = data[-2:, :] = 100
+    data[:, :2] = data[:, -2:] = 100
+    for x0, y0, x1, y1 in BOXES:
+        data[int(y0 / RES):int(math.ceil(y1 / RES)), int(x0 / RES):int(math.ceil(x1 / RES))] = 100
+    return OccupancyGridMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+
+
+def cast(grid: OccupancyGridMap, pose: np.ndarray, angles: np.ndarray = BEAMS, max_range: float = MAX_RANGE) -> np.ndarray:
+    """Ranges a perfect laser at ``pose`` measures (max_range where nothing is hit)."""
+    steps = np.arange(0.0, max_range, RES / 4.0)
+    th = pose[2] + angles
+    x = pose[0] + np.cos(th)[:, None] * steps
+    y = pose[1] + np.sin(th)[:, None] * steps
+    occ = grid.values_at(np.stack([x, y], axis=-1), outside=100) >= 65
+    first = np.where(occ.any(axis=1), occ.argmax(axis=1), len(steps) - 1)
+    out = steps[first]
+    out[~occ.any(axis=1)] = max_range
+    return out
+
+
+def loop_path(n: int = 120) -> np.ndarray:
+    """A closed loop around the middle of the room: (n, 3) poses, heading along the path."""
+    t = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    x = 5.0 + 2.8 * np.cos(t)
+    y = 4.0 + 1.6 * np.sin(t)
+    yaw = np.arctan2(1.6 * np.cos(t), -2.8 * np.sin(t))
+    return np.column_stack([x, y, yaw])

@@ -1,0 +1,316 @@
+"""``emos bench localize``: Monte Carlo localization on real lidar logs (CARMEN format).
+
+What is measured, on one log:
+
+- The map: built from the log's reference trajectory and scans (``build_reference_map``:
+  log-odds ray casting, 5 cm cells, readings beyond ``--max-range`` are no echo).
+- The odometry: the reference's increments with seeded noise from the AMCL odometry model
+  (``--noise`` alpha1..alpha4; seed = trial number), chained from the first reference pose, so
+  it drifts like a robot's.
+- Tracking (default): the filter starts at the first reference pose (spread: 0.1 m, 0.1 m,
+  3 deg standard deviations) and follows the whole log; one trial per seed. Errors are taken at
+  every scan against the reference pose.
+- ``--global``: the filter starts with particles spread over the whole free space, at a seeded
+  random scan of the log, and runs for 20 m of travel; one trial per seed. A trial converged
+  when the error is below 0.2 m at the first scan past 10 m of travel (``converged_rate``); it
+  kept the pose when the error stays below 0.2 m at every scan from there to 20 m
+  (``kept_rate``). RMSE is over the scans past 10 m of every trial.
+
+``--json`` prints ``{"results": [{"localizer": "emos", "position_rmse_m", "heading_rmse_deg",
+"converged_rate", "cpu_s_per_scan", ...}]}``; ``cpu_s_per_scan`` is process CPU time per scan
+on one core (filter only; the map is built before).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["add_arguments", "run", "prepare", "run_tracking", "run_global", "DEFAULT_NOISE"]
+
+#: The benchmark's odometry noise (alpha1..alpha4 of the AMCL odometry model): 10 % standard
+#: deviation on each turn and on each translation, 1.8 deg of heading per metre driven, 3 cm of
+#: translation per radian turned.
+DEFAULT_NOISE = (0.01, 0.001, 0.01, 0.001)
+
+
+def _floats(text: str, count: int, what: str) -> tuple[float, ...]:
+    vals = tuple(float(v) for v in text.split(","))
+    if len(vals) != count or not all(math.isfinite(v) and v >= 0 for v in vals):
+        raise argparse.ArgumentTypeError(f"{what}: expected {count} comma-separated numbers >= 0, got {text!r}")
+    return vals
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log", required=True, help="CARMEN log (.log or .log.gz) with FLASER lines")
+    parser.add_argument("--global", dest="global_", action="store_true", help="global localization from an unknown start")
+    parser.add_argument("--seeds", type=int, default=3, help="trials (seeds 0..N-1; default 3)")
+    parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
+    parser.add_argument("--noise", default=",".join(map(str, DEFAULT_NOISE)),
+                        help="odometry noise alpha1..alpha4 (default %(default)s)")
+    parser.add_argument("--alphas", default=None, help="the filter's alpha1..alpha4 (default: the noise's, x2)")
+    parser.add_argument("--min-particles", type=int, default=None, help="default 500 (global: 2000)")
+    parser.add_argument("--max-particles", type=int, default=None, help="default 2000 (global: 20000)")
+    parser.add_argument("--max-beams", type=int, default=None, help="beams per scan the filter scores (default: all, 180)")
+    parser.add_argument("--sigma-hit", type=float, default=None, help="default 0.15 (global: 0.2)")
+    parser.add_argument("--min-ess", type=float, default=None, help="min_ess_fraction: tempering (default 0; global: 0.5)")
+    parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
+    parser.add_argument("--recovery", default=None,
+                        help="recovery_alpha_slow,recovery_alpha_fast (default 0,0: none, as Nav2; global: 0.001,0.1)")
+    parser.add_argument("--peer", choices=("amcl",), default=None,
+                        help="also run Nav2's AMCL (the GPLv3 `amcl` PyPI package, installed by the benchmark into "
+                             "~/.cache/emos/bench/ on first use; tracking only: it has no global localization call)")
+    parser.add_argument("--max-scans", type=int, default=None, help="use only the first N scans of the log (quick checks)")
+    parser.add_argument("--plot", default=None, help="write a PNG of the first trial's estimate against the reference")
+
+
+def prepare(log_path: str, max_range: float = 30.0, max_scans: int | None = None) -> dict[str, Any]:
+    """The log (its first ``max_scans`` scans), its beam angles and the reference map built from it."""
+    from emos.actors.nav.localization import beam_angles, build_reference_map, read_carmen
+
+    log = read_carmen(log_path)
+    if max_scans is not None:
+        log.scans = log.scans[: max(max_scans, 2)]
+    angles = [beam_angles(len(s.ranges)) for s in log.scans]
+    ranges = [s.ranges for s in log.scans]
+    grid = build_reference_map(log.poses, ranges, angles, resolution=0.05, max_range=max_range)
+    return {"log": log, "angles": angles, "ranges": ranges, "reference": log.poses, "grid": grid, "max_range": max_range}
+
+
+def _filter(data: dict[str, Any], params: Any, seed: int) -> Any:
+    from emos.actors.nav.localization import ParticleFilter
+
+    return ParticleFilter(params, data["grid"], seed=seed, on_problem=lambda key, msg: None)
+
+
+def _pose_now(pf: Any, odom_now: np.ndarray) -> np.ndarray:
+    """The filter's estimate carried forward by the odometry since its last sensor update (what
+    the map -> odom transform gives between updates)."""
+    from emos.actors.nav.localization import compose_pose, relative_pose
+
+    ref = pf._odom_updated if pf._odom_updated is not None else odom_now
+    return np.asarray(compose_pose(pf.estimate, relative_pose(ref, odom_now)))
+
+
+def _errors(est: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    pos = np.hypot(est[:, 0] - ref[:, 0], est[:, 1] - ref[:, 1])
+    head = np.abs((est[:, 2] - ref[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+    return pos, head
+
+
+def run_tracking(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int) -> dict[str, Any]:
+    from emos.actors.nav.localization import noisy_odometry
+
+    ref = data["reference"]
+    odom = noisy_odometry(ref, noise, seed)  # type: ignore[arg-type]
+    pf = _filter(data, params, seed)
+    pf.initialize(ref[0], np.diag([0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2]))
+    est = np.zeros_like(ref)
+    cpu = 0.0
+    counts = []
+    for i in range(len(ref)):
+        t0 = time.process_time()
+        pf.update(odom[i], data["ranges"][i], data["angles"][i], scan_max=data["max_range"])
+        cpu += time.process_time() - t0
+        est[i] = _pose_now(pf, odom[i])
+        counts.append(pf.particle_count)
+    pos, head = _errors(est, ref)
+    return {"estimate": est, "odometry": odom, "pos": pos, "head": head, "cpu": cpu, "scans": len(ref),
+            "converged": bool(pos[-1] < 0.2), "particles": float(np.mean(counts))}
+
+
+def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int,
+               converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
+    from emos.actors.nav.localization import noisy_odometry
+
+    ref = data["reference"]
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])
+    starts = np.flatnonzero(travel <= travel[-1] - trial_m)
+    rng = np.random.default_rng(10_000 + seed)
+    s = int(starts[rng.integers(len(starts))])
+    end = int(np.searchsorted(travel, travel[s] + trial_m)) + 1
+    seg = ref[s:end]
+    odom = noisy_odometry(seg, noise, seed)  # type: ignore[arg-type]
+    pf = _filter(data, params, seed)
+    pf.global_localization()
+    est = np.zeros_like(seg)
+    cpu = 0.0
+    for j in range(len(seg)):
+        t0 = time.process_time()
+        pf.update(odom[j], data["ranges"][s + j], data["angles"][s + j], scan_max=data["max_range"])
+        cpu += time.process_time() - t0
+        est[j] = _pose_now(pf, odom[j])
+    pos, head = _errors(est, seg)
+    after = (travel[s:end] - travel[s]) >= converge_m
+    below = np.flatnonzero(pos < 0.2)
+    return {"estimate": est, "reference": seg, "pos": pos[after], "head": head[after], "cpu": cpu, "scans": len(seg),
+            "converged": bool(after.any() and pos[after][0] < 0.2), "kept": bool(after.any() and np.all(pos[after] < 0.2)),
+            "start": s, "first_below_m": float(travel[s + below[0]] - travel[s]) if len(below) else None}
+
+
+AMCL_PEER = "amcl==0.1.2"
+
+
+def _amcl() -> Any:
+    """The `amcl` package (Nav2's AMCL with Python bindings, GPLv3): imported if installed, else
+    installed once into a private cache folder by pip. Never a dependency of EMOS itself."""
+    import importlib
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    try:
+        return importlib.import_module("amcl")
+    except ImportError:
+        pass
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    target = cache / "emos" / "bench" / AMCL_PEER.replace("==", "-")
+    if not (target / "amcl").is_dir():
+        print(f"emos bench localize: installing the benchmark peer {AMCL_PEER} (GPLv3) into {target}", file=sys.stderr)
+        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target), AMCL_PEER],
+                       check=True)
+    sys.path.insert(0, str(target))
+    return importlib.import_module("amcl")
+
+
+def run_tracking_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int) -> dict[str, Any]:
+    """The same tracking trial with Nav2's AMCL: the same odometry (same seed), map, particle
+    budget, motion alphas, sigma_hit, z_hit/z_rand, beams and recovery rates. Its own seed, its
+    update thresholds and likelihood distance cap are not settable through these bindings."""
+    from emos.actors.nav.localization import noisy_odometry
+
+    amcl = _amcl()
+    ref = data["reference"]
+    odom = noisy_odometry(ref, noise, seed)  # type: ignore[arg-type]
+    p = params
+    loc = amcl.AMCL(p.min_particles, p.max_particles, p.recovery_alpha_slow, p.recovery_alpha_fast,
+                    amcl.MotionParameters(p.alpha1, p.alpha2, p.alpha3, p.alpha4, 0.2),
+                    amcl.LaserParameters(p.z_hit, 0.05, 0.05, p.z_rand, p.sigma_hit, 0.1, 0.05, p.max_beams), "differential")
+    g = data["grid"]
+    # Nav2's AMCL reads 100 as occupied, 0 as free and anything else as unknown (its convertMap):
+    # the map as map_server's trinary thresholds give it (0.65 / 0.25, the thresholds our filter
+    # uses too). Cells as rows of y, the origin at the lower-left corner, as these bindings take it.
+    cells = np.where(g.data >= 65, 100, np.where((g.data >= 0) & (g.data <= 25), 0, -1))
+    loc.set_map(amcl.create_occupancy_grid_from_list(cells.astype(int).tolist(), g.resolution, g.origin[0], g.origin[1]))
+    loc.set_laser_pose(amcl.Vector3D(0.0, 0.0, 0.0))
+    loc.set_initial_pose(amcl.Vector3D(*map(float, ref[0])), amcl.create_diagonal_covariance(0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2))
+    est = np.zeros_like(ref)
+    cpu = 0.0
+    for i in range(len(ref)):
+        r, a = data["ranges"][i], data["angles"][i]
+        t0 = time.process_time()
+        scan = amcl.create_laser_scan_from_list([[float(x), float(b)] for x, b in zip(r, a)], float(data["max_range"]))
+        loc.update(scan, amcl.Vector3D(*map(float, odom[i])))
+        m = loc.get_pose_mean()
+        cpu += time.process_time() - t0
+        est[i] = (m.x, m.y, m.theta)
+    pos, head = _errors(est, ref)
+    return {"estimate": est, "odometry": odom, "pos": pos, "head": head, "cpu": cpu, "scans": len(ref),
+            "converged": bool(pos[-1] < 0.2)}
+
+
+def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
+    from emos.actors.nav.localization import AmclParams
+
+    alphas = _floats(args.alphas, 4, "--alphas") if args.alphas else tuple(2.0 * a for a in noise)
+    g = args.global_
+    recovery = _floats(args.recovery, 2, "--recovery") if args.recovery else ((0.001, 0.1) if g else (0.0, 0.0))
+    return AmclParams(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
+                      min_particles=args.min_particles or (2000 if g else 500),
+                      max_particles=args.max_particles or (20000 if g else 2000),
+                      max_beams=args.max_beams or 180, laser_max_range=args.max_range,
+                      sigma_hit=args.sigma_hit if args.sigma_hit is not None else (0.2 if g else 0.15),
+                      update_min_d=0.25, update_min_a=0.2, jump_distance=5.0, jump_angle=math.pi,
+                      recovery_alpha_slow=recovery[0], recovery_alpha_fast=recovery[1],
+                      min_ess_fraction=args.min_ess if args.min_ess is not None else (0.5 if g else 0.0))
+
+
+def _plot(path: str, data: dict[str, Any], trial: dict[str, Any], title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    g = data["grid"]
+    img = np.where(g.data < 0, 0.75, 1.0 - g.data / 100.0)
+    h, w = g.data.shape
+    ox, oy, _ = g.origin
+    fig, ax = plt.subplots(figsize=(8, 8))
+    ax.imshow(img, cmap="gray", origin="lower", vmin=0, vmax=1,
+              extent=(ox, ox + w * g.resolution, oy, oy + h * g.resolution))
+    ref = trial.get("reference", data["reference"])
+    ax.plot(ref[:, 0], ref[:, 1], "-", color="tab:green", lw=2.5, label="reference (corrected log)")
+    if "odometry" in trial:
+        ax.plot(trial["odometry"][:, 0], trial["odometry"][:, 1], ":", color="tab:red", lw=1, label="noisy odometry")
+    ax.plot(trial["estimate"][:, 0], trial["estimate"][:, 1], "-", color="tab:blue", lw=1, label="EMOS Localizer")
+    # The long free rays through doors and windows reach far out; show the building.
+    lo, hi = ref[:, :2].min(axis=0) - 4.0, ref[:, :2].max(axis=0) + 4.0
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_title(title)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best")
+    ax.set_aspect("equal")
+    fig.tight_layout()
+    fig.savefig(path, dpi=75)
+    plt.close(fig)
+
+
+def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, Any]:
+    pos = np.concatenate([t["pos"] for t in trials])
+    head = np.concatenate([t["head"] for t in trials])
+    scans = sum(t["scans"] for t in trials)
+    return {"localizer": name, "position_rmse_m": float(np.sqrt(np.mean(pos ** 2))) if len(pos) else float("nan"),
+            "heading_rmse_deg": float(np.degrees(np.sqrt(np.mean(head ** 2)))) if len(head) else float("nan"),
+            "converged_rate": float(np.mean([t["converged"] for t in trials])),
+            "cpu_s_per_scan": sum(t["cpu"] for t in trials) / max(scans, 1),
+            "trials": len(trials), "scans": scans,
+            **({"kept_rate": float(np.mean([t["kept"] for t in trials]))} if global_ else {}),
+            "position_max_m": float(pos.max()) if len(pos) else float("nan")}
+
+
+def measure(args: argparse.Namespace) -> dict[str, Any]:
+    noise = _floats(args.noise, 4, "--noise")
+    params = _params(args, noise)
+    data = prepare(args.log, args.max_range, args.max_scans)
+    seeds = range(max(args.seeds, 1))
+    trials = [(run_global if args.global_ else run_tracking)(data, params, noise, seed) for seed in seeds]
+    rows = [_row("emos", trials, args.global_)]
+    if args.peer == "amcl":
+        if args.global_:
+            raise ValueError("--peer amcl: the amcl bindings have no global localization call; run it without --global")
+        rows.append(_row("amcl", [run_tracking_amcl(data, params, noise, seed) for seed in seeds], False))
+    if args.plot:
+        _plot(args.plot, data, trials[0], f"{data['log'].name}: {'global' if args.global_ else 'tracking'}, seed 0")
+    return {"dataset": data["log"].name, "mode": "global" if args.global_ else "tracking", "noise_alphas": list(noise),
+            "filter": {k: getattr(params, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4", "min_particles",
+                                                      "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand")},
+            "results": rows}
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from emos.actors.nav.localization import CarmenLogError
+
+    try:
+        result = measure(args)
+    except (CarmenLogError, argparse.ArgumentTypeError, ValueError) as exc:
+        print(f"emos bench localize: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    from .common import table
+
+    print(f"{result['dataset']} ({result['mode']}; odometry noise alphas {result['noise_alphas']})")
+    print(table(result["results"], [("localizer", "localizer", "s"), ("position_rmse_m", "pos RMSE m", ".4f"),
+                                    ("heading_rmse_deg", "head RMSE deg", ".3f"), ("converged_rate", "converged", ".2f"),
+                                    ("cpu_s_per_scan", "CPU s/scan", ".4f"), ("trials", "trials", "d")]))
+    return 0
