@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "component": ("emos.tools.cli.component", "list components, show one, or call its reconfiguration services"),
     "record": ("emos.tools.cli.record", "record a running system's topics into an MCAP file"),
     "play": ("emos.tools.cli.play", "publish an MCAP recording into a running system, with its timing"),
+    "map": ("emos.tools.cli.map", "build a map from a recording (offline SLAM) or draw a saved one"),
     "viz": ("emos.tools.cli.viz", "serve a running system's topics to Foxglove over its WebSocket protocol"),
 }
 
@@ -34,15 +35,18 @@ COMMANDS: dict[str, tuple[str, str]] = {
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "ipc": ("emos.tools.bench.ipc", "shared-memory topic latency and throughput vs multiprocessing"),
     "net": ("emos.tools.bench.net", "topic latency between two runs over Zenoh: EMOS against raw eclipse-zenoh"),
+    "ros2": ("emos.tools.bench.ros2", "half round trips rclpy <-> rclpy and EMOS component <-> rclpy node through the ROS 2 bridge"),
     "restart": ("emos.tools.bench.restart", "kill-to-detect and kill-to-recover times of the supervisor"),
     "events": ("emos.tools.bench.events", "event-to-action and failure-to-fallback latencies"),
     "record": ("emos.tools.bench.record", "camera latency to its subscribers with and without `emos record`"),
     "nav": ("emos.tools.bench.nav", "navigation algorithm kernels: costs, mapping, safety, DWA, planners"),
+    "localize": ("emos.tools.bench.localize", "Monte Carlo localization on real lidar logs (CARMEN): tracking and global"),
     "navloop": ("emos.tools.bench.navloop", "scan to motor command through LocalMapper, Controller and DriveManager processes"),
     "sim": ("emos.tools.bench.sim", "simulation speed relative to real time"),
     "barn": ("emos.tools.barn", "BARN navigation benchmark"),
     "agents": ("emos.tools.bench.agents", "semantic routing and vector-store query times"),
     "ui": ("emos.tools.bench.ui", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
+    "slam": ("emos.tools.bench.slam", "graph SLAM on a real lidar log (CARMEN): trajectory error, CPU per scan, the map"),
 }
 
 # `emos serve NAME`: long-running development services.
@@ -63,14 +67,22 @@ EXAMPLES: dict[str, str] = {
     "bench ipc": "emos bench ipc\nemos bench ipc --sizes 64,921600 --json\nemos bench ipc --plot ipc.png",
     "bench restart": "emos bench restart --kills 50\nemos bench restart --kills 200 --plot restart.png",
     "bench nav": "emos bench nav\nemos bench nav --json",
+    "bench localize": "emos bench localize --log ../shared/benchmarks/radish/intel-corrected.log.gz --seeds 5\n"
+                      "emos bench localize --log aces-corrected.log.gz --global --seeds 20 --json",
     "bench sim": "emos bench sim\nemos bench sim --json",
     "bench barn": "emos bench barn\nemos bench barn --json",
     "bench agents": "emos bench agents\nemos bench agents --json",
+    "bench slam": "emos bench slam --log ../shared/benchmarks/radish/intel-corrected.log.gz\n"
+                  "emos bench slam --log orebro-corrected.log.gz --seed 1 --json\n"
+                  "emos bench slam --log intel-corrected.log.gz --map intel.yaml --plot intel_slam.png",
     "serve models": "emos serve models\nemos serve models --help   # address and models",
     "record": "emos record -o run.mcap                  # every topic, until Ctrl-C\n"
               "emos record /camera/rgb /scan -o two.mcap --duration 10\n"
               "emos record -o nav.mcap -x '/*/status' --compression zstd",
     "play": "emos play run.mcap\nemos play run.mcap --rate 2 --loop --topics /scan",
+    "map": "emos record /scan /odom -o run.mcap      # drive the robot, Ctrl-C\n"
+           "emos map build run.mcap -o office         # office.yaml + office.pgm\n"
+           "emos map show office.yaml                 # office.png",
     "viz": "emos viz                                  # ws://127.0.0.1:8765 for Foxglove\nemos viz /scan '/camera/*' --port 8766\n"
            "emos viz --token auto                     # prints the URL with its token once",
     "bench record": "emos bench record\nemos bench record --pairs 4 --window 8 --against hz   # control",

@@ -257,15 +257,10 @@ class Localizer(NavComponent):
         if scan is self._last_scan:
             return  # Timed: no new scan since the last step
         self._last_scan = scan
-        odom_msg = self.latest("location")
-        if odom_msg is None:
-            self.fail_input("location", f"no odometry on {self.topic_name('location')} yet")
+        state = self.robot_state()  # reports a missing or bad odometry message by topic
+        if state is None:
             return
-        try:
-            odom = pose_of(odom_msg)
-        except BadInput as exc:
-            self.fail_input("location", f"{self.topic_name('location')}: {exc}")
-            return
+        odom = state[0]
         beams = self._scan_beams(scan)
         healthy = beams is not None and self._filter.field.has_obstacles
         r, a = beams if beams is not None else (np.zeros(0), np.zeros(0))

@@ -27,8 +27,10 @@ def build_reference_map(poses: np.ndarray, scans: list[np.ndarray], angles: list
     poses = np.asarray(poses, dtype=np.float64)
     if len(poses) != len(scans) or len(poses) == 0:
         raise ValueError(f"build_reference_map: {len(poses)} poses for {len(scans)} scans")
-    per_scan = [np.asarray(angles, dtype=np.float64)] * len(scans) if np.ndim(angles) == 1 and not isinstance(angles, list) \
-        else [np.asarray(a, dtype=np.float64) for a in angles]
+    # A list holds one angle array per scan (their lengths may differ: np.ndim would refuse it);
+    # an array is one set of angles for every scan.
+    per_scan = [np.asarray(a, dtype=np.float64) for a in angles] if isinstance(angles, list) \
+        else [np.asarray(angles, dtype=np.float64)] * len(scans)
     sx, sy, syaw = sensor_pose
     ends, hits, origins = [], [], []
     for pose, r, a in zip(poses, scans, per_scan):

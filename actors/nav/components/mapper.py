@@ -1,0 +1,206 @@
+"""``Mapper``: graph SLAM as a component (``mapping.slam.GraphSlam``).
+
+Inputs: the laser scan (``sensor_data``) and the odometry (``location``, an Odometry in
+``frames.odom``). Outputs: the growing map (``global_map``, an OccupancyGrid on ``/map``,
+TRANSIENT_LOCAL, as the MapServer publishes one) and the ``frames.world -> frames.odom``
+transform (``tf``), so that the other components keep reading odometry and compose it with the
+correction, as with slam_toolbox. Service ``<name>/save_map`` (``Save2dMapToFile``) writes the
+current map as map_server YAML + PGM.
+
+A scan becomes a graph node only when the robot moved ``update_min_d`` (m) or turned
+``update_min_a`` (rad) since the last node: standing still for an hour adds nothing. The map
+is rendered from every node's scan at its optimised pose (log-odds ray casting), at most every
+``map_period`` seconds: that rendering costs O(nodes), off the per-scan path, and is what a
+loop closure needs (it moves old scans). Bad scans (NaN/inf/zero/max range readings, a beam
+count that contradicts the angles) are handled by the SLAM (logged, the node gets the odometry
+only) and reported as a failure of the input.
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from attrs import define, field
+
+from emos.config.qos import TRANSIENT_LOCAL, QoSConfig
+from emos.config.validators import in_range
+from emos.core.keyed import AllowedTopic
+from emos.io.topic import Topic
+from emos.msgs.geometry import Quaternion, TFMessage, Transform, TransformStamped, Vector3
+from emos.msgs.std import Header
+
+from ..localization import build_reference_map, compose_pose, relative_pose
+from ..mapping.slam import GraphSlam, SlamParams
+from ..maps import save_map
+from .base import NavComponent, NavComponentConfig, rate_field
+from .convert import grid_msg
+from .interfaces import SaveMapRequest, SaveMapResponse
+
+__all__ = ["Mapper", "MapperConfig"]
+
+
+def _slam_params(value: Any) -> SlamParams:
+    if isinstance(value, SlamParams):
+        return value
+    if not isinstance(value, dict):
+        raise TypeError(f"MapperConfig.slam_params: expected SlamParams or a dict of its fields, got {type(value).__name__}")
+    return SlamParams(**value)
+
+
+@define(kw_only=True)
+class MapperConfig(NavComponentConfig):
+    """``slam_params``: a ``SlamParams`` or a dict of its fields. ``update_min_d`` (m) /
+    ``update_min_a`` (rad): the motion that makes a scan a node. ``map_period`` (s): how often
+    the map is re-rendered and published (0: after every node). ``map_resolution`` (m).
+    ``map_file_folder``: where ``save_map`` writes by default."""
+
+    loop_rate: float = rate_field(10.0)
+    slam_params: SlamParams = field(factory=SlamParams, converter=_slam_params)
+    update_min_d: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=100.0))
+    update_min_a: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=2 * math.pi))
+    map_period: float = field(default=2.0, validator=in_range(min_value=0.0, max_value=3600.0))
+    map_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
+    map_file_folder: str = field(default="")
+
+
+class Mapper(NavComponent):
+    """Online graph SLAM (module docstring)."""
+
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
+        "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
+        "location": AllowedTopic(types=("Odometry",), default=Topic(name="/odom", msg_type="Odometry"), required=True),
+    }
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
+        "global_map": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/map", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL)), required=True),
+        "tf": AllowedTopic(types=("TFMessage",), default=Topic(name="/tf", msg_type="TFMessage")),
+    }
+    key_aliases: ClassVar[Mapping[str, str]] = {"map": "global_map"}
+    config: MapperConfig
+
+    def __init__(self, component_name: str, config: MapperConfig | None = None, **kwargs: Any) -> None:
+        if kwargs.get("run_type") is None and kwargs.get("trigger") is None:
+            kwargs["run_type"] = "Event"  # one step per scan, as it arrives
+        super().__init__(component_name, config=config, **kwargs)
+
+    @classmethod
+    def config_class(cls) -> type[MapperConfig]:
+        return MapperConfig
+
+    def custom_on_configure(self) -> None:
+        self.default_trigger("sensor_data")
+        self._lock = threading.Lock()  # the save service and the steps share the map
+        self._slam = GraphSlam(self.config.slam_params, name=f"{self.component_name} ({self.topic_name('sensor_data')})",
+                               logger=self.get_logger())
+        self._scans: list[tuple[np.ndarray, np.ndarray]] = []
+        self._last_node_odom: np.ndarray | None = None
+        self._correction = np.zeros(3)
+        self._last_scan: Any = None
+        self._since_map = math.inf
+        self._grid: Any = None
+        self.create_service(f"{self.component_name}/save_map", SaveMapRequest, SaveMapResponse, self._save)
+
+    def _beams(self, scan: Any) -> tuple[np.ndarray, np.ndarray] | None:
+        r = np.asarray(scan.ranges, dtype=np.float64)
+        inc, a0 = float(scan.angle_increment), float(scan.angle_min)
+        if r.size == 0 or not (math.isfinite(inc) and math.isfinite(a0)) or inc == 0.0:
+            self.fail_input("sensor_data", f"{self.topic_name('sensor_data')}: unusable LaserScan ({r.size} ranges, "
+                                           f"angle_min={a0}, angle_increment={inc})")
+            return None
+        expected = int(round((float(scan.angle_max) - a0) / inc)) + 1 if math.isfinite(scan.angle_max) else r.size
+        angles = a0 + inc * np.arange(expected if abs(expected - r.size) > 1 else r.size)
+        # The mapper's own check names the topic; the SLAM refuses the scan and keeps the node.
+        if angles.size != r.size:
+            self.fail_input("sensor_data", f"{self.topic_name('sensor_data')}: {r.size} ranges but angle_min.."
+                                           f"angle_max / angle_increment give {expected} beams; scan ignored")
+        scan_max = float(scan.range_max) if math.isfinite(scan.range_max) and scan.range_max > 0 else math.inf
+        r = np.where(r >= scan_max, np.inf, r)  # no echo
+        return r, angles
+
+    def _execution_step(self, msg: Any = None, topic: Any = None, **kwargs: Any) -> None:
+        with self._lock:
+            self._step(msg)
+
+    def _step(self, msg: Any) -> None:
+        scan = msg if msg is not None else self.latest("sensor_data")
+        if scan is None:
+            self.fail_input("sensor_data", f"no scan on {self.topic_name('sensor_data')} yet")
+            return
+        if scan is self._last_scan:
+            return
+        self._last_scan = scan
+        state = self.robot_state()  # reports a missing or bad odometry message by topic
+        if state is None:
+            return
+        odom = state[0]
+        beams = self._beams(scan)
+        if beams is None:
+            self._publish_tf(scan.header.stamp)
+            return
+        last = self._last_node_odom
+        moved = last is None
+        if last is not None:
+            d = relative_pose(last, odom)
+            moved = math.hypot(d[0], d[1]) >= self.config.update_min_d or abs(d[2]) >= self.config.update_min_a
+        if moved:
+            problems = sum(self._slam.problems.values())
+            pose = self._slam.add(odom, beams[0], beams[1])
+            self._scans.append(beams)
+            self._last_node_odom = odom
+            # map -> odom: the correction that takes the odometry's pose to the estimate.
+            self._correction = compose_pose(pose, relative_pose(odom, np.zeros(3)))
+            if sum(self._slam.problems.values()) > problems:
+                self.fail_input("sensor_data", f"{self.topic_name('sensor_data')}: bad readings in this scan (see the log)")
+        self._publish_tf(scan.header.stamp)
+        self._since_map += 1.0 / max(self.config.loop_rate, 1e-6)
+        if moved and (self._grid is None or self._since_map >= self.config.map_period):
+            self._since_map = 0.0
+            self._render()
+        if beams[0].size == beams[1].size:
+            self.health_status.set_healthy()
+
+    def _render(self) -> None:
+        poses = self._slam.trajectory()
+        # Scans the SLAM refused (beam count) are not drawn; every other one from its node.
+        keep = [k for k, (r, a) in enumerate(self._scans) if r.size == a.size]
+        if not keep:
+            return
+        self._grid = build_reference_map(poses[keep], [np.where(np.isfinite(self._scans[k][0]), self._scans[k][0], np.inf)
+                                                       for k in keep], [self._scans[k][1] for k in keep],
+                                         resolution=self.config.map_resolution, max_range=self.config.slam_params.max_range)
+        g = self._grid
+        self.publish(self.required_out_topic("global_map"), grid_msg(g.data, g.resolution, g.origin, self.config.frames.world))
+
+    def _publish_tf(self, stamp: Any) -> None:
+        tf_topic = self.get_out_topic("tf")
+        if tf_topic is None:
+            return
+        frames = self.config.frames
+        x, y, yaw = self._correction
+        ts = TransformStamped(header=Header(stamp=stamp, frame_id=frames.world), child_frame_id=frames.odom,
+                              transform=Transform(translation=Vector3(x=float(x), y=float(y)),
+                                                  rotation=Quaternion.from_yaw(float(yaw))))
+        self.publish(tf_topic, TFMessage(transforms=[ts]))
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        """(N, 3) optimised pose of every node, for recipes and tests."""
+        return self._slam.trajectory()
+
+    def _save(self, request: SaveMapRequest) -> SaveMapResponse:
+        folder = request.file_location or self.config.map_file_folder or "."
+        name = request.file_name or "map"
+        if "/" in name or name.startswith("."):
+            return SaveMapResponse(success=False, message=f"file_name must be a plain name, got {name!r}")
+        with self._lock:
+            if self._grid is None:
+                return SaveMapResponse(success=False, message="no map yet: no scan has been mapped")
+            try:
+                path = save_map(self._grid, Path(os.path.expanduser(folder)) / f"{name}.yaml")
+            except (OSError, ValueError) as exc:
+                return SaveMapResponse(success=False, message=f"cannot save the map to {folder}/{name}.yaml: {exc}")
+        return SaveMapResponse(success=True, message="saved", path=str(path))

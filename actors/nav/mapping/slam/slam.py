@@ -1,0 +1,336 @@
+"""Graph SLAM on 2D lidar scans and odometry: correlative scan-to-submap matching in front,
+a gtsam pose graph with loop closures behind.
+
+Each scan, in :meth:`GraphSlam.add`:
+
+1. **Input check.** Ranges that are NaN, inf, <= ``min_range`` or >= ``max_range`` (no echo)
+   are not hits; a scan whose beam count does not match its angles is not used at all (its node
+   gets the odometry only); both are logged (rate-limited), naming the scan.
+2. **Front end.** The odometry increment carries the previous front-end pose to a guess; the
+   scan's hits (within ``match_range``, one per ``voxel`` square) are matched against the
+   current submap by :class:`CorrelativeMatcher` in a window of ``window_sigmas`` standard
+   deviations of the odometry noise model (clamped to ``[min_window_*, max_window_*]``), with a
+   weak prior towards the guess (it decides only where the scan does not, e.g. along a
+   corridor). The hits are then inserted into the two newest submaps.
+3. **Submaps** (as in Cartographer): a new submap starts every ``scans_per_submap`` scans and
+   each scan goes into the two newest, so a submap holds ``2 * scans_per_submap`` scans when it
+   is finished, and the one matched against always has between 1 and 2 times that many. A
+   submap is a rigid local map anchored at its first scan's node.
+4. **Back end.** Node = scan. An odometry factor (covariance from the motion model) to the
+   previous node, and a scan-match factor from the submap's anchor node (covariance from the
+   match's response). Every ``loop_every`` scans, the scan is matched against up to
+   ``loop_candidates`` finished submaps whose anchor lies within ``loop_radius`` of the
+   scan's optimised pose (nearest first), each in a bounded window (``loop_window_xy``,
+   ``loop_window_theta``) around where the graph puts it, with no prior. A loop closure is
+   accepted only if its score reaches ``loop_min_score`` and its response is not ambiguous;
+   it enters the graph under a robust (Huber or Cauchy) kernel. iSAM2 updates the graph.
+
+Why the per-scan cost does not grow with the map: the front end only touches the current
+submap (bounded: ``2 * scans_per_submap`` scans), matching cost is bounded by its window and the
+hit count, loop closure tries a bounded number of submaps in a bounded window (finding the
+candidates is a distance test over submap anchors: one vectorised pass over a few floats per
+submap), and iSAM2 re-solves only the cliques a new factor touches. Memory grows with the
+explored area (the finished submaps), not with time spent in it.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import attrs
+import numpy as np
+
+from emos.config import validators as V
+from emos.geometry import wrap_angle
+from emos.ratelimit import RateLimitedLog
+
+from ...localization.motion import compose_pose, odometry_delta, relative_pose
+from .graph import PoseGraph
+from .grid import LikelihoodGrid
+from .matcher import CorrelativeMatcher, MatchResult, voxel_filter
+
+__all__ = ["GraphSlam", "SlamParams", "Submap", "relative_pose", "compose_pose", "scan_points"]
+
+_log = logging.getLogger("emos.nav.mapping.slam")
+
+
+@attrs.define(kw_only=True)
+class SlamParams:
+    """SLAM parameters (see the module docstring for what each does). Distances in m, angles
+    in rad. ``odom_alphas``: the odometry noise (AMCL alpha1..alpha4) the front end's window and
+    the odometry factors assume."""
+
+    resolution: float = attrs.field(default=0.05, validator=V.finite_positive)
+    sigma: float = attrs.field(default=0.05, validator=V.finite_positive)
+    min_range: float = attrs.field(default=0.05, validator=attrs.validators.ge(0.0))
+    max_range: float = attrs.field(default=30.0, validator=V.finite_positive)
+    match_range: float = attrs.field(default=30.0, validator=V.finite_positive)
+    voxel: float = attrs.field(default=0.1, validator=attrs.validators.ge(0.0))
+    min_points: int = attrs.field(default=20, validator=attrs.validators.ge(3))
+    scans_per_submap: int = attrs.field(default=10, validator=attrs.validators.ge(1))
+    odom_alphas: tuple[float, float, float, float] = attrs.field(default=(0.02, 0.002, 0.02, 0.002))
+    window_sigmas: float = attrs.field(default=3.0, validator=V.finite_positive)
+    min_window_xy: float = attrs.field(default=0.2, validator=V.finite_positive)
+    max_window_xy: float = attrs.field(default=1.0, validator=V.finite_positive)
+    min_window_theta: float = attrs.field(default=math.radians(6.0), validator=V.finite_positive)
+    max_window_theta: float = attrs.field(default=math.radians(45.0), validator=V.finite_positive)
+    prior_weight: float = attrs.field(default=0.05, validator=attrs.validators.ge(0.0))
+    loop_every: int = attrs.field(default=1, validator=attrs.validators.ge(1))
+    loop_radius: float = attrs.field(default=15.0, validator=V.finite_positive)
+    loop_candidates: int = attrs.field(default=4, validator=attrs.validators.ge(1))
+    loop_window_xy: float = attrs.field(default=1.5, validator=V.finite_positive)
+    loop_window_theta: float = attrs.field(default=math.radians(15.0), validator=V.finite_positive)
+    loop_min_score: float = attrs.field(default=0.55, validator=attrs.validators.and_(attrs.validators.ge(0.0), attrs.validators.le(1.0)))
+    loop_skip_submaps: int = attrs.field(default=0, validator=attrs.validators.ge(0))
+    confirm_after_nodes: int = attrs.field(default=60, validator=attrs.validators.ge(0))
+    confirm_within: int = attrs.field(default=4, validator=attrs.validators.ge(1))
+    confirm_xy: float = attrs.field(default=0.15, validator=V.finite_positive)
+    confirm_theta: float = attrs.field(default=math.radians(2.0), validator=V.finite_positive)
+    robust: str = attrs.field(default="huber", validator=attrs.validators.in_(("huber", "cauchy")))
+    robust_k: float = attrs.field(default=1.345, validator=V.finite_positive)
+    match_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
+    loop_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
+
+
+@attrs.define(eq=False)
+class Submap:
+    """A rigid local map: the likelihood grid of ``2 * scans_per_submap`` scans placed at their
+    front-end poses, anchored at node ``anchor`` (``anchor_pose``: its front-end pose)."""
+
+    grid: LikelihoodGrid
+    anchor: int
+    anchor_pose: np.ndarray
+    scans: int = 0
+    finished: bool = False
+
+
+def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
+    """Hits (N, 2, sensor frame) of the readings that are finite and in (min_range, max_range)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    a = np.asarray(angles, dtype=np.float64)
+    ok = np.isfinite(r) & np.isfinite(a) & (r > min_range) & (r < max_range)
+    return np.column_stack([r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])])
+
+
+class GraphSlam:
+    """Online graph SLAM (see the module docstring). ``add`` one scan with its odometry pose at
+    a time; ``trajectory()`` is the current estimate, ``finish()`` the batch-optimised one."""
+
+    def __init__(self, params: SlamParams | None = None, *, name: str = "slam",
+                 logger: logging.Logger | None = None) -> None:
+        self.params = params or SlamParams()
+        self.name = name
+        self._logger = logger or _log
+        self._report = RateLimitedLog(interval=5.0)
+        self.matcher = CorrelativeMatcher()
+        self.graph = PoseGraph(robust=self.params.robust, robust_k=self.params.robust_k)
+        self.submaps: list[Submap] = []
+        self.front: list[np.ndarray] = []  # front-end pose of each node
+        self.odom: list[np.ndarray] = []
+        self.matches = 0
+        self.loop_attempts = 0
+        self.loops: list[tuple[int, int, float]] = []  # (submap anchor, node, score)
+        self.problems: dict[str, int] = {}
+        self._guess = np.zeros(3)
+        self._pending: list[tuple[int, np.ndarray, Submap, MatchResult]] = []
+        self._accepted: set[tuple[int, int]] = set()
+
+    # -- input ---------------------------------------------------------------------------------
+    def _problem(self, key: str, msg: str, *args: Any) -> None:
+        self.problems[key] = self.problems.get(key, 0) + 1
+        self._report.warning((self.name, key), msg, *args, logger=self._logger)
+
+    def _hits(self, index: int, ranges: Any, angles: Any) -> np.ndarray | None:
+        p = self.params
+        r = np.asarray(ranges, dtype=np.float64).ravel()
+        a = np.asarray(angles, dtype=np.float64).ravel()
+        if r.shape != a.shape:
+            self._problem("beam_count", "%s: scan %d has %d ranges for %d beam angles; expected equal counts: "
+                          "scan not used (odometry only)", self.name, index, r.size, a.size)
+            return None
+        bad = int(np.count_nonzero(~np.isfinite(r)))
+        if bad:
+            self._problem("nonfinite", "%s: scan %d has %d NaN/inf ranges of %d; they are not hits",
+                          self.name, index, bad, r.size)
+        return scan_points(r, a, p.min_range, p.max_range)
+
+    # -- odometry model ------------------------------------------------------------------------
+    def _odom_cov(self, delta: np.ndarray) -> np.ndarray:
+        """Covariance (frame of the new pose, x y theta) of an odometry increment under the
+        AMCL odometry model with ``odom_alphas`` (first order), with a floor. The increment is
+        split as the model splits it (turn ``rot1`` towards the direction of travel, ``trans``,
+        turn ``rot2``; Nav2's 1 cm threshold, reverse moves taken modulo pi): a short move
+        sideways is two large turns for the model, each with its own noise, and the search
+        window must cover that."""
+        a1, a2, a3, a4 = self.params.odom_alphas
+        rot1, trans, rot2 = odometry_delta(np.zeros(3), delta, 0.01)
+        r1 = min(abs(rot1), abs(float(wrap_angle(rot1 - math.pi))))
+        r2 = min(abs(rot2), abs(float(wrap_angle(rot2 - math.pi))))
+        var_rot1 = a1 * r1 * r1 + a2 * trans * trans
+        var_rot2 = a1 * r2 * r2 + a2 * trans * trans
+        var_trans = a3 * trans * trans + a4 * (r1 * r1 + r2 * r2)
+        sd_floor = (0.01, 0.01, math.radians(0.5))
+        return np.diag([var_trans + sd_floor[0] ** 2, trans * trans * var_rot1 + sd_floor[1] ** 2,
+                        var_rot1 + var_rot2 + sd_floor[2] ** 2])
+
+    def _window(self, delta: np.ndarray) -> tuple[float, float]:
+        p = self.params
+        cov = self._odom_cov(delta)
+        k = p.window_sigmas
+        wxy = min(max(k * math.sqrt(max(cov[0, 0], cov[1, 1])), p.min_window_xy), p.max_window_xy)
+        wth = min(max(k * math.sqrt(cov[2, 2]), p.min_window_theta), p.max_window_theta)
+        return wxy, wth
+
+    # -- main step -----------------------------------------------------------------------------
+    def add(self, odom_pose: Any, ranges: Any, angles: Any) -> np.ndarray:
+        """One scan taken at odometry pose ``odom_pose`` (x, y, theta); returns the node's
+        current optimised pose."""
+        p = self.params
+        i = len(self.front)
+        odom = np.asarray(odom_pose, dtype=np.float64).reshape(3)
+        if not np.isfinite(odom).all():
+            self._problem("odom", "%s: scan %d has a non-finite odometry pose %s; holding the last one",
+                          self.name, i, odom.tolist())
+            odom = self.odom[-1].copy() if self.odom else np.zeros(3)
+        pts = self._hits(i, ranges, angles)
+        if i == 0:
+            guess = odom.copy()
+            delta = np.zeros(3)
+        else:
+            delta = relative_pose(self.odom[-1], odom)
+            guess = compose_pose(self.front[-1], delta)
+        local = np.zeros((0, 2)) if pts is None else pts
+        near = local[np.hypot(local[:, 0], local[:, 1]) < p.match_range] if len(local) else local
+        match_pts = voxel_filter(near, p.voxel)
+        pose = guess
+        match: MatchResult | None = None
+        target = self._target()
+        if target is not None and len(match_pts) >= p.min_points:
+            wxy, wth = self._window(delta)
+            sd = self._odom_cov(delta)
+            match = self.matcher.match(target.grid, guess, match_pts, window_xy=wxy, window_theta=wth,
+                                       prior_weight=p.prior_weight,
+                                       prior_sigma=(max(math.sqrt(max(sd[0, 0], sd[1, 1])), 0.02), max(math.sqrt(sd[2, 2]), 0.01)))
+            if match is not None:
+                pose = match.pose
+                self.matches += 1
+        elif pts is not None and len(match_pts) < p.min_points and i > 0:
+            self._problem("few_hits", "%s: scan %d has %d usable hits (< %d); odometry only", self.name, i,
+                          len(match_pts), p.min_points)
+        self.front.append(pose)
+        self.odom.append(odom)
+        self._insert(i, pose, near)
+        self._add_to_graph(i, delta, target, match)
+        closed = False
+        if i % p.loop_every == 0 and len(match_pts) >= p.min_points:
+            closed = self._close_loops(i, match_pts)
+        self.graph.update(extra_iterations=2 if closed else 0)
+        return self.graph.pose(i)
+
+    def _target(self) -> Submap | None:
+        live = [s for s in self.submaps[-2:] if not s.finished and s.grid.hits]
+        return live[0] if live else None
+
+    def _insert(self, i: int, pose: np.ndarray, local: np.ndarray) -> None:
+        p = self.params
+        if i % p.scans_per_submap == 0:
+            self.submaps.append(Submap(grid=LikelihoodGrid(p.resolution, p.sigma, margin=5.0), anchor=i,
+                                       anchor_pose=pose.copy()))
+        if not len(local):
+            return
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = np.column_stack([c * local[:, 0] - s * local[:, 1] + pose[0], s * local[:, 0] + c * local[:, 1] + pose[1]])
+        for sm in self.submaps[-2:]:
+            if sm.finished:
+                continue
+            sm.grid.insert(world)
+            sm.scans += 1
+            if sm.scans >= 2 * p.scans_per_submap:
+                sm.finished = True
+
+    def _add_to_graph(self, i: int, delta: np.ndarray, target: Submap | None, match: MatchResult | None) -> None:
+        g = self.graph
+        if i == 0:
+            self._guess = self.front[0].copy()
+            g.add_node(0, self.front[0])
+            g.add_prior(0, self.front[0], np.diag([1e-6, 1e-6, 1e-8]))
+            return
+        prev = g.pose(i - 1)
+        # The graph's pose of the new node before this step's update: where loop closure looks.
+        self._guess = compose_pose(prev, relative_pose(self.front[i - 1], self.front[i]))
+        g.add_node(i, self._guess)
+        g.add_between(i - 1, i, delta, self._odom_cov(delta))
+        if match is not None and target is not None and target.anchor != i:
+            self._match_factor(target, i, match.pose, match.covariance, loop=False)
+
+    def _match_factor(self, sm: Submap, i: int, pose: np.ndarray, cov: np.ndarray, loop: bool) -> None:
+        rel = relative_pose(sm.anchor_pose, pose)
+        # The matcher's covariance is in the grid's axes; the factor's error is in the node's.
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        scale = self.params.loop_cov_scale if loop else self.params.match_cov_scale
+        self.graph.add_between(sm.anchor, i, rel, scale * rot @ cov @ rot.T, loop=loop)
+
+    def _close_loops(self, i: int, pts: np.ndarray) -> bool:
+        p = self.params
+        done = [s for s in self.submaps if s.finished]
+        recent = {s.anchor for s in self.submaps[-(p.loop_skip_submaps + 2):]}
+        cands = [s for s in done if s.anchor not in recent]
+        if not cands:
+            return False
+        here = self._guess
+        anchors = np.array([self.graph.pose(s.anchor) for s in cands])
+        dist = np.hypot(anchors[:, 0] - here[0], anchors[:, 1] - here[1])
+        order = [k for k in np.argsort(dist) if dist[k] <= p.loop_radius][: p.loop_candidates]
+        closed = False
+        for k in order:
+            sm = cands[k]
+            guess = compose_pose(sm.anchor_pose, relative_pose(anchors[k], here))
+            self.loop_attempts += 1
+            m = self.matcher.match(sm.grid, guess, pts, window_xy=p.loop_window_xy, window_theta=p.loop_window_theta,
+                                   min_score=p.loop_min_score)
+            if m is None or m.ambiguous or m.score < p.loop_min_score:
+                continue
+            # How far the match moves the scan from where the graph has it (in the submap's frame).
+            correction = relative_pose(guess, m.pose)
+            if i - sm.anchor > p.confirm_after_nodes and not self._confirmed(i, correction):
+                self._pending.append((i, correction, sm, m))
+                continue
+            closed |= self._accept_loop(sm, i, m)
+        return closed
+
+    def _confirmed(self, i: int, correction: np.ndarray) -> bool:
+        """A distant loop closure is accepted only when another scan of the last
+        ``confirm_within`` nodes proposed the same correction of the graph (within
+        ``confirm_xy``, ``confirm_theta``): a repetitive building fools one match, rarely two
+        different scans into the same wrong place. The confirming candidate is accepted too."""
+        p = self.params
+        self._pending = [c for c in self._pending if i - c[0] <= p.confirm_within]
+        ok = False
+        for j, corr, sm, m in self._pending:
+            if j == i:
+                continue
+            diff = relative_pose(corr, correction)
+            if math.hypot(diff[0], diff[1]) <= p.confirm_xy and abs(diff[2]) <= p.confirm_theta:
+                ok = True
+                if (sm.anchor, j) not in self._accepted:
+                    self._accept_loop(sm, j, m)
+        return ok
+
+    def _accept_loop(self, sm: Submap, i: int, m: MatchResult) -> bool:
+        self._match_factor(sm, i, m.pose, m.covariance, loop=True)
+        self.loops.append((sm.anchor, i, m.score))
+        self._accepted.add((sm.anchor, i))
+        return True
+
+    # -- results -------------------------------------------------------------------------------
+    def trajectory(self) -> np.ndarray:
+        """(N, 3) current optimised pose of every scan."""
+        return self.graph.poses(len(self.front))
+
+    def finish(self, iterations: int = 50) -> np.ndarray:
+        """Batch Levenberg-Marquardt over the whole graph; (N, 3) poses."""
+        if not self.front:
+            return np.zeros((0, 3))
+        return self.graph.optimize_batch(iterations)

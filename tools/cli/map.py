@@ -1,0 +1,142 @@
+"""``emos map build RUN.mcap -o office`` and ``emos map show office.yaml``: the map workflow.
+
+``build`` runs the graph SLAM (``emos.actors.nav.mapping.slam``) offline on a recording's
+LaserScan and Odometry topics (``--scan``, ``--odom``; each scan is paired with the newest
+odometry recorded before it; a scan becomes a node when the robot moved ``--min-d`` m or turned
+``--min-a`` rad since the last node), with a progress line, ends with a batch optimisation of
+the graph, and saves ``office.yaml`` + ``office.pgm`` (the ROS map_server format the MapServer
+reads). ``show`` draws a saved map to a PNG (``-o``, default next to the YAML).
+
+Record a run first with ``emos record /scan /odom -o run.mcap`` while driving the robot.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["add_arguments", "run", "build"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="map_verb", required=True)
+    b = sub.add_parser("build", help="offline SLAM on a recording: map_server YAML + PGM",
+                       description="offline SLAM on an MCAP recording (LaserScan + Odometry): map_server YAML + PGM")
+    b.add_argument("file", help="an MCAP recording (emos record) with a LaserScan and an Odometry topic")
+    b.add_argument("-o", "--output", required=True, help="map name or path without suffix: writes NAME.yaml and NAME.pgm")
+    b.add_argument("--scan", default="/scan", help="LaserScan topic (default /scan)")
+    b.add_argument("--odom", default="/odom", help="Odometry topic (default /odom)")
+    b.add_argument("--min-d", type=float, default=0.2, help="travel (m) that makes a scan a node (default 0.2)")
+    b.add_argument("--min-a", type=float, default=0.2, help="turn (rad) that makes a scan a node (default 0.2)")
+    b.add_argument("--resolution", type=float, default=0.05, help="map cell size in m (default 0.05)")
+    b.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
+    b.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    s = sub.add_parser("show", help="draw a saved map (map_server YAML) to a PNG")
+    s.add_argument("file", help="a map_server YAML")
+    s.add_argument("-o", "--output", default=None, help="PNG to write (default: the YAML's name with .png)")
+
+
+def _beams(scan: Any) -> tuple[np.ndarray, np.ndarray]:
+    r = np.asarray(scan.ranges, dtype=np.float64)
+    inc, a0 = float(scan.angle_increment), float(scan.angle_min)
+    if not (math.isfinite(inc) and math.isfinite(a0)) or inc == 0.0:
+        return r, np.zeros(0)  # the SLAM reports the count mismatch and keeps the node on odometry
+    span = float(scan.angle_max) - a0
+    n = int(round(span / inc)) + 1 if math.isfinite(span) else r.size
+    scan_max = float(scan.range_max) if math.isfinite(scan.range_max) and scan.range_max > 0 else math.inf
+    return np.where(r >= scan_max, np.inf, r), a0 + inc * np.arange(r.size if abs(n - r.size) <= 1 else n)
+
+
+def build(args: argparse.Namespace) -> Path:
+    from emos.actors.nav.components.convert import BadInput, pose_of
+    from emos.actors.nav.localization import build_reference_map, relative_pose
+    from emos.actors.nav.mapping.slam import GraphSlam, SlamParams
+    from emos.actors.nav.maps import save_map
+    from emos.interop.mcap_read import read_bag
+
+    slam = GraphSlam(SlamParams(max_range=args.max_range), name=f"map build {args.file} ({args.scan})")
+    odom: np.ndarray | None = None
+    last: np.ndarray | None = None
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    scans = 0
+    shown = 0.0
+    show = not args.quiet
+    for m in read_bag(args.file, topics=[args.scan, args.odom]):
+        msg = m.decode()
+        if m.topic == args.odom:
+            try:
+                odom = pose_of(msg)
+            except BadInput as exc:
+                print(f"emos map build: {args.odom}: {exc}; odometry message skipped", file=sys.stderr)
+            continue
+        scans += 1
+        if odom is None:
+            continue  # no odometry yet: the scan cannot be placed
+        if last is not None:
+            d = relative_pose(last, odom)
+            if math.hypot(d[0], d[1]) < args.min_d and abs(d[2]) < args.min_a:
+                continue
+        r, a = _beams(msg)
+        slam.add(odom, r, a)
+        kept.append((r, a))
+        last = odom
+        now = time.monotonic()
+        if show and now - shown > 0.2:
+            shown = now
+            sys.stderr.write(f"\rmap build: {scans} scans read, {len(kept)} nodes, {len(slam.loops)} loop closures   ")
+            sys.stderr.flush()
+    if not kept:
+        raise SystemExit(f"emos map build: {args.file}: no {args.scan} scan with {args.odom} odometry before it")
+    poses = slam.finish()
+    use = [k for k, (r, a) in enumerate(kept) if r.size == a.size]
+    grid = build_reference_map(poses[use], [kept[k][0] for k in use], [kept[k][1] for k in use],
+                               resolution=args.resolution, max_range=args.max_range)
+    out = save_map(grid, Path(str(args.output)).with_suffix(".yaml") if not str(args.output).endswith(".yaml") else Path(args.output))
+    if show:
+        sys.stderr.write(f"\rmap build: {scans} scans read, {len(kept)} nodes, {len(slam.loops)} loop closures: {out}\n")
+    return out
+
+
+def show_map(args: argparse.Namespace) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from emos.actors.nav.maps import load_map
+
+    grid = load_map(args.file)
+    img = np.where(grid.data < 0, 0.8, 1.0 - grid.data / 100.0)
+    h, w = grid.data.shape
+    ox, oy, _ = grid.origin
+    fig, ax = plt.subplots(figsize=(8, 8 * h / max(w, 1) + 0.5))
+    ax.imshow(img, cmap="gray", origin="lower", vmin=0, vmax=1,
+              extent=(ox, ox + w * grid.resolution, oy, oy + h * grid.resolution))
+    ax.set_title(f"{Path(args.file).name}: {w} x {h} cells of {grid.resolution} m")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    out = Path(args.output) if args.output else Path(args.file).with_suffix(".png")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from emos.actors.nav.maps import MapFileError
+    from emos.interop.mcap_read import NotMcapFile
+
+    try:
+        if args.map_verb == "build":
+            print(build(args))
+        else:
+            print(show_map(args))
+    except (NotMcapFile, MapFileError, OSError) as exc:
+        print(f"emos map {args.map_verb}: {exc}", file=sys.stderr)
+        return 2
+    return 0
