@@ -40,8 +40,37 @@ def fastdds_files() -> set[str]:
     return found - shm_in_use() if found else found
 
 
+_CLAIMED: list[int] = []  # lock files held for this process's life: its domains are its own
+
+
 def free_domains(n: int) -> list[int]:
-    return random.sample(range(20, 100), n)
+    """``n`` ROS 2 domain ids no other test process on this machine holds (a lock file per domain,
+    kept until this process ends): two runs on one domain would see each other's nodes."""
+    import fcntl
+
+    got: list[int] = []
+    for domain in random.sample(range(20, 100), 80):
+        fd = os.open(os.path.join(tempfile.gettempdir(), f"emos-test-ros-domain-{domain}.lock"), os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        _CLAIMED.append(fd)
+        got.append(domain)
+        if len(got) == n:
+            return got
+    raise RuntimeError(f"no free ROS 2 domain for this test: {len(got)} of {n} found among 20-99")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The ROS 2 tests run in one worker under pytest-xdist (--dist loadgroup): their checks for
+    Fast DDS files left behind look at the whole of /dev/shm, which another ROS 2 test beside
+    them would change."""
+    here = Path(__file__).parent
+    for item in items:
+        if here in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.xdist_group("ros2"))
 
 
 class Peer:

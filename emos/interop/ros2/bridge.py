@@ -30,7 +30,9 @@ How
   EMOS has no class for, a topic whose type differs between the sides, bytes that do not decode,
   a ROS 2 interface package that is not installed.
 * Incompatible QoS between the bridge and a ROS 2 node is reported once per topic and policy.
-* Services of shared types go both ways (:mod:`emos.interop.ros2.services`).
+* Services of shared types go both ways (:mod:`emos.interop.ros2.services`), and so do actions
+  (:mod:`emos.interop.ros2.actions`); an action's hidden ``<name>/_action/...`` topics are not
+  bridged as topics.
 """
 from __future__ import annotations
 
@@ -172,6 +174,9 @@ class Ros2Bridge:
             from emos.interop.ros2.services import ServiceBridge
 
             self.services = ServiceBridge(ctx, self.node, self.wanted, self._skip_once)
+            from emos.interop.ros2.actions import ActionBridge
+
+            self.actions = ActionBridge(ctx, self.node, self.wanted, self._skip_once, self.services.loop)
         except BaseException:
             rclpy.shutdown(context=self.context)
             raise
@@ -223,7 +228,7 @@ class Ros2Bridge:
     def discover(self) -> None:
         """Open the bridges of topics that appeared on either side since the last call."""
         def count() -> int:
-            return len(self.out) + len(self.inn) + len(self.services.to_ros) + len(self.services.to_emos)
+            return len(self.out) + len(self.inn) + len(self.services.to_ros) + len(self.services.to_emos) + len(self.actions.summary())
 
         before = count()
         self._discover()
@@ -237,7 +242,8 @@ class Ros2Bridge:
 
         state = {"node": f"{self.node_namespace.rstrip('/')}/{self.node_name}", "domain_id": self.domain_id,
                  "topics": {t: {"direction": v["direction"], "type": v["type"]} for t, v in self.summary().items()},
-                 "services": {**{n: "emos->ros2" for n in self.services.to_ros}, **{n: "ros2->emos" for n in self.services.to_emos}}}
+                 "services": {**{n: "emos->ros2" for n in self.services.to_ros}, **{n: "ros2->emos" for n in self.services.to_emos}},
+                 "actions": self.actions.summary()}
         path = self.ctx.run_dir / STATE_FILE
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         try:
@@ -248,6 +254,7 @@ class Ros2Bridge:
 
     def _discover(self) -> None:
         self.services.discover()
+        self.actions.discover(set(self.services.to_ros) | set(self.services.to_emos))
         emos_topics = list_topics(self.ctx)
         for topic, info in emos_topics.items():
             pubs = [p for p in info.get("publishers", []) if p != PUBLISHER_ID]
@@ -260,7 +267,7 @@ class Ros2Bridge:
                 if others:  # DDS keeps the two types apart: nothing flows between them
                     self._skip_once(topic, f"type differs between the sides: EMOS {route.ros_type}, ROS 2 {', '.join(others)}")
                 continue
-            if not self.wanted(topic):
+            if not self.wanted(topic) or "/_action/" in topic:  # an action's own topics: actions.py bridges the action
                 continue
             publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
                           if (p.node_name, p.node_namespace) != (self.node_name, self.node_namespace)]
@@ -412,6 +419,7 @@ class Ros2Bridge:
         for i in ins:
             i.pub.close()
         try:
+            self.actions.close()
             self.services.close()
             self.executor.shutdown(timeout_sec=1.0)
             self.node.destroy_node()
