@@ -1,0 +1,1 @@
+"""Drivers for real robot hardware (serial devices), with byte-faithful emulators."""
