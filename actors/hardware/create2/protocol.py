@@ -33,6 +33,8 @@ from collections.abc import Iterable, Iterator
 
 import attrs
 
+from emos.errors import EmosError
+
 # -- opcodes (OI spec, "Open Interface Command Reference") ---------------------------------------
 START = 128
 RESET = 7
@@ -98,7 +100,7 @@ DRIVER_STREAM_IDS: tuple[int, ...] = (
 BUMP_RIGHT, BUMP_LEFT, WHEELDROP_RIGHT, WHEELDROP_LEFT = 0x01, 0x02, 0x04, 0x08
 
 
-class ProtocolError(ValueError):
+class Create2ProtocolError(EmosError, ValueError):
     """Bytes or values that the OI spec does not allow (names the field and what was expected)."""
 
 
@@ -106,7 +108,7 @@ class ProtocolError(ValueError):
 def clamp_speed(mm_s: float) -> int:
     """A wheel speed in mm/s, rounded and clamped to the OI's -500..500 (Drive Direct clause)."""
     if not math.isfinite(mm_s):
-        raise ProtocolError(f"Drive Direct: wheel speed must be a finite number of mm/s, got {mm_s!r}")
+        raise Create2ProtocolError(f"Drive Direct: wheel speed must be a finite number of mm/s, got {mm_s!r}")
     return max(-MAX_WHEEL_SPEED_MM_S, min(MAX_WHEEL_SPEED_MM_S, int(round(mm_s))))
 
 
@@ -120,7 +122,7 @@ def stream_request(packet_ids: Iterable[int]) -> bytes:
     ids = list(packet_ids)
     for pid in ids:
         if pid not in PACKET_SIZES or pid == PKT_GROUP_ALL:
-            raise ProtocolError(f"Stream: packet id {pid} is not a single sensor packet this module knows (7..58)")
+            raise Create2ProtocolError(f"Stream: packet id {pid} is not a single sensor packet this module knows (7..58)")
     return bytes([STREAM, len(ids), *ids])
 
 
@@ -140,7 +142,7 @@ def encode_values(values: dict[int, int]) -> dict[int, bytes]:
     for pid, value in values.items():
         fmt = PACKET_FORMATS.get(pid)
         if fmt is None:
-            raise ProtocolError(f"sensor packet {pid}: unknown id (this module knows 7..58)")
+            raise Create2ProtocolError(f"sensor packet {pid}: unknown id (this module knows 7..58)")
         out[pid] = struct.pack(">" + fmt, value)
     return out
 
@@ -150,7 +152,7 @@ def encode_frame(values: dict[int, int], order: Iterable[int] | None = None) -> 
     data = encode_values(values)
     body = b"".join(bytes([pid]) + data[pid] for pid in (order if order is not None else values))
     if len(body) > 255:
-        raise ProtocolError(f"stream frame: {len(body)} bytes of packets, at most 255 fit the n-bytes field")
+        raise Create2ProtocolError(f"stream frame: {len(body)} bytes of packets, at most 255 fit the n-bytes field")
     head = bytes([STREAM_HEADER, len(body)]) + body
     return head + bytes([checksum(head)])
 
@@ -163,7 +165,7 @@ def encode_group_100(values: dict[int, int]) -> bytes:
 def decode_group_100(data: bytes) -> dict[int, int]:
     """The 80-byte reply to ``[142][100]`` -> packet id -> value (packets 7..58)."""
     if len(data) != PACKET_SIZES[PKT_GROUP_ALL]:
-        raise ProtocolError(f"sensor group 100: expected {PACKET_SIZES[PKT_GROUP_ALL]} bytes, got {len(data)}")
+        raise Create2ProtocolError(f"sensor group 100: expected {PACKET_SIZES[PKT_GROUP_ALL]} bytes, got {len(data)}")
     out, i = {}, 0
     for pid in range(7, 59):
         size = PACKET_SIZES[pid]

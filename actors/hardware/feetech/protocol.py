@@ -25,6 +25,8 @@ import enum
 from collections.abc import Iterable, Mapping
 from typing import NamedTuple
 
+from emos.errors import EmosError
+
 HEADER = b"\xff\xff"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFD  # 0xFE is broadcast; a status packet never carries it (SDK rxPacket: ID > 0xFD is invalid)
@@ -89,7 +91,7 @@ class Reg:
 TABLE_SIZE = 256  # addresses are one byte
 
 
-class ProtocolError(ValueError):
+class FeetechProtocolError(EmosError, ValueError):
     """Bytes or values that the protocol does not allow (names what and why)."""
 
 
@@ -103,7 +105,7 @@ def encode_sign_magnitude(value: int, sign_bit: int = 15) -> int:
     """A signed int as the STS sign-magnitude register value (the SDK's ``SCS_TOSCS``)."""
     magnitude = abs(int(value))
     if magnitude >= 1 << sign_bit:
-        raise ProtocolError(f"value {value} does not fit in a {sign_bit}-bit magnitude with sign bit {sign_bit}")
+        raise FeetechProtocolError(f"value {value} does not fit in a {sign_bit}-bit magnitude with sign bit {sign_bit}")
     return magnitude | (1 << sign_bit) if value < 0 else magnitude
 
 
@@ -117,13 +119,13 @@ def encode_value(reg: Register, value: int) -> bytes:
     """A register value as its little-endian bytes (sign-magnitude where the register is signed)."""
     raw = encode_sign_magnitude(value, 8 * reg.size - 1) if reg.signed else int(value)
     if not 0 <= raw < 1 << (8 * reg.size):
-        raise ProtocolError(f"value {value} does not fit register {reg.address} ({reg.size} byte(s))")
+        raise FeetechProtocolError(f"value {value} does not fit register {reg.address} ({reg.size} byte(s))")
     return raw.to_bytes(reg.size, "little")
 
 
 def decode_value(reg: Register, data: bytes) -> int:
     if len(data) != reg.size:
-        raise ProtocolError(f"register {reg.address} is {reg.size} byte(s), got {len(data)}")
+        raise FeetechProtocolError(f"register {reg.address} is {reg.size} byte(s), got {len(data)}")
     raw = int.from_bytes(data, "little")
     return decode_sign_magnitude(raw, 8 * reg.size - 1) if reg.signed else raw
 
@@ -139,12 +141,12 @@ class Packet(NamedTuple):
 
 def encode_packet(servo_id: int, code: int, params: bytes = b"") -> bytes:
     if not 0 <= servo_id <= BROADCAST_ID:
-        raise ProtocolError(f"servo id must be 0..{BROADCAST_ID}, got {servo_id}")
+        raise FeetechProtocolError(f"servo id must be 0..{BROADCAST_ID}, got {servo_id}")
     if not 0 <= code <= 0xFF:
-        raise ProtocolError(f"instruction/error byte must be 0..255, got {code}")
+        raise FeetechProtocolError(f"instruction/error byte must be 0..255, got {code}")
     length = len(params) + 2
     if length + 4 > MAX_LEN:
-        raise ProtocolError(f"packet of {length + 4} bytes exceeds the protocol's {MAX_LEN}")
+        raise FeetechProtocolError(f"packet of {length + 4} bytes exceeds the protocol's {MAX_LEN}")
     body = bytes((servo_id, length, code)) + bytes(params)
     return HEADER + body + bytes((checksum(body),))
 
@@ -169,7 +171,7 @@ def sync_write(address: int, length: int, data: Mapping[int, bytes]) -> bytes:
     params = bytearray((address, length))
     for servo_id, chunk in data.items():
         if len(chunk) != length:
-            raise ProtocolError(f"sync write of {length} byte(s) per servo: servo {servo_id} got {len(chunk)}")
+            raise FeetechProtocolError(f"sync write of {length} byte(s) per servo: servo {servo_id} got {len(chunk)}")
         params.append(servo_id)
         params += chunk
     return encode_packet(BROADCAST_ID, Instruction.SYNC_WRITE, bytes(params))

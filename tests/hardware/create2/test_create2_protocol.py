@@ -27,7 +27,7 @@ def test_drive_direct_bytes_right_first_big_endian_clamped():
     # OI spec, Drive Direct: [145][right hi][right lo][left hi][left lo], -500..500 mm/s
     assert P.drive_direct(-200, 500) == bytes([145, 0xFF, 0x38, 0x01, 0xF4])
     assert P.drive_direct(900, -900) == bytes([145, 0x01, 0xF4, 0xFE, 0x0C])
-    with pytest.raises(P.ProtocolError, match="finite"):
+    with pytest.raises(P.Create2ProtocolError, match="finite"):
         P.drive_direct(float("nan"), 0)
 
 

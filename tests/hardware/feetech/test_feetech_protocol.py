@@ -27,7 +27,7 @@ def test_sync_packets_layout():
     assert sw[2:5] == bytes((0xFE, 10, Instruction.SYNC_WRITE))
     assert sw[5:13] == bytes((42, 2, 1, 0x00, 0x08, 2, 0xFF, 0x0F))
     assert sw[-1] == P.checksum(sw[2:-1])
-    with pytest.raises(P.ProtocolError, match="servo 2 got 1"):
+    with pytest.raises(P.FeetechProtocolError, match="servo 2 got 1"):
         P.sync_write(42, 2, {2: b"\x00"})
 
 
@@ -50,7 +50,7 @@ def test_negative_speed_is_sign_magnitude_not_twos_complement():
     assert P.encode_value(Reg.GOAL_SPEED, -100) == bytes((0x64, 0x80))  # little-endian 0x8064
     assert P.decode_value(Reg.PRESENT_SPEED, bytes((0x64, 0x80))) == -100
     assert P.encode_value(Reg.GOAL_POSITION, 2048) == b"\x00\x08"
-    with pytest.raises(P.ProtocolError):
+    with pytest.raises(P.FeetechProtocolError):
         P.encode_value(Reg.GOAL_SPEED, 40000)
 
 
