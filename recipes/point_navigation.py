@@ -10,11 +10,23 @@ which the ``Simulator`` (pybullet, headless) builds from the same file in place 
 first goal round the table in front of the robot, then to a second one past the armchair at the
 other end of the room.
 
+The stack localizes as a real robot must (docs/localization.md, "In the main job"): the
+Simulator gives its realistic, drifting odometry (wheel encoders with a per-run scale error and
+2 % slip, heading from a gyro with a per-run bias), the ``Localizer`` corrects it against the
+map and publishes ``map -> odom`` on ``/tf``, and ``MapFramePose`` composes the two into the
+pose in the map frame that every navigation component reads (``/odometry/localized``). The
+Simulator's true pose goes to the Mission only, which scores the localization against it.
+``EMOS_NAV_LOCALIZE=0`` gives the stack the Simulator's true pose instead (no Localizer);
+``EMOS_NAV_SEED`` picks the Simulator's noise (default 0).
+
 Goals and progress come from a small ``Mission`` component defined here, so that the run needs
 nobody at the web UI and judges itself: it publishes each goal on the planner's ``goal_point``
 topic, prints progress once a second (distance left, speed, every component's health), and when
 the robot arrives (``reached_end``) sends the next goal. At the end it writes ``summary.json`` and the
-recipe draws ``point_navigation.png`` (map, plans, driven path). Exit code 0 only when both
+recipe draws ``point_navigation.png`` (map, plans, driven path). The summary's
+``localization`` holds the error of the stack's pose against the truth, sampled 5 times a
+second: ``position_m`` and ``heading_deg`` as ``{p50, p95, max}``, and ``odometry_drift_m`` (how
+far the odometry alone was off at the end). Exit code 0 only when both
 goals were reached without a collision; 1 otherwise (a time limit of ``MISSION_TIMEOUT`` s).
 Outputs go to ``$EMOS_NAV_OUT`` (default ``./point_navigation_out``).
 
@@ -48,10 +60,11 @@ from emos.actors.nav.components import (
     PlannerConfig,
     TopicsKeys,
 )
+from emos.actors.nav.components.localizer import Localizer, LocalizerConfig
 from emos.actors.nav.controllers import ControllersID
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.config.base import BaseComponentConfig
-from emos.msgs import Header, Point, PointStamped
+from emos.msgs import Header, Odometry, Point, PointStamped
 from emos.packages import get_package_share_directory
 
 kompass_sim_dir = get_package_share_directory(package_name="kompass_sim")
@@ -60,7 +73,15 @@ map_file = os.path.join(kompass_sim_dir, "maps", "turtlebot3_webots.yaml")
 OUT_DIR = os.path.abspath(os.environ.get("EMOS_NAV_OUT", "point_navigation_out"))
 GOALS = [(1.5, -3.2), (-0.2, 2.4)]  # round the table, then up the room past the armchair
 MISSION_TIMEOUT = float(os.environ.get("EMOS_NAV_TIMEOUT", "240"))
-NAV_COMPONENTS = ["global_map_server", "planner", "controller", "drive_manager", "mapper"]
+# The stack localizes with the Localizer (Monte Carlo localization on the map) on the
+# Simulator's drifting wheel + IMU odometry; EMOS_NAV_LOCALIZE=0 gives it the Simulator's
+# ground-truth pose instead (the recipe before the Localizer existed).
+LOCALIZE = os.environ.get("EMOS_NAV_LOCALIZE", "1") != "0"
+SEED = int(os.environ.get("EMOS_NAV_SEED", "0"))  # the Simulator's noise (odometry scale error, gyro bias) and the Localizer's
+# Localized, odometry is its own frame (odom -> base_link) and the Localizer publishes map ->
+# odom; unlocalized, the odometry is the true pose and its frame is the map's.
+FRAMES = RobotFrames(world="map", odom="odom" if LOCALIZE else "map", scan="LDS-01")
+NAV_COMPONENTS = ["global_map_server", "planner", "controller", "drive_manager", "mapper"] + (["localizer", "map_pose"] if LOCALIZE else [])
 
 # 1. Robot configuration (the spec's TurtleBot-sized robot)
 my_robot = RobotConfig(
@@ -96,22 +117,91 @@ map_server = MapServer(
 )
 
 # 4. The simulated robot and arena, built from the same map (instead of Webots); the robot
-# starts where the map's frame starts, as in Webots
-odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")
-sim = Simulator("sim", config=SimulatorConfig(world=map_file, spawn=(0.0, 0.0, 0.0)))
+# starts where the map's frame starts, as in Webots. Localized: the Simulator's realistic
+# odometry (wheel encoders with a per-run scale error and 2 % slip, heading from a gyro with a
+# per-run bias: it drifts like a real base's); its true pose goes out on /sim/ground_truth for
+# the Mission's score only, never to the stack.
+odom_topic = Topic(name="/odometry/filtered", msg_type="Odometry")  # the base's odometry (odom -> base_link)
+truth_topic = Topic(name="/sim/ground_truth", msg_type="Odometry")  # the referee's truth
+realistic = {"odometry_mode": "wheel-imu", "slip": 0.02, "seed": SEED} if LOCALIZE else {}
+sim = Simulator("sim", config=SimulatorConfig(world=map_file, spawn=(0.0, 0.0, 0.0), **realistic))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
-sim.outputs(odom=odom_topic)
+sim.outputs(odom=odom_topic, ground_truth=truth_topic)
+if LOCALIZE:
+    # The Simulator's own transform tree holds map -> odom made from the truth (a perfect
+    # localizer): off /tf, where the Localizer's map -> odom goes.
+    sim.outputs(tf=Topic(name="/sim/tf", msg_type="TFMessage"))
+
+# 5. Localization (the ROS 2 way): the Localizer corrects the odometry against the map and
+# publishes map -> odom on /tf (and its estimate on /amcl_pose); MapFramePose composes that
+# transform with each odometry message (odom -> base_link), as tf2 does for a Nav2 node, into
+# the robot's pose in the map frame with the measured twist, on /odometry/localized: the
+# ``location`` every navigation component reads. Unlocalized, the odometry is the truth in the
+# map frame and is the location itself.
+tf_topic = Topic(name="/tf", msg_type="TFMessage")
+location_topic = Topic(name="/odometry/localized", msg_type="Odometry") if LOCALIZE else odom_topic
+localizer = Localizer(component_name="localizer", config=LocalizerConfig(
+    set_initial_pose=True, initial_pose=sim.config.spawn, seed=SEED,  # where the robot starts, as Nav2's set_initial_pose
+    filter_params={"alpha1": 0.05, "alpha2": 0.05, "alpha3": 0.05, "alpha4": 0.05, "min_particles": 300,
+                   "max_particles": 1500, "update_min_d": 0.05, "update_min_a": 0.05, "sigma_hit": 0.1,
+                   "max_beams": 90, "initial_cov_xy": 0.01, "initial_cov_yaw": math.radians(5) ** 2}))
+localizer.inputs(location=odom_topic, map=map_server.get_out_topic(TopicsKeys.GLOBAL_MAP))
+localizer.outputs(tf=tf_topic)
+
+
+class MapFramePose(BaseComponent):
+    """The robot's pose in the map frame: the latest map -> odom on /tf composed with each
+    odometry message (odom -> base_link), with the odometry's measured twist. Nothing before
+    the Localizer's first transform (the stack then waits for its location)."""
+
+    def __init__(self) -> None:
+        super().__init__(component_name="map_pose", inputs=[odom_topic, tf_topic], outputs=[location_topic],
+                         trigger=odom_topic, run_type="Event")
+
+    def custom_on_activate(self) -> None:
+        from emos.actors.nav.transforms import TransformTree
+
+        self.tree = TransformTree()
+        self.tf_msg = None
+
+    def _execution_step(self, msg: object = None, topic: object = None, **kwargs: object) -> None:
+        from emos.actors.nav.components.convert import BadInput, localized_odometry, pose_of, pose_stamped
+        from emos.actors.nav.localization import compose_pose
+
+        frames = FRAMES
+        tf_msg = self.get_input(tf_topic)
+        if tf_msg is not None and tf_msg is not self.tf_msg:
+            self.tf_msg = tf_msg
+            for problem in self.tree.update(tf_msg):
+                self.health_status.set_fail_system(topic_names=[tf_topic.name], message=f"{tf_topic.name}: {problem}")
+        odom = msg if msg is not None else self.get_input(odom_topic)
+        m = self.tree.lookup(frames.world, frames.odom)
+        if odom is None or m is None:
+            self.health_status.set_fail_system(topic_names=[tf_topic.name], message=f"no {frames.world} -> {frames.odom} on {tf_topic.name} yet")
+            return
+        try:
+            x, y, yaw = compose_pose(np.array([m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0])]), pose_of(odom))
+        except BadInput as exc:
+            self.health_status.set_fail_system(topic_names=[odom_topic.name], message=f"{odom_topic.name}: {exc}")
+            return
+        self.publish(location_topic, localized_odometry(pose_stamped(x, y, yaw, frames.world, stamp=odom.header.stamp),
+                                                        odom, frames.robot_base))
+        self.health_status.set_healthy()
 
 
 class Mission(BaseComponent):
     """Sends the goals one after the other, prints progress, and ends the run with a summary."""
 
     def __init__(self) -> None:
-        self.odom, self.reached = odom_topic, planner.get_out_topic(TopicsKeys.REACHED_END)
+        # The referee's truth for progress, the driven path and the clearance; the stack's
+        # location (what the navigation components believe) to score the localization.
+        self.truth, self.location, self.odom = truth_topic, location_topic, odom_topic
+        self.reached = planner.get_out_topic(TopicsKeys.REACHED_END)
         self.plan = planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)
         self.goal = planner.get_in_topic(TopicsKeys.GOAL_POINT)
         self.statuses = [Topic(name=f"{name}/status", msg_type="ComponentStatus") for name in NAV_COMPONENTS]
-        super().__init__(component_name="mission", inputs=[self.odom, self.reached, self.plan, *self.statuses],
+        inputs = [self.truth, self.location, self.odom] if LOCALIZE else [self.truth, self.location]
+        super().__init__(component_name="mission", inputs=[*inputs, self.reached, self.plan, *self.statuses],
                          outputs=[self.goal], config=BaseComponentConfig(loop_rate=5.0))
 
     def custom_on_activate(self) -> None:
@@ -125,6 +215,8 @@ class Mission(BaseComponent):
         self.plans: list = []
         self.results: list = []
         self.min_clearance = math.inf
+        self.loc_errors: list = []  # (position m, heading deg) of the stack's location against the truth
+        self.last_location = None
         self.last_print = 0.0
         self.done = False
         self.state_file = self.node.ctx.run_dir / "mission.json"
@@ -143,6 +235,7 @@ class Mission(BaseComponent):
         self.t0, self.index, self.goal_sent_at = state["t0"], state["index"], state["goal_sent_at"]
         self.results, self.driven, self.plans = state["results"], [tuple(p) for p in state["driven"]], state["plans"]
         self.min_clearance = state["min_clearance"] if state["min_clearance"] is not None else math.inf
+        self.loc_errors = state.get("loc_errors", [])
         self.resumed = True
         print(f"[mission] restarted: resuming at goal {self.index + 1}/{len(GOALS)}", flush=True)
         if 0 <= self.index < len(GOALS):  # the planner may have lost the goal too (it may have been killed with us)
@@ -152,7 +245,8 @@ class Mission(BaseComponent):
     def _save(self) -> None:
         state = {"t0": self.t0, "index": self.index, "goal_sent_at": getattr(self, "goal_sent_at", self.t0),
                  "results": self.results, "driven": self.driven, "plans": self.plans,
-                 "min_clearance": None if math.isinf(self.min_clearance) else self.min_clearance}
+                 "min_clearance": None if math.isinf(self.min_clearance) else self.min_clearance,
+                 "loc_errors": self.loc_errors}
         tmp = self.state_file.with_suffix(".tmp")
         tmp.write_text(json.dumps(state))
         os.replace(tmp, self.state_file)
@@ -169,13 +263,14 @@ class Mission(BaseComponent):
     def _execution_step(self) -> None:
         if self.done:
             return
-        odom = self.get_input(self.odom)
-        if odom is None:
+        truth = self.get_input(self.truth)
+        if truth is None:
             return  # the simulator is starting
         if self.index < 0:
             self._send_next()
-        p = odom.pose.pose.position
+        p = truth.pose.pose.position
         pose = (p.x, p.y)
+        self._score_location(truth)
         if not self.driven or math.dist(self.driven[-1], pose) > 0.01:
             self.driven.append(pose)
         cell = self.clearance_map.world_to_grid(np.array(pose))
@@ -197,7 +292,7 @@ class Mission(BaseComponent):
         if now - self.last_print >= 1.0:
             self.last_print = now
             self._save()
-            speed = odom.twist.twist.linear.x
+            speed = truth.twist.twist.linear.x
             health = " ".join(f"{t.name.split('/')[1]}={self._health(t)}" for t in self.statuses)
             print(f"[mission] t={now - self.t0:5.1f}s goal {self.index + 1}: {left:5.2f} m left, "
                   f"{speed:4.2f} m/s | {health}", flush=True)
@@ -219,6 +314,25 @@ class Mission(BaseComponent):
             self._finish()
         self.health_status.set_healthy()
 
+    def _score_location(self, truth: Odometry) -> None:
+        """One sample of the localization error: the newest location against the truth at its
+        stamp (the truth, published every physics tick, carried over the few ms between the two
+        stamps with its own twist)."""
+        from emos.geometry import integrate_pose, wrap_angle
+
+        loc = self.get_input(self.location)
+        if loc is None or loc is self.last_location:
+            return  # none yet (the Localizer starting), or no new one since the last sample
+        self.last_location = loc
+        q, t = truth.pose.pose, truth.twist.twist
+        dt = loc.header.stamp.to_sec() - truth.header.stamp.to_sec()
+        if abs(dt) > 0.5:
+            return  # stamps too far apart to compare (a stalled publisher): no sample
+        x, y, yaw = integrate_pose((q.position.x, q.position.y, q.orientation.yaw()), (t.linear.x, t.linear.y, t.angular.z), dt)
+        e = loc.pose.pose
+        self.loc_errors.append((round(math.hypot(e.position.x - x, e.position.y - y), 4),
+                                round(abs(math.degrees(wrap_angle(e.orientation.yaw() - yaw))), 3)))
+
     def _health(self, topic: Topic) -> str:
         msg = self.get_input(topic)
         return "?" if msg is None else ("ok", "ALGO", "COMP", "SYS", "gen")[min(int(msg.status), 4)]
@@ -233,7 +347,13 @@ class Mission(BaseComponent):
             "reached": [r["reached"] for r in self.results] + [False] * (len(GOALS) - len(self.results)),
             "goals": self.results, "time_s": round(time.monotonic() - self.t0, 1), "path_length_m": round(length, 2),
             "min_clearance_m": round(self.min_clearance, 3), "collided": bool(status.get("collided", False)),
+            "localization": localization_summary(self.loc_errors),
         }
+        odom, truth = self.get_input(self.odom), self.get_input(self.truth)
+        if LOCALIZE and odom is not None and truth is not None:
+            # What the odometry alone would have believed at the end (both frames start at the spawn).
+            a, b = odom.pose.pose.position, truth.pose.pose.position
+            summary["localization"]["odometry_drift_m"] = round(math.hypot(a.x - b.x, a.y - b.y), 3)
         summary["success"] = all(summary["reached"]) and not summary["collided"]
         os.makedirs(OUT_DIR, exist_ok=True)
         with open(os.path.join(OUT_DIR, "summary.json"), "w") as f:
@@ -246,6 +366,17 @@ class Mission(BaseComponent):
         print("[mission] " + json.dumps(summary), flush=True)
         # End the whole run through the supervisor's socket.
         control.call(os.environ["EMOS_SUPERVISOR_SOCKET"], control.SUPERVISOR_STOP, {"reason": "mission finished"}, timeout=5.0)
+
+
+def localization_summary(errors: list) -> dict:
+    """p50 / p95 / max of the location's error against the truth, in metres and degrees."""
+    out: dict = {"source": "localizer" if LOCALIZE else "ground truth", "samples": len(errors)}
+    if errors:
+        arr = np.asarray(errors, dtype=np.float64)
+        for name, col, digits in (("position_m", 0, 3), ("heading_deg", 1, 2)):
+            p50, p95 = np.percentile(arr[:, col], [50, 95])
+            out[name] = {"p50": round(float(p50), digits), "p95": round(float(p95), digits), "max": round(float(arr[:, col].max()), digits)}
+    return out
 
 
 def draw(summary: dict, png: str) -> None:
@@ -277,22 +408,28 @@ def draw(summary: dict, png: str) -> None:
     plt.close(fig)
 
 
-# 5. Launch
+# 6. Launch
 launcher = Launcher()
 launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
 launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
+if LOCALIZE:
+    launcher.add_pkg(components=[localizer, MapFramePose()], package_name="localization", multiprocessing=True)
 launcher.add_pkg(components=[Mission()], package_name="mission", multiprocessing=True)
 
-launcher.inputs(location=odom_topic)  # odometry for every navigation component
+# The robot's pose in the map frame for every navigation component. Wired one by one: the
+# launcher-wide launcher.inputs(location=...) would also rewire the Localizer, whose location
+# is the raw odometry it corrects.
+for component in (controller, planner, driver, local_mapper):
+    component.inputs(location=location_topic)
 launcher.robot = my_robot  # also the simulated robot's shape and limits
-launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+launcher.frames = FRAMES
 # The spec's web UI (the map, the plan and the robot in a browser; goals from the page): with
 # EMOS_UI=1, open the link the run prints (docs/ui.md). Off by default: this recipe is the
 # headless main job (CI, the tests, the chaos scenario), which must not need port 5001.
 if os.environ.get("EMOS_UI") == "1":
     launcher.enable_ui(
         inputs=[planner.ui_main_action_input],
-        outputs=[map_server.get_out_topic(TopicsKeys.GLOBAL_MAP), odom_topic, planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)],
+        outputs=[map_server.get_out_topic(TopicsKeys.GLOBAL_MAP), location_topic, planner.get_out_topic(TopicsKeys.GLOBAL_PLAN)],
     )
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
@@ -305,7 +442,11 @@ if not os.path.exists(summary_file):
 with open(summary_file) as f:
     result = json.load(f)
 draw(result, os.path.join(OUT_DIR, "point_navigation.png"))
+loc = result["localization"]
+loc_text = (f"localization ({loc['source']}) error p50/p95/max {loc['position_m']['p50']}/{loc['position_m']['p95']}/"
+            f"{loc['position_m']['max']} m, {loc['heading_deg']['p50']}/{loc['heading_deg']['p95']}/{loc['heading_deg']['max']} deg"
+            if loc["samples"] else f"localization ({loc['source']}): no sample")
 print(f"point navigation: {'SUCCESS' if result['success'] else 'FAILURE'} reached={result['reached']} "
       f"time={result['time_s']} s path={result['path_length_m']} m min_clearance={result['min_clearance_m']} m "
-      f"collisions={int(result['collided'])}; picture: {os.path.join(OUT_DIR, 'point_navigation.png')}", flush=True)
+      f"collisions={int(result['collided'])}; {loc_text}; picture: {os.path.join(OUT_DIR, 'point_navigation.png')}", flush=True)
 sys.exit(0 if result["success"] else 1)

@@ -258,7 +258,10 @@ def test_a_query_bridge_refuses_queries_beyond_its_limit_at_once_and_serves_agai
         assert "busy" in msgpack.unpackb(busy[0].err.payload.to_bytes())["error"]
         release.set()
         assert msgpack.unpackb(list(first)[0].ok.payload.to_bytes()) == {"ok": 1}
-        again = list(sess.get(key, payload=msgpack.packb({"op": "echo", "n": 3}), timeout=10))
+        # The slot is freed when the first query's thread ends, just after its reply went out:
+        # a query sent in between is still refused, so ask until one is served.
+        again = wait_until(lambda: (lambda r: r if r and r[0].ok is not None else None)(
+            list(sess.get(key, payload=msgpack.packb({"op": "echo", "n": 3}), timeout=10))), timeout=30, what="a served query")
         assert msgpack.unpackb(again[0].ok.payload.to_bytes()) == {"ok": 3}
     finally:
         release.set()

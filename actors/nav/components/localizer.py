@@ -18,11 +18,20 @@ an odometry jump spreads them (see the filter); an initial pose outside the map 
 Each is a rate-limited log line naming the topic and a SYSTEM failure on it, until good data
 returns. Without an initial pose (``set_initial_pose``, ``/initialpose`` or the service) the
 Localizer publishes nothing and says so.
+
+A Localizer restarted within a run (killed, hung) resumes from its last ``map -> odom`` (kept in
+``<run dir>/<name>.localizer.json``, at most once a second) composed with the odometry it reads
+then, instead of the configured initial pose: the robot has moved since it started, and
+the odometry kept counting while the Localizer was down (``resume_on_restart``, on by default;
+Nav2's AMCL keeps its last pose in its parameters for the same reason).
 """
 from __future__ import annotations
 
+import json
 import math
+import os
 import threading
+import time
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -84,6 +93,7 @@ class LocalizerConfig(NavComponentConfig):
     sensor_pose: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), converter=_pose3)
     seed: int | None = field(default=None)
     max_published_particles: int = field(default=1000, validator=in_range(min_value=0, max_value=1_000_000))
+    resume_on_restart: bool = field(default=True)
 
 
 def _pose_msg(x: float, y: float, yaw: float) -> Pose:
@@ -128,6 +138,8 @@ class Localizer(NavComponent):
         self._has_pose = False
         self._last_scan: Any = None
         self._problems = 0
+        self._saved_at = -math.inf
+        self._resume = self._read_resume() if self.config.resume_on_restart else None
         self.create_service(f"{self.component_name}/global_localization", TriggerRequest, TriggerResponse, self._global_service)
 
     # -- problems, reported once per interval and as a failure of the input -------------------------------
@@ -155,7 +167,7 @@ class Localizer(NavComponent):
         if self._filter is None:
             self._filter = ParticleFilter(self.config.filter_params, grid, sensor_pose=self.config.sensor_pose,
                                           seed=self.config.seed, on_problem=self._problem)
-            if self.config.set_initial_pose:
+            if self.config.set_initial_pose and self._resume is None:
                 self._initialize(np.array(self.config.initial_pose), None, "initial_pose (config)")
         else:
             self._filter.set_map(grid)
@@ -202,6 +214,53 @@ class Localizer(NavComponent):
             return
         self._initialize(pose, cov, name)
 
+    # -- a restart resumes from the last map -> odom (module docstring) ---------------------------------------
+    def _resume_path(self) -> Any:
+        run_dir = getattr(getattr(self.node, "ctx", None), "run_dir", None)
+        return None if run_dir is None else run_dir / f"{self.component_name}.localizer.json"
+
+    def _read_resume(self) -> tuple[np.ndarray, np.ndarray] | None:
+        path = self._resume_path()
+        if path is None:
+            return None
+        try:
+            state = json.loads(path.read_text())
+            correction = np.array(state["correction"], dtype=np.float64).reshape(3)
+            cov = np.array(state["covariance"], dtype=np.float64).reshape(3, 3)
+            if not (np.all(np.isfinite(correction)) and np.all(np.isfinite(cov)) and np.all(np.diag(cov) >= 0)):
+                raise ValueError("non-finite or negative values")
+        except FileNotFoundError:
+            return None  # the first start of this run
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.get_logger().warning("[%s] cannot resume from %s (%s): starting as configured", self.component_name, path, exc)
+            return None
+        return correction, cov
+
+    def _save_resume(self) -> None:
+        path, now = self._resume_path(), time.monotonic()
+        if path is None or now - self._saved_at < 1.0 or self._filter is None:
+            return
+        self._saved_at = now
+        state = {"correction": self._correction.tolist(), "covariance": self._filter.covariance.tolist()}
+        tmp = path.with_name(path.name + ".tmp")
+        try:
+            tmp.write_text(json.dumps(state))
+            os.replace(tmp, path)
+        except OSError as exc:
+            self._report.warning("resume", "[%s] cannot save the estimate to %s: %s", self.component_name, path, exc,
+                                 logger=self.get_logger())
+
+    def _resume_from(self, odom: np.ndarray) -> None:
+        assert self._resume is not None
+        correction, cov = self._resume
+        self._resume = None
+        # The covariance of the last estimate, at least the default spread of an initial pose
+        # (the odometry ran unchecked while this Localizer was down).
+        p = self.config.filter_params
+        cov = cov + np.diag([p.initial_cov_xy, p.initial_cov_xy, p.initial_cov_yaw]) * 0.1
+        self._correction = correction
+        self._initialize(compose_pose(correction, odom), cov, "the last map -> odom of this run (restarted)")
+
     def _global(self) -> tuple[bool, str]:
         if self._filter is None:
             self._global_pending = True
@@ -247,6 +306,13 @@ class Localizer(NavComponent):
             return
         assert self._filter is not None  # made by _refresh_map
         self._check_initial_pose()
+        if self._resume is not None and not self._has_pose:
+            odom_msg = self.latest("location")
+            try:
+                if odom_msg is not None:
+                    self._resume_from(pose_of(odom_msg))
+            except BadInput:
+                pass  # reported below, where the odometry is read for the step
         if not self._has_pose:
             self.fail_algorithm("initial_pose", f"no initial pose: publish one on {self.topic_name('initial_pose')} "
                                                 f"or call {self.component_name}/global_localization")
@@ -273,6 +339,8 @@ class Localizer(NavComponent):
             # map -> odom: the correction that takes the odometry's pose to the estimate.
             self._correction = compose_pose(self._filter.estimate, relative_pose(odom, np.zeros(3)))
             healthy = healthy and self._filter.beams_used > 0
+            if self.config.resume_on_restart:
+                self._save_resume()
         self._publish(odom, scan.header.stamp, updated)
         if healthy and updated and not self._problems:
             self.health_status.set_healthy()
