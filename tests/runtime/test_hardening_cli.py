@@ -84,7 +84,7 @@ def test_sigterm_to_topic_pub_removes_its_ring(system):
     pub.send_signal(signal.SIGTERM)
     _, err = pub.communicate(timeout=HANG_S)
     assert pub.returncode == 143 and "Traceback" not in err, err
-    assert _segments(system, "shared") == []
+    assert _segments(system, "shared") == [], err
 
 
 def test_topic_pub_refuses_a_type_the_topic_does_not_carry(system):

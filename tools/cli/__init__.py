@@ -129,9 +129,11 @@ def _terminated(signum: int, frame: object) -> None:
     # SIGTERM unwinds like Ctrl-C, so every command's `finally` releases what it holds (a
     # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM. Noted first, for
     # the loops that check it should this SystemExit land where Python swallows it.
-    from emos.tools.cli.common import note_termination
+    from emos.tools.cli import common
 
-    note_termination(signum)
+    common.note_termination(signum)
+    if common.hold_signal(signum):
+        return  # inside signals_deferred(): delivered as the block ends
     raise SystemExit(128 + signum)
 
 

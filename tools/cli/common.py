@@ -5,6 +5,7 @@ import argparse
 import contextlib
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -99,14 +100,45 @@ def exit_if_terminated() -> None:
         raise SystemExit(128 + _TERMINATED[0])
 
 
+_DEFERRED: list[int] = []  # signals that arrived inside signals_deferred(): delivered at its end
+_DEFER_DEPTH = [0]
+
+
+def hold_signal(signum: int) -> bool:
+    """Inside signals_deferred(): keep ``signum`` for the end of the block and return True (the
+    SIGTERM handler then returns instead of raising); outside, False."""
+    if _DEFER_DEPTH[0] > 0:
+        _DEFERRED.append(signum)
+        return True
+    return False
+
+
 @contextlib.contextmanager
 def signals_deferred() -> Iterator[None]:
     """Hold SIGINT and SIGTERM while resources are being created or released, so a Ctrl-C or
-    SIGTERM never lands half way (a FIFO made but not yet known to the code that removes it);
-    a signal that arrived meanwhile is delivered on exit from the block."""
+    SIGTERM never lands half way (a ring made but not yet known to the code that removes it);
+    a signal that arrived meanwhile is delivered on exit from the block.
+
+    Blocking the signals in this thread is not enough: the kernel gives a process signal to any
+    thread that does not block it (a library's helper thread), and Python then runs the handler
+    in the main thread at once. So the handlers also note a signal and return while inside."""
     held = {signal.SIGINT, signal.SIGTERM}
     before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    outermost = _DEFER_DEPTH[0] == 0
+    previous_int = None
+    if outermost and threading.current_thread() is threading.main_thread():
+        previous_int = signal.signal(signal.SIGINT, lambda signum, frame: _DEFERRED.append(signum))
+    _DEFER_DEPTH[0] += 1
     try:
         yield
     finally:
+        _DEFER_DEPTH[0] -= 1
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        if outermost and _DEFERRED:
+            signum = _DEFERRED[0]
+            _DEFERRED.clear()
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise SystemExit(128 + signum)
