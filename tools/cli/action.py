@@ -198,9 +198,10 @@ def run_send_goal(args: argparse.Namespace) -> int:
     goal = _Goal(client, goal_msg, uuid.uuid4().hex, not args.no_feedback)
     deadline = time.monotonic() + args.timeout if args.timeout else math.inf
     try:
-        print(f"sending goal {goal.goal_id} to {iface.shown}", flush=True)
         with signals_deferred():  # a signal comes after the start, never half way through it
             goal.start()
+            # Said once it is on its way: a Ctrl-C after this line cancels the goal on the component.
+            print(f"sending goal {goal.goal_id} to {iface.shown}", flush=True)
         while not goal.done.wait(POLL_S):
             exit_if_terminated()
             if time.monotonic() >= deadline:
