@@ -16,7 +16,9 @@ import pytest
 from emos.core.rpc import RpcClient
 from tests.ui.conftest import ARTIFACTS
 
-pytestmark = [pytest.mark.browser, pytest.mark.process, pytest.mark.timeout(120)]
+# One pytest-xdist worker runs them all, in order (--dist loadgroup): they share one Chromium and
+# one UI system per module, and split across two workers they failed to find the page's tabs.
+pytestmark = [pytest.mark.browser, pytest.mark.process, pytest.mark.timeout(120), pytest.mark.xdist_group("browser")]
 
 
 def wait_for(predicate, timeout: float = 15.0, what: str = "condition"):
