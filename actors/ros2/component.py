@@ -95,6 +95,13 @@ class Ros2BridgeComponent(BaseComponent):
             return
         self.health_status.set_healthy()
 
+    def served_interfaces(self) -> list[tuple[str, str, tuple[Any, ...]]]:
+        """The ROS 2 services and actions offered to EMOS: ``emos service call`` and ``emos action
+        send_goal`` reach them through the bridge like any component's."""
+        if self.bridge is None:
+            return []
+        return self.bridge.served_interfaces()
+
     def custom_on_deactivate(self) -> None:
         self._close()
 

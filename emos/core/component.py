@@ -218,6 +218,13 @@ class BaseComponent(FallbackHooks):
     def create_action_server(self, name: str, goal_type: Any, feedback_type: Any, result_type: Any, callback: Any) -> None:
         self.node.add_action_server(name, goal_type, feedback_type, result_type, callback)
 
+    def served_interfaces(self) -> list[tuple[str, str, tuple[Any, ...]]]:
+        """Services and actions served now by something the component holds rather than by its
+        node (the ROS 2 bridge's stand-ins for ROS 2 servers): ``(kind, name, types)``, as
+        :meth:`~emos.core.node.Node.interfaces` gives them, so ``emos service list/call`` and
+        ``emos action`` find them. Called from the node's control loop: return a snapshot."""
+        return []
+
     def update_parameter(self, param_name: str, new_value: Any, keep_alive: bool = True) -> bool:
         """Set one config parameter (validated); returns whether it was applied."""
         try:

@@ -634,6 +634,7 @@ class Node:
             out.append(("action", comp.main_action_name, tuple(comp.main_action_type)))
         for kind, args in self._extra_servers:
             out.append((kind, args[0], tuple(args[1:-1])))  # name, types..., callback
+        out.extend(self.component.served_interfaces())
         return list({name: (kind, name, types) for kind, name, types in out}.values())  # one per name (socket)
 
     def on_config_changed(self) -> None:
@@ -663,7 +664,8 @@ class Node:
                 "outputs": {t.name: t.type_name for t in self.component.out_topics},
                 "config": self.component.config.asdict(),
                 # What `emos service list/call` and `emos action list/send_goal` find and type-check.
-                **describe_interfaces(self.interfaces(), {s.name for s in self._servers if isinstance(s, (ServiceServer, ActionServer))}),
+                **describe_interfaces(self.interfaces(), {s.name for s in self._servers if isinstance(s, (ServiceServer, ActionServer))}
+                                      | {name for _kind, name, _types in self.component.served_interfaces()}),
             }
 
         # Calling a method (execute_method), parameters, files, topics, steps: emos.core.reconfig.

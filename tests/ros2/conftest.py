@@ -63,6 +63,7 @@ def free_domains(n: int) -> list[int]:
     raise RuntimeError(f"no free ROS 2 domain for this test: {len(got)} of {n} found among 20-99")
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook reads the groups into the test ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The ROS 2 tests run in one worker under pytest-xdist (--dist loadgroup): their checks for
     Fast DDS files left behind look at the whole of /dev/shm, which another ROS 2 test beside

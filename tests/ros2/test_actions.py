@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import re
 import signal
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -139,6 +141,11 @@ def test_an_emos_client_drives_a_ros2_action_server_with_feedback_result_and_can
     assert 4 <= len(ended["error"].result.sequence) < 100
     server.wait_for(lambda line: line.startswith("canceled "), what="the ROS 2 server canceling")
     assert client.cancel("g1000") is False
+    # `emos action send_goal` reaches it through the bridge component, feedback and result printed.
+    sent = subprocess.run([sys.executable, "-m", "emos", "action", "send_goal", "ros2_bridge", "/ros_fib", '{"order": 5}',
+                           "--run", run.ctx.run_id], check=False, capture_output=True, text=True, timeout=HANG_S)
+    assert sent.returncode == 0, sent.stderr
+    assert "goal finished: succeeded" in sent.stdout and "[0, 1, 1, 2, 3]" in sent.stdout.replace("\n", "")
     # A goal the ROS 2 server refuses: an error naming the action.
     with pytest.raises(RpcError, match=r"ROS 2 action /ros_fib \(test_msgs/action/Fibonacci\): goal \w+: the server refused the goal"):
         client.send_goal(FibonacciGoal(order=-1), timeout=HANG_S)

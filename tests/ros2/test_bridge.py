@@ -8,6 +8,8 @@ import json
 import os
 import re
 import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -241,6 +243,10 @@ def test_a_ros2_node_that_dies_and_comes_back_resumes_its_stream(run):
     wait_until(lambda: "EMOS chatter b" in run.output(), what="the second talker's messages")
 
 
+def emos_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "emos", *args], check=False, capture_output=True, text=True, timeout=HANG_S)
+
+
 def test_services_both_ways(run):
     # A ROS 2 client calls the EMOS component's Trigger service ...
     client = Peer("service.py", run.domain, "client", "/emos_trigger")
@@ -252,6 +258,14 @@ def test_services_both_ways(run):
     wait_until(lambda: "EMOS setbool answer True ros:True" in run.output(), what="the ROS 2 service's answer at EMOS")
     state = json.loads((run.run_dir / "ros2_bridge.json").read_text())
     assert state["services"] == {"/emos_trigger": "emos->ros2", "/ros_setbool": "ros2->emos"}
+    # `emos service list/call` reach the ROS 2 server through the bridge component, as any component's.
+    listed = emos_cli("service", "list", "ros2_bridge", "--json", "--run", run.ctx.run_id)
+    assert listed.returncode == 0, listed.stderr
+    assert json.loads(listed.stdout) == [{"name": "/ros_setbool", "component": "ros2_bridge", "serving": True,
+                                          "request": "std_srvs/msg/SetBool_Request", "response": "std_srvs/msg/SetBool_Response"}]
+    called = emos_cli("service", "call", "ros2_bridge", "/ros_setbool", '{"data": false}', "--run", run.ctx.run_id)
+    assert called.returncode == 0, called.stderr
+    assert json.loads(called.stdout) == {"success": False, "message": "ros:False"}
 
 
 def test_image_921600_bytes_at_30_hz_for_10_s_arrives_whole(run):

@@ -52,33 +52,30 @@ def qos_depth() -> int:
     return int(QoSConfig().queue_size)
 
 
-def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, int] | None, transport: str = "auto",
-                label: str = "emos_component") -> list[Any]:
-    """The two components, ``[echo, ping]``; built in the benchmark process, forked into workers
-    by the zygote. ``transport``: their topics' (``"zenoh"``: ``emos bench net --mode component``,
-    each in a run of its own); ``label``: the ``transport`` their result rows carry."""
-    from emos import BaseComponent, Topic
+def pinger_class(plan: list[tuple[int, int]], result_path: str, cpu: int | None, ping_topic: str = PING) -> Any:
+    """The initiating component's class, for this mode and for ``emos bench ros2``: it pings with
+    numbered payloads, checks each reply against the number in flight, and writes
+    ``{"results": [...], "error": ...}`` to ``result_path`` when every phase (size, count) of
+    ``plan`` is done; it publishes on ``ping_topic``. Subclasses give ``_row(half_us)``, the result row of a phase, and may use
+    ``_warmed_up()``, called when the warm-up round trips of a phase are over."""
+    from emos import BaseComponent
     from emos.msgs import UInt8MultiArray
 
-    class Echo(BaseComponent):
+    class Pinger(BaseComponent):
         def custom_on_activate(self) -> None:
-            if cpus is not None:
-                os.sched_setaffinity(0, {cpus[1]})
-
-        def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
-            if msg is not None:
-                self.publish(PONG, msg)
-            self.health_status.set_healthy()
-
-    class Ping(BaseComponent):
-        def custom_on_activate(self) -> None:
-            if cpus is not None:
-                os.sched_setaffinity(0, {cpus[0]})
+            if cpu is not None:
+                os.sched_setaffinity(0, {cpu})
             self.phase = 0
             self.results: list[dict[str, Any]] = []
             self.finished = False
             self._start_phase()
             self.create_timer(0.05, self._watchdog)
+
+        def _row(self, half_us: list[float]) -> dict[str, Any]:
+            raise NotImplementedError
+
+        def _warmed_up(self) -> None:
+            """Warm-up over: the measured round trips start (a hook for CPU accounting)."""
 
         def _start_phase(self) -> None:
             size, count = plan[self.phase]
@@ -86,30 +83,27 @@ def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, 
             self.msg = UInt8MultiArray(data=self.payload)
             self.count, self.total = count, warmup_round_trips(count) + count
             self.rtts_ns: list[int] = []
-            self.mismatches = 0
-            self.resends = 0
-            self.seq = 0
+            self.seq = self.mismatches = self.resends = 0
             self.abandoned: set[int] = set()
-            self.replied = False
             self._send()
 
         def _send(self) -> None:
             self.seq += 1
             self.payload[:SEQ_BYTES] = np.frombuffer(self.seq.to_bytes(SEQ_BYTES, "little"), np.uint8)
             self.sent_at = time.perf_counter_ns()
-            self.publish(PING, self.msg)
+            self.publish(ping_topic, self.msg)
 
         def _watchdog(self) -> None:
             if self.finished:
                 return
             waited = (time.perf_counter_ns() - self.sent_at) / 1e9
-            if not self.replied and waited > _STARTUP_RESEND_S:
+            if not self.rtts_ns and waited > _STARTUP_RESEND_S:
                 # The echo may not have been listening yet. A new number, so that a late reply
                 # to the abandoned ping is recognised as such, not taken as a sample.
                 self.resends += 1
                 self.abandoned.add(self.seq)
                 self._send()
-            elif self.replied and waited > _REPLY_TIMEOUT_S:
+            elif self.rtts_ns and waited > _REPLY_TIMEOUT_S:
                 self._finish(f"no reply to ping {self.seq} within {_REPLY_TIMEOUT_S:g} s")
 
         def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
@@ -122,21 +116,16 @@ def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, 
                 if data.nbytes != self.payload.nbytes or _seq_of(data) not in self.abandoned:
                     self.mismatches += 1  # a stale, duplicated or foreign reply: not a sample
                 return
-            if not self.replied:
-                self.replied = True
-                if not np.array_equal(data, self.payload):
-                    self._finish(f"the echo of a {self.payload.nbytes} B payload came back with different bytes")
-                    return
+            if not self.rtts_ns and not np.array_equal(data, self.payload):
+                self._finish(f"the echo of a {self.payload.nbytes} B payload came back with different bytes")
+                return
             self.rtts_ns.append(now - self.sent_at)
+            if len(self.rtts_ns) == self.total - self.count:
+                self._warmed_up()
             if len(self.rtts_ns) < self.total:
                 self._send()
                 return
-            half = [ns / 2e3 for ns in self.rtts_ns[self.total - self.count :]]
-            p = percentiles(half)
-            self.results.append({
-                "transport": label, "payload_bytes": int(self.payload.nbytes), "p50_us": round(p["p50"], 2),
-                "p95_us": round(p["p95"], 2), "p99_us": round(p["p99"], 2), "round_trips": len(half), "seq_mismatches": self.mismatches, "startup_resends": self.resends,
-            })
+            self.results.append(self._row([ns / 2e3 for ns in self.rtts_ns[self.total - self.count :]]))
             self.phase += 1
             if self.phase < len(plan):
                 self._start_phase()
@@ -145,11 +134,39 @@ def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, 
 
         def _finish(self, error: str | None) -> None:
             self.finished = True
-            doc = {"results": self.results, "error": error}
             tmp = result_path + ".tmp"
             with open(tmp, "w") as f:
-                json.dump(doc, f)
+                json.dump({"results": self.results, "error": error}, f)
             os.replace(tmp, result_path)  # the benchmark sees all of it or nothing
+
+    return Pinger
+
+
+def _components(plan: list[tuple[int, int]], result_path: str, cpus: tuple[int, int] | None, transport: str = "auto",
+                label: str = "emos_component") -> list[Any]:
+    """The two components, ``[echo, ping]``; built in the benchmark process, forked into workers
+    by the zygote. ``transport``: their topics' (``"zenoh"``: ``emos bench net --mode component``,
+    each in a run of its own); ``label``: the ``transport`` their result rows carry."""
+    from emos import BaseComponent, Topic
+
+    class Echo(BaseComponent):
+        def custom_on_activate(self) -> None:
+            if cpus is not None:
+                os.sched_setaffinity(0, {cpus[1]})
+
+        def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
+            if msg is not None:
+                self.publish(PONG, msg)
+            self.health_status.set_healthy()
+
+    Pinger = pinger_class(plan, result_path, None if cpus is None else cpus[0])
+
+    class Ping(Pinger):  # type: ignore[valid-type,misc]  # a class made at run time
+        def _row(self, half_us: list[float]) -> dict[str, Any]:
+            p = percentiles(half_us)
+            return {"transport": label, "payload_bytes": int(self.payload.nbytes), "p50_us": round(p["p50"], 2),
+                    "p95_us": round(p["p95"], 2), "p99_us": round(p["p99"], 2), "round_trips": len(half_us),
+                    "seq_mismatches": self.mismatches, "startup_resends": self.resends}
 
     topic = {"msg_type": "UInt8MultiArray", "transport": transport}  # default QoS: what recipes get
     echo = Echo(component_name="bench_echo", inputs=[Topic(name=PING, **topic)], outputs=[Topic(name=PONG, **topic)], trigger=Topic(name=PING, **topic))
@@ -220,4 +237,4 @@ def await_result(systems: dict[str, Any], result_path: str, budget: float) -> tu
     return rows, error
 
 
-__all__ = ["latency"]
+__all__ = ["latency", "pinger_class"]

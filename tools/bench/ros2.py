@@ -185,20 +185,12 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
     """The pinging component (see ``emos bench ipc --mode component``, whose protocol it follows)."""
     import psutil
 
-    from emos import BaseComponent, Topic
-    from emos.msgs import UInt8MultiArray
-    from emos.tools.bench.ipc_common import random_payload
-    from emos.tools.bench.ipc_pingpong import warmup_round_trips
+    from emos import Topic
+    from emos.tools.bench.ipc_component import pinger_class
 
-    class Ping(BaseComponent):
-        def custom_on_activate(self) -> None:
-            if cpu is not None:
-                os.sched_setaffinity(0, {cpu})
-            self.phase, self.finished = 0, False
-            self.results: list[dict[str, Any]] = []
-            self._start_phase()
-            self.create_timer(0.05, self._watchdog)
+    Pinger = pinger_class(plan, result_path, cpu, ping_topic=PING)
 
+    class Ping(Pinger):  # type: ignore[valid-type,misc]  # a class made at run time
         def _bridge_pid(self) -> int | None:
             # The bridge is a worker of the same System; CPU per message counts it as EMOS's.
             system = int(os.environ.get("EMOS_BENCH_SYSTEM_PID", "0") or 0)
@@ -210,73 +202,18 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
                 pass
             return None
 
-        def _start_phase(self) -> None:
-            size, count = plan[self.phase]
-            self.payload = random_payload(size)
-            self.msg = UInt8MultiArray(data=self.payload)
-            self.count, self.total = count, warmup_round_trips(count) + count
-            self.rtts_ns: list[int] = []
-            self.seq = self.mismatches = self.resends = 0
-            self.abandoned: set[int] = set()
-            self.cpu0 = (0.0, 0.0, 0.0)
-            self._send()
-
-        def _send(self) -> None:
-            self.seq += 1
-            self.payload[:SEQ_BYTES] = np.frombuffer(self.seq.to_bytes(SEQ_BYTES, "little"), np.uint8)
-            self.sent_at = time.perf_counter_ns()
-            self.publish(PING, self.msg)
-
         def _cpu(self) -> tuple[float, float, float]:
             bridge = self._bridge_pid()
             return time.process_time(), _cpu_s(bridge) if bridge else 0.0, _cpu_s(echo_pid)
 
-        def _watchdog(self) -> None:
-            if self.finished:
-                return
-            waited = (time.perf_counter_ns() - self.sent_at) / 1e9
-            if not self.rtts_ns and waited > _STARTUP_RESEND_S:
-                self.resends += 1
-                self.abandoned.add(self.seq)
-                self._send()
-            elif self.rtts_ns and waited > _REPLY_TIMEOUT_S:
-                self._finish(f"no reply to ping {self.seq} within {_REPLY_TIMEOUT_S:g} s")
+        def _warmed_up(self) -> None:
+            self.cpu0 = self._cpu()
 
-        def _execution_step(self, msg: Any = None, topic: Any = None) -> None:
-            self.health_status.set_healthy()
-            if msg is None or self.finished:
-                return
-            now = time.perf_counter_ns()
-            data = msg.data
-            if data.nbytes != self.payload.nbytes or _seq_of(data) != self.seq:
-                if data.nbytes != self.payload.nbytes or _seq_of(data) not in self.abandoned:
-                    self.mismatches += 1
-                return
-            if not self.rtts_ns and not np.array_equal(data, self.payload):
-                self._finish(f"the echo of a {self.payload.nbytes} B payload came back with different bytes")
-                return
-            self.rtts_ns.append(now - self.sent_at)
-            if len(self.rtts_ns) == self.total - self.count:
-                self.cpu0 = self._cpu()
-            if len(self.rtts_ns) < self.total:
-                self._send()
-                return
+        def _row(self, half_us: list[float]) -> dict[str, Any]:
             cpu1 = self._cpu()
-            self.results.append({"payload_bytes": int(self.payload.nbytes), "half_us": [ns / 2e3 for ns in self.rtts_ns[self.total - self.count:]],
-                                 "cpu_initiator_s": (cpu1[0] - self.cpu0[0]) + (cpu1[1] - self.cpu0[1]), "cpu_ros_s": cpu1[2] - self.cpu0[2],
-                                 "seq_mismatches": self.mismatches, "startup_resends": self.resends})
-            self.phase += 1
-            if self.phase < len(plan):
-                self._start_phase()
-            else:
-                self._finish(None)
-
-        def _finish(self, error: str | None) -> None:
-            self.finished = True
-            tmp = result_path + ".tmp"
-            with open(tmp, "w") as f:
-                json.dump({"results": self.results, "error": error}, f)
-            os.replace(tmp, result_path)  # the benchmark sees all of it or nothing
+            return {"payload_bytes": int(self.payload.nbytes), "half_us": half_us,
+                    "cpu_initiator_s": (cpu1[0] - self.cpu0[0]) + (cpu1[1] - self.cpu0[1]), "cpu_ros_s": cpu1[2] - self.cpu0[2],
+                    "seq_mismatches": self.mismatches, "startup_resends": self.resends}
 
     topic = {"msg_type": "UInt8MultiArray"}  # default QoS: what recipes get
     return Ping(component_name="bench_ping", inputs=[Topic(name=PONG, **topic)], outputs=[Topic(name=PING, **topic)], trigger=Topic(name=PONG, **topic))

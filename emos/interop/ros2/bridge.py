@@ -235,6 +235,16 @@ class Ros2Bridge:
         if count() != before:
             self._write_state()
 
+    def served_interfaces(self) -> list[tuple[str, str, tuple[Any, ...]]]:
+        """``(kind, name, types)`` of the ROS 2 services and actions offered to EMOS, for the
+        bridge component's ``info`` answer (``emos service list``). ``list()`` snapshots each
+        table at once: discovery adds to them from the bridge's own threads."""
+        services = [("service", name, (server.request_type, server.response_type))
+                    for name, (server, _client) in list(self.services.to_emos.items())]
+        actions = [("action", name, (route.server.goal_type, route.server.feedback_type, route.server.result_type))
+                   for name, route in list(self.actions.to_emos.items())]
+        return services + actions
+
     def _write_state(self) -> None:
         """``<run dir>/ros2_bridge.json``: the bridged topics, their direction and ROS 2 type, for
         ``emos topic list`` (written whole and renamed, so a reader never sees half of it)."""
