@@ -53,7 +53,7 @@ _LAZY: dict[str, str] = {
         "LLM", "LLMConfig", "MLLM", "VLM", "MLLMConfig", "VLMConfig", "Vision", "VisionConfig",
         "SpeechToText", "SpeechToTextConfig", "TextToSpeech", "TextToSpeechConfig", "SemanticRouter",
         "SemanticRouterConfig", "Route", "MapEncoding", "MapConfig", "MapLayer", "VideoMessageMaker",
-        "VideoMessageMakerConfig", "VLA", "VLAConfig")},
+        "VideoMessageMakerConfig", "VLA", "VLAConfig", "Cortex", "CortexConfig", "Memory", "MemoryConfig")},
 }
 
 # The public names: the request/response types and errors imported above, then the lazy ones.

@@ -36,10 +36,13 @@ class UIComponent(BaseComponent):
         config: UIConfig | None = None,
         ui_services: Sequence[Any] = (),
         component_name: str = "ui",
+        graph: dict[str, Any] | None = None,
+        log_file: str | None = None,
     ) -> None:
         """``ui_inputs``: topics the page publishes to (text boxes, buttons, goals on the map).
         ``ui_outputs``: topics the page shows. ``components``: whose settings the page offers.
-        ``ui_actions``: actions the page sends goals to (``component.ui_main_action_input``)."""
+        ``ui_actions``: actions the page sends goals to (``component.ui_main_action_input``).
+        ``graph``: the system graph (system_view.describe_graph); ``log_file``: the run's log."""
         # Resolved before BaseComponent does it: the token is made here, ahead of super().__init__.
         config = resolve_config(component_name, type(self).__name__, config, UIConfig)
         if not config.token:
@@ -65,6 +68,7 @@ class UIComponent(BaseComponent):
             if not isinstance(s, ServiceClientConfig):
                 raise TypeError(f"UIComponent ui_services must be ServiceClientConfig objects, got {type(s).__name__}")
         self._services = {s.name: s for s in ui_services}
+        self._graph, self._log_file = graph, log_file
         self._server: Any = None
         self._start_task: Any = None
         self._stop_task: Any = None  # held until done: the loop keeps only weak references to tasks
@@ -93,6 +97,11 @@ class UIComponent(BaseComponent):
             supervisor_socket=node.supervisor_socket, own_name=self.component_name,
             actions=self._actions, action_socket=lambda name: Path(service_socket(node.ctx, name)), services=self._services,
             token_file=Path(node.ctx.run_dir) / f"{encode_name(self.component_name)}.token",
+            devices_file=Path(self.config.token_store).expanduser() if self.config.token_store
+            else Path(node.ctx.run_dir) / f"{encode_name(self.component_name)}.devices.json",
+            pairing_file=Path(node.ctx.run_dir) / f"{encode_name(self.component_name)}.pairing",
+            base_url=page_url(self.config, with_token=False, reachable=True), graph=self._graph,
+            log_file=Path(self._log_file) if self._log_file else None,
         )
         self._listening = False
 
@@ -114,6 +123,12 @@ class UIComponent(BaseComponent):
                 server.bind()
                 await server.start()
                 break
+            except ValueError as exc:  # a UI that must not serve as configured (plain HTTP off loopback, a bad certificate)
+                self.get_logger().error("[%s] not serving: %s", self.component_name, exc)
+                server.close_listener()
+                self.health_status.set_fail_system(message=str(exc))
+                self.node.publish_status()
+                return
             except OSError as exc:
                 failures += 1
                 if failures == 1 or failures % 30 == 0:
@@ -163,10 +178,29 @@ class UIComponent(BaseComponent):
             self.health_status.set_healthy()
 
 
-def page_url(config: UIConfig, with_token: bool = True) -> str:
-    """The page's address; ``with_token``: the link that signs the browser in (print it once)."""
+def page_url(config: UIConfig, with_token: bool = True, reachable: bool = False) -> str:
+    """The page's address; ``with_token``: the link that signs the browser in (print it once).
+    ``reachable``: for a UI bound to every address, one of this machine's addresses (for the
+    pairing QR code) instead of a placeholder."""
     from urllib.parse import quote
 
-    host = config.host if config.host not in ("0.0.0.0", "::") else "<this machine's address>"
+    host = config.host
+    if host in ("0.0.0.0", "::"):
+        host = _lan_address() if reachable else ""
+        host = host or "<this machine's address>"
     host = f"[{host}]" if ":" in host and not host.startswith("<") else host
-    return f"http://{host}:{config.port}/" + (f"?token={quote(config.token, safe='')}" if with_token and config.token else "")
+    scheme = "https" if config.uses_tls() else "http"
+    return f"{scheme}://{host}:{config.port}/" + (f"?token={quote(config.token, safe='')}" if with_token and config.token else "")
+
+
+def _lan_address() -> str:
+    """An IPv4 address of this machine other devices can likely reach (the default route's)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("192.0.2.1", 9))  # TEST-NET: nothing is sent, the kernel just picks the route
+            addr = str(s.getsockname()[0])
+        except OSError:
+            return ""
+    return "" if addr.startswith("127.") else addr

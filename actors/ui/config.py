@@ -49,3 +49,52 @@ class UIConfig(BaseComponentConfig):
 
     title: str = field(default="EMOS")
     """Page title (the recipe's name by default)."""
+
+    # ---------------------------------------------------------------- security (docs/ui.md)
+    tls: str = field(default="auto", validator=base_validators.in_(("auto", "on", "off")))
+    """HTTPS: ``auto`` serves HTTPS off loopback and HTTP on loopback; ``on`` always; ``off``
+    never (refused off loopback: tokens would cross the network in clear)."""
+
+    certfile: str = field(default="")
+    """The UI's own certificate (PEM). With ``keyfile``; without either, a self-signed one is made."""
+
+    keyfile: str = field(default="")
+    """The private key of ``certfile`` (PEM)."""
+
+    keystore: str = field(default="")
+    """An EMOS keystore (``emos security create-keystore``): the certificate of ``identity`` is used."""
+
+    identity: str = field(default="ui")
+    """The keystore identity whose certificate the UI serves."""
+
+    serve_browser: bool = field(default=True)
+    """``False``: headless, the REST and WebSocket API only (for fleet managers), no page."""
+
+    pairing: bool = field(default=True)
+    """Print a pairing code (and its QR code) that a device exchanges for a device token."""
+
+    pairing_code: str = field(default="", repr=False)  # a secret: made by enable_ui
+    """The current pairing code (made at start-up; a new one after each use)."""
+
+    pairing_role: str = field(default="operator", validator=base_validators.in_(("viewer", "operator")))
+    """The most a paired device gets: ``operator`` (may also ask for ``viewer``) or ``viewer``."""
+
+    token_ttl_h: float = field(default=720.0, validator=base_validators.in_range(min_value=0.01, max_value=87600.0))
+    """Lifetime of a device token, in hours (30 days by default)."""
+
+    token_store: str = field(default="")
+    """The device-token store; empty: ``<run dir>/ui.devices.json`` (tokens last one run). Give a
+    path in a private directory of yours to keep paired devices across runs."""
+
+    auth_failures_per_minute: int = field(default=30, validator=base_validators.in_range(min_value=1, max_value=10000))
+    """Failed sign-ins (wrong tokens, wrong pairing codes) a client may make in a minute before
+    it is refused (429); ten times as many from all clients together."""
+
+    allowed_hosts: list = field(factory=list)
+    """Further names the page may be reached by (the ``Host`` header), e.g. a DNS name of the
+    robot; its own addresses and host name are always allowed. Guards against DNS rebinding."""
+
+    def uses_tls(self) -> bool:
+        from emos.hosts import is_loopback
+
+        return self.tls == "on" or (self.tls == "auto" and not is_loopback(self.host))

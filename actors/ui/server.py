@@ -16,20 +16,27 @@ from aiohttp import WSMsgType, web
 
 from emos.actors.ui import settings as settings_mod
 from emos.actors.ui.actions import ActionRunner
-from emos.actors.ui.auth import CSRF_KEY, SECURITY_HEADERS, make_middleware
+from emos.actors.ui.api import Api, check_op_role
+from emos.actors.ui.auth import CSRF_KEY, PRINCIPAL_KEY, SECURITY_HEADERS, Gate, Principal, refused
 from emos.actors.ui.config import UIConfig
+from emos.actors.ui.devices import DeviceStore
 from emos.actors.ui.inputs import InputRefused, message_from_page, message_from_upload
-from emos.actors.ui.services import with_services
+from emos.actors.ui.services import InputRunners, ServiceRunner
 from emos.actors.ui.streams import Client, Hub, serve_client
 from emos.actors.ui.system_view import SystemView
 from emos.actors.ui.tokenfile import TokenFileRefused, remove_token_file, write_token_file
 from emos.actors.ui.widgets import describe_fields, input_kind
+from emos.hosts import is_loopback
 from emos.msgs.registry import resolve
 
 log = logging.getLogger("emos.ui")
 
 CSRF_PLACEHOLDER = b"__EMOS_CSRF__"  # in index.html; replaced by the session's CSRF token
-STATIC = {"app.js": "application/javascript", "media.js": "application/javascript", "panels.js": "application/javascript", "app.css": "text/css", "index.html": "text/html", "favicon.svg": "image/svg+xml"}
+STATIC = {"app.js": "application/javascript", "media.js": "application/javascript", "panels.js": "application/javascript", "app.css": "text/css",
+          "index.html": "text/html", "favicon.svg": "image/svg+xml", "pair.html": "text/html", "pair.js": "application/javascript",
+          "graph.js": "application/javascript"}
+PAGES = ("index.html", "pair.html")  # served at / and /pair, not as /static/...
+REVOCATION_CHECK_S = 1.0  # how soon an open websocket of a revoked or expired device token is closed
 
 
 def _dumps(obj: Any) -> str:
@@ -55,15 +62,24 @@ class UIServer:
     def __init__(self, config: UIConfig, hubs: list[Hub], inputs: dict[str, str], components: dict[str, Any],
                  publish: Callable[[str, Any], None], control_socket: Callable[[str], Path], supervisor_socket: str | None,
                  own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None,
-                 token_file: Path | None = None, services: dict[str, Any] | None = None):
-        """``token_file``: where the access token is kept (mode 0600) while the UI listens."""
+                 token_file: Path | None = None, services: dict[str, Any] | None = None, devices_file: Path | None = None,
+                 pairing_file: Path | None = None, base_url: str = "", graph: dict[str, Any] | None = None, log_file: Path | None = None):
+        """``token_file``: where the access token is kept (mode 0600) while the UI listens;
+        ``devices_file``: the device-token store (no pairing without one); ``pairing_file``: where
+        the current pairing code is kept for ``emos ui pair``; ``base_url``: the page's address
+        (for the pairing QR code); ``graph``: the system graph (system_view.describe_graph);
+        ``log_file``: the run's log, whose tail ``/api/v1/logs`` returns."""
         self.config, self.hubs, self.inputs = config, hubs, inputs
         self.token_file = token_file
+        self.devices = DeviceStore(devices_file) if devices_file is not None else None
+        self.pairing_file, self.base_url = pairing_file, base_url
         self.components = components  # name -> config object (its class drives the form)
         self.publish, self.control_socket, self.own_name = publish, control_socket, own_name
         self.system = SystemView(supervisor_socket, control_socket, own_name)
         socket_of = action_socket or (lambda name: Path(name))
-        self.actions = with_services(ActionRunner(actions or {}, socket_of), services, socket_of)
+        self.action_runner = ActionRunner(actions or {}, socket_of)
+        self.service_runner = ServiceRunner(services or {}, socket_of)
+        self.actions = InputRunners(self.action_runner, self.service_runner)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ui-encode")
         self.clients: set[Client] = set()
         self._closed = asyncio.Event()
@@ -71,6 +87,8 @@ class UIServer:
         self._sock: socket.socket | None = None
         self._assets = {name: (resources.files("emos.actors.ui") / "static" / name).read_bytes() for name in STATIC}
         self.published = 0
+        self.gate: Gate | None = None
+        self.api = Api(self, log_file=log_file, graph=graph)
 
     # ------------------------------------------------------------------ lifecycle
     def bind(self) -> None:
@@ -78,22 +96,54 @@ class UIServer:
             self._closed.clear()
             self._sock = bind_socket(self.config.host, self.config.port)
 
+    def make_gate(self) -> Gate:
+        """The checks of every request (auth.py); refuses to serve off loopback in clear."""
+        c = self.config
+        if not c.uses_tls() and not is_loopback(c.host):
+            raise ValueError(f"the UI on {c.host}:{c.port} would send its tokens across the network in clear: "
+                             "use UIConfig.tls='auto' or 'on' (a self-signed certificate is made when none is given), "
+                             "or bind it to 127.0.0.1")
+        if c.uses_tls() and not (c.certfile and c.keyfile):
+            raise ValueError(f"the UI on {c.host}:{c.port} serves HTTPS but has no certificate (UIConfig.certfile, keyfile); "
+                             "enable_ui makes one")
+        return Gate(c.host, c.token, c.port, self.token_file, devices=self.devices if c.pairing or self.devices else None, tls=c.uses_tls(),
+                    allowed_hosts=c.allowed_hosts, failures_per_minute=c.auth_failures_per_minute,
+                    pairing_code=c.pairing_code if c.pairing and self.devices is not None else "", pairing_role=c.pairing_role,
+                    token_ttl_s=c.token_ttl_h * 3600.0, pairing_file=self.pairing_file, base_url=self.base_url, serve_browser=c.serve_browser)
+
     async def start(self) -> None:
-        guard = make_middleware(self.config.host, self.config.token, self.config.port, self.token_file)
-        app = web.Application(middlewares=[guard], client_max_size=32 * 2**20)
+        ssl_context = None
+        if self.config.uses_tls():
+            from emos.actors.ui.tls import server_context
+
+            ssl_context = server_context(self.config.certfile, self.config.keyfile)
+        self.gate = self.make_gate()
+        app = web.Application(middlewares=[self.gate.middleware], client_max_size=32 * 2**20)
         app.on_response_prepare.append(self._headers)
-        app.add_routes([
-            web.get("/", self._index), web.get("/static/{name}", self._static), web.get("/api/layout", self._layout),
-            web.get("/ws", self._ws), web.post("/api/upload/{topic:.+}", self._upload),
+        routes = [
+            web.get("/api/layout", self._layout), web.post("/api/upload/{topic:.+}", self._upload),
             web.get("/api/settings", self._settings), web.post("/api/settings/{component}", self._apply_settings),
             web.get("/api/system", self._system), web.post("/api/system/{component}/{action}", self._system_action),
             web.get("/api/stats", self._stats), web.get("/api/session", self._session),
-        ])
+            *self.api.routes(),
+        ]
+        if self.config.serve_browser:  # headless: the API only, no page
+            routes += [web.get("/", self._index), web.get("/pair", self._pair_page), web.get("/static/{name}", self._static),
+                       web.get("/ws", self._ws)]
+        app.add_routes(routes)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         assert self._sock is not None
-        await web.SockSite(self._runner, self._sock, shutdown_timeout=1.0).start()
+        await web.SockSite(self._runner, self._sock, shutdown_timeout=1.0, ssl_context=ssl_context).start()
         self._write_token_file()
+        if self.gate.pairing_code and self.pairing_file is not None:
+            from emos.actors.ui.pairing import pairing_url, write_pairing_file
+
+            try:
+                write_pairing_file(self.pairing_file, self.gate.pairing_code, pairing_url(self.base_url, self.gate.pairing_code),
+                                   self.config.pairing_role, time.time())
+            except OSError as exc:
+                log.error("[ui] port %d: cannot keep the pairing code in %s: %s", self.config.port, self.pairing_file, exc)
 
     def _write_token_file(self) -> None:
         if self.token_file is None:
@@ -111,10 +161,11 @@ class UIServer:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-        if self.token_file is not None:
-            left = remove_token_file(self.token_file)
-            if left is not None:
-                log.warning("[ui] port %d: token file %s left in place: it %s", self.config.port, self.token_file, left)
+        for path in (self.token_file, self.pairing_file):
+            if path is not None:
+                left = remove_token_file(path)
+                if left is not None:
+                    log.warning("[ui] port %d: %s left in place: it %s", self.config.port, path, left)
 
     async def stop(self) -> None:
         self.close_listener()
@@ -135,12 +186,16 @@ class UIServer:
         return web.Response(body=page, content_type="text/html")
 
     async def _session(self, request: web.Request) -> web.Response:
-        """For scripts: the CSRF token of this session (the session cookie comes with it)."""
-        return web.json_response({"csrf": request[CSRF_KEY]})
+        """For scripts: the CSRF token of this session (the session cookie comes with it), and
+        who the credential is (the page hides what a viewer may not do)."""
+        return web.json_response({"csrf": request[CSRF_KEY], **request[PRINCIPAL_KEY].describe()})
+
+    async def _pair_page(self, request: web.Request) -> web.Response:
+        return web.Response(body=self._assets["pair.html"], content_type="text/html")
 
     async def _static(self, request: web.Request) -> web.Response:
         name = request.match_info["name"]
-        if name not in STATIC or name == "index.html":
+        if name not in STATIC or name in PAGES:
             raise web.HTTPNotFound(text=f"no asset {name!r}")
         return web.Response(body=self._assets[name], content_type=STATIC[name])
 
@@ -164,11 +219,13 @@ class UIServer:
 
     # ------------------------------------------------------------------ websocket
     async def _ws(self, request: web.Request) -> web.WebSocketResponse:
+        principal: Principal = request[PRINCIPAL_KEY]
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4 * 2**20)
         await ws.prepare(request)
         client = Client(ws.send_str, ws.send_bytes, request.remote or "?")
         self.clients.add(client)
         sender = asyncio.ensure_future(serve_client(client, self.hubs, self._closed, self.executor))
+        watch = asyncio.ensure_future(self.watch_credential(ws, principal))
         try:
             async for frame in ws:
                 if frame.type != WSMsgType.TEXT:
@@ -181,37 +238,68 @@ class UIServer:
                 op = request_msg.get("op") if isinstance(request_msg, dict) else None
                 if op == "ack":
                     client.ack(str(request_msg.get("topic")))
-                elif op == "publish":
-                    await ws.send_json(self._publish_from_page(request_msg))
-                elif op == "goal":
-                    await ws.send_json(self.actions.send(request_msg, lambda m: ws.send_json(m, dumps=_dumps)))
-                elif op == "cancel":
-                    await ws.send_json(self.actions.cancel(request_msg))
                 else:
-                    await ws.send_json({"op": "error", "error": f"unknown op {op!r}"})
+                    await ws.send_json(await self.handle_op(request_msg, principal, ws, request))
                 if sender.done():
                     break
         finally:
             self.clients.discard(client)
             sender.cancel()
             await asyncio.gather(sender, return_exceptions=True)
+            await self.end_watch(watch)
             if sender.done() and not sender.cancelled() and sender.exception() is not None:
                 log.warning("[ui] page %s: sending failed: %s", client.peer, sender.exception())
         return ws
 
-    def _publish_from_page(self, req: dict[str, Any]) -> dict[str, Any]:
-        rid, topic = req.get("id"), req.get("topic")
+    async def handle_op(self, msg: Any, principal: Principal, ws: web.WebSocketResponse, request: web.Request) -> dict[str, Any]:
+        """One websocket request (publish, goal, cancel, call), after the role check."""
+        op = msg.get("op") if isinstance(msg, dict) else None
+        rid = msg.get("id") if isinstance(msg, dict) else None
+        why = check_op_role(principal, str(op))
+        if why is not None:
+            refused("a viewer's websocket op", request, why)
+            return {"op": "result", "id": rid, "ok": False, "error": why}
+        assert isinstance(msg, dict)
+        if op == "publish":
+            return self.publish_value(msg.get("topic"), msg.get("value"), rid)
+        if op in ("goal", "call"):
+            return self.actions.send(msg, lambda m: ws.send_json(m, dumps=_dumps))
+        if op == "cancel":
+            return self.actions.cancel(msg)
+        return {"op": "error", "id": rid, "error": f"unknown op {op!r}"}
+
+    async def watch_credential(self, ws: web.WebSocketResponse, principal: Principal) -> None:
+        """Close the websocket of a device token once it is revoked or expires (close code 4401)."""
+        while not ws.closed and self.gate is not None:
+            await asyncio.sleep(REVOCATION_CHECK_S)
+            if not self.gate.still_valid(principal):
+                log.warning("[ui] closing the websocket of %s: its token was revoked or has expired", principal)
+                # Shielded: the handler's loop ends when the close completes, and its clean-up
+                # must not cut the closing handshake short (the client would see 1006, not why).
+                await asyncio.shield(ws.close(code=4401, message=b"token revoked or expired"))
+                return
+
+    @staticmethod
+    async def end_watch(watch: asyncio.Future[None]) -> None:
+        """Stop a websocket's credential watch, letting a close it started finish."""
+        if not watch.done():
+            watch.cancel()
+        await asyncio.gather(watch, return_exceptions=True)
+
+    def publish_value(self, topic: Any, value: Any, request_id: Any = None) -> dict[str, Any]:
+        rid = request_id
         type_name = self.inputs.get(str(topic))
         if type_name is None:
             return {"op": "result", "id": rid, "ok": False, "error": f"{topic!r} is not an input of this page"}
         try:
-            msg = message_from_page(str(topic), type_name, req.get("value"))
+            msg = message_from_page(str(topic), type_name, value)
+        except (InputRefused, TypeError, ValueError) as exc:  # a field's own check (a Float32 out of range) included
+            return {"op": "result", "id": rid, "ok": False, "error": str(exc) if isinstance(exc, InputRefused) else f"{topic}: {exc}"}
+        try:
             self.publish(str(topic), msg)
-        except InputRefused as exc:
-            return {"op": "result", "id": rid, "ok": False, "error": str(exc)}
         except Exception as exc:  # e.g. the component is not active: say so, keep serving
             log.error("[ui] publishing on %s failed: %s", topic, exc)
-            return {"op": "result", "id": rid, "ok": False, "error": f"{topic}: {exc}"}
+            return {"op": "result", "id": rid, "ok": False, "error": f"{topic}: {exc}", "unavailable": True}
         self.published += 1
         return {"op": "result", "id": rid, "ok": True}
 
@@ -220,6 +308,9 @@ class UIServer:
         type_name = self.inputs.get(topic) or self.inputs.get(request.match_info["topic"])
         if type_name is None:
             return web.json_response({"ok": False, "error": f"{topic!r} is not an input of this page"}, status=404)
+        return await self.upload_to(topic, type_name, request)
+
+    async def upload_to(self, topic: str, type_name: str, request: web.Request) -> web.Response:
         body = await request.read()
         try:
             msg = await asyncio.get_running_loop().run_in_executor(self.executor, message_from_upload, topic, type_name, body)

@@ -71,18 +71,26 @@ class ServiceRunner:
                 pass  # the page went away; the call's outcome has nobody to go to
 
         await reply("sent", summarize(request))
+        state, value = await self.call_once(name, service, request)
+        await reply("failed" if state == "unreachable" else state, value)
+
+    async def call_once(self, name: str, service: ServiceClientConfig, request: Any) -> tuple[str, Any]:
+        """Call ``service`` with ``request``: ("succeeded" | "failed" | "unreachable", the response's
+        summary or why). A response with ``success=False`` counts as failed (the service said no)."""
         client = AsyncRpcClient(self.socket_of(service.name))
         try:
             raw = await client.call("call", timeout=service.timeout_secs, request=codec.pack(request))
             response = codec.decode(service.response_type, raw, copy=True)
-        except (RpcError, RpcConnectionError, OSError, TimeoutError, ValueError) as exc:
+        except (RpcConnectionError, OSError, TimeoutError) as exc:
             log.warning("[ui] call to service %s failed: %s", name, exc)
-            await reply("failed", str(exc))
-            return
+            return "unreachable", str(exc)
+        except (RpcError, ValueError) as exc:
+            log.warning("[ui] call to service %s failed: %s", name, exc)
+            return "failed", str(exc)
         finally:
             await client.close()
         refused = getattr(response, "success", True) is False
-        await reply("failed" if refused else "succeeded", summarize(response))
+        return ("failed" if refused else "succeeded"), summarize(response)
 
     def cancel(self, req: dict[str, Any]) -> dict[str, Any]:
         return {"op": "result", "id": req.get("id"), "ok": False,

@@ -108,6 +108,13 @@ class Hub:
     def describe(self) -> dict[str, Any]:
         return {"topic": self.topic, "type": self.type_name, "kind": self.kind}
 
+    def latest(self) -> dict[str, Any]:
+        """The newest message as JSON for the API: ``{topic, seq, stamp, value}`` (value
+        ``None`` before the first; long arrays cut, pictures as their size, not their pixels)."""
+        msg = getattr(self, "msg", None)
+        value = codecs.summarize(msg) if msg is not None else None
+        return {"topic": self.topic, "type": self.type_name, "seq": self.seq, "stamp": getattr(self, "stamp", None), "value": value}
+
 
 class LogHub(Hub):
     family = "log"
@@ -124,6 +131,10 @@ class LogHub(Hub):
             # Chunks of one streamed reply go into one bubble on the page, closed by ``done``.
             value = {"text": msg.data, "stream": bool(msg.stream), "done": bool(msg.done)}
         self.items.append((self.seq, stamp_ms(msg, received_ns), value))
+
+    def latest(self) -> dict[str, Any]:
+        seq, stamp, value = self.items[-1] if self.items else (self.seq, None, None)
+        return {"topic": self.topic, "type": self.type_name, "seq": seq, "stamp": stamp, "value": value}
 
     async def send_to(self, client: Client, loop: asyncio.AbstractEventLoop, executor: Executor) -> None:
         last = client.sent[self.topic]

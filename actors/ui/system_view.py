@@ -50,6 +50,16 @@ class SystemView:
         data["ui"] = self.own_name
         return data
 
+    async def events(self, since: float = 0.0) -> list[dict[str, Any]]:
+        """The supervisor's events (starts, exits, restarts, escalations) after ``since``."""
+        if not self.supervisor_socket:
+            raise ConnectionError("this UI runs without a supervisor")
+        client = AsyncRpcClient(self.supervisor_socket)
+        try:
+            return list(await client.call(C.SUPERVISOR_EVENTS, timeout=3.0, since=since))
+        finally:
+            await client.close()
+
     async def act(self, name: str, action: str, known: set[str]) -> str:
         if action not in ACTIONS:
             raise ValueError(f"unknown action {action!r}; actions: {', '.join(ACTIONS)}")
@@ -76,3 +86,34 @@ class SystemView:
             return str(await client.call(C.TRANSITION, timeout=10.0, transition=want))
         finally:
             await client.close()
+
+
+def describe_graph(components: list[Any], events_actions: list[Any]) -> dict[str, Any]:
+    """The system graph the page draws and ``/api/v1/graph`` returns: components with the topics
+    they publish and subscribe, topics with their types, and events (the topics they watch) with
+    the actions they trigger (and the component an action acts on). Made in the launcher's
+    process at bringup, from the recipe's own objects; plain JSON from then on."""
+    topics: dict[str, dict[str, Any]] = {}
+
+    def topic(t: Any) -> str:
+        name = str(getattr(t, "name", t))
+        msg_type = getattr(getattr(t, "msg_type", None), "__name__", None) or str(getattr(t, "msg_type", ""))
+        topics.setdefault(name, {"name": name, "type": msg_type})
+        return name
+
+    comps = []
+    for c in components:
+        comps.append({"name": c.component_name, "type": type(c).__name__,
+                      "publishes": sorted({topic(t) for t in getattr(c, "out_topics", None) or []}),
+                      "subscribes": sorted({topic(t) for t in getattr(c, "in_topics", None) or []})})
+    events = []
+    for i, (event, actions) in enumerate(events_actions):
+        try:
+            watched = sorted(topic(t) for t in event.topics.values())
+        except Exception:  # an event without topics (a timer): shown unconnected
+            watched = []
+        events.append({"name": getattr(event, "name", None) or f"event {i + 1}", "topics": watched,
+                       "actions": [{"name": getattr(a, "method_name", type(a).__name__), "kind": getattr(a, "kind", "function"),
+                                    "component": getattr(a, "component", None) if isinstance(getattr(a, "component", None), str)
+                                    else getattr(getattr(a, "component", None), "component_name", None)} for a in actions]})
+    return {"components": comps, "topics": sorted(topics.values(), key=lambda t: t["name"]), "events": events}

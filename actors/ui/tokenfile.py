@@ -39,20 +39,31 @@ def _directory_problem(directory: Path) -> str | None:
 
 def write_token_file(path: Path, token: str) -> None:
     """Write ``token`` to ``path`` with mode 0600, atomically; the directory must be ours, 0700."""
+    write_private_file(path, token + "\n", "the UI's access token")
+
+
+def write_private_file(path: Path, text: str, what: str = "a private file of the UI") -> None:
+    """Write ``text`` to ``path`` with mode 0600, atomically; the directory must be ours, 0700.
+    ``what`` names the content in the refusal (the device-token store, the pairing code)."""
     path = Path(path)
     problem = _directory_problem(path.parent)
     if problem is not None:
-        raise TokenFileRefused(f"not writing the UI's access token to {path}: the directory {path.parent} {problem} "
+        raise TokenFileRefused(f"not writing {what} to {path}: the directory {path.parent} {problem} "
                                "(it must be a directory of ours with mode 0700)")
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     remove_owned(tmp, mode=None)  # left by a process of ours killed mid-write
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, FILE_MODE)
     try:
         os.fchmod(fd, FILE_MODE)  # exactly 0600, whatever the umask
-        os.write(fd, (token + "\n").encode())
+        os.write(fd, text.encode())
     finally:
         os.close(fd)
     os.replace(tmp, path)
+
+
+def directory_problem(directory: Path) -> str | None:
+    """Why ``directory`` is no place for a secret of ours (``None``: it is ours, 0700)."""
+    return _directory_problem(Path(directory))
 
 
 def remove_token_file(path: Path) -> str | None:

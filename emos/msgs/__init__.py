@@ -38,6 +38,7 @@ from emos.msgs.nav import MapMetaData, OccupancyGrid, Odometry, Path
 from emos.msgs.registry import UnknownMessageType, canonical_name, message_type, registered_types, resolve
 from emos.msgs.sensor import (
     Audio,
+    BatteryState,
     CameraInfo,
     CompressedImage,
     Image,
@@ -79,7 +80,7 @@ Detections2DMultiSource = DetectionsMultiSource
 
 # Spelled out (not computed from dir()) so that linters and type checkers see the public names.
 __all__ = [
-    "Audio", "Bool", "CameraInfo", "Clock", "ComponentStatus", "CompressedImage", "DecodeError", "Detection2D",
+    "Audio", "BatteryState", "Bool", "CameraInfo", "Clock", "ComponentStatus", "CompressedImage", "DecodeError", "Detection2D",
     "Detections", "Detections2D", "Detections2DMultiSource", "DetectionsMultiSource", "Duration", "Empty",
     "FieldTypeError", "Float32", "Float32MultiArray", "Float64", "Float64MultiArray", "Header", "Image", "Int32",
     "Int32MultiArray", "Int64", "JointJog", "JointState", "JointTrajectory", "JointTrajectoryPoint", "LaserScan",

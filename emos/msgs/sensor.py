@@ -209,6 +209,32 @@ class JointState(Message):
     effort: np.ndarray = F.array(dtype="float64", ndim=1)
 
 
+@message_type("sensor_msgs")
+class BatteryState(Message):
+    """A battery's state (sensor_msgs/msg/BatteryState); unmeasured values are NaN, as in ROS."""
+
+    POWER_SUPPLY_STATUS_UNKNOWN, POWER_SUPPLY_STATUS_CHARGING, POWER_SUPPLY_STATUS_DISCHARGING = 0, 1, 2
+    POWER_SUPPLY_STATUS_NOT_CHARGING, POWER_SUPPLY_STATUS_FULL = 3, 4
+    POWER_SUPPLY_HEALTH_UNKNOWN, POWER_SUPPLY_HEALTH_GOOD = 0, 1
+    POWER_SUPPLY_TECHNOLOGY_UNKNOWN, POWER_SUPPLY_TECHNOLOGY_NIMH, POWER_SUPPLY_TECHNOLOGY_LION = 0, 1, 2
+    header: Header = F.message(Header)
+    voltage: float = F.float32(math.nan)  # V
+    temperature: float = F.float32(math.nan)  # deg C
+    current: float = F.float32(math.nan)  # A, negative when discharging
+    charge: float = F.float32(math.nan)  # Ah
+    capacity: float = F.float32(math.nan)  # Ah
+    design_capacity: float = F.float32(math.nan)  # Ah
+    percentage: float = F.float32(math.nan)  # 0..1
+    power_supply_status: int = F.integer(bits=8, signed=False)
+    power_supply_health: int = F.integer(bits=8, signed=False)
+    power_supply_technology: int = F.integer(bits=8, signed=False)
+    present: bool = F.boolean()
+    cell_voltage: np.ndarray = F.array(dtype="float32", ndim=1)
+    cell_temperature: np.ndarray = F.array(dtype="float32", ndim=1)
+    location: str = F.string()
+    serial_number: str = F.string()
+
+
 @message_type("audio_common_msgs", name="Audio")
 class Audio(Message):
     """Raw audio bytes; EmbodiedAgents streams 16 kHz mono 16-bit PCM by convention."""

@@ -81,6 +81,10 @@ def load_config(zenoh: Any, path: str) -> Any:
         conf = zenoh.Config.from_file(path)
     except Exception as exc:  # noqa: BLE001 - zenoh.ZError: say which file
         raise ValueError(f"Zenoh configuration file {path!r} is invalid: {exc}") from None
+    if os.environ.get("EMOS_ZENOH_SECURE") == "1":  # emos run --secure / use_secure(): never a plain file
+        from emos.security.secure_run import check_secure
+
+        check_secure(conf, repr(path))
     with open(path, encoding="utf-8", errors="replace") as f:
         if "shared_memory" in f.read():
             return conf
@@ -176,6 +180,11 @@ def warn_if_exposed(conf: Any, source: str) -> list[str]:
         if os.getpid() in _warned:
             return found
         _warned.add(os.getpid())
+    tls, acl = _json(conf, "transport/link/tls") or {}, _json(conf, "access_control") or {}
+    if tls.get("enable_mtls") is True and acl.get("enabled") is True and _json(conf, "transport/link/protocols") == ["tls"]:
+        # emos security policy's kind of file: peers need a certificate of its CA, and the rules say what each may do
+        log.info("Zenoh configuration %s reaches beyond this host (%s) with mutual TLS only and access control on", source, ", ".join(found))
+        return found
     log.warning(
         "Zenoh configuration %s reaches beyond this host: %s. EMOS topics (and the services and control "
         "a run shares over Zenoh) are readable and writable by anyone who reaches these addresses: Zenoh "

@@ -94,18 +94,18 @@ def test_point_cloud_xyz_round_trip():
 
 def test_users_register_their_own_types():
     @message_type("my_robot_msgs")
-    class BatteryState:
+    class MotorState:
         voltage: float = F.float64()
         cells: object = F.array(dtype="float32", ndim=1)
         location: M.Point = F.message(M.Point)
 
-    assert resolve("BatteryState") is BatteryState
-    assert resolve("my_robot_msgs/msg/BatteryState") is BatteryState
-    msg = BatteryState(voltage=24.1, cells=[4.0, 4.1], location=M.Point(x=1.0))
-    back = codec.decode(BatteryState, codec.pack(msg))
+    assert resolve("MotorState") is MotorState
+    assert resolve("my_robot_msgs/msg/MotorState") is MotorState
+    msg = MotorState(voltage=24.1, cells=[4.0, 4.1], location=M.Point(x=1.0))
+    back = codec.decode(MotorState, codec.pack(msg))
     assert back.voltage == 24.1 and back.location.x == 1.0
     np.testing.assert_allclose(back.cells, [4.0, 4.1])
-    assert "my_robot_msgs/msg/BatteryState" in registered_types()
+    assert "my_robot_msgs/msg/MotorState" in registered_types()
 
 
 def test_garbage_frames_raise_decode_errors_not_crashes():

@@ -58,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes, comma-separated")
     parser.add_argument("--messages", type=int, default=300, help="round trips per size and transport (fewer for large payloads)")
     parser.add_argument("--rounds", type=int, default=3, help="alternations of the two transports per size (samples are pooled)")
+    parser.add_argument("--tls", action="store_true",
+                        help="transport mode: also measure both transports over mutual TLS with access control (a secure run's "
+                             "configuration, certificates from a fresh keystore), alternating with plain TCP in the same run")
 
 
 def _free_port() -> int:
@@ -107,10 +110,43 @@ class _Inbox:
         return bool(ready)
 
 
+TLS = "+tls"  # suffix of a transport measured over the TLS configuration pair
+
+
+def _tls_config_pair(folder: str) -> tuple[str, str]:
+    """Configuration files of a pinging and an echoing end over mutual TLS with access control,
+    as ``emos security policy`` writes them (TLS only, deny by default), with certificates of a
+    fresh keystore: what ``emos run --secure`` costs."""
+    from emos.security.keystore import create_identity, create_keystore
+    from emos.security.policy import tls_config
+
+    keys = os.path.join(folder, "keys")
+    create_keystore(keys)
+    ports = {"ping": _free_port(), "pong": _free_port()}
+    acl = {"enabled": True, "default_permission": "deny",
+           "rules": [{"id": "bench", "permission": "allow", "messages": ["put", "declare_subscriber", "liveliness_token"],
+                      "flows": ["ingress", "egress"], "key_exprs": ["emos/**", "rawbench/**"]}],
+           "subjects": [{"id": "peers", "cert_common_names": ["ping", "pong"]}], "policies": [{"id": "bench", "rules": ["bench"], "subjects": ["peers"]}]}
+    paths = []
+    for name, other in (("ping", "pong"), ("pong", "ping")):
+        create_identity(keys, name, hosts=["127.0.0.1"])
+        path = os.path.join(folder, f"{name}-tls.json5")
+        with open(path, "w") as f:
+            json.dump({
+                "mode": "peer", "listen": {"endpoints": [f"tls/127.0.0.1:{ports[name]}"]}, "connect": {"endpoints": [f"tls/127.0.0.1:{ports[other]}"]},
+                "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+                "transport": {"shared_memory": {"enabled": False}, "link": {"protocols": ["tls"], "tls": tls_config(keys, name)}},
+                "access_control": acl,
+            }, f)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
 class _End:
     """One side of one transport: ``send(payload)``, ``take() -> payloads``, and its inbox."""
 
     def __init__(self, config: str, group: str, transport: str, side: str):
+        transport = transport.removesuffix(TLS)
         from emos.msgs import UInt8MultiArray
         from emos.transport import zenoh_net
 
@@ -139,9 +175,9 @@ class _End:
                 return got
 
 
-def _echo_main(config: str, group: str, ready: Any) -> None:
-    """The other run: echo every message of both transports until killed."""
-    ends = [_End(config, group, t, "pong") for t in TRANSPORTS]
+def _echo_main(config: str, group: str, ready: Any, tls_config: str | None = None) -> None:
+    """The other run: echo every message of both transports (and over TLS: ``tls_config``) until killed."""
+    ends = [_End(config, group, t, "pong") for t in TRANSPORTS] + [_End(tls_config, group, t, "pong") for t in TRANSPORTS if tls_config]
     by_fd = {end.inbox.rfd: end for end in ends}
     ready.set()
     while True:
@@ -193,32 +229,37 @@ def _config_pair(folder: str) -> tuple[str, str]:
     return _config_file(folder, "ping", port_ping, port_pong), _config_file(folder, "pong", port_pong, port_ping)
 
 
-def measure(sizes: list[int], messages: int, rounds: int, transports: list[str] = TRANSPORTS) -> list[dict[str, Any]]:
-    """The transport mode: rows for each of ``transports`` and size."""
+def measure(sizes: list[int], messages: int, rounds: int, transports: list[str] = TRANSPORTS, tls: bool = False) -> list[dict[str, Any]]:
+    """The transport mode: rows for each of ``transports`` and size (and each over TLS: ``tls``)."""
     group = f"bench{uuid.uuid4().hex[:8]}"
     with tempfile.TemporaryDirectory(prefix="emos-bench-net-") as folder:
-        return _measure(sizes, messages, rounds, transports, group, *_config_pair(folder))
+        tls_pair = _tls_config_pair(folder) if tls else None
+        if tls:
+            transports = [*transports, *(t + TLS for t in transports)]
+        return _measure(sizes, messages, rounds, transports, group, *_config_pair(folder), tls_pair=tls_pair)
 
 
-def _measure(sizes: list[int], messages: int, rounds: int, transports: list[str], group: str, ping_conf: str, pong_conf: str) -> list[dict[str, Any]]:
+def _measure(sizes: list[int], messages: int, rounds: int, transports: list[str], group: str, ping_conf: str, pong_conf: str,
+             tls_pair: tuple[str, str] | None = None) -> list[dict[str, Any]]:
     from emos.msgs import UInt8MultiArray
     from emos.transport import zenoh_net
 
     spawn = mp.get_context("spawn")  # a fresh interpreter: no Zenoh session or thread inherited
     ready = spawn.Event()
-    echo = spawn.Process(target=_echo_main, args=(pong_conf, group, ready), name="emos-bench-net-echo", daemon=True)
+    echo = spawn.Process(target=_echo_main, args=(pong_conf, group, ready, tls_pair[1] if tls_pair else None), name="emos-bench-net-echo", daemon=True)
     echo.start()
     results = []
     try:
         if not ready.wait(60):
             raise RuntimeError("the echo process did not come up within 60 s")
-        ends = {t: _End(ping_conf, group, t, "ping") for t in transports}
+        ends = {t: _End(tls_pair[0] if tls_pair and t.endswith(TLS) else ping_conf, group, t, "ping") for t in transports}
         time.sleep(0.5)  # let the two sessions connect and match subscriptions
         for size in sizes:
             data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
             raw = data.tobytes()
             # Both carry the same bytes object: the EMOS message's array is a view of it.
             payloads = {"emos-zenoh": UInt8MultiArray(data=np.frombuffer(raw, np.uint8)), "zenoh": raw}
+            payloads.update({t + TLS: payloads[t] for t in list(payloads)})
             samples: dict[str, list[float]] = {t: [] for t in transports}
             lost = {t: 0 for t in transports}
             count = max(_messages_for(size, messages) // rounds, 5)
@@ -252,11 +293,16 @@ def run(args: argparse.Namespace) -> int:
         return 2
     with_transport, with_component = args.mode in ("both", "transport"), args.mode in ("both", "component")
     # The component mode's raw figure is the transport mode's raw Zenoh, from this invocation.
-    results = measure(sizes, args.messages, args.rounds, TRANSPORTS if with_transport else ["zenoh"])
+    results = measure(sizes, args.messages, args.rounds, TRANSPORTS if with_transport else ["zenoh"], tls=args.tls and with_transport)
     raw_p50 = {r["payload_bytes"]: r["p50_us"] for r in results if r["transport"] == "zenoh"}
+    p50 = {(r["transport"], r["payload_bytes"]): r["p50_us"] for r in results}
     for r in results:
         if r["transport"] == "emos-zenoh":
             r["overhead_p50_pct"] = _overhead(r["p50_us"], raw_p50[r["payload_bytes"]])
+        if r["transport"] == "emos-zenoh" + TLS:
+            r["overhead_p50_pct"] = _overhead(r["p50_us"], p50[("zenoh" + TLS, r["payload_bytes"])])
+        if r["transport"].endswith(TLS):  # the same transport over plain TCP, same run
+            r["tls_overhead_p50_pct"] = _overhead(r["p50_us"], p50[(r["transport"].removesuffix(TLS), r["payload_bytes"])])
     doc: dict[str, Any] = {"method": "pingpong over Zenoh, TCP on 127.0.0.1, two processes", "results": results}
     if with_component:
         from emos.tools.bench import net_component
@@ -274,7 +320,8 @@ def run(args: argparse.Namespace) -> int:
         return 0 if not with_component or doc["component"]["error"] is None else 1
     columns = [("transport", "transport", "s"), ("payload_bytes", "bytes", "d"), ("p50_us", "p50 us", ".1f"),
                ("p95_us", "p95 us", ".1f"), ("overhead_p50_pct", "EMOS overhead %", ".1f")]
-    print(table(results, columns[:4] + [("mb_per_s", "MB/s", ".1f"), columns[4]]))
+    extra = [("tls_overhead_p50_pct", "TLS overhead %", ".1f")] if args.tls else []
+    print(table(results, columns[:4] + [("mb_per_s", "MB/s", ".1f"), columns[4], *extra]))
     if with_component:
         print()
         print(table(doc["component"]["results"], columns))

@@ -39,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rounds", type=int, default=3, help="alternations of no page / page open (default: %(default)s)")
     parser.add_argument("--browser-nice", type=int, default=10, help="niceness of the browser, which shares the robot's cores here (default: %(default)s; 0 to keep it)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--https", action="store_true",
+                        help="compare publish -> displayed over HTTPS (self-signed certificate) against HTTP: two systems, the page alternating between them")
     parser.add_argument("--plot", metavar="FILE", help="save the latency distributions as a picture (PNG, SVG or PDF)")
 
 
@@ -61,7 +63,7 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None
     raise TimeoutError(f"the UI did not listen on port {port} within {timeout} s")
 
 
-def _browser() -> tuple[Any, str]:
+def _browser(extra_flags: tuple[str, ...] = ()) -> tuple[Any, str]:
     """A headless Chromium driver and its temporary profile folder (the caller removes it)."""
     try:
         from selenium import webdriver
@@ -72,7 +74,7 @@ def _browser() -> tuple[Any, str]:
     if not (os.path.exists(chromium) and os.path.exists(driver)):
         raise SystemExit("emos bench ui needs Debian's chromium and chromium-driver (scripts/setup.sh --test)")
     options = webdriver.ChromeOptions()
-    for flag in CHROME_FLAGS:
+    for flag in CHROME_FLAGS + tuple(extra_flags):
         options.add_argument(flag)
     profile = tempfile.mkdtemp(prefix="emos-bench-chromium-")
     options.add_argument(f"--user-data-dir={profile}")
@@ -181,6 +183,83 @@ def measure(duration: float, rounds: int, browser_nice: int) -> dict[str, Any]:
     }
 
 
+def _start_system(tmp: Path, name: str, https: bool) -> tuple[subprocess.Popen, int, str, Path]:
+    """One benchmark system (its own probe file and home); (process, port, page address with the token, home)."""
+    out, port, token, home = tmp / f"probe-{name}.json", _free_port(), new_token(), tmp / f"home-{name}"
+    env = dict(os.environ, EMOS_BENCH_UI_PORT=str(port), EMOS_BENCH_UI_OUT=str(out), EMOS_HOME=str(home), EMOS_UI_TOKEN=token)
+    flags = ["--ui-https"] if https else []
+    proc = subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "run", "--no-log", *flags, str(SYSTEM)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    return proc, port, f"{'https' if https else 'http'}://127.0.0.1:{port}/?token={token}", home
+
+
+def _spki_pin(cert: Path) -> str:
+    """base64 SHA-256 of the certificate's public key: Chromium trusts exactly that key."""
+    import base64
+    import hashlib
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+
+    key = x509.load_pem_x509_certificate(cert.read_bytes()).public_key()
+    der = key.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo)
+    return base64.b64encode(hashlib.sha256(der).digest()).decode()
+
+
+def measure_https(duration: float, rounds: int, browser_nice: int) -> dict[str, Any]:
+    """Publish -> displayed over HTTP and over HTTPS in one run: both systems run throughout (so
+    the machine's load is the same for both) and the page alternates between them."""
+    tmp = Path(tempfile.mkdtemp(prefix="emos-bench-ui-https-"))
+    systems = {name: _start_system(tmp, name, name == "https") for name in ("http", "https")}
+    driver: Any = None
+    profile: str | None = None
+    shown: dict[str, list[float]] = {"http": [], "https": []}
+    frames = {"http": 0, "https": 0}
+    try:
+        _progress("starting two systems (camera 640x480 at 30 Hz, map 400x400 at 2 Hz): UI over HTTP and over HTTPS")
+        for proc, port, _, _ in systems.values():
+            _wait_port(port, proc)
+        cert = systems["https"][3] / "ui" / "tls" / "ui-selfsigned.crt"
+        driver, profile = _browser((f"--ignore-certificate-errors-spki-list={_spki_pin(cert)}",))
+        for r in range(rounds):
+            for name in ("http", "https") if r % 2 == 0 else ("https", "http"):
+                _progress(f"round {r + 1}/{rounds}: page over {name.upper()}, {duration:g} s")
+                driver.get(systems[name][2])
+                time.sleep(2.0)  # connect and first frames, not measured
+                if browser_nice:
+                    _renice_browser(driver, browser_nice)
+                driver.execute_script("window.emosStats.latencies = []; window.emosStats.frames = {};")
+                time.sleep(duration)
+                page = driver.execute_script("return {frames: window.emosStats.frames, latencies: window.emosStats.latencies, proto: location.protocol}")
+                if page["proto"] != name + ":":
+                    raise RuntimeError(f"emos bench ui: the page came over {page['proto']}, not {name}")
+                shown[name] += page["latencies"]
+                frames[name] += page["frames"].get("/camera/rgb", 0)
+                driver.get("about:blank")
+    finally:
+        if driver is not None:
+            driver.quit()
+        if profile is not None:
+            shutil.rmtree(profile, ignore_errors=True)
+        for proc, _, _, _ in systems.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for proc, _, _, _ in systems.values():
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
+    on_time = duration * rounds
+    result: dict[str, Any] = {"duration_s": duration, "rounds": rounds, "browser_nice": browser_nice}
+    for name in ("http", "https"):
+        result[name] = {"camera_fps": frames[name] / on_time, "latency_ms": percentiles(shown[name]), "latencies": shown[name]}
+    p95 = (result["http"]["latency_ms"].get("p95"), result["https"]["latency_ms"].get("p95"))
+    result["https_p95_over_http"] = p95[1] / p95[0] if p95[0] and p95[1] else None
+    return result
+
+
 def _component_of(proc: Any) -> str | None:
     """Component processes are forks of the recipe: tell the UI's apart by its listening socket."""
     try:
@@ -217,6 +296,17 @@ def run(args: argparse.Namespace) -> int:
     from emos.tools.plotting import check_plot_argument
 
     check_plot_argument(args.plot)
+    if args.https:
+        compared = measure_https(args.duration, args.rounds, args.browser_nice)
+        if args.json:
+            print(json.dumps({k: ({kk: vv for kk, vv in v.items() if kk != "latencies"} if isinstance(v, dict) else v) for k, v in compared.items()}, indent=2))
+            return 0
+        print(table([{"what": f"page over {n.upper()}", "fps": compared[n]["camera_fps"], **compared[n]["latency_ms"]} for n in ("http", "https")],
+                    [("what", "", "s"), ("fps", "frames/s", ".1f"), ("p50", "p50 ms", ".1f"), ("p95", "p95 ms", ".1f"), ("p99", "p99 ms", ".1f")]))
+        ratio = compared["https_p95_over_http"]
+        print(f"HTTPS p95 / HTTP p95: {ratio:.3f}" if ratio else "HTTPS p95 / HTTP p95: not measured (no frames)")
+        print(f"({compared['rounds']} rounds of {compared['duration_s']:g} s on each, alternating; browser niceness {compared['browser_nice']})")
+        return 0
     result = measure(args.duration, args.rounds, args.browser_nice)
     if args.plot:
         save_plot(result, args.plot)

@@ -29,6 +29,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "play": ("emos.tools.cli.play", "publish an MCAP recording into a running system, with its timing"),
     "map": ("emos.tools.cli.map", "build a map from a recording (offline SLAM) or draw a saved one"),
     "viz": ("emos.tools.cli.viz", "serve a running system's topics to Foxglove over its WebSocket protocol"),
+    "ui": ("emos.tools.cli.ui", "the web UI's paired devices: list (tokens) or revoke their tokens, show the pairing code (pair)"),
+    "security": ("emos.tools.cli.security", "keystore (CA), identities, and Zenoh TLS + access rules derived from a recipe"),
+    "robot": ("emos.tools.cli.robot", "list robot plugins, or inspect one: topics, actions, events, transports, config"),
 }
 
 # `emos bench NAME`: one module per benchmark, all in the tools tier (emos.tools.bench).
@@ -47,6 +50,8 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "agents": ("emos.tools.bench.agents", "semantic routing and vector-store query times"),
     "ui": ("emos.tools.bench.ui", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
     "slam": ("emos.tools.bench.slam", "graph SLAM on a real lidar log (CARMEN): trajectory error, CPU per scan, the map"),
+    "cortex": ("emos.tools.bench.cortex", "Cortex planning on 20 house tasks: success, steps, replans, time per planning step"),
+    "hardware": ("emos.tools.bench.hardware", "drivers on emulated devices: /cmd_vel to wire, lidar scans and parse CPU, servo cycle"),
 }
 
 # `emos serve NAME`: long-running development services.
@@ -86,6 +91,8 @@ EXAMPLES: dict[str, str] = {
     "viz": "emos viz                                  # ws://127.0.0.1:8765 for Foxglove\nemos viz /scan '/camera/*' --port 8766\n"
            "emos viz --token auto                     # prints the URL with its token once",
     "bench record": "emos bench record\nemos bench record --pairs 4 --window 8 --against hz   # control",
+    "robot": "emos robot list\nemos robot inspect create2\nemos robot inspect mypkg.base:MyBase --json",
+    "bench hardware": "emos bench hardware\nemos bench hardware --json\nemos bench hardware --commands 1000 --scans 100",
 }
 
 

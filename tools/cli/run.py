@@ -6,6 +6,7 @@ import math
 import os
 import runpy
 import sys
+from typing import Any
 
 EXIT_NO_BRINGUP = 5  # the supervisor's own codes: 3 gave up, 4 a component failed to start
 
@@ -27,6 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--zenoh", metavar="CONFIG", default=None,
                         help="Zenoh configuration file (mode, endpoints, TLS, access control) to reach other hosts; "
                              "without one, Zenoh stays on this host's loopback")
+    parser.add_argument("--secure", metavar="KEYSTORE", default=None,
+                        help="Zenoh with mutual TLS and the access rules of `emos security policy` for this recipe (the identity's "
+                             "file in KEYSTORE/policies/, or --zenoh FILE); refuses any configuration that is not secure")
+    parser.add_argument("--identity", metavar="NAME", default=None, help="with --secure: the identity this host runs as")
     parser.add_argument("--net-topics", metavar="TOPICS", default=None, help="topics over Zenoh: 'all' or names separated by ','; default: those a recipe marks transport='zenoh'")
     parser.add_argument("--net-services", metavar="NAMES", default=None, help="services and actions also served over Zenoh: 'all' or names separated by ','")
     parser.add_argument("--net-control", action="store_true",
@@ -37,6 +42,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ros2-topics", metavar="TOPICS", default=None,
                         help="with --ros2: 'all' (default) or topic names / wildcards separated by ','")
     parser.add_argument("--ros-domain-id", metavar="N", type=int, default=None, help="with --ros2: the ROS 2 domain id (default: $ROS_DOMAIN_ID, else 0)")
+    parser.add_argument("--ui-host", metavar="ADDRESS", default=None, help="serve the recipe's web UI on this address (e.g. 0.0.0.0: HTTPS and pairing, docs/ui.md)")
+    parser.add_argument("--ui-https", action="store_true", help="serve the web UI over HTTPS on loopback too (off loopback it always is)")
+    parser.add_argument("--ui-cert", metavar="FILE", default=None, help="the web UI's certificate (PEM), with --ui-key; default: the keystore's or a self-signed one")
+    parser.add_argument("--ui-key", metavar="FILE", default=None, help="the private key of --ui-cert (PEM)")
+    parser.add_argument("--ui-keystore", metavar="DIR", default=None, help="serve the web UI with the certificate of the identity 'ui' in this EMOS keystore")
     parser.add_argument("args", nargs="*", help="arguments for the recipe, after '--'")
 
 
@@ -56,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     launcher_mod._RUN_DURATION = args.duration
     os.environ["EMOS_RUN_CLI"] = "1"
-    problem = _network_options(args) or _ros2_options(args)
+    problem = _secure_options(args, path) or _network_options(args) or _ros2_options(args) or _ui_options(args)
     if problem:
         print(f"emos run: {problem}", file=sys.stderr)
         return 2
@@ -70,6 +80,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"emos run: {path} finished without bringing anything up: it never called Launcher.bringup()", file=sys.stderr)
         return EXIT_NO_BRINGUP
     return code
+
+
+def _secure_options(args: argparse.Namespace, path: Any) -> str | None:
+    """``--secure KEYSTORE [--identity NAME]`` (emos.tools.cli.security)."""
+    if getattr(args, "secure", None) is None:
+        return "--identity goes with --secure" if getattr(args, "identity", None) else None
+    from emos.tools.cli.security import secure_run_options
+
+    problem = secure_run_options(args.secure, args.identity, args.zenoh, path)
+    args.zenoh = None  # exported by --secure, checked
+    return problem
 
 
 def _network_options(args: argparse.Namespace) -> str | None:
@@ -98,6 +119,28 @@ def _network_options(args: argparse.Namespace) -> str | None:
             net_topics_option()
         except ValueError as exc:
             return f"--net-topics: {exc}"
+    return None
+
+
+def _ui_options(args: argparse.Namespace) -> str | None:
+    """Export the --ui-* flags to the run (emos.actors.ui.launch reads them; they win over the recipe)."""
+    if bool(args.ui_cert) != bool(args.ui_key):
+        return "--ui-cert and --ui-key go together"
+    for flag, value, env in (("--ui-cert", args.ui_cert, "EMOS_UI_CERTFILE"), ("--ui-key", args.ui_key, "EMOS_UI_KEYFILE"),
+                             ("--ui-keystore", args.ui_keystore, "EMOS_UI_KEYSTORE")):
+        if value:
+            path = os.path.abspath(os.path.expanduser(value))
+            if not os.path.exists(path):
+                return f"{flag} {value!r}: no such file or directory"
+            os.environ[env] = path
+    secure = getattr(args, "secure", None)
+    if secure and not args.ui_keystore and not args.ui_cert and os.path.isdir(os.path.join(secure, "identities", "ui")):
+        # `--secure KEYSTORE` with an identity "ui" in it: the web UI serves that certificate when it serves HTTPS.
+        os.environ["EMOS_UI_KEYSTORE"] = os.path.abspath(secure)
+    if args.ui_https:
+        os.environ["EMOS_UI_TLS"] = "on"
+    if args.ui_host:
+        os.environ["EMOS_UI_HOST"] = args.ui_host
     return None
 
 

@@ -16,6 +16,8 @@ _LAZY = {
     "MapEncoding": ".map_encoding", "MapConfig": ".map_encoding", "MapLayer": ".map_encoding",
     "VideoMessageMaker": ".video_message_maker", "VideoMessageMakerConfig": ".video_message_maker",
     "VLA": ".vla", "VLAConfig": ".vla",
+    "Cortex": ".cortex", "CortexConfig": ".cortex",
+    "Memory": ".memory", "MemoryConfig": ".memory",
 }
 
 __all__ = sorted(_LAZY)

@@ -1,6 +1,7 @@
 """The Create 2 serial link: open the port, start the OI, stream sensors, send Drive Direct.
 
-Pure of EMOS topics: the component (``component.py``) or a future robot-plugin wraps it. A
+Pure of EMOS topics, for scripts and tests that talk to a Create 2 directly; the component
+(``component.py``) is a robot plugin on the generic serial transport instead. A
 reader thread parses the stream (``protocol.StreamParser``) into a queue of checked frames; a
 failed read or write marks the link ``lost`` with the port named, and :meth:`reconnect` tries
 to open it again (the caller decides when, on its ladder).
@@ -8,18 +9,16 @@ to open it again (the caller decides when, on its ladder).
 from __future__ import annotations
 
 import collections
-import errno
 import threading
 import time
 from typing import Any
 
-from emos.errors import EmosError
-
+from ..plugin.transports import DeviceError, serial_open_error
 from . import protocol as P
 from .odometry import DiffDriveOdometry
 
 
-class Create2PortError(EmosError, OSError):
+class Create2PortError(DeviceError):
     """The serial port of the Create 2 cannot be opened or was lost (the message names it)."""
 
 
@@ -65,15 +64,7 @@ class Create2Link:
         self._reader.start()
 
     def _why(self, exc: BaseException) -> str:
-        text = str(exc)
-        err = getattr(exc, "errno", None)
-        if err == errno.ENOENT or "No such file" in text:
-            return f"Create 2 port {self.port!r} does not exist (is the robot's USB cable plugged in? check ls /dev/ttyUSB*)"
-        if err in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK) or "exclusively lock" in text or "busy" in text.lower():
-            return f"Create 2 port {self.port!r} is taken by another process (close it, or check lsof {self.port})"
-        if err == errno.EACCES or "Permission denied" in text:
-            return f"Create 2 port {self.port!r}: permission denied (add the user to the dialout group)"
-        return f"Create 2 port {self.port!r} cannot be opened: {text}"
+        return serial_open_error("Create 2", self.port, exc)
 
     def close(self, stop_base: bool = True) -> None:
         self._closing.set()

@@ -7,7 +7,8 @@ lengths) the LED, song and display commands drivers send. Safe mode does what th
 "Safe" clause says: a cliff or a wheel drop stops the motors and reverts the OI to Passive. In
 Passive mode motion commands are ignored.
 
-The base is a kinematic differential drive (the pybullet coupling comes later): wheel speeds
+The base is a kinematic differential drive (``actors/hardware/simworld.py`` puts it in the pybullet
+world instead, by overriding ``_advance``): wheel speeds
 move toward the commanded ones at ``accel`` m/s^2, the pose integrates exactly per 15 ms tick,
 encoders count from wheel travel (508.8 counts per 72 mm-wheel revolution) and wrap at 16
 bits; a disc of ``radius`` that would enter an occupied cell of the map does not move and
@@ -28,8 +29,8 @@ import sys
 import threading
 import time
 import tty
-from collections.abc import Callable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -60,6 +61,21 @@ def _arg_len(opcode: int, pending: bytes) -> int | None:
     if opcode == P.SONG:  # [140][song][len][note, duration]*len
         return 2 + 2 * pending[1] if len(pending) >= 2 else None
     return 1 + pending[0]  # Stream / Query List: [n][ids...]
+
+
+def bump_bits(points: Iterable[Any], x: float, y: float, th: float) -> int:
+    """Bumper bits (packet 7) of a body at (x, y, th) touching ``points`` (x, y): the bumper
+    covers the front half; contacts within ~6 deg of straight ahead press both sides."""
+    bits = 0
+    for px, py in points:
+        bearing = math.atan2(math.sin(math.atan2(py - y, px - x) - th), math.cos(math.atan2(py - y, px - x) - th))
+        if abs(bearing) > math.pi / 2:
+            continue  # the bumper covers the front half
+        if bearing > -0.1:
+            bits |= P.BUMP_LEFT
+        if bearing < 0.1:
+            bits |= P.BUMP_RIGHT
+    return bits
 
 
 class Create2Emulator:
@@ -330,18 +346,7 @@ class Create2Emulator:
                 target = getattr(self, f"cmd_{side}") / 1000.0
                 v = getattr(self, f"v_{side}")
                 setattr(self, f"v_{side}", v + max(-dv, min(dv, target - v)))
-            dr, dl = self.v_right * dt, self.v_left * dt
-            ds, dth = (dr + dl) / 2.0, (dr - dl) / P.WHEEL_BASE_M
-            mid = self.th + dth / 2.0
-            nx, ny = self.x + ds * math.cos(mid), self.y + ds * math.sin(mid)
-            if ds != 0.0 and self._moves_into(nx, ny):
-                # pushing into the obstacle: the wheels slip, nothing moves, encoders stand still
-                dr = dl = 0.0
-            else:
-                self.x, self.y = nx, ny
-                self.th = math.atan2(math.sin(self.th + dth), math.cos(self.th + dth))
-            # The bumper is pressed while the front half touches something (its ~5 mm travel).
-            self.bumps = self._bump_bits(self.x, self.y, self.th, self.radius + BUMPER_TRAVEL_M)
+            dr, dl = self._advance(self.v_right * dt, self.v_left * dt, dt)
             self.counts_right += dr / P.M_PER_COUNT
             self.counts_left += dl / P.M_PER_COUNT
             self.current_ma = -int(300 + 0.8 * (abs(self.cmd_right) + abs(self.cmd_left)))
@@ -350,17 +355,24 @@ class Create2Emulator:
                 values = self.sensor_values()
                 self._write(P.encode_frame({pid: values.get(pid, 0) for pid in self.stream_ids}, self.stream_ids))
 
+    def _advance(self, dr: float, dl: float, dt: float) -> tuple[float, float]:
+        """Move the body by the wheels' travel (m) this tick and set ``bumps``; return the travel
+        the encoders count. Kinematic here; ``actors/hardware/simworld.py`` moves a pybullet body."""
+        ds, dth = (dr + dl) / 2.0, (dr - dl) / P.WHEEL_BASE_M
+        mid = self.th + dth / 2.0
+        nx, ny = self.x + ds * math.cos(mid), self.y + ds * math.sin(mid)
+        if ds != 0.0 and self._moves_into(nx, ny):
+            # pushing into the obstacle: the wheels slip, nothing moves, encoders stand still
+            dr = dl = 0.0
+        else:
+            self.x, self.y = nx, ny
+            self.th = math.atan2(math.sin(self.th + dth), math.cos(self.th + dth))
+        # The bumper is pressed while the front half touches something (its ~5 mm travel).
+        self.bumps = self._bump_bits(self.x, self.y, self.th, self.radius + BUMPER_TRAVEL_M)
+        return dr, dl
+
     def _bump_bits(self, x: float, y: float, th: float, radius: float) -> int:
-        bits = 0
-        for px, py in self._contacts(x, y, radius):
-            bearing = math.atan2(math.sin(math.atan2(py - y, px - x) - th), math.cos(math.atan2(py - y, px - x) - th))
-            if abs(bearing) > math.pi / 2:
-                continue  # the bumper covers the front half
-            if bearing > -0.1:
-                bits |= P.BUMP_LEFT
-            if bearing < 0.1:
-                bits |= P.BUMP_RIGHT
-        return bits
+        return bump_bits(self._contacts(x, y, radius), x, y, th)
 
     def _moves_into(self, nx: float, ny: float) -> bool:
         """Does the step bring the body closer to what it touches?"""

@@ -1,4 +1,4 @@
-"""``FeetechArm``: an SO-100/SO-101 arm on a Feetech STS3215 bus as a supervised component.
+"""``FeetechArm``: an SO-100/SO-101 arm on a Feetech STS3215 bus as a robot plugin.
 
     arm = FeetechArm(component_name="arm", config=FeetechArmConfig(port="/dev/ttyUSB0"))
     arm.inputs(joint_command=Topic(name="joint_command", msg_type="JointState"))
@@ -12,7 +12,9 @@ replacing the Simulator with this component. Either map the policy's joints to L
 arm does: ``FeetechArmConfig(joints={"Rotation": 1, "Pitch": 2, "Elbow": 3, "Wrist_Pitch": 4,
 "Wrist_Roll": 5, "Jaw": 6})``.
 
-Each Timed step (``loop_rate``, 100 Hz by default) is one bus cycle of :class:`.arm.ServoArm`: a
+Built on :class:`emos.actors.hardware.plugin.RobotPlugin` with a driver session (the bus is a
+request/response protocol that :class:`.arm.ServoArm` runs). A joint command is taken in the step
+its message arrives in; each poll (``loop_rate``, 100 Hz by default) is one bus cycle: a
 SYNC_READ of every live joint's position/speed/load, a SYNC_WRITE of the goal positions, and a
 JointState of the joints that answered, in radians (0 at encoder step 2048), named as LeRobot's
 SO-100 follower names them unless ``config.joints`` says otherwise. Health, every step:
@@ -21,7 +23,8 @@ SO-100 follower names them unless ``config.joints`` says otherwise. Health, ever
 * COMPONENT_FAILURE naming the servos that do not answer (the others keep working);
 * SYSTEM_FAILURE naming the port while it is gone; the arm reconnects on a backoff ladder.
 
-A missing or taken port fails activation with an error naming it.
+A missing or taken port fails activation with an error naming it. Actions: ``set_torque``
+(on/off for every live servo), ``arm_status``.
 """
 from __future__ import annotations
 
@@ -33,14 +36,12 @@ import numpy as np
 from attrs import define, field
 
 from emos.config import validators as V
-from emos.config.base import BaseComponentConfig
 from emos.core import clock
-from emos.core.keyed import AllowedTopic, KeyedComponent
-from emos.io.topic import Topic
-from emos.ratelimit import RateLimitedLog
 
+from ..plugin import Command, Feedback, PluginConfig, RobotPlugin, SessionTransport, plugin_action
 from . import protocol as P
 from .arm import SO100_JOINTS, Reading, ServoArm
+from .protocol import Reg
 
 
 def _check_joints(instance: Any, attribute: Any, value: Any) -> None:
@@ -60,7 +61,7 @@ def _check_port(instance: Any, attribute: Any, value: Any) -> None:
 
 
 @define(kw_only=True)
-class FeetechArmConfig(BaseComponentConfig):
+class FeetechArmConfig(PluginConfig):
     """The bus and the joints on it."""
 
     port: str = field(default="/dev/ttyUSB0", validator=_check_port)
@@ -78,108 +79,101 @@ class FeetechArmConfig(BaseComponentConfig):
     reping_period: float = field(default=1.0, validator=V.number(gt=0, finite=True))
 
 
-class FeetechArm(KeyedComponent):
+class FeetechArm(RobotPlugin):
     """An arm of Feetech STS3215 servos (module docstring)."""
 
-    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "joint_command": AllowedTopic(types=("JointState", "JointTrajectory"),
-                                      default=Topic(name="joint_command", msg_type="JointState")),
-    }
-    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "joint_states": AllowedTopic(types=("JointState",), default=Topic(name="joint_states", msg_type="JointState")),
-    }
+    plugin_name = "feetech"
+    description = "SO-100/SO-101 arm on a Feetech STS3215 servo bus (STS/SCS protocol)"
+    feedback: ClassVar[Mapping[str, Feedback]] = {"joint_states": Feedback(msg_type="JointState", topic="joint_states", help="position, velocity, load")}
+    commands: ClassVar[Mapping[str, Command]] = {"joint_command": Command(msg_types=("JointState", "JointTrajectory"), topic="joint_command",
+                                         help="goal positions (a trajectory's last point)")}
 
-    def __init__(self, component_name: str, config: FeetechArmConfig | None = None, **kwargs: Any) -> None:
-        super().__init__(component_name, config=config or FeetechArmConfig(), **kwargs)
+    def __init__(self, component_name: str = "arm", config: FeetechArmConfig | None = None, **kwargs: Any) -> None:
+        super().__init__(component_name, config or FeetechArmConfig(), **kwargs)
         self.config: FeetechArmConfig
         self.arm: ServoArm | None = None
-        self._last_command: Any = None
+        self._targets: dict[str, float] | None = None
         self.bad_commands = 0
-        self._rlog = RateLimitedLog(self.get_logger(), 5.0)
 
     @classmethod
     def config_class(cls) -> type[FeetechArmConfig]:
         return FeetechArmConfig
 
-    # -- lifecycle -------------------------------------------------------------------------------
-    def custom_on_activate(self) -> None:
+    # -- transport -------------------------------------------------------------------------------
+    def make_transports(self) -> Mapping[str, SessionTransport]:
         cfg = self.config
         arm = ServoArm(cfg.port, cfg.joints, baudrate=cfg.baudrate, timeout=cfg.response_timeout, zero_steps=cfg.zero_steps,
                        return_delay_time=cfg.return_delay_time, torque_on_start=cfg.torque_on_start, reping_period=cfg.reping_period)
-        arm.start()  # FeetechPortError / FeetechNoAnswer name the port and servos: activation fails with them
-        self.arm = arm
-        self._last_command = None
-        self.get_logger().info("[%s] Feetech arm on %s: %s%s", self.component_name, cfg.port,
-                               ", ".join(f"{n}={i}" for n, i in cfg.joints.items()),
-                               f"; not answering: {'; '.join(arm.lost.values())}" if arm.lost else "")
 
-    def custom_on_deactivate(self) -> None:
-        self._close()
+        def start() -> None:
+            arm.start()  # FeetechPortError / FeetechNoAnswer name the port and servos: activation fails with them
+            self.arm, self._targets = arm, None
+            self.get_logger().info("[%s] Feetech arm on %s: %s%s", self.component_name, cfg.port,
+                                   ", ".join(f"{n}={i}" for n, i in cfg.joints.items()),
+                                   f"; not answering: {'; '.join(arm.lost.values())}" if arm.lost else "")
 
-    def custom_on_shutdown(self) -> None:
-        self._close()
-
-    def custom_on_error(self) -> bool:
-        self._close()
-        return True
-
-    def _close(self) -> None:
-        arm, self.arm = self.arm, None
-        if arm is not None:
+        def stop() -> None:
+            self.arm = None
             arm.stop()
 
-    # -- the step --------------------------------------------------------------------------------
-    def _execution_step(self, **kwargs: Any) -> None:
+        # The arm reconnects inside a bus cycle (its own ladder): a cycle without goals is a rung.
+        return {"bus": SessionTransport("Feetech bus", cfg.port, start=start, stop=stop,
+                                        error=lambda: arm.disconnected, retry=lambda: arm.cycle(None))}
+
+    # -- commands and the bus cycle ----------------------------------------------------------------
+    def on_command(self, key: str, msg: Any) -> None:
         arm = self.arm
         if arm is None:
-            self.health_status.set_healthy()
             return
-        reading = arm.cycle(self._new_targets(arm))
-        if reading is None:
-            self.health_status.set_fail_system(topic_names=[arm.port], message=arm.disconnected or f"serial port {arm.port!r} is down")
-            return
-        if reading.names:
-            self._publish(reading)
-        if arm.lost:
-            self.health_status.set_fail_component(component_names=[self.component_name],
-                                                  message="servos not answering: " + "; ".join(arm.lost.values()))
-        else:
-            self.health_status.set_healthy()
-
-    def _new_targets(self, arm: ServoArm) -> dict[str, float] | None:
-        """The goals of a joint command that arrived since the last step (None if none did)."""
-        topic = self.get_in_topic("joint_command")
-        msg = self.get_input(topic) if topic is not None else None
-        if msg is None or msg is self._last_command:
-            return None
-        self._last_command = msg
         try:
             names, positions = joint_targets(msg)
         except (TypeError, ValueError) as exc:
             self.bad_commands += 1
             self._rlog.warning("bad command", "[%s] joint command refused: %s", self.component_name, exc)
-            return None
+            return
         targets = dict(zip(names, positions, strict=True))
         refused = [n for n, v in targets.items() if n not in arm.joints or not math.isfinite(v)]
         if refused:
             self.bad_commands += 1
             self._rlog.warning(("refused", tuple(refused)), "[%s] joint command: unknown joints or non-finite positions %s "
                                "(this arm has %s)", self.component_name, refused, list(arm.joints))
-        return {n: v for n, v in targets.items() if n not in refused}
+        self._targets = {**(self._targets or {}), **{n: v for n, v in targets.items() if n not in refused}}
+
+    def on_poll(self) -> None:
+        arm = self.arm
+        if arm is None:
+            return
+        targets, self._targets = self._targets, None
+        reading = arm.cycle(targets)
+        if reading is None:
+            return  # the port went away: the next poll reports it (SYSTEM_FAILURE naming it) and reconnects
+        if reading.names:
+            self._publish(reading)
+        self.device_problem = "servos not answering: " + "; ".join(arm.lost.values()) if arm.lost else ""
 
     def _publish(self, reading: Reading) -> None:
         from emos.msgs import JointState
         from emos.msgs.std import Header
 
-        topic = self.get_out_topic("joint_states")
-        if topic is None:
-            return
-        self.publish(topic, JointState(header=Header(stamp=clock.stamp()), name=reading.names,
+        self.emit("joint_states", JointState(header=Header(stamp=clock.stamp()), name=reading.names,
                                        position=np.asarray(reading.position, dtype=float),
                                        velocity=np.asarray(reading.velocity, dtype=float),
                                        effort=np.asarray(reading.effort, dtype=float)))
 
-    # -- introspection (tests, `emos component call`) --------------------------------------------
+    # -- plugin actions (events, `emos component call NAME execute_method method=...`) ------------
+    @plugin_action("torque on (hold) or off (limp) for every live servo")
+    def set_torque(self, on: bool) -> list[str]:
+        arm = self.arm
+        if arm is None:
+            return []
+        done = []
+        for name, servo_id in arm.joints.items():
+            if servo_id not in arm.lost:
+                arm.bus.write(servo_id, Reg.TORQUE_ENABLE, 1 if on else 0)
+                done.append(name)
+        return done
+
+    @plugin_action("port, servos not answering, reconnects, dropped bytes, refused commands")
     def arm_status(self) -> dict:
         arm = self.arm
         if arm is None:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .protocol import ANGLE_Q6_FULL, NodeParser, encode_nodes
-from .scan import RevolutionAssembler, revolution_ranges
+from .scan import RevolutionStream, revolution_ranges
 
 __all__ = ["make_stream", "parse_cost"]
 
@@ -57,20 +57,20 @@ def _cpu(fn, repeats: int) -> float:
     return best
 
 
-def parse_cost(revolutions: int = 100, chunk: int = 4096, repeats: int = 3) -> dict[str, Any]:
+def parse_cost(revolutions: int = 100, chunk: int = 512, repeats: int = 3) -> dict[str, Any]:
     """CPU seconds per scan for ours and pyrplidar's (module docstring), and their ratio."""
     stream = make_stream(revolutions)
     chunks = [stream[i:i + chunk] for i in range(0, len(stream), chunk)]
 
     def ours_parse() -> None:
-        p = NodeParser()
+        p = NodeParser(hold_until_start=True)  # as the driver runs it (RevolutionStream)
         for c in chunks:
             p.feed(c)
 
     def ours_full() -> None:
-        p, asm = NodeParser(), RevolutionAssembler()
+        stream = RevolutionStream()
         for c in chunks:
-            for rev in asm.feed(p.feed(c)):
+            for rev in stream.feed(c):
                 revolution_ranges(rev.nodes, 360, 0.15, 12.0)
 
     result: dict[str, Any] = {"revolutions": revolutions, "bytes": len(stream), "chunk": chunk,
@@ -95,8 +95,10 @@ def parse_cost(revolutions: int = 100, chunk: int = 4096, repeats: int = 3) -> d
     return result
 
 
-def live_cost(scans: int = 30, map_yaml: str | None = None) -> dict[str, Any]:
-    """CPU seconds per scan of this process reading a live emulator (module docstring)."""
+def live_cost(scans: int = 30, map_yaml: str | None = None, against_pyrplidar: bool = True) -> dict[str, Any]:
+    """CPU seconds per scan of this process reading a live emulator (module docstring);
+    ``against_pyrplidar=False`` skips the second reading, by pyrplidar (``emos bench hardware``
+    compares the parsers on the same byte stream instead: :func:`parse_cost`)."""
     import os
     import subprocess
     import sys
@@ -127,6 +129,8 @@ def live_cost(scans: int = 30, map_yaml: str | None = None) -> dict[str, Any]:
         corrupt = driver.corrupt_scans
         driver.stop()
         result: dict[str, Any] = {"scans": got, "scans_per_s": rate, "corrupt_scans": corrupt, "ours_live_us_per_scan": ours * 1e6}
+        if not against_pyrplidar:
+            return result
         try:
             from pyrplidar import PyRPlidar  # type: ignore[import-untyped]
         except ImportError:
@@ -166,7 +170,7 @@ def live_cost(scans: int = 30, map_yaml: str | None = None) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m emos.actors.hardware.rplidar.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--revolutions", type=int, default=100)
-    ap.add_argument("--chunk", type=int, default=4096)
+    ap.add_argument("--chunk", type=int, default=512, help="bytes per read (the driver reads >= 512)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--live", type=int, default=0, metavar="SCANS", help="also read SCANS scans from a live emulator process")
     args = ap.parse_args(argv)

@@ -1,39 +1,42 @@
-"""``Rplidar``: a component that runs an :class:`RplidarDriver` and publishes ``LaserScan``.
+"""``Rplidar``: an RPLIDAR A1/A2 as a robot plugin publishing ``LaserScan`` (key ``scan``, the
+Simulator's key for the same topic).
 
-Activation opens the port and starts the scan (a bad, missing or taken port, or a lidar in
-Protection Stop, fails activation with an error naming the port, and the status says
-SYSTEM_FAILURE with the same words). Each step publishes the scans the driver assembled since
-the last step on the output topic (``/scan`` by default) and reports health: HEALTHY while the
-stream flows, SYSTEM_FAILURE naming the port while the device is lost (the driver keeps
-reconnecting; the stream resumes, and the status turns HEALTHY, when it is back).
+Built on :class:`emos.actors.hardware.plugin.RobotPlugin` with a driver session
+(:class:`~emos.actors.hardware.plugin.SessionTransport` over :class:`RplidarDriver`, which owns the
+serial port because the device's start-up is a request/response flow of its own: health, info,
+motor, scan). Activation opens the port and starts the scan (a bad, missing or taken port, or a
+lidar in Protection Stop, fails activation with an error naming the port, and the status says
+SYSTEM_FAILURE with the same words). Each poll (``loop_rate``) publishes the scans the driver
+assembled since the last one and reports health: HEALTHY while the stream flows, SYSTEM_FAILURE
+naming the port while the device is lost (the driver keeps reconnecting; the stream resumes,
+and the status turns HEALTHY, when it is back).
 
 Angles follow ROS (counter-clockwise from the lidar's heading, ``angle_min = -pi``); the
-RPLIDAR measures clockwise, ``scan.py`` converts. The component is self-contained so that the
-robot-plugin API can wrap it later: the driver (``driver.py``) does not know about topics.
+RPLIDAR measures clockwise, ``scan.py`` converts. Action: ``restart_scan`` (stop, then the whole
+start-up again); ``lidar_stats`` (scans, corrupt scans, dropped bytes, reconnects).
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from attrs import define, field
 
 from emos.config import validators as V
-from emos.config.base import BaseComponentConfig
 from emos.core import clock
-from emos.core.component import BaseComponent
-from emos.io.topic import Topic
 from emos.msgs.sensor import LaserScan
 from emos.msgs.std import Header
 
+from ..plugin import Feedback, PluginConfig, RobotPlugin, SessionTransport, plugin_action
 from .driver import RplidarDriver, RplidarError
 
-__all__ = ["RplidarConfig", "Rplidar"]
+__all__ = ["RplidarConfig", "Rplidar", "RplidarError"]
 
 
 @define(kw_only=True)
-class RplidarConfig(BaseComponentConfig):
+class RplidarConfig(PluginConfig):
     """``port``: the serial device; ``bins``: beams per published scan (360 for an A1's ~1 deg);
     ranges outside [range_min, range_max] are published as inf (no return)."""
 
@@ -48,61 +51,64 @@ class RplidarConfig(BaseComponentConfig):
     stall_timeout: float = field(default=2.0, converter=float, validator=V.finite_positive)
 
 
-class Rplidar(BaseComponent):
+class Rplidar(RobotPlugin):
     """See the module docstring."""
 
-    def __init__(self, *, component_name: str, config: RplidarConfig | None = None,
-                 outputs: list[Topic] | None = None, **kwargs: Any) -> None:
-        outputs = outputs or [Topic(name="/scan", msg_type="LaserScan")]
-        super().__init__(component_name=component_name, outputs=outputs, config=config or RplidarConfig(), **kwargs)
+    plugin_name = "rplidar"
+    description = "Slamtec RPLIDAR A1/A2 2D lidar (serial protocol, standard scan)"
+    feedback: ClassVar[Mapping[str, Feedback]] = {"scan": Feedback(msg_type="LaserScan", topic="/scan", help="one revolution, counter-clockwise from -pi")}
+
+    def __init__(self, component_name: str = "lidar", config: RplidarConfig | None = None, **kwargs: Any) -> None:
+        super().__init__(component_name, config or RplidarConfig(), **kwargs)
+        self.config: RplidarConfig
         self.driver: RplidarDriver | None = None
         self.published = 0
-        self._device_error = ""
 
     @classmethod
-    def config_class(cls) -> type[BaseComponentConfig]:
+    def config_class(cls) -> type[RplidarConfig]:
         return RplidarConfig
 
-    def custom_on_activate(self) -> None:
+    def make_transports(self) -> Mapping[str, SessionTransport]:
         cfg = self.config
-        assert isinstance(cfg, RplidarConfig)
-        self.driver = RplidarDriver(cfg.port, cfg.baudrate, bins=cfg.bins, range_min=cfg.range_min, range_max=cfg.range_max,
-                                    motor_pwm=cfg.motor_pwm, stall_timeout=cfg.stall_timeout)
-        try:
-            info = self.driver.start()
-        except RplidarError as exc:
-            self._device_error = str(exc)
-            self.driver = None
-            raise
-        self.get_logger().info("[%s] RPLIDAR on %s: model 0x%02X firmware %s", self.component_name, cfg.port, info.model, info.firmware)
+        driver = RplidarDriver(cfg.port, cfg.baudrate, bins=cfg.bins, range_min=cfg.range_min, range_max=cfg.range_max,
+                               motor_pwm=cfg.motor_pwm, stall_timeout=cfg.stall_timeout)
 
-    def custom_on_error(self) -> bool:
-        """A failed activation because of the device is a SYSTEM failure (the hardware, not this
-        component), reported with the port's name; the component may be activated again."""
-        if self._device_error:
-            self.health_status.set_fail_system(topic_names=[t.name for t in self.out_topics], message=self._device_error)
-            self._device_error = ""
-        return True
+        def start() -> None:
+            info = driver.start()
+            self.driver = driver
+            self.get_logger().info("[%s] RPLIDAR on %s: model 0x%02X firmware %s", self.component_name, cfg.port,
+                                   info.model, info.firmware)
 
-    def custom_on_deactivate(self) -> None:
-        if self.driver is not None:
-            self.driver.stop()
+        def stop() -> None:
+            driver.stop()
             self.driver = None
 
-    def custom_on_shutdown(self) -> None:
-        self.custom_on_deactivate()
+        return {"serial": SessionTransport("RPLIDAR", cfg.port, start=start, stop=stop, error=lambda: driver.error)}
 
-    def _execution_step(self, **kwargs: Any) -> None:
+    def on_poll(self) -> None:
         driver = self.driver
         if driver is None:
             return
         for scan in driver.get_scans():
-            self.publish(self.out_topics[0], self.to_msg(scan))
+            self.emit("scan", self.to_msg(scan))
             self.published += 1
-        if driver.error is not None:
-            self.health_status.set_fail_system(topic_names=[t.name for t in self.out_topics], message=driver.error)
-        else:
-            self.health_status.set_healthy()
+
+    @plugin_action("stop the scan and run the whole start-up again (health, info, motor, scan)")
+    def restart_scan(self) -> bool:
+        transport = self.transports.get("serial")
+        if transport is None:
+            return False
+        transport.close()
+        transport.open()
+        return True
+
+    @plugin_action("counters: scans, corrupt scans, dropped bytes, reconnects")
+    def lidar_stats(self) -> dict:
+        d = self.driver
+        if d is None:
+            return {"running": False}
+        return {"running": True, "port": d.port, "scans": d.scans, "corrupt_scans": d.corrupt_scans,
+                "bytes_dropped": d.bytes_dropped, "reconnects": d.reconnects, "error": d.error}
 
     def to_msg(self, scan) -> LaserScan:
         cfg = self.config

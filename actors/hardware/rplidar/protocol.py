@@ -227,6 +227,11 @@ class Nodes:
     angle_q6: np.ndarray  # uint16, degrees * 64, clockwise
     distance_q2: np.ndarray  # uint16, mm * 4, 0 = invalid
 
+    def __getitem__(self, part: slice) -> Nodes:
+        if not isinstance(part, slice):
+            raise TypeError(f"Nodes are sliced (nodes[a:b]), not indexed; got {type(part).__name__}")
+        return Nodes(self.start[part], self.quality[part], self.angle_q6[part], self.distance_q2[part])
+
     def __len__(self) -> int:
         return len(self.start)
 
@@ -275,6 +280,18 @@ def encode_nodes(start: np.ndarray, quality: np.ndarray, angle_q6: np.ndarray, d
 
 
 _NODE_DTYPE = np.dtype([("b0", "u1"), ("angle", "<u2"), ("dist", "<u2")])  # packed, 5 bytes
+# byte 0 of a node -> 1 if its S / S-bar bits say "start of a new scan" (S=1, S-bar=0), else 0
+_START_CANDIDATE = bytes(1 if b & 3 == 1 else 0 for b in range(256))
+
+
+def _read_only_empty() -> Nodes:
+    nodes = Nodes.empty()
+    for arr in (nodes.start, nodes.quality, nodes.angle_q6, nodes.distance_q2):
+        arr.flags.writeable = False
+    return nodes
+
+
+_EMPTY_NODES = _read_only_empty()  # shared: the parser returns it for "no node yet" (most reads in hold mode)
 
 
 def _fields(rows: np.ndarray) -> Nodes:
@@ -330,10 +347,18 @@ class NodeParser:
     # no check bit, so a slip inside them shows only in the alignment of the nodes after it.
     LOOKAHEAD = 2
 
-    def __init__(self, confirm: int = 3, max_step_deg: float | None = 30.0) -> None:
+    def __init__(self, confirm: int = 3, max_step_deg: float | None = 30.0, *, hold_until_start: bool = False,
+                 max_hold: int = 4096) -> None:
         if confirm < 1:
             raise ValueError(f"NodeParser: confirm must be >= 1, got {confirm!r}")
         self.confirm = confirm
+        # Hold mode (the driver's): in sync, bytes wait, unchecked, until a node that may carry
+        # a start flag (S=1, S-bar=0) is among them or ``max_hold`` bytes are waiting; then they
+        # are checked in one pass. The checks cost per call far more than per byte (a dozen
+        # numpy passes), and a consumer that cuts revolutions needs no node before the next
+        # start flag, so a 512-byte read costs one bytes.translate instead of a dozen passes.
+        self.hold_until_start = hold_until_start
+        self.max_hold = int(max_hold)
         # Samples come in rotation order (Fig. 4-8: one per measurement as the head turns), so
         # two consecutive nodes are a small clockwise step apart (mod 360; ~1 deg on an A1).
         # None turns this plausibility check off and leaves the check bits alone.
@@ -345,6 +370,9 @@ class NodeParser:
         self.dropped = 0
         self.resyncs = 0
         self.nodes = 0
+        #: where the last feed dropped bytes: indices into the nodes it returned (a drop at i lies
+        #: between node i - 1 and node i), for consumers that mark what a slip may have bent
+        self.drop_marks: list[int] = []
 
     def reset(self) -> None:
         """Forget buffered bytes and sync (a new SCAN session)."""
@@ -358,9 +386,18 @@ class NodeParser:
 
     def feed(self, data: bytes) -> Nodes:
         buf = self._buf + bytes(data) if self._buf else bytes(data)
+        if self.hold_until_start and self._synced and len(buf) < self.max_hold:
+            self.drop_marks = []
+            # In sync the buffer starts on a node's first byte: byte 0 of every node is at a
+            # multiple of 5. Keep waiting while none of them could be a start node.
+            if 1 not in buf[0:len(buf) - len(buf) % NODE_SIZE:NODE_SIZE].translate(_START_CANDIDATE):
+                self._buf = buf
+                return _EMPTY_NODES
         arr = np.frombuffer(buf, dtype=np.uint8)
         pos = 0
         runs: list[np.ndarray] = []  # structured node rows taken
+        taken = 0  # nodes in runs
+        self.drop_marks = []
         while True:
             if not self._synced:
                 # checks at every byte offset: only while looking for sync
@@ -369,6 +406,8 @@ class NodeParser:
                     # keep what could still start a confirmed lock once more bytes arrive
                     keep_from = max(pos, len(buf) - NODE_SIZE * self.confirm + 1)
                     self.dropped += keep_from - pos
+                    if keep_from > pos:
+                        self.drop_marks.append(taken)
                     pos = keep_from
                     break
                 # The first locked candidate is dropped too: bytes slipped in between a node's
@@ -377,6 +416,8 @@ class NodeParser:
                 # (Not at a clean start: a session's first byte is a node's first byte.)
                 skip = 0 if (lock == pos and not self._lost) else NODE_SIZE
                 self.dropped += lock + skip - pos
+                if lock + skip > pos:
+                    self.drop_marks.append(taken)
                 pos = lock + skip
                 self._last_angle = (int(arr[lock + 1]) >> 1 | int(arr[lock + 2]) << 7) if skip else None
                 self._synced = True
@@ -399,6 +440,7 @@ class NodeParser:
             count = (int(bad[0]) if len(bad) else k) - self.LOOKAHEAD
             if count > 0:
                 runs.append(rows[:count])
+                taken += count
                 pos += count * NODE_SIZE
                 self._last_angle = int(ang[count - 1])
             if not len(bad):
@@ -406,10 +448,11 @@ class NodeParser:
             self._synced, self._last_angle, self._lost = False, None, True  # a failed check: drop the suspect, resync
             self.resyncs += 1
             self.dropped += 1
+            self.drop_marks.append(taken)
             pos += 1
         self._buf = buf[pos:]
         if not runs:
-            return Nodes.empty()
+            return _EMPTY_NODES
         v = runs[0] if len(runs) == 1 else np.concatenate(runs)
         self.nodes += len(v)
         b0 = v["b0"]

@@ -75,20 +75,26 @@ class RevolutionStream:
     bent a node next to it)."""
 
     def __init__(self) -> None:
-        self.parser = NodeParser()
+        self.parser = NodeParser(hold_until_start=True)  # revolutions need no node before the next start flag
         self.assembler = RevolutionAssembler()
 
     def feed(self, data: bytes) -> list[Revolution]:
-        before = self.parser.dropped
         nodes = self.parser.feed(data)
-        if self.parser.dropped != before:
-            # the nodes just parsed may sit on either side of the slip: the revolution they
-            # close is as suspect as the one they open
-            self.assembler.mark_dirty()
-            revs = self.assembler.feed(nodes)
-            self.assembler.mark_dirty()
-            return [Revolution(r.nodes, clean=False) for r in revs]
-        return self.assembler.feed(nodes)
+        marks = self.parser.drop_marks
+        if not marks:
+            return self.assembler.feed(nodes)
+        # A slip may have cost or bent the nodes on either side of it: the revolution that holds
+        # the node before it and the one that holds the node after it are both dirty.
+        asm, out, prev = self.assembler, [], 0
+        for m in marks:
+            if m >= prev:
+                out += asm.feed(nodes[prev:m])
+                asm.mark_dirty()
+                out += asm.feed(nodes[m:m + 1])
+                prev = m + 1
+            asm.mark_dirty()
+        out += asm.feed(nodes[prev:])
+        return out
 
 
 def revolution_ranges(nodes: Nodes, bins: int, range_min: float, range_max: float) -> tuple[np.ndarray, np.ndarray]:

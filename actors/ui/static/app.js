@@ -42,7 +42,7 @@ for (const tab of document.querySelectorAll(".tab")) {
     for (const t of document.querySelectorAll(".tab")) t.classList.toggle("active", t === tab);
     for (const v of document.querySelectorAll(".view")) v.hidden = v.id !== "view-" + tab.dataset.view;
     if (tab.dataset.view === "settings") loadSettings();
-    if (tab.dataset.view === "system") pollSystem();
+    if (tab.dataset.view === "system") { pollSystem(); loadGraph(); }
   });
 }
 
@@ -428,8 +428,15 @@ function connect() {
 
 // ------------------------------------------------------------------ start
 async function start() {
+  // Who we are: a viewer watches only (the server refuses its changes anyway; the page just
+  // does not offer them).
+  const me = await (await fetch("/api/session")).json();
+  state.role = me.role;
+  $("#role").textContent = me.role + (me.name ? ` · ${me.name}` : "");
+  document.body.classList.toggle("role-viewer", me.role !== "operator");
   const res = await fetch("/api/layout");
   const layout = await res.json();
+  if (state.role !== "operator") layout.inputs = [];
   state.layout = layout;
   document.title = layout.title;
   $("#title").textContent = layout.title.replace(/^EMOS\s*·?\s*/, "");

@@ -30,7 +30,7 @@ async function loadSettings() {
       if (hint) row.append(el("div", { class: "hint" }, hint));
       c.append(row);
     }
-    const apply = el("button", { class: "act", "data-apply": comp.component }, "Apply");
+    const apply = el("button", { class: "act", "data-apply": comp.component, "data-operator": "" }, "Apply");
     apply.addEventListener("click", async () => {
       const values = {};
       for (const [name, { f, input }] of Object.entries(inputs)) {
@@ -81,7 +81,7 @@ async function pollSystem() {
           const buttons = el("td", {});
           for (const action of ["start", "stop", "restart"]) {
             if (n.name === data.ui && action !== "restart") continue;
-            buttons.append(el("button", { class: "act secondary", "data-action": action, "data-component": n.name, onclick: async () => {
+            buttons.append(el("button", { class: "act secondary", "data-action": action, "data-component": n.name, "data-operator": "", onclick: async () => {
               const r = await postJSON(`/api/system/${encodeURIComponent(n.name)}/${action}`, {});
               const b = await r.json();
               b.ok ? toast(`${n.name}: ${b.detail}`, true) : toast(b.error, false);

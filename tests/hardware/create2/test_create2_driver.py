@@ -18,19 +18,23 @@ from .conftest import Lockstep, twist
 pytestmark = pytest.mark.process  # an emulator thread on a real pty; the CLI test starts a process
 
 
-def _drive(step: Lockstep, v: float, w: float, seconds: float, every: float = 0.1) -> None:
-    """Publish /cmd_vel every ``every`` s of robot time for ``seconds``, as a controller does."""
+def _drive(step: Lockstep, v: float, w: float, seconds: float, every: float = 0.1) -> float:
+    """Publish /cmd_vel every ``every`` s of robot time for ``seconds``, as a controller does;
+    returns the robot time of the last one (steps are whole emulator ticks: not exactly ``every``)."""
     n = max(1, round(seconds / every))
+    fed = step.h.time
     for _ in range(n):
+        fed = step.h.time
         step.h.feed("/cmd_vel", twist(v, w))
         step.run(every)
+    return fed
 
 
 def test_square_odometry_matches_emulator_truth(emulator):
     with ComponentHarness(Create2Base(port=emulator.link)) as h:
         step = Lockstep(h, emulator)
         assert step.run(5.0, until=lambda: h.latest("/battery") is not None)
-        battery_start = h.latest("/battery").data
+        battery_start = h.latest("/battery").percentage
         path = 0.0
         for _ in range(4):
             _drive(step, 0.3, 0.0, 1.2)
@@ -50,16 +54,16 @@ def test_square_odometry_matches_emulator_truth(emulator):
         q = odo.pose.pose.orientation
         assert abs(math.remainder(2 * math.atan2(q.z, q.w) - th, 2 * math.pi)) <= tol_th
         assert moved < 0.3  # a closed square (approximately): the loop came back near the start
-        assert h.component.link.parser.dropped_bytes == 0
-        assert 0 < h.latest("/battery").data < battery_start  # percent of capacity, draining
+        assert h.component.parser.dropped_bytes == 0
+        assert 0 < h.latest("/battery").percentage < battery_start <= 1.0  # fraction of capacity, draining
 
 
 def test_watchdog_sends_one_stop_after_cmd_timeout_of_robot_time(emulator):
     with ComponentHarness(Create2Base(port=emulator.link, cmd_timeout=0.5)) as h:
         step = Lockstep(h, emulator)
-        _drive(step, 0.2, 0.0, 1.0)  # fresh commands every 0.1 s: no watchdog
+        last_cmd_time = _drive(step, 0.2, 0.0, 1.0)  # fresh commands every 0.1 s: no watchdog
         assert h.component.stops_sent == 0 and emulator.cmd_right == 200
-        last_cmd_tick, last_cmd_time = emulator.drive_log[-1][0], h.time - 0.1  # fed 0.1 s before the loop ended
+        last_cmd_tick = emulator.drive_log[-1][0]
         step.run(1.5)  # silence
         zeros = [(t, r, left) for t, _, r, left in emulator.drive_log if t >= last_cmd_tick and (r, left) == (0, 0)]
         assert len(zeros) == 1 and h.component.stops_sent == 1  # once, not every period
@@ -101,10 +105,10 @@ def test_unplug_reports_system_failure_naming_port_and_replug_resumes(emulator):
         assert step.run(5.0, until=lambda: comp.health_status.is_system_fail)
         assert emulator.link in comp.health_status().message
         assert emulator.cmd_right == 100  # unreachable: the robot keeps its last command, as a real one does
-        frames_before = comp.link.parser.frames
+        frames_before = comp.parser.frames
         step.run(0.3)
         emulator.replug()
-        assert step.run(10.0, until=lambda: comp.health_status.is_healthy and comp.link.parser.frames > frames_before + 5)
+        assert step.run(10.0, until=lambda: comp.health_status.is_healthy and comp.parser.frames > frames_before + 5)
         # Reachable again: the first thing it gets is a stop, before any new command arrives.
         assert emulator.cmd_right == emulator.cmd_left == 0
         assert comp.stop_log[-1][1] == "reconnected"
