@@ -117,7 +117,11 @@ def test_microphone_recording_reaches_the_audio_topic(ui_system, browser):
 
     out = ui_system.out
     button = browser.find_element(By.CSS_SELECTOR, "button[data-record='/voice']")
-    ActionChains(browser).click_and_hold(button).pause(1.0).release().perform()
+    ActionChains(browser).click_and_hold(button).perform()
+    # Hold for a second of recording, counted from when the page says the microphone is open:
+    # opening it takes a while on a loaded machine.
+    wait_for(lambda: "Recording" in button.text, what="the microphone open")
+    ActionChains(browser).pause(1.0).release().perform()
     sizes = wait_for(lambda: received(out, "/voice"), what="a recording on /voice")
     assert sizes[-1] >= 8000 and sizes[-1] % 2 == 0, sizes  # about a second of 16 kHz 16-bit PCM
 

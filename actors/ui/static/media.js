@@ -4,13 +4,14 @@
 // The microphone, recorded as 16 kHz mono 16-bit PCM (what Audio topics carry), sent as a WAV
 // when the button is released. Browsers allow it on localhost or over HTTPS only.
 function microphone(topic, button) {
-  let ctx = null, stream = null, node = null, chunks = [];
+  let ctx = null, stream = null, node = null, chunks = [], starting = false, released = false;
   async function start() {
-    if (ctx) return;
+    if (ctx || starting) return;
     if (!navigator.mediaDevices) { toast("the microphone needs HTTPS or localhost; upload a WAV instead", false); return; }
+    starting = true; released = false;
     try {
       stream = await navigator.mediaDevices.getUserMedia({ audio: { channelCount: 1 } });
-    } catch (e) { toast(`microphone: ${e.message}`, false); return; }
+    } catch (e) { toast(`microphone: ${e.message}`, false); return; } finally { starting = false; }
     ctx = new AudioContext({ sampleRate: 16000 });
     const source = ctx.createMediaStreamSource(stream);
     node = ctx.createScriptProcessor(4096, 1, 1);
@@ -18,9 +19,10 @@ function microphone(topic, button) {
     node.onaudioprocess = ev => chunks.push(new Float32Array(ev.inputBuffer.getChannelData(0)));
     source.connect(node); node.connect(ctx.destination);
     button.textContent = "Recording... release to send";
+    if (released) stop();  // the button was let go while the microphone was opening: send what there is
   }
   async function stop() {
-    if (!ctx) return;
+    if (!ctx) { released = starting; return; }
     node.disconnect(); stream.getTracks().forEach(t => t.stop());
     const rate = ctx.sampleRate;
     await ctx.close(); ctx = null;
