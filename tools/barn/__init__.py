@@ -87,6 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", type=Path, default=None, metavar="PICTURE",
                         help="with --report: draw every trial's outcome, world by seed, into this .png/.svg/.pdf "
                              "(with --against, both files on the pairs both hold)")
+    from .generate import add_generate_arguments
+
+    add_generate_arguments(parser)  # --generate N, --generated-dir DIR (docs/barn-generated.md)
 
 
 def summarize(results: list[EpisodeResult], seeds: int | None = None) -> dict:
@@ -163,6 +166,9 @@ def run(args: argparse.Namespace) -> int:
     if args.controller is None:
         args.controller = DYNABARN_DEFAULT_CONTROLLER if args.dynabarn else DEFAULT_CONTROLLER
     try:
+        from .generate import apply_generate
+
+        apply_generate(args)  # --generate N: N fresh worlds become the run's --worlds-file
         rules = _rules(args)
         worlds, indices = _load(args)
     except (FileNotFoundError, ValueError) as exc:
@@ -280,7 +286,7 @@ def _report(args: argparse.Namespace, indices: list[int], trials: dict[tuple[int
     wall_total = time.perf_counter() - wall0
     print()
     _print_summary("all", summary, len(results))
-    if not args.dynabarn:
+    if not args.dynabarn and getattr(args, "generate", None) is None:  # the index % 5 split means nothing for generated worlds
         # The split: tune on idx % 5 != 0, report idx % 5 == 0 apart.
         for label, part in (("idx % 5 != 0", [r for r in results if r.idx % 5 != 0]),
                             ("idx % 5 == 0", [r for r in results if r.idx % 5 == 0])):

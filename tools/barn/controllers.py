@@ -65,7 +65,8 @@ CONTROLLERS: dict[str, tuple[Callable[[], Navigator], str]] = {
     "builtin-carve": (_builtin_carve, "builtin-odom, clearing free space along beams instead"),
 }
 for _name, _cls in (("navcore-dwa", "DWA"), ("navcore-purepursuit", "PurePursuit"),
-                    ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ")):
+                    ("navcore-stanley", "Stanley"), ("navcore-dvz", "DVZ"), ("mppi", "MPPI"),
+                    ("rpp", "RegulatedPurePursuit")):
     CONTROLLERS[_name] = (_navcore(_name), f"simulator global plan + emos.actors.nav {_cls} local controller")
 
 

@@ -195,6 +195,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
         t0 = _latest_stamp(truth, proc, log_path)  # the trial starts when the goal is given
         goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=goal_xy[0], y=goal_xy[1]))
         last_xy: tuple[float, float] | None = None
+        last_motion = (0.0, 0.0)  # true (v, omega) of the last moving tick: what a collision was caused by
         last_t = 0.0
         distance = 0.0
         goal_sent = 0.0
@@ -217,6 +218,9 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                     continue
                 p = msg.pose.pose.position
                 xy = (p.x, p.y)
+                moving = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+                if abs(moving[0]) > 1e-3 or abs(moving[1]) > 1e-3:  # a contact zeroes the twist: keep the last motion
+                    last_motion = moving
                 if last_xy is not None:
                     distance += math.dist(xy, last_xy)
                 last_xy, last_t = xy, t - t0
@@ -249,7 +253,8 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                     # A touch between the last poll and the goal still fails the trial.
                     return False, True, outcome.time_s, distance, "collision (before reaching the goal)", misses
                 reason = "goal" if outcome.reached else (
-                    f"time limit{drift.describe()}" if outcome.timeout else _collision_reason(contacts, last_xy))
+                    f"time limit{drift.describe()}" if outcome.timeout
+                    else _collision_reason(contacts, last_xy) + _collision_cause(*last_motion))
                 return outcome.reached, outcome.collided, outcome.time_s, distance, reason, misses
             if proc.poll() is not None:
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
@@ -301,6 +306,21 @@ class _PoseDrift:
             return ""
         dist, (bx, by), (tx, ty) = err
         return f"; the stack believed ({bx:.2f}, {by:.2f}), {dist:.2f} m from the true ({tx:.2f}, {ty:.2f})"
+
+
+def _collision_cause(v: float, omega: float) -> str:
+    """'; <cause> (v, omega)' from the true body twist just before a contact: ``reversing``
+    (v < -0.02 m/s), ``rotation`` (|v| <= 0.05 m/s, turning), ``arc`` (driving and turning,
+    |omega| > 0.05 rad/s) or ``straight``; for the collision counts by cause."""
+    if v < -0.02:
+        cause = "reversing"
+    elif abs(v) <= 0.05 and abs(omega) > 0.05:
+        cause = "rotation"
+    elif abs(omega) > 0.05:
+        cause = "arc"
+    else:
+        cause = "straight"
+    return f"; {cause} (v {v:.2f} m/s, omega {omega:.2f} rad/s)"
 
 
 def _collision_reason(contacts: list, last_xy: tuple[float, float] | None) -> str:

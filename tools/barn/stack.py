@@ -45,6 +45,8 @@ PROCESS_CONTROLLERS: dict[str, tuple[str, bool]] = {
     "navcore-purepursuit": ("PurePursuit", True),
     "navcore-stanley": ("Stanley", True),
     "navcore-dvz": ("DVZ", True),
+    "mppi": ("MPPI", True),  # Nav2's MPPI (emos.actors.nav.controllers.mppi)
+    "rpp": ("RegulatedPurePursuit", True),  # Nav2's Regulated Pure Pursuit
 }
 
 # --controller names whose ArcSampler checks the arcs the base achieves (ResponseConfig)
@@ -216,7 +218,7 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     control = Topic(name="/control", msg_type="Twist")
     controller.outputs(command=control)
     driver = DriveManager("driver", config=DriveManagerConfig(
-        critical_zone_distance=0.02, slowdown_zone_distance=0.05, max_distance=recovery.backup_distance, **common))
+        critical_zone_distance=0.02, slowdown_zone_distance=0.05, max_distance=recovery.backup_distance, sensor_pose=mount, **common))
     driver.inputs(command=control)
     driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
     if recovery.enabled:

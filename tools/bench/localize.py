@@ -59,6 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sigma-hit", type=float, default=None, help="default 0.15 (global: 0.2)")
     parser.add_argument("--min-ess", type=float, default=None, help="min_ess_fraction: tempering (default 0; global: 0.5)")
     parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
+    parser.add_argument("--field", choices=("bilinear", "nearest"), default="bilinear",
+                        help="likelihood-field lookup: bilinear distance interpolation (default) or Nav2's nearest cell")
     parser.add_argument("--recovery", default=None,
                         help="recovery_alpha_slow,recovery_alpha_fast (default 0,0: none, as Nav2; global: 0.001,0.1)")
     parser.add_argument("--peer", choices=("amcl",), default=None,
@@ -227,7 +229,8 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
                       sigma_hit=args.sigma_hit if args.sigma_hit is not None else (0.2 if g else 0.15),
                       update_min_d=0.25, update_min_a=0.2, jump_distance=5.0, jump_angle=math.pi,
                       recovery_alpha_slow=recovery[0], recovery_alpha_fast=recovery[1],
-                      min_ess_fraction=args.min_ess if args.min_ess is not None else (0.5 if g else 0.0))
+                      min_ess_fraction=args.min_ess if args.min_ess is not None else (0.5 if g else 0.0),
+                      field_interpolation=getattr(args, "field", "bilinear"))
 
 
 def _plot(path: str, data: dict[str, Any], trial: dict[str, Any], title: str) -> None:

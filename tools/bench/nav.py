@@ -32,7 +32,7 @@ from emos.actors.nav.costs import TrajectoryCostsWeights, evaluate_costs, polyli
 from emos.actors.nav.kinematics import integrate, rollout
 from emos.actors.nav.local_map import LocalMapper, MapConfig
 from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
-from emos.actors.nav.safety import SafetyZones, SafetyZonesConfig
+from emos.actors.nav.safety import SafetyZones, SafetyZonesConfig, SweptFootprint
 
 __all__ = ["add_arguments", "run", "measure_kernels"]
 
@@ -134,6 +134,43 @@ def _circle_scan(pose: np.ndarray, circles: list[tuple[float, float, float]], n:
     return LaserScan2D(ranges, angle_min=-math.pi, angle_increment=2 * math.pi / n, range_max=8.0)
 
 
+def bench_swept(commands: int = 500) -> dict[str, float]:
+    """The DriveManager's swept-footprint check, one call per command: the realistic Jackal
+    (jackal-barn box, its limits, the default skid-steer motion model) among BARN-like posts
+    (radius 0.075 m, one per 0.6 m^2 on average, none inside the robot), commands and previous
+    commands drawn over its speed range. Time per call (ms)."""
+    from emos.actors.sim.robots import PRESETS
+    from emos.tools.barn.harness import nav_robot
+
+    rng = np.random.default_rng(38)
+    robot = nav_robot(PRESETS["jackal-barn"])
+    swept = SweptFootprint(robot)
+    xy = rng.uniform(-3.0, 3.0, (60, 2))
+    xy = xy[np.hypot(xy[:, 0], xy[:, 1]) > robot.radius + 0.2]
+    scan = _circle_scan(np.zeros(3), [(float(x), float(y), 0.075) for x, y in xy])
+    points = scan.points()
+    cmds = np.c_[rng.uniform(-0.5, 2.0, commands), np.zeros(commands), rng.uniform(-3.0, 3.0, commands)]
+    prevs = np.clip(cmds + np.c_[rng.normal(0, 0.2, commands), np.zeros(commands), rng.normal(0, 0.3, commands)], -3, 3)
+    # Per command: the fastest of three calls (what it costs on a core of its own: the others
+    # are another process's turn on this shared machine) and the first call as it came.
+    # The thread's CPU time too: what the call costs whoever else runs.
+    best, first, cpu, stopped = [], [], [], 0
+    for cmd, prev in zip(cmds, prevs):
+        times = []
+        for _ in range(3):
+            c0, t0 = time.thread_time(), time.perf_counter()
+            result = swept.check(cmd, prev, points, lead=0.02)
+            times.append(time.perf_counter() - t0)
+            cpu.append(time.thread_time() - c0)
+        best.append(min(times))
+        first.append(times[0])
+        stopped += result.stopped
+    b, f, c = 1e3 * np.asarray(best), 1e3 * np.asarray(first), 1e3 * np.asarray(cpu)
+    return {"p50": float(np.percentile(b, 50)), "p99": float(np.percentile(b, 99)), "max": float(b.max()),
+            "first_p99": float(np.percentile(f, 99)), "cpu_p50": float(np.percentile(c, 50)),
+            "cpu_p99": float(np.percentile(c, 99)), "points": int(len(points)), "stopped": stopped / commands}
+
+
 def bench_dwa(steps: int = 200) -> dict[str, float]:
     robot = _robot()
     dwa = DWA(robot, DWAConfig(control_time_step=0.1, prediction_horizon=1.0, control_horizon=0.2,
@@ -158,6 +195,41 @@ def bench_dwa(steps: int = 200) -> dict[str, float]:
     return {"p50": float(np.percentile(arr, 50)), "p95": float(np.percentile(arr, 95))}
 
 
+def bench_mppi(steps: int = 60) -> dict[str, Any]:
+    """MPPI with Nav2's example batch (2,000 samples x 56 steps of 0.05 s) on DWA's course, one
+    thread: time per control step, the rate it allows, and where the time goes (per stage)."""
+    from emos.actors.nav.controllers.mppi import MPPI, MPPIConfig
+
+    robot = _robot()
+    mppi = MPPI(robot, MPPIConfig(batch_size=2000, time_steps=56, model_dt=0.05, control_time_step=0.1))
+    x = np.linspace(0.0, 8.0, 161)
+    mppi.set_path(np.stack([x, 0.3 * np.sin(x)], 1))
+    circles = [(2.5, 0.3, 0.2), (5.0, -0.8, 0.3), (6.0, 1.0, 0.25)] + [(xx, 2.0, 0.1) for xx in np.arange(0, 8, 0.5)]
+    pose, vel = np.zeros(3), np.zeros(3)
+    times, cpu = [], []
+    mppi.compute(pose, vel, _circle_scan(pose, circles))  # first step: imports and allocations
+    mppi.stage_ms = {}
+    for _ in range(steps):
+        scan = _circle_scan(pose, circles)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        res = mppi.compute(pose, vel, scan)
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.thread_time() - c0)
+        if res.status.value == "goal_reached":
+            mppi.set_path(np.stack([x, 0.3 * np.sin(x)], 1))
+            pose, vel = np.zeros(3), np.zeros(3)
+            continue
+        vel = res.command
+        pose = integrate(pose, vel, 0.1)
+    arr, cpu_ms = 1e3 * np.asarray(times), 1e3 * np.asarray(cpu)
+    p50 = float(np.percentile(arr, 50))
+    # CPU time says what one core costs when the machine is shared (the wall clock then counts
+    # other processes' turns too); the stages are wall-clock shares of the step.
+    return {"p50": p50, "p95": float(np.percentile(arr, 95)), "hz_at_p50": 1e3 / p50,
+            "cpu_p50": float(np.percentile(cpu_ms, 50)), "hz_at_cpu_p50": 1e3 / float(np.percentile(cpu_ms, 50)),
+            "stages_ms": {k: round(v / steps, 3) for k, v in mppi.stage_ms.items()}}
+
+
 def measure_kernels(peers: bool = False) -> dict[str, Any]:
     """The JSON kernels; with ``peers`` also the same-run reference formulations."""
     local_ms, local_cold, local_rays = bench_local_map()
@@ -172,6 +244,8 @@ def measure_kernels(peers: bool = False) -> dict[str, Any]:
         "critical_zone_100k_ms": cloud_ms,
         "critical_zone_scan_ms": scan_ms,
         "dwa_step_ms": bench_dwa(),
+        "mppi_step_ms": bench_mppi(),
+        "swept_check_ms": bench_swept(),
         "_local_map_cold_ms": local_cold,
         "_local_map_rays_ms": local_rays,
         "_dense_cost_ms": dense,
@@ -216,6 +290,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'local_map (first scan)':<26}{kernels['_local_map_cold_ms']:>10.3f}{'':>12}")
     dwa = result["dwa_step_ms"]
     print(f"{'dwa_step p50 / p95':<26}{dwa['p50']:>10.3f}{10.0:>12.1f}   p95 {dwa['p95']:.3f}")
+    mp = result["mppi_step_ms"]
+    print(f"{'mppi_step p50 / p95':<26}{mp['p50']:>10.3f}{33.3:>12.1f}   p95 {mp['p95']:.3f}  ({mp['hz_at_p50']:.0f} Hz; thread CPU "
+          f"p50 {mp['cpu_p50']:.1f} ms = {mp['hz_at_cpu_p50']:.0f} Hz; 2,000 x 56, "
+          "per stage: " + ", ".join(f"{k} {v:.1f}" for k, v in mp["stages_ms"].items()) + ")")
+    sw = result["swept_check_ms"]
+    print(f"{'swept_check p50 / p99':<26}{sw['p50']:>10.3f}{1.0:>12.1f}   p99 {sw['p99']:.3f} (best of 3 per command; "
+          f"first call p99 {sw['first_p99']:.3f}; thread CPU p50 {sw['cpu_p50']:.3f}, p99 {sw['cpu_p99']:.3f}); "
+          f"{sw['points']} scan points, {100 * sw['stopped']:.0f}% of commands stopped")
     print("Same-run peers (direct formulations of the same computation):")
     rays = kernels["_local_map_rays_ms"]
     print(f"  local map by sampling every ray: {rays:.3f} ms ({rays / result['local_map_ms']:.1f}x the cell lookup)")

@@ -75,7 +75,7 @@ EXAMPLES: dict[str, str] = {
     "bench localize": "emos bench localize --log ../shared/benchmarks/radish/intel-corrected.log.gz --seeds 5\n"
                       "emos bench localize --log aces-corrected.log.gz --global --seeds 20 --json",
     "bench sim": "emos bench sim\nemos bench sim --json",
-    "bench barn": "emos bench barn\nemos bench barn --json",
+    "bench barn": "emos bench barn\nemos bench barn --json\nemos bench barn --generate 30 --seed 7 --seeds 1",
     "bench agents": "emos bench agents\nemos bench agents --json",
     "bench slam": "emos bench slam --log ../shared/benchmarks/radish/intel-corrected.log.gz\n"
                   "emos bench slam --log orebro-corrected.log.gz --seed 1 --json\n"

@@ -1,4 +1,9 @@
-"""``emos map build RUN.mcap -o office`` and ``emos map show office.yaml``: the map workflow.
+"""``emos map record -o RUN.mcap``, ``emos map build RUN.mcap -o office`` and ``emos map show
+office.yaml``: the map workflow.
+
+``record`` is ``emos record`` of the scan and odometry topics (``--scan``, ``--odom``, default
+``/scan`` and ``/odom``; or the topics named) of a running system, until Ctrl-C or
+``--duration``: drive the robot meanwhile. Every ``emos record`` option works.
 
 ``build`` runs the graph SLAM (``emos.actors.nav.mapping.slam``) offline on a recording's
 LaserScan and Odometry topics (``--scan``, ``--odom``; each scan is paired with the newest
@@ -7,7 +12,8 @@ odometry recorded before it; a scan becomes a node when the robot moved ``--min-
 the graph, and saves ``office.yaml`` + ``office.pgm`` (the ROS map_server format the MapServer
 reads). ``show`` draws a saved map to a PNG (``-o``, default next to the YAML).
 
-Record a run first with ``emos record /scan /odom -o run.mcap`` while driving the robot.
+Record a run first with ``emos map record -o run.mcap`` (or ``emos record /scan /odom -o
+run.mcap``) while driving the robot.
 """
 from __future__ import annotations
 
@@ -20,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["add_arguments", "run", "build"]
+__all__ = ["add_arguments", "run", "build", "record_args"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,6 +42,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--resolution", type=float, default=0.05, help="map cell size in m (default 0.05)")
     b.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
     b.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    r = sub.add_parser("record", help="record a running system's scans and odometry to MCAP, for `emos map build`",
+                       description="emos record of the LaserScan and Odometry topics (--scan, --odom; or the topics "
+                                   "given), until Ctrl-C: drive the robot around meanwhile, then `emos map build`")
+    from . import record as _record
+
+    _record.add_arguments(r)
+    r.add_argument("--scan", default="/scan", help="LaserScan topic recorded when no topics are given (default /scan)")
+    r.add_argument("--odom", default="/odom", help="Odometry topic recorded when no topics are given (default /odom)")
     s = sub.add_parser("show", help="draw a saved map (map_server YAML) to a PNG")
     s.add_argument("file", help="a map_server YAML")
     s.add_argument("-o", "--output", default=None, help="PNG to write (default: the YAML's name with .png)")
@@ -127,10 +141,23 @@ def show_map(args: argparse.Namespace) -> Path:
     return out
 
 
+def record_args(args: argparse.Namespace) -> argparse.Namespace:
+    """``emos map record``'s arguments as ``emos record`` takes them: the scan and odometry
+    topics unless topics were named."""
+    out = argparse.Namespace(**vars(args))
+    if not out.topics:
+        out.topics = [args.scan, args.odom]
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     from emos.actors.nav.maps import MapFileError
     from emos.interop.mcap_read import NotMcapFile
 
+    if args.map_verb == "record":
+        from . import record as _record
+
+        return _record.run(record_args(args))
     try:
         if args.map_verb == "build":
             print(build(args))

@@ -1,7 +1,10 @@
 """``DriveManager``: the last gate before the motors.
 
 Every command from the controller goes through the safety zones (emergency stop, slowdown),
-the velocity/acceleration limits and the optional smoothing of :class:`DriveSafety`. A
+the velocity/acceleration limits and the optional smoothing of :class:`DriveSafety`, and then
+the swept-footprint check (``swept_check``): the robot's footprint over the command's period
+and the stop after it, rotations included, against the latest scan and the blind-spot memory;
+a command that would touch is slowed along its path or becomes a stop (docs/safety.md). A
 watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
 the command input goes stale or its publisher process died, when odometry goes stale
 (``closed_loop``), or when the scan goes stale: the robot never drives on old information.
@@ -13,6 +16,7 @@ The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -29,7 +33,8 @@ from emos.msgs.sensor import LaserScan
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 from emos.msgs.std import Bool, Header
 
-from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig
+from ..controllers.sensors import obstacle_points
+from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig, SweptConfig
 from ..safety import maneuvers as M
 from ..safety.blind_spot import BlindSpotConfig, BlindSpotMemory
 from ..safety.zones import ZoneCheck
@@ -43,6 +48,16 @@ SETTLE_S = 1.0  # node-clock s: the longest a maneuver waits for the base to com
 
 def _seconds(lo: float = 1e-3, hi: float = 1e3) -> Any:
     return in_range(min_value=lo, max_value=hi)
+
+
+def _pose(value: Any) -> tuple[float, float, float]:
+    try:
+        x, y, yaw = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"DriveManagerConfig.sensor_pose: expected (x, y, yaw), got {value!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise ValueError(f"DriveManagerConfig.sensor_pose: expected finite (x, y, yaw), got {value!r}")
+    return (x, y, yaw)
 
 
 @define(kw_only=True)
@@ -72,6 +87,23 @@ class DriveManagerConfig(NavComponentConfig):
     """s: obstacle points seen this long ago still block backing up where the laser cannot see
     now (behind a 270 degree laser); 0 turns the memory off. Needs the ``location`` input."""
     blind_spot_radius: float = field(default=2.0, validator=in_range(min_value=0.1, max_value=50.0))
+    sensor_pose: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), converter=_pose)
+    """(x, y, yaw) of the laser on the robot (m, rad): where its points are, for the swept check
+    and the blind-spot memory (the Jackal's is (0.055, 0, 0))."""
+    swept_check: bool = field(default=True)
+    """Check every command's swept footprint (then its stop) against the scan and the blind-spot
+    memory; the motion model below is the realistic Jackal's (docs/safety.md)."""
+    swept_margin: float = field(default=0.02, validator=in_range(min_value=0.0, max_value=1.0))
+    """m: the clearance the swept footprint keeps from every obstacle point."""
+    actuation_latency: float = field(default=0.15, validator=in_range(min_value=0.0, max_value=2.0))
+    """s: from a command leaving here to the wheels acting on it (transport, compute charged, the
+    motor response), beyond the scan's age."""
+    max_braking: float = field(default=4.9, validator=in_range(min_value=0.01, max_value=1000.0))
+    """m/s^2: the body's braking limit (friction: mu g); the robot's max_decel is used if lower."""
+    yaw_lag: float = field(default=0.4, validator=in_range(min_value=0.0, max_value=5.0))
+    """s: the body's yaw rate lag behind its wheels (it keeps turning yaw_rate * yaw_lag after a stop)."""
+    yaw_gain_min: float = field(default=0.6, validator=in_range(min_value=0.05, max_value=1.0))
+    """The least fraction of the commanded yaw rate the body turns at (skid-steer slip)."""
 
     def __attrs_post_init__(self) -> None:
         if self.slowdown_zone_distance < self.critical_zone_distance:
@@ -110,7 +142,12 @@ class DriveManager(NavComponent):
                                   slowdown_zone_distance=cfg.slowdown_zone_distance)
         filt = CommandFilterConfig(control_time_step=1.0 / cfg.loop_rate, smooth_commands=cfg.smooth_commands,
                                    smoothing_time_constant=cfg.smoothing_time_constant)
-        self._safety = DriveSafety(cfg.robot, zones, filt)
+        swept = SweptConfig(margin=cfg.swept_margin, latency=cfg.actuation_latency, hold=1.0 / cfg.loop_rate,
+                            max_braking=cfg.max_braking, yaw_lag=cfg.yaw_lag, yaw_gain_min=cfg.yaw_gain_min) if cfg.swept_check else None
+        self._safety = DriveSafety(cfg.robot, zones, filt, swept=swept)
+        self._scan_stamp: float | None = None  # node-clock time of the scan behind the obstacles
+        self._scan_age = 0.0  # s since that scan arrived
+        self._sent: deque[tuple[float, np.ndarray]] = deque()  # (node time, command) sent recently, for the swept check
         self._command = np.zeros(3)
         self._stopped_reason = ""
         self._estop: bool | None = None
@@ -239,12 +276,14 @@ class DriveManager(NavComponent):
                 if age is None or age > self.config.sensor_timeout:
                     return None, f"{topic.name}: " + ("no scan yet" if age is None else f"scan is {age:.2f} s old")
                 scan_msg = self.get_input(topic)
+                self._scan_age = age
         if scan_msg is None:
             return None, "no LaserScan among the sensor_data inputs"
         try:
             scan = scan_of(scan_msg)
         except BadInput as exc:
             return None, str(exc)
+        self._scan_stamp = scan_msg.header.stamp.to_sec() if scan_msg.header.stamp is not None else None
         self._remember(scan_msg, scan)
         return scan, reason
 
@@ -256,7 +295,7 @@ class DriveManager(NavComponent):
         if pose is not None:
             # On the node's clock: with use_sim_time the memory lasts blind_spot_memory_time
             # simulated seconds, not the few a loaded machine lets the simulator run in 10 wall s.
-            self._blind_spot.update(pose, scan, clock.now())
+            self._blind_spot.update(pose, scan, clock.now(), self.config.sensor_pose)
             self._remembered_scan = scan_msg
 
     def _pose(self) -> np.ndarray | None:
@@ -274,6 +313,31 @@ class DriveManager(NavComponent):
         pose = self._pose() if self._blind_spot is not None else None
         blind = self._blind_spot.blind_points(pose, scan) if self._blind_spot is not None and pose is not None else ()
         return np.vstack([scan.points(), blind]) if len(blind) else scan
+
+    def _swept_inputs(self, scan: Any) -> tuple[np.ndarray | None, float, Any]:
+        """(points in the robot frame: the scan's and the blind-spot memory's; the scan's age s;
+        the commands sent since (send times relative to now, commands)) for the swept-footprint
+        check; points None when it is off."""
+        if self._safety.swept is None:
+            return None, 0.0, None
+        cfg = self.config
+        points = obstacle_points(scan, cfg.sensor_pose)
+        pose = self._pose() if self._blind_spot is not None else None
+        if self._blind_spot is not None and pose is not None:
+            blind = self._blind_spot.blind_points(pose, scan, cfg.sensor_pose)
+            if len(blind):
+                points = np.vstack([points, blind])
+        now = clock.now()
+        # The scan's age from its stamp (the sensor's time); a stamp from another clock (or none):
+        # since it arrived here, the rest being counted in actuation_latency.
+        lead = now - self._scan_stamp if self._scan_stamp is not None else math.inf
+        if not 0.0 <= lead <= cfg.sensor_timeout:
+            lead = min(max(self._scan_age, 0.0), cfg.sensor_timeout)
+        horizon = now - lead - cfg.actuation_latency - 2.0 / cfg.loop_rate
+        while len(self._sent) > 1 and self._sent[1][0] <= horizon:
+            self._sent.popleft()  # keep one sent before the horizon: it still acts then
+        times = np.array([t - now for t, _ in self._sent])
+        return points, lead, (times, np.array([c for _, c in self._sent]).reshape(-1, 3))
 
     def _range_sensors_min(self) -> float:
         """Nearest reading (m beyond the footprint) of Float range sensors, inf if none."""
@@ -324,9 +388,10 @@ class DriveManager(NavComponent):
             self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
             self.node.publish_status()
             return
+        points, lead, history = self._swept_inputs(obstacles)
         if self._command[0] < 0.0:  # backing up: what is behind the laser's field of view counts too
             obstacles = self._all_around(obstacles)
-        out, check = self._safety.step(self._command, obstacles)
+        out, check = self._safety.step(self._command, obstacles, points, self._last_out, lead, history)
         near = self._range_sensors_min()
         if near <= self.config.critical_zone_distance and abs(self._command[0]) > 1e-9:
             out, check = np.zeros(3), ZoneCheck(0.0, near)
@@ -334,8 +399,16 @@ class DriveManager(NavComponent):
         self._send(out, check)
         if self.health_status.is_system_fail or (self.health_status.is_algorithm_fail and not check.emergency_stop):
             self.health_status.set_healthy()
-        if check.emergency_stop:
+        if check.emergency_stop and self._safety.last_swept.stopped:
+            self.fail_algorithm("emergency_stop", self._swept_message(self._command))
+        elif check.emergency_stop:
             self.fail_algorithm("emergency_stop", f"obstacle {check.min_distance:.3f} m ahead, inside the critical zone")
+
+    def _swept_message(self, command: np.ndarray) -> str:
+        swept = self._safety.last_swept
+        what = "even a stop now comes within" if swept.blocked else "would bring the footprint within"
+        return (f"swept footprint: command (v {command[0]:.2f} m/s, w {command[2]:.2f} rad/s) {what} "
+                f"{self.config.swept_margin:g} m of an obstacle (clearance {swept.clearance:.3f} m): stopped")
 
     def _send(self, cmd: np.ndarray, check: ZoneCheck, stop: bool = False) -> None:
         if stop:
@@ -348,6 +421,13 @@ class DriveManager(NavComponent):
             msg = TwistStamped(header=Header(stamp=stamp or clock.stamp(), frame_id=self.config.frames.robot_base), twist=msg)
         self.publish(topic, msg)
         self._last_out = np.array(cmd, dtype=float)
+        if self._safety.swept is not None:
+            now = clock.now()
+            self._sent.append((now, self._last_out))
+            cfg = self.config  # the swept check looks back at most this far (and one command more)
+            oldest = now - cfg.sensor_timeout - cfg.actuation_latency - 2.0 / cfg.loop_rate
+            while len(self._sent) > 1 and self._sent[1][0] <= oldest:
+                self._sent.popleft()
         estop = bool(check.emergency_stop) and not stop
         estop_topic = self.get_out_topic("emergency_stop")
         if estop_topic is not None and estop != self._estop:
@@ -453,14 +533,21 @@ class DriveManager(NavComponent):
         cmd = maneuver.commands[i]
         obstacles, _ = self._obstacles()
         check = ZoneCheck(1.0, math.inf)
+        swept = None
+        if obstacles is not None:
+            points, lead, history = self._swept_inputs(obstacles)
+            if points is not None:
+                cmd, swept = self._safety.limit_swept(cmd, self._last_out, points, lead, history)
         if obstacles is not None and cmd[0] < 0.0:
             obstacles = self._all_around(obstacles)
         if obstacles is not None and abs(cmd[0]) > 1e-9:
             cmd, check = self._safety.zones.limit(cmd, obstacles)
-        if obstacles is None or check.emergency_stop:
+        if obstacles is None or check.emergency_stop or (swept is not None and swept.stopped):
             self._maneuver = None
             self._send(np.zeros(3), check, stop=True)
-            self.fail_algorithm(maneuver.name, "aborted: " + ("scan went stale" if obstacles is None else "obstacle in the critical zone"))
+            why = ("scan went stale" if obstacles is None else "obstacle in the critical zone" if check.emergency_stop
+                   else self._swept_message(maneuver.commands[i]))
+            self.fail_algorithm(maneuver.name, "aborted: " + why)
             return
         self._maneuver = (maneuver, i + 1)
         self._send(cmd, check)

@@ -3,8 +3,10 @@ from .arc_sampler import ArcSampler, ArcSamplerConfig
 from .base import ControllersID, ControlResult, ControlStatus
 from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
+from .mppi import MPPI, MPPIConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
 from .registry import CONTROLLERS, make_controller
+from .rpp import RegulatedPurePursuit, RegulatedPurePursuitConfig
 from .sensors import LaserScan2D, OccupancyGrid2D, obstacle_points
 from .stanley import Stanley, StanleyConfig
 from .vision_common import BoundingBox, CameraIntrinsics
@@ -27,6 +29,10 @@ __all__ = [
     "DVZConfig",
     "DWA",
     "DWAConfig",
+    "MPPI",
+    "MPPIConfig",
+    "RegulatedPurePursuit",
+    "RegulatedPurePursuitConfig",
     "Stanley",
     "StanleyConfig",
     "BoundingBox",

@@ -26,6 +26,8 @@ class ControllersID(str, enum.Enum):
     VISION_IMG = "VisionRGBFollower"
     VISION_DEPTH = "VisionRGBDFollower"
     ARC_SAMPLER = "ArcSampler"  # sampled constant-velocity arcs scored by cost-to-go (BARN's local planner)
+    MPPI = "MPPI"  # Model Predictive Path Integral, Nav2's parameters and critics
+    REGULATED_PURE_PURSUIT = "RegulatedPurePursuit"  # Nav2's RPP: curvature- and proximity-regulated speed
 
     @classmethod
     def from_any(cls, value: ControllersID | str) -> ControllersID:

@@ -8,7 +8,9 @@ from .arc_sampler import ArcSampler, ArcSamplerConfig
 from .base import ControllersID
 from .dvz import DVZ, DVZConfig
 from .dwa import DWA, DWAConfig
+from .mppi import MPPI, MPPIConfig
 from .pure_pursuit import PurePursuit, PurePursuitConfig
+from .rpp import RegulatedPurePursuit, RegulatedPurePursuitConfig
 from .stanley import Stanley, StanleyConfig
 from .vision_rgb import VisionRGBFollower, VisionRGBFollowerConfig
 from .vision_rgbd import VisionRGBDFollower, VisionRGBDFollowerConfig
@@ -24,6 +26,8 @@ CONTROLLERS: dict[ControllersID, tuple[type, type]] = {
     ControllersID.VISION_IMG: (VisionRGBFollower, VisionRGBFollowerConfig),
     ControllersID.VISION_DEPTH: (VisionRGBDFollower, VisionRGBDFollowerConfig),
     ControllersID.ARC_SAMPLER: (ArcSampler, ArcSamplerConfig),
+    ControllersID.MPPI: (MPPI, MPPIConfig),
+    ControllersID.REGULATED_PURE_PURSUIT: (RegulatedPurePursuit, RegulatedPurePursuitConfig),
 }
 
 

@@ -113,7 +113,8 @@ class ParticleFilter:
         """Use ``grid`` from now on (the particles stay where they are)."""
         p = self.params
         self.field = LikelihoodField(grid, sigma_hit=p.sigma_hit, z_hit=p.z_hit, z_rand=p.z_rand,
-                                     max_dist=p.laser_likelihood_max_dist, laser_max_range=self._max_range(math.inf))
+                                     max_dist=p.laser_likelihood_max_dist, laser_max_range=self._max_range(math.inf),
+                                     interpolation=p.field_interpolation)
         self.grid = grid
 
     def _max_range(self, scan_max: float) -> float:

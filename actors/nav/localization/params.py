@@ -10,7 +10,7 @@ from typing import Any
 
 from attrs import define, field, fields
 
-from emos.config.validators import in_range
+from emos.config.validators import in_, in_range
 
 __all__ = ["AmclParams"]
 
@@ -47,6 +47,8 @@ class AmclParams:
     (a local search around the particles' mean; the particles are not moved).
     ``initial_cov_xy`` (m^2) / ``initial_cov_yaw`` (rad^2): the spread of an initial pose given
     without covariance (ROS amcl's ``initial_cov_xx``, ``initial_cov_aa``).
+    ``field_interpolation``: ``"bilinear"`` (interpolate the likelihood field's distance between
+    cell centres) or ``"nearest"`` (Nav2's cell lookup); see ``localization.likelihood``.
     """
 
     alpha1: float = _alpha()
@@ -75,6 +77,7 @@ class AmclParams:
     min_ess_fraction: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1.0))
     initial_cov_xy: float = field(default=0.25, validator=in_range(min_value=0.0, max_value=1e6))
     initial_cov_yaw: float = field(default=(math.pi / 12) ** 2, validator=in_range(min_value=0.0, max_value=100.0))
+    field_interpolation: str = field(default="bilinear", validator=in_(("bilinear", "nearest")))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:

@@ -19,6 +19,8 @@ NAVCORE_CONTROLLERS = {
     "navcore-purepursuit": ("PurePursuit", "PurePursuitConfig"),
     "navcore-stanley": ("Stanley", "StanleyConfig"),
     "navcore-dvz": ("DVZ", "DVZConfig"),
+    "mppi": ("MPPI", "MPPIConfig"),
+    "rpp": ("RegulatedPurePursuit", "RegulatedPurePursuitConfig"),
 }
 
 

@@ -11,6 +11,7 @@ from .maneuvers import (
     trapezoid_profile,
 )
 from .pipeline import DriveSafety
+from .swept import SweptCheck, SweptConfig, SweptFootprint
 from .zones import SafetyZones, SafetyZonesConfig, ZoneCheck
 
 __all__ = [
@@ -20,6 +21,9 @@ __all__ = [
     "Maneuver",
     "SafetyZones",
     "SafetyZonesConfig",
+    "SweptCheck",
+    "SweptConfig",
+    "SweptFootprint",
     "ZoneCheck",
     "free_travel",
     "interpolate_commands",
