@@ -218,6 +218,12 @@ class BaseComponent(FallbackHooks):
     def create_action_server(self, name: str, goal_type: Any, feedback_type: Any, result_type: Any, callback: Any) -> None:
         self.node.add_action_server(name, goal_type, feedback_type, result_type, callback)
 
+    def loan(self, topic: Any, msg_type: type, shape: tuple[int, ...], dtype: Any = None, field: str = "data", **fields: Any) -> Any:
+        """``with self.loan("/camera/rgb", Image, shape=(480, 640, 3)) as msg:`` fill ``msg.data``
+        in shared memory; it is published when the block ends (ROS 2's and iceoryx2's loaned
+        messages). Chaos publish faults do not apply to loaned messages."""
+        return self.node.loan(topic, msg_type, shape, dtype, field, **fields)
+
     def served_interfaces(self) -> list[tuple[str, str, tuple[Any, ...]]]:
         """Services and actions served now by something the component holds rather than by its
         node (the ROS 2 bridge's stand-ins for ROS 2 servers): ``(kind, name, types)``, as

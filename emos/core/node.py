@@ -9,13 +9,14 @@ both the health report and the supervisor's heartbeat.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import operator
 import os
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from emos.config.base import ComponentRunType
@@ -562,6 +563,23 @@ class Node:
                 return
         with lock:  # rings are single-writer; action threads and the loop may both publish
             pub.publish(msg)
+
+    @contextlib.contextmanager
+    def loan(self, topic: Topic | str, msg_type: type, shape: tuple[int, ...], dtype: Any = None, field: str = "data",
+             **fields: Any) -> Iterator[Any]:
+        """A loaned message on output ``topic``: its ``field`` array (``shape``, ``dtype``) is the
+        ring slot itself, filled in place and published when the ``with`` block ends (given up
+        if it raises). On Zenoh and ROS 2 outputs it is an ordinary array, copied once."""
+        from emos.transport.loans import loan_from
+
+        name = topic if type(topic) is str and topic in self._publishers else (
+            topic.name if isinstance(topic, Topic) else normalize_topic_name(topic))
+        entry = self._publishers.get(name)
+        if entry is None:
+            raise self._no_output(name)
+        pub, lock = entry
+        with lock, loan_from(pub, msg_type, shape, "uint8" if dtype is None else dtype, field, **fields) as msg:
+            yield msg  # the ring is single-writer: nothing else publishes on it until the block ends
 
     def _no_output(self, name: str) -> Exception:
         if self.state not in (L.LifecycleState.INACTIVE, L.LifecycleState.ACTIVE):

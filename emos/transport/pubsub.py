@@ -31,7 +31,7 @@ from emos.transport.context import SHM_DIR, RunContext, decode_name, encode_name
 from emos.transport.fence import full_fence
 from emos.transport.generations import create_generation, latest_own_generation
 from emos.transport.limits import check_topic_name
-from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook
+from emos.transport.loans import LOAN_MIN_BYTES, LOANS_PER_SUBSCRIBER, LoanBook, PublisherLoan
 from emos.transport.ring import MessageTooLarge as MessageTooLarge  # re-exported; one class for the ring's and the topic's limit
 from emos.transport.screen import SegmentScreen
 from emos.transport.trust import UntrustedFile, rate_limited, remove_owned
@@ -47,6 +47,12 @@ _MTIME_GRANULARITY_NS = 50_000_000  # well above any kernel's timestamp tick
 RESCAN_EVERY_NS = 1_000_000_000
 REJECT_LOG_PERIOD_S = 10.0  # a publisher of the wrong type is logged at most this often, with a count
 _SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow can do that once)
+# Messages at least this big are announced before they are copied, and lingering readers are
+# woken as the copy starts (waker module doc, "Long writes"); smaller copies take a few
+# microseconds, less than the announcement and the early wake-up would cost.
+ANNOUNCE_BYTES = 128 * 1024
+_COPY_NS_PER_BYTE = 1.0  # first guess of a copy's speed (1 GB/s): measured after each long write
+_ANNOUNCE_MARGIN_NS = 100_000  # slack on the deadline for preemption of the writer
 
 
 class TopicTypeError(TransportError, TypeError):
@@ -88,6 +94,8 @@ class Publisher:
         self.max_bytes = max_bytes
         self.sender = WakeSender(ctx)
         self._waiters_version = -1
+        self._ns_per_byte = _COPY_NS_PER_BYTE  # how fast our long copies run (see _announce_write)
+        self._loan_open = False  # a PublisherLoan holds the next message (single writer)
         self.ring = self._open_or_create()
         self._announce()
 
@@ -173,8 +181,37 @@ class Publisher:
         log.info("topic %s: ring of %s grew to %d B slots for a %d B message", self.topic, self.publisher_id, new.capacity, nbytes)
 
     # -- publishing ------------------------------------------------------------------------------
+    def loan(self, msg_cls: type, shape: tuple[int, ...], dtype: Any = np.uint8, field: str = "data", **fields: Any) -> PublisherLoan:
+        """A message whose ``field`` array (``shape``, ``dtype``) is a writable view of the next
+        ring slot, published when the ``with`` block ends (abandoned if it raises)::
+
+            with pub.loan(Image, shape=(480, 640, 3), encoding="rgb8") as msg:
+                camera.read_into(msg.to_numpy())
+
+        Other fields may be passed here or set inside the block; the message and its arrays
+        are valid only inside it. See :class:`emos.transport.loans.PublisherLoan`."""
+        if self._loan_open:
+            raise RuntimeError(f"topic {self.topic!r}: a loan of publisher {self.publisher_id!r} is still open (one at a time)")
+        return PublisherLoan(self, msg_cls, shape, dtype, field, fields)
+
+    def _begin_loan(self, nbytes: int) -> R.Ring:
+        """Our ring, grown to hold ``nbytes`` if needed, held for a loan until ``_end_loan``."""
+        if self._loan_open:
+            raise RuntimeError(f"topic {self.topic!r}: a loan of publisher {self.publisher_id!r} is still open (one at a time)")
+        if nbytes > self.ring.capacity:
+            if nbytes > self.max_bytes:
+                raise MessageTooLarge(f"topic {self.topic!r}: a loaned {self.type_name} of {nbytes} B exceeds the limit of {self.max_bytes} B")
+            self._grow(nbytes)
+        self._loan_open = True
+        return self.ring
+
+    def _end_loan(self) -> None:
+        self._loan_open = False
+
     def publish(self, msg: Any) -> int:
         """Write ``msg``; returns its message number on this publisher's ring."""
+        if self._loan_open:
+            raise RuntimeError(f"topic {self.topic!r}: publish while a loan of publisher {self.publisher_id!r} is open (finish the loan first)")
         if not isinstance(msg, self.msg_cls):
             raise TopicTypeError(f"topic {self.topic!r} carries {self.type_name}, got {type(msg).__name__}")
         stamp = time.time_ns()
@@ -186,10 +223,33 @@ class Publisher:
             self._grow(nbytes)
         ring = self.ring
         n, buf = ring.begin(nbytes)
+        started = self._announce_write(ring, nbytes) if nbytes >= ANNOUNCE_BYTES else 0  # (no call for small ones)
         try:
             enc.write_into(buf)
+        except BaseException:
+            ring.abandon()
+            raise
         finally:
             buf.release()
+        self._finish(ring, n, nbytes, stamp, started)
+        return n
+
+    def _announce_write(self, ring: R.Ring, nbytes: int) -> int:
+        """For a long copy about to start: announce when it should end and wake the lingering
+        readers now (waker module doc, "Long writes"); returns its start time (0: not announced)."""
+        if nbytes < ANNOUNCE_BYTES:
+            return 0
+        now = time.monotonic_ns()
+        ring.announce(now + int(2 * nbytes * self._ns_per_byte) + _ANNOUNCE_MARGIN_NS)
+        if self.sender.fds:
+            self.sender.wake_early()
+        return now
+
+    def _finish(self, ring: R.Ring, n: int, nbytes: int, stamp: int, started: int) -> None:
+        """Commit message ``n`` and wake the readers that are not spinning."""
+        if started:
+            took = time.monotonic_ns() - started
+            self._ns_per_byte = 0.75 * self._ns_per_byte + 0.25 * took / nbytes
         ring.commit(n, nbytes, stamp)
         # Our head store before we read the waiter table: a subscriber registers (stores), then
         # reads head; with a fence on both sides one of us sees the other, so a subscriber that
@@ -201,7 +261,6 @@ class Publisher:
             dead = self.sender.wake(fenced=True)
             for token in dead:
                 self._drop_waiter(token)
-        return n
 
     def _sync_waiters(self) -> None:
         version, tokens = self.ring.waiters()
@@ -309,6 +368,7 @@ class Subscriber:
         if waker is not None:
             self._interest = self.ctx.subscriber_dir(topic) / f"{waker.token:016x}"
             self._interest.touch(mode=0o600)
+            waker.watch(self)
         self.rescan(force=True)
 
     # -- discovery --------------------------------------------------------------------------------
@@ -549,6 +609,16 @@ class Subscriber:
                 return True
         return False
 
+    def busy_until(self) -> int:
+        """The latest deadline a publisher we read announced for a long write in progress
+        (``time.monotonic_ns``), or 0: the waker spins until then (waker module doc)."""
+        best = 0
+        for src in self.sources.values():
+            until = src.ring.q[R._BUSY]
+            if until > best:
+                best = until
+        return best
+
     def take(self) -> list[Any]:
         """Every new message, decoded, oldest first (at most ``queue_size``)."""
         return [msg for msg, _, _ in self.take_with_info()]
@@ -622,6 +692,8 @@ class Subscriber:
                     pass
             src.close()
         self.sources.clear()
+        if self.waker is not None:
+            self.waker.unwatch(self)
         if self._interest is not None:
             try:
                 self._interest.unlink()

@@ -23,7 +23,13 @@ Seqlock protocol, for message number ``n`` (0, 1, 2, ...):
   never overwritten while the loan lasts.
 
 A writer killed mid-copy leaves ``seq = 2n+1``, the map and ``head`` untouched: readers see no
-new message, never a torn one, and a restarted writer rewrites message ``n``.
+new message, never a torn one, and a restarted writer rewrites message ``n``. A publisher's
+loaned message (``loans.PublisherLoan``) is such a copy held open while the caller fills the slot;
+:meth:`Ring.abandon` gives it up in that same state.
+
+Header word ``_BUSY`` is a hint, not part of the protocol: the time a writer expects to finish a
+long copy (:meth:`Ring.announce`), so that lingering readers spin through it rather than park
+(``waker.py``, "Long writes"). A stale or forged value costs a reader some spinning, bounded.
 
 Memory order. Apart from the two handshake fences the protocol needs that the writer's stores
 (``seq`` odd, payload, ``seq`` even, map entry) become visible in that order and that the
@@ -67,6 +73,9 @@ _MAGIC, _GEOM, _STRIDE, _CAPACITY, _HEAD, _MOVED_PID, _WAITERS_VER, _FIRST, _CRE
 _FINGERPRINT_OFF = 80  # 16 ascii bytes
 _TYPE_OFF = 96  # 128 utf-8 bytes
 _SLOTS, _DATA_OFF = 28, 29  # physical slot count; byte offset of slot 0
+# CLOCK_MONOTONIC ns until which the writer expects to be copying message ``head`` (0: not
+# writing): a hint for lingering readers (see ``announce``), never trusted for correctness.
+_BUSY = 30
 _WAITERS_IDX = 256 // 8  # MAX_WAITERS u64 tokens
 _PIN_OWNER_IDX = 768 // 8  # LOAN_ENTRIES u64: pid of the reader that claimed the entry, or 0
 _PIN_IDX = _PIN_OWNER_IDX + LOAN_ENTRIES  # LOAN_ENTRIES u64: loaned slot + 1, or 0
@@ -326,6 +335,37 @@ class Ring:
         # The map entry and head need no fence: a reader that sees head first finds the entry
         # not there yet, reports NOT_READY and looks again; nothing is lost or torn.
         q[_HEAD] = n + 1
+        if q[_BUSY]:
+            q[_BUSY] = 0
+        self._pending_slot = -1
+
+    def pending_offset(self) -> int:
+        """Byte offset in the segment of the payload claimed by :meth:`begin` (a loaned message)."""
+        if self._pending_slot < 0:
+            raise RingError(f"ring {self.name}: no message is being written")
+        return self.data_offset + self._pending_slot * self.stride + SLOT_HEADER
+
+    def announce(self, until_ns: int) -> None:
+        """Say that the message being written (after :meth:`begin`) should be complete by
+        ``until_ns`` (``time.monotonic_ns``): a reader that lingers for messages keeps spinning
+        until then instead of parking in the middle of a long copy (``waker.Waker.serve``).
+        Only a hint: a writer killed mid-copy leaves a deadline that simply passes."""
+        self.q[_BUSY] = until_ns
+
+    @property
+    def busy_until(self) -> int:
+        """The writer's :meth:`announce` deadline for the message in progress, or 0."""
+        return self.q[_BUSY]
+
+    def abandon(self) -> None:
+        """Give up the message claimed by :meth:`begin` without publishing it.
+
+        Its slot is left as a writer killed mid-copy leaves it (``seq`` odd, map entry and
+        ``head`` untouched): readers never see it, and the next :meth:`begin` reuses its number.
+        """
+        if self._pending_slot >= 0:
+            self.q[_BUSY] = 0
+            self._pending_slot = -1
 
     def write(self, payload: bytes | memoryview, stamp_ns: int | None = None) -> int:
         n, buf = self.begin(len(payload))

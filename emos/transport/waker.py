@@ -18,6 +18,18 @@ published while the flag was still visible is never left unannounced. This is th
 spin-then-block idle strategy of low-latency messaging (Aeron's backoff, adaptive mutexes);
 ``spin_us=0`` turns it off.
 
+Long writes. A fixed spin window fails for big messages: copying a 921,600 B frame takes about
+as long as the window, an 8 MiB one ten times longer, so the reader parked in the middle of the
+copy and paid the whole FIFO and event-loop wake-up after it (hundreds of microseconds on a
+loaded VM, the p50 of issue 34). So a publisher about to copy a big message (a) writes into its
+ring's header when it expects the copy to be done (``Ring.announce``), and (b) wakes, at once,
+the parked readers that linger (the ``_EARLY`` word of their state page): their wake-up now runs
+*during* the copy instead of after it. A lingering reader that sees a write in progress keeps
+spinning until the announced deadline (bounded by ``MAX_BUSY_US``); past its linger deadline it
+pokes itself and returns, so the event loop still gets its turn. Correctness never rests on the
+announcement: the publisher still consults the state word after the commit and writes the FIFO
+to a reader that has parked, and a writer killed mid-copy leaves a deadline that simply passes.
+
 Robot first. A publisher wakes its subscribers one system call after the other, and on a
 machine with few cores the first woken takes the free core. Best-effort readers (the Monitor
 evaluating events, the web UI, a recorder) mark their token with :data:`BACKGROUND_BIT`, and
@@ -43,6 +55,7 @@ import struct
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from emos.transport.context import RunContext, make_run_id, run_is_alive
 from emos.transport.fence import full_fence
@@ -56,6 +69,9 @@ MAX_LINGER_US = 1000.0  # under a flood, return to the event loop this often (ti
 _STATE_BYTES = 64
 BACKGROUND_BIT = 1 << 62  # in a token: wake this reader after the others (module doc)
 _OWNER_PID, _OWNER_START = 1, 2  # words of the state page naming the reader's process (module doc)
+_EARLY = 3  # state word: 1 if this reader lingers and wants a wake-up when a long write starts
+MAX_BUSY_US = 50_000.0  # a write announced to end farther ahead than this is not waited for
+_MAX_BUSY_NS = int(MAX_BUSY_US * 1000)
 
 
 class Waker:
@@ -70,6 +86,7 @@ class Waker:
         self.path = fifo_path(ctx, self.token)
         self.spin_ns = int(spin_us * 1000)
         self.announcements = 0  # how many drains saw a publisher appear or go
+        self._watched: list[Any] = []  # subscribers whose rings may announce long writes (watch)
         # The state page first: a publisher that can open the FIFO finds it.
         self.state_path = state_path(ctx, self.token)
         fd = os.open(self.state_path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
@@ -82,6 +99,8 @@ class Waker:
             self._state = memoryview(self._state_mm).cast("Q")
             self._state[_OWNER_START] = _own_start_token()
             self._state[_OWNER_PID] = os.getpid()
+            # Background readers are never woken early: they come after the robot's own readers.
+            self._state[_EARLY] = int(self.spin_ns > 0 and not background)
             os.mkfifo(self.path, 0o600)
             # O_RDWR keeps the FIFO open for writing too, so it never reports EOF while idle.
             self.fd = os.open(self.path, os.O_RDWR | os.O_NONBLOCK)
@@ -117,6 +136,25 @@ class Waker:
         except BlockingIOError:
             pass  # full: a wake-up is pending anyway
 
+    def watch(self, source: Any) -> None:
+        """Let :meth:`serve` keep spinning while ``source.busy_until()`` (a monotonic ns
+        deadline, 0 for none) says one of its publishers is in the middle of a long write."""
+        if source not in self._watched:
+            self._watched.append(source)
+
+    def unwatch(self, source: Any) -> None:
+        if source in self._watched:
+            self._watched.remove(source)
+
+    def _busy_until(self, now: int) -> int:
+        """The latest plausible write deadline announced on the rings we read, or 0."""
+        best = 0
+        for source in self._watched:
+            until = source.busy_until()
+            if now < until <= now + _MAX_BUSY_NS and until > best:
+                best = until
+        return best
+
     def serve(self, handle: Callable[[], None], has_news: Callable[[], bool]) -> None:
         """Handle one wake-up: drain, ``handle()``, then linger for more (see module doc).
 
@@ -127,18 +165,28 @@ class Waker:
         handle()
         if self.spin_ns <= 0:
             return
-        clock = time.perf_counter_ns
+        clock = time.monotonic_ns  # the clock publishers announce write deadlines on
         yield_cpu = os.sched_yield
         state = self._state
         state[0] = SPINNING
+        busy = False  # stopped lingering while a publisher was still writing
         try:
             # Under a flood, give the event loop its turn now and then (timers, RPC, signals).
             deadline = clock() + max(int(MAX_LINGER_US * 1000), 2 * self.spin_ns)
             while True:
                 end = min(clock() + self.spin_ns, deadline)
                 while not has_news():
-                    if clock() >= end:
-                        return
+                    now = clock()
+                    if now >= end:
+                        # A publisher announced a long write: wait for it rather than park in
+                        # the middle of its copy (module doc); past our deadline, come back.
+                        until = self._busy_until(now) if self._watched else 0
+                        if not until:
+                            return
+                        if now >= deadline:
+                            busy = True
+                            return
+                        end = min(until, deadline)
                     # Give the CPU to whoever else can run on it (likely the very publisher we
                     # wait for, when both share a CPU); returns at once when nobody can.
                     yield_cpu()
@@ -148,7 +196,7 @@ class Waker:
         finally:
             state[0] = PARKED
             full_fence()  # publishers that still saw SPINNING published before this point...
-            if has_news():  # ...so their messages are visible here
+            if busy or has_news():  # ...so their messages are visible here
                 self.poke()
 
     def close(self) -> None:
@@ -246,6 +294,20 @@ class WakeSender:
             self._forget(token)
             remove_if_dead(self.ctx, token)
         return dead
+
+    def wake_early(self) -> None:
+        """Wake the parked readers that linger (module doc: long writes) as a long copy starts,
+        so their wake-up overlaps it. Only a head start: :meth:`wake` after the commit still
+        wakes whoever parked by then, so nothing here needs a fence, and errors wait for it."""
+        states = self._states
+        for token, fd in self.fds.items():
+            state = states.get(token)
+            if state is None or state[1][_EARLY] != 1 or state[1][0] == SPINNING:
+                continue
+            try:
+                os.write(fd, MESSAGE)
+            except OSError:
+                pass  # full (a wake-up is pending) or gone (wake() reports it)
 
     def close(self) -> None:
         for token in list(self.fds):

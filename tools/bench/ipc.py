@@ -29,7 +29,7 @@ import sys
 from typing import Any
 
 from emos.core.node import wake_spin_setting
-from emos.tools.bench import ipc_common, ipc_component, ipc_oneway, ipc_pingpong
+from emos.tools.bench import ipc_common, ipc_component, ipc_oneway, ipc_peers, ipc_pingpong
 from emos.tools.bench.common import percentiles, table
 
 SIZES = [8, 1024, 65536, 921_600, 8 * 1024 * 1024]
@@ -55,6 +55,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--throughput-seconds", type=float, default=1.0)
     parser.add_argument("--cpus", default=_default_cpus(), help="pin the two ends to these CPUs, 'A,B', or 'none' (default: the first two CPUs this process may use, each end on its own)")
     parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, help=f"history depth (KEEP_LAST) of the EMOS rings in the transport latency test (default {DEFAULT_DEPTH})")
+    parser.add_argument("--peers", metavar="LIST",
+                        help=f"compare EMOS with these IPC peers in the same run, comma-separated from {','.join(ipc_peers.PEERS)} "
+                             "(ping-pong, interleaved over --rounds; package peers are installed into a benchmark-only "
+                             f"environment under ${ipc_peers.ENV_PEER_DIR} or ~/.cache/emos-bench/peers)")
+    parser.add_argument("--rounds", type=int, default=3, help="with --peers: rounds, each measuring every transport and size once (default 3)")
     parser.add_argument("--mode", choices=MODES, default="both",
                         help="transport: the rings under a bare event loop, against multiprocessing; component: ping-pong between two "
                              "supervised BaseComponents with default QoS (what recipes get); both (default)")
@@ -141,6 +146,8 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(placement, str):
         return _usage_error(placement)
     ipc_common.PLACEMENT = placement
+    if args.peers is not None:
+        return _run_peers(args, sizes, placement)
     label = METHODS[args.method][0]
     where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
     doc: dict[str, Any] = {"mode": args.mode, "method": args.method, "cpus": None if placement is None else list(placement), "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting()}
@@ -185,3 +192,37 @@ def _print_transport(results: list[dict[str, Any]], sizes: list[int], label: str
         e, p = by.get(("emos", size)), by.get(("mp_pipe", size))
         if e and p and e["p50_us"] > 0:
             print(f"  {size:>9} B: pipe p50 / emos p50 = {p['p50_us'] / e['p50_us']:.1f}x")
+
+
+def _run_peers(args: argparse.Namespace, sizes: list[int], placement: tuple[int, int] | None) -> int:
+    """``--peers``: EMOS and the peers, half round trips, interleaved over ``--rounds``."""
+    peers = [p for p in _parse_list(args.peers) if p != "emos"]
+    problem = ipc_peers.check_peers(peers)
+    if problem or not peers:
+        return _usage_error(problem or f"--peers needs at least one of {','.join(ipc_peers.PEERS)}")
+    if args.rounds < 1:
+        return _usage_error(f"--rounds must be at least 1, got {args.rounds}")
+    if args.method != "pingpong":
+        return _usage_error("--peers measures half round trips only (--method pingpong)")
+    say = None if args.json else (lambda line: print(line, flush=True))
+    try:
+        ipc_peers.prepare(peers, say or (lambda line: print(line, file=sys.stderr, flush=True)))
+    except ipc_peers.PeerUnavailable as exc:
+        print(f"emos bench ipc: {exc}", file=sys.stderr)
+        return 2
+    where = "unpinned" if placement is None else f"pinned to CPUs {placement[0]} and {placement[1]}"
+    if say:
+        say(f"emos bench ipc --peers: EMOS rings (depth {args.depth}, wake spin {wake_spin_setting():g} us) against {', '.join(peers)}; "
+            f"half round trips, {args.rounds} interleaved round(s), {where}; payloads {sizes}")
+    result = ipc_peers.run_rounds(["emos", *peers], sizes, args.rounds, args.messages, _samples_for, args.depth, say)
+    doc: dict[str, Any] = {"mode": "peers", "method": "pingpong", "cpus": None if placement is None else list(placement),
+                           "emos_depth": args.depth, "emos_wake_spin_us": wake_spin_setting(), **result}
+    if args.json:
+        print(json.dumps(doc))
+    else:
+        print()
+        print(f"p50 and p99: median over {args.rounds} round(s); spread: max / min over rounds; load averages {result['loads']}")
+        print(table(result["results"], [("transport", "transport", ""), ("payload_bytes", "bytes", ",d"), ("p50_us", "p50 us", ".1f"),
+                                         ("p50_min_us", "p50 min", ".1f"), ("p50_max_us", "p50 max", ".1f"), ("p50_spread", "p50 spread", ".2f"),
+                                         ("p99_us", "p99 us", ".1f"), ("p99_spread", "p99 spread", ".2f")]))
+    return 1 if any("errors" in row for row in result["results"]) else 0

@@ -52,6 +52,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "slam": ("emos.tools.bench.slam", "graph SLAM on a real lidar log (CARMEN): trajectory error, CPU per scan, the map"),
     "cortex": ("emos.tools.bench.cortex", "Cortex planning on 20 house tasks: success, steps, replans, time per planning step"),
     "hardware": ("emos.tools.bench.hardware", "drivers on emulated devices: /cmd_vel to wire, lidar scans and parse CPU, servo cycle"),
+    "costmap": ("emos.tools.bench.costmap", "keepout zones on the shortest routes in the house: entries (goal 0), planner time with/without costmap"),
 }
 
 # `emos serve NAME`: long-running development services.

@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     s = sub.add_parser("show", help="draw a saved map (map_server YAML) to a PNG")
     s.add_argument("file", help="a map_server YAML")
     s.add_argument("-o", "--output", default=None, help="PNG to write (default: the YAML's name with .png)")
+    from . import map_zones
+
+    map_zones.add_parser(sub)  # emos map zones MAP.yaml list|add|set|remove|import (keepout and speed masks)
 
 
 def _beams(scan: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -154,6 +157,10 @@ def run(args: argparse.Namespace) -> int:
     from emos.actors.nav.maps import MapFileError
     from emos.interop.mcap_read import NotMcapFile
 
+    if args.map_verb == "zones":
+        from . import map_zones
+
+        return map_zones.run(args)
     if args.map_verb == "record":
         from . import record as _record
 

@@ -34,6 +34,8 @@ from ..controllers import ControllersID, ControlResult, ControlStatus
 from ..controllers.clearance import warm_up as clearance_warm_up
 from ..controllers.follower import PathFollower
 from ..controllers.registry import CONTROLLERS, make_controller
+from ..costmap.config import mask_path
+from ..costmap.filters import SpeedFilter, load_filter_mask
 from ..kinematics import integrate
 from ..stuck import ProgressChecker, StallHold
 from .base import NavComponent, NavComponentConfig, rate_field
@@ -71,7 +73,8 @@ class ControllerConfig(NavComponentConfig):
     matched, and lags the robot by the mapping time (in lock-step, where the controller may
     run before the mapper has taken the tick's scan, a scan and a half: 30 ms, 6 cm at 2 m/s).
     ``world_map_range`` (m): how far around the robot a world-frame ``local_map`` is read (beyond
-    every built-in algorithm's reach at 2 m/s)."""
+    every built-in algorithm's reach at 2 m/s). ``speed_mask``: a speed filter mask (Nav2's speed
+    filter; ``emos map zones``): inside its zones commands are scaled down to the zone's limit."""
 
     loop_rate: float = rate_field(10.0)
     algorithm: str = field(default=ControllersID.DWA.value, converter=_algorithm, on_setattr=attrs.setters.convert)
@@ -87,6 +90,7 @@ class ControllerConfig(NavComponentConfig):
     failure_tolerance: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=1e4))
     pose_prediction: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=1.0))
     world_map_range: float = field(default=5.0, validator=in_range(min_value=0.1, max_value=1e4))
+    speed_mask: str = field(default="", validator=mask_path("speed"))
 
 
 class Controller(VisionTracking, NavComponent):
@@ -187,6 +191,7 @@ class Controller(VisionTracking, NavComponent):
         self._plan_stamp: Any = None
         self._finished_stamp: Any = None
         self._sequence: tuple[np.ndarray, int] | None = None
+        self._speed_filter = SpeedFilter(load_filter_mask(self.config.speed_mask, "speed")) if self.config.speed_mask else None
         self._last_cmd = np.zeros(3)
         self._action_active = False
         self._failing_since = None
@@ -379,7 +384,7 @@ class Controller(VisionTracking, NavComponent):
 
     # -- publishing ---------------------------------------------------------------------------------------
     def publish_result(self, result: ControlResult) -> None:
-        cmds = np.asarray(result.commands, dtype=np.float64).reshape(-1, 3)
+        cmds = self._speed_capped(np.asarray(result.commands, dtype=np.float64).reshape(-1, 3))
         kind = self.config.ctrl_publish_type
         if kind in ("Sequence", "Parallel"):
             self._publish_command(cmds[0])
@@ -395,6 +400,19 @@ class Controller(VisionTracking, NavComponent):
         local = self.get_out_topic("local_plan")
         if local is not None and len(result.local_plan):
             self.publish(local, path_msg(np.asarray(result.local_plan).reshape(-1, 3), self.config.frames.world))
+
+    def _speed_capped(self, cmds: np.ndarray) -> np.ndarray:
+        """Inside a zone of ``speed_mask`` (at the robot's location, in the mask's map frame), each
+        command whose linear speed is above the zone's limit is scaled down whole, keeping its curvature."""
+        if self._speed_filter is None:
+            return cmds
+        state = self.robot_state()
+        limit = self._speed_filter.limit_at(state[0][:2]) if state is not None else None
+        if limit is None:
+            return cmds
+        cap = limit.cap(self.config.robot.ctrl_vx_limits.max_vel)
+        speed = np.hypot(cmds[:, 0], cmds[:, 1])
+        return cmds * np.where(speed > cap, cap / np.maximum(speed, 1e-12), 1.0)[:, None]
 
     def _publish_command(self, cmd: np.ndarray) -> None:
         out = self.get_out_topic("command")

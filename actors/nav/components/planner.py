@@ -37,9 +37,10 @@ from emos.io.topic import Topic
 from emos.msgs.nav import Path
 from emos.msgs.std import Bool, Header
 
+from ..costmap import CostmapConfig, LayeredCostmap, SmootherConfig, smooth_path
 from ..planning import OMPLConfig
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, goal_of, grid_map_of, path_msg
+from .convert import BadInput, goal_of, grid_map_of, grid_msg, path_msg
 from .interfaces import PlanPathFeedback, PlanPathGoal, PlanPathRequest, PlanPathResponse, PlanPathResult
 from .pixel_goals import PIXEL_GOAL_TYPES, PixelGoals, is_pixel_goal
 from .planner_paths import PathFiles
@@ -56,6 +57,22 @@ def _ompl(value: Any) -> OMPLConfig:
     raise TypeError(f"PlannerConfig.ompl: expected an OMPLConfig or a mapping, got {type(value).__name__}")
 
 
+def _nested(cls: type, value: Any) -> Any:
+    if isinstance(value, dict):
+        return cls(**value)
+    if not isinstance(value, cls):
+        raise TypeError(f"PlannerConfig: expected a {cls.__name__} or a mapping, got {type(value).__name__}")
+    return value
+
+
+def _costmap(value: Any) -> CostmapConfig:
+    return _nested(CostmapConfig, value)
+
+
+def _smoother(value: Any) -> SmootherConfig:
+    return _nested(SmootherConfig, value)
+
+
 @define(kw_only=True)
 class PlannerConfig(NavComponentConfig):
     """``planner_id``: an OMPL geometric planner (``"ompl.geometric.RRTConnect"``, ...) or a
@@ -69,6 +86,10 @@ class PlannerConfig(NavComponentConfig):
     planning_timeout: float = field(default=5.0, validator=in_range(min_value=1e-3, max_value=1e4))
     #: metres per unit of an integer (16UC1, mono16) depth image of a pixel goal; 32FC1 is metres
     depth_conversion_factor: float = field(default=1e-3, validator=in_range(min_value=1e-9, max_value=1e3))
+    #: the global costmap (Nav2 names): used when enabled or given a mask; see emos.actors.nav.costmap
+    costmap: CostmapConfig = field(factory=CostmapConfig, converter=_costmap, on_setattr=attrs.setters.convert)
+    #: Nav2's simple smoother after each plan (enabled=True), collision-checked on the costmap
+    smoother: SmootherConfig = field(factory=SmootherConfig, converter=_smoother, on_setattr=attrs.setters.convert)
 
 
 class _MainInterface:
@@ -94,6 +115,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
     allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path"), required=True),
         "reached_end": AllowedTopic(types=("Bool",), default=Topic(name="/reached_end", msg_type="Bool")),
+        "global_costmap": AllowedTopic(types=("OccupancyGrid",), default=Topic(name="/global_costmap/costmap", msg_type="OccupancyGrid", qos_profile=QoSConfig(durability=TRANSIENT_LOCAL))),
     }
     main_srv_type = (PlanPathRequest, PlanPathResponse)
     main_action_type = (PlanPathGoal, PlanPathFeedback, PlanPathResult)
@@ -129,6 +151,9 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._goal_key: Any = None
         self._reached = False
         self.last_plan: np.ndarray | None = None
+        cm = self.config.costmap
+        use_costmap = cm.enabled or bool(cm.keepout_mask or cm.speed_mask)
+        self.costmap = LayeredCostmap(cm, self.config.robot.inner_radius) if use_costmap else None
         self.create_path_services()
 
     def custom_on_deactivate(self) -> None:
@@ -152,6 +177,12 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             except (BadInput, ValueError) as exc:
                 self.fail_input("map", f"{self.topic_name('map')}: {exc}")
                 return False
+            if self.costmap is not None:
+                master = self.costmap.set_map(grid)
+                grid = self.costmap.planning_grid(grid)  # keepout zones are obstacles to the planner
+                out = self.get_out_topic("global_costmap")
+                if out is not None:
+                    self.publish(out, grid_msg(master.to_occupancy(), grid.resolution, grid.origin, msg.header.frame_id or self.config.frames.world))
             self._algo.set_map(grid)
             self._map_key = key
         return True
@@ -163,6 +194,12 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             if state is None or not self._ensure_map():
                 return False, self.health_status.message, np.zeros((0, 3))
             start = state[0]
+            for what, point in (("start", start), ("goal", goal)):
+                zone = self.costmap.keepout_zone_at(point) if self.costmap is not None else None
+                if zone is not None:
+                    message = f"the {what} ({point[0]:.2f}, {point[1]:.2f}) is inside keepout zone {zone}"
+                    self.fail_algorithm(self.config.planner_id, message)
+                    return False, message, np.zeros((0, 3))
             try:
                 result = self._algo.plan(start, goal, timeout=self.config.planning_timeout)
             except ValueError as exc:  # a goal (or the robot) off the map
@@ -172,6 +209,9 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 msg = f"{result.status}: {result.message}"
                 self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {msg}")
                 return False, msg, np.zeros((0, 3))
+            if self.config.smoother.enabled:
+                master = self.costmap.master if self.costmap is not None else None
+                result = attrs.evolve(result, path=smooth_path(result.path, self.config.smoother, master))
             self.last_plan = result.path
             self.publish(self.required_out_topic("plan"), path_msg(result.path, self.config.frames.world))
             self.health_status.set_healthy()

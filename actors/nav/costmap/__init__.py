@@ -1,0 +1,31 @@
+"""Layered 2D costmaps as Nav2 builds them: static, obstacle and inflation layers, keepout and
+speed-limit filters from mask maps, and the simple path smoother checked against them.
+
+Pure numpy (no processes): the Planner wires a global costmap to its map and publishes it.
+"""
+from .config import CostmapConfig, SmootherConfig
+from .costs import (
+    FREE_SPACE,
+    INSCRIBED_INFLATED_OBSTACLE,
+    LETHAL_OBSTACLE,
+    MAX_NON_OBSTACLE,
+    NO_INFORMATION,
+    costs_to_occupancy,
+    occupancy_to_costs,
+)
+from .filters import FILTER_TYPES, FilterMask, FilterMaskError, KeepoutFilter, SpeedFilter, SpeedLimit, load_filter_mask
+from .grid import Costmap2D
+from .inflation_layer import InflationLayer, inflation_cost
+from .layered import LayeredCostmap
+from .obstacle_layer import ObstacleLayer
+from .smoother import smooth_path
+from .static_layer import StaticLayer
+from .zones import ZONE_KINDS, Zone, points_in_polygon, rasterize, zone_from_dict
+
+__all__ = [
+    "FREE_SPACE", "INSCRIBED_INFLATED_OBSTACLE", "LETHAL_OBSTACLE", "MAX_NON_OBSTACLE", "NO_INFORMATION",
+    "FILTER_TYPES", "ZONE_KINDS", "Costmap2D", "CostmapConfig", "FilterMask", "FilterMaskError", "InflationLayer",
+    "KeepoutFilter", "LayeredCostmap", "ObstacleLayer", "SmootherConfig", "SpeedFilter", "SpeedLimit", "StaticLayer",
+    "Zone", "costs_to_occupancy", "inflation_cost", "load_filter_mask", "occupancy_to_costs", "points_in_polygon",
+    "rasterize", "smooth_path", "zone_from_dict",
+]

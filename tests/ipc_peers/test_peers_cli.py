@@ -1,0 +1,67 @@
+"""``emos bench ipc --peers``: the plumbing with the local peers (offline), iceoryx2 if its
+benchmark environment exists, and the error for a registry that cannot be reached."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from emos.tools.bench import ipc_peers
+
+pytestmark = pytest.mark.process
+
+_TIMEOUT_S = 600  # bounds a hang only
+
+
+def _bench(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-c", "import sys; from emos.tools.cli import main; sys.exit(main())", "bench", "ipc", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=_TIMEOUT_S, env=env)
+
+
+def test_local_peers_are_measured_interleaved_with_a_row_per_transport_and_size():
+    done = _bench("--peers", "shm-spin,pipe", "--rounds", "2", "--sizes", "8,65536", "--messages", "20", "--json")
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(done.stdout)
+    assert doc["mode"] == "peers" and doc["rounds"] == 2 and len(doc["loads"]) == 2
+    rows = {(r["transport"], r["payload_bytes"]): r for r in doc["results"]}
+    assert set(rows) == {(t, s) for t in ("emos", "shm-spin", "pipe") for s in (8, 65536)}
+    for row in rows.values():
+        assert [r["round"] for r in row["rounds"]] == [1, 2]
+        for r in row["rounds"]:
+            assert r["p50_us"] > 0 and r["p99_us"] >= r["p50_us"] and r["load"] >= 0 and r["samples"] >= 20
+        p50s = [r["p50_us"] for r in row["rounds"]]
+        assert row["p50_min_us"] == min(p50s) and row["p50_max_us"] == max(p50s)
+        assert row["p50_spread"] == pytest.approx(max(p50s) / min(p50s), rel=0.01)
+        assert "errors" not in row
+
+
+def test_unknown_and_unmeasured_peers_are_clear_usage_errors():
+    done = _bench("--peers", "carrier-pigeon", "--sizes", "8")
+    assert done.returncode == 2 and "unknown IPC peer 'carrier-pigeon'" in done.stderr
+    done = _bench("--peers", "dora", "--sizes", "8")
+    assert done.returncode == 2 and "dora-rs==1.1.0" in done.stderr and "not measured" in done.stderr
+    done = _bench("--peers", "pipe", "--rounds", "0", "--sizes", "8")
+    assert done.returncode == 2 and "--rounds" in done.stderr
+
+
+def test_a_registry_that_cannot_be_reached_is_a_clear_error(tmp_path):
+    env = dict(os.environ)
+    env.update({ipc_peers.ENV_PEER_DIR: str(tmp_path / "peers"), "PIP_CONFIG_FILE": os.devnull, "PIP_INDEX_URL": "http://127.0.0.1:9/simple",
+                "PIP_EXTRA_INDEX_URL": "", "PIP_FIND_LINKS": str(tmp_path), "PIP_RETRIES": "0", "PIP_TIMEOUT": "3", "PIP_NO_CACHE_DIR": "1"})
+    env.pop("PIP_CONSTRAINT", None)
+    done = _bench("--peers", "iceoryx2", "--sizes", "8", "--rounds", "1", env=env)
+    assert done.returncode == 2
+    assert "peer iceoryx2: cannot install iceoryx2==0.10.0" in done.stderr and "registry" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.skipif(not ipc_peers.peer_env_has("iceoryx2"),
+                    reason="the iceoryx2 peer environment (~/.cache/emos-bench/peers) is not installed; "
+                           "`emos bench ipc --peers iceoryx2` creates it from the package registry, which this test does not reach")
+def test_iceoryx2_is_measured_from_its_own_environment():
+    done = _bench("--peers", "iceoryx2,iceoryx2-poll", "--rounds", "1", "--sizes", "64", "--messages", "20", "--json")
+    assert done.returncode == 0, done.stderr
+    rows = {r["transport"]: r for r in json.loads(done.stdout)["results"]}
+    assert set(rows) == {"emos", "iceoryx2", "iceoryx2-poll"}
+    assert rows["iceoryx2"]["p50_us"] > 0 and rows["iceoryx2-poll"]["p50_us"] > 0

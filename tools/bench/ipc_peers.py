@@ -1,0 +1,266 @@
+"""``emos bench ipc --peers ...``: EMOS topics against the IPC a robotics engineer would pick
+instead, measured in the same run by the same method, interleaved over ``--rounds``.
+
+Method, for every transport: half a round trip (``ipc_pingpong``), a numpy payload stamped with
+a sequence number that the reply must carry back, both ends pinned to their CPUs (``--cpus``),
+the same sizes and warm-up. Each round measures every (size, transport) once, in an order that
+rotates from round to round, and records the machine's load average when it starts; the result
+is one row per transport and size with p50 and p99 per round and their spread (max / min over
+rounds), because on a shared machine a number that swings between rounds is a finding.
+
+Peers:
+
+* ``pipe``: ``multiprocessing.Pipe`` (``ipc_pingpong``'s), bytes turned into numpy at the end.
+* ``shm-spin``: raw shared memory and a spinning reader: a sequence word per direction and one
+  ``np.copyto`` per hop, nothing else; the floor any shared-memory transport pays for the copies.
+* ``iceoryx2`` / ``iceoryx2-poll``: iceoryx2 0.10 with loaned samples, the receiver blocking in an
+  event service's ``Listener.blocking_wait`` / spinning on ``receive`` (``ipc_peer_iceoryx2.py``).
+
+Peers that need packages (iceoryx2) run in a benchmark-only virtual environment that this
+module creates (``python -m venv``, then ``pip install`` of pinned versions) under
+``$EMOS_BENCH_PEERS`` (default ``~/.cache/emos-bench/peers``): never a dependency of EMOS, never
+imported by it. A registry that cannot be reached is a clear error naming the peer and packages.
+"""
+from __future__ import annotations
+
+import json
+import mmap
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from emos.errors import EmosError
+from emos.tools.bench import ipc_common, ipc_pingpong
+from emos.tools.bench.common import percentiles
+from emos.transport.fence import WEAK_ORDERING
+
+LOCAL_PEERS = ["shm-spin", "pipe"]
+# Peer name -> (packages for the peer environment, the module that checks they import).
+VENV_PEERS: dict[str, tuple[list[str], str]] = {
+    "iceoryx2": (["iceoryx2==0.10.0", "numpy"], "iceoryx2"),
+    "iceoryx2-poll": (["iceoryx2==0.10.0", "numpy"], "iceoryx2"),
+}
+# Named by the issue but not measured by this version: a clear error instead of a silent skip.
+NOT_YET = {"dora": "dora-rs==1.1.0", "zenoh": "eclipse-zenoh"}
+PEERS = LOCAL_PEERS + list(VENV_PEERS)
+ENV_PEER_DIR = "EMOS_BENCH_PEERS"
+_PEER_TIMEOUT_S = 600.0  # one peer measurement; only a hung peer reaches it
+_INSTALL_TIMEOUT_S = 900.0
+
+
+class PeerUnavailable(EmosError, RuntimeError):
+    """A peer that cannot be measured here (its packages do not install, or it is unknown)."""
+
+
+def peer_dir() -> Path:
+    return Path(os.environ.get(ENV_PEER_DIR) or "~/.cache/emos-bench/peers").expanduser()
+
+
+def peer_python() -> Path:
+    return peer_dir() / "bin" / "python"
+
+
+def peer_env_has(module: str) -> bool:
+    """Whether the peer environment exists and imports ``module`` (no install attempted)."""
+    python = peer_python()
+    if not python.exists():
+        return False
+    return subprocess.run([str(python), "-c", f"import {module}"], capture_output=True, timeout=120).returncode == 0
+
+
+def ensure_peer_env(peer: str, log: Any = None) -> Path:
+    """The peer environment's Python with ``peer``'s packages, creating and filling it if needed."""
+    packages, module = VENV_PEERS[peer]
+    python = peer_python()
+    if peer_env_has(module):
+        return python
+    where = peer_dir()
+    if log:
+        log(f"installing {' '.join(packages)} into the benchmark-only environment {where} (once)...")
+    if not python.exists():
+        where.parent.mkdir(parents=True, exist_ok=True)
+        made = subprocess.run([sys.executable, "-m", "venv", str(where)], capture_output=True, text=True, timeout=_INSTALL_TIMEOUT_S)
+        if made.returncode != 0:
+            raise PeerUnavailable(f"peer {peer}: cannot create the virtual environment {where}: {made.stderr.strip()[-400:]}")
+    try:
+        pip = subprocess.run([str(python), "-m", "pip", "install", "--disable-pip-version-check", "-q", *packages],
+                             capture_output=True, text=True, timeout=_INSTALL_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise PeerUnavailable(f"peer {peer}: pip install {' '.join(packages)} into {where} did not finish in {_INSTALL_TIMEOUT_S:.0f} s "
+                              "(is the package registry reachable?)") from None
+    if pip.returncode != 0 or not peer_env_has(module):
+        detail = (pip.stderr or pip.stdout).strip().splitlines()[-3:]
+        raise PeerUnavailable(f"peer {peer}: cannot install {' '.join(packages)} into {where} (the package registry may be "
+                              f"unreachable): {' | '.join(detail) or 'no output'}")
+    return python
+
+
+# ------------------------------------------------------------------ shm-spin: the copies alone
+_SEQ_PING, _SEQ_PONG = 0, 1  # u64 words at the start of the shared page
+_STOP = (1 << 64) - 1
+
+
+def _shm_echo(mm: mmap.mmap, size: int) -> None:
+    q = memoryview(mm).cast("Q")
+    ping = np.frombuffer(mm, np.uint8, size, 64)
+    pong = np.frombuffer(mm, np.uint8, size, 64 + _stride(size))
+    last = 0
+    while True:
+        while q[_SEQ_PING] == last:
+            os.sched_yield()
+        last = q[_SEQ_PING]
+        if last == _STOP:
+            return
+        np.copyto(pong, ping)
+        q[_SEQ_PONG] = last  # x86-64 keeps the copy's stores before this one (total store order)
+
+
+def _stride(size: int) -> int:
+    return (size + 63) // 64 * 64
+
+
+def _shm_spin_half_rtts(size: int, count: int) -> list[float]:
+    if WEAK_ORDERING:
+        raise PeerUnavailable("peer shm-spin: needs a CPU with total store order (x86-64); this one reorders stores")
+    mm = mmap.mmap(-1, 64 + 2 * _stride(size))  # anonymous and shared: the forked echo sees it
+    q = memoryview(mm).cast("Q")
+    ping = np.frombuffer(mm, np.uint8, size, 64)
+    pong = np.frombuffer(mm, np.uint8, size, 64 + _stride(size))
+    payload = ipc_common.random_payload(size)
+    total = ipc_pingpong.warmup_round_trips(count) + count
+    proc = ipc_common.start_child(_shm_echo, (mm, size), "emos:bench-echo")
+    rtts: list[int] = []
+    try:
+        for i in range(1, total + 1):
+            ipc_pingpong._stamp(payload, i)
+            start = time.perf_counter_ns()
+            np.copyto(ping, payload)
+            q[_SEQ_PING] = i
+            deadline = time.monotonic() + 30.0
+            while q[_SEQ_PONG] != i:
+                os.sched_yield()
+                if not proc.is_alive() or time.monotonic() > deadline:
+                    raise RuntimeError(f"shm-spin echo gave no reply (exit code {proc.exitcode})")
+            reply = pong  # the reply is usable as a numpy array as it is
+            rtts.append(time.perf_counter_ns() - start)
+            if not ipc_pingpong._seq_matches(reply, payload):
+                raise RuntimeError(f"shm-spin at {size} B: reply {i} carried the wrong sequence number")
+            ipc_pingpong._check_echo(reply, payload, first=i == 1)
+        q[_SEQ_PING] = _STOP
+    finally:
+        if q[_SEQ_PING] != _STOP:
+            q[_SEQ_PING] = _STOP
+        ipc_common.stop_child(proc)
+        q.release()  # the mapping itself goes with the last array viewing it
+    return [ns / 2e3 for ns in rtts[total - count :]]
+
+
+# ------------------------------------------------------------------ peers in their own environment
+def _venv_half_rtts(peer: str, size: int, count: int) -> list[float]:
+    python = ensure_peer_env(peer)
+    script = Path(__file__).with_name("ipc_peer_iceoryx2.py")
+    cpus = "none" if ipc_common.PLACEMENT is None else f"{ipc_common.PLACEMENT[0]},{ipc_common.PLACEMENT[1]}"
+    wait = "poll" if peer.endswith("-poll") else "event"
+    cmd = [str(python), str(script), "--size", str(size), "--count", str(count),
+           "--warmup", str(ipc_pingpong.warmup_round_trips(count)), "--wait", wait, "--cpus", cpus]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=_PEER_TIMEOUT_S, cwd=str(peer_dir()))
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"peer {peer} at {size} B: no result in {_PEER_TIMEOUT_S:.0f} s") from None
+    if done.returncode != 0:
+        raise RuntimeError(f"peer {peer} at {size} B failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
+    try:
+        samples = json.loads(done.stdout)["half_rtt_us"]
+    except (ValueError, KeyError, TypeError):
+        raise RuntimeError(f"peer {peer} at {size} B printed no result: {done.stdout[-200:]!r}") from None
+    return [float(s) for s in samples]
+
+
+def half_rtts_us(transport: str, size: int, count: int, depth: int) -> list[float]:
+    """``count`` half round trips of ``transport`` (``emos`` or a peer), after a warm-up."""
+    if transport == "emos":
+        return ipc_pingpong.latency_us("emos", size, count, depth=depth)
+    if transport == "pipe":
+        return ipc_pingpong.latency_us("mp_pipe", size, count)
+    if transport == "shm-spin":
+        return _shm_spin_half_rtts(size, count)
+    if transport in VENV_PEERS:
+        return _venv_half_rtts(transport, size, count)
+    raise PeerUnavailable(f"unknown IPC peer {transport!r}; choose from {', '.join(PEERS)}")
+
+
+def check_peers(names: list[str]) -> str | None:
+    """An error message for peers this version cannot measure, or None."""
+    for name in names:
+        if name in NOT_YET:
+            return (f"peer {name} ({NOT_YET[name]}) is not measured by this version of the benchmark yet; "
+                    f"measurable peers: {', '.join(PEERS)}")
+        if name not in PEERS:
+            return f"unknown IPC peer {name!r}; choose from {', '.join(PEERS)}"
+    return None
+
+
+def prepare(names: list[str], log: Any = None) -> None:
+    """Install what the peers need before the first round, so no round pays for it."""
+    for name in names:
+        if name in VENV_PEERS:
+            ensure_peer_env(name, log)
+
+
+def load_average() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def run_rounds(transports: list[str], sizes: list[int], rounds: int, messages: int, samples_for: Any,
+               depth: int, progress: Any = None) -> dict[str, Any]:
+    """Every (transport, size) once per round, in a rotating order; see the module doc."""
+    per: dict[tuple[str, int], list[dict[str, Any]]] = {(t, s): [] for s in sizes for t in transports}
+    loads: list[float] = []
+    for r in range(rounds):
+        load = load_average()
+        loads.append(load)
+        if progress:
+            progress(f"round {r + 1}/{rounds} (load average {load:.2f})")
+        for size in sizes:
+            shift = r % len(transports)
+            for transport in transports[shift:] + transports[:shift]:
+                count = samples_for(size, messages)
+                entry: dict[str, Any] = {"round": r + 1, "load": load_average()}
+                try:
+                    with ipc_common.placed():
+                        p = percentiles(half_rtts_us(transport, size, count, depth))
+                    entry.update(p50_us=round(p["p50"], 2), p99_us=round(p["p99"], 2), samples=count)
+                except (RuntimeError, OSError, ipc_pingpong.SequenceMismatch) as exc:
+                    entry["error"] = str(exc)
+                per[(transport, size)].append(entry)
+                if progress:
+                    got = f"p50 {entry['p50_us']:.1f} us, p99 {entry['p99_us']:.1f} us" if "error" not in entry else f"ERROR {entry['error']}"
+                    progress(f"  {transport:>13} {size:>9,} B: {got}")
+    rows = [_summary(t, s, per[(t, s)]) for s in sizes for t in transports]
+    return {"rounds": rounds, "loads": loads, "results": rows}
+
+
+def _spread(values: list[float]) -> float | None:
+    return round(max(values) / min(values), 2) if values and min(values) > 0 else None
+
+
+def _summary(transport: str, size: int, rounds: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rounds if "error" not in r]
+    p50s, p99s = [r["p50_us"] for r in ok], [r["p99_us"] for r in ok]
+    row: dict[str, Any] = {
+        "transport": transport, "payload_bytes": size, "rounds": rounds,
+        "p50_us": round(statistics.median(p50s), 2) if p50s else None,
+        "p99_us": round(statistics.median(p99s), 2) if p99s else None,
+        "p50_min_us": min(p50s, default=None), "p50_max_us": max(p50s, default=None),
+        "p50_spread": _spread(p50s), "p99_spread": _spread(p99s),
+    }
+    errors = [r["error"] for r in rounds if "error" in r]
+    if errors:
+        row["errors"] = errors
+    return row
