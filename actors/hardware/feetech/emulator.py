@@ -7,7 +7,8 @@ USB adapter) and serves the protocol of :mod:`.protocol` on it until interrupted
 
 Each servo has its control table in memory (the registers of :class:`.protocol.Reg` with the
 STS3215's factory values: model 777, return delay 250 = 500 us, 7.4 V, 25 deg C). The motion is a
-kinematic model, not the pybullet arm (that backing comes later): with torque on, the present
+kinematic model here (:mod:`.simarm` swaps in the pybullet arm through ``servo_factory``, the bus
+untouched): with torque on, the present
 position moves toward the goal position at the goal speed, capped at the STS3215's no-load
 speed of 0.222 s / 60 deg at 7.4 V (Feetech's data sheet: 4.71 rad/s = 3072 steps/s),
 acceleration taken as instant. Timing is honest for the bus: a servo answers after its Return
@@ -119,11 +120,13 @@ class BusEmulator:
     """N servos on one emulated bus behind a pty (module docstring)."""
 
     def __init__(self, ids: Iterable[int] = (1, 2, 3, 4, 5, 6), *, baudrate: int = 1_000_000,
-                 return_delay: int | None = None, link_dir: str | None = None) -> None:
+                 return_delay: int | None = None, link_dir: str | None = None,
+                 servo_factory: Callable[[int], ServoModel] = ServoModel) -> None:
         ids = list(ids)
         if not ids or len(set(ids)) != len(ids):
             raise ValueError(f"emulator needs distinct servo ids, got {ids}")
-        self.servos = {i: ServoModel(i) for i in ids}
+        # servo_factory(id) builds each servo: the motion model is swappable (simarm.PybulletServo)
+        self.servos = {i: servo_factory(i) for i in ids}
         if return_delay is not None:
             for servo in self.servos.values():
                 servo.table[Reg.RETURN_DELAY_TIME.address] = return_delay
