@@ -12,7 +12,6 @@ from emos.actors.sim.barn_worlds import BARN_CYLINDER_RADIUS, load_barn_worlds
 from emos.tools.barn import grid as G
 from emos.tools.barn.generate import (
     GeneratorConfig,
-    add_generate_arguments,
     apply_generate,
     astar,
     generate_world,
@@ -138,8 +137,7 @@ def test_generate_option_replaces_the_world_source(tmp_path):
     from emos.tools.barn import _load, add_arguments
 
     parser = argparse.ArgumentParser()
-    add_arguments(parser)
-    add_generate_arguments(parser)
+    add_arguments(parser)  # `emos bench barn`'s own parser: --generate is among its options
     args = parser.parse_args(["--generate", "3", "--seed", "21", "--generated-dir", str(tmp_path)])
     apply_generate(args)
     worlds, indices = _load(args)
