@@ -15,8 +15,9 @@ for a family of yaw gains (the body turns at ``gain`` times the commanded yaw ra
 slip, and the forward speed lost while scrubbing), and checks the footprint at every sampled
 pose against every point. The footprint is inflated by ``margin`` plus bounds of what sampling
 in time and in gain can miss, so a touch between two samples is still caught (the argument is in
-docs/safety.md). Candidates are tried from the full command down: the same path slower
-(``scales``), then a stop; the first whose prediction is clear is sent.
+docs/safety.md). Candidates: the full command first; if it touches, the stop (if even that
+touches, the stop is sent and reported blocked); else the same path slower (``scales``), all
+in one batch, the fastest clear one sent, or the stop.
 
 A point that is already nearer than the inflated footprint at the start (the robot stopped
 close to something) only blocks a motion that brings it nearer: the robot may always move away.
@@ -82,7 +83,7 @@ class SweptConfig:
     speed_loss: float = attrs.field(default=0.07, converter=float, validator=in_range(min_value=0.0, max_value=0.2))
     time_step: float = attrs.field(default=0.02, converter=float, validator=in_range(min_value=0.002, max_value=0.2))
     gains: int = attrs.field(default=2, validator=in_range(min_value=2, max_value=64))
-    max_gains: int = attrs.field(default=8, validator=in_range(min_value=2, max_value=64))
+    max_gains: int = attrs.field(default=5, validator=in_range(min_value=2, max_value=64))
     gain_gap: float = attrs.field(default=0.01, converter=float, validator=in_range(min_value=0.001, max_value=0.5))
     scales: tuple[float, ...] = attrs.field(default=(1.0, 0.6, 0.3, 0.15), converter=_scales)
     hysteresis: float = attrs.field(default=0.0, converter=float, validator=in_range(min_value=0.0, max_value=0.5))
@@ -117,6 +118,9 @@ class SweptFootprint:
         # Half extents of the box; other shapes use their bounding circle (conservative).
         self._half = (0.5 * float(p[0]), 0.5 * float(p[1])) if self._box else (robot.radius, robot.radius)
         self._radius = robot.radius
+        # The footprint's farthest point from the centre (what the sampling bounds turn).
+        self._reach = math.hypot(*self._half) if self._box else robot.radius
+        self._radius = max(self._radius, self._reach)  # the prefilters' bound must cover it
         cfg = self.config
         lim = robot.ctrl_vx_limits, robot.ctrl_vy_limits, robot.ctrl_omega_limits
         # Braking at the lower of the robot's limit and the body's (the slowest it may brake).
@@ -131,7 +135,7 @@ class SweptFootprint:
         a history, or before its first entry, ``previous``."""
         cfg = self.config
         dt = cfg.time_step
-        n1 = int(math.ceil((max(lead, 0.0) + cfg.latency) / dt - 1e-9))
+        n1 = self._pipe_steps(lead)
         prev = np.asarray(previous, dtype=np.float64).reshape(3)
         if history is None or len(history[0]) == 0 or n1 == 0:
             return np.broadcast_to(prev, (n1, 3))
@@ -143,6 +147,11 @@ class SweptFootprint:
         last = np.clip(np.searchsorted(times, acting + dt, side="left") - 1, 0, len(times) - 1)
         a, b = commands[first], commands[last]
         return np.where(np.abs(b) > np.abs(a), b, a)
+
+    def _pipe_steps(self, lead: float) -> int:
+        """How many time steps the pipe (:meth:`pipe`) lasts."""
+        cfg = self.config
+        return int(math.ceil((max(lead, 0.0) + cfg.latency) / cfg.time_step - 1e-9))
 
     def twists(self, command: np.ndarray, previous: np.ndarray, lead: float, scales: np.ndarray,
                history: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -202,10 +211,7 @@ class SweptFootprint:
             # A rotation in place one way: a smaller gain turns through a part of the same sweep.
             return np.array([hi])
         # Enough gains that what lies between two of them stays within gain_gap (see inflation()).
-        dt = cfg.time_step
-        turn = float(np.max(np.sum(np.abs(w), axis=-1))) * dt * hi
-        length = float(np.max(np.sum(np.hypot(twists[..., 0], twists[..., 1]), axis=-1))) * dt
-        need = (hi - cfg.yaw_gain_min) * turn * (length + self._radius + cfg.margin + 0.05) / (2.0 * cfg.gain_gap)
+        need = (hi - cfg.yaw_gain_min) * float(np.max(self._gain_sensitivity(twists))) / (2.0 * cfg.gain_gap)
         count = int(min(max(cfg.gains, 1 + math.ceil(need)), cfg.max_gains))
         return np.linspace(cfg.yaw_gain_min, hi, count)
 
@@ -223,28 +229,41 @@ class SweptFootprint:
         out[..., 2] = heading
         return out
 
+    def _gain_sensitivity(self, twists: np.ndarray) -> np.ndarray:
+        """Per sequence (...,): a bound B of how far any footprint point moves per unit of yaw
+        gain, at any time of the sequence: B = integral |v| |Theta| dt + R_f max |Theta|
+        (Theta: the heading at gain 1, R_f: the footprint's farthest point from the centre)."""
+        dt = self.config.time_step
+        heading = np.cumsum(twists[..., 2], axis=-1) * dt  # Theta at the end of each step
+        before = np.concatenate([np.zeros(heading.shape[:-1] + (1,)), heading[..., :-1]], axis=-1)
+        # Theta is linear over a step, so its largest magnitude there is at one of its ends.
+        theta = np.maximum(np.abs(heading), np.abs(before))
+        speed = np.hypot(twists[..., 0], twists[..., 1])
+        top = np.max(theta, axis=-1) if theta.shape[-1] else np.zeros(theta.shape[:-1])
+        bound: np.ndarray = np.sum(speed * theta, axis=-1) * dt + self._reach * top
+        return bound
+
     def inflation(self, twists: np.ndarray, gains: np.ndarray) -> np.ndarray:
         """Per candidate (C,): ``margin`` + what time sampling can miss + what gain sampling can miss.
 
-        Between two poses a time_step apart a fixed point moves, in the body frame, by at most
-        (|v| + |w| r) dt with r its distance from the centre (<= the bounding radius plus the
-        inflation while it can touch); half of that separates any instant from its nearest
-        sample. Two neighbouring gains differ in heading by at most dg * W (W = the turn over the
-        horizon) and in position by at most dg * W * S (S = the path length); halfway between
-        them half of it, plus the heading's effect on the footprint (r * dg * W / 2).
+        The distance of a fixed point to the footprint changes by at most the largest
+        displacement of a footprint point, and the footprint is rigid: over a time_step that is
+        at most (|v| + |w| R_f) dt (R_f: its farthest point from the centre); any instant is
+        within dt / 2 of a sample. A gain between two samples dg apart is within dg / 2 of one
+        of them, and a footprint point moves per unit of gain by at most B
+        (:meth:`_gain_sensitivity`): d/dg of the position is the integral of v Theta turned a
+        quarter, of the body's turn Theta R_f. See docs/safety.md.
         """
         cfg = self.config
         dt = cfg.time_step
         g_hi = float(gains.max())
-        r = self._radius + cfg.margin + 0.05  # generous bound of the reach of a touching point
         speed = np.hypot(twists[..., 0], twists[..., 1])
         turn = np.abs(twists[..., 2]) * g_hi
-        time_gap = 0.5 * np.max(speed + turn * r, axis=1) * dt
+        time_gap = 0.5 * np.max(speed + turn * self._reach, axis=1) * dt
         dg = float(gains[1] - gains[0]) if len(gains) > 1 else 0.0
-        big_w = np.sum(np.abs(twists[..., 2]), axis=1) * dt * g_hi
-        length = np.sum(speed, axis=1) * dt
-        gain_gap = 0.5 * dg * big_w * (length + r)
-        return cfg.margin + time_gap + gain_gap
+        gain_gap = 0.5 * dg * self._gain_sensitivity(twists)
+        total: np.ndarray = cfg.margin + time_gap + gain_gap
+        return total
 
     # -- the check ----------------------------------------------------------------------------
     def clearance(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -259,8 +278,10 @@ class SweptFootprint:
         if self._box:
             qx = np.abs(bx) - self._half[0]
             qy = np.abs(by) - self._half[1]
-            return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
-        return np.hypot(bx, by) - self._radius
+            box: np.ndarray = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
+            return box
+        circle: np.ndarray = np.hypot(bx, by) - self._radius
+        return circle
 
     def check(self, command: np.ndarray, previous: np.ndarray, points: np.ndarray, lead: float = 0.0,
               history: tuple[np.ndarray, np.ndarray] | None = None) -> SweptCheck:
@@ -295,70 +316,126 @@ class SweptFootprint:
         start = self.clearance(np.zeros(3), pts)  # (N,)
         step = np.max(speed, axis=1) * self.config.time_step * _COARSE_STRIDE  # (C,) centre travel between coarse poses
 
-        stop_index = len(scales) - 1
-        hysteresis = self.config.hysteresis
+        hysteresis = np.where(np.arange(len(scales)) == len(scales) - 1, 0.0, self.config.hysteresis)
+        limit = inflate + hysteresis
+        # Poses after a candidate's body has stopped repeat its last one: checked once.
+        moving = np.any(np.abs(tw) > 1e-12, axis=2)
+        ends = np.where(moving.any(axis=1), tw.shape[1] - np.argmax(moving[:, ::-1], axis=1), 0) + 1
 
-        def touches(i: int) -> tuple[bool, float] | None:
-            extra = 0.0 if i == stop_index else hysteresis
-            found = self._touches(self.poses(tw[i:i + 1], gains)[0], pts, start, float(inflate[i]) + extra, float(step[i]))
-            return None if found is None else (found[0], found[1] + extra)
+        # The first poses, while the pipe drives the robot, are the same for every candidate
+        # (the base's response is causal): a touch there within every candidate's limit is
+        # one that even a stop makes.
+        shared, shared_limit = self._pipe_steps(lead), float(limit.min())
+
+        clear_to = -1.0  # the shared poses are known clear within this limit
+
+        def touches(which: list[int]) -> list[tuple[bool, float, bool] | None]:
+            """The candidates ``which`` in one batch: (touches, clearance beyond the margin,
+            touches within the shared poses) each."""
+            nonlocal clear_to
+            k1 = int(max(ends[which]))
+            poses = self.poses(tw[which, :k1 - 1], gains) if k1 > 1 else np.zeros((len(which), len(gains), 1, 3))
+            if 0 < shared < k1 - 1 and float(limit[which].max()) <= clear_to:
+                # Shared poses already found clear within a limit at least as large: from the
+                # last of them on (its clearance then counts from there).
+                found = self._touches(poses[:, :, shared:], pts, start, limit[which], step[which])
+            else:
+                found = self._touches(poses, pts, start, limit[which], step[which], shared, shared_limit)
+                if found[0] is not None and len(which) == 1 and found[0][3]:
+                    clear_to = float(limit[which[0]])
+            return [None if f is None else (f[0], f[1] + float(hysteresis[i]), f[2]) for f, i in zip(found, which)]
 
         # The command as asked first (the usual answer), then the stop: if even that touches,
-        # nothing slower helps; then the slower versions by bisection (a slower one sweeps a
-        # part of a faster one's path, so clear is monotone in practice; each answer is checked).
-        first = touches(0)
+        # nothing slower helps; then the slower versions together in one batch, the fastest
+        # clear one sent (each answer is checked, none is inferred from another).
+        first = touches([0])[0]
         if first is None:
             return FREE
         if not first[0]:
             return SweptCheck(1.0, first[1])
-        stop = touches(len(scales) - 1)
+        if first[2]:  # the stop's own poses touch: no need to roll it out
+            return SweptCheck(0.0, first[1], blocked=True)
+        stop = touches([len(scales) - 1])[0]
         if stop is not None and stop[0]:
             return SweptCheck(0.0, stop[1], blocked=True)
-        best = SweptCheck(0.0, math.inf if stop is None else stop[1])
-        lo, hi = 1, len(scales) - 2  # the fastest clear one lies in [lo, hi], or none does
-        while lo <= hi:
-            mid = (lo + hi) // 2
-            found = touches(mid)
+        slower = list(range(1, len(scales) - 1))
+        for i, found in zip(slower, touches(slower) if slower else []):
             if found is None or not found[0]:
-                best = SweptCheck(float(scales[mid]), math.inf if found is None else found[1])
-                hi = mid - 1
-            else:
-                lo = mid + 1
-        return best
+                return SweptCheck(float(scales[i]), math.inf if found is None else found[1])
+        return SweptCheck(0.0, math.inf if stop is None else stop[1])
 
-    def _touches(self, poses: np.ndarray, pts: np.ndarray, start: np.ndarray, limit: float,
-                 step: float) -> tuple[bool, float] | None:
-        """Do ``poses`` (G, K + 1, 3) bring a point within ``limit`` of the footprint (and nearer
-        than it started)? (touches, clearance beyond the margin), or None when no point is near."""
+    def _touches(self, poses: np.ndarray, pts: np.ndarray, start: np.ndarray, limits: np.ndarray,
+                 steps: np.ndarray, shared: int = -1,
+                 shared_limit: float = 0.0) -> list[tuple[bool, float, bool, bool] | None]:
+        """Per candidate of ``poses`` (C, G, K + 1, 3): does it bring a point within its
+        ``limits`` entry of the footprint (and nearer than it started)? (touches, clearance
+        beyond the margin, a touch within ``shared_limit`` at one of the first ``shared`` + 1
+        poses, those poses clear within the candidate's limit), or None when no point comes
+        near it.
+
+        The poses are taken in time order in a few spans (the shared ones first), each against
+        only the points near it, and the rest is skipped once every candidate touches (their
+        clearance is then the least seen so far)."""
+        n_c, n_g, k1, _ = poses.shape
+        stride = _COARSE_STRIDE
         # A point within d of the footprint lies within R + d of the centre, so within that plus
-        # the travel between coarse poses of a coarse pose's centre.
-        centres = poses[:, ::_COARSE_STRIDE, :2].reshape(-1, 2)
-        r = self._radius + limit + step
+        # the travel between coarse poses of a coarse pose's centre; coarse pose j covers poses
+        # stride * j .. stride * j + stride - 1.
+        centres = poses[:, :, ::stride, :2]  # (C, G, J, 2)
+        r = self._radius + limits + steps  # (C,)
         # Squared distances by one product: |p|^2 + |c|^2 - 2 p.c (p: the points, c: the centres).
-        d2 = np.einsum("ij,ij->i", centres, centres)[:, None] - 2.0 * (centres @ pts.T)
-        cand = np.nonzero(np.min(d2, axis=0) <= r * r - np.einsum("ij,ij->i", pts, pts))[0]
-        if cand.size == 0:
-            return None
-        sub = pts[cand]
-        flat = poses.reshape(-1, 3)
-        c, s = np.cos(flat[:, 2]), np.sin(flat[:, 2])
-        # Every point in every pose's body frame at once: one (2M, 2) @ (2, n) product.
-        rot = np.empty((2 * len(flat), 2))
+        d2 = np.einsum("cgjk,cgjk->cgj", centres, centres)[..., None] - 2.0 * (centres @ pts.T)  # (C, G, J, N)
+        close = np.min(d2, axis=1) <= (r * r)[:, None, None] - np.einsum("ij,ij->i", pts, pts)  # (C, J, N)
+        near_any = close.any(axis=1)  # (C, N)
+        out: list[tuple[bool, float, bool, bool] | None] = [None] * n_c
+        if not near_any.any():
+            return out
+        # Spans of coarse poses: the shared ones (the pipe), then the rest in halves.
+        n_j = centres.shape[2]
+        cut = min(max(shared, 0) // stride + 1, n_j)
+        mid = cut + (n_j - cut + 1) // 2
+        spans = [(a, b) for a, b in ((0, cut), (cut, mid), (mid, n_j)) if b > a]
+        hit = np.zeros(n_c, dtype=bool)
+        early = np.zeros(n_c, dtype=bool)
+        head_hit = np.zeros(n_c, dtype=bool)
+        low = np.full(n_c, math.inf)
+        below = start - _TOL
+        for a, b in spans:
+            cand = np.nonzero(close[:, a:b].any(axis=(0, 1)))[0]
+            if cand.size == 0:
+                continue
+            span = poses[:, :, a * stride:min(b * stride, k1)]  # (C, G, k, 3)
+            d = self._box_distance(span.reshape(-1, 3), pts[cand]).reshape(span.shape[:3] + (len(cand),))
+            low = np.minimum(low, np.min(d, axis=(1, 2, 3)) - limits + self.config.margin)
+            # Touching: within the limit and nearer than the point started.
+            hit |= np.any(d < np.minimum(limits[:, None], below[cand])[:, None, None, :], axis=(1, 2, 3))
+            if a == 0 and shared >= 0:
+                head = d[:, :, :shared + 1]
+                early |= np.any(head < np.minimum(shared_limit, below[cand]), axis=(1, 2, 3))
+                head_hit |= np.any(head < np.minimum(limits[:, None], below[cand])[:, None, None, :], axis=(1, 2, 3))
+            if hit.all():
+                break
+        # The first span, which holds the shared poses, is always looked at (or no point is near it).
+        head_clear = ~head_hit if shared >= 0 else np.zeros(n_c, dtype=bool)
+        for i in range(n_c):
+            if near_any[i].any():
+                out[i] = (bool(hit[i]), float(low[i]), bool(early[i]), bool(head_clear[i]))
+        return out
+
+    def _box_distance(self, poses: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        """Distance (M, n) of each point to the footprint at each pose (M, 3), negative inside:
+        :meth:`clearance` by one (2M, 2) @ (2, n) product for every point in every body frame."""
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        rot = np.empty((2 * len(poses), 2))
         rot[0::2, 0], rot[0::2, 1], rot[1::2, 0], rot[1::2, 1] = c, s, -s, c
-        body = (rot @ sub.T).reshape(len(flat), 2, -1)
-        off = rot.reshape(len(flat), 2, 2) @ flat[:, :2, None]  # (M, 2, 1): the pose's own position, turned
-        qx = np.abs(body[:, 0] - off[:, 0]) - self._half[0]
-        qy = np.abs(body[:, 1] - off[:, 1]) - self._half[1]
-        near = np.maximum(qx, qy)  # <= the distance to the box, so near >= d rules a pair out
+        body = (rot @ pts.T).reshape(len(poses), 2, -1)
+        off = rot.reshape(len(poses), 2, 2) @ poses[:, :2, None]  # (M, 2, 1): the pose's own position, turned
+        bx = body[:, 0] - off[:, 0]
+        by = body[:, 1] - off[:, 1]
         if not self._box:
-            near = np.hypot(body[:, 0] - off[:, 0], body[:, 1] - off[:, 1]) - self._radius
-        low = float(near.min()) - limit + self.config.margin  # clearance beyond the margin, a lower bound
-        maybe = near < limit
-        if not maybe.any():
-            return False, low
-        # The exact distance only where the cheap bound could not decide.
-        mq = np.nonzero(maybe)
-        x, y = qx[mq], qy[mq]
-        d = np.hypot(np.maximum(x, 0.0), np.maximum(y, 0.0)) + np.minimum(np.maximum(x, y), 0.0) if self._box else near[mq]
-        touching = (d < limit) & (d < start[cand][mq[1]] - _TOL)
-        return bool(touching.any()), low
+            circle: np.ndarray = np.hypot(bx, by) - self._radius
+            return circle
+        qx = np.abs(bx) - self._half[0]
+        qy = np.abs(by) - self._half[1]
+        box: np.ndarray = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
+        return box
