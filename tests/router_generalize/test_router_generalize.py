@@ -1,0 +1,132 @@
+"""Issue 40 item 4: vector routing that generalizes to wording it was not given.
+
+Scored on report_queries.tsv, a set written after the router change was frozen and never used to
+choose anything (the tuning sets are tuning_queries.tsv, tuning_queries_2.tsv and the package's
+router_labeled.tsv). The complete-agent recipe's route samples, real all-MiniLM-L6-v2 embeddings,
+the embedded Chroma store. The old rule (scoring="nearest") is scored on the same queries so the
+report shows both; the floors sit a few points under the measured figures (docs/local-models.md)."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+# The timeout bounds a hang only: loading the embedding model took 155 s on the 2-core machine at
+# load 22 (6 s idle), and the test routes 216 queries.
+pytestmark = [pytest.mark.unit, pytest.mark.statistical, pytest.mark.timeout(900)]
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+from emos.actors.agents.data import DATA_DIR  # noqa: E402
+from emos.actors.agents.db import ChromaClient, ChromaDB  # noqa: E402 - after HF_HUB_OFFLINE is set
+from emos.actors.agents.logic.router import (  # noqa: E402
+    HybridRouter,
+    LLMRouter,
+    Route,
+    SemanticRouterConfig,
+    VectorRouter,
+    description_phrases,
+)
+from emos.actors.agents.types import ChatMessage, ChatResponse  # noqa: E402
+
+HERE = Path(__file__).parent
+
+
+def _rows(path: Path) -> list[tuple[str, str]]:
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        query, _, route = line.partition("\t")
+        assert query and route, f"{path.name}:{number}: expected 'query<TAB>route'"
+        rows.append((query, route))
+    return rows
+
+
+SPEC = json.loads((HERE / "routes.json").read_text())
+REPORT = _rows(HERE / "report_queries.tsv")
+TUNING = {name: _rows(path) for name, path in (("tuning_queries.tsv", HERE / "tuning_queries.tsv"),
+                                                ("tuning_queries_2.tsv", HERE / "tuning_queries_2.tsv"),
+                                                ("router_labeled.tsv", DATA_DIR / "router_labeled.tsv"))}
+
+
+def _routes(descriptions: bool) -> dict[str, Route]:
+    return {name: Route(routes_to=name, samples=samples,
+                        description=SPEC["descriptions"][name] if descriptions else None)
+            for name, samples in SPEC["routes"].items()}
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory):
+    db = ChromaClient(ChromaDB(path=str(tmp_path_factory.mktemp("router-generalize"))))
+    db.initialize()
+    yield db
+    db.deinitialize()
+
+
+def _accuracy(client, name: str, scoring: str, descriptions: bool, rows) -> float:
+    routes = _routes(descriptions)
+    router = VectorRouter(list(routes.values()), client, SemanticRouterConfig(router_name=name, scoring=scoring),
+                          default_route=routes[SPEC["default_route"]])
+    router.initialize()
+    return sum(router.decide(query).route.name == expected for query, expected in rows) / len(rows)
+
+
+def test_the_report_set_is_separate_from_every_tuning_set_and_balanced():
+    assert SPEC["routes"] == json.loads((DATA_DIR / "router_routes.json").read_text())["routes"]  # the recipe's samples
+    seen = {q.lower() for rows in TUNING.values() for q, _ in rows}
+    assert not seen & {q.lower() for q, _ in REPORT}
+    samples = {s.lower() for samples in SPEC["routes"].values() for s in samples}
+    assert not samples & {q.lower() for q, _ in REPORT}
+    assert len(REPORT) >= 60 and {r for _, r in REPORT} == set(SPEC["routes"])
+    assert min(sum(r == name for _, r in REPORT) for name in SPEC["routes"]) >= 20
+
+
+def test_learned_routing_generalizes_to_the_report_set(client, capsys):
+    before = _accuracy(client, "report-nearest", "nearest", False, REPORT)
+    learned = _accuracy(client, "report-learned", "learned", False, REPORT)
+    described = _accuracy(client, "report-described", "learned", True, REPORT)
+    with capsys.disabled():
+        print(f"\nreport set ({len(REPORT)} queries, default distance bound): nearest sample {before:.3f}, learned {learned:.3f}, "
+              f"learned + descriptions {described:.3f}")
+    assert described >= 0.88  # measured 0.889 (64/72; the goal of issue 40 item 4 was >= 0.90): a regression guard
+    assert learned > before
+
+
+def test_descriptions_become_training_phrases_and_hybrid_asks_the_model_only_on_close_calls(client):
+    assert description_phrases("Go somewhere. Fetch, bring; carry things\nor come here.") == [
+        "Go somewhere", "Fetch, bring", "carry things", "or come here"]
+    routes = _routes(True)
+    asked: list[str] = []
+
+    def model(request):  # a model that always says "vision": shows when it was asked
+        asked.append(request.messages[-1].content)
+        return ChatResponse(message=ChatMessage(role="assistant", content="route_to_mllm_in"))
+
+    vector = VectorRouter(list(routes.values()), client, SemanticRouterConfig(router_name="hybrid-r", llm_margin=0.2),
+                          default_route=routes["llm_in"])
+    hybrid = HybridRouter(vector, LLMRouter(list(routes.values()), model, default_route=routes["llm_in"]))
+    hybrid.initialize()
+    clear = hybrid.decide("Go to the kitchen")
+    assert clear.route.name == "goto_in" and clear.decided_by == "vector" and clear.margin >= 0.2 and not asked
+    close = next(q for q, _ in TUNING["tuning_queries_2.tsv"] if vector.decide(q).margin < 0.2)
+    decision = hybrid.decide(close)
+    assert asked == [close] and decision.route.name == "mllm_in" and decision.decided_by == "hybrid"
+
+
+def test_nearest_scoring_keeps_the_original_rule_and_learned_needs_an_embedder(client):
+    routes = _routes(False)
+    with pytest.raises(TypeError, match="scoring='learned' needs a db_client with embed"):
+        VectorRouter(list(routes.values()), object(), SemanticRouterConfig(router_name="no-embed"))
+    with pytest.raises(ValueError, match="scoring"):
+        SemanticRouterConfig(router_name="x", scoring="magic")
+    with pytest.raises(ValueError, match="Route.description"):
+        Route(routes_to="x", samples=["a"], description="  ")
+    router = VectorRouter(list(routes.values()), client, SemanticRouterConfig(router_name="far", scoring="learned",
+                                                                            maximum_distance=0.3),
+                          default_route=routes["llm_in"])
+    router.initialize()
+    far = router.decide("The mitochondria is the powerhouse of the cell")
+    assert far.is_default and far.reason.startswith("no route close enough")
