@@ -42,20 +42,9 @@ from emos import BaseComponent, Launcher, Topic
 from emos.actors.hardware.create2.component import Create2Base, Create2Config
 from emos.actors.hardware.rplidar.component import Rplidar, RplidarConfig
 from emos.actors.hardware.simworld import DevicesComponent, DevicesConfig
-from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotFrames
-from emos.actors.nav.components import (
-    Controller,
-    DriveManager,
-    DriveManagerConfig,
-    LocalMapper,
-    LocalMapperConfig,
-    MapServer,
-    MapServerConfig,
-    Planner,
-    PlannerConfig,
-    TopicsKeys,
-)
-from emos.actors.nav.controllers import ControllersID
+from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotFrames
+from emos.actors.nav.components import TopicsKeys
+from emos.actors.nav.stacks import point_navigation_stack
 from emos.config.base import BaseComponentConfig
 from emos.msgs import Header, Point, PointStamped
 from emos.packages import get_package_share_directory
@@ -119,18 +108,12 @@ def robot_components() -> list:
     return [*devices, base, lidar]
 
 
-# The main job's navigation stack
-planner = Planner(component_name="planner", config=PlannerConfig(loop_rate=1.0))
-planner.run_type = "Timed"
-controller = Controller(component_name="controller")
-controller.algorithm = ControllersID.PURE_PURSUIT
-controller.direct_sensor = False
-driver = DriveManager(component_name="drive_manager",
-                      config=DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0, slowdown_zone_distance=0.3))
-driver.outputs(robot_command=cmd_topic)
-local_mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)))
-map_server = MapServer(component_name="global_map_server", config=MapServerConfig(map_file_path=map_file, grid_resolution=0.5))
-NAV = [map_server, controller, planner, driver, local_mapper]
+# The main job's navigation stack (emos.actors.nav.stacks), on the plugins' topics: the odometry
+# is the location (no Localizer), the lidar's /scan feeds the LocalMapper, Controller and
+# DriveManager, and the DriveManager's /cmd_vel goes to the base.
+stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="laser"), map_file,
+                               odom=odom_topic, scan=scan_topic, command=cmd_topic)
+planner = stack.planner
 
 
 class HardwareMission(BaseComponent):
@@ -207,14 +190,8 @@ class HardwareMission(BaseComponent):
 
 launcher = Launcher()
 launcher.add_pkg(components=robot_components(), package_name="robot", multiprocessing=True)  # devices first: ports up before the plugins open them
-launcher.kompass(components=NAV, multiprocessing=True)
+stack.launch(launcher)  # the stack, its robot and frames
 launcher.add_pkg(components=[HardwareMission()], package_name="mission", multiprocessing=True)
-for component in (controller, planner, driver, local_mapper):
-    component.inputs(location=odom_topic)
-for component in (controller, driver, local_mapper):
-    component.inputs(sensor_data=scan_topic)
-launcher.robot = my_robot
-launcher.frames = RobotFrames(world="map", odom="map", scan="laser")
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
 if os.path.exists(summary_file):

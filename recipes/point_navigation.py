@@ -47,21 +47,9 @@ import time
 import numpy as np
 
 from emos import BaseComponent, Launcher, Topic
-from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from emos.actors.nav.components import (
-    Controller,
-    DriveManager,
-    DriveManagerConfig,
-    LocalMapper,
-    LocalMapperConfig,
-    MapServer,
-    MapServerConfig,
-    Planner,
-    PlannerConfig,
-    TopicsKeys,
-)
-from emos.actors.nav.components.localizer import Localizer, LocalizerConfig
-from emos.actors.nav.controllers import ControllersID
+from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components import TopicsKeys
+from emos.actors.nav.stacks import point_navigation_stack
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.config.base import BaseComponentConfig
 from emos.msgs import Header, Odometry, Point, PointStamped
@@ -81,7 +69,6 @@ SEED = int(os.environ.get("EMOS_NAV_SEED", "0"))  # the Simulator's noise (odome
 # Localized, odometry is its own frame (odom -> base_link) and the Localizer publishes map ->
 # odom; unlocalized, the odometry is the true pose and its frame is the map's.
 FRAMES = RobotFrames(world="map", odom="odom" if LOCALIZE else "map", scan="LDS-01")
-NAV_COMPONENTS = ["global_map_server", "planner", "controller", "drive_manager", "mapper"] + (["localizer", "map_pose"] if LOCALIZE else [])
 
 # 1. Robot configuration (the spec's TurtleBot-sized robot)
 my_robot = RobotConfig(
@@ -92,31 +79,7 @@ my_robot = RobotConfig(
     ctrl_omega_limits=AngularCtrlLimits(max_vel=0.4, max_acc=2.0, max_decel=2.0, max_steer=np.pi / 3),
 )
 
-# 2. Components
-planner = Planner(component_name="planner", config=PlannerConfig(loop_rate=1.0))
-planner.run_type = "Timed"
-
-controller = Controller(component_name="controller")
-controller.algorithm = ControllersID.PURE_PURSUIT
-controller.direct_sensor = False  # obstacles from the LocalMapper's grid
-
-driver = DriveManager(
-    component_name="drive_manager",
-    config=DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0, slowdown_zone_distance=0.3),
-)
-driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))  # no ROS distributions here: Twist
-
-# 3. Mapping: a 3 x 3 m local grid, and the spec's map of the Webots arena
-local_mapper = LocalMapper(
-    component_name="mapper",
-    config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)),
-)
-map_server = MapServer(
-    component_name="global_map_server",
-    config=MapServerConfig(map_file_path=map_file, grid_resolution=0.5),
-)
-
-# 4. The simulated robot and arena, built from the same map (instead of Webots); the robot
+# 2. The simulated robot and arena, built from the same map (instead of Webots); the robot
 # starts where the map's frame starts, as in Webots. Localized: the Simulator's realistic
 # odometry (wheel encoders with a per-run scale error and 2 % slip, heading from a gyro with a
 # per-run bias: it drifts like a real base's); its true pose goes out on /sim/ground_truth for
@@ -132,61 +95,18 @@ if LOCALIZE:
     # localizer): off /tf, where the Localizer's map -> odom goes.
     sim.outputs(tf=Topic(name="/sim/tf", msg_type="TFMessage"))
 
-# 5. Localization (the ROS 2 way): the Localizer corrects the odometry against the map and
-# publishes map -> odom on /tf (and its estimate on /amcl_pose); MapFramePose composes that
-# transform with each odometry message (odom -> base_link), as tf2 does for a Nav2 node, into
-# the robot's pose in the map frame with the measured twist, on /odometry/localized: the
-# ``location`` every navigation component reads. Unlocalized, the odometry is the truth in the
-# map frame and is the location itself.
-tf_topic = Topic(name="/tf", msg_type="TFMessage")
-location_topic = Topic(name="/odometry/localized", msg_type="Odometry") if LOCALIZE else odom_topic
-localizer = Localizer(component_name="localizer", config=LocalizerConfig(
-    set_initial_pose=True, initial_pose=sim.config.spawn, seed=SEED,  # where the robot starts, as Nav2's set_initial_pose
-    filter_params={"alpha1": 0.05, "alpha2": 0.05, "alpha3": 0.05, "alpha4": 0.05, "min_particles": 300,
-                   "max_particles": 1500, "update_min_d": 0.05, "update_min_a": 0.05, "sigma_hit": 0.1,
-                   "max_beams": 90, "initial_cov_xy": 0.01, "initial_cov_yaw": math.radians(5) ** 2}))
-localizer.inputs(location=odom_topic, map=map_server.get_out_topic(TopicsKeys.GLOBAL_MAP))
-localizer.outputs(tf=tf_topic)
-
-
-class MapFramePose(BaseComponent):
-    """The robot's pose in the map frame: the latest map -> odom on /tf composed with each
-    odometry message (odom -> base_link), with the odometry's measured twist. Nothing before
-    the Localizer's first transform (the stack then waits for its location)."""
-
-    def __init__(self) -> None:
-        super().__init__(component_name="map_pose", inputs=[odom_topic, tf_topic], outputs=[location_topic],
-                         trigger=odom_topic, run_type="Event")
-
-    def custom_on_activate(self) -> None:
-        from emos.actors.nav.transforms import TransformTree
-
-        self.tree = TransformTree()
-        self.tf_msg = None
-
-    def _execution_step(self, msg: object = None, topic: object = None, **kwargs: object) -> None:
-        from emos.actors.nav.components.convert import BadInput, localized_odometry, pose_of, pose_stamped
-        from emos.actors.nav.localization import compose_pose
-
-        frames = FRAMES
-        tf_msg = self.get_input(tf_topic)
-        if tf_msg is not None and tf_msg is not self.tf_msg:
-            self.tf_msg = tf_msg
-            for problem in self.tree.update(tf_msg):
-                self.health_status.set_fail_system(topic_names=[tf_topic.name], message=f"{tf_topic.name}: {problem}")
-        odom = msg if msg is not None else self.get_input(odom_topic)
-        m = self.tree.lookup(frames.world, frames.odom)
-        if odom is None or m is None:
-            self.health_status.set_fail_system(topic_names=[tf_topic.name], message=f"no {frames.world} -> {frames.odom} on {tf_topic.name} yet")
-            return
-        try:
-            x, y, yaw = compose_pose(np.array([m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0])]), pose_of(odom))
-        except BadInput as exc:
-            self.health_status.set_fail_system(topic_names=[odom_topic.name], message=f"{odom_topic.name}: {exc}")
-            return
-        self.publish(location_topic, localized_odometry(pose_stamped(x, y, yaw, frames.world, stamp=odom.header.stamp),
-                                                        odom, frames.robot_base))
-        self.health_status.set_healthy()
+# 3. The navigation stack (emos.actors.nav.stacks): MapServer on the spec's map of the arena,
+# Planner, Controller with Pure Pursuit on the LocalMapper's 3 x 3 m grid, DriveManager with
+# safety zones on /cmd_vel (no ROS distributions here: Twist). Localized (the ROS 2 way), it also
+# runs the Localizer, which corrects the odometry against the map and publishes map -> odom on
+# /tf (and its estimate on /amcl_pose), and MapFramePose, which composes that transform with each
+# odometry message (odom -> base_link), as tf2 does for a Nav2 node, into the robot's pose in the
+# map frame on /odometry/localized: the ``location`` every navigation component reads.
+# Unlocalized, the odometry is the truth in the map frame and is the location itself.
+stack = point_navigation_stack(my_robot, FRAMES, map_file, odom=odom_topic, command=Topic(name="/cmd_vel", msg_type="Twist"),
+                               localize=LOCALIZE, initial_pose=sim.config.spawn, seed=SEED)
+planner, map_server, location_topic = stack.planner, stack.map_server, stack.location
+NAV_COMPONENTS = stack.component_names  # the stack's components, whose health the Mission prints
 
 
 class Mission(BaseComponent):
@@ -408,21 +328,12 @@ def draw(summary: dict, png: str) -> None:
     plt.close(fig)
 
 
-# 6. Launch
+# 4. Launch: the Simulator, the stack (its navigation and localization packages, the location
+# wiring, the robot's shape and limits, also the simulated robot's, and its frames), the Mission
 launcher = Launcher()
 launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
-launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
-if LOCALIZE:
-    launcher.add_pkg(components=[localizer, MapFramePose()], package_name="localization", multiprocessing=True)
+stack.launch(launcher)
 launcher.add_pkg(components=[Mission()], package_name="mission", multiprocessing=True)
-
-# The robot's pose in the map frame for every navigation component. Wired one by one: the
-# launcher-wide launcher.inputs(location=...) would also rewire the Localizer, whose location
-# is the raw odometry it corrects.
-for component in (controller, planner, driver, local_mapper):
-    component.inputs(location=location_topic)
-launcher.robot = my_robot  # also the simulated robot's shape and limits
-launcher.frames = FRAMES
 # The spec's web UI (the map, the plan and the robot in a browser; goals from the page): with
 # EMOS_UI=1, open the link the run prints (docs/ui.md). Off by default: this recipe is the
 # headless main job (CI, the tests, the chaos scenario), which must not need port 5001.

@@ -30,20 +30,9 @@ import time
 import numpy as np
 
 from emos import BaseComponent, Launcher, Topic
-from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from emos.actors.nav.components import (
-    Controller,
-    DriveManager,
-    DriveManagerConfig,
-    LocalMapper,
-    LocalMapperConfig,
-    MapServer,
-    MapServerConfig,
-    Planner,
-    PlannerConfig,
-    TopicsKeys,
-)
-from emos.actors.nav.controllers import ControllersID
+from emos.actors.nav import AngularCtrlLimits, LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components import TopicsKeys
+from emos.actors.nav.stacks import point_navigation_stack
 from emos.config.base import BaseComponentConfig
 from emos.msgs import Header, Point, PointStamped
 from emos.packages import get_package_share_directory
@@ -52,7 +41,6 @@ from emos.transport.select import use_ros2
 map_file = os.path.join(get_package_share_directory(package_name="kompass_sim"), "maps", "turtlebot3_webots.yaml")
 OUT_DIR = os.path.abspath(os.environ.get("EMOS_NAV_OUT", "point_navigation_ros2_out"))
 MISSION_TIMEOUT = float(os.environ.get("EMOS_NAV_TIMEOUT", "240"))
-NAV_COMPONENTS = ["global_map_server", "planner", "controller", "drive_manager", "mapper"]
 ROS2_TOPICS = ["/odom", "/scan", "/cmd_vel"]
 
 
@@ -81,20 +69,14 @@ my_robot = RobotConfig(
     ctrl_omega_limits=AngularCtrlLimits(max_vel=0.4, max_acc=2.0, max_decel=2.0, max_steer=np.pi / 3),
 )
 
-# 2. The navigation stack; the robot's topics are ROS 2's names and types
+# 2. The navigation stack of point_navigation.py (emos.actors.nav.stacks), unlocalized: the
+# robot's odometry is its location. The robot's topics are ROS 2's names and types; /scan is
+# every component's default sensor_data.
 odom_topic = Topic(name="/odom", msg_type="Odometry")
-planner = Planner(component_name="planner", config=PlannerConfig(loop_rate=1.0))
-planner.run_type = "Timed"
-controller = Controller(component_name="controller")
-controller.algorithm = ControllersID.PURE_PURSUIT
-controller.direct_sensor = False  # obstacles from the LocalMapper's grid
-driver = DriveManager(
-    component_name="drive_manager",
-    config=DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0, slowdown_zone_distance=0.3),
-)
-driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
-local_mapper = LocalMapper(component_name="mapper", config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)))
-map_server = MapServer(component_name="global_map_server", config=MapServerConfig(map_file_path=map_file, grid_resolution=0.5))
+stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", robot_base="base_link", scan="base_scan"),
+                               map_file, odom=odom_topic, command=Topic(name="/cmd_vel", msg_type="Twist"))
+planner = stack.planner
+NAV_COMPONENTS = stack.component_names
 
 
 class Mission(BaseComponent):
@@ -191,13 +173,11 @@ class Mission(BaseComponent):
         control.call(os.environ["EMOS_SUPERVISOR_SOCKET"], control.SUPERVISOR_STOP, {"reason": "mission finished"}, timeout=5.0)
 
 
-# 3. Launch: the navigation stack and the Mission; the bridge is added by the run option
+# 3. Launch: the navigation stack (with its robot and frames) and the Mission; the bridge is
+# added by the run option
 launcher = Launcher()
-launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
+stack.launch(launcher)
 launcher.add_pkg(components=[Mission()], package_name="mission", multiprocessing=True)
-launcher.inputs(location=odom_topic)  # /scan is every component's default sensor_data
-launcher.robot = my_robot
-launcher.frames = RobotFrames(world="map", odom="map", robot_base="base_link", scan="base_scan")
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
 if os.path.exists(summary_file):

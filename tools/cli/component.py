@@ -28,6 +28,7 @@ from typing import Any
 import yaml
 
 from emos.core import control as C
+from emos.core.discovery import component_workers
 from emos.core.rpc import RpcClient, RpcConnectionError, RpcError
 from emos.tools.cli.common import add_run_argument, join_run, options_anywhere
 
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if args.verb == "list":
         with RpcClient(ctx.run_dir / "supervisor.sock", timeout=args.timeout) as rpc:
             tree = rpc.call("tree")["tree"]
-        for name in _workers(tree):
+        for name in component_workers(tree):
             print(name)
         return 0
     if args.verb == "info":
@@ -123,9 +124,3 @@ def _call(path: Any, op: str, payload: dict, timeout: float, name: str) -> int:
     print(json.dumps(C.decode_result(result), indent=2, default=repr))
     return 0
 
-
-def _workers(node: dict) -> list[str]:
-    out = [node["name"]] if node.get("kind") == "worker" else []
-    for child in node.get("children", []):
-        out.extend(_workers(child))
-    return out

@@ -23,15 +23,15 @@ from typing import Any
 import attrs
 
 from emos.core import control as C
+from emos.core import discovery
+from emos.core.discovery import KINDS, component_workers, interfaces_of, printable
 from emos.core.rpc import RpcConnectionError, RpcError
-from emos.core.services import ACTION_ROLES, SERVICE_ROLES
 from emos.errors import EmosError
 from emos.msgs.registry import UnknownMessageType, resolve
 from emos.transport.context import RunContext
 
 # A module this command may import because a component named it: one of the emos package.
 _EMOS_MODULE = re.compile(r"^emos(\.[A-Za-z_][A-Za-z0-9_]*)+$")
-KINDS = {"service": SERVICE_ROLES, "action": ACTION_ROLES}
 
 
 class InterfaceError(EmosError, LookupError):
@@ -39,19 +39,9 @@ class InterfaceError(EmosError, LookupError):
 
 
 @attrs.define(frozen=True)
-class Interface:
-    """One service or action of a component, as its ``info`` answer describes it."""
-
-    kind: str  # "service" or "action"
-    name: str  # e.g. "planner/save_plan_to_file" (no leading slash)
-    component: str
-    serving: bool
-    types: dict[str, str]  # role ("request", "goal", ...) -> canonical type name
-    modules: dict[str, str]  # role -> module that defines the type
-
-    @property
-    def shown(self) -> str:
-        return "/" + self.name
+class Interface(discovery.Interface):
+    """One service or action of a component (read by :func:`emos.core.discovery.interfaces_of`),
+    whose types this command may load from the module of the emos package that defines them."""
 
     def message_class(self, role: str) -> type:
         """The class of this interface's ``role`` type; InterfaceError says why it cannot be had."""
@@ -78,28 +68,8 @@ def _a(kind: str) -> str:
     return f"an {kind}" if kind[0] in "aeiou" else f"a {kind}"
 
 
-def _text(value: Any, limit: int = 200) -> str:
-    """A name from the answer as printable text (the peer is not trusted to send clean strings)."""
-    return "".join(ch for ch in str(value)[:limit] if ch.isprintable())
-
-
 def _parse(component: str, kind: str, entries: Any) -> list[Interface]:
-    out: list[Interface] = []
-    if not isinstance(entries, list):
-        return out
-    roles = KINDS[kind]
-    for entry in entries:
-        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
-            continue
-        types, modules = {}, {}
-        for role in roles:
-            spec = entry.get(role)
-            if isinstance(spec, dict) and isinstance(spec.get("type"), str):
-                types[role] = _text(spec["type"])
-                modules[role] = _text(spec.get("module", ""))
-        if len(types) == len(roles):  # an entry without all its types cannot be called: skip it
-            out.append(Interface(kind, _text(entry["name"]).strip("/"), component, bool(entry.get("serving")), types, modules))
-    return out
+    return interfaces_of(component, kind, entries, Interface)
 
 
 def component_interfaces(ctx: RunContext, component: str, kind: str, timeout: float) -> tuple[list[Interface], str]:
@@ -116,7 +86,7 @@ def component_interfaces(ctx: RunContext, component: str, kind: str, timeout: fl
         raise InterfaceError(f"component {component!r} answered info with {type(info).__name__}, not a map")
     if "services" not in info and "actions" not in info:
         raise InterfaceError(f"component {component!r} does not list its services and actions (an EMOS older than this CLI?)")
-    return _parse(component, kind, info.get(kind + "s")), _text(info.get("state", "?"), 40)
+    return _parse(component, kind, info.get(kind + "s")), printable(info.get("state", "?"), 40)
 
 
 def find(ctx: RunContext, component: str, kind: str, name: str, timeout: float) -> Interface:
@@ -143,15 +113,13 @@ def listing(ctx: RunContext, component: str | None, kind: str, timeout: float) -
     and the problems met on the way (a component that did not answer: the others are listed)."""
     if component is not None:
         return component_interfaces(ctx, component, kind, timeout)[0], []
-    from emos.tools.cli.component import _workers
-
     try:
         tree = C.call(ctx.run_dir / "supervisor.sock", C.SUPERVISOR_TREE, {}, timeout=timeout)["tree"]
     except (RpcConnectionError, RpcError, TimeoutError, KeyError, TypeError) as exc:
         raise InterfaceError(f"the supervisor of run {ctx.run_id} did not list its components: {exc}") from None
     found: list[Interface] = []
     problems: list[str] = []
-    for name in _workers(tree):
+    for name in component_workers(tree):
         try:
             found.extend(component_interfaces(ctx, name, kind, timeout)[0])
         except InterfaceError as exc:

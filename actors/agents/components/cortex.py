@@ -35,6 +35,7 @@ from attrs import define, field
 
 from emos.config import validators as V
 from emos.core import control as C
+from emos.core.discovery import component_workers
 from emos.core.rpc import RpcConnectionError
 from emos.events.runner import ActionRuntime, run_action
 from emos.io.fixed import FixedInput
@@ -319,7 +320,7 @@ class Cortex(ModelComponent):
             client = AsyncRpcClient(sock)
             try:
                 tree = await client.call(C.SUPERVISOR_TREE, timeout=timeout)
-                names = _workers(tree.get("tree", {}) if isinstance(tree, dict) else {})
+                names = component_workers(tree.get("tree") if isinstance(tree, dict) else None)
             except Exception as exc:
                 self._errors("discover", "[%s] the supervisor did not list the components: %s", self.component_name, exc)
             finally:
@@ -430,16 +431,6 @@ def _own_action(tool: Callable[..., Any], args: dict) -> Any:
     from emos.events.action import Action
 
     return Action(tool, kwargs=dict(args))
-
-
-def _workers(node: Any) -> list[str]:
-    """The worker (component) names of a supervisor tree, as ``emos component list`` reads it."""
-    if not isinstance(node, dict):
-        return []
-    out = [str(node["name"])] if node.get("kind") == "worker" and isinstance(node.get("name"), str) else []
-    for child in node.get("children", []) or []:
-        out.extend(_workers(child))
-    return out
 
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -28,8 +28,8 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.core.discovery import interfaces_of, printable
 from emos.msgs import fields as F
-from emos.msgs.registry import UnknownMessageType, resolve
 
 from ..types import ToolSpec
 
@@ -82,24 +82,6 @@ class CortexTool:
     waits: bool = False  # the Action returns the goal's result (an action server): judge it
 
 
-def _text(value: Any, limit: int = 120) -> str:
-    return "".join(ch for ch in str(value)[:limit] if ch.isprintable())
-
-
-def _types(entry: dict, roles: tuple[str, ...]) -> tuple[type, ...] | None:
-    """The message classes of an ``info`` entry, resolved among registered types only."""
-    out = []
-    for role in roles:
-        spec = entry.get(role)
-        if not isinstance(spec, dict) or not isinstance(spec.get("type"), str):
-            return None
-        try:
-            out.append(resolve(spec["type"]))
-        except UnknownMessageType:
-            return None  # a type this process does not know cannot be built: not offered
-    return tuple(out)
-
-
 def _goal_action(server: str, types: tuple[type, ...], build: Callable[[dict], Any]) -> Callable[[dict], Any]:
     from emos import actions as A
 
@@ -117,18 +99,18 @@ def tools_from_info(info: dict, places: dict[str, tuple[float, float]] | None = 
     """The tools one component's ``info`` answer offers (see the module doc). ``topic_of(name,
     type)`` gives the Topic object for publishing to an input (speech)."""
 
-    component = _text(info.get("component", ""))
-    kind = _text(info.get("type", ""))
+    component = printable(info.get("component", ""), 120)
+    kind = printable(info.get("type", ""), 120)
     if not component:
         return []
     out: list[CortexTool] = []
-    for entry in info.get("actions") or []:
-        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or not entry.get("serving"):
-            continue
-        types = _types(entry, ("goal", "feedback", "result"))
+    # Only what is served now, and whose types this process knows (a type it does not know
+    # cannot be built: not offered).
+    for action in interfaces_of(component, "action", info.get("actions")):
+        types = action.registered_types() if action.serving else None
         if types is None:
             continue
-        server = _text(entry["name"]).strip("/")
+        server = action.name
         short = server.split("/")[-1]
         out.append(CortexTool(ToolSpec(name=tool_name(component, short),
                                        description=f"Action {server} of {kind} {component!r}: send a {types[0].__name__} goal and wait for its result.",
@@ -136,13 +118,11 @@ def tools_from_info(info: dict, places: dict[str, tuple[float, float]] | None = 
                               _goal_action(server, types, _from_fields(types[0])), component, "action", waits=True))
         if kind == "Planner" and short == "plan_path":
             out += _navigation(server, types, component, places or {})
-    for entry in info.get("services") or []:
-        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or not entry.get("serving"):
-            continue
-        types = _types(entry, ("request", "response"))
+    for service in interfaces_of(component, "service", info.get("services")):
+        types = service.registered_types() if service.serving else None
         if types is None:
             continue
-        srv = _text(entry["name"]).strip("/")
+        srv = service.name
         req_t = types[0]
         out.append(CortexTool(ToolSpec(name=tool_name(component, srv.split("/")[-1]),
                                        description=f"Service {srv} of {kind} {component!r}: send a {req_t.__name__} request.",
