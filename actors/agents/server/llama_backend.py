@@ -77,7 +77,7 @@ class LlamaCppResponder:
         if seed is not None:
             kwargs["seed"] = seed
         try:
-            self._llm = Llama(**kwargs)
+            self._llm: Any = Llama(**kwargs)  # None once closed
         except (ValueError, RuntimeError, OSError) as exc:
             # A file with a valid header but broken tensors, or an architecture llama.cpp lacks.
             raise LocalModelError(f"llama.cpp could not load the GGUF model {str(path)!r}: {exc}") from None
@@ -103,7 +103,8 @@ class LlamaCppResponder:
 
     def respond(self, request: ChatRequest, model: str) -> ChatResponse:
         with self._lock:
-            out = self._llm.create_chat_completion(**self._kwargs(request))
+            # llama-cpp-python's TypedDicts: read as plain JSON, as the OpenAI codec reads a server's.
+            out: Any = self._llm.create_chat_completion(**self._kwargs(request))
         choice = out["choices"][0]
         raw = choice["message"]
         calls = [ToolCall(id=c.get("id", ""), name=c["function"]["name"], arguments=decode_tool_arguments(c["function"].get("arguments")))
@@ -117,7 +118,8 @@ class LlamaCppResponder:
         with self._lock:
             reason = None
             tokens = 0
-            for part in self._llm.create_chat_completion(stream=True, **self._kwargs(request)):
+            parts: Any = self._llm.create_chat_completion(stream=True, **self._kwargs(request))
+            for part in parts:
                 choice = part["choices"][0]
                 text = (choice.get("delta") or {}).get("content")
                 if text:
