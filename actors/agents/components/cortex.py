@@ -126,9 +126,11 @@ class CortexRuntime(ActionRuntime):
             # A step that ran out of time must not keep the robot driving: cancel it on the server.
             try:
                 await self.run_function(client.cancel, (goal_id,), {}, 10.0)
+                outcome = "the goal was cancelled"
             except Exception as exc:
                 self.log.warning("[%s] cancelling goal %s of %s after its step timed out: %s", self.cortex.component_name, goal_id, name, exc)
-            raise TimeoutError(f"action {name}: no result within step_timeout={self.timeout:g} s; the goal was cancelled") from None
+                outcome = f"cancelling the goal failed ({exc})"
+            raise TimeoutError(f"action {name}: no result within step_timeout={self.timeout:g} s; {outcome}") from None
 
     def publish(self, topic: Topic, msg: Any) -> None:
         from emos.transport.select import open_publisher
