@@ -42,6 +42,29 @@ def house_shapes() -> list[Shape]:
     return shapes
 
 
+# A charging dock: a V reflector (two arms meeting at the contacts, opening along the dock's
+# yaw) that a scan sees from any approach. The robot's DockSpec (emos.actors.nav.docking)
+# describes the same shape; keep the two in step.
+DOCK_HALF_ANGLE_DEG, DOCK_ARM, DOCK_THICKNESS, DOCK_HEIGHT = 45.0, 0.4, 0.03, 0.5
+HOUSE_DOCK = (0.1, 6.0, 0.0)  # against the left wall of the top-left room, opening into the room
+
+
+def charging_dock(pose: tuple[float, float, float]) -> list[Shape]:
+    """The dock's two arms as walls; ``pose`` = (x, y, yaw) of the apex and its opening direction."""
+    import math
+
+    x, y, yaw = (float(v) for v in pose)
+    color = (0.1, 0.1, 0.1, 1.0)
+    arms: list[Shape] = []
+    for sign in (1.0, -1.0):
+        a = yaw + sign * math.radians(DOCK_HALF_ANGLE_DEG)
+        # Centre line of an arm; its square end overlaps the apex by half a thickness.
+        arms.append(Wall((x, y), (x + DOCK_ARM * math.cos(a) - DOCK_THICKNESS / 2 * math.cos(a),
+                                  y + DOCK_ARM * math.sin(a) - DOCK_THICKNESS / 2 * math.sin(a)),
+                         DOCK_THICKNESS, DOCK_HEIGHT, color))
+    return arms
+
+
 def demo_house(**world_kwargs: Any) -> World:
     """A small house with four rooms and doorways; the robot fits through every door."""
     world = World(name="demo_house", **world_kwargs)

@@ -232,13 +232,15 @@ def test_moving_obstacle_configs_validate_and_the_local_mapper_takes_evidence_de
     cfg = LocalMapperConfig(mapping_bounds=(0.0, 0.0, 4.0, 4.0), memory_decay={"cap": 3})
     assert cfg.memory_decay == EvidenceConfig(cap=3, free_range=8.0)
     cfg.memory_decay = EvidenceConfig(cap=2, free_range=5.0)  # on assignment too
+    from emos.testing import ComponentHarness
+
     mapper = LocalMapper("mapper", config=cfg)
-    mapper.custom_on_configure()
-    assert isinstance(mapper._memory.grid, EvidenceGrid) and mapper._memory.grid.cap == 2
-    assert mapper._memory.free_range == 5.0
+    with ComponentHarness(mapper, activate=False):  # configured on a real node (it creates its services)
+        assert isinstance(mapper._memory.grid, EvidenceGrid) and mapper._memory.grid.cap == 2
+        assert mapper._memory.free_range == 5.0
     plain = LocalMapper("plain", config=LocalMapperConfig(mapping_bounds=(0.0, 0.0, 4.0, 4.0)))
-    plain.custom_on_configure()
-    assert not isinstance(plain._memory.grid, EvidenceGrid)  # static worlds: never forget
+    with ComponentHarness(plain, activate=False):
+        assert not isinstance(plain._memory.grid, EvidenceGrid)  # static worlds: never forget
     for bad, match in (({"cap": 0}, "cap must be an integer >= 1"), ({"cap": 2.5}, "cap must be an integer"),
                        ({"free_range": -1.0}, "free_range must be"), ({"decay": 3}, "unknown EvidenceConfig field"),
                        (4, "expected an EvidenceConfig")):

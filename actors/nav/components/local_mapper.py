@@ -16,6 +16,7 @@ from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 from emos.msgs import Odometry
+from emos.msgs.srv import TriggerRequest, TriggerResponse
 
 from ..local_map import LocalMapper as GridBuilder
 from ..local_map import MapConfig
@@ -145,6 +146,17 @@ class LocalMapper(NavComponent):
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
         self._memory = memory_of(self.config)
         self._memory_published = -math.inf
+        # Nav2's clear_entirely_local_costmap: a recovery behavior (Behaviors.clear_costmaps)
+        # empties the grid, so obstacles that have gone stop blocking the robot.
+        self.create_service(f"{self.component_name}/clear_entirely_local_costmap", TriggerRequest, TriggerResponse,
+                            lambda request: TriggerResponse(success=self.clear_costmap(), message="local grid cleared"))
+
+    def clear_costmap(self) -> bool:
+        """Forget every obstacle of the local grid (the obstacle memory of mapping mode is kept:
+        it is the map, not a costmap); the next scan starts it again. An event action too."""
+        self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
+        self.get_logger().info("[%s] local grid cleared", self.component_name)
+        return True
 
     def custom_on_activate(self) -> None:
         if self.run_type == ComponentRunType.EVENT and not self.config.use_sim_time:

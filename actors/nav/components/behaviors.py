@@ -1,0 +1,301 @@
+"""``Behaviors``: Nav2's behavior server. Recovery moves as event / fallback actions and as
+action servers: ``spin``, ``backup``, ``drive_on_heading``, ``wait``, and ``clear_costmaps``
+(the LocalMapper's ``clear_entirely_local_costmap`` service).
+
+    behaviors = Behaviors(component_name="behaviors")
+    Event(stuck_event, Action(method=behaviors.back_up, kwargs={"distance": 0.3}))
+    Fallback ladder: [Action(method=behaviors.clear_costmaps), Action(method=behaviors.spin), ...]
+
+Every move is planned by :mod:`emos.actors.nav.recovery` with the robot's footprint over the
+whole motion against the latest scan (and the local grid when wired: it remembers what the scan
+no longer sees, behind the robot included), and planned again on every step from the pose the
+odometry gives, so an obstacle that appears mid-way stops it. A move that cannot be done is
+refused with the reason (the component's status says it too: ALGORITHM failure naming the
+behavior), e.g. ``back_up refused: obstacle 0.12 m behind``. Commands go to ``robot_command``
+(wire it to the DriveManager's command input to keep its safety zones in the loop, or to the
+base directly as Nav2 does).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import attrs
+import numpy as np
+from attrs import define, field
+
+from emos.config.validators import in_range
+from emos.core import clock
+from emos.core.keyed import AllowedTopic
+from emos.geometry import wrap_angle
+from emos.io.topic import Topic
+from emos.msgs.srv import TriggerRequest, TriggerResponse
+
+from .. import recovery as R
+from ..controllers.sensors import obstacle_points
+from .base import NavComponent, NavComponentConfig, rate_field
+from .convert import BadInput, grid_points_in_robot_frame, pose_of, scan_of, twist_msg
+from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
+
+__all__ = ["Behaviors", "BehaviorsConfig"]
+
+
+@define(kw_only=True)
+class BehaviorsConfig(NavComponentConfig):
+    """Nav2's behavior server parameters where they are the same: ``max_rotational_vel`` (rad/s
+    of a spin), ``safety_margin`` (m the footprint keeps from obstacles over a move),
+    ``sensor_timeout`` (s: an older scan refuses every move), ``local_mapper`` (the component
+    whose grid ``clear_costmaps`` clears)."""
+
+    loop_rate: float = rate_field(10.0)
+    max_rotational_vel: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=10.0))
+    safety_margin: float = field(default=0.03, validator=in_range(min_value=0.0, max_value=1.0))
+    sensor_timeout: float = field(default=1.0, validator=in_range(min_value=1e-3, max_value=1e3))
+    local_mapper: str = field(default="mapper")
+    xy_tolerance: float = field(default=0.01, validator=in_range(min_value=1e-4, max_value=1.0))
+    yaw_tolerance: float = field(default=math.radians(1.0), validator=in_range(min_value=1e-4, max_value=1.0))
+
+
+@attrs.define
+class _Running:
+    name: str
+    target: float  # rad of a spin, m of a drive, s of a wait
+    speed: float
+    start_pose: np.ndarray | None
+    started: float  # node clock
+    deadline: float
+    done_amount: float = 0.0
+    last_yaw: float = 0.0
+    result: BehaviorResult | None = None
+    stopped: bool = False  # the zero command after the end was sent (a cancel ends it off the loop)
+
+
+class Behaviors(NavComponent):
+    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
+        "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
+        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
+        "local_map": AllowedTopic(types=("OccupancyGrid",), default=None),
+    }
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
+        "robot_command": AllowedTopic(types=("Twist",), default=Topic(name="/cmd_vel", msg_type="Twist"), required=True),
+    }
+    config: BehaviorsConfig
+
+    @classmethod
+    def config_class(cls) -> type[BehaviorsConfig]:
+        return BehaviorsConfig
+
+    def custom_on_configure(self) -> None:
+        self._lock = threading.Lock()
+        self._running: _Running | None = None
+        self._last: BehaviorResult | None = None
+        self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0}
+        for name, goal in (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal)):
+            self.create_action_server(f"{self.component_name}/{name}", goal, BehaviorFeedback, BehaviorResult, self._serve)
+
+    def action_servers(self) -> dict[str, tuple[Any, Any, Any]]:
+        return {f"{self.component_name}/{n}": (g, BehaviorFeedback, BehaviorResult) for n, g in
+                (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal))}
+
+    # -- what the robot sees ------------------------------------------------------------------------
+    def _obstacles(self) -> tuple[np.ndarray, bool]:
+        """Obstacle points in the robot frame and whether anything sees behind the robot.
+        Raises BadInput (naming the topic) when the scan is missing or old."""
+        msg = self.latest("sensor_data")
+        age = self.age_of("sensor_data")
+        if msg is None:
+            raise BadInput(f"no scan on {self.topic_name('sensor_data')} yet")
+        if not self.config.use_sim_time and age is not None and age > self.config.sensor_timeout:
+            raise BadInput(f"{self.topic_name('sensor_data')} is stale: last scan {age:.2f} s ago")
+        scan = scan_of(msg)
+        pts = obstacle_points(scan)
+        rear = R.scan_covers_rear(scan)
+        grid = self.latest("local_map")
+        if grid is not None:
+            origin_frame = grid.header.frame_id
+            pose = np.zeros(3) if origin_frame == self.config.frames.robot_base else self._pose()
+            if pose is not None:
+                cells = grid_points_in_robot_frame(grid, pose, max_range=2.0)
+                pts = np.vstack([pts, cells]) if cells.size else pts
+                rear = True  # the grid remembers what the scan saw before it turned away
+        return pts, rear
+
+    def _pose(self) -> np.ndarray | None:
+        msg = self.latest("location")
+        try:
+            return None if msg is None else pose_of(msg)
+        except BadInput:
+            return None
+
+    def _plan(self, run: _Running, remaining: float) -> R.BehaviorPlan:
+        dt = 1.0 / self.config.loop_rate
+        if run.name == "wait":
+            return R.plan_wait(max(remaining, 1e-3), dt=dt)
+        pts, rear = self._obstacles()
+        m = self.config.safety_margin
+        robot = self.config.robot
+        if run.name == "spin":
+            return R.plan_spin(robot, pts, math.copysign(remaining, run.target), max_omega=run.speed, dt=dt, margin=m)
+        if run.name == "back_up":
+            return R.plan_back_up(robot, pts, remaining, speed=run.speed, dt=dt, margin=m, rear_seen=rear)
+        return R.plan_drive_on_heading(robot, pts, remaining, speed=run.speed, dt=dt, margin=m)
+
+    # -- starting and playing -----------------------------------------------------------------------
+    def _begin(self, name: str, target: float, speed: float, time_allowance: float, preempt: bool = False) -> tuple[bool, str]:
+        """Check the whole move now and start it; (False, why) when refused. A fallback ladder
+        fires its actions again while the failure lasts: a request for the behavior already
+        running lets it go on, one for another is refused while it runs (an action goal,
+        ``preempt``, replaces it, as in Nav2)."""
+        with self._lock:
+            busy = self._running if self._running is not None and self._running.result is None else None
+        if busy is not None and not preempt:
+            if busy.name == name:
+                return True, f"{name} already running"
+            return self._refuse(name, f"{name} refused: {busy.name} is running")
+        now = clock.now()
+        pose = self._pose()
+        if name != "wait" and pose is None:
+            return self._refuse(name, f"{name} refused: no pose on {self.topic_name('location')}")
+        run = _Running(name, float(target), float(speed), pose, now, now + float(time_allowance),
+                       last_yaw=float(pose[2]) if pose is not None else 0.0)
+        try:
+            plan = self._plan(run, abs(run.target))
+        except (BadInput, ValueError) as exc:
+            return self._refuse(name, f"{name} refused: {exc}")
+        if not plan.feasible:
+            return self._refuse(name, plan.reason)
+        self._counts["started"] += 1
+        with self._lock:
+            if self._running is not None and self._running.result is None:
+                self._running.result = BehaviorResult(success=False, message=f"{self._running.name} preempted by {name}")
+            self._running = run
+        self.get_logger().info("[%s] %s started (%.3g)", self.component_name, name, target)
+        return True, f"{name} started"
+
+    def _refuse(self, name: str, reason: str) -> tuple[bool, str]:
+        self._counts["refused"] += 1
+        self.fail_algorithm(name, reason)
+        self._last = BehaviorResult(success=False, message=reason)
+        return False, reason
+
+    def _finish(self, run: _Running, success: bool, message: str) -> None:
+        self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+        run.stopped = True
+        run.result = BehaviorResult(success=success, message=message, total_elapsed_time=clock.now() - run.started)
+        self._last = run.result
+        self._counts["succeeded" if success else "stopped"] += 1
+        if success:
+            self.health_status.set_healthy()
+            self.get_logger().info("[%s] %s", self.component_name, message)
+        else:
+            self.fail_algorithm(run.name, message)
+
+    def _execution_step(self, **kwargs: Any) -> None:
+        with self._lock:
+            ended = self._running if self._running is not None and self._running.result is not None else None
+            run = self._running if self._running is not None and self._running.result is None else None
+        if ended is not None and not ended.stopped:  # cancelled or preempted from another thread
+            self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+            ended.stopped = True
+        if run is None:
+            if self._last is None or self._last.success:
+                self.health_status.set_healthy()
+            return
+        now = clock.now()
+        if now > run.deadline:
+            self._finish(run, False, f"{run.name} stopped: time allowance of {run.deadline - run.started:.1f} s used up "
+                                     f"({run.done_amount:.2f} of {abs(run.target):.2f} done)")
+            return
+        if run.name == "wait":
+            run.done_amount = now - run.started
+        else:
+            pose = self._pose()
+            if pose is None or run.start_pose is None:
+                self._finish(run, False, f"{run.name} stopped: lost the pose on {self.topic_name('location')}")
+                return
+            if run.name == "spin":
+                run.done_amount += abs(wrap_angle(pose[2] - run.last_yaw))
+                run.last_yaw = float(pose[2])
+            else:
+                run.done_amount = float(math.dist(pose[:2], run.start_pose[:2]))
+        remaining = abs(run.target) - run.done_amount
+        tol = self.config.yaw_tolerance if run.name == "spin" else (1e-3 if run.name == "wait" else self.config.xy_tolerance)
+        if remaining <= tol:
+            self._finish(run, True, f"{run.name} done: {run.done_amount:.2f} {'rad' if run.name == 'spin' else 's' if run.name == 'wait' else 'm'}")
+            return
+        try:
+            plan = self._plan(run, remaining)
+        except (BadInput, ValueError) as exc:
+            self._finish(run, False, f"{run.name} stopped after {run.done_amount:.2f}: {exc}")
+            return
+        if not plan.feasible:
+            self._finish(run, False, f"{run.name} stopped after {run.done_amount:.2f} of {abs(run.target):.2f}: {plan.reason}")
+            return
+        self.publish(self.required_out_topic("robot_command"), twist_msg(plan.commands[0]))
+
+    # -- actions (events, fallbacks) ------------------------------------------------------------------
+    def spin(self, angle: float = math.pi / 2, time_allowance: float = 30.0) -> bool:
+        """Turn in place by ``angle`` rad, if the footprint stays clear over the whole turn."""
+        return self._begin("spin", angle, self.config.max_rotational_vel, time_allowance)[0]
+
+    def back_up(self, distance: float = 0.3, speed: float = 0.1, time_allowance: float = 30.0) -> bool:
+        """Drive straight back ``distance`` m, if what is behind is seen and clear."""
+        return self._begin("back_up", distance, speed, time_allowance)[0]
+
+    def drive_on_heading(self, distance: float = 0.3, speed: float = 0.1, time_allowance: float = 30.0) -> bool:
+        return self._begin("drive_on_heading", distance, speed, time_allowance)[0]
+
+    def wait(self, duration: float = 1.0) -> bool:
+        return self._begin("wait", duration, 0.0, duration + 5.0)[0]
+
+    def clear_costmaps(self) -> bool:
+        """Clear the LocalMapper's grid (its ``clear_entirely_local_costmap`` service)."""
+        from emos.core.services import ServiceClient
+
+        name = f"{self.config.local_mapper}/clear_entirely_local_costmap"
+        try:
+            client = ServiceClient(name, TriggerRequest, TriggerResponse, ctx=self.node.ctx, timeout=5.0)
+            try:
+                answer = client.call(TriggerRequest())
+            finally:
+                client.close()
+        except Exception as exc:  # noqa: BLE001 - reported: the service may be down
+            self._refuse("clear_costmaps", f"clear_costmaps failed: service {name}: {type(exc).__name__}: {exc}")
+            return False
+        self.get_logger().info("[%s] clear_costmaps: %s", self.component_name, answer.message)
+        return bool(answer.success)
+
+    def stats(self) -> dict[str, int]:
+        """How many behaviors started, succeeded, were refused or stopped (a mission's report)."""
+        return dict(self._counts)
+
+    @property
+    def last_result(self) -> BehaviorResult | None:
+        return self._last
+
+    # -- action servers ---------------------------------------------------------------------------------
+    def _serve(self, handle: Any) -> BehaviorResult:
+        goal = handle.goal
+        if isinstance(goal, SpinGoal):
+            ok, why = self._begin("spin", goal.target_yaw, self.config.max_rotational_vel, goal.time_allowance, preempt=True)
+        elif isinstance(goal, BackUpGoal):
+            ok, why = self._begin("back_up", goal.distance, goal.speed, goal.time_allowance, preempt=True)
+        elif isinstance(goal, DriveOnHeadingGoal):
+            ok, why = self._begin("drive_on_heading", goal.distance, goal.speed, goal.time_allowance, preempt=True)
+        else:
+            ok, why = self._begin("wait", goal.time, 0.0, goal.time + 5.0, preempt=True)
+        if not ok:
+            return BehaviorResult(success=False, message=why)
+        with self._lock:
+            run = self._running
+        assert run is not None
+        while run.result is None:
+            if handle.is_cancel_requested:
+                run.result = BehaviorResult(success=False, message=f"{run.name} cancelled")
+                break
+            handle.publish_feedback(BehaviorFeedback(behavior=run.name, progress=min(1.0, run.done_amount / max(abs(run.target), 1e-9))))
+            time.sleep(0.1)
+        return run.result
