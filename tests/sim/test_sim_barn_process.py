@@ -88,7 +88,8 @@ def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
     assert all(name in text for name in ("sim", *NAV_COMPONENTS)), text[-2000:]  # the whole system's log
     # The reason names the first contact, which lies on the cylinder (radius 0.075 m at (-2.25, 3.2)).
     (trial,) = [json.loads(line)["trial"] for line in (tmp_path / "trials.jsonl").read_text().splitlines()[1:]]
-    x, y = map(float, re.fullmatch(r"collision at \((\S+), (\S+)\)", trial["reason"]).groups())
+    # ... followed by the motion at the contact ("; rotation (v 0.00 m/s, omega 0.41 rad/s)").
+    x, y = map(float, re.fullmatch(r"collision at \((\S+), (\S+)\); (rotation|arc|reversing|straight) \(v .*\)", trial["reason"]).groups()[:2])
     assert math.dist((x, y), (-2.25, 3.2)) < 0.2, trial["reason"]
     from PIL import Image
 

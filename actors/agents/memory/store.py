@@ -71,7 +71,7 @@ def _number(name: str, value: Any) -> float:
     return value
 
 
-def _count(name: str, value: Any, hi: int) -> int:
+def _query_count(name: str, value: Any, hi: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
         raise MemoryQueryError(f"{name} must be an integer in [1, {hi}], got {value!r}")
     return value
@@ -222,7 +222,7 @@ class MemoryStore:
         x, y, radius = _number("x", x), _number("y", y), _number("radius", radius)
         if radius < 0:
             raise MemoryQueryError(f"radius must be >= 0 m, got {radius:g}: a negative radius holds nothing")
-        n_results = _count("n_results", n_results, 200)
+        n_results = _query_count("n_results", n_results, 200)
         with self._lock:
             recs, ts, xs, ys = self._arrays()
         if not recs:
@@ -241,7 +241,7 @@ class MemoryStore:
                 raise MemoryQueryError(f"{name}={value:g} is in the future: times are seconds ago, >= 0")
         if until_s > since_s:
             raise MemoryQueryError(f"until_s={until_s:g} is before since_s={since_s:g}: the window would end before it starts")
-        n_results = _count("n_results", n_results, 200)
+        n_results = _query_count("n_results", n_results, 200)
         now = self.clock()
         with self._lock:
             recs, ts, _, _ = self._arrays()
@@ -271,7 +271,7 @@ class MemoryStore:
 
     def semantic_search(self, query: str, n_results: int = 3) -> list[dict[str, Any]]:
         query = _text("query", query)
-        n_results = _count("n_results", n_results, 50)
+        n_results = _query_count("n_results", n_results, 50)
         now = self.clock()
         with self._lock:
             by_id = {r.id: r for r in self._records}
