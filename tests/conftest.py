@@ -28,6 +28,33 @@ def _private_emos_home():
 TIERS = ("unit", "process", "sim", "browser")
 
 
+@pytest.fixture(autouse=True)
+def _ctrl_c_left_as_found(request: pytest.FixtureRequest):
+    """Every test leaves SIGINT's disposition and the signal mask as it found them. A child
+    inherits an ignored SIGINT and a blocked mask: a test that left either behind (an in-process
+    node or library that set SIGINT to SIG_IGN) made every later `emos ... ` subprocess of that
+    worker deaf to Ctrl-C, and the Ctrl-C tests hung (seen in two full runs, never alone). The
+    fixture puts them back and says which test changed them."""
+    import signal
+    import threading
+    import warnings
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before, mask = signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    yield
+    changed = []
+    if signal.getsignal(signal.SIGINT) is not before:
+        changed.append(f"SIGINT handler {signal.getsignal(signal.SIGINT)!r}")
+        signal.signal(signal.SIGINT, before)
+    if signal.pthread_sigmask(signal.SIG_BLOCK, set()) != mask:
+        changed.append("the signal mask")
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    if changed:
+        warnings.warn(f"{request.node.nodeid} left {' and '.join(changed)} behind; restored", stacklevel=1)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """A test without a tier would be in no loop but the full run: refuse to collect it."""
     untiered = sorted({item.nodeid.split("::")[0] for item in items if not any(item.get_closest_marker(t) for t in TIERS)})
