@@ -62,7 +62,12 @@ def test_back_up_refuses_with_the_wall_behind_spin_and_drive_move(tmp_path):
 
     try:
         wait_until(lambda: odom.take(), 60, what="odometry")
-        result = client("backup", BackUpGoal).send_goal(BackUpGoal(distance=0.3, speed=0.1), timeout=120)
+
+        def back_up_seeing():  # the Behaviors component may not have its first scan yet: ask again
+            answer = client("backup", BackUpGoal).send_goal(BackUpGoal(distance=0.3, speed=0.1), timeout=120)
+            return None if "no scan" in answer.message else answer
+
+        result = wait_until(back_up_seeing, 60, interval=0.5, what="a back-up answer from a component that has a scan")
         assert not result.success
         assert result.message.startswith("back_up refused: obstacle 0.1"), result.message  # ~0.12 m (scan resolution)
         result = client("spin", SpinGoal).send_goal(SpinGoal(target_yaw=math.pi / 2), timeout=300)
