@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from emos.chaos.history import History
-from emos.chaos.target import RunningSystem, iter_workers
+from emos.chaos.target import RunningSystem
+from emos.core.discovery import worker_nodes
 from emos.msgs.registry import resolve
 from emos.transport.context import RunContext
 
@@ -56,7 +57,7 @@ class StatusObserver(threading.Thread):
                 self.errors += 1
                 self.halt.wait(self.interval)
                 continue
-            for w in iter_workers(tree):
+            for w in worker_nodes(tree):
                 key = (w.get("pid"), w.get("state"), w.get("health"), w.get("restarts", 0))
                 if self._last.get(w["name"]) != key:
                     self._last[w["name"]] = key

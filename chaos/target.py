@@ -20,6 +20,7 @@ from typing import Any
 
 import psutil
 
+from emos.core.discovery import worker_nodes
 from emos.core.rpc import RpcClient
 from emos.errors import EmosError
 from emos.transport.context import ENV_RUN_ID, SHM_DIR, SHM_PREFIX, runtime_root
@@ -47,20 +48,6 @@ def _signals_held(*signums: int) -> Iterator[None]:
             signal.signal(n, handler)
         for n in dict.fromkeys(arrived):
             signal.raise_signal(n)  # now, with the Popen assigned: its handler unwinds as usual
-
-
-def iter_workers(node: dict[str, Any]) -> Iterator[dict[str, Any]]:
-    if node.get("kind") == "worker":
-        yield node
-    for child in node.get("children", []):
-        yield from iter_workers(child)
-
-
-def iter_supervisors(node: dict[str, Any]) -> Iterator[dict[str, Any]]:
-    if node.get("kind") == "supervisor" or "children" in node:
-        yield node
-    for child in node.get("children", []):
-        yield from iter_supervisors(child)
 
 
 class RunningSystem:
@@ -103,7 +90,7 @@ class RunningSystem:
             if self.run_dir is not None:
                 try:
                     answer = self.tree()
-                    workers = list(iter_workers(answer["tree"]))
+                    workers = worker_nodes(answer["tree"])
                 except (OSError, ConnectionError, TimeoutError, KeyError):
                     answer, workers = {}, []
                 # "up": every group started. Groups start one after another and the tree shows a
@@ -165,7 +152,7 @@ class RunningSystem:
         return self.run_dir / "ctl" / f"{encode_name(component)}.sock"
 
     def workers(self) -> dict[str, dict[str, Any]]:
-        return {w["name"]: w for w in iter_workers(self.tree()["tree"])}
+        return {w["name"]: w for w in worker_nodes(self.tree()["tree"])}
 
     def pid_of(self, component: str) -> int | None:
         return self.workers().get(component, {}).get("pid")

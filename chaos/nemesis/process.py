@@ -16,7 +16,7 @@ import psutil
 
 from emos.chaos.history import Record
 from emos.chaos.nemesis.base import Nemesis, NemesisError
-from emos.chaos.target import iter_supervisors, iter_workers
+from emos.core.discovery import supervisor_nodes, worker_nodes
 
 
 def _signal(value: str | int) -> signal.Signals:
@@ -38,7 +38,7 @@ class _Targeted(Nemesis):
     def pick(self) -> tuple[str, int] | None:
         """(component, pid) to hit now, or None when nothing is running."""
         assert self.system is not None
-        tree = list(iter_workers(self.system.tree()["tree"]))
+        tree = worker_nodes(self.system.tree()["tree"])
         known = {w["name"] for w in tree}
         # Threads cannot be signalled separately; a stopped or restarting worker has no pid now.
         workers = {w["name"]: w.get("pid") for w in tree if w.get("mode", "process") == "process"}
@@ -202,13 +202,13 @@ class KillGroup(Nemesis):
     def start(self) -> Record | None:
         assert self.system is not None
         tree = self.system.tree()["tree"]
-        groups = {g["name"]: g for g in iter_supervisors(tree) if g is not tree}
+        groups = {g["name"]: g for g in supervisor_nodes(tree) if g is not tree}
         if not groups:
             return None
         name = self.group or self.rng.choice(sorted(groups))
         if name not in groups:
             raise NemesisError(f"kill_group: no supervisor group {name!r}; groups: {', '.join(sorted(groups))}")
-        victims = {w["name"]: w["pid"] for w in iter_workers(groups[name]) if w.get("pid") and w.get("mode") == "process"}
+        victims = {w["name"]: w["pid"] for w in worker_nodes(groups[name]) if w.get("pid") and w.get("mode") == "process"}
         for pid in victims.values():
             try:
                 os.kill(pid, signal.SIGKILL)

@@ -10,6 +10,7 @@ package; Cortex only resolves registered types); this module imports nothing by 
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any, TypeVar, overload
 
 import attrs
@@ -17,7 +18,7 @@ import attrs
 from emos.core.services import ACTION_ROLES, SERVICE_ROLES
 from emos.msgs.registry import UnknownMessageType, resolve
 
-__all__ = ["KINDS", "Interface", "component_workers", "interfaces_of", "printable"]
+__all__ = ["KINDS", "Interface", "component_workers", "interfaces_of", "printable", "supervisor_nodes", "tree_nodes", "worker_nodes"]
 
 # The types of each kind of interface, in order ("request", "response" for a service).
 KINDS: dict[str, tuple[str, ...]] = {"service": SERVICE_ROLES, "action": ACTION_ROLES}
@@ -29,16 +30,31 @@ def printable(value: Any, limit: int = 200) -> str:
     return "".join(ch for ch in str(value)[:limit] if ch.isprintable())
 
 
-def component_workers(tree: Any) -> list[str]:
-    """The worker (component) names of a supervisor tree (the ``tree`` of the supervisor's
-    ``tree`` answer), depth first in start order; nodes that are not maps are skipped."""
+def tree_nodes(tree: Any) -> Iterator[dict[str, Any]]:
+    """Every node of a supervisor tree (the ``tree`` of the supervisor's ``tree`` answer, maybe
+    another host's), depth first in start order; nodes that are not maps are skipped, with their
+    subtrees, and a ``children`` that is not a list counts as none."""
     if not isinstance(tree, dict):
-        return []
-    out = [tree["name"]] if tree.get("kind") == "worker" and isinstance(tree.get("name"), str) else []
+        return
+    yield tree
     children = tree.get("children")
     for child in children if isinstance(children, list) else []:
-        out.extend(component_workers(child))
-    return out
+        yield from tree_nodes(child)
+
+
+def worker_nodes(tree: Any) -> list[dict[str, Any]]:
+    """The worker (component) nodes of a supervisor tree, depth first in start order."""
+    return [node for node in tree_nodes(tree) if node.get("kind") == "worker"]
+
+
+def supervisor_nodes(tree: Any) -> list[dict[str, Any]]:
+    """The supervisor (group) nodes of a supervisor tree, the root included."""
+    return [node for node in tree_nodes(tree) if node.get("kind") == "supervisor" or "children" in node]
+
+
+def component_workers(tree: Any) -> list[str]:
+    """The worker (component) names of a supervisor tree, depth first in start order."""
+    return [node["name"] for node in worker_nodes(tree) if isinstance(node.get("name"), str)]
 
 
 @attrs.define(frozen=True)

@@ -10,7 +10,7 @@ from emos import Topic
 from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components.map_pose import MapFramePose
 from emos.actors.nav.stacks import point_navigation_stack
-from emos.core.discovery import component_workers, interfaces_of
+from emos.core.discovery import component_workers, interfaces_of, supervisor_nodes, worker_nodes
 from emos.core.services import describe_interfaces
 
 pytestmark = pytest.mark.unit
@@ -76,6 +76,10 @@ def test_workers_of_a_supervisor_tree_skip_what_is_malformed():
         {"kind": "supervisor", "name": "x", "children": "not a list"}]}
     assert component_workers(tree) == ["sim", "planner"]
     assert component_workers(None) == [] and component_workers(["a"]) == []
+    # The chaos tool walks the same tree for the nodes themselves (pids, modes, groups).
+    assert [w.get("name") for w in worker_nodes(tree)] == ["sim", "planner", 3, None]
+    assert [g["name"] for g in supervisor_nodes(tree)] == ["root", "kompass", "x"]
+    assert worker_nodes("junk") == [] and supervisor_nodes(None) == []
 
 
 def test_interfaces_of_an_info_answer_keep_whole_entries_with_printable_names():

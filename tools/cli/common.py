@@ -12,6 +12,7 @@ from pathlib import Path
 
 import psutil
 
+from emos.core.discovery import printable
 from emos.transport.context import RunContext
 
 
@@ -50,7 +51,7 @@ def _describe_run(path: Path) -> str:
         return run_id
     if words and Path(words[0]).name.startswith("python"):
         words = words[2:] if words[1:2] == ["-m"] else words[1:]  # "emos run x.py", not "python3 -m emos run x.py"
-    command = "".join(ch for ch in " ".join(words) if ch.isprintable())
+    command = printable(" ".join(words), 4096)
     if len(command) > 80:
         command = command[:77] + "..."
     return f"{run_id} ({command or '?'}, up {up:.0f} s)"

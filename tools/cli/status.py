@@ -8,6 +8,7 @@ from typing import Any
 
 import psutil
 
+from emos.core.discovery import printable
 from emos.core.rpc import RpcClient
 from emos.tools.cli.common import add_run_argument, join_run
 
@@ -83,7 +84,7 @@ def render(data: dict[str, Any]) -> str:
 
 def _text(value: Any) -> str:
     """A reason from the tree answer (possibly another host's, over Zenoh) as plain printable text."""
-    return "".join(ch for ch in str(value)[:40] if ch.isprintable()) if value else ""
+    return printable(value, 40) if value else ""
 
 
 def _remote(args: argparse.Namespace) -> int:
