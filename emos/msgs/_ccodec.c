@@ -1106,6 +1106,108 @@ static PyObject *setup_frames(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ============================================================================ streaming copy */
+/* stream_copy(dst, offset, src): copy a big array into a ring slot with non-temporal stores.
+ *
+ * Why: a plain copy (memcpy, numpy) first takes every line of the destination into this core's
+ * cache in order to overwrite it (read-for-ownership). A ring slot is the worst case for that:
+ * its lines are either in memory (a ring cycles through more slots than the caches hold: two
+ * rings of 8 MiB slots in a ping-pong) or in the cache of the reader's core, which read the slot
+ * last and must now give them up, line by line. On this VM that transfer between the two vCPUs
+ * costs anywhere from little to 4x the copy, changing as the host moves them, so every
+ * plain-copy transport swung 3-6x between benchmark rounds. Streaming stores write whole lines
+ * to memory without owning them first; the reader then reads memory, at full bandwidth. glibc's
+ * memcpy streams only above 3/4 of what it takes for the shared cache (240 MiB on this VM).
+ * docs/ipc.md, "Streaming copies", has the measurements and the threshold (codec.STREAM_MIN_BYTES).
+ *
+ * Ordering. Streaming stores are weakly ordered even on x86-64: they may pass earlier plain stores
+ * and be passed by later ones. Without fences a reader could see the new payload under the old
+ * seq, or the commit (seq = 2n+2) before the payload, and accept a torn message. So the copy is
+ * bracketed by SFENCEs: the seqlock's "being written" mark is visible before the first streamed
+ * byte, and every streamed byte before the function returns and the commit's plain stores follow.
+ *
+ * Elsewhere (no SSE2) a plain memcpy. The GIL is released for the copy: the buffers are held
+ * (Py_buffer), so neither can be freed or resized meanwhile. */
+#if defined(__x86_64__) || defined(_M_X64)
+#include <emmintrin.h>
+#include <xmmintrin.h>
+#define EMOS_STREAM_STORES 1
+/* Read the source this far ahead: the hardware prefetchers stop at every 4 KiB page, and a
+ * cold source (the reader's copy of a message it received, straight from memory) then stalls
+ * on each new page. 8 MiB from a cold source into a cold slot, one process: 495-515 us against
+ * 553-587 without; a source in the cache: no change (a prefetch never faults, past the end too). */
+#define EMOS_PREFETCH_AHEAD 512
+#else
+#define EMOS_STREAM_STORES 0
+#endif
+
+static void copy_streaming(char *dst, const char *src, size_t n)
+{
+#if EMOS_STREAM_STORES
+    /* Streaming stores may pass earlier plain stores too: the writer's "being written" mark
+     * (seq = 2n+1, stored before this copy) must be visible before any byte of the new payload. */
+    _mm_sfence();
+    /* Head: plain stores up to the next cache line of the destination, so that each
+     * iteration below fills exactly one line (a full write-combining buffer). */
+    size_t head = (64 - ((uintptr_t)dst & 63)) & 63;
+    if (head > n)
+        head = n;
+    memcpy(dst, src, head);
+    dst += head;
+    src += head;
+    n -= head;
+    size_t lines = n / 64;
+    for (size_t i = 0; i < lines; i++) {
+        _mm_prefetch(src + EMOS_PREFETCH_AHEAD, _MM_HINT_NTA); /* NTA: read once, keep it out of the way */
+        __m128i a = _mm_loadu_si128((const __m128i *)src);
+        __m128i b = _mm_loadu_si128((const __m128i *)(src + 16));
+        __m128i c = _mm_loadu_si128((const __m128i *)(src + 32));
+        __m128i d = _mm_loadu_si128((const __m128i *)(src + 48));
+        _mm_stream_si128((__m128i *)dst, a);
+        _mm_stream_si128((__m128i *)(dst + 16), b);
+        _mm_stream_si128((__m128i *)(dst + 32), c);
+        _mm_stream_si128((__m128i *)(dst + 48), d);
+        dst += 64;
+        src += 64;
+    }
+    memcpy(dst, src, n - lines * 64); /* tail: less than a line */
+    _mm_sfence();                      /* the streaming stores before any later store (the commit) */
+#else
+    memcpy(dst, src, n);
+#endif
+}
+
+static PyObject *stream_copy(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_Format(PyExc_TypeError, "stream_copy(dst, offset, src) takes 3 arguments, got %zd", nargs);
+        return NULL;
+    }
+    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
+    if (offset == -1 && PyErr_Occurred())
+        return NULL;
+    Py_buffer dst, src;
+    if (PyObject_GetBuffer(args[0], &dst, PyBUF_WRITABLE) < 0)
+        return NULL;
+    if (PyObject_GetBuffer(args[2], &src, PyBUF_C_CONTIGUOUS) < 0) {
+        PyBuffer_Release(&dst);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (offset < 0 || offset > dst.len || src.len > dst.len - offset) {
+        PyErr_Format(PyExc_ValueError, "stream_copy: %zd B at offset %zd do not fit a destination of %zd B", src.len, offset, dst.len);
+    } else {
+        char *to = (char *)dst.buf + offset;
+        Py_BEGIN_ALLOW_THREADS
+        copy_streaming(to, (const char *)src.buf, (size_t)src.len);
+        Py_END_ALLOW_THREADS
+        result = PyLong_FromSsize_t(offset + src.len);
+    }
+    PyBuffer_Release(&src);
+    PyBuffer_Release(&dst);
+    return result;
+}
+
 /* ================================================================================== module */
 
 static PyObject *setup(PyObject *self, PyObject *args)
@@ -1149,6 +1251,8 @@ static PyMethodDef methods[] = {
     {"read_message", (PyCFunction)(void (*)(void))read_framed, METH_FASTCALL, "read_message(data, fingerprint, cls) -> (stamp_ns, publisher, message)"},
     {"try_read_message", (PyCFunction)(void (*)(void))try_read_message, METH_FASTCALL, "try_read_message(...) -> the tuple or NotImplemented"},
     {"forget", forget, METH_NOARGS, "forget(): drop the cached plans (after a message class changed, in tests)"},
+    {"stream_copy", (PyCFunction)(void (*)(void))stream_copy, METH_FASTCALL,
+     "stream_copy(dst, offset, src) -> end offset: src's bytes into dst at offset, with non-temporal stores and a store fence"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1162,5 +1266,9 @@ PyMODINIT_FUNC PyInit__ccodec(void)
     empty_tuple = PyTuple_New(0);
     if (plans == NULL || dtype_strs == NULL || empty_tuple == NULL)
         return NULL;
-    return PyModule_Create(&module);
+    PyObject *mod = PyModule_Create(&module);
+    /* Whether stream_copy uses non-temporal stores here (else it is a plain memcpy). */
+    if (mod != NULL && PyModule_AddIntConstant(mod, "STREAM_STORES", EMOS_STREAM_STORES) < 0)
+        Py_CLEAR(mod);
+    return mod;
 }

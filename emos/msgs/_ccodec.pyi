@@ -2,6 +2,7 @@
 
 Each function returns what its Python counterpart returns, or NotImplemented for the ``try_``
 ones when the fast path leaves the message to Python: see codec.py and transport/netframe.py.
+``stream_copy`` has no counterpart: the Python codec copies with numpy (codec.STREAM_MIN_BYTES).
 """
 from collections.abc import Callable
 from types import NotImplementedType
@@ -30,3 +31,6 @@ def frame_message(msg: Any, header: bytes, stamp_ns: int | None, limit: int, /) 
 def read_message(data: Any, fingerprint: bytes, cls: type, /) -> tuple[int, str, Any]: ...
 def try_read_message(data: Any, fingerprint: bytes, cls: type, /) -> tuple[int, str, Any] | NotImplementedType: ...
 def forget() -> None: ...
+def stream_copy(dst: Any, offset: int, src: Any, /) -> int: ...
+
+STREAM_STORES: int  # 1 where stream_copy uses non-temporal stores (x86-64), 0 where it is a plain memcpy

@@ -34,8 +34,11 @@ long copy (:meth:`Ring.announce`), so that lingering readers spin through it rat
 Memory order. Apart from the two handshake fences the protocol needs that the writer's stores
 (``seq`` odd, payload, ``seq`` even, map entry) become visible in that order and that the
 reader's loads (map entry, ``seq``, payload, ``seq``) happen in that order. x86-64 guarantees
-both (total store order). On weakly ordered CPUs (arm64) ``WEAK_ORDERING`` adds a full fence
-at each step that needs one (see ``commit`` and ``read``); docs/runtime.md gives the argument.
+both (total store order), except for non-temporal stores, which a publisher uses to copy big
+arrays into a slot (``codec.STREAM_MIN_BYTES``): that copy (``_ccodec.stream_copy``) is bracketed
+by store fences, so it too lands after ``seq = 2n+1`` and before the commit. On weakly ordered CPUs
+(arm64) ``WEAK_ORDERING`` adds a full fence at each step that needs one (see ``commit`` and
+``read``); docs/runtime.md gives the argument.
 
 Trust. A segment is opened only through :func:`emos.transport.trust.open_owned` (a regular file
 of our uid, mode 0600, no symbolic link), its header is checked for consistency before any

@@ -16,7 +16,11 @@ see the flag skip the FIFO. Bursts and request-reply exchanges then cost no syst
 When the spin ends the node *parks*: clears the flag, fences, and looks once more, so a message
 published while the flag was still visible is never left unannounced. This is the
 spin-then-block idle strategy of low-latency messaging (Aeron's backoff, adaptive mutexes);
-``spin_us=0`` turns it off.
+``spin_us=0`` turns it off. A linger lasts at most ``MAX_LINGER_US`` (so the event loop still
+runs timers and RPCs under a flood); if messages were still flowing when it ended, the node does
+not park: it pokes its own FIFO and keeps the flag, so publishers still skip the FIFO and the
+event loop calls it again after its other work (a park there made the next message pay a full
+wake-up: at 8 MiB, whose round trip outlasts the linger, most messages).
 
 Long writes. A fixed spin window fails for big messages: copying a 921,600 B frame takes about
 as long as the window, an 8 MiB one ten times longer, so the reader parked in the middle of the
@@ -169,35 +173,46 @@ class Waker:
         yield_cpu = os.sched_yield
         state = self._state
         state[0] = SPINNING
-        busy = False  # stopped lingering while a publisher was still writing
+        # Our linger deadline came while messages still flowed (or a long write was announced):
+        # give the event loop its turn and come straight back, still spinning (module doc).
+        keep = False
         try:
             # Under a flood, give the event loop its turn now and then (timers, RPC, signals).
             deadline = clock() + max(int(MAX_LINGER_US * 1000), 2 * self.spin_ns)
             while True:
-                end = min(clock() + self.spin_ns, deadline)
+                idle_end = clock() + self.spin_ns
                 while not has_news():
                     now = clock()
-                    if now >= end:
+                    if now >= idle_end:
                         # A publisher announced a long write: wait for it rather than park in
-                        # the middle of its copy (module doc); past our deadline, come back.
+                        # the middle of its copy (module doc); the deadline below still holds.
                         until = self._busy_until(now) if self._watched else 0
                         if not until:
-                            return
-                        if now >= deadline:
-                            busy = True
-                            return
-                        end = min(until, deadline)
+                            return  # idle: park
+                        idle_end = until
+                    if now >= deadline:
+                        keep = True  # a message within the last spin window, or a write under way
+                        return
                     # Give the CPU to whoever else can run on it (likely the very publisher we
                     # wait for, when both share a CPU); returns at once when nobody can.
                     yield_cpu()
                 handle()
                 if clock() >= deadline:
+                    keep = True
                     return
         finally:
-            state[0] = PARKED
-            full_fence()  # publishers that still saw SPINNING published before this point...
-            if busy or has_news():  # ...so their messages are visible here
+            if keep:
+                # Still SPINNING in the publishers' eyes, so they write no wake-up: the poke
+                # makes the event loop call serve() again after its other work, and that call
+                # takes whatever they published meanwhile. Parking here instead cost a full
+                # wake-up (FIFO, scheduler, event loop) on the next message, every
+                # MAX_LINGER_US: at 8 MiB, where a round trip outlasts it, on most messages.
                 self.poke()
+            else:
+                state[0] = PARKED
+                full_fence()  # publishers that still saw SPINNING published before this point...
+                if has_news():  # ...so their messages are visible here
+                    self.poke()
 
     def close(self) -> None:
         if self.fd >= 0:

@@ -7,7 +7,7 @@ import pytest
 
 from emos import msgs as M
 from emos.transport.pubsub import ANNOUNCE_BYTES, Publisher, Subscriber
-from emos.transport.waker import MAX_BUSY_US, Waker
+from emos.transport.waker import MAX_BUSY_US, PARKED, SPINNING, Waker
 
 pytestmark = pytest.mark.unit
 
@@ -71,3 +71,30 @@ def test_a_dead_writers_announcement_is_ignored(ctx):
     waker.serve(lambda: None, sub.has_news)
     assert waker.drain() == 0
     assert sub.take() == []
+
+
+def test_a_reader_whose_linger_ends_while_messages_flow_comes_back_still_spinning(ctx):
+    """At its linger deadline a reader gives the event loop its turn. While messages still flow
+    it must not park: parking made the next message pay a full wake-up, on most messages at
+    8 MiB (a round trip there outlasts the linger). It pokes itself and stays SPINNING, so
+    publishers write no wake-up and the next serve() takes what they published meanwhile."""
+    waker = Waker(ctx, spin_us=100_000)  # an idle gap of 100 ms would end the linger: no test load makes one
+    last = [time.monotonic_ns()]
+    handled = []
+
+    def has_news() -> bool:  # a message every millisecond, as a stream of frames
+        return time.monotonic_ns() - last[0] >= 1_000_000
+
+    def handle() -> None:
+        handled.append(1)
+        last[0] = time.monotonic_ns()
+
+    waker.serve(handle, has_news)
+    assert len(handled) > 2
+    assert waker._state[0] == SPINNING  # publishers still skip the FIFO...
+    assert waker.drain() == 1  # ...and the event loop calls us again at once
+    # Once messages stop, the reader parks after one idle spin window, as before.
+    waker.serve(lambda: None, lambda: False)
+    assert waker._state[0] == PARKED
+    assert waker.drain() == 0
+    waker.close()

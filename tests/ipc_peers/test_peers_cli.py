@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 
 import pytest
 
@@ -56,12 +57,69 @@ def test_a_registry_that_cannot_be_reached_is_a_clear_error(tmp_path):
     assert "Traceback" not in done.stderr
 
 
-@pytest.mark.skipif(not ipc_peers.peer_env_has("iceoryx2"),
-                    reason="the iceoryx2 peer environment (~/.cache/emos-bench/peers) is not installed; "
-                           "`emos bench ipc --peers iceoryx2` creates it from the package registry, which this test does not reach")
-def test_iceoryx2_is_measured_from_its_own_environment():
+needs_iceoryx2 = pytest.mark.skipif(
+    not ipc_peers.peer_env_has("iceoryx2"),
+    reason="the iceoryx2 peer environment (~/.cache/emos-bench/peers) is not installed; "
+           "`emos bench ipc --peers iceoryx2` creates it from the package registry, which this test does not reach")
+
+
+def _iceoryx2_leftovers() -> set[str]:
+    """What iceoryx2 runs left where they leave things: shared memory named iox2*, and the root
+    directories the benchmark makes for them."""
+    shm = {f"shm:{n}" for n in os.listdir(ipc_peers.IOX2_SHM_DIR) if n.startswith("iox2")}
+    roots = {f"tmp:{n}" for n in os.listdir(tempfile.gettempdir()) if n.startswith("emos-bench-iox2-")}
+    return shm | roots
+
+
+@needs_iceoryx2
+def test_iceoryx2_is_measured_from_its_own_environment_and_leaves_no_files():
+    before = _iceoryx2_leftovers()
     done = _bench("--peers", "iceoryx2,iceoryx2-poll", "--rounds", "1", "--sizes", "64", "--messages", "20", "--json")
     assert done.returncode == 0, done.stderr
     rows = {r["transport"]: r for r in json.loads(done.stdout)["results"]}
     assert set(rows) == {"emos", "iceoryx2", "iceoryx2-poll"}
     assert rows["iceoryx2"]["p50_us"] > 0 and rows["iceoryx2-poll"]["p50_us"] > 0
+    assert _iceoryx2_leftovers() - before == set()  # not even iceoryx2's 16 B node-management record
+
+
+@needs_iceoryx2
+def test_an_iceoryx2_peer_that_hangs_is_killed_with_its_echo_and_its_files_removed(monkeypatch):
+    """A peer past its time limit: the peer and the echo it forked are killed (their process
+    group), and what iceoryx2 made for them is removed all the same."""
+    monkeypatch.setattr(ipc_peers, "_PEER_TIMEOUT_S", 8.0)
+    tags = []
+    real_prefix = ipc_peers.iceoryx2_file_prefix
+    monkeypatch.setattr(ipc_peers, "iceoryx2_file_prefix", lambda tag: tags.append(tag) or real_prefix(tag))
+    before = _iceoryx2_leftovers()
+    with pytest.raises(RuntimeError, match="no result in 8 s"):
+        ipc_peers.half_rtts_us("iceoryx2", 8, 10**9, 2)  # far more round trips than 8 s allow
+    assert tags, "the peer was not started"
+    assert _iceoryx2_leftovers() - before == set()
+    alive = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                if tags[0].encode() in f.read():
+                    alive.append(pid)
+        except OSError:
+            continue
+    assert alive == [], f"peer processes left running: {alive}"
+
+
+@pytest.mark.unit
+def test_only_the_files_of_the_tagged_iceoryx2_run_are_removed(tmp_path):
+    ours, other = "0123456789abcdef", "fedcba9876543210"
+    made = [ipc_peers.IOX2_SHM_DIR / f"{ipc_peers.iceoryx2_file_prefix(t)}node.global_mgmt" for t in (ours, other)]
+    default = ipc_peers.IOX2_SHM_DIR / f"iox2_{ours}_test.global_mgmt"  # iceoryx2's own prefix: not ours to remove
+    root = tmp_path / "root"
+    (root / "nodes").mkdir(parents=True)
+    (root / "nodes" / "x.node_monitor").write_bytes(b"")
+    try:
+        for path in (*made, default):
+            path.write_bytes(b"\0" * 16)
+        removed = ipc_peers.remove_iceoryx2_files(ours, root)
+        assert removed == [made[0].name]
+        assert not made[0].exists() and made[1].exists() and default.exists() and not root.exists()
+    finally:
+        for path in (*made, default):
+            path.unlink(missing_ok=True)

@@ -9,6 +9,14 @@ are pinned to their CPUs. ``--wait event``: each send is followed by a notificat
 service and the receiver blocks in ``Listener.blocking_wait`` (iceoryx2's blocking wait);
 ``--wait poll``: the receiver spins on ``Subscriber.receive`` (with ``sched_yield``).
 Prints ``{"half_rtt_us": [...]}`` on stdout; an error exits non-zero with the reason on stderr.
+
+Files. iceoryx2 keeps its services, nodes and a node-management record in files: shared memory
+in ``/dev/shm`` and lock and detail files under its root path (``/tmp/iceoryx2``), some of them
+(the 16 B ``...global_mgmt`` record) outliving every node. So both processes use a config of
+their own: every file name starts with ``--prefix`` (``iox2emos<tag>_``, the tag of this run's
+service names ``emos-bench/<tag>/...``) and the root path is ``--root`` (a directory the
+benchmark made for this run). The benchmark (``ipc_peers.remove_iceoryx2_files``) then removes
+exactly those after the run, whether it ended well or was killed.
 """
 from __future__ import annotations
 
@@ -16,10 +24,19 @@ import argparse
 import ctypes
 import json
 import os
+import signal
 import sys
 import time
 import uuid
 from typing import Any
+
+
+def _node(iox2: Any, file_prefix: str, root: str) -> Any:
+    """A node whose files carry ``file_prefix`` and live under ``root`` (module doc, "Files")."""
+    config = iox2.config.default()
+    config.global_cfg.prefix = iox2.FileName.new(file_prefix)
+    config.global_cfg.root_path = iox2.Path.new(root.rstrip("/") + "/")
+    return iox2.NodeBuilder.new().config(config).create(iox2.ServiceType.Ipc)
 
 
 def _services(node: Any, iox2: Any, prefix: str, size: int) -> dict[str, Any]:
@@ -51,12 +68,12 @@ def _receive(sub: Any, listener: Any | None) -> Any:
             os.sched_yield()
 
 
-def _echo(prefix: str, size: int, wait: str, cpu: int | None, ready_fd: int) -> None:
+def _echo(prefix: str, size: int, wait: str, cpu: int | None, ready_fd: int, file_prefix: str, root: str) -> None:
     import iceoryx2 as iox2  # type: ignore[import-not-found]  # the peer environment only
 
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
-    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    node = _node(iox2, file_prefix, root)
     s = _services(node, iox2, prefix, size)
     sub = s["ping"].subscriber_builder().create()
     pub = s["pong"].publisher_builder().initial_max_slice_len(max(size, 1)).create()
@@ -81,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warmup", type=int, default=10)
     parser.add_argument("--wait", choices=["event", "poll"], default="event")
     parser.add_argument("--cpus", default="none", help="'A,B': the initiator on A, the echo on B")
+    parser.add_argument("--tag", default=uuid.uuid4().hex, help="names this run's services (emos-bench/TAG/...)")
+    parser.add_argument("--prefix", help="the start of every file name iceoryx2 makes (default iox2emosTAG_)")
+    parser.add_argument("--root", default="/tmp/iceoryx2", help="iceoryx2's root path for its lock and detail files")
     args = parser.parse_args(argv)
     import iceoryx2 as iox2
     import numpy as np
@@ -88,14 +108,15 @@ def main(argv: list[str] | None = None) -> int:
     iox2.set_log_level(iox2.LogLevel.Error)
     cpus = None if args.cpus == "none" else tuple(int(c) for c in args.cpus.split(","))
     size = args.size
-    prefix = f"emos-bench/{uuid.uuid4().hex}"
+    prefix = f"emos-bench/{args.tag}"
+    file_prefix = args.prefix or f"iox2emos{args.tag}_"
     ready_r, ready_w = os.pipe()
     pid = os.fork()  # before any iceoryx2 node exists in this process
     if pid == 0:
         os.close(ready_r)
         code = 0
         try:
-            _echo(prefix, size, args.wait, cpus[1] if cpus else None, ready_w)
+            _echo(prefix, size, args.wait, cpus[1] if cpus else None, ready_w, file_prefix, args.root)
         except BaseException as exc:  # noqa: BLE001 - reported, then the child exits
             print(f"iceoryx2 echo: {type(exc).__name__}: {exc}", file=sys.stderr)
             code = 1
@@ -103,10 +124,11 @@ def main(argv: list[str] | None = None) -> int:
     os.close(ready_w)
     if cpus is not None:
         os.sched_setaffinity(0, {cpus[0]})
+    stopped = False
     try:
         if os.read(ready_r, 1) != b"r":
             raise RuntimeError("the iceoryx2 echo process died while starting")
-        node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+        node = _node(iox2, file_prefix, args.root)
         s = _services(node, iox2, prefix, size)
         pub = s["ping"].publisher_builder().initial_max_slice_len(max(size, 1)).create()
         sub = s["pong"].subscriber_builder().create()
@@ -130,8 +152,11 @@ def main(argv: list[str] | None = None) -> int:
             del reply, sample
         stop = np.zeros(1, np.uint8)
         _send(pub, stop.ctypes.data, 1, notifier)
+        stopped = True
     finally:
         os.close(ready_r)
+        if not stopped:  # we failed before the stop sentinel: the echo would wait for pings forever
+            os.kill(pid, signal.SIGKILL)
         _, status = os.waitpid(pid, 0)
     if status != 0:
         raise RuntimeError(f"iceoryx2 echo process exited with status {status}")

@@ -26,10 +26,15 @@ from __future__ import annotations
 import json
 import mmap
 import os
+import shutil
+import signal
+import stat
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +57,9 @@ PEERS = LOCAL_PEERS + list(VENV_PEERS)
 ENV_PEER_DIR = "EMOS_BENCH_PEERS"
 _PEER_TIMEOUT_S = 600.0  # one peer measurement; only a hung peer reaches it
 _INSTALL_TIMEOUT_S = 900.0
+# Where iceoryx2 keeps its shared memory on Linux, and how the files of our runs start.
+IOX2_SHM_DIR = Path("/dev/shm")
+_IOX2_PREFIX = "iox2emos"
 
 
 class PeerUnavailable(EmosError, RuntimeError):
@@ -162,17 +170,76 @@ def _shm_spin_half_rtts(size: int, count: int) -> list[float]:
 
 
 # ------------------------------------------------------------------ peers in their own environment
+def iceoryx2_file_prefix(tag: str) -> str:
+    """The start of the name of every file an iceoryx2 peer run tagged ``tag`` makes (its
+    services are ``emos-bench/<tag>/...``; see ``ipc_peer_iceoryx2.py``, "Files")."""
+    return f"{_IOX2_PREFIX}{tag}_"
+
+
+def remove_iceoryx2_files(tag: str, root: Path) -> list[str]:
+    """Remove what an iceoryx2 peer run tagged ``tag`` left: its shared memory (``/dev/shm``
+    files named by its prefix: only regular files of ours) and its root directory ``root``
+    (made for that run alone). Returns the names removed from ``/dev/shm``."""
+    prefix = iceoryx2_file_prefix(tag)
+    removed = []
+    try:
+        names = os.listdir(IOX2_SHM_DIR)
+    except OSError:
+        names = []
+    for name in names:
+        if not name.startswith(prefix):
+            continue
+        path = IOX2_SHM_DIR / name
+        try:
+            st = os.lstat(path)
+            if stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid():
+                os.unlink(path)
+                removed.append(name)
+        except FileNotFoundError:
+            pass
+    shutil.rmtree(root, ignore_errors=True)
+    return removed
+
+
+def _run_peer_group(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """Run a peer script in a process group of its own; on a timeout (or any interruption) the
+    whole group goes, the echo it forked included, before its files are removed."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(cwd), start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=_PEER_TIMEOUT_S)
+    except BaseException:
+        _kill_group(proc.pid)
+        proc.communicate()
+        raise
+    if proc.returncode < 0:  # killed by a signal: it could not reap its echo (an exit of its own does)
+        _kill_group(proc.pid)
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def _kill_group(pgid: int) -> None:
+    """SIGKILL the process group a peer script leads (made by ``start_new_session``)."""
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
 def _venv_half_rtts(peer: str, size: int, count: int) -> list[float]:
     python = ensure_peer_env(peer)
     script = Path(__file__).with_name("ipc_peer_iceoryx2.py")
     cpus = "none" if ipc_common.PLACEMENT is None else f"{ipc_common.PLACEMENT[0]},{ipc_common.PLACEMENT[1]}"
     wait = "poll" if peer.endswith("-poll") else "event"
+    tag = uuid.uuid4().hex[:16]
+    root = Path(tempfile.mkdtemp(prefix=f"emos-bench-iox2-{tag}-"))
     cmd = [str(python), str(script), "--size", str(size), "--count", str(count),
-           "--warmup", str(ipc_pingpong.warmup_round_trips(count)), "--wait", wait, "--cpus", cpus]
+           "--warmup", str(ipc_pingpong.warmup_round_trips(count)), "--wait", wait, "--cpus", cpus,
+           "--tag", tag, "--prefix", iceoryx2_file_prefix(tag), "--root", str(root)]
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=_PEER_TIMEOUT_S, cwd=str(peer_dir()))
+        done = _run_peer_group(cmd, peer_dir())
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"peer {peer} at {size} B: no result in {_PEER_TIMEOUT_S:.0f} s") from None
+    finally:
+        remove_iceoryx2_files(tag, root)  # the peer and its echo have been reaped or killed on every path
     if done.returncode != 0:
         raise RuntimeError(f"peer {peer} at {size} B failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
     try:

@@ -1,0 +1,214 @@
+"""Big arrays are copied into ring slots with streaming (non-temporal) stores (issue 34, 8 MiB):
+the C copy writes exactly the bytes numpy would, the frames do not change, the Python codec
+(no compiler) still writes them alone, and a writer SIGKILLed in the middle of a streaming copy
+never leaves a torn message visible (the copy's fences keep the ring's seqlock)."""
+import mmap
+import multiprocessing as mp
+import os
+import signal
+import subprocess
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from emos import msgs as M
+from emos.msgs import codec
+from emos.transport import ring as R
+from emos.transport.context import RunContext
+from emos.transport.pubsub import Publisher, Subscriber
+
+needs_c = pytest.mark.skipif(codec._stream_copy is None, reason="the codec's C extension is not built here (the Python codec alone)")
+_FORK = mp.get_context("fork")
+
+
+@needs_c
+@pytest.mark.unit
+@pytest.mark.parametrize("size", [0, 1, 15, 63, 64, 65, 127, 1000, 4096 + 17, (1 << 20) + 3])
+@pytest.mark.parametrize("offset", [0, 1, 8, 32, 63, 64])
+def test_stream_copy_writes_exactly_the_source_and_nothing_around_it(size, offset):
+    src = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+    mm = mmap.mmap(-1, offset + size + 128)  # shared memory, as a ring slot is
+    mm.write(b"\xee" * len(mm))
+    end = codec._stream_copy(mm, offset, src)
+    assert end == offset + size
+    dst = np.frombuffer(mm, np.uint8)
+    assert np.array_equal(dst[offset : offset + size], src)
+    assert (dst[:offset] == 0xEE).all() and (dst[offset + size :] == 0xEE).all()
+    del dst
+    mm.close()
+
+
+@needs_c
+@pytest.mark.unit
+def test_stream_copy_refuses_what_does_not_fit_and_read_only_destinations():
+    buf = bytearray(100)
+    with pytest.raises(ValueError, match="do not fit a destination of 100 B"):
+        codec._stream_copy(buf, 90, np.zeros(11, np.uint8))
+    with pytest.raises(ValueError, match="offset -1"):
+        codec._stream_copy(buf, -1, np.zeros(1, np.uint8))
+    with pytest.raises(BufferError):
+        codec._stream_copy(bytes(100), 0, np.zeros(1, np.uint8))
+    with pytest.raises((BufferError, ValueError)):  # the caller passes contiguous bytes only
+        codec._stream_copy(buf, 0, np.zeros((4, 4), np.uint8)[:, ::2])
+    assert buf == bytearray(100)
+
+
+def _streamed(enc: codec.Encoded) -> bytes:
+    """The frame as a publisher writes it into a ring slot (shared memory, streaming stores)."""
+    mm = mmap.mmap(-1, enc.nbytes + 64)  # zeros, as to_bytes starts from (write_into skips the padding)
+    mm[enc.nbytes :] = b"\xee" * 64
+    assert enc.write_into(memoryview(mm)[: enc.nbytes], stream=True) == enc.nbytes
+    frame = mm[: enc.nbytes]
+    assert mm[enc.nbytes :] == b"\xee" * 64
+    mm.close()
+    return frame
+
+
+@needs_c
+@pytest.mark.unit
+def test_frames_with_streamed_arrays_are_byte_for_byte_the_numpy_ones():
+    rng = np.random.default_rng(7)
+    msg = M.PointCloud2(
+        height=1, width=3, point_step=4, row_step=12,
+        data=rng.integers(0, 256, 300_001, dtype=np.uint8),
+    )
+    img = M.Image.from_numpy(rng.integers(0, 256, (480, 640, 3), dtype=np.uint8))
+    # Two big arrays, the first of an odd length: the second starts at an offset streamed to.
+    scan = M.LaserScan(ranges=rng.standard_normal(70_001).astype(np.float32), intensities=rng.standard_normal(40_003).astype(np.float32))
+    assert scan.ranges.nbytes >= codec.STREAM_MIN_BYTES and msg.data.nbytes >= codec.STREAM_MIN_BYTES
+    for m, field in ((msg, "data"), (img, "data"), (scan, "ranges"), (scan, "intensities")):
+        enc = codec.encode(m)
+        streamed = _streamed(enc)
+        assert streamed == enc.to_bytes() == b"".join(bytes(c) for c in enc.chunks())
+        back = codec.decode(type(m), streamed)
+        assert np.array_equal(getattr(back, field), getattr(m, field))
+
+
+@pytest.mark.process
+def test_the_python_codec_alone_writes_the_same_frames():
+    """Without the C extension (no compiler: its import fails) big arrays are copied by numpy."""
+    code = r"""
+import sys
+class NoCCodec:
+    def find_spec(self, name, path=None, target=None):
+        if name == "emos.msgs._ccodec":
+            raise ImportError("no compiler here")
+sys.meta_path.insert(0, NoCCodec())
+import zlib
+import numpy as np
+from emos import msgs as M
+from emos.msgs import codec
+assert codec.C_CODEC is None and codec._stream_copy is None
+data = np.random.default_rng(1).integers(0, 256, codec.STREAM_MIN_BYTES + 11, dtype=np.uint8)
+frame = codec.encode(M.UInt8MultiArray(data=data)).to_bytes()
+assert np.array_equal(codec.decode(M.UInt8MultiArray, frame).data, data)
+print(zlib.crc32(frame))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    data = np.random.default_rng(1).integers(0, 256, codec.STREAM_MIN_BYTES + 11, dtype=np.uint8)
+    assert int(done.stdout) == zlib.crc32(codec.encode(M.UInt8MultiArray(data=data)).to_bytes())
+
+
+@pytest.mark.unit
+def test_a_published_message_past_the_threshold_arrives_intact(ctx):
+    sub = Subscriber(ctx, "/big", M.UInt8MultiArray, queue_size=4)
+    pub = Publisher(ctx, "/big", M.UInt8MultiArray, publisher_id="big", depth=2)
+    rng = np.random.default_rng(3)
+    sent = [rng.integers(0, 256, codec.STREAM_MIN_BYTES + k, dtype=np.uint8) for k in (0, 5, 64)]
+    for data in sent:
+        pub.publish(M.UInt8MultiArray(data=data))
+        [got] = sub.take()
+        assert np.array_equal(got.data, data)
+        del got
+    sub.close()
+    pub.close()
+
+
+@needs_c
+@pytest.mark.unit
+def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx, monkeypatch):
+    calls = []
+    real = codec._stream_copy
+
+    def counting(dst, offset, src):
+        calls.append(src.nbytes)
+        return real(dst, offset, src)
+
+    monkeypatch.setattr(codec, "_stream_copy", counting)
+    sub = Subscriber(ctx, "/cam", M.Image, queue_size=4)
+    pub = Publisher(ctx, "/cam", M.Image, publisher_id="cam", depth=2)
+    frame = np.random.default_rng(5).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    pub.publish(M.Image.from_numpy(frame))
+    pub.publish(M.Image.from_numpy(frame[:8, :8]))  # 192 B: a plain copy
+    got = sub.take()
+    assert calls == [frame.nbytes]
+    assert np.array_equal(got[0].to_numpy(), frame) and np.array_equal(got[1].to_numpy(), frame[:8, :8])
+    del got
+    sub.close()
+    pub.close()
+
+
+def _streaming_writer(run_dir: str, run_id: str, size: int, ready) -> None:
+    """Publishes forever (big arrays streamed into the ring), the checksum in the label."""
+    ctx = RunContext(run_id, Path(run_dir), owner=False)
+    pub = Publisher(ctx, "/stream", M.UInt8MultiArray, publisher_id="writer", depth=2)
+    payloads = [np.random.default_rng(i).integers(0, 256, size, dtype=np.uint8) for i in range(3)]
+    crcs = [zlib.crc32(p.data) for p in payloads]
+    ready.set()
+    seq = 0
+    while True:
+        k = seq % 3
+        dim = M.MultiArrayDimension(label=f"{seq}:{crcs[k]}", size=size, stride=size)
+        pub.publish(M.UInt8MultiArray(layout=M.MultiArrayLayout(dim=[dim]), data=payloads[k]))
+        seq += 1
+
+
+def _check_intact(msgs) -> int:
+    for m in msgs:
+        seq, crc = m.layout.dim[0].label.split(":")
+        assert zlib.crc32(m.data.data) == int(crc), f"torn message {seq}"
+    return len(msgs)
+
+
+@needs_c
+@pytest.mark.process
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(size=st.sampled_from([codec.STREAM_MIN_BYTES + 24, (1 << 20) + 8, 4 << 20]), kill_after=st.floats(0.0, 0.05))
+def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, size, kill_after):
+    ready = _FORK.Event()
+    args = (str(ctx.run_dir), ctx.run_id, size, ready)
+    proc = _FORK.Process(target=_streaming_writer, args=args)
+    proc.start()
+    try:
+        sub = Subscriber(ctx, "/stream", M.UInt8MultiArray, queue_size=8)
+        assert ready.wait(60)
+        checked = 0
+        end = time.monotonic() + kill_after
+        while time.monotonic() < end:
+            checked += _check_intact(sub.take())
+        assert proc.is_alive(), f"the writer died by itself (exit code {proc.exitcode})"
+        os.kill(proc.pid, signal.SIGKILL)  # mid-copy with good probability: a copy is most of a publish
+        proc.join()
+        checked += _check_intact(sub.take())
+        latest = sub.latest()
+        if latest is not None:
+            _check_intact([latest])
+        assert sub.take() == []
+        src = sub.sources.get("writer")
+        if src is not None:  # the next number is either not written or complete and intact
+            status, payload, _ = src.ring.read(src.ring.head)
+            assert status in (R.NOT_READY, R.LAPPED, R.OK)
+            if status == R.OK:
+                _check_intact([M.decode(M.UInt8MultiArray, payload)])
+        sub.close()
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join()
