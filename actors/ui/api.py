@@ -18,9 +18,11 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import WSMsgType, web
 
 from emos.actors.ui import openapi
+from emos.actors.ui import settings as settings_mod
 from emos.actors.ui.auth import CSRF_KEY, PRINCIPAL_KEY, Principal, client_of, refused
 from emos.actors.ui.inputs import InputRefused, goal_from_page
 from emos.actors.ui.services import service_key
+from emos.actors.ui.system_view import ACTIONS as SYSTEM_ACTIONS
 from emos.actors.ui.widgets import input_kind
 
 if TYPE_CHECKING:
@@ -97,6 +99,8 @@ class Api:
             web.post(p + "/actions/{name:.+}/goals/{goal_id}/cancel", self.cancel_goal),
             web.get(f"{p}/outputs", self.list_outputs), web.get(p + "/outputs/{topic:.+}/latest", self.latest),
             web.get(f"{p}/system", self.system), web.get(f"{p}/graph", self.graph_view), web.get(f"{p}/logs", self.logs),
+            web.get(f"{p}/settings", self.list_settings), web.post(p + "/settings/{component}", self.change_settings),
+            web.post(p + "/components/{component}/{action}", self.component_action),
             web.get(f"{p}/ws", self.ws),
         ]
 
@@ -105,7 +109,7 @@ class Api:
         if self._doc is None:
             s = self.server
             self._doc = openapi.document(s.config.title, s.inputs, s.action_runner.actions, s.service_runner.services,
-                                         [h.describe() for h in s.hubs])
+                                         [h.describe() for h in s.hubs], settings=self._fields(), system_actions=SYSTEM_ACTIONS)
         return self._doc
 
     async def openapi(self, request: web.Request) -> web.Response:
@@ -220,6 +224,80 @@ class Api:
         if not answer.get("ok"):
             return _error(409, str(answer.get("error")))
         return web.json_response({"ok": True}, status=202)
+
+    # ------------------------------------------------------------------ settings and lifecycle
+    def _fields(self) -> dict[str, list[dict[str, Any]]]:
+        return {name: settings_mod.describe_config(config) for name, config in self.server.components.items()}
+
+    def _component(self, request: web.Request, known: Any) -> str:
+        name = request.match_info["component"]
+        if name not in known:
+            raise web.HTTPNotFound(text=_dumps({"ok": False, "error": f"no component {name[:80]!r}; components: {', '.join(sorted(known)) or 'none'}",
+                                                "field": "component"}), content_type="application/json")
+        return name
+
+    async def list_settings(self, request: web.Request) -> web.Response:
+        """Every component's form, current values (from the running component) and change schema."""
+        out = []
+        for name, fields in sorted(self._fields().items()):
+            entry: dict[str, Any] = {"component": name, "type": type(self.server.components[name]).__name__, "fields": fields,
+                                     "schema": openapi.settings_schema(fields)}
+            try:
+                entry["values"] = (await settings_mod.read_config(self.server.control_socket(name)))["config"]
+            except Exception as exc:  # not running (yet): the recipe's values, said so
+                entry["values"], entry["error"] = self.server.components[name].asdict(), f"not reachable ({exc}); the recipe's values"
+            out.append(entry)
+        return web.json_response({"components": out}, dumps=_dumps)
+
+    async def change_settings(self, request: web.Request) -> web.Response:
+        """``{"values": {parameter: value}}``: checked against the component's schema here (types,
+        ranges, choices: 422 naming the parameter), then by the component itself, all or nothing."""
+        name = self._component(request, self.server.components)
+        fields = {f["name"]: f for f in settings_mod.describe_config(self.server.components[name])}
+        raw = await self._body(request, "values", {"type": "object"})
+        for key in raw:
+            if key in fields and not fields[key].get("editable", True):
+                return _error(422, f"body.values.{key}: {name}'s {key} is read-only here (a {fields[key]['kind']} value); "
+                                   "change it in the recipe or a config file", f"body.values.{key}")
+        values = await self._body_checked(raw, "values", openapi.settings_schema(list(fields.values())))
+        try:
+            converted = {key: settings_mod.convert_value(fields[key], value) for key, value in values.items()}
+            new = await settings_mod.apply_config_change(self.server.control_socket(name), name, converted)
+        except settings_mod.SettingRefused as exc:  # the component's own validator
+            field = f"body.values.{next(iter(values))}" if len(values) == 1 else "body.values"
+            return _error(422, str(exc), field)
+        except (ConnectionError, TimeoutError) as exc:
+            return _error(503, str(exc))
+        log.info("[ui] %s: settings changed through the API by %s: %s", name, request[PRINCIPAL_KEY], converted)
+        return web.json_response({"ok": True, "values": new}, dumps=_dumps)
+
+    async def _body_checked(self, body: Any, key: str, schema: dict[str, Any]) -> Any:
+        try:
+            openapi.check(schema, body, f"body.{key}")
+        except openapi.RequestInvalid as exc:
+            raise web.HTTPUnprocessableEntity(text=_dumps({"ok": False, "error": str(exc), "field": exc.field}),
+                                              content_type="application/json") from None
+        return body
+
+    async def component_action(self, request: web.Request) -> web.Response:
+        """Start (activate), stop (deactivate) or restart a component."""
+        s = self.server
+        action = request.match_info["action"]
+        if action not in SYSTEM_ACTIONS:
+            return _error(404, f"no action {action[:40]!r} for components; actions: {', '.join(SYSTEM_ACTIONS)}", "action")
+        name = self._component(request, set(s.components) | {s.own_name})
+        if name == s.own_name and action != "restart":
+            return _error(409, f"the UI cannot {action} itself (it would stop answering); restart it instead")
+        if request.can_read_body and request.content_type != "application/json":
+            return _error(415, "the body, if any, must be JSON ('Content-Type: application/json')")
+        try:
+            detail = await s.system.act(name, action, known=set(s.components) | {s.own_name})
+        except ValueError as exc:
+            return _error(409, str(exc))
+        except Exception as exc:  # the component or the supervisor is not reachable
+            return _error(503, f"{name}: {action} failed: {exc}")
+        log.info("[ui] %s: %s requested through the API by %s", name, action, request[PRINCIPAL_KEY])
+        return web.json_response({"ok": True, "detail": detail, "t": time.time()})
 
     # ------------------------------------------------------------------ outputs and system
     async def list_outputs(self, request: web.Request) -> web.Response:

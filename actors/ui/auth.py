@@ -141,7 +141,11 @@ class Gate:
     def __init__(self, bind_host: str, token: str, port: int, token_file: Path | None = None, *,
                  devices: DeviceStore | None = None, tls: bool = False, allowed_hosts: Any = (), failures_per_minute: int = 30,
                  pairing_code: str = "", pairing_role: str = "operator", token_ttl_s: float = 30 * 86400.0,
-                 pairing_file: Path | None = None, base_url: str = "", serve_browser: bool = True) -> None:
+                 pairing_file: Path | None = None, base_url: str = "", serve_browser: bool = True,
+                 pairing_ttl_s: float = 300.0, pairing_expires: float = 0.0, clock: Callable[[], float] = time.time) -> None:
+        """``pairing_ttl_s``: how long a pairing code is valid; ``pairing_expires``: when the
+        given ``pairing_code`` expires (UNIX time, as printed; 0: ``pairing_ttl_s`` from now);
+        ``clock``: the wall clock (the printed expiry is one), injectable for tests."""
         if not token:
             raise ValueError(f"the UI on {bind_host}:{port} needs an access token (UIConfig.token); "
                              "enable_ui and UIComponent make one when none is given")
@@ -158,8 +162,17 @@ class Gate:
         self.limiter = pairing_mod.AttemptLimiter(failures_per_minute)
         self.pairing_code, self.pairing_role, self.token_ttl_s = pairing_code, pairing_role, token_ttl_s
         self.pairing_file, self.base_url = pairing_file, base_url
+        if not pairing_ttl_s > 0:
+            raise ValueError(f"the UI on {bind_host}:{port}: a pairing code's lifetime must be > 0 s, got {pairing_ttl_s!r}")
+        self.clock, self.pairing_ttl_s = clock, float(pairing_ttl_s)
+        self.pairing_expires = pairing_expires or clock() + self.pairing_ttl_s
+        self.expired_code, self.expired_at = "", 0.0  # the last code that expired unused: refused with its own message
         self.paired = 0
         self.serve_browser = serve_browser
+        if self.pairing_code and self._code_was_used(self.pairing_code):
+            # A restarted UI process gets the printed code from its config: if a device paired
+            # with it before the restart, it must not work again.
+            self.new_pairing_code()
 
     # ------------------------------------------------------------------ credentials
     def authenticate(self, credential: str, via: str) -> tuple[Principal | None, str]:
@@ -292,7 +305,14 @@ class Gate:
             return _json(404, {"ok": False, "error": "pairing is off for this UI (UIConfig.pairing)"})
         if not isinstance(body.get("code"), str):
             return _json(422, {"ok": False, "error": "code: expected the pairing code as text", "field": "code"})
-        if not pairing_mod.same_code(body["code"], self.pairing_code):
+        code = self.current_code()  # an expired code is replaced here, before it is compared
+        if self.expired_code and pairing_mod.same_code(body["code"], self.expired_code):
+            # Not counted as a guess: only someone who was shown the code can send it.
+            refused("an expired pairing code", request, f"expired at {pairing_mod.until_text(self.expired_at)}")
+            return _json(401, {"ok": False, "error": f"this pairing code expired at {pairing_mod.until_text(self.expired_at)} "
+                                                     f"(codes are valid {pairing_mod.lifetime_text(self.pairing_ttl_s)}): "
+                                                     "run `emos ui pair` on the robot for the current one", "expired": True})
+        if not pairing_mod.same_code(body["code"], code):
             self.limiter.failed(client)
             refused("a pairing code", request, "wrong code")
             return _json(401, {"ok": False, "error": "wrong or used pairing code"})
@@ -302,7 +322,8 @@ class Gate:
                                                       f"got {role!r}", "field": "role"})
         name = body.get("name") or f"device at {client}"
         try:
-            token, record = self.devices.issue(str(name)[:64] if isinstance(name, str) else "", role, self.token_ttl_s)
+            token, record = self.devices.issue(str(name)[:64] if isinstance(name, str) else "", role, self.token_ttl_s,
+                                               pairing=pairing_mod.code_digest(code))
         except ValueError as exc:
             return _json(422, {"ok": False, "error": f"name: {exc}", "field": "name"})
         self.paired += 1
@@ -313,17 +334,45 @@ class Gate:
         self._set_cookie(response, self.tok_cookie, token)
         return response
 
-    def new_pairing_code(self) -> str:
-        """A fresh single-use code (the old one stops working), written to the pairing file and logged."""
-        self.pairing_code = pairing_mod.new_code()
-        if self.pairing_file is not None:
-            url = pairing_mod.pairing_url(self.base_url, self.pairing_code) if self.base_url else ""
-            try:
-                pairing_mod.write_pairing_file(self.pairing_file, self.pairing_code, url, self.pairing_role, time.time())
-            except OSError as exc:
-                log.error("[ui] cannot write the pairing code to %s: %s", self.pairing_file, exc)
-        log.info("[ui] next pairing code: %s (also shown by `emos ui pair`)", self.pairing_code)
+    def current_code(self) -> str:
+        """The pairing code in force: an expired one is replaced first (and remembered, so that a
+        device sending it is told it expired rather than that it is wrong)."""
+        if self.pairing_code and self.clock() >= self.pairing_expires:
+            self.expired_code, self.expired_at = self.pairing_code, self.pairing_expires
+            self.new_pairing_code(announce=False)
+            log.info("[ui] port %d: the pairing code expired at %s; the next one is valid until %s (`emos ui pair` shows it)",
+                     self.port, pairing_mod.until_text(self.expired_at), pairing_mod.until_text(self.pairing_expires))
         return self.pairing_code
+
+    def write_pairing_file(self) -> None:
+        if self.pairing_file is None or not self.pairing_code:
+            return
+        url = pairing_mod.pairing_url(self.base_url, self.pairing_code) if self.base_url else ""
+        try:
+            pairing_mod.write_pairing_file(self.pairing_file, self.pairing_code, url, self.pairing_role, self.pairing_expires)
+        except OSError as exc:
+            log.error("[ui] port %d: cannot write the pairing code to %s: %s", self.port, self.pairing_file, exc)
+
+    def new_pairing_code(self, announce: bool = True) -> str:
+        """A fresh single-use code valid ``pairing_ttl_s`` (the old one stops working), written to
+        the pairing file and (``announce``) logged."""
+        self.pairing_code = pairing_mod.new_code()
+        self.pairing_expires = self.clock() + self.pairing_ttl_s
+        self.write_pairing_file()
+        if announce:
+            log.info("[ui] next pairing code: %s, valid until %s (also shown by `emos ui pair`)", self.pairing_code,
+                     pairing_mod.until_text(self.pairing_expires))
+        return self.pairing_code
+
+    def _code_was_used(self, code: str) -> bool:
+        if self.devices is None:
+            return False
+        digest = pairing_mod.code_digest(code)
+        try:
+            return any(r.get("pairing") == digest for r in self.devices.records())
+        except Exception as exc:  # an unusable store: pairing will refuse anyway; be safe and change the code
+            log.warning("[ui] port %d: cannot read the device store (%s): making a new pairing code", self.port, exc)
+            return True
 
 
 def _json(status: int, body: dict[str, Any], headers: dict[str, str] | None = None) -> web.Response:

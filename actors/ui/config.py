@@ -76,6 +76,16 @@ class UIConfig(BaseComponentConfig):
     pairing_code: str = field(default="", repr=False)  # a secret: made by enable_ui
     """The current pairing code (made at start-up; a new one after each use)."""
 
+    pairing_code_ttl_s: float = field(default=300.0, validator=base_validators.in_range(min_value=1.0, max_value=86400.0))
+    """How long a pairing code is valid, in seconds (5 minutes by default; 1 s to a day). A code
+    seen on a screen or photographed stops working by itself; when it expires a new one is made
+    (``emos ui pair`` shows it). A used code is dead at once (single use)."""
+
+    pairing_code_expires: float = field(default=0.0, repr=False)
+    """When the current pairing code expires (UNIX time). Set by ``enable_ui`` when it prints the
+    code, so the printed time holds and a restarted UI keeps it; 0: ``pairing_code_ttl_s`` from
+    the moment the UI starts serving."""
+
     pairing_role: str = field(default="operator", validator=base_validators.in_(("viewer", "operator")))
     """The most a paired device gets: ``operator`` (may also ask for ``viewer``) or ``viewer``."""
 
@@ -89,6 +99,10 @@ class UIConfig(BaseComponentConfig):
     auth_failures_per_minute: int = field(default=30, validator=base_validators.in_range(min_value=1, max_value=10000))
     """Failed sign-ins (wrong tokens, wrong pairing codes) a client may make in a minute before
     it is refused (429); ten times as many from all clients together."""
+
+    zones_map: str = field(default="")
+    """A map_server YAML whose keepout and speed zones the page edits (drawn as polygons over the
+    map; operators only), saved in its masks as `emos map zones` does. Empty: no zone editor."""
 
     allowed_hosts: list = field(factory=list)
     """Further names the page may be reached by (the ``Host`` header), e.g. a DNS name of the

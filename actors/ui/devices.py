@@ -112,9 +112,10 @@ class DeviceStore:
             os.close(fd)  # releases the lock
 
     # ------------------------------------------------------------------ API
-    def issue(self, name: str, role: str, ttl_s: float) -> tuple[str, dict[str, Any]]:
+    def issue(self, name: str, role: str, ttl_s: float, pairing: str = "") -> tuple[str, dict[str, Any]]:
         """A new token for device ``name`` with ``role``, valid ``ttl_s`` seconds: (token, record).
-        The token is returned once and never stored."""
+        The token is returned once and never stored. ``pairing``: the digest of the code it paired
+        with (pairing.code_digest), so that code never works again."""
         check_role(role)
         if not isinstance(name, str) or not _NAME_RE.match(name):
             raise ValueError(f"device name must be 1-64 letters, digits, spaces or . @ : + - _, got {name!r}")
@@ -128,6 +129,8 @@ class DeviceStore:
                 device_id = secrets.token_hex(6)
             record = {"id": device_id, "name": name, "role": role, "sha256": _digest(secret), "created": now, "expires": now + ttl_s,
                       "revoked": None}
+            if pairing:
+                record["pairing"] = pairing
             records[device_id] = record
             self._write(records)
         return f"{PREFIX}{device_id}.{secret}", public(record, now)
@@ -157,6 +160,10 @@ class DeviceStore:
         except DeviceStoreError:
             return False
         return record is not None and not record.get("revoked") and float(record.get("expires", 0)) > self.clock()
+
+    def records(self) -> list[dict[str, Any]]:
+        """Every record as stored (hashes included: for the UI's own checks, never shown)."""
+        return [dict(r) for r in self._read().values()]
 
     def listing(self) -> list[dict[str, Any]]:
         """Every record (without its hash), with a ``status``: active, expired or revoked."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -86,6 +87,8 @@ def check_security(config: UIConfig) -> None:
         path = getattr(config, name)
         if path and not os.path.isfile(os.path.expanduser(path)):
             raise ValueError(f"{where}: {name} {path!r} is not a file")
+    if config.zones_map and not os.path.isfile(os.path.expanduser(config.zones_map)):
+        raise ValueError(f"{where}: zones_map {config.zones_map!r} is not a file (the map_server YAML whose zones the page edits)")
     if config.keystore and not os.path.isdir(os.path.expanduser(config.keystore)):
         raise ValueError(f"{where}: keystore {config.keystore!r} is not a directory (emos security create-keystore DIR makes one)")
 
@@ -145,6 +148,9 @@ def add_ui(launcher: Any, request: dict[str, Any]) -> None:
     from emos.actors.ui.system_view import describe_graph
 
     certificate = prepare_certificate(config)
+    if config.pairing and not config.pairing_code_expires:
+        # From the moment it is printed (below): the printed time holds, and a restarted UI keeps it.
+        config.pairing_code_expires = time.time() + config.pairing_code_ttl_s
     graph = describe_graph(components, list(getattr(launcher, "_events_actions", [])))
     ui = UIComponent(ui_inputs=topics, ui_outputs=request["outputs"], ui_actions=actions, ui_services=services, components=components,
                      config=config, component_name=UI_NAME, graph=graph, log_file=run_log_file())
@@ -155,9 +161,11 @@ def add_ui(launcher: Any, request: dict[str, Any]) -> None:
     if certificate:
         print(f"EMOS UI: HTTPS with the {certificate}", flush=True)
     if config.pairing:
-        from emos.actors.ui.pairing import pairing_url, terminal_qr
+        from emos.actors.ui.pairing import lifetime_text, pairing_url, terminal_qr, until_text
 
         link = pairing_url(page_url(config, with_token=False, reachable=True), config.pairing_code)
         qr = terminal_qr(link)
+        until = f"valid until {until_text(config.pairing_code_expires)} ({lifetime_text(config.pairing_code_ttl_s)}), single use"
         print(f"EMOS UI: pair a device: open {link}, or enter the code {config.pairing_code} at /pair "
-              f"(single use; `emos ui pair` shows the next one)" + (f"\n{qr}" if qr else ""), flush=True)
+              f"({until}; `emos ui pair` shows the current one)" + (f"\n{qr}\nEMOS UI: the QR code above is {until}" if qr else ""),
+              flush=True)

@@ -78,6 +78,26 @@ def input_schema(type_name: str) -> dict[str, Any]:
     return message_schema(resolve(type_name))
 
 
+def settings_schema(fields: list[dict[str, Any]]) -> dict[str, Any]:
+    """The schema of ``values`` for a component's settings change: its editable parameters
+    (settings.describe_config), each with its type, range and choices; at least one."""
+    props: dict[str, Any] = {}
+    for f in fields:
+        if not f.get("editable", True):
+            continue
+        kind = f["kind"]
+        if kind == "choice":
+            one: dict[str, Any] = {"enum": list(f["choices"])}
+        else:
+            one = dict(_PRIMITIVE.get(kind, {}))
+            if kind in ("int", "float"):
+                one.update({k: f[src] for k, src in (("minimum", "min"), ("maximum", "max")) if isinstance(f.get(src), (int, float))})
+        if f.get("help"):
+            one["description"] = f["help"]
+        props[f["name"]] = {"anyOf": [one, {"type": "null"}]} if f.get("optional") else one
+    return {"type": "object", "properties": props, "additionalProperties": False, "minProperties": 1}
+
+
 def goal_schema(goal_cls: type) -> dict[str, Any]:
     whole = message_schema(goal_cls)
     return {"anyOf": [GOAL_POINT, whole]} if goal_field(goal_cls) is not None else whole
@@ -127,6 +147,8 @@ def check(schema: dict[str, Any], value: Any, where: str = "body") -> None:
             check(schema.get("items", {}), item, f"{where}[{i}]")
     if want == "object":
         props = schema.get("properties", {})
+        if len(value) < schema.get("minProperties", 0):
+            raise RequestInvalid(where, f"give at least {schema['minProperties']} of: {', '.join(props) or 'none'}")
         for name in schema.get("required", []):
             if name not in value:
                 raise RequestInvalid(f"{where}.{name}", "required")
@@ -159,16 +181,18 @@ ERROR = {"type": "object", "properties": {"ok": {"type": "boolean"}, "error": {"
 
 def _responses(ok: dict[str, Any], *codes: int) -> dict[str, Any]:
     out: dict[str, Any] = {"200": {"description": "done", "content": {"application/json": {"schema": ok}}}}
-    words = {202: "accepted", 400: "malformed body", 401: "no or wrong credential", 403: "role or origin refused", 404: "no such input",
-             409: "nothing to cancel", 415: "wrong content type", 422: "a field does not fit (named in 'field')", 429: "too many failed sign-ins",
+    words = {202: "accepted", 400: "malformed body", 401: "no or wrong credential", 403: "role or origin refused", 404: "no such input, component or action",
+             409: "nothing to cancel, or not allowed in this state", 415: "wrong content type", 422: "a field does not fit (named in 'field')", 429: "too many failed sign-ins",
              503: "the component or supervisor is not reachable", 504: "the call timed out"}
     for code in codes:
         out[str(code)] = {"description": words[code], "content": {"application/json": {"schema": ERROR}}}
     return out
 
 
-def document(title: str, inputs: dict[str, str], actions: dict[str, Any], services: dict[str, Any], outputs: list[dict[str, Any]]) -> dict[str, Any]:
-    """The OpenAPI 3.1 document of this UI's API (paths per input, action and service)."""
+def document(title: str, inputs: dict[str, str], actions: dict[str, Any], services: dict[str, Any], outputs: list[dict[str, Any]],
+             settings: dict[str, list[dict[str, Any]]] | None = None, system_actions: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The OpenAPI 3.1 document of this UI's API (paths per input, action and service; the
+    components' settings (``settings``: name -> settings.describe_config) and lifecycle actions)."""
     paths: dict[str, Any] = {}
     common = (400, 401, 403, 415, 422, 429)
     ok = {"type": "object", "properties": {"ok": {"type": "boolean"}}}
@@ -212,6 +236,37 @@ def document(title: str, inputs: dict[str, str], actions: dict[str, Any], servic
             "summary": f"the latest message on /{name} (as JSON; long arrays cut)", "operationId": f"latest_{_op(name)}", "tags": ["outputs"],
             "responses": _responses(sample, 401, 403, 429)}}
     listing = {"type": "object"}
+    settings = settings or {}
+    names = ", ".join(sorted(settings)) or "none"
+    # One path with the component as a parameter (not one path per component): a schema-based
+    # generator exploring the document must not stop the robot's components or retune them at
+    # random. Each component's own schema is in components.schemas and in GET /api/v1/settings.
+    component = [{"name": "component", "in": "path", "required": True, "schema": {"type": "string"},
+                  "description": f"a component of the recipe: {names}"}]
+    schemas = {f"settings_{_op(n)}": settings_schema(fields) for n, fields in sorted(settings.items())}
+    paths["/api/v1/settings"] = {"get": {
+        "summary": "every component's parameters: the form (kind, range, choices), the current values and the schema of a change",
+        "operationId": "settings", "tags": ["settings"], "responses": _responses(listing, 401, 429)}}
+    paths["/api/v1/settings/{component}"] = {"post": {
+        "summary": "change parameters of a running component (operators); validated by the component, all or nothing",
+        "description": "The body's 'values' follows the component's schema, components.schemas.settings_<component> "
+                       "(also in GET /api/v1/settings). A wrong type, an unknown or read-only parameter: 422 naming it; "
+                       "an unknown component: 404.",
+        "operationId": "change_settings", "tags": ["settings"], "parameters": component,
+        "requestBody": {"required": True, "content": {"application/json": {"schema": envelope(
+            "values", {"type": "object", "minProperties": 1, "description": "parameter name -> new value"})}}},
+        "responses": _responses({"type": "object", "properties": {"ok": {"type": "boolean"}, "values": {"type": "object"}}},
+                                400, 401, 403, 404, 415, 422, 429, 503)}}
+    for act in system_actions:
+        paths[f"/api/v1/components/{{component}}/{act}"] = {"post": {
+            "summary": {"start": "activate a component (the lifecycle's activate; its process stays)",
+                        "stop": "deactivate a component (the lifecycle's deactivate; its process stays, its topics stay open)",
+                        "restart": "restart a component's process (its supervisor starts a fresh one; counts against the restart intensity)"}
+            .get(act, act) + " (operators)",
+            "operationId": f"component_{act}", "tags": ["system"], "parameters": component,
+            "requestBody": {"required": False, "content": {"application/json": {"schema": {"type": "object"}}}},
+            "responses": _responses({"type": "object", "properties": {"ok": {"type": "boolean"}, "detail": {"type": "string"}}},
+                                    401, 403, 404, 409, 415, 429, 503)}}
     paths.update({
         "/api/v1/session": {"get": {"summary": "who this credential is (role, device, expiry) and the session's CSRF token",
                                     "operationId": "session", "tags": ["meta"], "responses": _responses(listing, 401, 429)}},
@@ -236,7 +291,7 @@ def document(title: str, inputs: dict[str, str], actions: dict[str, Any], servic
                                 "/api/v1/ws streams outputs at a rate the client chooses: send {\"op\": \"subscribe\", \"topic\": T, "
                                 "\"rate\": HZ}; it also takes publish, goal, cancel and call ops (operators)."},
         "servers": [{"url": "/"}],
-        "components": {"securitySchemes": {"bearer": {"type": "http", "scheme": "bearer"}}},
+        "components": {"securitySchemes": {"bearer": {"type": "http", "scheme": "bearer"}}, "schemas": schemas},
         "security": [{"bearer": []}],
         "paths": paths,
     }

@@ -3,8 +3,10 @@
 The run prints a code (``K7QM-2XHD``: 8 characters of a 32-letter alphabet without look-alikes,
 40 bits) and a QR code of the pairing page's address with the code in it. A device that sends
 the code to ``POST /api/pair`` gets a device token (see :mod:`emos.actors.ui.devices`). A code
-is single-use: once a device has paired, a new one is made, written to ``<run dir>/ui.pairing``
-(mode 0600; ``emos ui pair`` shows it with its QR code) and logged.
+is single-use and short-lived: once a device has paired, or ``UIConfig.pairing_code_ttl_s`` (5
+minutes) after it was shown, a new one is made, written to ``<run dir>/ui.pairing`` with its
+expiry (mode 0600; ``emos ui pair`` shows it with its QR code) and logged. An expired code is
+refused with a message saying when it expired.
 
 Guessing is bounded twice: :class:`AttemptLimiter` refuses a client (429) after
 ``per_client`` failed attempts (wrong codes or wrong tokens) in a minute, and everyone after
@@ -14,6 +16,7 @@ through one :class:`~emos.ratelimit.RateLimitedLog`, so 1,000 wrong codes make a
 from __future__ import annotations
 
 import collections
+import hashlib
 import hmac
 import json
 import secrets
@@ -43,6 +46,24 @@ def same_code(given: Any, code: str) -> bool:
     return bool(code) and hmac.compare_digest(normalize(given).encode(), normalize(code).encode())
 
 
+def code_digest(code: str) -> str:
+    """What a device record keeps of the code it paired with (so a restarted UI does not bring a
+    used code back): a short hash, never the code."""
+    return hashlib.sha256(b"emos-ui-pairing:" + normalize(code).encode()).hexdigest()[:24]
+
+
+def until_text(expires: float) -> str:
+    """An expiry for people: local time of day, with the date when it is not today."""
+    when = time.localtime(expires)
+    today = time.localtime()
+    fmt = "%H:%M:%S" if when[:3] == today[:3] else "%Y-%m-%d %H:%M:%S"
+    return time.strftime(fmt, when)
+
+
+def lifetime_text(seconds: float) -> str:
+    return f"{seconds / 60:g} min" if seconds >= 60 else f"{seconds:g} s"
+
+
 def pairing_url(base: str, code: str) -> str:
     """The address the QR code carries: the pairing page with the code filled in."""
     return f"{base.rstrip('/')}/pair#code={code}"  # in the fragment: never sent to a server, kept out of access logs
@@ -62,6 +83,7 @@ def terminal_qr(text: str) -> str:
 
 
 def write_pairing_file(path: Path, code: str, url: str, role: str, expires: float) -> None:
+    """The current code for ``emos ui pair``; ``expires``: when it stops working (UNIX time)."""
     from emos.actors.ui.tokenfile import write_private_file
 
     write_private_file(path, json.dumps({"code": code, "url": url, "role": role, "expires": expires}) + "\n", "the UI's pairing code")

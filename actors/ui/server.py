@@ -34,13 +34,43 @@ log = logging.getLogger("emos.ui")
 CSRF_PLACEHOLDER = b"__EMOS_CSRF__"  # in index.html; replaced by the session's CSRF token
 STATIC = {"app.js": "application/javascript", "media.js": "application/javascript", "panels.js": "application/javascript", "app.css": "text/css",
           "index.html": "text/html", "favicon.svg": "image/svg+xml", "pair.html": "text/html", "pair.js": "application/javascript",
-          "graph.js": "application/javascript"}
+          "graph.js": "application/javascript", "zones.js": "application/javascript"}
 PAGES = ("index.html", "pair.html")  # served at / and /pair, not as /static/...
 REVOCATION_CHECK_S = 1.0  # how soon an open websocket of a revoked or expired device token is closed
+PAIRING_CHECK_S = 1.0  # how soon an expired pairing code is replaced (and `emos ui pair` shows the new one)
 
 
 def _dumps(obj: Any) -> str:
     return json.dumps(obj, default=str)
+
+
+MAX_ZONE_POINTS = 1000
+
+
+def _zone_edit_args(body: Any) -> dict[str, Any]:
+    """The checked fields of a zone edit from the page (ValueError naming the field)."""
+    if not isinstance(body, dict):
+        raise ValueError("expected a JSON object {op, name, kind, polygon, value}")
+    verb = body.get("op")
+    if verb not in ("add", "set", "remove"):
+        raise ValueError(f"op: must be add, set or remove, got {verb!r}")
+    name = body.get("name")
+    if not isinstance(name, str) or not name.strip() or len(name) > 64:
+        raise ValueError(f"name: a zone name of 1-64 characters, got {name!r}")
+    out: dict[str, Any] = {"verb": verb, "name": name.strip()}
+    if verb == "remove":
+        return out
+    kind = body.get("kind")
+    if kind is not None and kind not in ("keepout", "speed"):
+        raise ValueError(f"kind: must be keepout or speed, got {kind!r}")
+    polygon = body.get("polygon")
+    point_ok = lambda p: isinstance(p, list) and len(p) == 2 and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in p)  # noqa: E731
+    if polygon is not None and (not isinstance(polygon, list) or not 3 <= len(polygon) <= MAX_ZONE_POINTS or not all(map(point_ok, polygon))):
+        raise ValueError(f"polygon: 3 to {MAX_ZONE_POINTS} points [x, y] in metres")
+    value = body.get("value")
+    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ValueError(f"value: a number (the speed limit), got {value!r}")
+    return {**out, "kind": kind, "polygon": polygon, "value": value}
 
 
 def bind_socket(host: str, port: int) -> socket.socket:
@@ -63,12 +93,16 @@ class UIServer:
                  publish: Callable[[str, Any], None], control_socket: Callable[[str], Path], supervisor_socket: str | None,
                  own_name: str, actions: dict[str, Any] | None = None, action_socket: Callable[[str], Path] | None = None,
                  token_file: Path | None = None, services: dict[str, Any] | None = None, devices_file: Path | None = None,
-                 pairing_file: Path | None = None, base_url: str = "", graph: dict[str, Any] | None = None, log_file: Path | None = None):
+                 pairing_file: Path | None = None, base_url: str = "", graph: dict[str, Any] | None = None, log_file: Path | None = None,
+                 clock: Callable[[], float] = time.time):
         """``token_file``: where the access token is kept (mode 0600) while the UI listens;
         ``devices_file``: the device-token store (no pairing without one); ``pairing_file``: where
         the current pairing code is kept for ``emos ui pair``; ``base_url``: the page's address
         (for the pairing QR code); ``graph``: the system graph (system_view.describe_graph);
-        ``log_file``: the run's log, whose tail ``/api/v1/logs`` returns."""
+        ``log_file``: the run's log, whose tail ``/api/v1/logs`` returns; ``clock``: the wall
+        clock pairing codes expire by (injectable for tests)."""
+        self.clock = clock
+        self._pairing_task: asyncio.Future[None] | None = None
         self.config, self.hubs, self.inputs = config, hubs, inputs
         self.token_file = token_file
         self.devices = DeviceStore(devices_file) if devices_file is not None else None
@@ -89,6 +123,7 @@ class UIServer:
         self.published = 0
         self.gate: Gate | None = None
         self.api = Api(self, log_file=log_file, graph=graph)
+        self._zone_lock = asyncio.Lock()
 
     # ------------------------------------------------------------------ lifecycle
     def bind(self) -> None:
@@ -109,7 +144,8 @@ class UIServer:
         return Gate(c.host, c.token, c.port, self.token_file, devices=self.devices if c.pairing or self.devices else None, tls=c.uses_tls(),
                     allowed_hosts=c.allowed_hosts, failures_per_minute=c.auth_failures_per_minute,
                     pairing_code=c.pairing_code if c.pairing and self.devices is not None else "", pairing_role=c.pairing_role,
-                    token_ttl_s=c.token_ttl_h * 3600.0, pairing_file=self.pairing_file, base_url=self.base_url, serve_browser=c.serve_browser)
+                    token_ttl_s=c.token_ttl_h * 3600.0, pairing_file=self.pairing_file, base_url=self.base_url, serve_browser=c.serve_browser,
+                    pairing_ttl_s=c.pairing_code_ttl_s, pairing_expires=c.pairing_code_expires, clock=self.clock)
 
     async def start(self) -> None:
         ssl_context = None
@@ -125,6 +161,7 @@ class UIServer:
             web.get("/api/settings", self._settings), web.post("/api/settings/{component}", self._apply_settings),
             web.get("/api/system", self._system), web.post("/api/system/{component}/{action}", self._system_action),
             web.get("/api/stats", self._stats), web.get("/api/session", self._session),
+            web.get("/api/zones", self._zones), web.post("/api/zones", self._edit_zone),
             *self.api.routes(),
         ]
         if self.config.serve_browser:  # headless: the API only, no page
@@ -136,14 +173,16 @@ class UIServer:
         assert self._sock is not None
         await web.SockSite(self._runner, self._sock, shutdown_timeout=1.0, ssl_context=ssl_context).start()
         self._write_token_file()
-        if self.gate.pairing_code and self.pairing_file is not None:
-            from emos.actors.ui.pairing import pairing_url, write_pairing_file
+        if self.gate.pairing_code:
+            self.gate.current_code()  # a code that expired before the UI came up is replaced now
+            self.gate.write_pairing_file()
+            self._pairing_task = asyncio.ensure_future(self._renew_pairing_code(self.gate))
 
-            try:
-                write_pairing_file(self.pairing_file, self.gate.pairing_code, pairing_url(self.base_url, self.gate.pairing_code),
-                                   self.config.pairing_role, time.time())
-            except OSError as exc:
-                log.error("[ui] port %d: cannot keep the pairing code in %s: %s", self.config.port, self.pairing_file, exc)
+    async def _renew_pairing_code(self, gate: Gate) -> None:
+        """Replace the pairing code when it expires, so that `emos ui pair` always shows one that works."""
+        while not self._closed.is_set():
+            gate.current_code()
+            await asyncio.sleep(PAIRING_CHECK_S)
 
     def _write_token_file(self) -> None:
         if self.token_file is None:
@@ -156,6 +195,9 @@ class UIServer:
     def close_listener(self) -> None:
         """Synchronous part of stopping: free the port at once."""
         self._closed.set()
+        if self._pairing_task is not None:
+            self._pairing_task.cancel()
+            self._pairing_task = None
         for c in list(self.clients):
             c.dirty.set()
         if self._sock is not None:
@@ -168,11 +210,19 @@ class UIServer:
                     log.warning("[ui] port %d: %s left in place: it %s", self.config.port, path, left)
 
     async def stop(self) -> None:
+        runner, self._runner = self._runner, None
+        if runner is not None and self._sock is not None:
+            # Still listening: stop serving before the socket is closed under the server.
+            self._closed.set()
+            await runner.cleanup()
+            runner = None
         self.close_listener()
         self.actions.close()
-        if self._runner is not None:
-            await self._runner.cleanup()
-            self._runner = None
+        if runner is not None:
+            try:
+                await runner.cleanup()
+            except ValueError:  # its socket was closed already (close_listener frees the port at once)
+                pass
         self.executor.shutdown(wait=False, cancel_futures=True)
 
     async def _headers(self, request: web.Request, response: web.StreamResponse) -> None:
@@ -208,7 +258,7 @@ class UIServer:
             inputs.append(entry)
         inputs += self.actions.describe()
         return web.json_response({"title": self.config.title, "outputs": [h.describe() for h in self.hubs], "inputs": inputs,
-                                  "components": sorted(self.components), "ui": self.own_name})
+                                  "components": sorted(self.components), "ui": self.own_name, "zones": bool(self.config.zones_map)})
 
     async def _stats(self, request: web.Request) -> web.Response:
         return web.json_response({
@@ -357,6 +407,47 @@ class UIServer:
             return web.json_response({"ok": False, "error": str(exc)}, status=503)
         log.info("[ui] %s: settings changed from the page: %s", name, values)
         return web.json_response({"ok": True, "values": new}, dumps=lambda o: json.dumps(o, default=str))
+
+    # ------------------------------------------------------------------ zones
+    def _zones_map(self) -> Path | None:
+        return Path(self.config.zones_map).expanduser() if self.config.zones_map else None
+
+    async def _zones(self, request: web.Request) -> web.Response:
+        """The keepout and speed zones of ``UIConfig.zones_map`` (what `emos map zones list` shows)."""
+        path = self._zones_map()
+        if path is None:
+            return web.json_response({"ok": False, "error": "this UI edits no zones (UIConfig.zones_map)"}, status=404)
+        from emos.actors.nav.costmap.mask_io import load_zones
+
+        try:
+            zones, speed_type = await asyncio.get_running_loop().run_in_executor(None, load_zones, path)
+        except (ValueError, OSError) as exc:
+            return web.json_response({"ok": False, "error": f"zones of {path}: {exc}"}, status=503)
+        return web.json_response({"ok": True, "map": str(path), "speed_type": speed_type, "zones": [z.to_dict() for z in zones]})
+
+    async def _edit_zone(self, request: web.Request) -> web.Response:
+        """``{"op": "add"|"set"|"remove", "name", "kind", "polygon": [[x, y], ...], "value"}``
+        (operators: the gate): saved with the code `emos map zones` uses (mask_io.edit_zone)."""
+        path = self._zones_map()
+        if path is None:
+            return web.json_response({"ok": False, "error": "this UI edits no zones (UIConfig.zones_map)"}, status=404)
+        try:
+            body = await request.json()
+        except ValueError:
+            body = None
+        try:
+            args = _zone_edit_args(body)
+        except ValueError as exc:
+            return web.json_response({"ok": False, "error": str(exc)}, status=422)
+        from emos.actors.nav.costmap.mask_io import edit_zone
+
+        async with self._zone_lock:  # one edit at a time: each is a read-modify-write of the masks
+            try:
+                written = await asyncio.get_running_loop().run_in_executor(None, lambda: edit_zone(path, **args))
+            except (ValueError, OSError) as exc:  # FilterMaskError and MapFileError are ValueErrors
+                return web.json_response({"ok": False, "error": str(exc)}, status=422)
+        log.info("[ui] zones of %s: %s %r by %s", path, args["verb"], args["name"], request[PRINCIPAL_KEY])
+        return web.json_response({"ok": True, "written": [str(p) for p in written]})
 
     # ------------------------------------------------------------------ system
     async def _system(self, request: web.Request) -> web.Response:

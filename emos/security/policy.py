@@ -194,6 +194,8 @@ def render_json5(config: dict[str, Any], graph: RecipeGraph, roles: Roles, ident
         "// To let an identity publish one more topic, add its key (and KEY/_pub_/**) to that identity's",
         "// 'publishes its topics' rules; to add an identity, add a subject (its certificate CN) and a policy.",
         "// Other hosts: add their tls/HOST:PORT endpoints to connect.endpoints; the HOST must be in their certificate's SANs.",
+        "// Services include those the components create when they configure (read from their code, nothing was run).",
+        *(f"// NOT DERIVED: {note}" for note in graph.notes),
     ]
     return "\n".join(lines) + "\n" + _dump(config, "") + "\n"
 

@@ -7,9 +7,14 @@ access rules need the real ones, so :func:`load_recipe_graph` runs the recipe as
 ``Launcher.bringup()``, which it replaces by a capture of the launcher: components are built
 (their constructors open nothing heavy, by convention) and nothing is started. The recipe's
 module-level code does run: load only recipes you would run.
+
+Services a component creates when it configures (``self.create_service`` in
+``custom_on_configure``) are read from its code by :mod:`emos.security.configure_services`
+(nothing is configured); a name that cannot be read that way is listed in ``RecipeGraph.notes``.
 """
 from __future__ import annotations
 
+import logging
 import os
 import runpy
 import sys
@@ -18,6 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from emos.errors import ConfigError
+
+log = logging.getLogger("emos.security")
 
 __all__ = ["RecipeGraph", "ComponentPorts", "load_recipe_graph", "graph_of_launcher"]
 
@@ -35,6 +42,7 @@ class ComponentPorts:
 class RecipeGraph:
     recipe: str
     components: list[ComponentPorts]
+    notes: list[str] = field(default_factory=list)  # what could not be derived (add it by hand)
 
     @property
     def outputs(self) -> list[str]:
@@ -74,11 +82,17 @@ def _topic_name(topic: Any) -> str:
 
 def graph_of_launcher(launcher: Any, recipe: str = "") -> RecipeGraph:
     """The graph of a launcher whose components are added (its shared wiring applied here)."""
+    from emos.security.configure_services import configure_services
+
     launcher._apply_shared()
     comps: list[ComponentPorts] = []
+    notes: list[str] = []
     for package in launcher._packages:
         for c in package.components:
-            services: list[str] = []
+            found = configure_services(c)  # created at configure time, read from the code
+            services: list[str] = list(found.names)
+            notes += [f"{u}: service name unknown until the component runs; add its key to the rules by hand, "
+                      "or list the name in the component's declared_services" for u in found.unresolved]
             if getattr(c, "main_srv_type", None) is not None:
                 services.append(str(c.main_srv_name))
             try:
@@ -90,7 +104,9 @@ def graph_of_launcher(launcher: Any, recipe: str = "") -> RecipeGraph:
                 inputs=sorted({_topic_name(t) for t in c.in_topics}), outputs=sorted({_topic_name(t) for t in c.out_topics}),
                 services=sorted(set(services)),
             ))
-    return RecipeGraph(recipe=recipe, components=comps)
+    for note in notes:
+        log.warning("[security] %s", note)
+    return RecipeGraph(recipe=recipe, components=comps, notes=notes)
 
 
 def load_recipe_graph(path: str | os.PathLike[str], args: list[str] | None = None) -> RecipeGraph:

@@ -2,7 +2,8 @@
 identities, the policy of a recipe, a multi-process run on it, and an operator (alice) on its own
 Zenoh session: what the recipe lets her publish (/goal, an input no component publishes) reaches
 the component; /cmd_vel (the Driver's output) never does, and the run's security watch logs her
-attempt. A run given a plain configuration with --secure refuses to start."""
+attempt. The service the listener creates when it configures (listener/ping) is in the derived
+policy, so the robot may serve it over the network and alice may call it. A run given a plain configuration with --secure refuses to start."""
 import json
 import os
 import signal
@@ -20,11 +21,15 @@ zenoh = pytest.importorskip("zenoh", reason="the 'net' extra (eclipse-zenoh) is 
 RECIPE = """
 import json, os
 from emos import BaseComponent, Launcher, Topic
-from emos.msgs import Twist
+from emos.msgs import TriggerRequest, TriggerResponse, Twist
 
 OUT = os.environ.get("SEC_OUT", "seen.json")
 
 class Listener(BaseComponent):
+    def custom_on_configure(self):
+        self.create_service(f"{self.component_name}/ping", TriggerRequest, TriggerResponse, self._ping)
+    def _ping(self, request):
+        return TriggerResponse(success=True, message="pong from " + self.component_name)
     def custom_on_activate(self):
         self.seen = {"goal": [], "cmd_vel": []}
     def _execution_step(self):
@@ -79,9 +84,10 @@ def _seen(path):
         return {"goal": [], "cmd_vel": []}
 
 
-def test_secure_run_enforces_the_recipe_policy(tmp_path):
-    from emos.msgs import Twist
+def test_secure_run_enforces_the_recipe_policy(tmp_path, monkeypatch):
+    from emos.msgs import TriggerRequest, TriggerResponse, Twist
     from emos.transport import zenoh_net
+    from emos.transport.zenoh_rpc import NetServiceClient, ServiceUnavailable
 
     ks, recipe, out = tmp_path / "keys", tmp_path / "secure_recipe.py", tmp_path / "seen.json"
     recipe.write_text(RECIPE)
@@ -95,7 +101,10 @@ def test_secure_run_enforces_the_recipe_policy(tmp_path):
     _emos("security", "policy", str(recipe), "--keystore", str(ks), "--identity", "robot1", "--operator", "alice",
           "--group", group, "--listen", f"tls/127.0.0.1:{port}", "--connect", f"tls/127.0.0.1:{port}")
     alice_conf = str(ks / "policies" / "secure_recipe" / "alice.json5")
-    env = dict(os.environ, SEC_OUT=str(out), EMOS_NET_GROUP=group, PYTHONUNBUFFERED="1")
+    with open(alice_conf) as f:
+        assert f"emos/{group}/_srv_/listener/ping" in f.read()  # created at configure time, derived all the same
+    env = dict(os.environ, SEC_OUT=str(out), EMOS_NET_GROUP=group, PYTHONUNBUFFERED="1", EMOS_NET_SERVICES="all")
+    monkeypatch.setenv("EMOS_NET_GROUP", group)  # the service client's key
     log_path = tmp_path / "run.log"
     with open(log_path, "w") as log:
         run = subprocess.Popen([sys.executable, "-m", "emos.tools.cli", "run", "--no-log", "--secure", str(ks), "--duration", "120", str(recipe)],
@@ -126,6 +135,15 @@ def test_secure_run_enforces_the_recipe_policy(tmp_path):
         warned = [line for line in text.splitlines() if "identity 'alice'" in line]
         assert warned and all("/cmd_vel" in line for line in warned), text[-3000:]
         assert "secure Zenoh (mutual TLS, access rules)" in text
+        # The configure-time service: served by the robot and called by alice, through the rules.
+        ping = NetServiceClient("/listener/ping", TriggerRequest, TriggerResponse, config_path=alice_conf)
+        answer, deadline = None, time.monotonic() + 60.0  # bounds a hang only
+        while answer is None and time.monotonic() < deadline:
+            try:
+                answer = ping.call(TriggerRequest(), timeout=3.0)
+            except ServiceUnavailable:
+                assert run.poll() is None, log_path.read_text()[-3000:]
+        assert answer is not None and answer.success and answer.message == "pong from listener", log_path.read_text()[-3000:]
     finally:
         for p in pubs:
             p.close()

@@ -66,10 +66,10 @@ def _wait_for(log: Path, proc: subprocess.Popen, pattern: re.Pattern[str], timeo
     raise TimeoutError(f"no {pattern.pattern!r} in {log} after {timeout} s: {log.read_text()[-2000:]}")
 
 
-def run_secured(tmp: Path, https: bool = True, headless: bool = False, extra_flags: tuple[str, ...] = ()):
+def run_secured(tmp: Path, https: bool = True, headless: bool = False, extra_flags: tuple[str, ...] = (), extra_env: dict[str, str] | None = None):
     port, out, home = free_port(), tmp / "received.jsonl", tmp / "home"
     env = dict(os.environ, EMOS_UI_TEST_PORT=str(port), EMOS_UI_TEST_OUT=str(out), EMOS_HOME=str(home),
-               EMOS_UI_TEST_HEADLESS="1" if headless else "0")
+               EMOS_UI_TEST_HEADLESS="1" if headless else "0", **(extra_env or {}))
     env.pop("EMOS_UI_TOKEN", None)
     log = tmp / "recipe.log"
     flags = (["--ui-https"] if https else []) + list(extra_flags)

@@ -2,7 +2,8 @@
 a service, and an event, with the UI served as the test's environment says.
 
 Environment: EMOS_UI_TEST_PORT, EMOS_UI_TEST_OUT (JSON lines of what the recorder received),
-EMOS_UI_TEST_HEADLESS=1 for enable_ui(serve_browser=False). HTTPS comes from `emos run --ui-https`.
+EMOS_UI_TEST_HEADLESS=1 for enable_ui(serve_browser=False); EMOS_UI_TEST_ZONES_MAP=MAP.yaml adds a
+component publishing that map on /map and the zone editor for it. HTTPS comes from `emos run --ui-https`.
 """
 import json
 import os
@@ -80,9 +81,27 @@ lamp = Lamp(component_name="lamp", trigger=1.0)
 navigator = Navigator(component_name="navigator", run_type="ActionServer")
 lamp_service = ServiceClientConfig(name="lamp/set", srv_type=(SetBoolRequest, SetBoolResponse))
 
+ZONES_MAP = os.environ.get("EMOS_UI_TEST_ZONES_MAP", "")
+grid = Topic(name="map", msg_type="OccupancyGrid")
+
+
+class MapPublisher(BaseComponent):
+    def _execution_step(self):
+        from emos.actors.nav.maps import load_map
+        from emos.msgs import Header, MapMetaData, OccupancyGrid
+
+        m = load_map(ZONES_MAP)
+        info = MapMetaData(resolution=m.resolution, width=m.width, height=m.height)
+        info.origin.position.x, info.origin.position.y = m.origin[0], m.origin[1]
+        self.publish(grid, OccupancyGrid(header=Header(frame_id="map"), info=info, data=m.flat_data()))
+        self.health_status.set_healthy()
+
+
+extra = [MapPublisher(component_name="map_publisher", outputs=[grid], trigger=1.0)] if ZONES_MAP else []
 launcher = Launcher(multi_processing=True)
-launcher.add_pkg(components=[talker, recorder, lamp, navigator],
+launcher.add_pkg(components=[talker, recorder, lamp, navigator, *extra],
                  events_actions={Event(estop.msg.data == True, name="estop pressed"): Action(recorder.note_estop)})  # noqa: E712
-launcher.enable_ui(inputs=[question, speed, estop, cmd, goal, navigator.ui_main_action_input, lamp_service], outputs=[words], port=PORT,
-                   serve_browser=os.environ.get("EMOS_UI_TEST_HEADLESS") != "1", auth_failures_per_minute=30)
+launcher.enable_ui(inputs=[question, speed, estop, cmd, goal, navigator.ui_main_action_input, lamp_service], outputs=[words, *([grid] if ZONES_MAP else [])],
+                   port=PORT, serve_browser=os.environ.get("EMOS_UI_TEST_HEADLESS") != "1", auth_failures_per_minute=30,
+                   **({"zones_map": ZONES_MAP} if ZONES_MAP else {}))
 launcher.bringup()

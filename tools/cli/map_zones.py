@@ -14,7 +14,8 @@ so they can be listed and edited:
 
 Speed values are percent of the robot's maximum speed (``--speed-type percent``, the default)
 or m/s (``--speed-type absolute``); values out of range are refused naming the zone. Zones are
-drawn on the command line or in YAML here; a polygon editor in the web UI is not part of this.
+drawn on the command line or in YAML here; the web UI edits the same masks (``enable_ui(zones_map=...)``,
+docs/ui.md).
 """
 from __future__ import annotations
 
@@ -48,8 +49,9 @@ def add_parser(sub: Any) -> None:
 
 
 def mask_paths(map_yaml: Path) -> dict[str, Path]:
-    return {"keepout": map_yaml.with_name(f"{map_yaml.stem}_keepout.yaml"),
-            "speed": map_yaml.with_name(f"{map_yaml.stem}_speed.yaml")}
+    from emos.actors.nav.costmap.mask_io import zone_mask_paths
+
+    return zone_mask_paths(map_yaml)
 
 
 def _polygon(text: str) -> list[list[float]]:
@@ -60,30 +62,15 @@ def _polygon(text: str) -> list[list[float]]:
 
 
 def _load(map_yaml: Path) -> tuple[list[Any], str]:
-    from emos.actors.nav.costmap import load_filter_mask
+    from emos.actors.nav.costmap.mask_io import load_zones
 
-    zones: list[Any] = []
-    speed_type = "speed_percent"
-    for kind, path in mask_paths(map_yaml).items():
-        if path.exists():
-            mask = load_filter_mask(path, kind)
-            zones.extend(mask.zones)
-            if kind == "speed":
-                speed_type = mask.filter_type
-    return zones, speed_type
+    return load_zones(map_yaml)
 
 
 def _save(map_yaml: Path, zones: list[Any], speed_type: str) -> list[Path]:
-    from emos.actors.nav.costmap.mask_io import write_mask
-    from emos.actors.nav.maps import load_map
+    from emos.actors.nav.costmap.mask_io import save_zones
 
-    grid = load_map(map_yaml)
-    written = []
-    for kind, path in mask_paths(map_yaml).items():
-        mine = [z for z in zones if z.kind == kind]
-        if mine or path.exists():
-            written.append(write_mask(path, mine, "keepout" if kind == "keepout" else speed_type, grid))
-    return written
+    return save_zones(map_yaml, zones, speed_type)
 
 
 def edit(args: argparse.Namespace) -> str:

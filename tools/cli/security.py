@@ -109,6 +109,8 @@ def _policy(args: argparse.Namespace) -> int:
                              connect=args.connect, verify_name=not args.no_verify_name, force=args.force)
     print(f"recipe {path}: {len(graph.components)} components, {len(graph.outputs)} published topics, "
           f"{len(graph.external_inputs)} external inputs ({', '.join(graph.external_inputs) or 'none'}), {len(graph.services)} services")
+    for note in graph.notes:
+        print(f"  note: {note}", file=sys.stderr)
     for p in written:
         print(f"  wrote {p}")
     print(f"run it with: emos run --secure {args.keystore} {args.recipe}" + (f" --identity {args.identity[0]}" if len(args.identity) > 1 else ""))

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pair(args: argparse.Namespace) -> int:
-    from emos.actors.ui.pairing import terminal_qr
+    from emos.actors.ui.pairing import terminal_qr, until_text
 
     path = Path(join_run(args.run).run_dir) / PAIRING
     try:
@@ -92,7 +92,9 @@ def _pair(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"emos ui pair: cannot read {path}: {exc}", file=sys.stderr)
         return 1
-    print(f"pairing code {data.get('code')} (single use; devices get the role {data.get('role')})")
+    expires = data.get("expires")
+    until = f", valid until {until_text(expires)}" if isinstance(expires, (int, float)) else ""
+    print(f"pairing code {data.get('code')} (single use{until}; devices get the role {data.get('role')})")
     if data.get("url"):
         print(f"or open {data['url']}")
         print(terminal_qr(data["url"]))

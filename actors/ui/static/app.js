@@ -252,19 +252,23 @@ function mapWidget(outs, goalInputs) {
       const [cx, cy] = toCanvas(goal[0], goal[1]);
       ctx.strokeStyle = "#ef4452"; ctx.lineWidth = 3; ctx.beginPath(); ctx.arc(cx, cy, 7, 0, 2 * Math.PI); ctx.stroke();
     }
+    for (const overlay of api.overlays) overlay(ctx, toCanvas);  // e.g. the zone editor's polygons
   }
   function redraw() { if (!pending) { pending = true; requestAnimationFrame(draw); } }
   canvas.addEventListener("click", ev => {
-    if (!view || !goalInputs.length) return;
+    if (!view) return;
     const rect = canvas.getBoundingClientRect();
     const cx = (ev.clientX - rect.left) * canvas.width / rect.width, cy = (ev.clientY - rect.top) * canvas.height / rect.height;
     const [x, y] = toWorld(cx, cy);
+    if (api.onClick && api.onClick(x, y)) { redraw(); return; }  // taken (the zone editor while drawing)
+    if (!goalInputs.length) return;
     goal = [x, y];
     const target = $("#goal-target") ? $("#goal-target").value : goalInputs[0].topic;
     sendInput(target, { x, y }).then(ok => { if (ok) info.textContent = `goal (${x.toFixed(2)}, ${y.toFixed(2)}) sent to ${target}`; });
     redraw();
   });
-  return {
+  const api = {
+    overlays: [], onClick: null, redraw, canvas,
     async frame(h, blob) {
       try {
         const bmp = await createImageBitmap(blob);
@@ -283,6 +287,7 @@ function mapWidget(outs, goalInputs) {
     toWorld: (cx, cy) => (view ? toWorld(cx, cy) : null),
     toCanvas: (x, y) => (view ? toCanvas(x, y) : null),
   };
+  return api;
 }
 
 // ------------------------------------------------------------------ inputs
@@ -458,6 +463,7 @@ async function start() {
     $("#inputs").append(c);
   }
   for (const inp of layout.inputs) buildInput(inp, hasMap);
+  if (layout.zones && hasMap) zoneEditor(state.map, state.role === "operator");  // zones.js
   connect();
 }
 
