@@ -24,7 +24,22 @@ HEALTHY = M.ComponentStatus.STATUS_HEALTHY
 def test_query_published_while_the_model_loads_is_routed_and_the_router_says_it_is_not_ready(tmp_path):
     # The spec's recipe as written: ChromaDB() embeds with the local model, one client shared by
     # the components, threaded mode (Launcher()'s default).
+    # Each router's load of the embedding model (in its worker thread, "<name>-worker") waits for
+    # a file the test makes once that router's queries are out: however loaded the machine, and
+    # whether the routers start one after the other or together, the queries are published
+    # while their router loads.
+    gates = tmp_path / "gates"
+    gates.mkdir()
     system = SystemUnderTest(tmp_path, f"""
+import os, threading, time
+from emos.actors.agents.local import embeddings as _embeddings
+_real_load = _embeddings._load
+def _gated_load(path):
+    gate = os.path.join({str(gates)!r}, threading.current_thread().name)
+    while not os.path.exists(gate):
+        time.sleep(0.05)
+    return _real_load(path)
+_embeddings._load = _gated_load
 from emos.actors.agents import SemanticRouter, SemanticRouterConfig, Route, ChromaClient, ChromaDB
 goto_in = Topic(name="goto_in", msg_type="String")
 llm_in = Topic(name="text_in_llm", msg_type="String")
@@ -35,8 +50,10 @@ router = SemanticRouter(inputs=[Topic(name="question", msg_type="String")], rout
                         default_route=llm_route, db_client=chroma_client,
                         config=SemanticRouterConfig(router_name="go-to-router"), component_name="router")
 # One waiting query at most: a second one that arrives while it loads drops the first, and says so.
+# Its own DB client, so that it loads (the routers start one after the other: with the shared
+# client, already open, its load would be over before the test could publish).
 tight = SemanticRouter(inputs=[Topic(name="question2", msg_type="String")], routes=[llm_route, goto_route],
-                       default_route=llm_route, db_client=chroma_client,
+                       default_route=llm_route, db_client=ChromaClient(db=ChromaDB(path={str(tmp_path / "chroma2")!r})),
                        config=SemanticRouterConfig(router_name="tight-router", max_pending=1), component_name="tight")
 launcher = Launcher()
 launcher.add_pkg(components=[router, tight])
@@ -51,15 +68,19 @@ launcher.bringup()
             said = statuses[name].latest()
             return said if said is not None and "loading the embedding model" in said.message else None
 
-        for name in ("router", "tight"):
-            said = wait_until(lambda name=name: loading(name), 2 * HANG_S, what=f"{name} saying it loads its model")
+        def loads(name: str) -> None:
+            said = wait_until(lambda: loading(name), 2 * HANG_S, what=f"{name} saying it loads its model")
             # Not ACTIVE until it can route: the launcher and `emos status` show it still starting.
             assert said.status == GENERAL and said.lifecycle_state != "active", said
-        # Published while the model loads (torch alone takes seconds): they wait (the tight
-        # router keeps one: max_pending=1).
+
+        # Published while the model loads: they wait (the tight router keeps one: max_pending=1).
+        loads("router")
         probe.pub("/question", M.String(data="please walk over to the kitchen"))
+        (gates / "router-worker").touch()
+        loads("tight")
         probe.pub("/question2", M.String(data="first: go to the door"))
         probe.pub("/question2", M.String(data="second: go to the door"))
+        (gates / "tight-worker").touch()
         routed = probe.collect("/goto_in", "String", count=2, timeout=4 * HANG_S)
         wait_until(lambda: system.state("router") == "active" and probe.status("router").status == HEALTHY, HANG_S,
                    what="the router active and healthy once loaded")
