@@ -12,8 +12,8 @@ import pytest
 
 from emos.msgs import Detections, Image, String
 from emos.msgs.status import ComponentStatus
-from emos.tools.bench.agents_system import ModelServer, RunningRecipe, _wait_one
-from emos.tools.bench.local_llm import SWAP_RECIPE, _answer_after
+from emos.tools.bench.agents_system import ModelServer, RunningRecipe, _server_on, _wait_one
+from emos.tools.bench.local_llm import _answer_after, _wait_for, _wait_standby, swap_recipe
 
 # Bounds a hang only: the processes load a 98 MB model on a machine that may be busy.
 pytestmark = [pytest.mark.process, pytest.mark.timeout(900)]
@@ -73,21 +73,33 @@ def test_llm_and_vlm_answer_with_the_local_model_in_their_own_process():
         recipe.stop()
 
 
-def test_a_killed_model_server_is_replaced_by_the_local_model_through_the_ladder():
+def test_a_killed_model_server_is_replaced_by_the_local_model_through_the_ladder_and_comes_back():
     server = ModelServer()
     recipe = None
     try:
-        recipe = RunningRecipe(SWAP_RECIPE.format(port=server.port, standby=False), ["local_llm"], timeout=180)
+        recipe = RunningRecipe(swap_recipe(server.port, standby=False, threads=1), ["local_llm"], timeout=180)
         pub, sub = recipe.publisher("/local_q", String), recipe.subscriber("/local_a", String)
-        pub.publish(String(data="hello server"))
-        msg, _ = _wait_one(sub, timeout=60)
-        assert msg.data == "You said: hello server"  # the scripted model server answers first
-        server.kill()  # mid-run: SIGKILL, nothing graceful
-        text, _ = _answer_after(sub, pub, time.perf_counter(), ask_every=0.5, timeout=120)
-        assert text.strip() and not text.startswith("You said:")  # SmolLM2's own words
-        pub.publish(String(data="And what is a bedroom?"))
-        later = [m.data for m in _collect(sub, 20.0)]
-        assert later and not any(t.startswith("You said:") for t in later)  # it stays on the local model
+        # The ladder holds fallback_to_local: the model is loaded and warmed at activation, in the
+        # background, before any failure (the swap does not wait for the GGUF to load).
+        state = _wait_standby(recipe)
+        assert state["role"] == "standby" and not state["active"] and state["error"] is None
+        for round_ in range(2):  # the second kill proves the way back to the server is whole
+            pub.publish(String(data=f"hello server {round_}"))
+            _wait_for(sub, f"You said: hello server {round_}", 60)  # the scripted model server answers
+            server.kill()  # mid-run: SIGKILL, nothing graceful
+            text, _, _ = _answer_after(sub, pub, time.perf_counter(), ask_every=0.5, timeout=120)
+            assert text.strip() and not text.startswith("You said:")  # SmolLM2's own words
+            assert recipe.call_method("local_llm", "local_model_state")["active"]
+            pub.publish(String(data="And what is a bedroom?"))
+            later = [m.data for m in _collect(sub, 5.0)]
+            assert not any(t.startswith("You said:") for t in later)  # it stays on the local model
+            # The server comes back (a new process on the same port): the component returns to it.
+            server = _server_on(server.port)
+            assert recipe.call_method("local_llm", "change_model_client", "primary") is True
+            sub.take()
+        pub.publish(String(data="hello again"))
+        _wait_for(sub, "You said: hello again", 60)
+        assert not recipe.call_method("local_llm", "local_model_state")["active"]
     finally:
         if recipe is not None:
             recipe.stop()

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 import time
@@ -249,12 +250,16 @@ def bench(model: str, tasks: list[Task], server: ScriptedServer | None = None) -
         t0 = time.perf_counter()
         report, world, ok = run_task(task, chat)
         plan_times += report.planning_seconds
-        rows.append({"task": task.text, "success": ok, "steps": len(report.steps), "replans": report.replans,
+        # ``claimed``: the planner ended with the model's DONE; ``success`` also needs the world's
+        # own check (where the robot is, what it said). A model that says DONE without doing the
+        # task shows as claimed and not successful.
+        rows.append({"task": task.text, "success": ok, "claimed": report.success, "steps": len(report.steps), "replans": report.replans,
                      "refusals": len(report.refusals), "planning_calls": len(report.planning_seconds),
                      "plan_ms_mean": 1000 * statistics.fmean(report.planning_seconds) if report.planning_seconds else None,
-                     "seconds": time.perf_counter() - t0, "reason": report.reason})
+                     "seconds": time.perf_counter() - t0, "reason": report.reason, "answer": (report.answer or "")[:200]})
     n = len(rows)
     return {"model": model + (" (HTTP, emos serve models)" if model == "scripted" and server is not None else ""), "tasks": n, "success_rate": sum(r["success"] for r in rows) / n,
+            "claimed_rate": sum(r["claimed"] for r in rows) / n, "load_1min": round(os.getloadavg()[0], 2),
             "steps_per_task": sum(r["steps"] for r in rows) / n, "replans_per_task": sum(r["replans"] for r in rows) / n,
             "refusals_per_task": sum(r["refusals"] for r in rows) / n,
             "plan_step_ms_p50": 1000 * statistics.median(plan_times) if plan_times else None,
@@ -281,8 +286,9 @@ def run(args: argparse.Namespace) -> int:
                 continue
             print(f"\n{res['model']}: {res['tasks']} tasks, success {100 * res['success_rate']:.0f} %, "
                   f"{res['steps_per_task']:.1f} steps, {res['replans_per_task']:.2f} replans, {res['refusals_per_task']:.2f} refusals "
-                  f"per task; planning step {res['plan_step_ms_p50']:.1f} ms p50")
-            print(table(res["rows"], [("task", "task", ""), ("success", "ok", ""), ("steps", "steps", "d"), ("replans", "replans", "d"),
+                  f"per task; planning step {res['plan_step_ms_p50']:.1f} ms p50; the model claimed DONE on "
+                  f"{100 * res['claimed_rate']:.0f} % (load {res['load_1min']})")
+            print(table(res["rows"], [("task", "task", ""), ("success", "ok", ""), ("claimed", "claimed", ""), ("steps", "steps", "d"), ("replans", "replans", "d"),
                                       ("refusals", "refused", "d"), ("plan_ms_mean", "plan ms", ".1f")]))
     scripted = next((r for r in results if r["model"].startswith("scripted") and "skipped" not in r), None)
     return 0 if scripted is None or scripted["success_rate"] == 1.0 else 1

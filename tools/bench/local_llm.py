@@ -8,7 +8,9 @@
 * ``fallback_to_local()`` swap: a recipe's LLM component asks a model server, whose process
   is then SIGKILLed while questions keep arriving (every ``--ask-every`` s, as a conversation or
   a timed trigger would send them); the component's ``on_component_fail`` ladder holds
-  ``fallback_to_local``. Measured: server death -> first answer from the local model. The
+  ``fallback_to_local``, so the model is loaded and warmed at activation (in the background).
+  Measured: server death -> the component reports COMPONENT_FAILURE -> first answer from the
+  local model; then the way back: a new server, ``change_model_client("primary")``, its answer. The
   standby variant (``enable_local_model=True`` with the server as primary: the local model is
   loaded at start and the request-level failover re-sends the question being answered) is timed
   from the kill of a server to the answer of a question asked at that moment.
@@ -41,12 +43,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--swaps", type=int, default=5, help="server kills timed per fallback variant (default 5)")
     parser.add_argument("--ask-every", type=float, default=0.25, help="seconds between questions during a swap")
     parser.add_argument("--skip-swap", action="store_true", help="measure the speed only")
+    parser.add_argument("--skip-speed", action="store_true", help="measure the swaps only")
 
 
 def _stats(values: list[float], scale: float = 1.0) -> dict[str, float]:
     arr = np.asarray(values, dtype=float) * scale
     return {"p50": round(float(np.percentile(arr, 50)), 3), "p95": round(float(np.percentile(arr, 95)), 3),
-            "mean": round(float(arr.mean()), 3), "n": len(values)}
+            "max": round(float(arr.max()), 3), "mean": round(float(arr.mean()), 3), "n": len(values)}
 
 
 def _stream_once(client: Any, prompt: str, max_tokens: int) -> tuple[float, float, int]:
@@ -117,7 +120,7 @@ q = Topic(name="local_q", msg_type="String")
 a = Topic(name="local_a", msg_type="String")
 llm = LLM(inputs=[q], outputs=[a], trigger=q, component_name="local_llm",
           model_client=OllamaClient(OllamaModel(name="server", checkpoint="emos-scripted"), port={port}),
-          config=LLMConfig(max_new_tokens=16, temperature=0.0, ncpu_local_model=2, enable_local_model={standby}))
+          config=LLMConfig(max_new_tokens=16, temperature=0.0, ncpu_local_model={threads}, enable_local_model={standby}))
 llm.on_component_fail(action=Action(llm.fallback_to_local), max_retries=3)
 launcher = Launcher(multi_processing=True)
 launcher.add_pkg(components=[llm])
@@ -125,58 +128,108 @@ launcher.bringup()
 """
 
 
-def _answer_after(sub: Any, pub: Any, start: float, ask_every: float, timeout: float = 60.0) -> tuple[str, float]:
-    """Ask every ``ask_every`` s until a reply that is not the scripted server's arrives."""
+def swap_recipe(port: int, standby: bool, threads: int = 2) -> str:
+    return SWAP_RECIPE.format(port=port, standby=standby, threads=threads)
+
+
+def _answer_after(sub: Any, pub: Any, start: float, ask_every: float, timeout: float = 60.0,
+                  status: Any = None) -> tuple[str, float, float | None]:
+    """Ask every ``ask_every`` s until a reply that is not the scripted server's arrives:
+    (the reply, when it arrived, when ``status`` first said COMPONENT_FAILURE or None)."""
     from emos.msgs import String
+    from emos.msgs.status import ComponentStatus
 
     end = start + timeout
     next_ask = start
     n = 0
+    failed_at = None
     while time.perf_counter() < end:
         now = time.perf_counter()
         if ask_every > 0 and now >= next_ask:
             pub.publish(String(data=f"What is a kitchen? ({n})"))
             n += 1
             next_ask = now + ask_every
+        if status is not None and failed_at is None and any(
+                m.status == ComponentStatus.STATUS_FAILURE_COMPONENT_LEVEL for m in status.take()):
+            failed_at = time.perf_counter()
         for msg in sub.take():
             if not msg.data.startswith("You said:"):  # the scripted server's answers all do
-                return msg.data, time.perf_counter()
+                return msg.data, time.perf_counter(), failed_at
         time.sleep(0.001)
     raise TimeoutError("no answer from the local model after the server died")
 
 
-def bench_swap(swaps: int, ask_every: float, standby: bool) -> dict[str, Any]:
-    from emos.msgs import String
+def _wait_for(sub: Any, text: str, timeout: float) -> float:
+    """Wait for the reply ``text`` (replies to older questions are skipped); when it came."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if any(m.data == text for m in sub.take()):
+            return time.perf_counter()
+        time.sleep(0.001)
+    raise TimeoutError(f"no reply {text!r} within {timeout:.0f} s")
 
-    from .agents_system import ModelServer, RunningRecipe, _server_on, _wait_one
+
+def _wait_standby(recipe: Any, timeout: float = 180.0) -> dict[str, Any]:
+    """The component's local_model_state() once its standby model is loaded and warmed."""
+    end = time.monotonic() + timeout
+    while True:
+        state = recipe.call_method("local_llm", "local_model_state")
+        if state.get("error"):
+            raise RuntimeError(f"the standby local model failed to load: {state['error']}")
+        if state.get("loaded") and state.get("warm_s") is not None:
+            return dict(state)
+        if time.monotonic() > end:
+            raise TimeoutError(f"the standby local model was not loaded after {timeout:.0f} s: {state}")
+        time.sleep(0.1)
+
+
+def bench_swap(swaps: int, ask_every: float, standby: bool, threads: int = 2) -> dict[str, Any]:
+    """Kill the model server ``swaps`` times. Per kill: server death -> the component reports
+    COMPONENT_FAILURE (``detect``), -> the local model's first answer (``swap``); then a new
+    server on the same port, ``change_model_client("primary")``, and the time until the server
+    answers again (``back``: the way back after a fallback)."""
+    from emos.msgs import String
+    from emos.msgs.status import ComponentStatus
+
+    from .agents_system import ModelServer, RunningRecipe, _server_on
 
     server = ModelServer()
     port = server.port
     recipe = None
-    times, answers = [], []
+    swap_s, detect_s, back_s, answers = [], [], [], []
     try:
-        recipe = RunningRecipe(SWAP_RECIPE.format(port=port, standby=standby), ["local_llm"])
+        recipe = RunningRecipe(swap_recipe(port, standby, threads), ["local_llm"])
         pub, sub = recipe.publisher("/local_q", String), recipe.subscriber("/local_a", String)
+        status = recipe.subscriber("/local_llm/status", ComponentStatus)
+        loaded = _wait_standby(recipe)  # loaded at activation, in the background: wait for it once
         for i in range(swaps):
             if i:  # a fresh server on the same port, and the component back on it
                 server = _server_on(port)
-                recipe.call_method("local_llm", "change_model_client", "primary")
-            pub.publish(String(data=f"warm {i}"))
-            end_wait = time.monotonic() + 120
-            while True:  # local answers to questions still queued from the last swap come first
-                msg, _ = _wait_one(sub, timeout=max(1.0, end_wait - time.monotonic()))
-                if msg.data == f"You said: warm {i}":
-                    break
+                asked = time.perf_counter()
+                if not recipe.call_method("local_llm", "change_model_client", "primary"):
+                    raise RuntimeError("change_model_client('primary') refused")
+                pub.publish(String(data=f"warm {i}"))
+                back_s.append(_wait_for(sub, f"You said: warm {i}", 120.0) - asked)
+            else:
+                pub.publish(String(data=f"warm {i}"))
+                _wait_for(sub, f"You said: warm {i}", 120.0)
+            time.sleep(0.3)
+            status.take()  # statuses from before the kill
             server.kill()
             start = time.perf_counter()
             if standby:
                 pub.publish(String(data="What is a kitchen?"))
-            text, end = _answer_after(sub, pub, start, 0.0 if standby else ask_every)
-            times.append(end - start)
+            text, end, failed = _answer_after(sub, pub, start, 0.0 if standby else ask_every, status=status)
+            swap_s.append(end - start)
+            if failed is not None:
+                detect_s.append(failed - start)
             answers.append(text)
             time.sleep(0.5)
             sub.take()  # answers to questions still queued
-        return _stats(times, 1000.0) | {"answers": answers}
+        return {"swap_ms": _stats(swap_s, 1000.0), "detect_ms": _stats(detect_s, 1000.0) if detect_s else None,
+                "back_to_primary_ms": _stats(back_s, 1000.0) if back_s else None,
+                "standby_load_s": loaded.get("load_s"), "standby_warm_s": loaded.get("warm_s"),
+                "answers": answers, "swaps_ms": [round(t * 1000.0, 1) for t in swap_s]}
     finally:
         if recipe is not None:
             recipe.stop()
@@ -194,23 +247,34 @@ def run(args: argparse.Namespace) -> int:
         model = packaged_smollm2()
     except ImportError as exc:
         raise SystemExit(f"emos bench llm: {exc}") from None
-    speed = bench_speed(args.threads, args.rounds, args.max_tokens)
+    load_before = round(os.getloadavg()[0], 2)
+    speed = None if args.skip_speed else bench_speed(args.threads, args.rounds, args.max_tokens)
     swap = standby = None
     if not args.skip_swap:
-        swap = bench_swap(args.swaps, args.ask_every, standby=False)
-        standby = bench_swap(args.swaps, args.ask_every, standby=True)
-    result = {"model": model.name, "threads": args.threads, "cpus": os.cpu_count(), "load_1min": round(os.getloadavg()[0], 2),
-              "speed": speed, "fallback_to_local_ms": swap, "standby_failover_ms": standby}
+        swap = bench_swap(args.swaps, args.ask_every, standby=False, threads=args.threads)
+        standby = bench_swap(args.swaps, args.ask_every, standby=True, threads=args.threads)
+    result = {"model": model.name, "threads": args.threads, "cpus": os.cpu_count(), "load_1min": load_before,
+              "load_1min_after": round(os.getloadavg()[0], 2), "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
+              "speed": speed, "fallback_to_local": swap, "standby_failover": standby}
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"model {model.name}, {args.threads} llama.cpp threads, {os.cpu_count()} CPUs, load {result['load_1min']}")
-    print(f"{'path':<16} {'first token p50/p95 ms':>24} {'tokens/s p50 (mean)':>22} {'tokens/answer':>14}")
-    for name, s in speed.items():
-        ft, tr = s["first_token_ms"], s["tokens_per_s"]
-        print(f"{name:<16} {ft['p50']:>11.1f} / {ft['p95']:<10.1f} {tr['p50']:>12.1f} ({tr['mean']:.1f})    {s['tokens_per_answer']:>10}")
+    print(f"model {model.name}, {args.threads} llama.cpp threads, {os.cpu_count()} CPUs, "
+          f"load {result['load_1min']} -> {result['load_1min_after']}")
+    if speed is not None:
+        print(f"{'path':<16} {'first token p50/p95 ms':>24} {'tokens/s p50 (mean)':>22} {'tokens/answer':>14}")
+        for name, s in speed.items():
+            ft, tr = s["first_token_ms"], s["tokens_per_s"]
+            print(f"{name:<16} {ft['p50']:>11.1f} / {ft['p95']:<10.1f} {tr['p50']:>12.1f} ({tr['mean']:.1f})    {s['tokens_per_answer']:>10}")
     for label, r in (("fallback_to_local() ladder", swap), ("standby failover (enable_local_model)", standby)):
         if r is not None:
-            print(f"{label}: server death -> local answer p50 {r['p50']:.0f} ms, p95 {r['p95']:.0f} ms "
-                  f"({r['n']} kills; goal p95 <= 2000 ms)")
+            sw, det, back = r["swap_ms"], r["detect_ms"], r["back_to_primary_ms"]
+            print(f"{label}: server death -> local answer p50 {sw['p50']:.0f} ms, p95 {sw['p95']:.0f} ms, "
+                  f"max {sw['max']:.0f} ms ({sw['n']} kills; goal p95 <= 2000 ms)")
+            if det is not None:
+                print(f"    death -> COMPONENT_FAILURE reported p50 {det['p50']:.0f} ms; standby loaded in "
+                      f"{r['standby_load_s']:.2f} s, warmed in {r['standby_warm_s']:.2f} s (at activation)")
+            if back is not None:
+                print(f"    change_model_client('primary') -> the restarted server's answer p50 {back['p50']:.0f} ms, "
+                      f"max {back['max']:.0f} ms")
     return 0

@@ -12,7 +12,10 @@ SmolLM2-135M-Instruct; ``local_model_path`` for another file). Without a ``model
 the component's model; with one it waits as the extra client ``"local"``: the request-level
 failover re-sends a request there when the server fails, and the ``fallback_to_local()`` action
 switches to it from a fallback ladder. The file is checked in the recipe line (missing or
-corrupt: an error naming it) and loaded in the worker thread at activation.
+corrupt: an error naming it). As the component's model it loads in the worker thread at
+activation; standing by (``enable_local_model`` beside a server, or a ladder that holds
+``fallback_to_local``) it loads and warms in a thread of its own at activation
+(``server/local_standby.py``), so neither the activation nor the swap waits for it.
 """
 from __future__ import annotations
 
@@ -37,8 +40,9 @@ from ..logic.streaming import StreamChunker
 from ..logic.templates import PromptBuilder, TemplateVariableError
 from ..logic.tools import ToolError, ToolRegistry, run_tool_loop
 from ..server.local_client import LOCAL_CLIENT, LocalLLMClient, local_client_for
+from ..server.local_standby import LocalStandby
 from ..types import ChatMessage, ChatRequest, ImageData, ToolSpec
-from .base import ModelComponent, ModelComponentConfig
+from .base import PRIMARY_CLIENT, ModelComponent, ModelComponentConfig
 from .convert import TEXTUAL_TYPES, text_of
 
 LLM_OUTPUTS = (D.String, I.StreamingString, G.PoseStamped, G.Pose, G.Point, G.PointStamped,
@@ -125,6 +129,11 @@ class LLM(ModelComponent):
         self._prompts = PromptBuilder([self.variable_name(t) for t in self.text_inputs])
         self._tools = ToolRegistry()
         self._history: ChatHistory | None = None
+        #: the local model loading / loaded ahead of a failover (see activate_resources)
+        self._standby: LocalStandby | None = None
+        #: the local client a ladder's fallback_to_local will switch to (not a request-level
+        #: backup: the ladder, not the failover, decides when the component goes local)
+        self._ladder_local: LocalLLMClient | None = None
 
     # ------------------------------------------------------------------ local model
     @staticmethod
@@ -158,27 +167,72 @@ class LLM(ModelComponent):
         before the next request. ``change_model_client("primary")`` switches back."""
         local = self.local_model_client
         if local is None:
-            try:
-                local = self._local_client(self.config, self.component_name)
-            except (ValueError, ImportError) as exc:
-                self._errors("local", "[%s] fallback_to_local: %s", self.component_name, exc)
-                return False
+            local = self._ladder_local  # loaded (or loading) since activation
+            if local is None:
+                try:
+                    local = self._local_client(self.config, self.component_name)
+                except (ValueError, ImportError) as exc:
+                    self._errors("local", "[%s] fallback_to_local: %s", self.component_name, exc)
+                    return False
             self._clients[LOCAL_CLIENT] = local
         name = next(n for n, c in self._clients.items() if c is local)
+        standby = self._standby
+        if standby is not None and standby.error is not None:
+            self.get_logger().warning("[%s] fallback_to_local: the local model failed to load at activation (%s); "
+                                      "loading it again", self.component_name, standby.error)
         if not self.change_model_client(name):
             return False
         worker = self._worker
         if worker is not None and not self._client_ready:
-            worker.submit(self._reconnect_in_worker)  # load the model now, not with the next question
+            # Connects it in the worker before the next question (waits for a load in
+            # progress in the standby thread, or loads the model if it is not loaded yet).
+            worker.submit(self._reconnect_in_worker)
         return True
+
+    def local_model_state(self) -> dict[str, Any]:
+        """Where the local model is (for ``emos call``, the web UI, benchmarks and tests):
+        ``role`` "model", "standby" or "none"; ``active``: whether it answers now; ``loaded``;
+        ``error``: why the standby load failed; ``load_s``/``warm_s``: how long it took."""
+        local = self.local_model_client or self._ladder_local
+        standby = self._standby
+        role = "none" if local is None else ("model" if local is self._clients.get(PRIMARY_CLIENT) else "standby")
+        return {"role": role, "active": local is not None and local is self.model_client,
+                "loaded": bool(local is not None and local.loaded),
+                "error": standby.error if standby is not None else None,
+                "load_s": standby.load_s if standby is not None else None,
+                "warm_s": standby.warm_s if standby is not None else None}
+
+    def _ladder_holds_fallback_to_local(self) -> bool:
+        return any(getattr(action, "method_name", None) == "fallback_to_local"
+                   and getattr(action, "component", None) == self.component_name
+                   for fallback in self.fallbacks.values() for action in fallback.steps)
+
+    def _standby_client(self) -> LocalLLMClient | None:
+        """The local client to load ahead of a failover, or None (none wanted, or it is the
+        component's own model, which the worker loads as any model client)."""
+        if isinstance(self._clients.get(PRIMARY_CLIENT), LocalLLMClient):
+            return None
+        local = self._clients.get(LOCAL_CLIENT)
+        if local is None and self._ladder_holds_fallback_to_local():
+            if self._ladder_local is None:
+                try:
+                    self._ladder_local = self._local_client(self.config, self.component_name)
+                except (ValueError, ImportError) as exc:  # reported; fallback_to_local reports it again
+                    self.get_logger().error("[%s] the ladder holds fallback_to_local() but the local model cannot be "
+                                            "used: %s", self.component_name, exc)
+                    return None
+            local = self._ladder_local
+        return local if isinstance(local, LocalLLMClient) else None
 
     def activate_resources(self) -> None:
         super().activate_resources()
         self._activate_history()
-        local = self._clients.get(LOCAL_CLIENT)
-        if local is not None and not local.loaded:
-            # Standing by for a failover: loaded now, so the swap does not wait for it.
-            local.initialize()
+        local = self._standby_client()
+        if local is not None and not local.loaded and self._standby is None:
+            # Standing by for a failover: loaded and warmed now, in a thread of its own, so
+            # neither the activation nor the first questions to the server wait for it.
+            self._standby = LocalStandby(local, self.component_name, self.get_logger(), self.config.system_prompt)
+            self._standby.start()
 
     # ------------------------------------------------------------------ recipe API
     @property
@@ -207,9 +261,12 @@ class LLM(ModelComponent):
     # ------------------------------------------------------------------ steps
     def release_resources(self) -> None:
         super().release_resources()
-        for client in self._clients.values():
-            if isinstance(client, LocalLLMClient):
-                client.deinitialize()  # frees the model's memory; reloaded at the next activation
+        standby, self._standby = self._standby, None
+        if standby is not None:
+            standby.stop()  # a load in progress ends before the model is freed
+        clients = list(self._clients.values()) + [self._ladder_local]
+        for client in {id(c): c for c in clients if isinstance(c, LocalLLMClient)}.values():
+            client.deinitialize()  # frees the model's memory; reloaded at the next activation
 
     def _activate_history(self) -> None:
         cfg = self.config

@@ -163,6 +163,9 @@ def calls_from_message(message: ChatMessage) -> tuple[list[ToolCall], list[Refus
     return _text_calls(message.content or "")
 
 
+_CLAIMS_DONE = re.compile(r"DONE\b(?!\s+STEPS)", re.IGNORECASE)
+
+
 class CortexPlanner:
     """Plans a task with ``chat`` (a ChatRequest -> ChatResponse callable: a model client) and
     runs its steps with ``execute(tool, arguments) -> StepOutcome``. ``on_event`` sees every
@@ -252,7 +255,9 @@ class CortexPlanner:
                     report.reason = f"the model gave up after a failed step: {failure.line()}"
                     report.answer = text.strip()
                     break
-                if not report.steps and (report.refusals or not text.strip().upper().startswith("DONE")):
+                # "DONE" claims the task; a model echoing the prompt's own "DONE STEPS:" header
+                # (SmolLM2 does) claims nothing.
+                if not report.steps and (report.refusals or not _CLAIMS_DONE.match(text.strip())):
                     why = f" after {len(report.refusals)} refused answer(s)" if report.refusals else ""
                     report.reason = f"the model answered without a tool call{why}: {text.strip()[:200]!r}"
                     report.answer = text.strip()

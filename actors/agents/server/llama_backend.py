@@ -8,21 +8,47 @@ components run it in their own process (``enable_local_model=True``, see local_c
 The models this is used with are text-only: a request that carries images is answered from
 its text, with each image replaced by a note saying that it cannot be seen, so the model says
 so rather than invent a scene (and nothing crashes on an image part the template cannot hold).
+
+Threads on a shared, busy computer: llama.cpp here is built with OpenMP (libgomp), and its
+threads meet at an OpenMP barrier after every operation of the graph, hundreds per token.
+libgomp's default is to spin at a barrier; when more threads want the CPUs than there are,
+a spinning thread burns the time slice the thread it waits for needs. Measured on 2 cores at
+load 7-21: 16 tokens with 2 threads took 24-45 s spinning and 1.3-3.1 s with waiting threads
+asleep (``OMP_WAIT_POLICY=PASSIVE``), against 1.1-1.9 s with one thread. So the process sets
+``OMP_WAIT_POLICY=PASSIVE`` before llama.cpp is loaded, unless the environment sets it.
+
+Tools and chat templates: llama.cpp formats a chat with the template stored in the GGUF file,
+and a template without a tools section (SmolLM2's has none) silently drops the ``tools`` of a
+request: the model was asked to call tools it was never shown (Cortex with SmolLM2: 154 prompt
+tokens, none of them a tool). For such a template the tools are written into the system message
+as JSON lines, with the instruction to answer a call as ``{"name": ..., "arguments": {...}}``
+(the form Cortex and the tool loop read from text), and earlier tool calls of the assistant are
+written as that JSON in its message, so the template has text to render.
 """
 from __future__ import annotations
 
+import json
 import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ToolCall, decode_tool_arguments
+from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ToolCall, ToolSpec, decode_tool_arguments
 from .gguf import EXTRA_HINT, SMOLLM2_FILE, SMOLLM2_NAMES, LocalModelError, LocalModelUnavailable, check_gguf
 
 __all__ = ["LlamaCppResponder", "IMAGE_NOTE", "default_threads"]
 
 IMAGE_NOTE = "[An image was attached here, but this model is text-only and cannot see it.]"
+
+
+def _import_llama() -> Any:
+    """``llama_cpp.Llama``, with OpenMP threads that sleep at barriers (see the module docstring).
+    libgomp reads the variable when it is loaded, i.e. at the first import of llama_cpp."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    from llama_cpp import Llama
+
+    return Llama
 
 
 def default_threads() -> int:
@@ -35,16 +61,33 @@ def default_threads() -> int:
     return max(1, min(4, cpus))
 
 
-def _message(message: ChatMessage) -> dict[str, Any]:
+TOOLS_NOTE = ("You can call these tools. To call one, answer with a JSON object "
+              '{"name": "<tool>", "arguments": {...}} for each call, one per line. The tools:')
+
+
+def tools_as_text(tools: list[ToolSpec]) -> str:
+    """The tools of a request, written for a model whose chat template cannot show them."""
+    lines = [json.dumps({"name": t.name, "description": t.description, "parameters": t.parameters}, sort_keys=True)
+             for t in tools]
+    return "\n".join([TOOLS_NOTE, *lines])
+
+
+def _call_text(message: ChatMessage) -> str:
+    """The assistant's tool calls as the JSON text a template without tools can render."""
+    calls = "\n".join(json.dumps({"name": c.name, "arguments": c.arguments}) for c in message.tool_calls)
+    return f"{message.content}\n{calls}" if message.content else calls
+
+
+def _message(message: ChatMessage, native_tools: bool = True) -> dict[str, Any]:
     """One message in llama-cpp-python's OpenAI shape, text only (see the module docstring)."""
     content = message.content
     if message.images:
         notes = " ".join([IMAGE_NOTE] * len(message.images))
         content = f"{notes}\n{content}" if content else notes
-    out: dict[str, Any] = {"role": message.role, "content": content}
-    if message.tool_calls:
-        import json
-
+    if message.tool_calls and not native_tools:
+        content = _call_text(message)
+    out: dict[str, Any] = {"role": message.role, "content": content if content is not None else ""}
+    if message.tool_calls and native_tools:
         out["tool_calls"] = [{"id": c.id, "type": "function",
                               "function": {"name": c.name, "arguments": json.dumps(c.arguments)}}
                              for c in message.tool_calls]
@@ -65,7 +108,7 @@ class LlamaCppResponder:
                  seed: int | None = None) -> None:
         path = check_gguf(gguf_path)
         try:
-            from llama_cpp import Llama
+            Llama = _import_llama()
         except ImportError as exc:
             raise LocalModelUnavailable(f"the GGUF model {str(path)!r} needs llama-cpp-python: {EXTRA_HINT}") from exc
         self.path = path
@@ -83,15 +126,27 @@ class LlamaCppResponder:
             raise LocalModelError(f"llama.cpp could not load the GGUF model {str(path)!r}: {exc}") from None
         # llama.cpp contexts are not thread-safe; requests are served one at a time.
         self._lock = threading.Lock()
+        template = (getattr(self._llm, "metadata", None) or {}).get("tokenizer.chat_template") or ""
+        #: whether the model's chat template renders a request's tools (see the module docstring)
+        self.native_tools = "tools" in template
 
     @property
     def context_size(self) -> int:
         return int(self._llm.n_ctx())
 
     def _kwargs(self, request: ChatRequest) -> dict[str, Any]:
-        kwargs: dict[str, Any] = {"messages": [_message(m) for m in request.messages]}
-        if request.tools:
-            kwargs["tools"] = [t.to_openai() for t in request.tools]
+        messages = [_message(m, self.native_tools) for m in request.messages]
+        if request.tools and self.native_tools:
+            kwargs: dict[str, Any] = {"messages": messages, "tools": [t.to_openai() for t in request.tools]}
+        elif request.tools:
+            note = tools_as_text(list(request.tools))
+            if messages and messages[0]["role"] == "system":
+                messages[0] = {**messages[0], "content": f"{messages[0]['content']}\n\n{note}"}
+            else:
+                messages.insert(0, {"role": "system", "content": note})
+            kwargs = {"messages": messages}
+        else:
+            kwargs = {"messages": messages}
         if request.temperature is not None:
             kwargs["temperature"] = request.temperature
         if request.max_tokens is not None:
