@@ -14,7 +14,7 @@ import threading
 
 import pytest
 
-from tests.runtime.helpers import HANG_S, LISTENER, REPO, SystemUnderTest
+from tests.runtime.helpers import HANG_S, LISTENER, REPO, SystemUnderTest, ctrl_c_as_at_a_terminal
 
 pytestmark = pytest.mark.process
 
@@ -131,7 +131,8 @@ def test_ctrl_c_cancels_the_goal_on_the_component_and_exits_130(planner_run, whe
     right after the goal went out, the cancel may reach the component before the goal does: it
     is asked again until the component knows the goal."""
     proc = subprocess.Popen([sys.executable, "-m", "emos", "action", "send_goal", "planner", "plan_path", FAR_GOAL,
-                             "--run", planner_run.run_dir.name], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--run", planner_run.run_dir.name], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=ctrl_c_as_at_a_terminal)
     seen: list[str] = []
     wanted = "feedback: " if when == "after_feedback" else "sending goal "
     ready = threading.Event()

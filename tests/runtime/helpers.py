@@ -84,17 +84,26 @@ def kill_leftover_systems() -> None:
         _STARTED.pop().kill_all()
 
 
+def ctrl_c_as_at_a_terminal() -> None:
+    """``preexec_fn`` for a child the test will Ctrl-C (SIGINT): a background job of a
+    non-interactive shell (``pytest ... &``, CI wrappers) inherits SIGINT ignored, and a Python
+    started that way keeps ignoring it (no KeyboardInterrupt): give the child a terminal's
+    default back."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 class SystemUnderTest:
     """A recipe running under ``emos run`` in its own process."""
 
     def __init__(self, tmp_path: Path, body: str, duration: float | None = None, env: dict | None = None, prefix: list[str] | None = None,
-                 args: list[str] | None = None):
+                 args: list[str] | None = None, python: str | None = None):
         """``prefix``: a command that execs the rest in place (``ip netns exec NS``), keeping the pid.
-        ``args``: more options of ``emos run`` (``--ros2``, ...)."""
+        ``args``: more options of ``emos run`` (``--ros2``, ...). ``python``: another interpreter
+        than this one (a venv with other packages, e.g. another ROS 2 distribution's wheels)."""
         _STARTED.append(self)
         self.script = tmp_path / "recipe.py"
         self.script.write_text(RECIPE_HEADER + textwrap.dedent(body))
-        cmd = [*(prefix or []), sys.executable, "-m", "emos", "run", str(self.script)]
+        cmd = [*(prefix or []), python or sys.executable, "-m", "emos", "run", str(self.script)]
         if duration:
             cmd += ["--duration", str(duration)]
         cmd += args or []

@@ -10,21 +10,15 @@ import pytest
 
 from emos.msgs import Image
 from emos.transport.pubsub import Publisher
-from tests.runtime.helpers import HANG_S, LISTENER, SystemUnderTest, wait_until
+from tests.runtime.helpers import HANG_S, LISTENER, SystemUnderTest, ctrl_c_as_at_a_terminal, wait_until
 
 pytestmark = pytest.mark.process
 
 
 
-def _ctrl_c_as_at_a_terminal() -> None:
-    # A background job of a non-interactive shell (`pytest ... &`) inherits SIGINT ignored, and a
-    # Python started that way keeps ignoring it: give the child a terminal's default back.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def _emos(*args: str, **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "emos", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=_ctrl_c_as_at_a_terminal, **kw)
+                            preexec_fn=ctrl_c_as_at_a_terminal, **kw)
 
 
 @pytest.fixture
@@ -152,7 +146,7 @@ def test_ctrl_c_at_the_terminal_ends_emos_bench_quietly_with_its_helpers(mode):
     token = f"bench-{os.getpid()}-{mode}"
     bench = subprocess.Popen(
         [sys.executable, "-m", "emos", "bench", "ipc", "--mode", mode, "--sizes", "8", "--messages", "200000", "--transports", "emos"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=_ctrl_c_as_at_a_terminal,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=ctrl_c_as_at_a_terminal,
         env={**os.environ, "EMOS_HARDENING_TOKEN": token},
     )
     try:

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from emos import msgs as M
-from tests.runtime.helpers import REPO, SystemUnderTest, wait_until
+from tests.runtime.helpers import REPO, SystemUnderTest, ctrl_c_as_at_a_terminal, wait_until
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -47,7 +47,7 @@ def test_send_goal_from_the_cli_starts_the_following_and_ctrl_c_cancels_it(tmp_p
 
         cli = subprocess.Popen([sys.executable, "-m", "emos", "action", "send_goal", "--run", system.ctx.run_id,
                                 "my_controller", "track_vision_target", '{"label": "person"}'],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, preexec_fn=ctrl_c_as_at_a_terminal)
         yaw0 = samples[-1][1]
 
         def turned() -> bool:

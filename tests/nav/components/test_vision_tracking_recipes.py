@@ -16,7 +16,7 @@ import pytest
 
 from emos import msgs as M
 from emos.actors.sim.person import Person
-from tests.runtime.helpers import REPO, SystemUnderTest
+from tests.runtime.helpers import REPO, SystemUnderTest, ctrl_c_as_at_a_terminal
 
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
@@ -46,7 +46,7 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
         system.wait_up(timeout=60, components=[controller])
         cli = subprocess.Popen([sys.executable, "-m", "emos", "action", "send_goal", "--run", system.ctx.run_id,
                                 controller, "track_vision_target", '{"label": "person"}'],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+                               stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, preexec_fn=ctrl_c_as_at_a_terminal)
         odom = Subscriber(system.ctx, "/odom", M.Odometry, queue_size=1000)
         dets = Subscriber(system.ctx, detections, M.Detections, queue_size=100)
         samples, seen, t_first = [], 0, None
