@@ -1,6 +1,5 @@
 """A publisher SIGKILLed while a loaned message is open never leaves a torn message visible
 (issue 34, item 2), as for a writer killed mid-copy (tests/runtime/test_transport.py)."""
-import multiprocessing as mp
 import os
 import signal
 import time
@@ -13,13 +12,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from emos import msgs as M
-from emos.transport import ring as R
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
+from tests.ipc_loan.torn import FORK, sigkill_writer_and_check
 
 pytestmark = pytest.mark.process
-
-_FORK = mp.get_context("fork")
 
 
 def _loaning_writer(run_dir: str, run_id: str, size: int, ready) -> None:
@@ -38,45 +35,10 @@ def _loaning_writer(run_dir: str, run_id: str, size: int, ready) -> None:
         seq += 1
 
 
-def _check_intact(msgs) -> int:
-    for m in msgs:
-        seq, crc = m.layout.dim[0].label.split(":")
-        assert zlib.crc32(m.data.data) == int(crc), f"torn message {seq}"
-    return len(msgs)
-
-
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(size=st.sampled_from([1 << 16, 1 << 20, 3 << 20]), kill_after=st.floats(0.0, 0.05))
 def test_no_torn_message_when_the_writer_is_sigkilled_mid_loan(ctx, size, kill_after):
-    ready = _FORK.Event()
-    proc = _FORK.Process(target=_loaning_writer, args=(str(ctx.run_dir), ctx.run_id, size, ready))
-    proc.start()
-    try:
-        sub = Subscriber(ctx, "/stream", M.UInt8MultiArray, queue_size=8)
-        assert ready.wait(30)
-        checked = 0
-        end = time.monotonic() + kill_after
-        while time.monotonic() < end:
-            checked += _check_intact(sub.take())
-        assert proc.is_alive(), f"the loaning writer died by itself (exit code {proc.exitcode})"
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.join()
-        checked += _check_intact(sub.take())
-        latest = sub.latest()
-        if latest is not None:
-            _check_intact([latest])
-        assert sub.take() == []
-        src = sub.sources.get("writer")
-        if src is not None:  # the next number is either not written or complete and intact
-            status, payload, _ = src.ring.read(src.ring.head)
-            assert status in (R.NOT_READY, R.LAPPED, R.OK)
-            if status == R.OK:
-                _check_intact([M.decode(M.UInt8MultiArray, payload)])
-        sub.close()
-    finally:
-        if proc.is_alive():
-            proc.kill()
-        proc.join()
+    sigkill_writer_and_check(ctx, _loaning_writer, size, kill_after)
 
 
 def _open_loan_then_wait(run_dir: str, run_id: str, filled) -> None:
@@ -90,8 +52,8 @@ def _open_loan_then_wait(run_dir: str, run_id: str, filled) -> None:
 
 
 def test_a_writer_killed_with_a_loan_open_leaves_nothing_visible_and_its_restart_carries_on(ctx):
-    filled = _FORK.Event()
-    proc = _FORK.Process(target=_open_loan_then_wait, args=(str(ctx.run_dir), ctx.run_id, filled))
+    filled = FORK.Event()
+    proc = FORK.Process(target=_open_loan_then_wait, args=(str(ctx.run_dir), ctx.run_id, filled))
     proc.start()
     try:
         assert filled.wait(60)

@@ -3,12 +3,8 @@ the C copy writes exactly the bytes numpy would, the frames do not change, the P
 (no compiler) still writes them alone, and a writer SIGKILLed in the middle of a streaming copy
 never leaves a torn message visible (the copy's fences keep the ring's seqlock)."""
 import mmap
-import multiprocessing as mp
-import os
-import signal
 import subprocess
 import sys
-import time
 import zlib
 from pathlib import Path
 
@@ -19,12 +15,11 @@ from hypothesis import strategies as st
 
 from emos import msgs as M
 from emos.msgs import codec
-from emos.transport import ring as R
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
+from tests.ipc_loan.torn import sigkill_writer_and_check
 
 needs_c = pytest.mark.skipif(codec._stream_copy is None, reason="the codec's C extension is not built here (the Python codec alone)")
-_FORK = mp.get_context("fork")
 
 
 @needs_c
@@ -170,45 +165,9 @@ def _streaming_writer(run_dir: str, run_id: str, size: int, ready) -> None:
         seq += 1
 
 
-def _check_intact(msgs) -> int:
-    for m in msgs:
-        seq, crc = m.layout.dim[0].label.split(":")
-        assert zlib.crc32(m.data.data) == int(crc), f"torn message {seq}"
-    return len(msgs)
-
-
 @needs_c
 @pytest.mark.process
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(size=st.sampled_from([codec.STREAM_MIN_BYTES + 24, (1 << 20) + 8, 4 << 20]), kill_after=st.floats(0.0, 0.05))
 def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, size, kill_after):
-    ready = _FORK.Event()
-    args = (str(ctx.run_dir), ctx.run_id, size, ready)
-    proc = _FORK.Process(target=_streaming_writer, args=args)
-    proc.start()
-    try:
-        sub = Subscriber(ctx, "/stream", M.UInt8MultiArray, queue_size=8)
-        assert ready.wait(60)
-        checked = 0
-        end = time.monotonic() + kill_after
-        while time.monotonic() < end:
-            checked += _check_intact(sub.take())
-        assert proc.is_alive(), f"the writer died by itself (exit code {proc.exitcode})"
-        os.kill(proc.pid, signal.SIGKILL)  # mid-copy with good probability: a copy is most of a publish
-        proc.join()
-        checked += _check_intact(sub.take())
-        latest = sub.latest()
-        if latest is not None:
-            _check_intact([latest])
-        assert sub.take() == []
-        src = sub.sources.get("writer")
-        if src is not None:  # the next number is either not written or complete and intact
-            status, payload, _ = src.ring.read(src.ring.head)
-            assert status in (R.NOT_READY, R.LAPPED, R.OK)
-            if status == R.OK:
-                _check_intact([M.decode(M.UInt8MultiArray, payload)])
-        sub.close()
-    finally:
-        if proc.is_alive():
-            proc.kill()
-        proc.join()
+    sigkill_writer_and_check(ctx, _streaming_writer, size, kill_after)
