@@ -115,25 +115,32 @@ def ui_system(tmp_path_factory):
     yield from run_system(tmp_path_factory.mktemp("ui"), "ui_recipe.py")
 
 
-@pytest.fixture(scope="module")
-def browser():
+def headless_chromium(extra_args=(), capabilities=None):
+    """A headless Chromium driven by chromedriver (a generator: yields the driver, quits it and
+    removes its profile when closed); skips the test where Chromium is not installed."""
     if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
         pytest.skip("headless Chromium is not installed (scripts/setup.sh --test installs chromium and chromium-driver)")
     webdriver = pytest.importorskip("selenium.webdriver")
     from selenium.webdriver.chrome.service import Service
 
     options = webdriver.ChromeOptions()
-    for flag in CHROME_FLAGS:
+    for flag in (*CHROME_FLAGS, *extra_args):
         options.add_argument(flag)
     profile = tempfile.mkdtemp(prefix="emos-chromium-")
     options.add_argument(f"--user-data-dir={profile}")
     options.binary_location = CHROMIUM
-    options.set_capability("goog:loggingPrefs", {"performance": "ALL", "browser": "ALL"})
+    for name, value in (capabilities or {}).items():
+        options.set_capability(name, value)
     driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
     driver.set_page_load_timeout(30)
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
     try:
         yield driver
     finally:
         driver.quit()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    yield from headless_chromium(capabilities={"goog:loggingPrefs": {"performance": "ALL", "browser": "ALL"}})

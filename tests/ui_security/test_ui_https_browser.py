@@ -8,16 +8,13 @@ from __future__ import annotations
 import base64
 import hashlib
 import http.server
-import os
-import shutil
-import tempfile
 import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.ui.conftest import CHROME_FLAGS, CHROMEDRIVER, CHROMIUM, free_port
+from tests.ui.conftest import free_port, headless_chromium
 from tests.ui_security.conftest import next_code
 
 pytestmark = [pytest.mark.browser, pytest.mark.process, pytest.mark.timeout(240), pytest.mark.xdist_group("browser")]
@@ -40,25 +37,8 @@ def spki_pin(cert: Path) -> str:
 
 @pytest.fixture(scope="module")
 def tls_browser(secured):
-    if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
-        pytest.skip("headless Chromium is not installed (scripts/setup.sh --test installs chromium and chromium-driver)")
-    webdriver = pytest.importorskip("selenium.webdriver")
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    for flag in CHROME_FLAGS:
-        options.add_argument(flag)
-    options.add_argument(f"--ignore-certificate-errors-spki-list={spki_pin(secured.cert)}")
-    profile = tempfile.mkdtemp(prefix="emos-chromium-")
-    options.add_argument(f"--user-data-dir={profile}")
-    options.binary_location = CHROMIUM
-    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
-    driver.set_page_load_timeout(30)
-    try:
-        yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
+    # The run's self-signed certificate is trusted by its key's pin, as a paired device would.
+    yield from headless_chromium(extra_args=(f"--ignore-certificate-errors-spki-list={spki_pin(secured.cert)}",))
 
 
 def wait_js(driver, script: str, timeout: float = 30.0):

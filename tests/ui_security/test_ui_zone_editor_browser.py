@@ -5,17 +5,14 @@ zone's limit and removes the keepout; the masks beside the map are written by th
 not even with a hand-made request."""
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
 import pytest
 
-from tests.ui.conftest import CHROME_FLAGS, CHROMEDRIVER, CHROMIUM
+from tests.ui.conftest import headless_chromium
 from tests.ui_security.conftest import ROOT, run_secured
 from tests.ui_security.test_ui_https_browser import pair_in_browser, wait_js
 
@@ -37,24 +34,7 @@ def zone_system(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser():
-    if not (os.path.exists(CHROMIUM) and os.path.exists(CHROMEDRIVER)):
-        pytest.skip("headless Chromium is not installed (scripts/setup.sh --test installs chromium and chromium-driver)")
-    webdriver = pytest.importorskip("selenium.webdriver")
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    for flag in CHROME_FLAGS:
-        options.add_argument(flag)
-    profile = tempfile.mkdtemp(prefix="emos-chromium-")
-    options.add_argument(f"--user-data-dir={profile}")
-    options.binary_location = CHROMIUM
-    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
-    driver.set_page_load_timeout(30)
-    try:
-        yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
+    yield from headless_chromium()
 
 
 def click_world(driver, x: float, y: float) -> None:
