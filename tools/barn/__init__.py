@@ -87,6 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", type=Path, default=None, metavar="PICTURE",
                         help="with --report: draw every trial's outcome, world by seed, into this .png/.svg/.pdf "
                              "(with --against, both files on the pairs both hold)")
+    parser.add_argument("--no-swept-check", dest="swept_check", action="store_false",
+                        help="through the processes: turn the DriveManager's swept-footprint check off (the safety "
+                             "zones alone), to measure what it changes (docs/safety.md)")
     from .generate import add_generate_arguments
 
     add_generate_arguments(parser)  # --generate N, --generated-dir DIR (docs/barn-generated.md)
@@ -184,6 +187,10 @@ def run(args: argparse.Namespace) -> int:
               f"({len(worlds)} worlds, {min(worlds)}..{max(worlds)})", file=sys.stderr)
         return 2
     if args.in_process:
+        if not getattr(args, "swept_check", True):
+            print("emos bench barn: --no-swept-check turns off the DriveManager's check; an --in-process run has "
+                  "no DriveManager (run it through the processes)", file=sys.stderr)
+            return 2
         if args.logs is not None:
             print("emos bench barn: --logs keeps the system logs of runs through the processes; "
                   "an --in-process run has none (use --png to see a run)", file=sys.stderr)
@@ -202,6 +209,8 @@ def run(args: argparse.Namespace) -> int:
         mode = "supervised processes, "
     name = "DynaBARN-style" if args.dynabarn else "BARN"
     config = "ideal (kinematic, true odometry)" if rules.ideal else f"realistic ({rules.robot}, laser, wheel+IMU odometry)"
+    if not getattr(args, "swept_check", True):
+        config += ", swept check off"
     try:
         log = _trial_log(args, rules)
     except ValueError as exc:
@@ -310,6 +319,9 @@ def _trial_log(args: argparse.Namespace, rules: BarnRules) -> Any:
         # Through the processes the compute charge is the Simulator's (compute_deadline); files of
         # runs from before it existed (no charge there) must not be resumed as if they had it.
         config["process_compute"] = "lockstep-charged"
+    if not getattr(args, "swept_check", True):
+        # Recorded only when off, so files of runs with the check on (the default) still resume.
+        config["swept_check"] = False
     log = TrialLog(args.results, config)
     if log.trials and not args.json:
         print(f"resuming: {len(log.trials)} trial(s) already in {args.results}")
@@ -343,7 +355,8 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace, s
 
     def episode(idx: int, seed: int) -> EpisodeResult:
         opts = StackOptions.for_controller(args.controller, world=idx, rules=rules, seed=seed, dynabarn=args.dynabarn,
-                                           barn_source=None if source is None else str(source))
+                                           barn_source=None if source is None else str(source),
+                                           swept_check=getattr(args, "swept_check", True))
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         png = None if args.png is None else args.png / f"{'dynabarn' if args.dynabarn else 'barn'}_{idx:03d}_seed_{seed}.png"
         try:

@@ -89,6 +89,7 @@ class StackOptions:
     moving_obstacles: bool = False  # evidence memory + ArcSamplerConfig(movers=MoverConfig()): builtin-dynamic
     dynabarn: bool = False
     recovery: RecoveryOptions = attrs.field(factory=RecoveryOptions)
+    swept_check: bool = True  # the DriveManager's swept-footprint check (docs/safety.md); off: the zones alone
 
     @classmethod
     def for_controller(cls, name: str, **kwargs: Any) -> StackOptions:
@@ -218,7 +219,8 @@ def build_system(opts: StackOptions) -> tuple[Any, list[Any]]:
     control = Topic(name="/control", msg_type="Twist")
     controller.outputs(command=control)
     driver = DriveManager("driver", config=DriveManagerConfig(
-        critical_zone_distance=0.02, slowdown_zone_distance=0.05, max_distance=recovery.backup_distance, sensor_pose=mount, **common))
+        critical_zone_distance=0.02, slowdown_zone_distance=0.05, max_distance=recovery.backup_distance, sensor_pose=mount,
+        swept_check=opts.swept_check, **common))
     driver.inputs(command=control)
     driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
     if recovery.enabled:

@@ -11,7 +11,7 @@ from .maneuvers import (
     trapezoid_profile,
 )
 from .pipeline import DriveSafety
-from .swept import SweptCheck, SweptConfig, SweptFootprint
+from .swept import ScanCache, SweptCheck, SweptConfig, SweptFootprint, SweptPoints
 from .zones import SafetyZones, SafetyZonesConfig, ZoneCheck
 
 __all__ = [
@@ -21,9 +21,11 @@ __all__ = [
     "Maneuver",
     "SafetyZones",
     "SafetyZonesConfig",
+    "ScanCache",
     "SweptCheck",
     "SweptConfig",
     "SweptFootprint",
+    "SweptPoints",
     "ZoneCheck",
     "free_travel",
     "interpolate_commands",

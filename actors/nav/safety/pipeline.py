@@ -2,12 +2,14 @@
 the swept-footprint check of what is about to be sent."""
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..controllers.sensors import LaserScan2D
 from ..robot import RobotConfig
 from .commands import CommandFilter, CommandFilterConfig
-from .swept import FREE, SweptCheck, SweptConfig, SweptFootprint
+from .swept import FREE, ScanCache, SweptCheck, SweptConfig, SweptFootprint, SweptPoints
 from .zones import SafetyZones, SafetyZonesConfig, ZoneCheck
 
 __all__ = ["DriveSafety"]
@@ -35,12 +37,24 @@ class DriveSafety:
         self.filter = CommandFilter(robot, commands)
         self.swept = SweptFootprint(robot, swept) if swept is not None else None
         self.last_swept: SweptCheck = FREE
+        self._scan_points = ScanCache()
+
+    def swept_points(self, scan: object, extra: object, build: Callable[[], np.ndarray]) -> SweptPoints | None:
+        """The swept check's obstacle points for one scan (``scan``: its message, compared by
+        identity; ``extra``: anything else they depend on, e.g. whether the pose was known),
+        prepared once: ``build()`` (the points in the robot frame, (N, 2)) runs only when a new
+        scan (or ``extra``) comes, and every command until then reuses what it made. None when
+        the check is off."""
+        swept = self.swept
+        if swept is None:
+            return None
+        return self._scan_points.get(scan, extra, lambda: swept.prepare(build()))
 
     def step(self, command: np.ndarray, obstacles: LaserScan2D | np.ndarray | None,
-             swept_points: np.ndarray | None = None, previous: np.ndarray | None = None,
+             swept_points: np.ndarray | SweptPoints | None = None, previous: np.ndarray | None = None,
              lead: float = 0.0, history: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, ZoneCheck]:
         """``swept_points`` (N, 2): obstacle points in the robot frame of the pose they were seen
-        from, ``lead`` s ago; ``previous``: the command sent last (default: the filter's last
+        from, ``lead`` s ago (or :meth:`swept_points`' prepared form of them); ``previous``: the command sent last (default: the filter's last
         output); ``history``: the commands sent recently (see ``SweptFootprint.check``)."""
         cmd = np.asarray(command, dtype=np.float64).reshape(3)
         before = self.filter.last.copy() if previous is None else np.asarray(previous, dtype=np.float64).reshape(3)
@@ -60,7 +74,7 @@ class DriveSafety:
             return out, ZoneCheck(0.0, swept.clearance)
         return out, check
 
-    def limit_swept(self, command: np.ndarray, previous: np.ndarray, points: np.ndarray,
+    def limit_swept(self, command: np.ndarray, previous: np.ndarray, points: np.ndarray | SweptPoints,
                     lead: float = 0.0, history: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, SweptCheck]:
         """The swept-footprint check alone (the unblock maneuvers' commands go through it too)."""
         if self.swept is None:

@@ -22,25 +22,29 @@ in one batch, the fastest clear one sent, or the stop.
 A point that is already nearer than the inflated footprint at the start (the robot stopped
 close to something) only blocks a motion that brings it nearer: the robot may always move away.
 
-Pure numpy; the poses come from :func:`emos.geometry.integrate_pose` (exact arcs) and the
-base's response to the commands from :meth:`SweptFootprint.response`.
+Pure numpy; the poses are exact arcs (those of :func:`emos.geometry.integrate_pose`, in fewer
+array operations) and the base's response to the commands comes from
+:meth:`SweptFootprint.response`. What depends on the points alone (sorted by distance, their
+homogeneous rows, their distance at the start) is prepared once per scan
+(:meth:`SweptFootprint.prepare`, kept by :class:`ScanCache`); every command reuses it.
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import attrs
 import numpy as np
 
 from emos.config.validators import in_range
-from emos.geometry import integrate_pose
 
 from ..robot import RobotConfig, RobotGeometry
 
-__all__ = ["SweptConfig", "SweptCheck", "SweptFootprint"]
+__all__ = ["ScanCache", "SweptConfig", "SweptCheck", "SweptFootprint", "SweptPoints"]
 
 _TOL = 1e-3  # m: a point must come this much nearer than it started to count as approached
 _COARSE_STRIDE = 4  # poses: the prefilter looks at every 4th pose's centre
+_PARTS = 2  # after the shared poses, the rest is looked at in this many spans
 
 
 def _scales(value: object) -> tuple[float, ...]:
@@ -50,6 +54,23 @@ def _scales(value: object) -> tuple[float, ...]:
         raise ValueError(f"SweptConfig.scales: expected numbers in (0, 1], got {value!r}") from None
     if not out or any(not (0.0 < v <= 1.0) for v in out) or list(out) != sorted(out, reverse=True):
         raise ValueError(f"SweptConfig.scales: expected decreasing numbers in (0, 1] starting at 1, got {value!r}")
+    return out
+
+
+def _window_max(values: np.ndarray, width: int) -> np.ndarray:
+    """The running maximum (..., K) of non-negative ``values`` (..., K) over the last ``width``
+    entries (fewer at the start), by doubling windows: a few whole-array operations."""
+    out = np.array(values, dtype=np.float64)
+    span = 1
+    while 2 * span <= width:
+        # Overlapping input and output: numpy reads the old values (it buffers overlaps).
+        np.maximum(out[..., span:], out[..., :-span], out=out[..., span:])
+        span *= 2
+    rest = width - span
+    if rest > 0:
+        full = out.copy()
+        np.maximum(out[..., rest:], out[..., :-rest], out=full[..., rest:])
+        out = full
     return out
 
 
@@ -121,11 +142,14 @@ class SweptFootprint:
         # The footprint's farthest point from the centre (what the sampling bounds turn).
         self._reach = math.hypot(*self._half) if self._box else robot.radius
         self._radius = max(self._radius, self._reach)  # the prefilters' bound must cover it
+        self._half_col = np.array(self._half).reshape(2, 1)
         cfg = self.config
         lim = robot.ctrl_vx_limits, robot.ctrl_vy_limits, robot.ctrl_omega_limits
         # Braking at the lower of the robot's limit and the body's (the slowest it may brake).
         self._decel = np.array([min(lim[0].max_decel, cfg.max_braking), min(lim[1].max_decel, cfg.max_braking),
                                 lim[2].max_decel])
+        self._lag = int(math.ceil(cfg.yaw_lag / cfg.time_step - 1e-9))  # time steps a turn's yaw rate holds
+        self._ramps: dict[int, np.ndarray] = {}
 
     # -- prediction ---------------------------------------------------------------------------
     def pipe(self, previous: np.ndarray, lead: float, history: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -181,28 +205,35 @@ class SweptFootprint:
         ``yaw_lag`` s after its command dropped (a skid-steer body keeps turning while its wheels
         break their sideways grip). Per axis and direction: v_k = max over j <= k of
         (c_j - decel * (k - j) * dt), the slowest decay from every earlier command."""
-        cfg = self.config
-        dt = cfg.time_step
-        k = np.arange(commanded.shape[-2], dtype=np.float64)[:, None] * dt * self._decel  # (K, 3)
-        lag = int(math.ceil(cfg.yaw_lag / dt - 1e-9))
+        k = self._ramp(commanded.shape[-2])  # (K, 3): decel * step * dt
+        lag = self._lag
         parts = []
-        for sign in (1.0, -1.0):
-            c = np.maximum(sign * commanded, 0.0)
+        for c in (np.maximum(commanded, 0.0), np.maximum(-commanded, 0.0)):
             if not c.any():  # nothing this way (most sequences go forward only)
                 parts.append(c)
                 continue
             if lag:
                 # The yaw rate: the largest command of the last yaw_lag s holds before it decays.
-                padded = np.concatenate([np.zeros(c.shape[:-2] + (lag, 3)), c], axis=-2)
-                windows = np.lib.stride_tricks.sliding_window_view(padded[..., 2], lag + 1, axis=-1)
-                c[..., 2] = windows.max(axis=-1)
+                c[..., 2] = _window_max(c[..., 2], lag + 1)
             parts.append(np.maximum.accumulate(c + k, axis=-2) - k)
         forward, backward = parts
         # A base going one way brakes through zero before it goes the other way.
         return np.where(forward > 1e-12, forward, -backward)
 
+    def _ramp(self, steps: int) -> np.ndarray:
+        """(steps, 3): what braking takes off each axis after 0, 1, ... time steps (cached per length)."""
+        ramp = self._ramps.get(steps)
+        if ramp is None:
+            ramp = np.arange(steps, dtype=np.float64)[:, None] * self.config.time_step * self._decel
+            self._ramps[steps] = ramp
+        return ramp
+
     def gain_values(self, twists: np.ndarray) -> np.ndarray:
         """The yaw gains sampled: from ``yaw_gain_min`` to the tightest turn the speed loss allows."""
+        return self._gain_values(twists, None)
+
+    def _gain_values(self, twists: np.ndarray, sensitivity: np.ndarray | None) -> np.ndarray:
+        """:meth:`gain_values` with :meth:`_gain_sensitivity` of ``twists`` given (None: computed)."""
         cfg = self.config
         w_max = float(np.max(np.abs(twists[..., 2]))) if twists.size else 0.0
         hi = 1.0 / max(1.0 - cfg.speed_loss * w_max, 0.5)
@@ -211,34 +242,45 @@ class SweptFootprint:
             # A rotation in place one way: a smaller gain turns through a part of the same sweep.
             return np.array([hi])
         # Enough gains that what lies between two of them stays within gain_gap (see inflation()).
-        need = (hi - cfg.yaw_gain_min) * float(np.max(self._gain_sensitivity(twists))) / (2.0 * cfg.gain_gap)
+        if sensitivity is None:
+            sensitivity = self._gain_sensitivity(twists)
+        need = (hi - cfg.yaw_gain_min) * float(np.max(sensitivity)) / (2.0 * cfg.gain_gap)
         count = int(min(max(cfg.gains, 1 + math.ceil(need)), cfg.max_gains))
-        return np.linspace(cfg.yaw_gain_min, hi, count)
+        gains = cfg.yaw_gain_min + np.arange(count) * ((hi - cfg.yaw_gain_min) / (count - 1))  # np.linspace, cheaper
+        gains[-1] = hi
+        return gains
 
     def poses(self, twists: np.ndarray, gains: np.ndarray) -> np.ndarray:
-        """Poses (C, G, K + 1, 3) from the start pose (0, 0, 0) for every twist sequence and gain."""
+        """Poses (C, G, K + 1, 3) from the start pose (0, 0, 0) for every twist sequence and gain.
+
+        Each step is the exact arc of its constant twist (as :func:`emos.geometry.integrate_pose`):
+        the body's velocity turns uniformly through ``dth``, so the step's displacement is the
+        chord ``dt sinc(dth / 2)`` along the heading halfway through it (sinc(x) = sin x / x)."""
         dt = self.config.time_step
-        tw = np.repeat(twists[:, None], len(gains), axis=1)  # (C, G, K, 3)
-        tw[..., 2] *= gains[None, :, None]
-        heading = np.concatenate([np.zeros(tw.shape[:2] + (1,)), np.cumsum(tw[..., 2] * dt, axis=-1)], axis=-1)
-        start = np.zeros(tw.shape)
-        start[..., 2] = heading[..., :-1]
-        step = integrate_pose(start, tw, dt)  # displacement of each step, in the start frame
-        out = np.zeros(tw.shape[:2] + (tw.shape[2] + 1, 3))
-        out[..., 1:, :2] = np.cumsum(step[..., :2], axis=-2)
-        out[..., 2] = heading
+        n_c, k = twists.shape[:2]
+        dth = twists[:, None, :, 2] * (gains[None, :, None] * dt)  # (C, G, K) heading change per step
+        out = np.zeros((n_c, len(gains), k + 1, 3))
+        heading = np.cumsum(dth, axis=-1, out=out[..., 1:, 2])
+        mid = heading - 0.5 * dth  # the heading halfway through each step
+        chord = np.sinc(dth * (0.5 / math.pi)) * dt  # numpy's sinc(x) = sin(pi x) / (pi x)
+        c, s = np.cos(mid) * chord, np.sin(mid) * chord
+        vx, vy = twists[:, None, :, 0], twists[:, None, :, 1]
+        np.cumsum(c * vx - s * vy, axis=-1, out=out[..., 1:, 0])
+        np.cumsum(s * vx + c * vy, axis=-1, out=out[..., 1:, 1])
         return out
 
-    def _gain_sensitivity(self, twists: np.ndarray) -> np.ndarray:
+    def _gain_sensitivity(self, twists: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
         """Per sequence (...,): a bound B of how far any footprint point moves per unit of yaw
         gain, at any time of the sequence: B = integral |v| |Theta| dt + R_f max |Theta|
         (Theta: the heading at gain 1, R_f: the footprint's farthest point from the centre)."""
         dt = self.config.time_step
-        heading = np.cumsum(twists[..., 2], axis=-1) * dt  # Theta at the end of each step
-        before = np.concatenate([np.zeros(heading.shape[:-1] + (1,)), heading[..., :-1]], axis=-1)
-        # Theta is linear over a step, so its largest magnitude there is at one of its ends.
-        theta = np.maximum(np.abs(heading), np.abs(before))
-        speed = np.hypot(twists[..., 0], twists[..., 1])
+        end = np.abs(np.cumsum(twists[..., 2], axis=-1) * dt)  # |Theta| at the end of each step
+        # Theta is linear over a step, so its largest magnitude there is at one of its ends (the
+        # first step starts at 0).
+        theta = end.copy()
+        np.maximum(end[..., 1:], end[..., :-1], out=theta[..., 1:])
+        if speed is None:
+            speed = np.hypot(twists[..., 0], twists[..., 1])
         top = np.max(theta, axis=-1) if theta.shape[-1] else np.zeros(theta.shape[:-1])
         bound: np.ndarray = np.sum(speed * theta, axis=-1) * dt + self._reach * top
         return bound
@@ -254,14 +296,17 @@ class SweptFootprint:
         (:meth:`_gain_sensitivity`): d/dg of the position is the integral of v Theta turned a
         quarter, of the body's turn Theta R_f. See docs/safety.md.
         """
+        return self._inflation(twists, gains, self._gain_sensitivity(twists), np.hypot(twists[..., 0], twists[..., 1]))
+
+    def _inflation(self, twists: np.ndarray, gains: np.ndarray, sensitivity: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        """:meth:`inflation` with :meth:`_gain_sensitivity` and the linear speeds (C, K) given."""
         cfg = self.config
         dt = cfg.time_step
         g_hi = float(gains.max())
-        speed = np.hypot(twists[..., 0], twists[..., 1])
         turn = np.abs(twists[..., 2]) * g_hi
         time_gap = 0.5 * np.max(speed + turn * self._reach, axis=1) * dt
         dg = float(gains[1] - gains[0]) if len(gains) > 1 else 0.0
-        gain_gap = 0.5 * dg * self._gain_sensitivity(twists)
+        gain_gap = 0.5 * dg * sensitivity
         total: np.ndarray = cfg.margin + time_gap + gain_gap
         return total
 
@@ -283,40 +328,62 @@ class SweptFootprint:
         circle: np.ndarray = np.hypot(bx, by) - self._radius
         return circle
 
-    def check(self, command: np.ndarray, previous: np.ndarray, points: np.ndarray, lead: float = 0.0,
+    def prepare(self, points: np.ndarray | SweptPoints) -> SweptPoints:
+        """What the check needs of a set of obstacle points (N, 2) that depends on the points
+        alone, computed once (the DriveManager does it once per scan, and every command until the
+        next scan reuses it): the points sorted by their distance from the centre, that distance
+        squared, the homogeneous rows (x, y, 1) that put them in any pose's frame by one product,
+        and their signed distance to the footprint at the start pose."""
+        if isinstance(points, SweptPoints) and points.footprint is self:
+            return points
+        raw = points.points if isinstance(points, SweptPoints) else points
+        pts = np.asarray(raw, dtype=np.float64).reshape(-1, 2)
+        norm2 = np.einsum("ij,ij->i", pts, pts)
+        order = np.argsort(norm2, kind="stable")
+        pts, norm2 = pts[order], norm2[order]
+        homog = np.empty((3, len(pts)))
+        homog[:2] = pts.T
+        homog[2] = 1.0
+        start = self.clearance(np.zeros(3), pts) if len(pts) else np.zeros(0)
+        return SweptPoints(self, pts, norm2, homog, start)
+
+    def check(self, command: np.ndarray, previous: np.ndarray, points: np.ndarray | SweptPoints, lead: float = 0.0,
               history: tuple[np.ndarray, np.ndarray] | None = None) -> SweptCheck:
         """Scale ``command`` (vx, vy, w) so that its predicted sweep, then a stop, touches no point.
 
         ``previous``: the command sent last (the base executes it once the latency has passed);
-        ``points`` (N, 2) obstacle points in the robot frame of the pose they were seen from;
+        ``points`` (N, 2) obstacle points in the robot frame of the pose they were seen from, or
+        what :meth:`prepare` made of them (the same answer, without redoing the per-scan work);
         ``lead`` (s): how long ago that was; ``history``: (send times relative to now, commands)
         of the commands sent over the last ``lead + latency`` s, which drive the robot until
         this one acts (see :meth:`pipe`).
         """
         cmd = np.asarray(command, dtype=np.float64).reshape(3)
         prev = np.asarray(previous, dtype=np.float64).reshape(3)
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        if pts.shape[0] == 0:
+        scan = self.prepare(points)
+        if len(scan.norm2) == 0:
             return FREE  # nothing to touch
         still = not (np.any(np.abs(cmd) > 1e-9) or np.any(np.abs(prev) > 1e-9))
         if still and (history is None or not np.any(np.abs(self.pipe(prev, lead, history)) > 1e-9)):
             return FREE  # standing still, and staying so
-        scales = np.array(self.config.scales + (0.0,))
+        cfg = self.config
+        scales = np.array(cfg.scales + (0.0,))
         tw = self.twists(cmd, prev, lead, scales, history)
-        gains = self.gain_values(tw)
-        inflate = self.inflation(tw, gains)
+        speed = np.hypot(tw[..., 0], tw[..., 1])  # (C, K)
+        sensitivity = self._gain_sensitivity(tw, speed)
+        gains = self._gain_values(tw, sensitivity)
+        inflate = self._inflation(tw, gains, sensitivity, speed)
         # Only points the footprint can reach: within the bounding radius (plus inflation) of
-        # the centre's path, which stays within the path length of the start.
-        speed = np.hypot(tw[..., 0], tw[..., 1])
-        reach = float(np.max(np.sum(speed, axis=1))) * self.config.time_step * (1.0 + 1e-6)
-        near = np.einsum("ij,ij->i", pts, pts) <= (self._radius + float(inflate.max()) + reach) ** 2
-        pts = pts[near]
-        if pts.shape[0] == 0:
+        # the centre's path, which stays within the path length of the start. The points are
+        # sorted by distance from the centre, so those are a prefix.
+        reach = float(np.max(np.sum(speed, axis=1))) * cfg.time_step * (1.0 + 1e-6)
+        n = int(np.searchsorted(scan.norm2, (self._radius + float(inflate.max()) + reach) ** 2, side="right"))
+        if n == 0:
             return FREE
-        start = self.clearance(np.zeros(3), pts)  # (N,)
-        step = np.max(speed, axis=1) * self.config.time_step * _COARSE_STRIDE  # (C,) centre travel between coarse poses
+        homog, norm2, start = scan.homog[:, :n], scan.norm2[:n], scan.start[:n]
+        step = np.max(speed, axis=1) * cfg.time_step * _COARSE_STRIDE  # (C,) centre travel between coarse poses
 
-        hysteresis = np.where(np.arange(len(scales)) == len(scales) - 1, 0.0, self.config.hysteresis)
+        hysteresis = np.where(np.arange(len(scales)) == len(scales) - 1, 0.0, cfg.hysteresis)
         limit = inflate + hysteresis
         # Poses after a candidate's body has stopped repeat its last one: checked once.
         moving = np.any(np.abs(tw) > 1e-12, axis=2)
@@ -329,7 +396,7 @@ class SweptFootprint:
 
         clear_to = -1.0  # the shared poses are known clear within this limit
 
-        def touches(which: list[int]) -> list[tuple[bool, float, bool] | None]:
+        def touches(which: list[int], decisive: int | None = None) -> list[tuple[bool, float, bool] | None]:
             """The candidates ``which`` in one batch: (touches, clearance beyond the margin,
             touches within the shared poses) each."""
             nonlocal clear_to
@@ -338,16 +405,17 @@ class SweptFootprint:
             if 0 < shared < k1 - 1 and float(limit[which].max()) <= clear_to:
                 # Shared poses already found clear within a limit at least as large: from the
                 # last of them on (its clearance then counts from there).
-                found = self._touches(poses[:, :, shared:], pts, start, limit[which], step[which])
+                found = self._touches(poses[:, :, shared:], homog, norm2, start, limit[which], step[which], decisive=decisive)
             else:
-                found = self._touches(poses, pts, start, limit[which], step[which], shared, shared_limit)
+                found = self._touches(poses, homog, norm2, start, limit[which], step[which], shared, shared_limit, decisive)
                 if found[0] is not None and len(which) == 1 and found[0][3]:
                     clear_to = float(limit[which[0]])
             return [None if f is None else (f[0], f[1] + float(hysteresis[i]), f[2]) for f, i in zip(found, which)]
 
-        # The command as asked first (the usual answer), then the stop: if even that touches,
-        # nothing slower helps; then the slower versions together in one batch, the fastest
-        # clear one sent (each answer is checked, none is inferred from another).
+        # The command as asked first (the usual answer); if it touches, the stop and the slower
+        # versions together in one batch (one batch's fixed work instead of two): if even the
+        # stop touches, nothing slower helps (the batch ends as soon as it does), else the
+        # fastest clear slower one is sent (each answer is checked, none is inferred from another).
         first = touches([0])[0]
         if first is None:
             return FREE
@@ -355,23 +423,26 @@ class SweptFootprint:
             return SweptCheck(1.0, first[1])
         if first[2]:  # the stop's own poses touch: no need to roll it out
             return SweptCheck(0.0, first[1], blocked=True)
-        stop = touches([len(scales) - 1])[0]
+        slower = list(range(1, len(scales) - 1))
+        stop, *rest = touches([len(scales) - 1] + slower, decisive=0)
         if stop is not None and stop[0]:
             return SweptCheck(0.0, stop[1], blocked=True)
-        slower = list(range(1, len(scales) - 1))
-        for i, found in zip(slower, touches(slower) if slower else []):
+        for i, found in zip(slower, rest):
             if found is None or not found[0]:
                 return SweptCheck(float(scales[i]), math.inf if found is None else found[1])
         return SweptCheck(0.0, math.inf if stop is None else stop[1])
 
-    def _touches(self, poses: np.ndarray, pts: np.ndarray, start: np.ndarray, limits: np.ndarray,
-                 steps: np.ndarray, shared: int = -1,
-                 shared_limit: float = 0.0) -> list[tuple[bool, float, bool, bool] | None]:
+    def _touches(self, poses: np.ndarray, homog: np.ndarray, norm2: np.ndarray, start: np.ndarray,
+                 limits: np.ndarray, steps: np.ndarray, shared: int = -1,
+                 shared_limit: float = 0.0, decisive: int | None = None) -> list[tuple[bool, float, bool, bool] | None]:
         """Per candidate of ``poses`` (C, G, K + 1, 3): does it bring a point within its
         ``limits`` entry of the footprint (and nearer than it started)? (touches, clearance
         beyond the margin, a touch within ``shared_limit`` at one of the first ``shared`` + 1
         poses, those poses clear within the candidate's limit), or None when no point comes
-        near it.
+        near it. ``homog`` (3, N): the points' rows x, y, 1; ``norm2`` (N,): their squared
+        distance from the start pose's centre; ``start`` (N,): their distance to the footprint there.
+        ``decisive``: a candidate whose touch decides the batch (the stop: then nothing slower
+        is sent), so the rest is skipped once it touches too.
 
         The poses are taken in time order in a few spans (the shared ones first), each against
         only the points near it, and the rest is skipped once every candidate touches (their
@@ -382,60 +453,122 @@ class SweptFootprint:
         # the travel between coarse poses of a coarse pose's centre; coarse pose j covers poses
         # stride * j .. stride * j + stride - 1.
         centres = poses[:, :, ::stride, :2]  # (C, G, J, 2)
+        n_j = centres.shape[2]
         r = self._radius + limits + steps  # (C,)
-        # Squared distances by one product: |p|^2 + |c|^2 - 2 p.c (p: the points, c: the centres).
-        d2 = np.einsum("cgjk,cgjk->cgj", centres, centres)[..., None] - 2.0 * (centres @ pts.T)  # (C, G, J, N)
-        close = np.min(d2, axis=1) <= (r * r)[:, None, None] - np.einsum("ij,ij->i", pts, pts)  # (C, J, N)
+        # Squared distances less |p|^2 by one product: (-2 cx, -2 cy, |c|^2) . (px, py, 1)
+        # (p: the points, c: the centres).
+        rows = np.empty((n_c, n_g, n_j, 3))
+        np.multiply(centres, -2.0, out=rows[..., :2])
+        np.einsum("cgjk,cgjk->cgj", centres, centres, out=rows[..., 2])
+        d2 = (rows.reshape(-1, 3) @ homog).reshape(n_c, n_g, n_j, -1)  # (C, G, J, N)
+        close = np.min(d2, axis=1) <= (r * r)[:, None, None] - norm2  # (C, J, N)
         near_any = close.any(axis=1)  # (C, N)
         out: list[tuple[bool, float, bool, bool] | None] = [None] * n_c
         if not near_any.any():
             return out
-        # Spans of coarse poses: the shared ones (the pipe), then the rest in halves.
-        n_j = centres.shape[2]
+        # Every pose's frame once: rows (c, s, -(c x + s y)) and (-s, c, s x - c y) give a
+        # point's body x and y at the pose by one product with its (x, y, 1).
+        c, s = np.cos(poses[..., 2]), np.sin(poses[..., 2])
+        x, y = poses[..., 0], poses[..., 1]
+        frames = np.empty((n_c, n_g, k1, 2, 3))
+        frames[..., 0, 0] = c
+        frames[..., 0, 1] = s
+        frames[..., 0, 2] = -(c * x + s * y)
+        frames[..., 1, 0] = -s
+        frames[..., 1, 1] = c
+        frames[..., 1, 2] = s * x - c * y
+        # Spans of coarse poses: the shared ones (the pipe), then the rest in parts.
         cut = min(max(shared, 0) // stride + 1, n_j)
-        mid = cut + (n_j - cut + 1) // 2
-        spans = [(a, b) for a, b in ((0, cut), (cut, mid), (mid, n_j)) if b > a]
+        edges = [0] + [cut + ((n_j - cut) * i + _PARTS - 1) // _PARTS for i in range(_PARTS + 1)]
+        spans = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        # Per span, the points near any of its coarse poses (of any candidate and gain).
+        span_points = np.logical_or.reduceat(close.any(axis=0), [a for a, _ in spans], axis=0)  # (spans, N)
+        # Touching: within the limit and nearer than the point started.
+        threshold = np.minimum(limits[:, None], start - _TOL)  # (C, N)
         hit = np.zeros(n_c, dtype=bool)
-        early = np.zeros(n_c, dtype=bool)
-        head_hit = np.zeros(n_c, dtype=bool)
-        low = np.full(n_c, math.inf)
-        below = start - _TOL
-        for a, b in spans:
-            cand = np.nonzero(close[:, a:b].any(axis=(0, 1)))[0]
+        early = head_hit = hit
+        lows = []
+        for (a, b), near_span in zip(spans, span_points):
+            cand = np.flatnonzero(near_span)
             if cand.size == 0:
                 continue
-            span = poses[:, :, a * stride:min(b * stride, k1)]  # (C, G, k, 3)
-            d = self._box_distance(span.reshape(-1, 3), pts[cand]).reshape(span.shape[:3] + (len(cand),))
-            low = np.minimum(low, np.min(d, axis=(1, 2, 3)) - limits + self.config.margin)
-            # Touching: within the limit and nearer than the point started.
-            hit |= np.any(d < np.minimum(limits[:, None], below[cand])[:, None, None, :], axis=(1, 2, 3))
-            if a == 0 and shared >= 0:
-                head = d[:, :, :shared + 1]
-                early |= np.any(head < np.minimum(shared_limit, below[cand]), axis=(1, 2, 3))
-                head_hit |= np.any(head < np.minimum(limits[:, None], below[cand])[:, None, None, :], axis=(1, 2, 3))
-            if hit.all():
+            head = shared + 1 if a == 0 and shared >= 0 else 0
+            # (C, n) each: the least distance over the span's poses, and over the shared ones
+            least, least_head = self._least_distance(frames[:, :, a * stride:b * stride], homog[:, cand], head)
+            lows.append(np.min(least, axis=1))
+            thr = threshold[:, cand]
+            hit = hit | np.any(least < thr, axis=1)
+            if least_head is not None:
+                early = np.any(least_head < np.minimum(shared_limit, start[cand] - _TOL), axis=1)
+                head_hit = np.any(least_head < thr, axis=1)
+            if hit.all() or (decisive is not None and hit[decisive]):
                 break
+        low = (np.min(lows, axis=0) if lows else np.full(n_c, math.inf)) - limits + self.config.margin
         # The first span, which holds the shared poses, is always looked at (or no point is near it).
         head_clear = ~head_hit if shared >= 0 else np.zeros(n_c, dtype=bool)
-        for i in range(n_c):
-            if near_any[i].any():
-                out[i] = (bool(hit[i]), float(low[i]), bool(early[i]), bool(head_clear[i]))
+        for i in np.flatnonzero(near_any.any(axis=1)):
+            out[i] = (bool(hit[i]), float(low[i]), bool(early[i]), bool(head_clear[i]))
         return out
 
-    def _box_distance(self, poses: np.ndarray, pts: np.ndarray) -> np.ndarray:
-        """Distance (M, n) of each point to the footprint at each pose (M, 3), negative inside:
-        :meth:`clearance` by one (2M, 2) @ (2, n) product for every point in every body frame."""
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        rot = np.empty((2 * len(poses), 2))
-        rot[0::2, 0], rot[0::2, 1], rot[1::2, 0], rot[1::2, 1] = c, s, -s, c
-        body = (rot @ pts.T).reshape(len(poses), 2, -1)
-        off = rot.reshape(len(poses), 2, 2) @ poses[:, :2, None]  # (M, 2, 1): the pose's own position, turned
-        bx = body[:, 0] - off[:, 0]
-        by = body[:, 1] - off[:, 1]
+    def _least_distance(self, frames: np.ndarray, homog: np.ndarray, head: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+        """The least signed distance (C, n) of each point to the footprint over the poses of
+        each candidate (negative: inside at some pose), and the same over the first ``head``
+        poses (None when 0). ``frames`` (C, G, k, 2, 3): each pose's rows that give a point's body
+        x and y from its (x, y, 1), ``homog`` (3, n): the points' rows x, y, 1. :meth:`clearance`'s
+        distance; for a box without a square root per pose: the least squared distance outside,
+        its root taken once per point."""
+        n_c, n_g, k = frames.shape[:3]
+        body = (frames.reshape(-1, 3) @ homog).reshape(n_c, n_g, k, 2, -1)  # (C, G, k, 2, n)
         if not self._box:
-            circle: np.ndarray = np.hypot(bx, by) - self._radius
-            return circle
-        qx = np.abs(bx) - self._half[0]
-        qy = np.abs(by) - self._half[1]
-        box: np.ndarray = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)) + np.minimum(np.maximum(qx, qy), 0.0)
-        return box
+            circle = np.hypot(body[..., 0, :], body[..., 1, :]) - self._radius
+            return np.min(circle, axis=(1, 2)), (np.min(circle[:, :, :head], axis=(1, 2)) if head else None)
+        q = np.abs(body)
+        q -= self._half_col  # beyond the half extents (negative: within)
+        depth = np.maximum(q[..., 0, :], q[..., 1, :])  # (C, G, k, n): negative inside the box (minus the depth)
+        np.maximum(q, 0.0, out=q)
+        q *= q
+        sq = q[..., 0, :] + q[..., 1, :]  # squared distance outside (0 inside)
+
+        def least(upto: int | None) -> np.ndarray:
+            inner = np.min(depth[:, :, :upto], axis=(1, 2))
+            return np.where(inner < 0.0, inner, np.sqrt(np.min(sq[:, :, :upto], axis=(1, 2))))
+
+        return least(None), (least(head) if head else None)
+
+
+@attrs.define(frozen=True, eq=False)
+class SweptPoints:
+    """Obstacle points prepared for one :class:`SweptFootprint` (:meth:`SweptFootprint.prepare`):
+    ``points`` (N, 2) sorted by distance from the centre, ``norm2`` that distance squared,
+    ``homog`` (3, N) the rows x, y, 1, ``start`` the signed distance of each to the footprint
+    at the start pose. Made once per scan and read only."""
+
+    footprint: SweptFootprint
+    points: np.ndarray
+    norm2: np.ndarray
+    homog: np.ndarray
+    start: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.norm2)
+
+
+class ScanCache:
+    """The prepared points of the latest scan, rebuilt only when a new scan (or a new ``extra``
+    key, e.g. whether the robot's pose was known) comes: ``get(scan_message, extra, build)``
+    returns what ``build()`` made for that message. Messages are compared by identity (a
+    component keeps the latest message object until the next arrives); None is never reused."""
+
+    def __init__(self) -> None:
+        self._key: object = None
+        self._extra: object = None
+        self._value: SweptPoints | None = None
+
+    def get(self, message: object, extra: object, build: Callable[[], SweptPoints]) -> SweptPoints:
+        if self._value is None or message is None or message is not self._key or extra != self._extra:
+            self._value = build()
+            self._key, self._extra = message, extra
+        return self._value
+
+    def clear(self) -> None:
+        self._key, self._extra, self._value = None, None, None
