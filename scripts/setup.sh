@@ -41,6 +41,16 @@ if [ $want_test = 1 ]; then
   # with LD_LIBRARY_PATH set. EMOS loads the ROS 2 libraries itself where it needs them
   # (emos/interop/ros2/env.py), so the rest of the suite's processes stay as they are without ROS.
   $PY -m pip uninstall -y -q ros-wheels-bootstrapper >/dev/null 2>&1 || true
+  # ROS 2 Kilted for tests/ros2/test_kilted.py: its wheels replace Jazzy's `ros-rclpy`, so they get
+  # a venv of their own that sees this Python's packages (EMOS, numpy) and shadows its rclpy.
+  kilted=${EMOS_ROS2_KILTED_VENV:-$HOME/.cache/emos/ros2-kilted}
+  if ! "$kilted/bin/python" -c "import importlib.metadata as m; m.version('ros-kilted-rclpy')" >/dev/null 2>&1; then
+    echo "setup: ROS 2 Kilted wheels into $kilted (for the Kilted test)"
+    $PY -m venv --system-site-packages "$kilted"
+    "$kilted/bin/python" -m pip install -q ros-kilted-rclpy==9.1.2 ros-kilted-rmw-fastrtps-cpp ros-kilted-std-msgs \
+      2> >(grep -v "is ignored: it is neither" >&2)
+    "$kilted/bin/python" -m pip uninstall -y -q ros-wheels-bootstrapper >/dev/null 2>&1 || true
+  fi
 fi
 # Bytecode now, once: every process of a run imports much of the package, and an environment
 # with PYTHONDONTWRITEBYTECODE=1 would otherwise compile it from source in each one (about half

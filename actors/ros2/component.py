@@ -3,7 +3,8 @@
 ``emos run --ros2`` (or a recipe's ``emos.transport.select.use_ros2(...)``) adds one to the run
 as its own supervised group; a recipe may also add it itself like any component. When it dies
 (SIGKILL included) the supervisor restarts it and the bridged streams resume; it talks UDP only
-(Fast DDS's shared-memory files would outlive a SIGKILL).
+by default (Fast DDS's shared-memory files would outlive a SIGKILL; ``fastdds="shm"`` trades
+that for speed with large messages, docs/ros2.md).
 """
 from __future__ import annotations
 
@@ -39,6 +40,13 @@ def _qos(instance: Any, attribute: Any, value: Any) -> None:
         as_qos(q, f"Ros2BridgeConfig.qos[{topic!r}]")
 
 
+def _fastdds(instance: Any, attribute: Any, value: Any) -> None:
+    from emos.interop.ros2.bridge import FASTDDS_TRANSPORTS
+
+    if value not in FASTDDS_TRANSPORTS:
+        raise ValueError(f"Ros2BridgeConfig.fastdds must be one of {', '.join(FASTDDS_TRANSPORTS)}, got {value!r}")
+
+
 def _node_name(instance: Any, attribute: Any, value: Any) -> None:
     import re
 
@@ -50,13 +58,16 @@ def _node_name(instance: Any, attribute: Any, value: Any) -> None:
 class Ros2BridgeConfig(BaseComponentConfig):
     """``topics``: names or wildcards to bridge (empty: every topic of shared type on both sides).
     ``domain_id``: the ROS 2 domain (None: ``$ROS_DOMAIN_ID``, else 0). ``qos``: per topic, a
-    QoSConfig or ``"default"`` / ``"sensor_data"`` / ``"latched"`` (docs/ros2.md)."""
+    QoSConfig or ``"default"`` / ``"sensor_data"`` / ``"latched"`` (docs/ros2.md). ``fastdds``:
+    ``"udp"`` (loopback UDP only: nothing left behind by a SIGKILL) or ``"shm"`` (Fast DDS's
+    default transports, shared memory towards local nodes: faster for large messages)."""
 
     loop_rate: float = field(default=2.0, validator=validators.in_range(min_value=1e-3, max_value=1e3))
     topics: list = field(factory=list, validator=_topics)
     domain_id: int | None = field(default=None, validator=_domain)
     node_name: str = field(default="emos_bridge", validator=_node_name)
     qos: dict = field(factory=dict, validator=_qos)
+    fastdds: str = field(default="udp", validator=_fastdds)
 
 
 def config_from_environment() -> Ros2BridgeConfig:
@@ -86,7 +97,8 @@ class Ros2BridgeComponent(BaseComponent):
         from emos.interop.ros2.bridge import Ros2Bridge
 
         cfg = self.config
-        self.bridge = Ros2Bridge(self.node.ctx, cfg.topics or None, domain_id=cfg.domain_id, node_name=cfg.node_name, qos=cfg.qos)
+        self.bridge = Ros2Bridge(self.node.ctx, cfg.topics or None, domain_id=cfg.domain_id, node_name=cfg.node_name, qos=cfg.qos,
+                                 fastdds=cfg.fastdds)
         self.get_logger().info("ROS 2: %s, domain %d, node /%s", self.bridge.install.describe(), self.bridge.domain_id, cfg.node_name)
 
     def _execution_step(self, **kwargs: Any) -> None:

@@ -97,7 +97,9 @@ def pinger_class(plan: list[tuple[int, int]], result_path: str, cpu: int | None,
             if self.finished:
                 return
             waited = (time.perf_counter_ns() - self.sent_at) / 1e9
-            if not self.rtts_ns and waited > _STARTUP_RESEND_S:
+            # Backing off (0.2, 0.4, ... 6.4 s): a large payload whose first round trip takes
+            # longer than 0.2 s must not be re-sent in a flood (8 MiB through a loaded bridge).
+            if not self.rtts_ns and waited > _STARTUP_RESEND_S * 2 ** min(self.resends, 5):
                 # The echo may not have been listening yet. A new number, so that a late reply
                 # to the abandoned ping is recognised as such, not taken as a sample.
                 self.resends += 1

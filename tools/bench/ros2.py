@@ -7,7 +7,9 @@ Two pairs, each a ping and its echo, ``std_msgs/msg/UInt8MultiArray`` of ``paylo
   objects, Fast DDS with its default transports: shared memory between two local processes).
 * ``emos-rclpy``: the pinger is an EMOS component (Event-triggered by the reply, default QoS) in a
   supervised System beside the run's ``Ros2BridgeComponent``; the echo is the same rclpy program.
-  Each message goes ring -> bridge -> DDS (UDP on loopback, the bridge's default) -> echo, and back.
+  Each message goes ring -> bridge -> DDS -> echo, and back. The bridge talks loopback UDP (its
+  default, docs/ros2.md) unless ``--fastdds shm``, where it uses Fast DDS's default transports
+  (shared memory between local processes) as the rclpy nodes do.
 
 The echo republishes the message object it received (deserialize, serialize), as a user's relay
 node would. The pinger stamps a sequence number in the first 8 bytes and takes the time when the
@@ -20,7 +22,10 @@ CPU per message (us of user + system CPU per round trip, over the sampled round 
 ``cpu_us_per_msg_ros`` is the rclpy echo's (the same program in both pairs);
 ``cpu_us_per_msg_emos`` is the EMOS side's, the pinging component plus the bridge (null for
 ``rclpy-rclpy``); ``cpu_us_per_msg_initiator`` is the pinging side's in both pairs (the rclpy
-pinger, or the component plus the bridge), so the two pairs compare side by side.
+pinger, or the component plus the bridge), so the two pairs compare side by side. The bridge's
+process is found once, when the warm-up ends, and must be the same process (pid and start time)
+when the phase ends: a bridge not found, or restarted during the phase, makes the row an error
+instead of a CPU figure that leaves it out or counts another process's life.
 
 Discovery stays on this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` unless set) on a
 random domain (``--ros-domain-id``), so no other ROS 2 node is met.
@@ -59,9 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pairs", default=",".join(PAIRS), help=f"comma-separated, from {','.join(PAIRS)}")
     parser.add_argument("--messages", type=int, default=200, help="round trips per size and pair (fewer for large payloads)")
     parser.add_argument("--cpus", default=_default_cpus(), help="pin the two ends to these CPUs, 'A,B', or 'none' (as emos bench ipc)")
-    parser.add_argument("--fastdds", choices=["default", "udp"], default="default",
-                        help="the rclpy nodes' Fast DDS transports: default (shared memory between local processes; the bridge talks "
-                             "UDP regardless, docs/ros2.md) or udp (every participant, the bridge included, on loopback UDP: like for like)")
+    parser.add_argument("--fastdds", choices=["default", "udp", "shm"], default="default",
+                        help="Fast DDS transports: default (rclpy nodes: shared memory between local processes; the bridge: its "
+                             "default, loopback UDP), udp (every participant on loopback UDP: like for like) or shm (every "
+                             "participant, the bridge included, on Fast DDS's default transports: like for like)")
     parser.add_argument("--ros-domain-id", type=int, default=None, help="ROS 2 domain of the benchmark's nodes (default: a random one in 20..99)")
 
 
@@ -159,8 +165,10 @@ def _peer_ping(domain: int, cpu: int | None, plan: list[tuple[int, int]], echo_p
                             cpu0 = (time.process_time(), _cpu_s(echo_pid))
                         break
                     waited = (time.perf_counter_ns() - sent_at) / 1e9
-                    if not rtts and waited > _STARTUP_RESEND_S:
-                        abandoned.add(seq)  # the echo may not be matched yet: a new number
+                    if not rtts and waited > _STARTUP_RESEND_S * 2 ** min(len(abandoned), 5):
+                        # The echo may not be matched yet: a new number. Backing off, as the
+                        # component pinger does: a slow first 8 MiB round trip is no flood.
+                        abandoned.add(seq)
                         break
                     if rtts and waited > _REPLY_TIMEOUT_S:
                         error = f"no reply to ping {seq} within {_REPLY_TIMEOUT_S:g} s"
@@ -191,42 +199,64 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
     Pinger = pinger_class(plan, result_path, cpu, ping_topic=PING)
 
     class Ping(Pinger):  # type: ignore[valid-type,misc]  # a class made at run time
-        def _bridge_pid(self) -> int | None:
-            # The bridge is a worker of the same System; CPU per message counts it as EMOS's.
+        bridge: Any = None  # the bridge's psutil.Process, found when a phase's warm-up ends
+
+        def _find_bridge(self) -> Any:
+            """The bridge: a worker of the same System, whose CPU counts as EMOS's. A child that
+            ends during the walk is skipped (it is not the bridge, which runs throughout)."""
             system = int(os.environ.get("EMOS_BENCH_SYSTEM_PID", "0") or 0)
             try:
-                for p in psutil.Process(system).children(recursive=True):
-                    if p.name().startswith("emos:ros2_bri"):
-                        return int(p.pid)
+                children = psutil.Process(system).children(recursive=True)
             except psutil.Error:
-                pass
+                return None
+            for p in children:
+                try:
+                    if p.name().startswith("emos:ros2_bri"):
+                        p.cpu_times()  # readable now, or skipped
+                        return p
+                except psutil.Error:
+                    continue
             return None
 
         def _cpu(self) -> tuple[float, float, float]:
-            bridge = self._bridge_pid()
-            return time.process_time(), _cpu_s(bridge) if bridge else 0.0, _cpu_s(echo_pid)
+            t = self.bridge.cpu_times()  # psutil.Process checks it is the same process (pid and start time)
+            return time.process_time(), float(t.user + t.system), _cpu_s(echo_pid)
 
         def _warmed_up(self) -> None:
+            self.bridge, self.cpu0, self.cpu_error = self._find_bridge(), None, None
+            if self.bridge is None:
+                self.cpu_error = "the ROS 2 bridge's process was not found among the benchmark System's workers"
+                return
             self.cpu0 = self._cpu()
 
         def _row(self, half_us: list[float]) -> dict[str, Any]:
-            cpu1 = self._cpu()
-            return {"payload_bytes": int(self.payload.nbytes), "half_us": half_us,
-                    "cpu_initiator_s": (cpu1[0] - self.cpu0[0]) + (cpu1[1] - self.cpu0[1]), "cpu_ros_s": cpu1[2] - self.cpu0[2],
-                    "seq_mismatches": self.mismatches, "startup_resends": self.resends}
+            error = self.cpu_error
+            cpu1 = None
+            if error is None:
+                try:
+                    cpu1 = self._cpu()
+                except psutil.Error as exc:  # NoSuchProcess also when the pid was reused
+                    error = f"the ROS 2 bridge (pid {self.bridge.pid}) ended or was restarted during the phase ({type(exc).__name__})"
+            row = {"payload_bytes": int(self.payload.nbytes), "half_us": half_us, "seq_mismatches": self.mismatches,
+                   "startup_resends": self.resends, "error": error}
+            if cpu1 is not None and self.cpu0 is not None:
+                row.update(cpu_initiator_s=(cpu1[0] - self.cpu0[0]) + (cpu1[1] - self.cpu0[1]), cpu_ros_s=cpu1[2] - self.cpu0[2],
+                           cpu_bridge_s=cpu1[1] - self.cpu0[1])
+            return row
 
     topic = {"msg_type": "UInt8MultiArray"}  # default QoS: what recipes get
     return Ping(component_name="bench_ping", inputs=[Topic(name=PONG, **topic)], outputs=[Topic(name=PING, **topic)], trigger=Topic(name=PONG, **topic))
 
 
-def _emos_system_main(plan: list[tuple[int, int]], result_path: str, cpu: int | None, echo_pid: int, domain: int, allowed: set[int]) -> None:
+def _emos_system_main(plan: list[tuple[int, int]], result_path: str, cpu: int | None, echo_pid: int, domain: int, allowed: set[int],
+                      fastdds: str = "udp") -> None:
     """The supervised System (the Ping component and the bridge), in a process of its own."""
     from emos.actors.ros2 import Ros2BridgeComponent, Ros2BridgeConfig
     from emos.supervisor.system import Package, System, SystemOptions
 
     os.sched_setaffinity(0, allowed)
     os.environ["EMOS_BENCH_SYSTEM_PID"] = str(os.getpid())
-    bridge = Ros2BridgeComponent(config=Ros2BridgeConfig(topics=[PING, PONG], domain_id=domain))
+    bridge = Ros2BridgeComponent(config=Ros2BridgeConfig(topics=[PING, PONG], domain_id=domain, fastdds=fastdds))
     system = System([Package(components=[_emos_ping(plan, result_path, cpu, echo_pid)], multiprocessing=True),
                      Package(components=[bridge], multiprocessing=True)], SystemOptions(heartbeat_timeout=10.0))
     os._exit(system.run())
@@ -287,12 +317,14 @@ def _row(pair: str, raw: dict[str, Any]) -> dict[str, Any]:
     per_msg = lambda s: round(s * 1e6 / n, 1)  # noqa: E731 - seconds over n round trips -> us per message
     return {"pair": pair, "payload_bytes": raw["payload_bytes"], "p50_us": round(p["p50"], 1), "p99_us": round(p["p99"], 1),
             "cpu_us_per_msg_emos": per_msg(raw["cpu_initiator_s"]) if pair == "emos-rclpy" else None,
+            "cpu_us_per_msg_bridge": per_msg(raw["cpu_bridge_s"]) if pair == "emos-rclpy" else None,
             "cpu_us_per_msg_ros": per_msg(raw["cpu_ros_s"]), "cpu_us_per_msg_initiator": per_msg(raw["cpu_initiator_s"]),
             "round_trips": n, "seq_mismatches": raw["seq_mismatches"]}
 
 
-def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int, int] | None) -> tuple[list[dict[str, Any]], str | None]:
-    """One row per size, and an error or None."""
+def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int, int] | None,
+            bridge_fastdds: str = "udp") -> tuple[list[dict[str, Any]], str | None]:
+    """One row per size, and an error or None. ``bridge_fastdds``: the bridge's transports."""
     from emos.tools.bench import ipc_common
     from emos.tools.bench.ipc_component import await_result
 
@@ -300,7 +332,7 @@ def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int
     try:
         if echo.line(_READY_TIMEOUT_S) != "ready":
             return [], "the rclpy echo did not start"
-        budget = _READY_TIMEOUT_S + sum(n for _, n in plan) * 0.2
+        budget = 2 * _READY_TIMEOUT_S + sum(n for _, n in plan) * 0.5  # bounds a hang only: a loaded machine starts slowly
         if pair == "rclpy-rclpy":
             ping = _Peer("ping", domain, "none" if cpus is None else cpus[0], json.dumps(plan), echo.proc.pid)
             rows: list[dict[str, Any]] = []
@@ -317,8 +349,11 @@ def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int
         with tempfile.TemporaryDirectory(prefix="emos-bench-ros2-") as tmp:
             result_path = str(Path(tmp) / "result.json")
             proc = ipc_common.start_child(_emos_system_main, (plan, result_path, None if cpus is None else cpus[0], echo.proc.pid, domain,
-                                                               os.sched_getaffinity(0)), "emos:bench-sys")
+                                                               os.sched_getaffinity(0), bridge_fastdds), "emos:bench-sys")
             raws, error = await_result({"benchmark system": proc}, result_path, budget)
+        failed = [raw for raw in raws if raw.get("error")]
+        if failed:
+            return [_row(pair, raw) for raw in raws[: raws.index(failed[0])]], f"{failed[0]['payload_bytes']} B: {failed[0]['error']}"
         return [_row(pair, raw) for raw in raws], error
     finally:
         echo.stop()
@@ -380,7 +415,7 @@ def _run_pairs(args: argparse.Namespace, install: Any, sizes: list[int], pairs: 
     results: list[dict[str, Any]] = []
     errors: dict[str, str] = {}
     for pair in pairs:
-        rows, error = measure(pair, plan, domain, cpus)
+        rows, error = measure(pair, plan, domain, cpus, "shm" if args.fastdds == "shm" else "udp")
         results += rows
         if error:
             errors[pair] = error

@@ -23,7 +23,10 @@ How
   rclpy message objects).
 * ROS 2 -> EMOS: every wanted ROS 2 topic with a publisher other than this bridge, whose type has
   an EMOS class, gets a raw rclpy subscription (bytes) and an EMOS publisher (ring) of the same
-  name; EMOS components subscribe to it as to any topic.
+  name; EMOS components subscribe to it as to any topic. These subscriptions are waited on and
+  taken by the bridge's own reader thread (one wait set of just them), not by rclpy's executor,
+  which rebuilds its whole wait set in Python about three times per sample and hands each one to
+  a pool thread (measured: 3.2 executor passes and 3.2 pool hand-offs per 8 B sample).
 * A topic goes one way only: the side that had a publisher first. ``/rosout`` and
   ``/parameter_events`` are bridged only when named.
 * Bad input is dropped with one rate-limited line naming the topic and the types: a ROS 2 type
@@ -62,12 +65,18 @@ _limited = RateLimitedLog(log, interval=10.0)
 
 PUBLISHER_ID = "ros2_bridge"  # the bridge's rings: never bridged back out
 ROS_INTERNAL = frozenset({"/rosout", "/parameter_events"})
-# Fast DDS's shared-memory transport leaves /dev/shm/fastrtps_* and sem.fastrtps_* behind when a
-# process is SIGKILLed (they carry no pid, so a restarted bridge cannot tell its own from a live
-# node's). The bridge talks UDP only instead: a killed bridge leaves nothing, at the cost of one
-# loopback copy per message. See _udp_only().
+# Fast DDS transports (Ros2Bridge's ``fastdds``): "udp" (the default), loopback UDP only: a
+# SIGKILLed bridge leaves no file, at the cost of UDP's copies and fragments (2-4x slower than
+# shared memory for large messages, docs/ros2.md); "shm", Fast DDS's defaults (shared memory
+# between local processes, as ROS 2 nodes on this host use). Fast DDS leaves /dev/shm/fastrtps_*
+# behind when a process is SIGKILLed; with "shm" the bridge removes the segments of dead
+# participants when it starts (fastdds_shm.py), but not yet the port segments that live peers
+# still sending to the dead participant re-create (seen in tests/ros2/test_bridge.py's SIGKILL
+# test), which is why "udp" stays the default.
+FASTDDS_TRANSPORTS = ("udp", "shm")
 ENV_FASTDDS_TRANSPORTS = "FASTDDS_BUILTIN_TRANSPORTS"
-ENV_FASTDDS_PROFILES = "FASTRTPS_DEFAULT_PROFILES_FILE"
+ENV_FASTDDS_PROFILES = "FASTRTPS_DEFAULT_PROFILES_FILE"  # Fast DDS 2 (Jazzy and older)
+ENV_FASTDDS3_PROFILES = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS 3 (Kilted on): the old name is deprecated there
 _UDP_LOOPBACK_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <!-- Written by the EMOS ROS 2 bridge: UDP on the loopback interface only, no shared memory. -->
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
@@ -88,6 +97,24 @@ _UDP_LOOPBACK_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
+def _choose_transports(ctx: RunContext, fastdds: str) -> str:
+    """Set up this process's Fast DDS transports for ``fastdds`` (``FASTDDS_TRANSPORTS``);
+    returns what was chosen, for the log."""
+    if fastdds not in FASTDDS_TRANSPORTS:
+        raise ValueError(f"ROS 2 bridge: fastdds must be one of {FASTDDS_TRANSPORTS}, got {fastdds!r}")
+    if fastdds == "udp":
+        return _udp_only(ctx)
+    users = os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
+    if users:
+        return f"Fast DDS profile {users} (the user's)"
+    from emos.interop.ros2.fastdds_shm import remove_leftovers
+
+    removed = remove_leftovers()
+    if removed:
+        log.info("ROS 2 bridge: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
+    return "Fast DDS default transports (shared memory between local processes)"
+
+
 def _udp_only(ctx: RunContext) -> str:
     """Make this process's Fast DDS participant use UDP only; returns how, for the log.
 
@@ -96,8 +123,9 @@ def _udp_only(ctx: RunContext) -> str:
     rmw_fastrtps installs its own transports, shared memory included. In that case we give Fast
     DDS an XML profile of UDP on 127.0.0.1 (the same reach) and take the variables out of this
     process's environment. A user's own Fast DDS profile file is used as it is."""
-    if os.environ.get(ENV_FASTDDS_PROFILES):
-        return f"Fast DDS profile {os.environ[ENV_FASTDDS_PROFILES]} (the user's)"
+    users = os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
+    if users:
+        return f"Fast DDS profile {users} (the user's)"
     localhost = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST" or os.environ.get("ROS_LOCALHOST_ONLY") == "1"
     if not localhost:
         os.environ.setdefault(ENV_FASTDDS_TRANSPORTS, "UDPv4")
@@ -106,7 +134,11 @@ def _udp_only(ctx: RunContext) -> str:
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(_UDP_LOOPBACK_PROFILE)
     os.replace(tmp, path)
-    os.environ[ENV_FASTDDS_PROFILES] = str(path)
+    from emos.interop.ros2.env import find
+
+    install = find()
+    fastdds2 = install is None or install.distro in ("humble", "iron", "jazzy")
+    os.environ[ENV_FASTDDS_PROFILES if fastdds2 else ENV_FASTDDS3_PROFILES] = str(path)
     os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
     return "UDP on 127.0.0.1 only (discovery range LOCALHOST)"
@@ -129,19 +161,130 @@ class _In:
         self.received = self.errors = 0
 
 
+_READER_WAIT_S = 0.5  # the reader's wait when nothing comes: it only bounds how late it sees _stop
+
+
+def _run_to_end(coroutine: Any) -> None:
+    """Run an rclpy event handler's ``execute`` coroutine, which awaits nothing (its callback
+    is a plain function), to its end in this thread."""
+    try:
+        coroutine.send(None)
+    except StopIteration:
+        return
+    coroutine.close()  # it awaited something: not ours to drive
+    log.warning("ROS 2 bridge: a QoS event handler waited for something; its event was dropped")
+
+
+class _Reader:
+    """Waits on a set of raw rclpy subscriptions and their QoS event handlers, and takes their
+    samples and events, in the calling thread.
+
+    The subscriptions are created on the bridge's node in :attr:`group`, which rclpy's executor
+    never runs: it leaves the subscriptions and their event handlers out of its wait set. Both
+    must be waited on in one place: while the executor waited on the events and this reader on
+    the data, each woke the other's wait (apparently rmw_fastrtps's one listener per subscription,
+    for its data and its events, wakes one wait set at a time) (measured at 8 B: the executor thread
+    at 21 % of a CPU, 1.5-1.8 ms of bridge CPU per round trip, p50 2-3 ms under load; with one
+    wait set, 0.42 ms and 0.39 ms). rclpy has no public wait-set API: this uses the one
+    ``rclpy.wait_for_message`` and the executor use (``WaitSet``, ``take_message``, the
+    ``Waitable`` methods of an event handler), unchanged from Humble to Kilted."""
+
+    def __init__(self, context: Any):
+        from rclpy import guard_condition
+        from rclpy.callback_groups import CallbackGroup
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+
+        class _TakenByReader(CallbackGroup):
+            def can_execute(self, entity: Any) -> bool:
+                return False  # neither the subscriptions nor their event handlers: see the class doc
+
+            def beginning_execution(self, entity: Any) -> bool:
+                return False
+
+            def ending_execution(self, entity: Any) -> None:
+                pass
+
+        self.context = context
+        self.group = _TakenByReader()
+        self._rclpy = rclpy_implementation
+        make_guard: Any = guard_condition.GuardCondition  # rclpy's code is untyped
+        self._wake: Any = make_guard(None, None, context=context)  # on no node: the executor ignores it
+        self._wait_set: Any = None
+        self._size = (-1, -1)
+
+    def wake(self) -> None:
+        """End the current wait (the set of subscriptions changed, or the bridge stops)."""
+        try:
+            self._wake.trigger()
+        except Exception:  # destroyed: closing
+            pass
+
+    def wait(self, subs: list[Any], timeout_s: float) -> list[int] | None:
+        """Wait until one of ``subs`` has a sample or an event (or :meth:`wake`, or
+        ``timeout_s``); handles the events, returns the indexes of the subscriptions that have a
+        sample, or None if the wait timed out."""
+        from contextlib import ExitStack
+
+        events = [e for sub in subs for e in sub.event_handlers]
+        if self._size != (len(subs), len(events)):
+            self._wait_set = self._rclpy.WaitSet(len(subs), 1, 0, 0, 0, len(events), self.context.handle)
+            self._size = (len(subs), len(events))
+        wait_set = self._wait_set
+        with ExitStack() as held:  # rclpy's handles must not be destroyed while waited on
+            for sub in subs:
+                held.enter_context(sub.handle)
+            for event in events:
+                held.enter_context(event)
+            held.enter_context(self._wake.handle)
+            held.enter_context(self.context.handle)
+            wait_set.clear_entities()
+            for sub in subs:
+                wait_set.add_subscription(sub.handle)
+            for event in events:
+                event.add_to_wait_set(wait_set)
+            wait_set.add_guard_condition(self._wake.handle)
+            wait_set.wait(int(timeout_s * 1e9))
+            fired = [e for e in events if e.is_ready(wait_set)]
+            ready = wait_set.get_ready_entities("subscription")
+            woken = bool(ready or fired or wait_set.get_ready_entities("guard_condition"))
+        for event in fired:
+            _run_to_end(event.execute(event.take_data()))
+        if not woken:
+            return None
+        return [i for i, sub in enumerate(subs) if sub.handle.pointer in ready] if ready else []
+
+    @staticmethod
+    def take_all(sub: Any) -> Any:
+        """Every sample ``sub`` holds now, as CDR bytes."""
+        with sub.handle:
+            while True:
+                got = sub.handle.take_message(sub.msg_type, True)
+                if got is None:
+                    return
+                yield got[0]
+
+    def close(self) -> None:
+        self._wake.destroy()
+
+
 class Ros2Bridge:
     """Bridges the wanted topics of the run ``ctx`` to the ROS 2 graph of ``domain_id``.
 
     ``topics``: names or wildcards (``None`` or empty: all). ``qos``: per topic name, a QoSConfig,
-    its fields or a profile name (:mod:`emos.interop.ros2.qos`). Runs two threads: rclpy's
-    executor (ROS 2 -> EMOS) and the forwarder (EMOS -> ROS 2, and discovery every
-    ``discover_every`` s). :attr:`failure` is set if either dies.
+    its fields or a profile name (:mod:`emos.interop.ros2.qos`). ``fastdds``: ``"udp"`` or
+    ``"shm"`` (``FASTDDS_TRANSPORTS``). Runs three threads: the reader (ROS 2 -> EMOS topics),
+    rclpy's executor (services, actions, QoS events) and the forwarder (EMOS -> ROS 2, and
+    discovery every ``discover_every`` s). :attr:`failure` is set if one dies. :attr:`wakeups`
+    counts the reader's and the forwarder's wake-ups (time-outs are not counted), and those that
+    found nothing to move: a loop that spins shows there, per message
+    (tests/ros2/test_bridge_cost.py).
     """
 
     def __init__(self, ctx: RunContext, topics: Iterable[str] | None = None, domain_id: int | None = None,
-                 node_name: str = "emos_bridge", qos: dict[str, Any] | None = None, discover_every: float = 0.5):
+                 node_name: str = "emos_bridge", qos: dict[str, Any] | None = None, discover_every: float = 0.5,
+                 fastdds: str = "udp"):
         self.install = env.ensure_loadable()
-        self.transport = _udp_only(ctx)
+        self.transport = _choose_transports(ctx, fastdds)
         import rclpy
         from rclpy.executors import MultiThreadedExecutor
 
@@ -157,6 +300,8 @@ class Ros2Bridge:
         self._lock = threading.Lock()  # out/inn tables: the forwarder adds, close() removes
         self._stop = threading.Event()
         self.failure: str | None = None
+        self.wakeups = {"reader": 0, "reader_idle": 0, "forwarder": 0, "forwarder_idle": 0}
+        self._in_version = 0  # bumped when the reader's subscriptions change
         self.context = rclpy.context.Context()
         from rclpy.signals import SignalHandlerOptions
 
@@ -170,6 +315,7 @@ class Ros2Bridge:
             # per EMOS ring), calls to EMOS services, answers of ROS 2 servers (services.py).
             self.executor = MultiThreadedExecutor(num_threads=3, context=self.context)
             self.executor.add_node(self.node)
+            self._reader = _Reader(self.context)
             self.waker = Waker(ctx, background=True)
             from emos.interop.ros2.services import ServiceBridge
 
@@ -181,7 +327,8 @@ class Ros2Bridge:
             rclpy.shutdown(context=self.context)
             raise
         self.domain_id = self.context.get_domain_id()
-        self._threads = [threading.Thread(target=self._guard, args=(self._spin,), name="ros2-executor", daemon=True),
+        self._threads = [threading.Thread(target=self._guard, args=(self._read,), name="ros2-reader", daemon=True),
+                         threading.Thread(target=self._guard, args=(self._spin,), name="ros2-executor", daemon=True),
                          threading.Thread(target=self._guard, args=(self._forward,), name="ros2-forwarder", daemon=True)]
         for t in self._threads:
             t.start()
@@ -201,18 +348,46 @@ class Ros2Bridge:
         while not self._stop.is_set() and self.context.ok():
             self.executor.spin_once(timeout_sec=0.1)
 
+    def _read(self) -> None:
+        """ROS 2 -> EMOS: wait on the bridged subscriptions, take every sample, publish it."""
+        reader, wakeups = self._reader, self.wakeups
+        version = -1
+        routes: list[tuple[str, _In]] = []
+        while not self._stop.is_set() and self.context.ok():
+            if version != self._in_version:
+                with self._lock:
+                    version = self._in_version
+                    routes = [(t, r) for t, r in self.inn.items() if r.sub is not None]
+            ready = reader.wait([r.sub for _t, r in routes], _READER_WAIT_S)
+            if ready is None:
+                continue  # timed out: nothing came
+            taken = 0
+            for index in ready:
+                topic, route = routes[index]
+                for data in reader.take_all(route.sub):
+                    self._receive(topic, route, data)
+                    taken += 1
+            wakeups["reader"] += 1
+            if not taken:
+                wakeups["reader_idle"] += 1
+
     def _forward(self) -> None:
         import select
 
         next_discovery = 0.0
+        wakeups = self.wakeups
         while not self._stop.is_set():
             now = time.monotonic()
             if now >= next_discovery:
                 next_discovery = now + self.discover_every
                 self.discover()
-            select.select([self.waker.fd], [], [], 0.05)
+            readable, _, _ = select.select([self.waker.fd], [], [], 0.05)
             self.waker.drain()
-            self.forward_once()
+            sent = self.forward_once()  # also after a time-out: a wake-up lost to a full FIFO is not a lost message
+            if readable:
+                wakeups["forwarder"] += 1
+                if not sent:
+                    wakeups["forwarder_idle"] += 1
 
     # -- which topics --------------------------------------------------------------------------
     def wanted(self, topic: str) -> bool:
@@ -335,13 +510,16 @@ class Ros2Bridge:
 
         events = SubscriptionEventCallbacks(incompatible_qos=lambda info: self._incompatible_qos(topic, "ROS 2 -> EMOS", qos, info))
         try:
+            # The callback is never called: the reader thread takes the samples (_read).
             route.sub = self.node.create_subscription(msg_cls, topic, lambda data: self._receive(topic, route, cast(bytes, data)), Q.to_ros(qos),
-                                                      raw=True, event_callbacks=events)
+                                                      raw=True, event_callbacks=events, callback_group=self._reader.group)
         except BaseException:
             pub.close()
             raise
         with self._lock:
             self.inn[topic] = route
+            self._in_version += 1
+        self._reader.wake()
         log.info("ROS 2 bridge: %s (%s) ROS 2 -> EMOS, %s", topic, ros_type, Q.describe(qos))
 
     def _ros_class(self, topic: str, ros_type: str) -> Any:
@@ -417,6 +595,7 @@ class Ros2Bridge:
         import rclpy
 
         self._stop.set()
+        self._reader.wake()
         for t in self._threads:
             if t is not threading.current_thread():
                 t.join(timeout=5.0)
@@ -433,6 +612,7 @@ class Ros2Bridge:
             self.services.close()
             self.executor.shutdown(timeout_sec=1.0)
             self.node.destroy_node()
+            self._reader.close()
         finally:
             if self.context.ok():
                 rclpy.shutdown(context=self.context)

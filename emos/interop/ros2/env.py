@@ -87,15 +87,13 @@ def _wheels() -> Ros2Install | None:
     if not _has_module("rclpy"):
         return None
     version = _dist_version("ros-rclpy")
-    distro = None
-    for candidate in ("humble", "iron", "jazzy", "kilted", "rolling"):
-        if _dist_version(f"ros-{candidate}-rclpy") is not None:
-            distro = candidate
-            break
     if version is None:  # rclpy importable but not from a wheel we know: a sourced install on sys.path
         return None
-    if distro is None:
-        distro = _RCLPY_DISTRO.get(version.split(".")[0], "unknown")
+    # The rclpy that imports decides: a venv with Kilted's wheels over a system with Jazzy's
+    # (``--system-site-packages``) still lists the ``ros-jazzy-*`` meta-packages. Their names
+    # are used only for an rclpy version we cannot place.
+    named = [c for c in ("humble", "iron", "jazzy", "kilted", "rolling") if _dist_version(f"ros-{c}-rclpy") is not None]
+    distro = _RCLPY_DISTRO.get(version.split(".")[0]) or (named[0] if named else "unknown")
     prefix = sys.prefix
     purelib = sysconfig.get_paths()["purelib"]
     # The vendored libraries (ros_*.libs) first: the wheels' RPATHs to them do not hold once
@@ -262,8 +260,10 @@ def ensure_loadable() -> Ros2Install:
         rmw = _rmw_name()
         if f"lib{rmw}.so" in _PRELOADER.files:
             _PRELOADER._load(f"lib{rmw}.so", ())
+        # rmw_dds_common: the graph messages every node publishes; Kilted's rmw opens their type
+        # support by name at run time (Jazzy's links it).
         for package in ("builtin_interfaces", "rcl_interfaces", "rosgraph_msgs", "action_msgs", "unique_identifier_msgs",
-                        "type_description_interfaces", "service_msgs"):
+                        "type_description_interfaces", "service_msgs", "rmw_dds_common"):
             _PRELOADER.load_package(package)
     try:
         import rclpy  # noqa: F401
