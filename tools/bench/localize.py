@@ -14,7 +14,10 @@ What is measured, on one log:
   random scan of the log, and runs for 20 m of travel; one trial per seed. A trial converged
   when the error is below 0.2 m at the first scan past 10 m of travel (``converged_rate``); it
   kept the pose when the error stays below 0.2 m at every scan from there to 20 m
-  (``kept_rate``). RMSE is over the scans past 10 m of every trial.
+  (``kept_rate``). RMSE is over the scans past 10 m of every trial. Time to converge: the
+  first scan from which the error stays below 0.2 m to the trial's end (``settled_rate``, and
+  the median and maximum travel ``settled_m_*``, scans ``settled_scans_*`` and filter CPU
+  ``settled_cpu_s_*`` up to it, over the trials that settled).
 
 ``--json`` prints ``{"results": [{"localizer": "emos", "position_rmse_m", "heading_rmse_deg",
 "converged_rate", "cpu_s_per_scan", ...}]}``; ``cpu_s_per_scan`` is process CPU time per scan
@@ -141,17 +144,27 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
     pf.global_localization()
     est = np.zeros_like(seg)
     cpu = 0.0
+    cpu_at = np.zeros(len(seg))
     for j in range(len(seg)):
         t0 = time.process_time()
         pf.update(odom[j], data["ranges"][s + j], data["angles"][s + j], scan_max=data["max_range"])
         cpu += time.process_time() - t0
+        cpu_at[j] = cpu
         est[j] = _pose_now(pf, odom[j])
     pos, head = _errors(est, seg)
-    after = (travel[s:end] - travel[s]) >= converge_m
+    moved = travel[s:end] - travel[s]
+    after = moved >= converge_m
     below = np.flatnonzero(pos < 0.2)
+    # Time to converge: the first scan from which the error stays under 0.2 m to the trial's end
+    # (travel and filter CPU up to it); None when the last scan is not under 0.2 m.
+    above = np.flatnonzero(pos >= 0.2)
+    settle = None if len(above) and above[-1] == len(seg) - 1 else (int(above[-1]) + 1 if len(above) else 0)
     return {"estimate": est, "reference": seg, "pos": pos[after], "head": head[after], "cpu": cpu, "scans": len(seg),
             "converged": bool(after.any() and pos[after][0] < 0.2), "kept": bool(after.any() and np.all(pos[after] < 0.2)),
-            "start": s, "first_below_m": float(travel[s + below[0]] - travel[s]) if len(below) else None}
+            "start": s, "first_below_m": float(moved[below[0]]) if len(below) else None,
+            "settled_m": None if settle is None else float(moved[settle]),
+            "settled_scans": None if settle is None else settle + 1,
+            "settled_cpu_s": None if settle is None else float(cpu_at[settle])}
 
 
 AMCL_PEER = "amcl==0.1.2"
@@ -265,6 +278,18 @@ def _plot(path: str, data: dict[str, Any], trial: dict[str, Any], title: str) ->
     plt.close(fig)
 
 
+def _settling(trials: list[dict[str, Any]]) -> dict[str, Any]:
+    """Time to converge over the global trials that settled (error under 0.2 m from some scan to
+    the end): median and maximum travel (m), scans and filter CPU (s) up to that scan."""
+    done = [t for t in trials if t.get("settled_m") is not None]
+    out: dict[str, Any] = {"settled_rate": len(done) / max(len(trials), 1)}
+    for key in ("settled_m", "settled_scans", "settled_cpu_s"):
+        vals = np.array([t[key] for t in done], dtype=np.float64)
+        out[f"{key}_median"] = float(np.median(vals)) if len(vals) else None
+        out[f"{key}_max"] = float(vals.max()) if len(vals) else None
+    return out
+
+
 def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, Any]:
     pos = np.concatenate([t["pos"] for t in trials])
     head = np.concatenate([t["head"] for t in trials])
@@ -274,7 +299,7 @@ def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, An
             "converged_rate": float(np.mean([t["converged"] for t in trials])),
             "cpu_s_per_scan": sum(t["cpu"] for t in trials) / max(scans, 1),
             "trials": len(trials), "scans": scans,
-            **({"kept_rate": float(np.mean([t["kept"] for t in trials]))} if global_ else {}),
+            **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials)} if global_ else {}),
             "position_max_m": float(pos.max()) if len(pos) else float("nan")}
 
 

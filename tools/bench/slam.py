@@ -19,6 +19,9 @@ What is measured, on one log:
 - ``--map OUT.yaml``: the occupancy grid of the optimised trajectory (log-odds ray casting,
   5 cm) in map_server YAML + PGM; ``--plot OUT.png``: that map beside the reference PNG
   (``--reference``, default: the log's name with ``.png`` next to it), with the trajectories.
+- ``--param NAME=VALUE`` (repeatable): set a ``SlamParams`` field for this run (e.g.
+  ``--param factor_covariance=hessian --param hessian_cov_scale=50``); the result then holds
+  ``params``, what was changed from the defaults.
 """
 from __future__ import annotations
 
@@ -47,6 +50,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", default=None, help="write a PNG of the built map beside the reference map")
     parser.add_argument("--reference", default=None, help="reference map PNG for --plot (default: LOG's name .png)")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="set a SlamParams field (repeatable), e.g. --param factor_covariance=response")
+
+
+def _params(items: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` pairs as SlamParams keyword arguments: the value is read as JSON when it
+    parses (numbers, lists) and as a plain string otherwise; a field SlamParams lacks is an error."""
+    from emos.actors.nav.mapping.slam import SlamParams
+
+    known = {f.name for f in SlamParams.__attrs_attrs__}
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or name not in known:
+            raise SystemExit(f"--param: expected NAME=VALUE with NAME a SlamParams field ({', '.join(sorted(known))}), "
+                             f"got {item!r}")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            value = text
+        out[name] = tuple(value) if isinstance(value, list) else value
+    return out
 
 
 def _noise(text: str | None) -> tuple[float, float, float, float]:
@@ -102,7 +127,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     scans = log.scans[: args.scans] if args.scans and args.scans > 0 else log.scans
     ref = np.array([s.pose for s in scans], dtype=np.float64)
     odom = noisy_odometry(ref, noise, args.seed)
-    params = SlamParams(max_range=args.max_range, odom_alphas=tuple(2.0 * a for a in noise))  # type: ignore[arg-type]
+    overrides = _params(getattr(args, "param", []) or [])
+    base: dict[str, Any] = {"max_range": args.max_range, "odom_alphas": tuple(2.0 * a for a in noise)}
+    params = SlamParams(**{**base, **overrides})
     slam = GraphSlam(params, name=f"bench slam {log.name}")
     # The progress line goes to stderr: shown unless --quiet, and with --json only on a terminal.
     progress = _Progress(len(scans), f"SLAM {log.name}", enabled=not args.quiet and (not args.json or sys.stderr.isatty()))
@@ -120,6 +147,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "realtime_factor": (duration / cpu) if duration is not None and cpu > 0 else None,
         "seed": args.seed, "noise_alphas": list(noise), "odometry_ate_rmse_m": ate_rmse(odom, ref),
         "loop_closures": len(slam.loops), "log_duration_s": duration,
+        **({"params": {k: list(v) if isinstance(v, tuple) else v for k, v in overrides.items()}} if overrides else {}),
     }
     if args.map or args.plot:
         grid = _build_map(est, scans, args.max_range)

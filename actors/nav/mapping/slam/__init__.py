@@ -5,7 +5,10 @@ a trajectory is judged by (``metrics``). The map is drawn from the optimised tra
 from .grid import LikelihoodGrid, max_tables
 from .matcher import CorrelativeMatcher, MatchResult, voxel_filter
 from .metrics import align_se2, ate_rmse, rpe_rmse
+from .relocalize import MapLocalizer, map_grid
 from .slam import GraphSlam, SlamParams, Submap, scan_points
+from .store import POSEGRAPH_SUFFIX, PoseGraphFile, PoseGraphFileError, load_posegraph, save_posegraph
 
-__all__ = ["CorrelativeMatcher", "GraphSlam", "LikelihoodGrid", "MatchResult", "SlamParams", "Submap", "align_se2",
-           "ate_rmse", "max_tables", "rpe_rmse", "scan_points", "voxel_filter"]
+__all__ = ["POSEGRAPH_SUFFIX", "CorrelativeMatcher", "GraphSlam", "LikelihoodGrid", "MapLocalizer", "MatchResult",
+           "PoseGraphFile", "PoseGraphFileError", "SlamParams", "Submap", "align_se2", "ate_rmse", "load_posegraph",
+           "map_grid", "max_tables", "rpe_rmse", "save_posegraph", "scan_points", "voxel_filter"]

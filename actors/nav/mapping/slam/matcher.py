@@ -19,6 +19,18 @@ branch and bound over (x, y, theta), then a sub-cell polish and a covariance fro
    along it and the covariance says so: the pose graph then trusts the odometry there, and a
    loop closure with an ambiguous match is refused (:attr:`MatchResult.ambiguous`).
 
+4. **Curvature covariance** (:attr:`MatchResult.hessian_covariance`): ``(N H)^-1`` with ``H``
+   the curvature of the mean score at the polished pose (central differences, two cells and two
+   heading steps) and ``N`` the hit count: the covariance the hits would give if they were
+   independent measurements with the field's sigma (``_hessian_covariance``). Along a corridor
+   the score is flat and only the window bounds it. Independent of the lattice and of a
+   temperature; hits on one wall are not independent and a submap is not rigid, so its scale is
+   too small by a roughly constant factor, which the SLAM calibrates
+   (``SlamParams.hessian_cov_scale``). (The Gauss-Newton ``s2 (J^T J)^-1`` of the polish was
+   tried first and is wrong here: at a good fit every hit sits on the crest of the field, where
+   its gradient is zero, so ``J^T J`` has no information *across* a wall and the corridor came
+   out backwards.)
+
 Per-call cost is bounded by the window and the hit count (the crop of the grid around the
 scan is what is pooled), never by the size of the map.
 """
@@ -41,13 +53,16 @@ class MatchResult:
     """``pose``: best (x, y, theta) in the grid's frame; ``score``: mean likelihood of the hits
     there (0..1); ``covariance``: 3x3 (m^2, rad^2); ``ambiguous``: the response is flat over
     more than ``max_sd_xy`` / ``max_sd_theta`` (a corridor, a repetitive place); ``evaluated``:
-    how many candidates branch and bound scored (the work done)."""
+    how many candidates branch and bound scored (the work done). ``hessian_covariance``: 3x3,
+    from the curvature of the score at the polished pose (module docstring, step 4), in the
+    grid's axes."""
 
     pose: np.ndarray
     score: float
     covariance: np.ndarray
     ambiguous: bool
     evaluated: int
+    hessian_covariance: np.ndarray
 
 
 def voxel_filter(points: np.ndarray, size: float) -> np.ndarray:
@@ -143,9 +158,11 @@ class CorrelativeMatcher:
         cov = self._covariance(score, ba, bu, bv, bscore, len(dth), w, r, step)
         offset = lo * r + grid.origin
         pose, polished = self._polish(field, offset, r, pts, pose)
+        hess = self._hessian_covariance(field, offset, r, pts, pose, step, window_xy, window_theta)
         sd_xy = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2]).max()), 0.0))
         ambiguous = sd_xy > self.max_sd_xy or math.sqrt(cov[2, 2]) > self.max_sd_theta
-        return MatchResult(pose=pose, score=polished, covariance=cov, ambiguous=ambiguous, evaluated=evaluated)
+        return MatchResult(pose=pose, score=polished, covariance=cov, ambiguous=ambiguous, evaluated=evaluated,
+                           hessian_covariance=hess)
 
     def _branch(self, score, a: np.ndarray, u: np.ndarray, v: np.ndarray, level: int, w: int,
                 min_score: float) -> tuple[int, int, int, float] | None:
@@ -242,3 +259,60 @@ class CorrelativeMatcher:
             else:
                 lam *= 10.0
         return pose, float(m.mean())
+
+    @staticmethod
+    def _hessian_covariance(field: np.ndarray, offset: np.ndarray, r: float, pts: np.ndarray, pose: np.ndarray,
+                            step: float, window_xy: float, window_theta: float) -> np.ndarray:
+        """``(N H)^-1``, ``H`` the curvature (minus the Hessian) of the mean score at the
+        polished pose, ``N`` the hit count: each hit on a wall of the Gaussian field
+        ``exp(-d^2 / 2 sigma^2)`` adds ``1 / sigma^2`` of curvature across the wall and none along
+        it, exactly the information of a measurement with standard deviation ``sigma``; so this
+        is the covariance the hits would give if they were independent. Central differences of
+        the bilinear field with steps of two cells and two lattice heading steps: the field is
+        piecewise linear (its curvature only exists at the scale of a cell), and along a wall far
+        from the scanner its hits are farther apart than the field's reach, so at one cell the
+        bumps between them would read as information along the wall. Across a wall this step
+        (2 sigma) reads about half the curvature at the crest, a constant factor the
+        calibration absorbs. Along a corridor the score is flat and the direction gets (almost)
+        no information. Negative curvature (not a maximum in
+        some direction) counts as none. The search window bounds what a match can claim not to
+        know: the information is at least that of a Gaussian as wide as the window."""
+        h = np.array([2.0 * r, 2.0 * r, 2.0 * step])
+        offsets = [np.zeros(3)]
+        for i in range(3):
+            e = np.zeros(3)
+            e[i] = h[i]
+            offsets += [e, -e]
+        for i in range(3):
+            for j in range(i + 1, 3):
+                for si in (1, -1):
+                    for sj in (1, -1):
+                        e = np.zeros(3)
+                        e[i], e[j] = si * h[i], sj * h[j]
+                        offsets.append(e)
+        cand = pose + np.array(offsets)  # (19, 3)
+        c, s = np.cos(cand[:, 2])[:, None], np.sin(cand[:, 2])[:, None]
+        fx = (c * pts[:, 0] - s * pts[:, 1] + cand[:, 0:1] - offset[0]) / r - 0.5
+        fy = (s * pts[:, 0] + c * pts[:, 1] + cand[:, 1:2] - offset[1]) / r - 0.5
+        hh, ww = field.shape
+        i0 = np.clip(np.floor(fx).astype(np.int64), 0, ww - 2)
+        j0 = np.clip(np.floor(fy).astype(np.int64), 0, hh - 2)
+        t = np.clip(fx - i0, 0.0, 1.0)
+        u = np.clip(fy - j0, 0.0, 1.0)
+        m = ((1 - t) * (1 - u) * field[j0, i0] + t * (1 - u) * field[j0, i0 + 1]
+             + (1 - t) * u * field[j0 + 1, i0] + t * u * field[j0 + 1, i0 + 1])
+        sc = m.mean(axis=1)
+        hess = np.zeros((3, 3))
+        for i in range(3):
+            hess[i, i] = (sc[1 + 2 * i] - 2 * sc[0] + sc[2 + 2 * i]) / (h[i] * h[i])
+        k = 7
+        for i in range(3):
+            for j in range(i + 1, 3):
+                pp, pm, mp, mm = sc[k:k + 4]
+                hess[i, j] = hess[j, i] = (pp - pm - mp + mm) / (4 * h[i] * h[j])
+                k += 4
+        vals, vecs = np.linalg.eigh(-0.5 * (hess + hess.T))
+        info = (vecs * np.maximum(vals, 0.0)) @ vecs.T * len(pts)
+        info += np.diag([1.0 / window_xy ** 2, 1.0 / window_xy ** 2, 1.0 / window_theta ** 2])
+        cov = np.linalg.inv(info)
+        return 0.5 * (cov + cov.T)

@@ -18,7 +18,11 @@ Each scan, in :meth:`GraphSlam.add`:
    submap is a rigid local map anchored at its first scan's node.
 4. **Back end.** Node = scan. An odometry factor (covariance from the motion model) to the
    previous node, and a scan-match factor from the submap's anchor node (covariance from the
-   match's response). Every ``loop_every`` scans, the scan is matched against up to
+   match: ``factor_covariance="response"``, the spread of the lattice scores around the best
+   pose (Olson) times ``match_cov_scale`` / ``loop_cov_scale``; or ``"hessian"``, the inverse
+   curvature of the score at the polished pose over the hit count (``MatchResult.
+   hessian_covariance``) times ``hessian_cov_scale``, the factor that calibrates it against
+   the factors' real errors). Every ``loop_every`` scans, the scan is matched against up to
    ``loop_candidates`` finished submaps whose anchor lies within ``loop_radius`` of the
    scan's optimised pose (nearest first), each in a bounded window (``loop_window_xy``,
    ``loop_window_theta``) around where the graph puts it, with no prior. A loop closure is
@@ -91,6 +95,8 @@ class SlamParams:
     robust_k: float = attrs.field(default=1.345, validator=V.finite_positive)
     match_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
     loop_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
+    factor_covariance: str = attrs.field(default="response", validator=attrs.validators.in_(("response", "hessian")))
+    hessian_cov_scale: float = attrs.field(default=1.0, validator=V.finite_positive)
 
 
 @attrs.define(eq=False)
@@ -262,14 +268,19 @@ class GraphSlam:
         g.add_node(i, self._guess)
         g.add_between(i - 1, i, delta, self._odom_cov(delta))
         if match is not None and target is not None and target.anchor != i:
-            self._match_factor(target, i, match.pose, match.covariance, loop=False)
+            self._match_factor(target, i, match.pose, match.covariance, loop=False, hess=match.hessian_covariance)
 
-    def _match_factor(self, sm: Submap, i: int, pose: np.ndarray, cov: np.ndarray, loop: bool) -> None:
+    def _match_factor(self, sm: Submap, i: int, pose: np.ndarray, cov: np.ndarray, loop: bool,
+                      hess: np.ndarray | None = None) -> None:
         rel = relative_pose(sm.anchor_pose, pose)
         # The matcher's covariance is in the grid's axes; the factor's error is in the node's.
         c, s = math.cos(pose[2]), math.sin(pose[2])
         rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        scale = self.params.loop_cov_scale if loop else self.params.match_cov_scale
+        p = self.params
+        if p.factor_covariance == "hessian" and hess is not None:
+            cov, scale = hess, p.hessian_cov_scale
+        else:
+            scale = p.loop_cov_scale if loop else p.match_cov_scale
         self.graph.add_between(sm.anchor, i, rel, scale * rot @ cov @ rot.T, loop=loop)
 
     def _close_loops(self, i: int, pts: np.ndarray) -> bool:
@@ -319,7 +330,7 @@ class GraphSlam:
         return ok
 
     def _accept_loop(self, sm: Submap, i: int, m: MatchResult) -> bool:
-        self._match_factor(sm, i, m.pose, m.covariance, loop=True)
+        self._match_factor(sm, i, m.pose, m.covariance, loop=True, hess=m.hessian_covariance)
         self.loops.append((sm.anchor, i, m.score))
         self._accepted.add((sm.anchor, i))
         return True
