@@ -48,6 +48,11 @@ def test_map_build_then_show(tmp_path):
     grid = load_map(tmp_path / "office.yaml")
     assert (tmp_path / "office.pgm").exists()
     assert (grid.data == 100).sum() > 200 and (grid.data == 0).sum() > 1000
+    # The pose graph beside it, loadable by a Mapper in localization mode.
+    from emos.actors.nav.mapping.slam import load_posegraph
+
+    graph = load_posegraph(tmp_path / "office.posegraph.npz")
+    assert len(graph.poses) >= 2 and len(graph.poses) == len(graph.ranges) == len(graph.angles)
     shown = subprocess.run([sys.executable, "-m", "emos.tools.cli", "map", "show", str(tmp_path / "office.yaml")],
                            capture_output=True, text=True, timeout=120)
     assert shown.returncode == 0, shown.stderr

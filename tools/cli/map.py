@@ -72,7 +72,7 @@ def _beams(scan: Any) -> tuple[np.ndarray, np.ndarray]:
 def build(args: argparse.Namespace) -> Path:
     from emos.actors.nav.components.convert import BadInput, pose_of
     from emos.actors.nav.localization import build_reference_map, relative_pose
-    from emos.actors.nav.mapping.slam import GraphSlam, SlamParams
+    from emos.actors.nav.mapping.slam import POSEGRAPH_SUFFIX, GraphSlam, SlamParams, save_posegraph
     from emos.actors.nav.maps import save_map
     from emos.interop.mcap_read import read_bag
 
@@ -114,8 +114,12 @@ def build(args: argparse.Namespace) -> Path:
     grid = build_reference_map(poses[use], [kept[k][0] for k in use], [kept[k][1] for k in use],
                                resolution=args.resolution, max_range=args.max_range)
     out = save_map(grid, Path(str(args.output)).with_suffix(".yaml") if not str(args.output).endswith(".yaml") else Path(args.output))
+    # The pose graph beside it, as the Mapper saves it: a Mapper in localization mode loads it.
+    p = slam.params
+    graph = save_posegraph(out.with_name(out.stem + POSEGRAPH_SUFFIX), poses[use], [kept[k] for k in use],
+                           resolution=p.resolution, sigma=p.sigma, max_range=p.max_range, min_range=p.min_range)
     if show:
-        sys.stderr.write(f"\rmap build: {scans} scans read, {len(kept)} nodes, {len(slam.loops)} loop closures: {out}\n")
+        sys.stderr.write(f"\rmap build: {scans} scans read, {len(kept)} nodes, {len(slam.loops)} loop closures: {out} (pose graph {graph.name})\n")
     return out
 
 
