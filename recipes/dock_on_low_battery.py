@@ -8,7 +8,8 @@ dock against the left wall of the top-left room (the Simulator's ``charging_dock
 off the dock and rises while it charges. An ``Event`` on ``percentage < 0.3`` runs
 ``Action(method=charger.go_charge)``: the ``ChargeManager`` cancels the waypoint mission
 (``cancel_mission``), drives to the dock's staging pose through the Planner, pauses the
-Controller (a lifecycle ``stop``: the docking server drives now) and calls the
+Controller (a lifecycle ``stop``: its plan ends at the staging pose, and it must not drive the
+robot back there once the docking server lets go) and calls the
 ``DockingServer``'s ``dock_robot`` action, which finds the dock in the scan and docks. Charged
 (``percentage`` >= 0.95) it calls ``undock_robot``, starts the Controller again and
 ``resume_mission``: the patrol goes on from the waypoint it left. ``summary.json`` in
@@ -25,22 +26,11 @@ import time
 import numpy as np
 
 from emos import Action, BaseComponent, Event, Launcher, Topic
-from emos.actors.nav import MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from emos.actors.nav.components import (
-    Controller,
-    DriveManager,
-    DriveManagerConfig,
-    LocalMapper,
-    LocalMapperConfig,
-    MapServer,
-    MapServerConfig,
-    Planner,
-    PlannerConfig,
-    TopicsKeys,
-)
-from emos.actors.nav.components.docking import DockingServer, DockingServerConfig
-from emos.actors.nav.components.waypoints import WaypointFollower, WaypointFollowerConfig
-from emos.actors.nav.controllers import ControllersID
+from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components import TopicsKeys
+from emos.actors.nav.components.docking import DockingServerConfig
+from emos.actors.nav.components.waypoints import WaypointFollowerConfig
+from emos.actors.nav.stacks import COMMAND_INPUTS, point_navigation_stack
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.builders import HOUSE_DOCK, charging_dock
 from emos.msgs import BatteryState
@@ -58,31 +48,20 @@ my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=Ro
                        geometry_params=np.array([0.2, 0.3]))
 odom = Topic(name="/odom", msg_type="Odometry")
 scan = Topic(name="/scan", msg_type="LaserScan")
-control = Topic(name="/control", msg_type="Twist")
 battery_topic = Topic(name="/battery_state", msg_type="BatteryState")
 
 sim = Simulator("sim", config=SimulatorConfig(world="house", obstacles=charging_dock(HOUSE_DOCK)))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(odom=odom, scan=scan)
-map_server = MapServer("global_map_server", config=MapServerConfig(map_file_path=HOUSE_MAP, grid_resolution=0.5))
-planner = Planner("planner", config=PlannerConfig(loop_rate=1.0))
-planner.run_type = "Timed"
-controller = Controller("controller")
-controller.algorithm = ControllersID.PURE_PURSUIT
-controller.direct_sensor = False
-driver = DriveManager("drive_manager", config=DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0,
-                                                                 slowdown_zone_distance=0.3))
-driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
-local_mapper = LocalMapper("mapper", config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)))
-docking = DockingServer("docking", config=DockingServerConfig(docks={"home": HOUSE_DOCK}, docked_offset=DOCKED_OFFSET,
-                                                              staging_offset=STAGING_OFFSET, search_timeout=5.0))
-docking.inputs(sensor_data=scan, location=odom)
-docking.outputs(robot_command=control)  # through the DriveManager, as the Controller's commands
-follower = WaypointFollower("waypoints", config=WaypointFollowerConfig(stop_on_failure=False, waypoint_timeout=240.0))
-follower.inputs(location=odom, reached_end=planner.get_out_topic(TopicsKeys.REACHED_END),
-                planner_status=Topic(name="planner/status", msg_type="ComponentStatus"))
+# The house's point-navigation stack (recipes/patrol.py's); the DriveManager ranks the docking
+# server's commands over the Controller's (COMMAND_INPUTS).
+stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="LDS-01"), HOUSE_MAP, odom=odom,
+                               command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS)
+planner = stack.planner
+docking = stack.docking_server(config=DockingServerConfig(docks={"home": HOUSE_DOCK}, docked_offset=DOCKED_OFFSET,
+                                                          staging_offset=STAGING_OFFSET, search_timeout=5.0))
+follower = stack.waypoint_follower(config=WaypointFollowerConfig(stop_on_failure=False, waypoint_timeout=240.0))
 goal_topic = planner.get_in_topic(TopicsKeys.GOAL_POINT)
-follower.outputs(goal_point=goal_topic)
 
 
 class Battery(BaseComponent):
@@ -212,13 +191,9 @@ low_battery = Event(battery_topic.msg.percentage < LOW, handle_once=True)
 
 launcher = Launcher()
 launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
-launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
+stack.launch(launcher)
 launcher.add_pkg(components=[docking, follower, Battery(), charger], package_name="mission", multiprocessing=True,
                  events_actions={low_battery: Action(method=charger.go_charge)})
-for component in (controller, planner, driver, local_mapper):
-    component.inputs(location=odom)
-launcher.robot = my_robot
-launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
 if os.path.exists(summary_file):

@@ -3,15 +3,19 @@
     emos run recipes/patrol.py                      # one lap
     EMOS_PATROL_LAPS=20 EMOS_PATROL_WORLD=house_person emos run recipes/patrol.py  # docs/missions.md
 
-The navigation stack (MapServer on the house map, Planner, Controller with Pure Pursuit on the
-LocalMapper's grid, DriveManager) drives the Simulator's robot; a ``WaypointFollower`` (Nav2's
+The point-navigation stack of ``emos.actors.nav.stacks`` (MapServer on the house map, Planner,
+Controller with Pure Pursuit on the LocalMapper's grid, DriveManager) drives the Simulator's
+robot; its DriveManager ranks the recovery behaviors' commands over the Controller's
+(``COMMAND_INPUTS``, twist_mux's priorities). ``EMOS_PATROL_MOVERS=1`` gives the Controller the
+moving-obstacle tracker instead (``movers=True``: the ArcSampler on CostToGo plans, its arcs
+checked against where the tracked movers will be). A ``WaypointFollower`` (Nav2's
 waypoint follower) sends it from room to room through the Planner's goal topic and saves the
 Simulator's camera image at each room (``PhotoAtWaypoint``: the camera topic saved to a PNG;
 the Vision component is not needed for a picture). A ``Behaviors`` component (Nav2's behavior
 server) is the Controller's recovery ladder: clear the local grid, back up (checking behind),
 spin. The ``Patrol`` component below sends the ``follow_waypoints`` goal, prints its feedback,
 and writes ``summary.json`` (laps, missed waypoints with reasons, pictures, recoveries used,
-collisions) to ``$EMOS_PATROL_OUT`` (default ``./patrol_out``). Exit code 0 when every lap was
+collisions; every contact with a moving obstacle, classified by who closed the gap) to ``$EMOS_PATROL_OUT`` (default ``./patrol_out``). Exit code 0 when every lap was
 done without a missed waypoint or a collision.
 """
 import json
@@ -23,25 +27,13 @@ import time
 import numpy as np
 
 from emos import Action, BaseComponent, Launcher, Topic
-from emos.actors.nav import MapConfig, RobotConfig, RobotFrames, RobotGeometry, RobotType
-from emos.actors.nav.components import (
-    Controller,
-    DriveManager,
-    DriveManagerConfig,
-    LocalMapper,
-    LocalMapperConfig,
-    MapServer,
-    MapServerConfig,
-    Planner,
-    PlannerConfig,
-    TopicsKeys,
-)
-from emos.actors.nav.components.behaviors import Behaviors, BehaviorsConfig
-from emos.actors.nav.components.waypoints import WaypointFollower, WaypointFollowerConfig
-from emos.actors.nav.controllers import ControllersID
+from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components.waypoints import WaypointFollowerConfig
 from emos.actors.nav.missions import PhotoAtWaypoint
+from emos.actors.nav.stacks import COMMAND_INPUTS, point_navigation_stack
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.builders import HOUSE_DOCK, charging_dock
+from emos.actors.sim.person import PERSON_RADIUS
 
 OUT_DIR = os.path.abspath(os.environ.get("EMOS_PATROL_OUT", "patrol_out"))
 LAPS = int(os.environ.get("EMOS_PATROL_LAPS", "1"))
@@ -54,43 +46,88 @@ STOP_ON_FAILURE = os.environ.get("EMOS_PATROL_STOP_ON_FAILURE", "0") == "1"
 HOME = (1.5, 1.5)
 # "house_person": the same house with a person walking its rooms (the dynamic obstacle of the measure).
 WORLD = os.environ.get("EMOS_PATROL_WORLD", "house")
+# 1: the Controller tracks moving obstacles (stacks.point_navigation_stack(movers=True): the ArcSampler on CostToGo
+# plans); 0 (the default): Pure Pursuit on the local grid. docs/missions.md compares the two with the walking person.
+MOVERS = os.environ.get("EMOS_PATROL_MOVERS", "0") == "1"
 
 my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
                        geometry_params=np.array([0.2, 0.3]))
 odom = Topic(name="/odom", msg_type="Odometry")  # the Simulator's true pose in the map frame (no localizer here)
 scan = Topic(name="/scan", msg_type="LaserScan")
 image = Topic(name="/camera/image", msg_type="Image")
-control = Topic(name="/control", msg_type="Twist")
 
 sim = Simulator("sim", config=SimulatorConfig(world=WORLD, obstacles=charging_dock(HOUSE_DOCK), camera_rate=2.0,
                                              camera_width=160, camera_height=120))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(odom=odom, scan=scan, camera=image)
 
-map_server = MapServer("global_map_server", config=MapServerConfig(map_file_path=HOUSE_MAP, grid_resolution=0.5))
-planner = Planner("planner", config=PlannerConfig(loop_rate=1.0))
-planner.run_type = "Timed"
-controller = Controller("controller")
-controller.algorithm = ControllersID.PURE_PURSUIT
-controller.direct_sensor = False
-driver = DriveManager("drive_manager", config=DriveManagerConfig(critical_zone_distance=0.05, critical_zone_angle=90.0,
-                                                                 slowdown_zone_distance=0.3))
-driver.outputs(robot_command=Topic(name="/cmd_vel", msg_type="Twist"))
-local_mapper = LocalMapper("mapper", config=LocalMapperConfig(map_params=MapConfig(width=3.0, height=3.0, resolution=0.05)))
-
-behaviors = Behaviors("behaviors", config=BehaviorsConfig(local_mapper="mapper"))
-behaviors.inputs(sensor_data=scan, location=odom, local_map=local_mapper.get_out_topic("local_map"))
-behaviors.outputs(robot_command=control)  # through the DriveManager's safety zones
+# The house's point-navigation stack; the DriveManager ranks the recovery behaviors over the Controller.
+stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="LDS-01"), HOUSE_MAP, odom=odom,
+                               command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
+                               movers=MOVERS)
+behaviors = stack.behaviors()
 # Recovery ladder of the Controller (Nav2's recovery subtree): clear, back up, spin.
-controller.on_algorithm_fail(action=[Action(method=behaviors.clear_costmaps), Action(method=behaviors.back_up),
-                                     Action(method=behaviors.spin)], max_retries=3)
+stack.controller.on_algorithm_fail(action=[Action(method=behaviors.clear_costmaps), Action(method=behaviors.back_up),
+                                           Action(method=behaviors.spin)], max_retries=3)
+follower = stack.waypoint_follower(config=WaypointFollowerConfig(stop_on_failure=STOP_ON_FAILURE, waypoint_timeout=240.0),
+                                   tasks={i: PhotoAtWaypoint(image_topic=image.name, save_dir=os.path.join(OUT_DIR, "pictures"))
+                                          for i in range(len(ROOMS))})
+follower.inputs(camera=image)
 
-follower = WaypointFollower("waypoints", config=WaypointFollowerConfig(stop_on_failure=STOP_ON_FAILURE, waypoint_timeout=240.0),
-                            tasks={i: PhotoAtWaypoint(image_topic=image.name, save_dir=os.path.join(OUT_DIR, "pictures"))
-                                   for i in range(len(ROOMS))})
-follower.inputs(location=odom, reached_end=planner.get_out_topic(TopicsKeys.REACHED_END),
-                planner_status=Topic(name="planner/status", msg_type="ComponentStatus"), camera=image)
-follower.outputs(goal_point=planner.get_in_topic(TopicsKeys.GOAL_POINT))
+
+ROBOT_RADIUS = float(my_robot.geometry_params[0])
+
+
+class ContactMonitor:
+    """Watches the Simulator's ground truth (``sim_status``: the robot's pose, each mover's) and
+    records every contact with a moving obstacle as an episode, classified by who closed the gap:
+    ``robot_drove_into`` (the robot moved towards the person faster than 5 cm/s just before) or
+    ``walked_into_robot`` (the robot was standing or moving away: the person, who walks on
+    whatever is in the way, walked into it). The Simulator's own ``collided`` flag is sticky and
+    counts one contact per run whatever happened after; these episodes count them all."""
+
+    def __init__(self, ctx: object, mover_radius: float = PERSON_RADIUS, period: float = 0.1) -> None:
+        from emos.core import control as C
+
+        self.client = C.ControlClient("sim", ctx, timeout=5.0)
+        self.mover_radius, self.period = mover_radius, period
+        self.episodes: list[dict] = []
+        self.min_gap = float("inf")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="contact-monitor")
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+    def _run(self) -> None:
+        prev, touching = None, False
+        while not self._stop.wait(self.period):
+            try:
+                st = self.client.execute_method("sim_status")
+            except Exception:  # noqa: BLE001 - the simulator may be busy or stopping: try again
+                continue
+            if "pose" not in st or not st.get("movers"):
+                continue
+            t, pose = float(st["sim_time"]), np.array(st["pose"][:2])
+            was_touching, touching = touching, False
+            for mover in st["movers"]:
+                mp = np.array(mover["pose"][:2])
+                gap = float(np.linalg.norm(mp - pose)) - ROBOT_RADIUS - self.mover_radius
+                self.min_gap = min(self.min_gap, gap)
+                touching = touching or gap <= 0.005
+                if gap <= 0.005 and not was_touching:
+                    toward = mp - pose
+                    toward /= max(float(np.linalg.norm(toward)), 1e-9)
+                    v = (pose - prev[1]) / max(t - prev[0], 1e-3) if prev is not None else np.zeros(2)
+                    closing = float(v @ toward)
+                    self.episodes.append({"sim_time": round(t, 2), "robot": [round(float(x), 2) for x in st["pose"]],
+                                          "mover": [round(float(x), 2) for x in mover["pose"]], "mover_name": mover["name"],
+                                          "robot_speed_toward": round(closing, 3), "robot_speed": round(float(np.linalg.norm(v)), 3),
+                                          "kind": "robot_drove_into" if closing > 0.05 else "walked_into_robot"})
+                    print(f"[patrol] contact with {mover['name']}: {json.dumps(self.episodes[-1])}", flush=True)
+            prev = (t, pose)
 
 
 class Patrol(BaseComponent):
@@ -120,6 +157,7 @@ class Patrol(BaseComponent):
                       f"{fb.distance_remaining:.1f} m left", flush=True)
 
         poses = [Pose(position=Point(x=x, y=y)) for x, y in [*ROOMS, HOME]]
+        monitor = ContactMonitor(self.node.ctx)
         client = ActionClient("waypoints/follow_waypoints", FollowWaypointsGoal, FollowWaypointsFeedback, FollowWaypointsResult,
                               ctx=self.node.ctx)
         try:
@@ -128,8 +166,15 @@ class Patrol(BaseComponent):
                        "missed_waypoints": list(result.missed_waypoints)}
         except Exception as exc:  # noqa: BLE001 - the time limit or a lost server: reported
             summary = {"success": False, "message": f"{type(exc).__name__}: {exc}", "laps": None, "missed_waypoints": []}
+        monitor.stop()
+        summary["mover_contacts"] = monitor.episodes
+        summary["mover_contacts_by_kind"] = {kind: sum(e["kind"] == kind for e in monitor.episodes)
+                                             for kind in ("robot_drove_into", "walked_into_robot")}
+        summary["mover_min_gap_m"] = round(monitor.min_gap, 3)
         status = C.ControlClient("sim", self.node.ctx, timeout=10.0).execute_method("sim_status")
-        summary["collisions"] = int(bool(status.get("collided", False)))
+        # The Simulator's flag is sticky (one per run); the monitor counts every contact with a mover.
+        summary["sim_collided"] = bool(status.get("collided", False))
+        summary["collisions"] = max(len(monitor.episodes), int(summary["sim_collided"]))
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
         pictures = os.path.join(OUT_DIR, "pictures")
@@ -145,13 +190,12 @@ class Patrol(BaseComponent):
 
 launcher = Launcher()
 launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
-launcher.kompass(components=[map_server, controller, planner, driver, local_mapper], multiprocessing=True)
+stack.launch(launcher)
 launcher.add_pkg(components=[behaviors, follower, Patrol()], package_name="mission", multiprocessing=True)
-for component in (controller, planner, driver, local_mapper):
-    component.inputs(location=odom)
-launcher.robot = my_robot
-launcher.fallback_rate = 1 / 4  # one ladder step every 4 s: a back-up or a spin has time to finish
-launcher.frames = RobotFrames(world="map", odom="map", scan="LDS-01")
+# One ladder step every 4 s: a back-up or a spin has time to finish. On the Controller's own config:
+# a component with its own handlers (on_algorithm_fail above) keeps its fallback_rate (100 Hz by
+# default), whatever launcher.fallback_rate says (that one paces the launcher-wide policies).
+stack.controller.config.fallback_rate = 1 / 4
 
 summary_file = os.path.join(OUT_DIR, "summary.json")
 if os.path.exists(summary_file):

@@ -12,14 +12,14 @@ no longer sees, behind the robot included), and planned again on every step from
 odometry gives, so an obstacle that appears mid-way stops it. A move that cannot be done is
 refused with the reason (the component's status says it too: ALGORITHM failure naming the
 behavior), e.g. ``back_up refused: obstacle 0.12 m behind``. Commands go to ``robot_command``
-(wire it to the DriveManager's command input to keep its safety zones in the loop, or to the
-base directly as Nav2 does).
+(wire it to a DriveManager command input of a higher priority than the Controller's,
+``stacks.BEHAVIORS_COMMAND``, to keep its safety zones in the loop, or to the base directly as
+Nav2 does).
 """
 from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -31,14 +31,14 @@ from emos.config.validators import in_range
 from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.geometry import wrap_angle
-from emos.io.topic import Topic
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 
 from .. import recovery as R
 from ..controllers.sensors import obstacle_points
-from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, grid_points_in_robot_frame, pose_of, scan_of, twist_msg
+from .base import NavComponentConfig, rate_field
+from .convert import BadInput, grid_points_in_robot_frame, scan_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
+from .motion_actions import MotionActionServer
 
 __all__ = ["Behaviors", "BehaviorsConfig"]
 
@@ -73,15 +73,11 @@ class _Running:
     stopped: bool = False  # the zero command after the end was sent (a cancel ends it off the loop)
 
 
-class Behaviors(NavComponent):
+class Behaviors(MotionActionServer):
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
-        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
-        "local_map": AllowedTopic(types=("OccupancyGrid",), default=None),
-    }
-    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "robot_command": AllowedTopic(types=("Twist",), default=Topic(name="/cmd_vel", msg_type="Twist"), required=True),
-    }
+        **MotionActionServer.allowed_inputs, "local_map": AllowedTopic(types=("OccupancyGrid",), default=None)}
+    ACTIONS = tuple((name, goal, BehaviorFeedback, BehaviorResult, "_serve") for name, goal in
+                    (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal)))
     config: BehaviorsConfig
 
     @classmethod
@@ -93,12 +89,7 @@ class Behaviors(NavComponent):
         self._running: _Running | None = None
         self._last: BehaviorResult | None = None
         self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0}
-        for name, goal in (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal)):
-            self.create_action_server(f"{self.component_name}/{name}", goal, BehaviorFeedback, BehaviorResult, self._serve)
-
-    def action_servers(self) -> dict[str, tuple[Any, Any, Any]]:
-        return {f"{self.component_name}/{n}": (g, BehaviorFeedback, BehaviorResult) for n, g in
-                (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal))}
+        self._create_action_servers()
 
     # -- what the robot sees ------------------------------------------------------------------------
     def _obstacles(self) -> tuple[np.ndarray, bool]:
@@ -122,13 +113,6 @@ class Behaviors(NavComponent):
                 pts = np.vstack([pts, cells]) if cells.size else pts
                 rear = True  # the grid remembers what the scan saw before it turned away
         return pts, rear
-
-    def _pose(self) -> np.ndarray | None:
-        msg = self.latest("location")
-        try:
-            return None if msg is None else pose_of(msg)
-        except BadInput:
-            return None
 
     def _plan(self, run: _Running, remaining: float) -> R.BehaviorPlan:
         dt = 1.0 / self.config.loop_rate
@@ -182,7 +166,7 @@ class Behaviors(NavComponent):
         return False, reason
 
     def _finish(self, run: _Running, success: bool, message: str) -> None:
-        self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+        self._stop_robot()
         run.stopped = True
         run.result = BehaviorResult(success=success, message=message, total_elapsed_time=clock.now() - run.started)
         self._last = run.result
@@ -198,7 +182,7 @@ class Behaviors(NavComponent):
             ended = self._running if self._running is not None and self._running.result is not None else None
             run = self._running if self._running is not None and self._running.result is None else None
         if ended is not None and not ended.stopped:  # cancelled or preempted from another thread
-            self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+            self._stop_robot()
             ended.stopped = True
         if run is None:
             if self._last is None or self._last.success:
@@ -234,7 +218,7 @@ class Behaviors(NavComponent):
         if not plan.feasible:
             self._finish(run, False, f"{run.name} stopped after {run.done_amount:.2f} of {abs(run.target):.2f}: {plan.reason}")
             return
-        self.publish(self.required_out_topic("robot_command"), twist_msg(plan.commands[0]))
+        self._drive(plan.commands[0])
 
     # -- actions (events, fallbacks) ------------------------------------------------------------------
     def spin(self, angle: float = math.pi / 2, time_allowance: float = 30.0) -> bool:
@@ -292,10 +276,10 @@ class Behaviors(NavComponent):
         with self._lock:
             run = self._running
         assert run is not None
-        while run.result is None:
-            if handle.is_cancel_requested:
+
+        def cancel() -> None:
+            if run.result is None:
                 run.result = BehaviorResult(success=False, message=f"{run.name} cancelled")
-                break
-            handle.publish_feedback(BehaviorFeedback(behavior=run.name, progress=min(1.0, run.done_amount / max(abs(run.target), 1e-9))))
-            time.sleep(0.1)
-        return run.result
+
+        return self._follow_goal(handle, lambda: run.result, cancel=cancel, feedback=lambda: BehaviorFeedback(
+            behavior=run.name, progress=min(1.0, run.done_amount / max(abs(run.target), 1e-9))))

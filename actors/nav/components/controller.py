@@ -404,15 +404,10 @@ class Controller(VisionTracking, NavComponent):
     def _speed_capped(self, cmds: np.ndarray) -> np.ndarray:
         """Inside a zone of ``speed_mask`` (at the robot's location, in the mask's map frame), each
         command whose linear speed is above the zone's limit is scaled down whole, keeping its curvature."""
-        if self._speed_filter is None:
-            return cmds
         state = self.robot_state()
-        limit = self._speed_filter.limit_at(state[0][:2]) if state is not None else None
-        if limit is None:
+        if self._speed_filter is None or state is None:
             return cmds
-        cap = limit.cap(self.config.robot.ctrl_vx_limits.max_vel)
-        speed = np.hypot(cmds[:, 0], cmds[:, 1])
-        return cmds * np.where(speed > cap, cap / np.maximum(speed, 1e-12), 1.0)[:, None]
+        return self._speed_filter.capped(cmds, state[0][:2], self.config.robot.ctrl_vx_limits.max_vel)
 
     def _publish_command(self, cmd: np.ndarray) -> None:
         out = self.get_out_topic("command")

@@ -11,30 +11,30 @@ where a navigation goal brings it (Nav2: ``navigate_to_staging_pose``). The fina
 on the dock pose detected in each scan (:mod:`emos.actors.nav.docking`), in the robot frame, so
 localization error does not move the contacts. A dock not found within ``search_timeout``
 (node clock s) fails the goal with the reason and the robot is stopped; so does a dock lost
-during the approach for that long.
+during the approach for that long. Commands go to ``robot_command``: in the shipped stacks the
+DriveManager's ``/control/docking`` input, above the recovery behaviors and the Controller
+(``stacks.DOCKING_COMMAND``). The action-server plumbing is :mod:`.motion_actions`'.
 """
 from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from attrs import define, field
 
 from emos.config.validators import in_range
 from emos.core import clock
-from emos.core.keyed import AllowedTopic
-from emos.io.topic import Topic
 
 from .. import recovery as R
 from ..controllers.sensors import obstacle_points
 from ..docking import DockApproach, DockSpec, compose, detect_dock, invert
-from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, pose_of, scan_of, twist_msg
+from .base import NavComponentConfig, rate_field
+from .convert import BadInput, scan_of
 from .mission_interfaces import DockRobotFeedback, DockRobotGoal, DockRobotResult, UndockRobotGoal
+from .motion_actions import MotionActionServer
 
 __all__ = ["DockingServer", "DockingServerConfig"]
 
@@ -69,14 +69,9 @@ class DockingServerConfig(NavComponentConfig):
         return DockSpec(docked_offset=self.docked_offset, staging_offset=self.staging_offset)
 
 
-class DockingServer(NavComponent):
-    allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "sensor_data": AllowedTopic(types=("LaserScan",), default=Topic(name="/scan", msg_type="LaserScan"), required=True),
-        "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry"), required=True),
-    }
-    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "robot_command": AllowedTopic(types=("Twist",), default=Topic(name="/cmd_vel", msg_type="Twist"), required=True),
-    }
+class DockingServer(MotionActionServer):
+    ACTIONS = (("dock_robot", DockRobotGoal, DockRobotFeedback, DockRobotResult, "_serve_dock"),
+               ("undock_robot", UndockRobotGoal, DockRobotFeedback, DockRobotResult, "_serve_undock"))
     config: DockingServerConfig
 
     @classmethod
@@ -90,12 +85,7 @@ class DockingServer(NavComponent):
         self._job: dict[str, Any] | None = None
         self.is_docked = False
         self.last_result: DockRobotResult | None = None
-        self.create_action_server(f"{self.component_name}/dock_robot", DockRobotGoal, DockRobotFeedback, DockRobotResult, self._serve_dock)
-        self.create_action_server(f"{self.component_name}/undock_robot", UndockRobotGoal, DockRobotFeedback, DockRobotResult, self._serve_undock)
-
-    def action_servers(self) -> dict[str, tuple[Any, Any, Any]]:
-        return {f"{self.component_name}/dock_robot": (DockRobotGoal, DockRobotFeedback, DockRobotResult),
-                f"{self.component_name}/undock_robot": (UndockRobotGoal, DockRobotFeedback, DockRobotResult)}
+        self._create_action_servers()
 
     # -- actions -------------------------------------------------------------------------------------
     def dock_robot(self, dock_id: str = "") -> bool:
@@ -140,15 +130,8 @@ class DockingServer(NavComponent):
         return False, reason
 
     # -- the loop ------------------------------------------------------------------------------------
-    def _pose(self) -> np.ndarray | None:
-        msg = self.latest("location")
-        try:
-            return None if msg is None else pose_of(msg)
-        except BadInput:
-            return None
-
     def _end(self, job: dict[str, Any], success: bool, message: str, err: tuple[float, float] = (0.0, 0.0)) -> None:
-        self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))  # the robot stops either way
+        self._stop_robot()  # the robot stops either way
         job["result"] = DockRobotResult(success=success, message=message, error_m=err[0], error_deg=err[1])
         self.last_result = job["result"]
         if success:
@@ -162,7 +145,7 @@ class DockingServer(NavComponent):
             job = self._job
         if job is None or job["result"] is not None:
             if job is not None and job.get("cancel") and not job.get("stopped"):
-                self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+                self._stop_robot()
                 job["stopped"] = True
             return
         if job.get("cancel"):
@@ -195,7 +178,7 @@ class DockingServer(NavComponent):
         if not det.found:
             job["estimate"] = estimate
             job["reason"] = det.reason
-            self.publish(self.required_out_topic("robot_command"), twist_msg(np.zeros(3)))
+            self._stop_robot()
             if now - job["seen"] > self.config.search_timeout:
                 where = "found" if job["state"] == "INITIAL_PERCEPTION" else "seen again"
                 self._end(job, False, f"dock {job['dock_id']!r} not {where} in the scan within {self.config.search_timeout:g} s "
@@ -216,7 +199,7 @@ class DockingServer(NavComponent):
                                  f"across, {math.degrees(abs(heading)):.1f} deg)",
                       (math.hypot(along, lateral), math.degrees(abs(heading))))
             return
-        self.publish(self.required_out_topic("robot_command"), twist_msg(np.array([v, 0.0, w])))
+        self._drive(np.array([v, 0.0, w]))
 
     def _undock_step(self, job: dict[str, Any], pose: np.ndarray, points: np.ndarray, scan: Any) -> None:
         done = math.dist(pose[:2], job["pose"][:2])
@@ -232,19 +215,17 @@ class DockingServer(NavComponent):
         if not plan.feasible:
             self._end(job, False, f"undock stopped after {done:.2f} m: {plan.reason}")
             return
-        self.publish(self.required_out_topic("robot_command"), twist_msg(plan.commands[0]))
+        self._drive(plan.commands[0])
 
     # -- action servers ------------------------------------------------------------------------------
     def _wait(self, handle: Any) -> DockRobotResult:
         with self._lock:
             job = self._job
         assert job is not None
-        while job["result"] is None:
-            if handle.is_cancel_requested:
-                job["cancel"] = True
-            handle.publish_feedback(DockRobotFeedback(state=job["state"], distance_left=float(min(job["left"], 1e6))))
-            time.sleep(0.1)
-        return job["result"]
+        result: DockRobotResult = self._follow_goal(
+            handle, lambda: job["result"], cancel=lambda: job.__setitem__("cancel", True),
+            feedback=lambda: DockRobotFeedback(state=job["state"], distance_left=float(min(job["left"], 1e6))))
+        return result
 
     def _serve_dock(self, handle: Any) -> DockRobotResult:
         ok, why = self._start_dock(handle.goal.dock_id)

@@ -12,6 +12,13 @@ Right after activation an input that has not sent its first message yet holds th
 a failure until its timeout has passed (a restart must not fail on its own start-up).
 The unblock maneuvers (``move_forward``, ``move_backward``, ``rotate_in_place``,
 ``move_to_unblock``) are methods (for event actions) and Trigger services.
+
+Several sources may drive the robot (the Controller, a recovery behavior, the docking server, a
+teleop): ``command_inputs`` gives each its own topic on the ``command`` key with a priority and a
+timeout, as ROS 2's twist_mux does. The highest-priority input with a command younger than its
+timeout drives; a lower one is ignored while a higher one is live; an input silent past its
+timeout releases the robot to the next. Whichever wins goes through the same safety pipeline,
+and through the speed cap of ``speed_mask`` (the zones the Controller obeys, enforced here too).
 """
 from __future__ import annotations
 
@@ -26,7 +33,8 @@ from attrs import define, field
 from emos.config.validators import in_range
 from emos.core import clock
 from emos.core.keyed import AllowedTopic
-from emos.io.topic import Topic
+from emos.errors import ConfigError
+from emos.io.topic import Topic, normalize_topic_name
 from emos.msgs.geometry import Twist, TwistStamped
 from emos.msgs.nav import Odometry
 from emos.msgs.sensor import LaserScan
@@ -34,6 +42,8 @@ from emos.msgs.srv import TriggerRequest, TriggerResponse
 from emos.msgs.std import Bool, Header
 
 from ..controllers.sensors import obstacle_points
+from ..costmap.config import mask_path
+from ..costmap.filters import SpeedFilter, load_filter_mask
 from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig, SweptConfig
 from ..safety import maneuvers as M
 from ..safety.blind_spot import BlindSpotConfig, BlindSpotMemory
@@ -41,7 +51,7 @@ from ..safety.zones import ZoneCheck
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of
 
-__all__ = ["DriveManager", "DriveManagerConfig"]
+__all__ = ["CommandInput", "DriveManager", "DriveManagerConfig"]
 
 SETTLE_S = 1.0  # node-clock s: the longest a maneuver waits for the base to come to rest before it is re-planned
 
@@ -60,6 +70,55 @@ def _pose(value: Any) -> tuple[float, float, float]:
     return (x, y, yaw)
 
 
+@define(frozen=True)
+class CommandInput:
+    """One prioritised command input (an entry of twist_mux's ``topics``): ``topic`` (its name),
+    ``priority`` (higher wins), ``timeout`` (s on the node's clock: a command older than this no
+    longer holds the robot, and the next input drives), ``msg_type`` (``Twist`` or ``TwistStamped``)."""
+
+    topic: str
+    priority: int
+    timeout: float
+    msg_type: str = "Twist"
+
+
+def _command_inputs(value: Any) -> tuple[CommandInput, ...]:
+    """``command_inputs`` from CommandInput or dicts of its fields, each field checked with the
+    entry named: a bad one is refused where the config is made."""
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__iter__"):
+        raise TypeError(f"DriveManagerConfig.command_inputs: expected a list of CommandInput (topic, priority, timeout), "
+                        f"got {type(value).__name__}")
+    out: list[CommandInput] = []
+    for i, item in enumerate(value):
+        where = f"DriveManagerConfig.command_inputs[{i}]"
+        if isinstance(item, Mapping):
+            unknown = set(item) - {"topic", "priority", "timeout", "msg_type"}
+            if unknown or not {"topic", "priority", "timeout"} <= set(item):
+                raise ValueError(f"{where}: expected the keys topic, priority, timeout (and msg_type), got {sorted(item)}")
+            item = CommandInput(**item)
+        if not isinstance(item, CommandInput):
+            raise TypeError(f"{where}: expected a CommandInput or a dict of its fields, got {type(item).__name__}")
+        try:
+            topic = normalize_topic_name(item.topic)
+        except ValueError as exc:
+            raise ValueError(f"{where}.topic: {exc}") from None
+        if isinstance(item.priority, bool) or not isinstance(item.priority, int):
+            raise ValueError(f"{where}.priority: expected an integer, got {item.priority!r}")
+        if isinstance(item.timeout, bool) or not isinstance(item.timeout, (int, float)) or not (math.isfinite(item.timeout) and item.timeout > 0):
+            raise ValueError(f"{where}.timeout: expected a number of seconds > 0, got {item.timeout!r}")
+        if item.msg_type not in ("Twist", "TwistStamped"):
+            raise ValueError(f"{where}.msg_type: expected 'Twist' or 'TwistStamped', got {item.msg_type!r}")
+        for j, other in enumerate(out):
+            if other.topic == topic:
+                raise ValueError(f"{where}.topic: {item.topic!r} is already command_inputs[{j}]'s topic: one entry per topic")
+            if other.priority == item.priority:
+                raise ValueError(f"{where}.priority: {item.priority} is already the priority of command_inputs[{j}] "
+                                 f"({other.topic}): two inputs of one priority would interleave their commands")
+        out.append(CommandInput(topic=topic, priority=int(item.priority), timeout=float(item.timeout),
+                                msg_type=item.msg_type))
+    return tuple(out)
+
+
 @define(kw_only=True)
 class DriveManagerConfig(NavComponentConfig):
     """Zones in metres beyond the footprint (``critical_zone_angle``: full cone, degrees).
@@ -67,7 +126,10 @@ class DriveManagerConfig(NavComponentConfig):
     ``sensor_timeout`` (s): older inputs stop the robot. ``smooth_commands``: low-pass filter
     (``smoothing_time_constant`` s) on top of the acceleration limits. ``max_distance`` (m) and
     ``max_rotation`` (rad): default size of the unblock maneuvers. ``stop_hold_time`` (s): how
-    long ``stop()`` (an event action) holds the robot still whatever the controller sends."""
+    long ``stop()`` (an event action) holds the robot still whatever the controller sends.
+    ``command_inputs``: prioritised command inputs (twist_mux; empty: the one ``command`` input,
+    timed out after ``cmd_timeout``). ``speed_mask``: a speed filter mask (the Controller's): every
+    command sent is capped to the zone's limit at the robot's location."""
 
     loop_rate: float = rate_field(20.0)
     closed_loop: bool = field(default=True)
@@ -104,6 +166,12 @@ class DriveManagerConfig(NavComponentConfig):
     """s: the body's yaw rate lag behind its wheels (it keeps turning yaw_rate * yaw_lag after a stop)."""
     yaw_gain_min: float = field(default=0.6, validator=in_range(min_value=0.05, max_value=1.0))
     """The least fraction of the commanded yaw rate the body turns at (skid-steer slip)."""
+    command_inputs: tuple[CommandInput, ...] = field(factory=tuple, converter=_command_inputs)
+    """Prioritised command inputs, each its own topic on the ``command`` key (see the module doc).
+    Empty (the default): the ``command`` key's one topic, priority 0, timeout ``cmd_timeout``."""
+    speed_mask: str = field(default="", validator=mask_path("speed"))
+    """A speed filter mask (Nav2's speed filter; ``emos map zones``): inside its zones every
+    command leaving here is scaled down to the zone's limit, whichever input sent it."""
 
     def __attrs_post_init__(self) -> None:
         if self.slowdown_zone_distance < self.critical_zone_distance:
@@ -113,7 +181,7 @@ class DriveManagerConfig(NavComponentConfig):
 
 class DriveManager(NavComponent):
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist")),
+        "command": AllowedTopic(types=("Twist", "TwistStamped"), default=Topic(name="/control", msg_type="Twist"), number=-1),
         "multi_command": AllowedTopic(types=("TwistArray",), default=Topic(name="/control_list", msg_type="TwistArray")),
         "sensor_data": AllowedTopic(types=("LaserScan", "Float64", "Float32"), default=Topic(name="/scan", msg_type="LaserScan"), number=11),
         "location": AllowedTopic(types=("Odometry", "PoseStamped", "Pose"), default=Topic(name="/odom", msg_type="Odometry")),
@@ -126,10 +194,42 @@ class DriveManager(NavComponent):
 
     def __init__(self, component_name: str, config: DriveManagerConfig | None = None, **kwargs: Any) -> None:
         super().__init__(component_name, config=config, **kwargs)
+        if self.config.command_inputs:  # each prioritised input is a topic of the command key
+            self.inputs(command=[Topic(name=c.topic, msg_type=c.msg_type) for c in self.config.command_inputs])
         # Event run type by default: commands are passed on as they arrive (no added latency);
         # the watchdog timer runs beside at loop_rate. Timed also works (commands wait for a tick).
-        if "trigger" not in kwargs and "run_type" not in kwargs:
-            self.trigger = [t for t in (self.get_in_topic("command"), self.get_in_topic("multi_command")) if t is not None]
+        self._default_trigger = "trigger" not in kwargs and "run_type" not in kwargs
+        if self._default_trigger:
+            self.trigger = self._command_topics()
+
+    def _command_topics(self) -> list[Topic]:
+        return [*self.get_in_topics("command"), *self.get_in_topics("multi_command")]
+
+    def _mux_table(self) -> list[tuple[int, float, str, Topic]]:
+        """(priority, timeout s, key, topic) of every command input. Without ``command_inputs``:
+        the command topic and ``multi_command`` at priority 0, timeout ``cmd_timeout`` (the newest
+        of the two drives, as before). With them: each entry's topic, which must be wired on the
+        ``command`` key (and nothing else be); ``multi_command`` ranks with the lowest entry."""
+        cfg = self.config
+        wired = self.get_in_topics("command")
+        multi = [("multi_command", t) for t in self.get_in_topics("multi_command")]
+        if not cfg.command_inputs:
+            if len(wired) > 1:
+                raise ConfigError(f"DriveManager {self.component_name!r}: {len(wired)} topics on the command input "
+                                  f"({', '.join(t.name for t in wired)}) and no command_inputs to rank them: their commands "
+                                  "would interleave; give DriveManagerConfig(command_inputs=[CommandInput(topic, priority, timeout), ...])")
+            return [(0, cfg.cmd_timeout, key, t) for key, t in [("command", t) for t in wired] + multi]
+        by_name = {t.name: t for t in wired}
+        missing = [c.topic for c in cfg.command_inputs if c.topic not in by_name]
+        extra = sorted(set(by_name) - {c.topic for c in cfg.command_inputs})
+        if missing or extra:
+            raise ConfigError(f"DriveManager {self.component_name!r}: the command input's topics ({', '.join(by_name) or 'none'}) "
+                              f"do not match command_inputs" + (f": {', '.join(missing)} not wired" if missing else "")
+                              + (f": {', '.join(extra)} has no command_inputs entry" if extra else "")
+                              + " (a later driver.inputs(command=...) replaced them?)")
+        low = min(c.priority for c in cfg.command_inputs)
+        table = [(c.priority, c.timeout, "command", by_name[c.topic]) for c in cfg.command_inputs]
+        return table + [(low, cfg.cmd_timeout, key, t) for key, t in multi]
 
     @classmethod
     def config_class(cls) -> type[DriveManagerConfig]:
@@ -153,7 +253,12 @@ class DriveManager(NavComponent):
         self._estop: bool | None = None
         self._maneuver: tuple[M.Maneuver, int] | None = None
         self._held_until = -math.inf
-        self._cmd_seen: dict[str, Any] = {}  # per command key: the message whose writers were noted
+        self._mux = self._mux_table()
+        if self._default_trigger and self.run_type.value == "Event":
+            self._trigger = self._command_topics()  # the topics wired now (inputs may have changed since __init__)
+        self._driving: str | None = None  # the command input that drives now (its topic name), for the log
+        self._speed_filter = SpeedFilter(load_filter_mask(cfg.speed_mask, "speed")) if cfg.speed_mask else None
+        self._cmd_seen: dict[str, Any] = {}  # per command topic: the message whose writers were noted
         self._cmd_writers: dict[str, list[int]] = {}
         self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
                             if cfg.blind_spot_memory_time > 0 else None)
@@ -180,8 +285,16 @@ class DriveManager(NavComponent):
         # Event: a command arrived. Timed: the main timer (which also plays maneuvers).
         if msg is None:
             self._watchdog()
-        elif self._maneuver is None:
+        elif self._maneuver is None and not self._outranked(topic):
             self._drive()
+
+    def _outranked(self, topic: Any) -> bool:
+        """A command arrived on an input that does not drive now (a higher one is live): it is
+        ignored, as twist_mux ignores it; the watchdog keeps passing on the one that drives."""
+        if len(self._mux) < 2 or topic is None:
+            return False
+        selected = self._selected_input()
+        return selected is not None and selected[1].name != getattr(topic, "name", topic)
 
     def _watchdog(self) -> None:
         if self._maneuver is not None:
@@ -189,18 +302,35 @@ class DriveManager(NavComponent):
             return
         self._drive()
 
-    def _latest_command(self) -> tuple[np.ndarray, float, str] | None:
-        """(command, age s, key) of the newest of ``command`` / ``multi_command``; None if none."""
-        best = None
-        for key in ("command", "multi_command"):
-            age = self.age_of(key)
-            if age is not None and (best is None or age < best[1]):
-                best = (key, age)
-        if best is None:
+    def _selected_input(self) -> tuple[str, Topic, float, float] | None:
+        """(key, topic, age s, timeout s) of the input that drives now: the highest-priority one
+        with a command younger than its timeout (the newest among equals). When none is live:
+        the newest command of any input (stale: the caller stands or stops on it). None when no
+        command has arrived at all."""
+        live: tuple[int, float, tuple[str, Topic, float, float]] | None = None
+        newest: tuple[str, Topic, float, float] | None = None
+        for priority, timeout, key, topic in self._mux:
+            age = self.input_age(topic)
+            if age is None:
+                continue
+            if newest is None or age < newest[2]:
+                newest = (key, topic, age, timeout)
+            if age <= timeout and (live is None or (priority, -age) > (live[0], -live[1])):
+                live = (priority, age, (key, topic, age, timeout))
+        return live[2] if live is not None else newest
+
+    def _latest_command(self) -> tuple[np.ndarray, float, str, Topic, float] | None:
+        """(command, age s, key, topic, timeout s) of the input that drives (``_selected_input``); None if none."""
+        selected = self._selected_input()
+        if selected is None:
             return None
-        key, age = best
-        msg = self.latest(key)
-        assert msg is not None  # the key has an age, so a message has arrived
+        key, topic, age, timeout = selected
+        msg = self.get_input(topic)
+        assert msg is not None  # the input has an age, so a message has arrived
+        if topic.name != self._driving:
+            if self._driving is not None and len(self._mux) > 1:  # rare (a recovery, docking, a teleop): worth a line
+                self.get_logger().info("[%s] command input %s drives (was %s)", self.component_name, topic.name, self._driving)
+            self._driving = topic.name
         if key == "multi_command":
             if len(msg.linear_velocities) == 0:
                 raise BadInput("multi_command: empty TwistArray")
@@ -209,10 +339,11 @@ class DriveManager(NavComponent):
                 raise BadInput(f"multi_command: NaN/inf velocity {cmd.tolist()}")
         else:
             cmd = twist_of(msg)
-        return cmd, age, key
+        return cmd, age, key, topic, timeout
 
-    def _blocking_reason(self) -> tuple[str, str] | None:
-        """(input key, reason) when the robot must not drive now, else None; sets the command."""
+    def _blocking_reason(self) -> tuple[str | Topic, str] | None:
+        """(input key or command topic, reason) when the robot must not drive now, else None;
+        sets the command."""
         cfg = self.config
         try:
             latest = self._latest_command()
@@ -220,19 +351,20 @@ class DriveManager(NavComponent):
             return "command", str(exc)
         if latest is None:
             return None  # nothing asked of the robot yet: it stands still, and that is no failure
-        cmd, age, key = latest
-        src = self.latest(key)
+        cmd, age, key, topic, timeout = latest
+        src = self.get_input(topic)
         self._command_stamp = src.header.stamp if isinstance(src, TwistStamped) else None
-        if age > cfg.cmd_timeout and not np.any(cmd):
+        if age > timeout and not np.any(cmd):
             # The last word was "stand still" (a controller or a motion test that finished): the
             # robot keeps standing still, and a source that said so and went quiet is no fault.
             self._command = np.zeros(3)
             return None
-        if age > cfg.cmd_timeout:
-            return key, f"no command for {age:.2f} s (cmd_timeout {cfg.cmd_timeout:g} s)"
-        if not self._publisher_alive(key, src):
-            return key, f"the process that published the last command on {self.topic_name(key)} died"
-        self._command = cmd
+        if age > timeout:
+            what = "cmd_timeout" if not cfg.command_inputs or key == "multi_command" else f"{topic.name} timeout"
+            return topic, f"no command for {age:.2f} s ({what} {timeout:g} s)"
+        if not self._publisher_alive(topic, src):
+            return topic, f"the process that published the last command on {topic.name} died"
+        self._command = self._speed_capped(cmd)
         if cfg.closed_loop:
             odom_age = self.age_of("location")
             if odom_age is None or odom_age > cfg.odom_timeout:
@@ -252,20 +384,38 @@ class DriveManager(NavComponent):
         ages += [self.input_age(t) for t in self.get_in_topics("sensor_data") if t.msg_type is LaserScan]
         return any(age is None for age in ages)
 
-    def _publisher_alive(self, key: str, msg: Any) -> bool:
-        """Is the process that sent the current command still running? A restarted publisher
-        (same ring, new pid) does not revive a command its dead predecessor sent."""
+    def _publisher_alive(self, topic: Topic, msg: Any) -> bool:
+        """Is the process that sent the current command (on ``topic``) still running? A restarted
+        publisher (same ring, new pid) does not revive a command its dead predecessor sent."""
         from emos.core.node import process_alive
 
-        topic = self.get_in_topic(key)
-        assert topic is not None  # key names the input the current command came in on
         # A newer message (each arrival is decoded into a new object; its age cannot tell: on
         # simulated time it does not grow while the simulator waits): note who can have sent it.
-        if msg is not self._cmd_seen.get(key):
-            self._cmd_writers[key] = [pid for pid in self.node.publisher_pids(topic) if pid <= 0 or process_alive(pid)]
-            self._cmd_seen[key] = msg
-        writers = self._cmd_writers.get(key)
+        if msg is not self._cmd_seen.get(topic.name):
+            self._cmd_writers[topic.name] = [pid for pid in self.node.publisher_pids(topic) if pid <= 0 or process_alive(pid)]
+            self._cmd_seen[topic.name] = msg
+        writers = self._cmd_writers.get(topic.name)
         return not writers or any(pid <= 0 or process_alive(pid) for pid in writers)
+
+    def _speed_capped(self, cmd: np.ndarray) -> np.ndarray:
+        """``cmd`` within the ``speed_mask`` zone's limit at the robot's location (the Controller's
+        cap, enforced here too, whichever input sent the command); unchanged outside the zones or
+        without a fresh pose."""
+        if self._speed_filter is None:
+            return cmd
+        pose = self._pose()
+        if pose is None:
+            return cmd
+        capped: np.ndarray = self._speed_filter.capped(cmd[None, :], pose[:2], self.config.robot.ctrl_vx_limits.max_vel)[0]
+        return capped
+
+    def _fail_source(self, source: str | Topic, message: str) -> None:
+        """``fail_input`` for an input key, or for one command input named by its topic."""
+        if isinstance(source, Topic):
+            self.health_status.set_fail_system(topic_names=[source.name], message=message)
+            self._report.warning(f"input:{source.name}", "[%s] %s", self.component_name, message, logger=self.get_logger())
+        else:
+            self.fail_input(source, message)
 
     def _obstacles(self) -> tuple[Any, str]:
         """The latest scan (and any range sensors) as obstacles; None with a reason when stale."""
@@ -284,6 +434,7 @@ class DriveManager(NavComponent):
         except BadInput as exc:
             return None, str(exc)
         self._scan_stamp = scan_msg.header.stamp.to_sec() if scan_msg.header.stamp is not None else None
+        self._scan_msg = scan_msg  # the swept check prepares its points once per scan message
         self._remember(scan_msg, scan)
         return scan, reason
 
@@ -314,19 +465,26 @@ class DriveManager(NavComponent):
         blind = self._blind_spot.blind_points(pose, scan) if self._blind_spot is not None and pose is not None else ()
         return np.vstack([scan.points(), blind]) if len(blind) else scan
 
-    def _swept_inputs(self, scan: Any) -> tuple[np.ndarray | None, float, Any]:
-        """(points in the robot frame: the scan's and the blind-spot memory's; the scan's age s;
-        the commands sent since (send times relative to now, commands)) for the swept-footprint
-        check; points None when it is off."""
+    def _swept_inputs(self, scan: Any) -> tuple[Any, float, Any]:
+        """(points in the robot frame: the scan's and the blind-spot memory's, prepared for the
+        check; the scan's age s; the commands sent since (send times relative to now, commands))
+        for the swept-footprint check; points None when it is off."""
         if self._safety.swept is None:
             return None, 0.0, None
         cfg = self.config
-        points = obstacle_points(scan, cfg.sensor_pose)
         pose = self._pose() if self._blind_spot is not None else None
-        if self._blind_spot is not None and pose is not None:
-            blind = self._blind_spot.blind_points(pose, scan, cfg.sensor_pose)
-            if len(blind):
-                points = np.vstack([points, blind])
+
+        def scan_points() -> np.ndarray:
+            # Once per scan (again if the pose became known since): the blind-spot memory placed
+            # at the pose of the scan's arrival, as the memory placed the scan itself.
+            points = obstacle_points(scan, cfg.sensor_pose)
+            if self._blind_spot is not None and pose is not None:
+                blind = self._blind_spot.blind_points(pose, scan, cfg.sensor_pose)
+                if len(blind):
+                    points = np.vstack([points, blind])
+            return points
+
+        points = self._safety.swept_points(getattr(self, "_scan_msg", None), pose is not None, scan_points)
         now = clock.now()
         # The scan's age from its stamp (the sensor's time); a stamp from another clock (or none):
         # since it arrived here, the rest being counted in actuation_latency.
@@ -365,7 +523,7 @@ class DriveManager(NavComponent):
         if clock.now() < self._held_until:
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             return
-        if self.age_of("command") is None and self.age_of("multi_command") is None:
+        if all(self.input_age(topic) is None for _, _, _, topic in self._mux):
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             self.health_status.set_healthy()
             return
@@ -374,8 +532,8 @@ class DriveManager(NavComponent):
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf), stop=True)
             return
         if blocked is not None:
-            key, reason = blocked
-            self.fail_input(key, f"robot stopped: {reason}")
+            source, reason = blocked
+            self._fail_source(source, f"robot stopped: {reason}")
             self._send(np.zeros(3), ZoneCheck(0.0, math.nan), stop=True)
             self.node.publish_status()
             return
@@ -530,7 +688,7 @@ class DriveManager(NavComponent):
             self._maneuver = None
             self._send(np.zeros(3), ZoneCheck(1.0, math.inf))
             return
-        cmd = maneuver.commands[i]
+        cmd = self._speed_capped(maneuver.commands[i])
         obstacles, _ = self._obstacles()
         check = ZoneCheck(1.0, math.inf)
         swept = None

@@ -190,3 +190,15 @@ class SpeedFilter:
             return None
         return SpeedLimit(percentage=self.mask.filter_type == "speed_percent",
                           speed_limit=self.mask.base + self.mask.multiplier * v)
+
+    def capped(self, cmds: np.ndarray, point: np.ndarray, max_speed: float) -> np.ndarray:
+        """``cmds`` ((n, 3): vx, vy, omega) within the limit at ``point``: each command whose
+        linear speed is above it is scaled down whole, keeping its curvature (the Controller's and
+        the DriveManager's cap). ``max_speed``: the robot's, for a percentage limit."""
+        cmds = np.asarray(cmds, dtype=float).reshape(-1, 3)
+        limit = self.limit_at(point)
+        if limit is None:
+            return cmds
+        cap = limit.cap(max_speed)
+        speed = np.hypot(cmds[:, 0], cmds[:, 1])
+        return cmds * np.where(speed > cap, cap / np.maximum(speed, 1e-12), 1.0)[:, None]
