@@ -31,6 +31,8 @@ import types
 from dataclasses import dataclass, field
 from typing import Any
 
+from emos.errors import EmosError
+
 __all__ = ["ConfigureServices", "configure_services"]
 
 CREATORS = ("create_service", "create_action_server")
@@ -44,8 +46,9 @@ class ConfigureServices:
     unresolved: list[str] = field(default_factory=list)  # "component: file:line: expression"
 
 
-class _Unknown(Exception):
-    """An expression whose value cannot be known without running the component."""
+class _Unknown(EmosError):
+    """An expression whose value cannot be known without running the component (internal: caught
+    where it is raised, and the name reported as not derived)."""
 
 
 @functools.lru_cache(maxsize=256)
