@@ -123,6 +123,14 @@ class Peer:
             return [line for line in self.lines if line.startswith("got ")]
 
     def stop(self, sig: int = signal.SIGTERM) -> int:
+        if self.proc.poll() is None and sig != signal.SIGKILL:
+            # A peer signalled while rclpy starts (before its try/finally) dies with its Fast DDS
+            # participant undestroyed, leaving /dev/shm/fastrtps_* that the tests' leftover checks
+            # then see: let it reach "ready" (or exit) first.
+            try:
+                self.wait_for(lambda line: line == "ready", what="ready before being stopped")
+            except AssertionError:
+                pass  # it exited, or never got ready: stop it as it is
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
             try:

@@ -12,6 +12,7 @@ import time
 import aiohttp
 import pytest
 
+from tests.runtime.helpers import wait_until
 from tests.ui_security.conftest import bearer, client_ssl, request
 
 pytestmark = [pytest.mark.process, pytest.mark.timeout(240)]
@@ -20,16 +21,6 @@ pytestmark = [pytest.mark.process, pytest.mark.timeout(240)]
 @pytest.fixture
 def api(secured):
     return secured  # the HTTPS system shared by this folder's tests (conftest.py)
-
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise TimeoutError(f"{what} not met within {timeout} s")
 
 
 WRONG = [  # path, body, the field the 422 must name
@@ -68,7 +59,7 @@ def test_wrong_types_are_refused_with_the_field_named_and_nothing_published(api)
                        ("/api/v1/inputs/goal", {"value": {"x": 1.5, "y": -2.0}})):
         status, answer, _ = request(api, "POST", path, h, json_body=body)
         assert status == 200 and answer == {"ok": True}, (path, answer)
-    got = _wait(lambda: {r["topic"]: r["value"] for r in api.received()[before:] if r["topic"] != "navigate"}
+    got = wait_until(lambda: {r["topic"]: r["value"] for r in api.received()[before:] if r["topic"] != "navigate"}
                 if len([r for r in api.received()[before:] if r["topic"] != "navigate"]) >= 6 else None, what="the five inputs and the event")
     assert got["/question"] == "hello" and got["/speed"] == 0.5 and got["/estop"] is True
     assert got["/cmd"] == [0.3, -0.2] and got["/goal"] == [1.5, -2.0]
@@ -86,16 +77,16 @@ def test_services_and_action_goals_with_feedback_and_cancel(api):
     def done():
         s, a, _ = request(api, "GET", f"/api/v1/actions/navigator/action/goals/{goal_id}", h)
         return a if s == 200 and a["state"] in ("succeeded", "failed", "canceled") else None
-    final = _wait(done, what="the goal's result")
+    final = wait_until(done, what="the goal's result")
     assert final["state"] == "succeeded" and final["result"] == {"data": "reached 2.00 3.00"}, final
     assert [f["data"] for f in final["feedback"]] == [3.0, 2.0, 1.0], final
     # A long goal, cancelled.
     status, answer, _ = request(api, "POST", "/api/v1/actions/navigator/action/goals", h, json_body={"goal": {"x": 60.0, "y": 0.0}})
     long_id = answer["goal_id"]
-    _wait(lambda: request(api, "GET", f"/api/v1/actions/navigator/action/goals/{long_id}", h)[1]["feedback"], what="first feedback")
+    wait_until(lambda: request(api, "GET", f"/api/v1/actions/navigator/action/goals/{long_id}", h)[1]["feedback"], what="first feedback")
     status, answer, _ = request(api, "POST", f"/api/v1/actions/navigator/action/goals/{long_id}/cancel", h, json_body={})
     assert status == 202, answer
-    final = _wait(lambda: (lambda a: a if a["state"] != "running" and a["state"] != "sent" else None)(
+    final = wait_until(lambda: (lambda a: a if a["state"] != "running" and a["state"] != "sent" else None)(
         request(api, "GET", f"/api/v1/actions/navigator/action/goals/{long_id}", h)[1]), what="the cancel")
     assert final["state"] == "canceled", final
     assert request(api, "POST", f"/api/v1/actions/navigator/action/goals/{long_id}/cancel", h, json_body={})[0] == 409

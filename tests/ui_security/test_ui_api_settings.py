@@ -5,25 +5,15 @@ start components (404 naming an unknown one). The change is checked on the compo
 through its control socket, not only through the API's answer."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import pytest
 
 from emos.core.rpc import RpcClient
+from tests.runtime.helpers import wait_until
 from tests.ui_security.conftest import bearer, paired_operator, request, run_id_of
 
 pytestmark = [pytest.mark.process, pytest.mark.timeout(240)]
-
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise TimeoutError(f"{what} not met within {timeout} s")
 
 
 def _control(secured, name: str, method: str, **kw):
@@ -81,10 +71,10 @@ def test_settings_and_lifecycle_through_the_api_by_role(secured):
     # Stop and start: the lifecycle's deactivate and activate, seen on the component itself.
     status, answer, _ = request(secured, "POST", "/api/v1/components/talker/stop", operator, json_body={})
     assert status == 200 and answer["ok"], answer
-    _wait(lambda: _control(secured, "talker", "get_state")["state"] != "active", what="the talker stopped")
+    wait_until(lambda: _control(secured, "talker", "get_state")["state"] != "active", what="the talker stopped")
     status, answer, _ = request(secured, "POST", "/api/v1/components/talker/start", operator)
     assert status == 200 and answer["ok"], answer
-    _wait(lambda: _control(secured, "talker", "get_state")["state"] == "active", what="the talker active again")
+    wait_until(lambda: _control(secured, "talker", "get_state")["state"] == "active", what="the talker active again")
     for path, code, words in (("/api/v1/components/nosuch/stop", 404, "'nosuch'"), ("/api/v1/components/talker/explode", 404, "'explode'"),
                               ("/api/v1/components/ui/stop", 409, "cannot stop itself")):
         status, answer, _ = request(secured, "POST", path, operator, json_body={})
