@@ -235,7 +235,7 @@ def test_bad_input_is_dropped_with_one_line_and_the_rest_keeps_flowing(run):
 
 
 def test_a_ros2_node_that_dies_and_comes_back_resumes_its_stream(run):
-    first = Peer("talker.py", run.domain, "/chatter", "std_msgs/msg/String", 20, "default", "--prefix", "a", udp_only=True)
+    first = Peer("talker.py", run.domain, "/chatter", "std_msgs/msg/String", 20, "default", "--prefix", "a")
     wait_until(lambda: "EMOS chatter a" in run.output(), what="the first talker's messages")
     first.stop(signal.SIGKILL)
     second = Peer("talker.py", run.domain, "/chatter", "std_msgs/msg/String", 20, "default", "--prefix", "b")
