@@ -31,6 +31,7 @@ import threading
 import time
 import tty
 from collections.abc import Callable, Iterable
+from typing import Any
 
 from . import protocol as P
 from .protocol import Instruction, Reg
@@ -305,12 +306,18 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         parser.error(f"--ids: expected comma-separated integers, got {args.ids!r}")
     emu = BusEmulator(ids, baudrate=args.baudrate, return_delay=args.return_delay)
+    return serve_until_stopped(emu, f"Feetech bus emulator: servos {ids}")
+
+
+def serve_until_stopped(bus: Any, what: str) -> int:
+    """Open ``bus`` (a context manager with a ``path``: the emulator, or the arm driving one),
+    print its path on stdout (alone, for scripts) and ``what`` on stderr, and serve until
+    SIGTERM or Ctrl-C; the bus is closed on either."""
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with emu:
-        print(emu.path, flush=True)  # stdout: the path alone, for scripts
-        print(f"Feetech bus emulator: servos {ids} on {emu.path} -> {os.path.realpath(emu.path)}; Ctrl-C stops",
-              file=sys.stderr, flush=True)
+    with bus:
+        print(bus.path, flush=True)
+        print(f"{what} on {bus.path} -> {os.path.realpath(bus.path)}; Ctrl-C stops", file=sys.stderr, flush=True)
         try:
             stop.wait()
         except KeyboardInterrupt:

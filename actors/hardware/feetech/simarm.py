@@ -40,7 +40,7 @@ import numpy as np
 
 from . import protocol as P
 from .arm import RAD_PER_STEP, ServoArm
-from .emulator import BusEmulator, ServoModel
+from .emulator import BusEmulator, ServoModel, serve_until_stopped
 from .protocol import Reg
 
 __all__ = ["FULL_LOAD_ERROR_RAD", "SERVO_JOINTS", "PybulletServo", "SimulatedArm", "main"]
@@ -248,26 +248,14 @@ class SimulatedArm:
 
 def main(argv: list[str] | None = None) -> int:
     import argparse
-    import os
-    import signal
-    import sys
 
     parser = argparse.ArgumentParser(prog="python -m emos.actors.hardware.feetech.simarm",
                                      description="The pybullet table-top arm on an emulated Feetech STS3215 bus (a pty).")
     parser.add_argument("--return-delay", type=int, default=None,
                         help="Return Delay Time register (2 us units; default the factory 250)")
     args = parser.parse_args(argv)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with SimulatedArm(return_delay=args.return_delay) as sim:
-        print(sim.path, flush=True)  # stdout: the path alone, for scripts
-        print(f"Feetech bus emulator on the pybullet arm: servos {SERVO_JOINTS} on {sim.path} -> "
-              f"{os.path.realpath(sim.path)}; Ctrl-C stops", file=sys.stderr, flush=True)
-        try:
-            stop.wait()
-        except KeyboardInterrupt:
-            pass
-    return 0
+    return serve_until_stopped(SimulatedArm(return_delay=args.return_delay),
+                               f"Feetech bus emulator on the pybullet arm: servos {SERVO_JOINTS}")
 
 
 if __name__ == "__main__":
