@@ -169,7 +169,7 @@ class PublisherLoan:
         pub = self.pub
         nbytes = math.prod(self.shape) * self.dtype.itemsize
         ring = pub._begin_loan(LOAN_META_BYTES + _align8(nbytes))
-        n, buf = ring.begin(ring.capacity)  # the whole slot: arrays other than the loaned one go after it
+        n, buf = ring.begin(ring.capacity, pub.reuse_recent)  # the whole slot: arrays other than the loaned one go after it
         buf.release()  # the array below maps the segment itself, as a reader's loan does
         self._n, self._ring = n, ring
         try:

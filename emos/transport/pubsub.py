@@ -78,8 +78,11 @@ class Publisher:
     """Writes messages of one type to one topic."""
 
     def __init__(self, ctx: RunContext, topic: str, msg_cls: type, publisher_id: str | None = None, depth: int = 10,
-                 max_bytes: int = MAX_MESSAGE_BYTES, capacity: int = DEFAULT_CAPACITY):
-        """``capacity``: the slot size (bytes) of the first ring; it grows as messages need."""
+                 max_bytes: int = MAX_MESSAGE_BYTES, capacity: int = DEFAULT_CAPACITY, reuse_recent: bool = False):
+        """``capacity``: the slot size (bytes) of the first ring; it grows as messages need.
+        ``reuse_recent``: big messages may go to the slot of the message before last when every
+        reader has read it (``ring.py``, "Recent slots"): what a volatile topic wants; a
+        transient-local one keeps its whole history for late joiners."""
         if not 0 < capacity <= max_bytes:
             raise ValueError(f"Publisher on {topic!r}: capacity must be 1..{max_bytes} bytes, got {capacity!r}")
         self.ctx = ctx
@@ -96,6 +99,7 @@ class Publisher:
         self._waiters_version = -1
         self._ns_per_byte = _COPY_NS_PER_BYTE  # how fast our long copies run (see _announce_write)
         self._loan_open = False  # a PublisherLoan holds the next message (single writer)
+        self.reuse_recent = bool(reuse_recent)
         self.ring = self._open_or_create()
         self._announce()
 
@@ -153,14 +157,22 @@ class Publisher:
         # Carry the messages still held by the old ring over, under the same numbers, so a
         # subscriber that finds only the new generation (or follows late) loses nothing.
         start = max(old.first, old.head - old.slot_count)
-        new = self._create_ring(old.generation + 1, old.slot_count, capacity, old.fingerprint, old.type_name, start)
+        carried: list[tuple[bytearray, int]] = []
         for n in range(start, old.head):
             try:
                 status, read, stamp = old.read(n)
             except R.RingCorrupt:  # scribbled on while we ran: carry an empty message in its place
-                status, read, stamp = R.LAPPED, None, 0
-            # Not OK cannot happen for our own completed messages; keep the numbering dense anyway.
-            payload = read if status == R.OK and read is not None else bytearray()
+                status, read, stamp = R.CORRUPT, None, 0
+            if status == R.LAPPED:
+                # Overwritten by a recent-slot write (every reader had read it): carry only what
+                # follows, so no reader is handed a hole; the numbering stays dense.
+                carried.clear()
+                start = n + 1
+                continue
+            carried.append((read if status == R.OK and read is not None else bytearray(), stamp))
+        new = self._create_ring(old.generation + 1, old.slot_count, capacity, old.fingerprint, old.type_name, start)
+        new.add_untracked(old.untracked)  # readers we cannot track follow us here (_Source.switch_to)
+        for payload, stamp in carried:
             m, buf = new.begin(len(payload))
             buf[:] = payload
             buf.release()
@@ -222,7 +234,7 @@ class Publisher:
                 raise MessageTooLarge(f"topic {self.topic!r}: a {self.type_name} of {nbytes} B exceeds the limit of {self.max_bytes} B")
             self._grow(nbytes)
         ring = self.ring
-        n, buf = ring.begin(nbytes)
+        n, buf = ring.begin(nbytes, self.reuse_recent)
         started = self._announce_write(ring, nbytes) if nbytes >= ANNOUNCE_BYTES else 0  # (no call for small ones)
         try:
             # Big arrays go in with streaming stores (codec.STREAM_MIN_BYTES): steadier and,
@@ -299,20 +311,45 @@ class Publisher:
 class _Source:
     """One publisher's ring as seen by one subscriber."""
 
-    __slots__ = ("ring", "cursor", "publisher_id", "base", "loans")
+    __slots__ = ("ring", "cursor", "publisher_id", "base", "loans", "track")
 
-    def __init__(self, ring: R.Ring, cursor: int, publisher_id: str, base: str, loans: int):
+    def __init__(self, ring: R.Ring, cursor: int, publisher_id: str, base: str, loans: int, token: int | None):
         self.ring = ring
         self.cursor = cursor
         self.publisher_id = publisher_id
         self.base = base
         self.loans = LoanBook(ring, loans) if loans > 0 else None
+        self.track = _NOT_COUNTED
+        self._track(token)
 
-    def switch_to(self, ring: R.Ring, base: str, loans: int) -> None:
+    def _track(self, token: int | None, counted: bool = False) -> None:
+        """Tell the writer how far we read (``ring.py``, "Recent slots"): through the cursor word
+        of our wake-up ``token`` in the ring if it is registered there, else by being counted as
+        a reader it cannot track (which keeps its whole history for us). ``counted``: the ring
+        already counts us (a grown ring carries its predecessor's count over)."""
+        at = self.ring.cursor_index(token) if token is not None else None
+        if at is None:
+            if not counted:
+                self.ring.add_untracked(1)
+            self.track = _UNTRACKED
+        else:
+            if counted:
+                self.ring.add_untracked(-1)
+            self.track = at
+            self.report()
+
+    def report(self) -> None:
+        """Store our cursor in the ring's cursor word (cheap: one store; for the hot path)."""
+        if self.track >= 0:
+            self.ring.q[self.track] = self.cursor
+
+    def switch_to(self, ring: R.Ring, base: str, loans: int, token: int | None) -> None:
         """Follow the publisher to the next generation of its ring."""
+        counted = self.track == _UNTRACKED  # the publisher carried the count over when it grew
         self.close()
         self.ring, self.base = ring, base
         self.loans = LoanBook(ring, loans) if loans > 0 else None
+        self._track(token, counted)
 
     def read(self, n: int) -> tuple[int, np.ndarray | memoryview | None, int]:
         """Message ``n``: a loaned view when it is big and an entry is free, else a copy.
@@ -332,7 +369,14 @@ class _Source:
         if self.loans is not None:
             self.loans.close()
             self.loans = None
+        if self.track == _UNTRACKED and self.ring.mm is not None:
+            self.ring.add_untracked(-1)
+        self.track = _NOT_COUNTED
         self.ring.close()
+
+
+# _Source.track when the source has no cursor word: counted in the ring's untracked readers, or not.
+_UNTRACKED, _NOT_COUNTED = -1, -2
 
 
 class Subscriber:
@@ -433,7 +477,7 @@ class Subscriber:
                     # Our ring is gone without moving: the publisher restarted on a fresh
                     # generation (its old ring was damaged). Numbering may start over.
                     src.close()
-                self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, ring.name, self.loans)
+                self.sources[pub] = _Source(ring, self._start_cursor(ring, mark), pub, ring.name, self.loans, self._token(mark))
             if not incomplete:
                 break
         for gone in [n for n in self._rejected if n not in listed]:
@@ -485,6 +529,10 @@ class Subscriber:
             return None
         return ring.mark_of(self.waker.token)
 
+    def _token(self, mark: int | None) -> int | None:
+        """Our wake-up token if ``_register`` just registered it in a ring (it gave a mark)."""
+        return None if mark is None or self.waker is None else self.waker.token
+
     def _start_cursor(self, ring: R.Ring, mark: int | None) -> int:
         """Where reading a newly found ring starts.
 
@@ -515,8 +563,8 @@ class Subscriber:
                 self._drop_quietly(src)
                 return False
             name = new.name
-            src.switch_to(new, name, self.loans)
-            self._register(new)
+            mark = self._register(new)
+            src.switch_to(new, name, self.loans, self._token(mark))
             if src.cursor < new.first:
                 self.dropped += new.first - src.cursor
                 src.cursor = new.first
@@ -577,6 +625,7 @@ class Subscriber:
                     self._drain(src, out)
                 else:
                     src.cursor = max(src.cursor, src.ring.head)
+                    src.report()
             except Exception as exc:  # noqa: BLE001 - one bad ring must not stop the reader
                 self._drop(src, exc)
         current = self.sources.get(publisher_id)
@@ -600,6 +649,8 @@ class Subscriber:
                     src.cursor += 1
                 else:
                     break  # a writer died mid-message: nothing after it exists yet
+            if src.track >= 0:  # src.report(), inlined: every take of every topic passes here
+                ring.q[src.track] = src.cursor
             if not ring.moved_to or not self._follow(src):
                 return
 
@@ -668,6 +719,7 @@ class Subscriber:
             status, buf, stamp = src.read(n)
             if status == R.OK and buf is not None:
                 src.cursor = n + 1
+                src.report()
                 return (stamp, buf, src.publisher_id)
             if status == R.LAPPED:
                 break

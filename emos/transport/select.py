@@ -168,7 +168,9 @@ def open_publisher(ctx: RunContext, topic: Any, publisher_id: str | None = None,
         return ZenohPublisher(topic.name, topic.msg_type, publisher_id=publisher_id, transient_local=topic.qos_profile.transient_local, depth=depth)
     from emos.transport.pubsub import Publisher
 
-    return Publisher(ctx, topic.name, topic.msg_type, publisher_id=publisher_id, depth=depth)
+    # A volatile topic's big messages may reuse recent ring slots (ring.py, "Recent slots"); a
+    # transient-local one keeps its whole history for subscribers that join later.
+    return Publisher(ctx, topic.name, topic.msg_type, publisher_id=publisher_id, depth=depth, reuse_recent=not topic.qos_profile.transient_local)
 
 
 def open_subscriber(ctx: RunContext, topic: Any, waker: Any = None, queue_size: int = 10, transient_local: bool = False) -> TopicSubscriber:

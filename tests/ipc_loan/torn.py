@@ -14,6 +14,7 @@ from emos import msgs as M
 from emos.transport import ring as R
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Subscriber
+from emos.transport.waker import Waker
 
 FORK = mp.get_context("fork")
 
@@ -26,20 +27,35 @@ def check_intact(msgs) -> int:
     return len(msgs)
 
 
-def sigkill_writer_and_check(ctx: RunContext, writer: Callable[..., None], size: int, kill_after: float) -> int:
+def sigkill_writer_and_check(ctx: RunContext, writer: Callable[..., None], size: int, kill_after: float, tracked: bool = False,
+                             armed: Callable[[], bool] | None = None) -> int:
     """Run ``writer(run_dir, run_id, size, ready)`` publishing on /stream as "writer", read and
     check for ``kill_after`` s, SIGKILL it, then check everything still visible: the queue, the
-    latest message and the ring's next number (not written, or complete and intact)."""
+    latest message and the ring's next number (not written, or complete and intact).
+    ``tracked``: the subscriber has a wake-up token, so the writer sees how far it read (what
+    recent-slot reuse needs, ``ring.py``); it drains its wake-ups as it reads. ``armed``: read
+    until it says the writer reached the state under test (bounded only against a hang), then
+    the ``kill_after`` s."""
     ready = FORK.Event()
     proc = FORK.Process(target=writer, args=(str(ctx.run_dir), ctx.run_id, size, ready))
     proc.start()
+    waker = Waker(ctx) if tracked else None
     try:
-        sub = Subscriber(ctx, "/stream", M.UInt8MultiArray, queue_size=8)
+        sub = Subscriber(ctx, "/stream", M.UInt8MultiArray, waker=waker, queue_size=8)
         assert ready.wait(60)
         checked = 0
+
+        def read() -> int:
+            if waker is not None:
+                waker.drain()  # announcements: the writer's ring (and each one it grows to)
+            return check_intact(sub.take())
+
+        hang = time.monotonic() + 60
+        while armed is not None and not armed() and time.monotonic() < hang:
+            checked += read()
         end = time.monotonic() + kill_after
         while time.monotonic() < end:
-            checked += check_intact(sub.take())
+            checked += read()
         assert proc.is_alive(), f"the writer died by itself (exit code {proc.exitcode})"
         os.kill(proc.pid, signal.SIGKILL)
         proc.join()
@@ -60,3 +76,5 @@ def sigkill_writer_and_check(ctx: RunContext, writer: Callable[..., None], size:
         if proc.is_alive():
             proc.kill()
         proc.join()
+        if waker is not None:
+            waker.close()
