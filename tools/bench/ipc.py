@@ -225,4 +225,6 @@ def _run_peers(args: argparse.Namespace, sizes: list[int], placement: tuple[int,
         print(table(result["results"], [("transport", "transport", ""), ("payload_bytes", "bytes", ",d"), ("p50_us", "p50 us", ".1f"),
                                          ("p50_min_us", "p50 min", ".1f"), ("p50_max_us", "p50 max", ".1f"), ("p50_spread", "p50 spread", ".2f"),
                                          ("p99_us", "p99 us", ".1f"), ("p99_spread", "p99 spread", ".2f")]))
+        for transport, about in dict.fromkeys((r["transport"], r.get("about")) for r in result["results"]):
+            print(f"  {transport}: {about}")  # what each row measures (the JSON's "about")
     return 1 if any("errors" in row for row in result["results"]) else 0

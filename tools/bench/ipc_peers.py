@@ -15,14 +15,26 @@ Peers:
   ``np.copyto`` per hop, nothing else; the floor any shared-memory transport pays for the copies.
 * ``iceoryx2`` / ``iceoryx2-poll``: iceoryx2 0.10 with loaned samples, the receiver blocking in an
   event service's ``Listener.blocking_wait`` / spinning on ``receive`` (``ipc_peer_iceoryx2.py``).
+* ``zenoh``: eclipse-zenoh's Python API with its shared-memory provider (``ShmProvider.alloc``,
+  ``put`` of the ``ZShmMut``), two peer sessions over ``tcp/127.0.0.1`` with no router and no
+  scouting (``ipc_peer_zenoh.py``).
+* ``dora``: dora-rs Python nodes ``ping`` and ``pong`` in a dataflow started with ``dora run``
+  (``ipc_peer_dora.py``).
 
-Peers that need packages (iceoryx2) run in a benchmark-only virtual environment that this
-module creates (``python -m venv``, then ``pip install`` of pinned versions) under
-``$EMOS_BENCH_PEERS`` (default ``~/.cache/emos-bench/peers``): never a dependency of EMOS, never
-imported by it. A registry that cannot be reached is a clear error naming the peer and packages.
+Each row says what its transport is (``about``), and a round of a peer that reports how the
+payload travelled (zenoh: ``shm``) records it.
+
+Peers that need packages run in one benchmark-only virtual environment that this module creates
+(``python -m venv``, then ``pip install`` of pinned versions) under ``$EMOS_BENCH_PEERS`` (default
+``~/.cache/emos-bench/peers``): never a dependency of EMOS, never imported by it. A registry that
+cannot be reached, or a package that installs but cannot run here, is a clear error naming the
+peer and packages. Every peer script runs in a session of its own; when it ends, however it
+ends, every process left in that session is killed and the files the peer made are removed
+(``remove_iceoryx2_files``, ``remove_zenoh_files``, the run's temporary folder).
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import mmap
 import os
@@ -46,20 +58,44 @@ from emos.tools.bench.common import percentiles
 from emos.transport.fence import WEAK_ORDERING
 
 LOCAL_PEERS = ["shm-spin", "pipe"]
+ICEORYX2 = "iceoryx2==0.10.0"
+ZENOH = "eclipse-zenoh==1.10.2"  # the version EMOS's own `net` extra requires at least
+DORA = ["dora-rs==1.1.0", "dora-rs-cli==1.1.0"]  # the node API, and the `dora` command
 # Peer name -> (packages for the peer environment, the module that checks they import).
 VENV_PEERS: dict[str, tuple[list[str], str]] = {
-    "iceoryx2": (["iceoryx2==0.10.0", "numpy"], "iceoryx2"),
-    "iceoryx2-poll": (["iceoryx2==0.10.0", "numpy"], "iceoryx2"),
+    "iceoryx2": ([ICEORYX2, "numpy"], "iceoryx2"),
+    "iceoryx2-poll": ([ICEORYX2, "numpy"], "iceoryx2"),
+    "zenoh": ([ZENOH, "numpy"], "zenoh"),
+    "dora": ([*DORA, "pyarrow", "numpy"], "dora"),
 }
-# Named by the issue but not measured by this version: a clear error instead of a silent skip.
-NOT_YET = {"dora": "dora-rs==1.1.0", "zenoh": "eclipse-zenoh"}
+# Commands a peer runs from the environment's bin/, with the arguments that prove they run here.
+PEER_COMMANDS: dict[str, list[str]] = {"dora": ["dora", "--version"]}
+PEER_SCRIPTS = {"iceoryx2": "ipc_peer_iceoryx2.py", "iceoryx2-poll": "ipc_peer_iceoryx2.py",
+                "zenoh": "ipc_peer_zenoh.py", "dora": "ipc_peer_dora.py"}
 PEERS = LOCAL_PEERS + list(VENV_PEERS)
+# What each row measures (the JSON's ``about``): the transport, the version, how it is driven.
+ABOUT = {
+    "emos": "EMOS topic rings under a bare event loop (as --mode transport)",
+    "pipe": "multiprocessing.Pipe; bytes, np.frombuffer at the receiver",
+    "shm-spin": "raw shared memory, a spinning reader, one np.copyto per hop: the copies alone",
+    "iceoryx2": f"{ICEORYX2}: loaned samples, event service, Listener.blocking_wait",
+    "iceoryx2-poll": f"{ICEORYX2}: loaned samples, the receiver spinning on receive",
+    "zenoh": f"{ZENOH} Python: ShmProvider.alloc + put of a ZShmMut (POSIX shared memory), two peer sessions "
+             "over tcp/127.0.0.1, no router, no scouting; the receiver copies out with to_bytes()",
+    "dora": f"{' + '.join(DORA)}: two Python nodes under `dora run` (daemon in that process), Arrow arrays through "
+            "send_output (zenoh shared memory between nodes, pool 5x the payload), the reply read with to_numpy(zero_copy_only=True)",
+}
+ABOUT_NO_SHM = {"zenoh": f"zenoh (no shm): {ZENOH} Python, plain put of bytes over tcp/127.0.0.1 (the payload did not travel "
+                         "through shared memory), no router, no scouting"}
 ENV_PEER_DIR = "EMOS_BENCH_PEERS"
 _PEER_TIMEOUT_S = 600.0  # one peer measurement; only a hung peer reaches it
 _INSTALL_TIMEOUT_S = 900.0
-# Where iceoryx2 keeps its shared memory on Linux, and how the files of our runs start.
-IOX2_SHM_DIR = Path("/dev/shm")
+# Where iceoryx2 and zenoh keep their shared memory on Linux, and how iceoryx2's files of our runs start.
+PEER_SHM_DIR = Path("/dev/shm")
+IOX2_SHM_DIR = PEER_SHM_DIR
 _IOX2_PREFIX = "iox2emos"
+ZENOH_SHM_SUFFIX = ".zenoh"  # zenoh's shared memory: /dev/shm/<number>.zenoh
+_REPORTED = ("shm",)  # zenoh: whether the reply arrived as shared memory
 
 
 class PeerUnavailable(EmosError, RuntimeError):
@@ -82,11 +118,33 @@ def peer_env_has(module: str) -> bool:
     return subprocess.run([str(python), "-c", f"import {module}"], capture_output=True, timeout=120).returncode == 0
 
 
+def _command_problem(peer: str) -> str | None:
+    """Why the command ``peer`` runs from the environment's bin/ does not run here, or None."""
+    if peer not in PEER_COMMANDS:
+        return None
+    name, *args = PEER_COMMANDS[peer]
+    path = peer_dir() / "bin" / name
+    if not path.exists():
+        return f"the {name} command is missing from {path.parent}"
+    try:
+        ran = subprocess.run([str(path), *args], capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"{path} {' '.join(args)} does not run here: {exc}"
+    if ran.returncode != 0:
+        return f"{path} {' '.join(args)} exited {ran.returncode}: {(ran.stderr or ran.stdout).strip()[-300:]}"
+    return None
+
+
+def peer_ready(peer: str) -> bool:
+    """Whether ``peer``'s packages (and commands) are in the peer environment (no install attempted)."""
+    return peer_env_has(VENV_PEERS[peer][1]) and _command_problem(peer) is None
+
+
 def ensure_peer_env(peer: str, log: Any = None) -> Path:
     """The peer environment's Python with ``peer``'s packages, creating and filling it if needed."""
     packages, module = VENV_PEERS[peer]
     python = peer_python()
-    if peer_env_has(module):
+    if peer_ready(peer):
         return python
     where = peer_dir()
     if log:
@@ -106,6 +164,9 @@ def ensure_peer_env(peer: str, log: Any = None) -> Path:
         detail = (pip.stderr or pip.stdout).strip().splitlines()[-3:]
         raise PeerUnavailable(f"peer {peer}: cannot install {' '.join(packages)} into {where} (the package registry may be "
                               f"unreachable): {' | '.join(detail) or 'no output'}")
+    problem = _command_problem(peer)
+    if problem:
+        raise PeerUnavailable(f"peer {peer}: {' '.join(packages)} installed into {where}, but {problem}")
     return python
 
 
@@ -201,9 +262,48 @@ def remove_iceoryx2_files(tag: str, root: Path) -> list[str]:
     return removed
 
 
+def zenoh_files() -> set[str]:
+    """The zenoh shared-memory segments in ``/dev/shm`` now (``<number>.zenoh``)."""
+    try:
+        names = os.listdir(PEER_SHM_DIR)
+    except OSError:
+        return set()
+    return {n for n in names if n.endswith(ZENOH_SHM_SUFFIX) and n[: -len(ZENOH_SHM_SUFFIX)].isdigit()}
+
+
+def remove_zenoh_files(before: set[str]) -> list[str]:
+    """Remove the zenoh segments that appeared since ``before`` (taken when a peer run started)
+    and that no live process holds: every process that maps a segment keeps a shared ``flock``
+    on it, so an exclusive one succeeds only on a segment left behind, which is how zenoh's own
+    orphan clean-up tells them apart. Only regular files of our uid. Returns the names removed."""
+    removed = []
+    for name in sorted(zenoh_files() - before):
+        path = PEER_SHM_DIR / name
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+        except OSError:
+            continue  # gone meanwhile, or not ours to open
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_uid != os.geteuid():
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                continue  # a live zenoh process (not necessarily ours) maps it
+            os.unlink(path)
+            removed.append(name)
+        except FileNotFoundError:
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
 def _run_peer_group(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    """Run a peer script in a process group of its own; on a timeout (or any interruption) the
-    whole group goes, the echo it forked included, before its files are removed."""
+    """Run a peer script in a session (and process group) of its own; when it ends, however it
+    ends (a timeout, Ctrl-C, an error), every process still in that session goes: the echo it
+    forked, a ``dora run`` and the nodes it started in process groups of their own."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(cwd), start_new_session=True)
     try:
         out, err = proc.communicate(timeout=_PEER_TIMEOUT_S)
@@ -211,63 +311,114 @@ def _run_peer_group(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess[st
         _kill_group(proc.pid)
         proc.communicate()
         raise
-    if proc.returncode < 0:  # killed by a signal: it could not reap its echo (an exit of its own does)
-        _kill_group(proc.pid)
+    _kill_group(proc.pid)  # a peer that exited by itself has normally left nothing: then a no-op
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
+def _session_members(sid: int) -> list[int]:
+    """The processes whose session is ``sid`` (``/proc/<pid>/stat``, field 6)."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as f:
+                fields = f.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # gone meanwhile
+        if len(fields) > 3 and int(fields[3]) == sid:
+            pids.append(int(entry))
+    return pids
+
+
 def _kill_group(pgid: int) -> None:
-    """SIGKILL the process group a peer script leads (made by ``start_new_session``)."""
+    """SIGKILL the process group a peer script leads (made by ``start_new_session``) and every
+    process left in its session. The session id stays reserved while any member lives, so no
+    unrelated process can carry it."""
     try:
         os.killpg(pgid, signal.SIGKILL)
     except ProcessLookupError:
         pass
+    for pid in _session_members(pgid):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
 
 
-def _venv_half_rtts(peer: str, size: int, count: int) -> list[float]:
+def _free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (the kernel's pick for port 0)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _venv_peer(peer: str, size: int, count: int) -> dict[str, Any]:
+    """Run ``peer``'s script with the peer environment's Python; its JSON result (``half_rtt_us``
+    and what else it reports). Its files are removed on every path (see the module doc)."""
     python = ensure_peer_env(peer)
-    script = Path(__file__).with_name("ipc_peer_iceoryx2.py")
+    script = Path(__file__).with_name(PEER_SCRIPTS[peer])
     cpus = "none" if ipc_common.PLACEMENT is None else f"{ipc_common.PLACEMENT[0]},{ipc_common.PLACEMENT[1]}"
-    wait = "poll" if peer.endswith("-poll") else "event"
     tag = uuid.uuid4().hex[:16]
-    root = Path(tempfile.mkdtemp(prefix=f"emos-bench-iox2-{tag}-"))
     cmd = [str(python), str(script), "--size", str(size), "--count", str(count),
-           "--warmup", str(ipc_pingpong.warmup_round_trips(count)), "--wait", wait, "--cpus", cpus,
-           "--tag", tag, "--prefix", iceoryx2_file_prefix(tag), "--root", str(root)]
+           "--warmup", str(ipc_pingpong.warmup_round_trips(count)), "--cpus", cpus]
+    zenoh_before = zenoh_files()
+    root: Path | None = None
+    if peer.startswith("iceoryx2"):
+        root = Path(tempfile.mkdtemp(prefix=f"emos-bench-iox2-{tag}-"))
+        cmd += ["--wait", "poll" if peer.endswith("-poll") else "event", "--tag", tag,
+                "--prefix", iceoryx2_file_prefix(tag), "--root", str(root)]
+    elif peer == "zenoh":
+        cmd += ["--tag", tag, "--port", str(_free_port())]
+    elif peer == "dora":
+        root = Path(tempfile.mkdtemp(prefix=f"emos-bench-dora-{tag}-"))
+        cmd += ["--root", str(root)]
     try:
         done = _run_peer_group(cmd, peer_dir())
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"peer {peer} at {size} B: no result in {_PEER_TIMEOUT_S:.0f} s") from None
-    finally:
-        remove_iceoryx2_files(tag, root)  # the peer and its echo have been reaped or killed on every path
+    finally:  # the peer and everything it started have been reaped or killed on every path
+        if peer.startswith("iceoryx2") and root is not None:
+            remove_iceoryx2_files(tag, root)
+        elif root is not None:
+            shutil.rmtree(root, ignore_errors=True)
+        remove_zenoh_files(zenoh_before)  # dora 1.1 moves outputs through zenoh shared memory too
     if done.returncode != 0:
         raise RuntimeError(f"peer {peer} at {size} B failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
     try:
-        samples = json.loads(done.stdout)["half_rtt_us"]
+        doc = json.loads(done.stdout)
+        samples = [float(v) for v in doc["half_rtt_us"]]
     except (ValueError, KeyError, TypeError):
         raise RuntimeError(f"peer {peer} at {size} B printed no result: {done.stdout[-200:]!r}") from None
-    return [float(s) for s in samples]
+    # What else a peer may report, each a flag (its output is not trusted to shape the rows).
+    reported = {k: doc[k] for k in _REPORTED if isinstance(doc.get(k), bool)}
+    return {"half_rtt_us": samples, **reported}
+
+
+def _measure(transport: str, size: int, count: int, depth: int) -> tuple[list[float], dict[str, Any]]:
+    """``count`` half round trips of ``transport``, and what the peer reported about the run."""
+    if transport == "emos":
+        return ipc_pingpong.latency_us("emos", size, count, depth=depth), {}
+    if transport == "pipe":
+        return ipc_pingpong.latency_us("mp_pipe", size, count), {}
+    if transport == "shm-spin":
+        return _shm_spin_half_rtts(size, count), {}
+    if transport in VENV_PEERS:
+        doc = _venv_peer(transport, size, count)
+        return doc.pop("half_rtt_us"), doc
+    raise PeerUnavailable(f"unknown IPC peer {transport!r}; choose from {', '.join(PEERS)}")
 
 
 def half_rtts_us(transport: str, size: int, count: int, depth: int) -> list[float]:
     """``count`` half round trips of ``transport`` (``emos`` or a peer), after a warm-up."""
-    if transport == "emos":
-        return ipc_pingpong.latency_us("emos", size, count, depth=depth)
-    if transport == "pipe":
-        return ipc_pingpong.latency_us("mp_pipe", size, count)
-    if transport == "shm-spin":
-        return _shm_spin_half_rtts(size, count)
-    if transport in VENV_PEERS:
-        return _venv_half_rtts(transport, size, count)
-    raise PeerUnavailable(f"unknown IPC peer {transport!r}; choose from {', '.join(PEERS)}")
+    return _measure(transport, size, count, depth)[0]
 
 
 def check_peers(names: list[str]) -> str | None:
     """An error message for peers this version cannot measure, or None."""
     for name in names:
-        if name in NOT_YET:
-            return (f"peer {name} ({NOT_YET[name]}) is not measured by this version of the benchmark yet; "
-                    f"measurable peers: {', '.join(PEERS)}")
         if name not in PEERS:
             return f"unknown IPC peer {name!r}; choose from {', '.join(PEERS)}"
     return None
@@ -301,8 +452,9 @@ def run_rounds(transports: list[str], sizes: list[int], rounds: int, messages: i
                 entry: dict[str, Any] = {"round": r + 1, "load": load_average()}
                 try:
                     with ipc_common.placed():
-                        p = percentiles(half_rtts_us(transport, size, count, depth))
-                    entry.update(p50_us=round(p["p50"], 2), p99_us=round(p["p99"], 2), samples=count)
+                        samples, reported = _measure(transport, size, count, depth)
+                    p = percentiles(samples)
+                    entry.update(p50_us=round(p["p50"], 2), p99_us=round(p["p99"], 2), samples=count, **reported)
                 except (RuntimeError, OSError, ipc_pingpong.SequenceMismatch) as exc:
                     entry["error"] = str(exc)
                 per[(transport, size)].append(entry)
@@ -320,8 +472,11 @@ def _spread(values: list[float]) -> float | None:
 def _summary(transport: str, size: int, rounds: list[dict[str, Any]]) -> dict[str, Any]:
     ok = [r for r in rounds if "error" not in r]
     p50s, p99s = [r["p50_us"] for r in ok], [r["p99_us"] for r in ok]
+    no_shm = any(r.get("shm") is False for r in ok)
     row: dict[str, Any] = {
-        "transport": transport, "payload_bytes": size, "rounds": rounds,
+        "transport": transport, "payload_bytes": size,
+        "about": ABOUT_NO_SHM[transport] if no_shm and transport in ABOUT_NO_SHM else ABOUT.get(transport, transport),
+        "rounds": rounds,
         "p50_us": round(statistics.median(p50s), 2) if p50s else None,
         "p99_us": round(statistics.median(p99s), 2) if p99s else None,
         "p50_min_us": min(p50s, default=None), "p50_max_us": max(p50s, default=None),
