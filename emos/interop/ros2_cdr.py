@@ -15,6 +15,8 @@ The codec does not know how bytes travel (MCAP files, the Foxglove bridge, later
 from __future__ import annotations
 
 import logging
+import struct
+import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -44,6 +46,10 @@ _NUMERIC = {
 }
 # ROS 2 gives field-less messages one placeholder byte (rosidl's rule for empty structures).
 _PLACEHOLDER = "structure_needs_at_least_one_member"
+# A message whose last field is a numeric sequence at least this large (an Image's or a
+# UInt8MultiArray's data, an OccupancyGrid's cells) is written with one copy of that array
+# (:meth:`Ros2Codec.serialize`); smaller ones go through rosbags alone.
+SPLICE_MIN_BYTES = 64 * 1024
 
 
 class NotShared(EmosError, LookupError):
@@ -74,6 +80,10 @@ class Ros2Codec:
         self._from: dict[type, Callable[[Any], Any]] = {}
         self._why_not: dict[type, str] = {}
         self._msgdefs: dict[type, str] = {}
+        # Per class whose last field is a numeric sequence: (field, its converter, the other
+        # fields' converters, the rosbags class, the element size).
+        self._tail: dict[type, tuple[str, Callable[[Any], Any], list[tuple[str, Callable[[Any], Any]]], Any, int]] = {}
+        self.spliced_bytes = 0  # array bytes written by serialize()'s one-copy path (tests count them)
 
     # -- which types ---------------------------------------------------------------------------
     def ros_type(self, cls: type) -> str:
@@ -117,7 +127,33 @@ class Ros2Codec:
         return self._plan(cls)[1](obj)
 
     def serialize(self, msg: Any) -> bytes:
-        """``msg`` as ROS 2 CDR bytes (encapsulation header included)."""
+        """``msg`` as ROS 2 CDR bytes (encapsulation header included).
+
+        rosbags writes into a zero-filled buffer that ``bytes`` then copies again (rclpy's raw
+        publish takes only ``bytes``): for a 921,600 B image that is a fill and two copies of
+        the pixels. When the message ends in a large numeric sequence, the fields before it are
+        written by rosbags with that sequence empty, and the sequence's length and elements are
+        appended in one ``join``: one copy of the array (``spliced_bytes`` counts them). The
+        sequence is the last field, so no later field's alignment depends on where it ends."""
+        cls = type(msg)
+        if cls not in self._to:
+            self._plan(cls)  # NotShared for a class ROS 2 lacks, as serialize_view would say
+        tail = self._tail.get(cls) if sys.byteorder == "little" else None  # the bytes appended are native-order
+        if tail is not None:
+            fname, to_array, head_steps, ros_cls, itemsize = tail
+            arr = to_array(getattr(msg, fname))
+            if arr.nbytes >= SPLICE_MIN_BYTES:
+                name = canonical_name(cls)
+                try:
+                    fields = {f: conv(getattr(msg, f)) for f, conv in head_steps}
+                    head = self.store.serialize_cdr(ros_cls(**fields, **{fname: arr[:0]}), name)
+                except Exception as exc:  # as serialize_view's
+                    raise CdrError(f"cannot encode {name} as CDR: {exc}") from exc
+                # head ends with the empty sequence's uint32 length; CDR aligns 8-byte elements
+                # to 8 from the start of the body (after the 4-byte encapsulation header).
+                pad = b"\0\0\0\0" if itemsize == 8 and (len(head) - 4) % 8 else b""
+                self.spliced_bytes += arr.nbytes
+                return b"".join((head[:-4], struct.pack("<I", arr.size), pad, arr))
         return bytes(self.serialize_view(msg))
 
     def serialize_view(self, msg: Any) -> memoryview:
@@ -136,7 +172,9 @@ class Ros2Codec:
         if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
             raise CdrError(f"{name}: not a CDR payload (encapsulation header {raw[:4].hex() or 'missing'}, expected 0000 or 0001 ....)")
         try:
-            obj = self.store.deserialize_cdr(raw, name)
+            # A memoryview: rosbags slices off the 4-byte header, which for bytes copies the
+            # whole payload (a 921,600 B image once more per message).
+            obj = self.store.deserialize_cdr(memoryview(raw), name)
         except Exception as exc:  # rosbags raises struct.error, IndexError, UnicodeDecodeError, ...
             raise CdrError(f"cannot decode {len(raw)} bytes as {name}: {exc}") from exc
         return self.from_ros(cls, obj)
@@ -174,6 +212,11 @@ class Ros2Codec:
             to_conv, from_conv = self._field(name, fname, kind, resolver, ros_fields[fname])
             to_steps.append((fname, to_conv))
             from_steps.append((fname, from_conv))
+
+        last_name, last_kind, _ = ours[-1] if ours else ("", "", None)
+        if last_kind == F.ARRAY and ros_fields[last_name][0] == _SEQUENCE:
+            itemsize = np.dtype(_NUMERIC[ros_fields[last_name][1][0][1][0]]).itemsize
+            self._tail[cls] = (last_name, to_steps[-1][1], to_steps[:-1], ros_cls, itemsize)
 
         def to_ros(msg: Any) -> Any:
             return ros_cls(**{f: conv(getattr(msg, f)) for f, conv in to_steps})

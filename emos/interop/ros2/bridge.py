@@ -46,6 +46,7 @@ import os
 import threading
 import time
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any, cast
 
 from emos.config.qos import QoSConfig
@@ -65,10 +66,11 @@ _limited = RateLimitedLog(log, interval=10.0)
 
 PUBLISHER_ID = "ros2_bridge"  # the bridge's rings: never bridged back out
 ROS_INTERNAL = frozenset({"/rosout", "/parameter_events"})
-# Fast DDS transports (Ros2Bridge's ``fastdds``): "udp" (the default), loopback UDP only: a
-# SIGKILLed bridge leaves no file, at the cost of UDP's copies and fragments (2-4x slower than
-# shared memory for large messages, docs/ros2.md); "shm", Fast DDS's defaults (shared memory
-# between local processes, as ROS 2 nodes on this host use). Fast DDS leaves /dev/shm/fastrtps_*
+# Fast DDS transports (Ros2Bridge's ``fastdds``, see _choose_transports): "udp" (the default), UDP
+# only: a SIGKILLed bridge leaves no file, at the cost of UDP's copies, and of losses in the other
+# node's socket buffer that the bridge cannot size (slower than shared memory for large messages,
+# docs/ros2.md); "shm", shared memory between local processes (as ROS 2 nodes on this host use)
+# and UDP. Fast DDS leaves /dev/shm/fastrtps_*
 # behind when a process is SIGKILLed; with "shm" the bridge removes the segments of dead
 # participants when it starts (fastdds_shm.py), but not yet the port segments that live peers
 # still sending to the dead participant re-create (seen in tests/ros2/test_bridge.py's SIGKILL
@@ -77,62 +79,120 @@ FASTDDS_TRANSPORTS = ("udp", "shm")
 ENV_FASTDDS_TRANSPORTS = "FASTDDS_BUILTIN_TRANSPORTS"
 ENV_FASTDDS_PROFILES = "FASTRTPS_DEFAULT_PROFILES_FILE"  # Fast DDS 2 (Jazzy and older)
 ENV_FASTDDS3_PROFILES = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS 3 (Kilted on): the old name is deprecated there
-_UDP_LOOPBACK_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
-<!-- Written by the EMOS ROS 2 bridge: UDP on the loopback interface only, no shared memory. -->
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <transport_descriptors>
+
+# Sizes the bridge's participant asks of its transports. Large messages travel as ~64 KB
+# fragments, all written in one burst; a fragment that finds no room is lost, and Fast DDS repairs
+# it only after its reader's heartbeat-response and its writer's NACK-response delays (5 ms each),
+# so every lost fragment costs ~10 ms (measured per stage in docs/ros2.md: a 921,600 B half
+# round trip at 12-16 ms where the bridge's own work is ~1 ms).
+# * UDP: the kernel's default receive buffer (net.core.rmem_default, 208 KB here) holds about three
+#   fragments; the bridge's sockets ask for 8 MiB, which the kernel caps at net.core.rmem_max.
+#   Only the receive side: with a large send buffer too, tests/ros2/test_bridge.py's 44 topics
+#   at once failed to come back within a minute in 4 runs of 4 at load 50 (that test is
+#   load-sensitive: HEAD's bridge passed 2 of 3, the receive buffer alone 1 of 2). A ROS 2
+#   node's own receive buffer is its own: what the bridge sends it over UDP can still be lost
+#   there (docs/ros2.md, Measured), which shared memory avoids.
+# * Shared memory: Fast DDS's default segment is 512 KB, smaller than one 921,600 B image, so a
+#   writer reuses the buffers of fragments its reader has not read yet; the bridge's segment
+#   (its writers' memory) holds several large messages.
+# * A burst whose last fragments and trailing heartbeat are both lost (the other node's small
+#   socket buffer, under load) is noticed only at the writer's next periodic heartbeat: 3 s by
+#   Fast DDS's default (measured: 921,600 B half round trips of 3 s); the bridge's writers send
+#   one every 50 ms while a reader has not acknowledged everything (none otherwise).
+HEARTBEAT_PERIOD_NS = 50_000_000
+UDP_SOCKET_BUFFER_BYTES = 8 * 1024 * 1024
+SHM_SEGMENT_BYTES = 32 * 1024 * 1024
+_MIN_SOCKET_BUFFER = 65_536  # Fast DDS's UDP transport needs a buffer of one whole datagram
+
+
+def _socket_buffer(kind: str) -> int | None:
+    """The socket buffer to ask for (``kind``: ``rmem``, receiving): ours, capped at what the
+    kernel lets an unprivileged process set; None (Fast DDS's default) if that is too small."""
+    try:
+        most = int(Path(f"/proc/sys/net/core/{kind}_max").read_text())
+    except (OSError, ValueError):
+        most = UDP_SOCKET_BUFFER_BYTES
+    size = min(UDP_SOCKET_BUFFER_BYTES, most)
+    return size if size >= _MIN_SOCKET_BUFFER else None
+
+
+def fastdds_profile(shm: bool, loopback_only: bool) -> str:
+    """The bridge's Fast DDS XML profile: UDPv4 with a large receive buffer (on 127.0.0.1 only when
+    ``loopback_only``), and with ``shm`` Fast DDS's shared-memory transport first, with a large
+    segment (see ``SHM_SEGMENT_BYTES``). Only transports: QoS comes from ROS 2 as usual."""
+    receive = _socket_buffer("rmem")
+    buffers = f"\n      <receiveBufferSize>{receive}</receiveBufferSize>" if receive else ""
+    where = "\n      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>" if loopback_only else ""
+    shm_descriptor = f"""
     <transport_descriptor>
-      <transport_id>emos_udp_loopback</transport_id>
-      <type>UDPv4</type>
-      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
+      <transport_id>emos_shm</transport_id>
+      <type>SHM</type>
+      <segment_size>{SHM_SEGMENT_BYTES}</segment_size>
+    </transport_descriptor>""" if shm else ""
+    ids = ("<transport_id>emos_shm</transport_id>" if shm else "") + "<transport_id>emos_udp</transport_id>"
+    what = ("shared memory between local processes, " if shm else "no shared memory, ") + \
+        ("UDP on 127.0.0.1 only" if loopback_only else "UDP") + ", large receive buffers"
+    return f"""<?xml version="1.0" encoding="UTF-8" ?>
+<!-- Written by the EMOS ROS 2 bridge: {what}. -->
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>{shm_descriptor}
+    <transport_descriptor>
+      <transport_id>emos_udp</transport_id>
+      <type>UDPv4</type>{buffers}{where}
     </transport_descriptor>
   </transport_descriptors>
   <participant profile_name="emos_bridge" is_default_profile="true">
     <rtps>
-      <userTransports><transport_id>emos_udp_loopback</transport_id></userTransports>
+      <userTransports>{ids}</userTransports>
       <useBuiltinTransports>false</useBuiltinTransports>
     </rtps>
   </participant>
+  <data_writer profile_name="emos_bridge_writer" is_default_profile="true">
+    <times>
+      <heartbeatPeriod><sec>0</sec><nanosec>{HEARTBEAT_PERIOD_NS}</nanosec></heartbeatPeriod>
+    </times>
+  </data_writer>
 </profiles>
 """
 
 
+# The loopback-UDP profile, also given to the tests' and the benchmark's rclpy peers that must
+# talk like the bridge.
+_UDP_LOOPBACK_PROFILE = fastdds_profile(shm=False, loopback_only=True)
+
+
+def _users_profile() -> str | None:
+    return os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
+
+
 def _choose_transports(ctx: RunContext, fastdds: str) -> str:
     """Set up this process's Fast DDS transports for ``fastdds`` (``FASTDDS_TRANSPORTS``);
-    returns what was chosen, for the log."""
+    returns what was chosen, for the log.
+
+    A user's own Fast DDS profile file (or ``FASTDDS_BUILTIN_TRANSPORTS``) is used as it is.
+    Otherwise the bridge gives Fast DDS its own profile (:func:`fastdds_profile`): ``"udp"``,
+    UDP only; ``"shm"``, shared memory and UDP, as ROS 2 nodes on this host use. When discovery
+    is limited to this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` or the older
+    ``ROS_LOCALHOST_ONLY=1``), the profile's UDP is on 127.0.0.1 only (the same reach) and the
+    variables are taken out of this process's environment: with them rmw_fastrtps installs its
+    own transports over the profile's."""
     if fastdds not in FASTDDS_TRANSPORTS:
         raise ValueError(f"ROS 2 bridge: fastdds must be one of {FASTDDS_TRANSPORTS}, got {fastdds!r}")
-    if fastdds == "udp":
-        return _udp_only(ctx)
-    users = os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
-    if users:
-        return f"Fast DDS profile {users} (the user's)"
-    from emos.interop.ros2.fastdds_shm import remove_leftovers
-
-    removed = remove_leftovers()
-    if removed:
-        log.info("ROS 2 bridge: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
-    return "Fast DDS default transports (shared memory between local processes)"
-
-
-def _udp_only(ctx: RunContext) -> str:
-    """Make this process's Fast DDS participant use UDP only; returns how, for the log.
-
-    ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` does it, except when discovery is limited to this host
-    (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` or the older ``ROS_LOCALHOST_ONLY=1``): then
-    rmw_fastrtps installs its own transports, shared memory included. In that case we give Fast
-    DDS an XML profile of UDP on 127.0.0.1 (the same reach) and take the variables out of this
-    process's environment. A user's own Fast DDS profile file is used as it is."""
-    users = os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
+    users = _users_profile()
     if users:
         return f"Fast DDS profile {users} (the user's)"
     localhost = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST" or os.environ.get("ROS_LOCALHOST_ONLY") == "1"
-    if not localhost:
-        os.environ.setdefault(ENV_FASTDDS_TRANSPORTS, "UDPv4")
-        return f"Fast DDS transports {os.environ[ENV_FASTDDS_TRANSPORTS]}"
-    path = ctx.run_dir / "ros2_fastdds_udp_loopback.xml"
+    if os.environ.get(ENV_FASTDDS_TRANSPORTS) and not localhost:
+        return f"Fast DDS transports {os.environ[ENV_FASTDDS_TRANSPORTS]} (the user's)"
+    if fastdds == "shm":
+        from emos.interop.ros2.fastdds_shm import remove_leftovers
+
+        removed = remove_leftovers()
+        if removed:
+            log.info("ROS 2 bridge: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
+    path = ctx.run_dir / f"ros2_fastdds_{fastdds}{'_loopback' if localhost else ''}.xml"
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(_UDP_LOOPBACK_PROFILE)
+    tmp.write_text(fastdds_profile(shm=fastdds == "shm", loopback_only=localhost))
     os.replace(tmp, path)
     from emos.interop.ros2.env import find
 
@@ -141,7 +201,9 @@ def _udp_only(ctx: RunContext) -> str:
     os.environ[ENV_FASTDDS_PROFILES if fastdds2 else ENV_FASTDDS3_PROFILES] = str(path)
     os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
-    return "UDP on 127.0.0.1 only (discovery range LOCALHOST)"
+    reach = "UDP on 127.0.0.1 only (discovery range LOCALHOST)" if localhost else "UDP"
+    memory = f"shared memory ({SHM_SEGMENT_BYTES >> 20} MiB segment) between local processes and " if fastdds == "shm" else ""
+    return f"Fast DDS {memory}{reach}, receive buffers {_socket_buffer('rmem')} B (profile {path})"
 
 
 class _Out:
