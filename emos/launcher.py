@@ -104,6 +104,7 @@ class Launcher:
         self._shared_wiring: list[tuple[str, dict[str, Any]]] = []
         self._shared_config: dict[str, Any] = {}
         self._ui: dict[str, Any] | None = None
+        self._monitor: BaseComponent | None = None  # add_pkg(monitor=...): a Cortex
 
     def add_pkg(
         self,
@@ -118,12 +119,19 @@ class Launcher:
         max_restarts: int | None = None,
         max_seconds: float | None = None,
         restart: str = "permanent",
+        monitor: BaseComponent | None = None,
     ) -> None:
         """Add a group of components. ``package_name`` and ``executable_entry_point`` are accepted
-        so ROS recipes port unchanged; EMOS needs no entry point to run a component in a process."""
+        so ROS recipes port unchanged; EMOS needs no entry point to run a component in a process.
+        ``monitor``: a component that serves as the launcher's monitor (a ``Cortex``): it gets the
+        run's health changes and event/fallback outcomes as observations (its
+        ``serve_as_monitor``) and runs in a group of its own, so that its crashes never restart,
+        stop or end anything else (see docs/cortex.md)."""
         from emos.supervisor.system import Package, SupervisionPolicy
 
         components = list(components)
+        if monitor is not None:
+            self._set_monitor(monitor, components)
         if not components:
             raise ValueError("add_pkg: components must not be empty")
         for c in components:
@@ -159,6 +167,36 @@ class Launcher:
             policy=policy,
             name=package_name or f"group{len(self._packages)}",
         ))
+
+    def _set_monitor(self, monitor: BaseComponent, components: list[BaseComponent]) -> None:
+        # Duck-typed: the core knows no monitor class (Cortex is an actor, a layer above).
+        if not isinstance(monitor, BaseComponent) or not callable(getattr(monitor, "serve_as_monitor", None)):
+            raise TypeError(f"add_pkg(monitor=...): expected a component that can serve as the monitor (a Cortex, with "
+                            f"serve_as_monitor), got {type(monitor).__name__} {monitor!r}")
+        if self._monitor is not None and self._monitor is not monitor:
+            raise ValueError(f"add_pkg(monitor=...): this launcher has a monitor already ({self._monitor.component_name!r})")
+        if monitor in components:
+            raise ValueError(f"add_pkg: {monitor.component_name!r} is the monitor; pass it as monitor= only (it runs in a group of its own)")
+        known = {c.component_name for p in self._packages for c in p.components}
+        if monitor.component_name in known:
+            raise ValueError(f"add_pkg(monitor=...): component name {monitor.component_name!r} already added")
+        self._monitor = monitor
+
+    def _monitor_package(self) -> Any:
+        """The monitor's own group: restarted when it crashes (its own intensity), and dropped,
+        not escalated, when it crashes more than that: the run goes on without it."""
+        from emos.supervisor.monitor import OUTCOMES_TOPIC
+        from emos.supervisor.system import Package, SupervisionPolicy
+
+        monitor = self._monitor
+        assert monitor is not None
+        if self.config_file:
+            monitor.configure(self.config_file)
+        monitor.serve_as_monitor(outcomes_topic=OUTCOMES_TOPIC)  # type: ignore[attr-defined]
+        return Package(components=[monitor], multiprocessing=self.multi_processing, activate=True,
+                       policy=SupervisionPolicy(strategy="one_for_one", max_restarts=self.default_policy["max_restarts"],
+                                                max_seconds=self.default_policy["max_seconds"]),
+                       name=f"{monitor.component_name}_monitor", group_restart="temporary")
 
     # -- Kompass-style conveniences: shared wiring and robot description ---------------------------
     def kompass(self, components: Sequence[BaseComponent], multiprocessing: bool | None = None, **kwargs: Any) -> None:
@@ -264,6 +302,8 @@ class Launcher:
 
         if not self._packages:
             raise RuntimeError("Launcher.bringup: no components; call add_pkg(components=[...]) first")
+        if self._monitor is not None and not any(p.name == f"{self._monitor.component_name}_monitor" for p in self._packages):
+            self._packages.append(self._monitor_package())  # last: it starts after what it watches
         self._apply_shared()
         if self._ui is not None:
             load_frontend("ui").add(self, self._ui)
@@ -278,7 +318,8 @@ class Launcher:
             raise ValueError(f"Launcher.fallback_rate must be a positive number of Hz, got {self.fallback_rate!r}")
         orchestration = Orchestration(events_actions=list(self._events_actions), policies=dict(self._fallback_policies),
                                       fallback_rate=self.fallback_rate, reset_after=self.fallback_reset_after,
-                                      monitor_nice=self.monitor_nice, monitor_defer_ms=self.monitor_defer_ms)
+                                      monitor_nice=self.monitor_nice, monitor_defer_ms=self.monitor_defer_ms,
+                                      report_outcomes=self._monitor is not None)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
         options = SystemOptions(

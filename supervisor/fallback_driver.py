@@ -162,10 +162,13 @@ class FallbackDriver(ActionRuntime):
                     result = await asyncio.wait_for(run_action(action, self), self.timeout + 30.0)
                     if result is True and not restarting:
                         log.info("[%s] fallback %s reports recovery", name, action.describe())
+                    # The outcome, for a monitor that watches the run (a Cortex reads the events).
+                    self._record(name, "fallback_result", action=action.describe(), ok=result is not False)
                     if on_self:
                         await asyncio.wait_for(fresh.wait(), self.timeout if restarting else 1.0)
                 except Exception as exc:
                     self._report(name, action.describe(), exc)
+                    self._record(name, "fallback_result", action=action.describe(), ok=False, detail=f"{type(exc).__name__}: {exc}"[:300])
                 finally:
                     self._fresh.pop(name, None)
                 await asyncio.sleep(tracker.period)

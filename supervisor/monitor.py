@@ -30,10 +30,14 @@ from emos.events.event import Blackboard, Event, EventTracker
 from emos.events.runner import ActionRuntime, prepare, run_action
 from emos.events.topic_group import TopicEvents
 from emos.io.topic import Topic
+from emos.msgs.std import String
 from emos.ratelimit import RateLimitedLog
 from emos.supervisor.monitor_net import ActionRoutes, place_inputs
 
 MONITOR_NAME = "emos_monitor"
+# Each fired event's outcome (String, JSON), published when a Cortex monitors the run
+# (``Launcher.add_pkg(monitor=cortex)``): ``{"event", "topic", "actions": [{"action", "ok", "detail"}]}``.
+OUTCOMES_TOPIC = f"{MONITOR_NAME}/outcomes"
 
 
 class Monitor(BaseComponent):
@@ -45,8 +49,9 @@ class Monitor(BaseComponent):
     _wake_background = True
 
     def __init__(self, entries: list[tuple[Event, list[Action]]], action_timeout: float = 10.0, nice: int = 0,
-                 local_components: Collection[str] = (), defer_ms: float = 0.0):
+                 local_components: Collection[str] = (), defer_ms: float = 0.0, report_outcomes: bool = False):
         self._entries = entries
+        self._report_outcomes = report_outcomes
         self._defer_ms = defer_ms
         # Read by the node: after a wake-up, wait this long before reading (see Node._on_wake).
         self._wake_defer_s = defer_ms / 1000.0
@@ -62,6 +67,8 @@ class Monitor(BaseComponent):
                 if a.predefined == "publish_message":
                     topic = a.kwargs["topic"].value  # a Literal: the topic itself, not a binding
                     outputs[topic.name] = topic
+        if report_outcomes:
+            outputs[OUTCOMES_TOPIC] = self._outcomes = Topic(name=OUTCOMES_TOPIC, msg_type="String")
         # Component statuses: this run's from its rings, other runs' over Zenoh (across hosts).
         topics = place_inputs(topics, self._local_components)
         super().__init__(component_name=MONITOR_NAME, inputs=list(topics.values()), outputs=list(outputs.values()))
@@ -73,7 +80,7 @@ class Monitor(BaseComponent):
 
     def __deepcopy__(self, memo: dict) -> Monitor:
         # Threaded mode restarts take a fresh copy: the definitions are shared, the state is not.
-        return Monitor(self._entries, self._action_timeout, self._nice, self._local_components, self._defer_ms)
+        return Monitor(self._entries, self._action_timeout, self._nice, self._local_components, self._defer_ms, self._report_outcomes)
 
     # -- lifecycle ------------------------------------------------------------------------------
     def custom_on_activate(self) -> None:
@@ -180,12 +187,14 @@ class Monitor(BaseComponent):
 
     async def _run(self, index: int, actions: list[Action], prepared: list, topic: str, msg: Any) -> None:
         event = self._entries[index][0]
+        outcomes: list[dict] = []
         for k, (action, args) in enumerate(zip(actions, prepared)):
             try:
                 # Every path of run_action has its own deadline (RPC, worker thread, service call),
                 # so no extra wait_for task sits on the hot path of an event.
                 await run_action(action, self.runtime, topic, msg, args)
                 self.stats["actions_ok"] += 1
+                outcomes.append({"action": action.describe(), "component": action.component, "ok": True})
             except asyncio.CancelledError:
                 raise
             except BaseException as exc:
@@ -194,6 +203,13 @@ class Monitor(BaseComponent):
                 self._errors.error((index, k, type(exc).__name__), "[%s] event %r: action %d/%d %s (component %s) %s",
                                    self.component_name, event, k + 1, len(actions), action.describe(), action.component or "-",
                                    what, logger=self.get_logger())
+                outcomes.append({"action": action.describe(), "component": action.component, "ok": False, "detail": what[:300]})
+        if self._report_outcomes:
+            try:
+                self.publish(self._outcomes, String(data=json.dumps({"event": str(event)[:200], "topic": topic, "actions": outcomes}, default=str)))
+            except Exception as exc:  # a report that cannot go out must not fail the event
+                self._errors.error(("report", type(exc).__name__), "[%s] publishing the outcome of event %r on %s: %s",
+                                   self.component_name, event, OUTCOMES_TOPIC, exc, logger=self.get_logger())
 
     def monitor_stats(self) -> dict:
         """Counts since this Monitor started (``emos component call emos_monitor execute_method``)."""

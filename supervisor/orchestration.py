@@ -49,6 +49,7 @@ class Orchestration:
     action_timeout: float = 10.0
     monitor_nice: int = 5
     monitor_defer_ms: float = 0.0
+    report_outcomes: bool = False  # the Monitor publishes each event's outcome (a Cortex monitors the run)
 
     def all_events(self, components: Sequence[BaseComponent]) -> list[tuple[Event, list[Action]]]:
         """Recipe events, the events components bring along (a VLA's stop event), and one per
@@ -147,7 +148,7 @@ def with_monitor(packages: list[Any], orchestration: Orchestration) -> list[Any]
     if not entries:
         return list(packages)
     monitor = Monitor(entries, orchestration.action_timeout, nice=orchestration.monitor_nice, defer_ms=orchestration.monitor_defer_ms,
-                      local_components=[c.component_name for c in components])
+                      local_components=[c.component_name for c in components], report_outcomes=orchestration.report_outcomes)
     if monitor.component_name in {c.component_name for c in components}:
         raise ValueError(f"component name {monitor.component_name!r} is reserved for the Monitor")
     multiprocessing = any(p.multiprocessing for p in packages)

@@ -59,6 +59,9 @@ class Package:
     activate: bool = True
     policy: SupervisionPolicy = field(factory=SupervisionPolicy)
     name: str = ""
+    # How the root treats the group itself: "temporary" for the launcher's monitor (a Cortex),
+    # whose group is dropped, not restarted, when it breaches its intensity (the run goes on).
+    group_restart: RestartType = field(default=RestartType.PERMANENT, converter=RestartType)
 
 
 @define(kw_only=True)
@@ -258,7 +261,7 @@ class System:
         offset = 0
         for k, pkg in enumerate(self.packages):
             name = pkg.name or f"group{k}"
-            children.append(supervisor_spec(self._group_factory(pkg, offset, name), name))
+            children.append(supervisor_spec(self._group_factory(pkg, offset, name), name, restart=pkg.group_restart))
             offset += len(pkg.components)
         return Supervisor("root", children, Strategy.ONE_FOR_ONE, self.options.max_restarts, self.options.max_seconds, on_event=self._record,
                           ledger=self.ledger)

@@ -133,3 +133,9 @@ def _rebuild_malformed(expected, got, client, model, url):
 
 class ModelNotFoundError(ModelClientError):
     """The server is up but does not serve (and could not load) the requested model."""
+
+
+class GenerationAbandoned(EmosError, RuntimeError):
+    """A local model's answer in progress was abandoned: the component switched to another model
+    client meanwhile (``change_model_client``, e.g. back from ``fallback_to_local()`` to the
+    restarted server). Not a failure of the model: the question goes to the new client."""

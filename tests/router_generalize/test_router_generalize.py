@@ -48,6 +48,7 @@ def _rows(path: Path) -> list[tuple[str, str]]:
 SPEC = json.loads((HERE / "routes.json").read_text())
 REPORT = _rows(HERE / "report_queries.tsv")
 REPORT_2 = _rows(HERE / "report_queries_2.tsv")  # a second unseen set, written a session later
+REPORT_3 = _rows(HERE / "report_queries_3.tsv")  # a third (session 22), written before the new bound was scored
 TUNING = {name: _rows(path) for name, path in (("tuning_queries.tsv", HERE / "tuning_queries.tsv"),
                                                 ("tuning_queries_2.tsv", HERE / "tuning_queries_2.tsv"),
                                                 ("router_labeled.tsv", DATA_DIR / "router_labeled.tsv"))}
@@ -67,12 +68,15 @@ def client(tmp_path_factory):
     db.deinitialize()
 
 
-def _accuracy(client, name: str, scoring: str, descriptions: bool, rows, maximum_distance: float | None = None) -> float:
+def _accuracy(client, name: str, scoring: str, descriptions: bool, rows, maximum_distance: float | None = None,
+              samples_bound: bool = False) -> float:
     routes = _routes(descriptions)
     config = SemanticRouterConfig(router_name=name, scoring=scoring, maximum_distance=maximum_distance)
     router = VectorRouter(list(routes.values()), client, config,
                           default_route=routes[SPEC["default_route"]])
     router.initialize()
+    if samples_bound:
+        router._phrase_vectors = None  # the session-21 default: the distance bound on the samples only
     return sum(router.decide(query).route.name == expected for query, expected in rows) / len(rows)
 
 
@@ -80,12 +84,13 @@ def test_the_report_set_is_separate_from_every_tuning_set_and_balanced():
     assert SPEC["routes"] == json.loads((DATA_DIR / "router_routes.json").read_text())["routes"]  # the recipe's samples
     seen = {q.lower() for rows in TUNING.values() for q, _ in rows}
     samples = {s.lower() for samples in SPEC["routes"].values() for s in samples}
-    for report in (REPORT, REPORT_2):
+    for report in (REPORT, REPORT_2, REPORT_3):
         assert not seen & {q.lower() for q, _ in report}
         assert not samples & {q.lower() for q, _ in report}
         assert len(report) >= 60 and {r for _, r in report} == set(SPEC["routes"])
         assert min(sum(r == name for _, r in report) for name in SPEC["routes"]) >= 20
     assert not {q.lower() for q, _ in REPORT} & {q.lower() for q, _ in REPORT_2}
+    assert not {q.lower() for q, _ in REPORT + REPORT_2} & {q.lower() for q, _ in REPORT_3}
 
 
 def test_learned_routing_generalizes_to_the_report_set(client, capsys):
@@ -95,7 +100,7 @@ def test_learned_routing_generalizes_to_the_report_set(client, capsys):
     with capsys.disabled():
         print(f"\nreport set ({len(REPORT)} queries, default distance bound): nearest sample {before:.3f}, learned {learned:.3f}, "
               f"learned + descriptions {described:.3f}")
-    assert described >= 0.88  # measured 0.889 (64/72; the goal of issue 40 item 4 was >= 0.90): a regression guard
+    assert described >= 0.88  # measured 0.889 (64/72), 0.903 since the bound counts description phrases (session 22)
     assert learned > before
     second = _accuracy(client, "report2-described", "learned", True, REPORT_2)
     unbounded = [_accuracy(client, f"report{i}-unbounded", "learned", True, rows, maximum_distance=4.0)
@@ -142,3 +147,27 @@ def test_nearest_scoring_keeps_the_original_rule_and_learned_needs_an_embedder(c
     router.initialize()
     far = router.decide("The mitochondria is the powerhouse of the cell")
     assert far.is_default and far.reason.startswith("no route close enough")
+
+
+FAR = ["zxqv 1234 lorem ipsum", "asdf qwer zxcv", "lorem ipsum dolor sit amet", "blorp fnord quux", "%%%% #### @@@@",
+       "1234567890", "The mitochondria is the powerhouse of the cell"]
+
+
+def test_the_default_bound_counts_description_phrases_and_keeps_far_queries_on_the_default_route(client, capsys):
+    """The default's distance bound measures from the route samples and the phrases of
+    the route descriptions (cosine 0.25 from anything a route declares). Chosen on the tuning sets
+    (0.932 -> 0.937 over their 207 queries, far queries unchanged), then scored once on
+    report_queries_3.tsv: 0.931 (67/72); the old default 0.917, unbounded 0.931 (docs/local-models.md)."""
+    new = _accuracy(client, "report3-new", "learned", True, REPORT_3)
+    old = _accuracy(client, "report3-old", "learned", True, REPORT_3, samples_bound=True)
+    with capsys.disabled():
+        print(f"\nthird report set ({len(REPORT_3)} queries): default {new:.3f}; bound on the samples only (before) {old:.3f}")
+    assert new >= 0.91 and new >= old  # measured 0.931 and 0.917: regression guards
+    routes = _routes(True)
+    router = VectorRouter(list(routes.values()), client, SemanticRouterConfig(router_name="far3"),
+                          default_route=routes[SPEC["default_route"]])
+    router.initialize()
+    far = [router.decide(q) for q in FAR]
+    assert all(d.is_default and d.reason.startswith("no route close enough") for d in far), [(d.distance, d.reason) for d in far]
+    near = router.decide("Describe the scene around the robot")  # a description phrase itself
+    assert near.route.name == "mllm_in" and near.distance < 1e-6 and near.matched_sample == "Describe the scene around the robot"

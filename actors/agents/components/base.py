@@ -33,7 +33,7 @@ from emos.core.offload import StepWorker
 from emos.io.fixed import FixedInput
 from emos.io.topic import Topic
 
-from ..errors import ModelClientError
+from ..errors import GenerationAbandoned, ModelClientError
 from ..logic.preprocess import PreprocessorChain
 from .convert import OutputConversionError, to_message
 from .failover import ModelFailover, is_component_level
@@ -220,6 +220,11 @@ class ModelComponent(BaseComponent):
             old = self.model_client
             self._active_client = model_client_name
             self._client_ready = False
+        # A local model still answering on the old client (switching back from fallback_to_local()
+        # to the restarted server) is abandoned, not waited for: the worker asks the new client.
+        cancel = getattr(old, "cancel_generation", None)
+        if callable(cancel) and cancel():
+            self.get_logger().info("[%s] the answer in progress on %r is abandoned", self.component_name, type(old).__name__)
         try:
             if old is not None:
                 old.close()
@@ -243,7 +248,17 @@ class ModelComponent(BaseComponent):
 
         def attempt(client: Any) -> T:
             self._ensure_client()
-            return send(self.model_client)
+            used = self.model_client
+            try:
+                return send(used)
+            except GenerationAbandoned:
+                # Switched away from ``used`` while it answered: the new client answers instead
+                # (unless part of the answer went out already: it is not repeated).
+                if self.model_client is used or not retry_allowed():
+                    raise
+                self.get_logger().info("[%s] asking %r the question the abandoned answer was for", self.component_name, self._active_client)
+                self._ensure_client()
+                return send(self.model_client)
 
         return self._failover.call(attempt, retry_allowed=retry_allowed)
 
@@ -487,6 +502,9 @@ class ModelComponent(BaseComponent):
         self._publish_status()
 
     def _on_job_error(self, exc: BaseException) -> None:
+        if isinstance(exc, GenerationAbandoned):  # a client switch, not a failure: nothing to recover
+            self.get_logger().info("[%s] %s", self.component_name, exc)
+            return
         self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
         self._errors(f"job:{type(exc).__name__}", "[%s] step failed: %s: %s", self.component_name, type(exc).__name__, exc)
         self._publish_status()

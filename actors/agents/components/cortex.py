@@ -23,10 +23,12 @@ the recipe gives, which get the model's final summary.
 from __future__ import annotations
 
 import asyncio
+import collections
 import functools
 import json
 import logging
 import threading
+import time
 import uuid
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
@@ -45,6 +47,15 @@ from emos.msgs import std as D
 from ..errors import ModelClientError
 from ..logic.cortex_plan import CortexPlanner, PlanEvent, PlanningError, StepOutcome, TaskReport
 from ..logic.cortex_tools import CortexTool, tools_from_info
+from ..logic.cortex_watch import (
+    Observation,
+    RecoveryBudget,
+    from_event_outcome,
+    from_status,
+    from_supervisor_event,
+    level_name,
+    recovery_task,
+)
 from ..logic.tools import tool_spec_from_description
 from ..types import ToolSpec
 from .base import ModelComponent, ModelComponentConfig
@@ -82,6 +93,11 @@ class CortexConfig(ModelComponentConfig):
     discover: bool = field(default=True)
     """Offer what the run's components serve; False: only the tools the recipe adds."""
     exclude_components: list = field(factory=list)
+    monitor_period: float = field(default=0.5, validator=V.in_range(0.05, 60.0))
+    """As the launcher's monitor: seconds between two looks at the run's health and events."""
+    max_recoveries: int = field(default=3, validator=V.in_range(0, 100))
+    """As the launcher's monitor: recovery tasks per component within ``recovery_window`` (0: observe only)."""
+    recovery_window: float = field(default=60.0, validator=V.in_range(1.0, 86_400.0))
 
 
 class CortexRuntime(ActionRuntime):
@@ -203,9 +219,11 @@ class Cortex(ModelComponent):
         self.plan_topic = Topic(name=f"{component_name}/plan", msg_type="String")
         self.steps_topic = Topic(name=f"{component_name}/steps", msg_type="String")
         self.outcome_topic = Topic(name=f"{component_name}/outcome", msg_type="String")
+        # What it observes as the launcher's monitor (add_pkg(monitor=...)): one JSON object per message.
+        self.observations_topic = Topic(name=f"{component_name}/observations", msg_type="String")
         if trigger is None:
             trigger = [t for t in inputs if not isinstance(t, FixedInput)] or 1.0
-        super().__init__(inputs=inputs, outputs=answers + [self.plan_topic, self.steps_topic, self.outcome_topic],
+        super().__init__(inputs=inputs, outputs=answers + [self.plan_topic, self.steps_topic, self.outcome_topic, self.observations_topic],
                          model_client=model_client, config=config, trigger=trigger, component_name=component_name, **kwargs)
         self.config: CortexConfig
         self._answer_topics = [t.name for t in answers]
@@ -213,6 +231,10 @@ class Cortex(ModelComponent):
         self._runtime: CortexRuntime | None = None
         self.last_report: TaskReport | None = None
         self.last_tools: list[str] = []
+        self._outcomes_topic: str | None = None
+        self._monitoring = False  # set by the launcher (serve_as_monitor) before the run starts
+        self._watch: _Watch | None = None
+        self.observations: list[dict] = []  # the last ones (bounded), for last_observations()
 
     # ------------------------------------------------------------------ recipe API
     def add_tool(self, tool: Callable[..., Any], tool_description: dict | ToolSpec, component: str | None = None) -> None:
@@ -225,11 +247,18 @@ class Cortex(ModelComponent):
         owner = component or probe.component
         self._own_tools[spec.name] = CortexTool(spec, functools.partial(_own_action, tool), owner, probe.kind)
 
+    def serve_as_monitor(self, outcomes_topic: str | None = None) -> None:
+        """Called by the Launcher (``add_pkg(monitor=cortex)``) before the run starts: watch the
+        run's health, the supervisor's events and the Monitor's event outcomes on
+        ``outcomes_topic``, and plan a recovery when something is in trouble."""
+        self._monitoring = True
+        self._outcomes_topic = outcomes_topic
+
     def __deepcopy__(self, memo: dict) -> Cortex:
         """A restart's copy (threaded mode) reaches the system through a runtime of its own."""
         new = super().__deepcopy__(memo)
         assert isinstance(new, Cortex)
-        new._runtime, new.last_report, new.last_tools = None, None, []
+        new._runtime, new.last_report, new.last_tools, new._watch, new.observations = None, None, [], None, []
         return new
 
     # ------------------------------------------------------------------ lifecycle
@@ -238,7 +267,17 @@ class Cortex(ModelComponent):
         self.create_action_server(f"{self.component_name}/run_task", CortexTaskGoal, CortexTaskFeedback, CortexTaskResult,
                                   self._run_task_goal)
 
+    def custom_on_activate(self) -> Any:
+        ready = super().custom_on_activate()
+        if self._monitoring:
+            self._watch = _Watch(self)
+            self.create_timer(self.config.monitor_period, self._watch.tick)
+        return ready
+
     def custom_on_deactivate(self) -> None:
+        watch, self._watch = self._watch, None
+        if watch is not None:
+            watch.close()
         runtime, self._runtime = self._runtime, None
         loop = self._node.loop if self._node is not None else None
         if runtime is not None and loop is not None and loop.is_running():
@@ -337,6 +376,15 @@ class Cortex(ModelComponent):
             return topic
 
         tools: dict[str, CortexTool] = {}
+        if self._monitoring:
+            # The monitor's own tool: restart a component through the supervisor (counted
+            # against its group's intensity, like any restart request).
+            targets = [n for n in names if n not in skip]
+            if targets:
+                spec = ToolSpec(name=RESTART_TOOL, description="Restart a component of the run (a fresh process; its state is lost).",
+                                parameters={"type": "object", "properties": {"component": {"type": "string", "enum": targets}},
+                                            "required": ["component"]})
+                tools[RESTART_TOOL] = CortexTool(spec, lambda args: None, None, "lifecycle")
         for name in names:
             if name in skip:
                 continue
@@ -353,6 +401,13 @@ class Cortex(ModelComponent):
     def execute(self, tool: CortexTool, arguments: dict) -> StepOutcome:
         """Run one step through the events' machinery and judge it (worker thread)."""
         rt = self.runtime()
+        if tool.kind == "lifecycle":  # restart_component: straight to the supervisor
+            target = str(arguments.get("component", ""))
+            try:
+                self._on_loop(rt.lifecycle(target, "restart"), self.config.step_timeout + 5.0)
+            except Exception as exc:
+                return StepOutcome(False, f"restarting {target!r} failed: {type(exc).__name__}: {exc}")
+            return StepOutcome(True, f"{target} restarted")
         try:
             action = tool.make(arguments)
         except (TypeError, ValueError, KeyError) as exc:  # the arguments do not build the goal
@@ -424,9 +479,166 @@ class Cortex(ModelComponent):
         method=tool_names``)."""
         return list(self.last_tools)
 
+    def monitored_components(self) -> list[str]:
+        """The components it watches as the launcher's monitor (empty until its first look)."""
+        return list(self._watch.components) if self._watch is not None else []
+
+    def last_observations(self) -> list[dict]:
+        """What it observed last as the launcher's monitor (``emos component call cortex
+        execute_method method=last_observations``)."""
+        return list(self.observations)
+
+    def observe(self, observations: list[Observation]) -> None:
+        """Loop thread: publish what was observed; start a recovery for a component in trouble
+        (one at a time per component, within the budget)."""
+        watch = self._watch
+        for o in observations:
+            record = {"at": time.time(), **o.asdict()}
+            self.observations = (self.observations + [record])[-100:]
+            self.publish_output(self.observations_topic, json.dumps(record))
+            (self.get_logger().warning if o.trouble else self.get_logger().info)("[%s] observed: %s", self.component_name, o.text)
+        if watch is None or self.config.max_recoveries == 0:
+            return
+        troubled: dict[str, list[Observation]] = {}
+        for o in observations:
+            if o.trouble and o.component and o.component != self.component_name:
+                troubled.setdefault(o.component, []).append(o)
+        for component, seen in troubled.items():
+            if component in watch.recovering:
+                continue
+            if not watch.budget.allow(component, time.monotonic()):
+                self._errors(f"budget:{component}", "[%s] %s is in trouble again, but its recovery budget (%d in %g s) is spent: "
+                             "observing only", self.component_name, component, self.config.max_recoveries, self.config.recovery_window)
+                continue
+            task = recovery_task(component, watch.history(component) or seen)
+            watch.recovering.add(component)
+
+            def job(component: str = component, task: str = task) -> None:
+                try:
+                    report = self.run_task(task)
+                    self.publish_output(self.observations_topic, json.dumps(
+                        {"at": time.time(), "component": component, "kind": "recovery", "trouble": False,
+                         "text": f"recovery of '{component}' {'succeeded' if report.success else 'failed'}: {report.answer or report.reason}",
+                         "success": report.success, "steps": len(report.steps)}))
+                finally:
+                    watch.recovering.discard(component)
+
+            worker = self._worker
+            if worker is None or not worker.submit(job):
+                watch.recovering.discard(component)
+                self._errors(f"submit:{component}", "[%s] cannot plan the recovery of %s now (busy)", self.component_name, component)
+
     def last_task_report(self) -> dict:
         """The last task's report (``emos component call cortex execute_method method=last_task_report``)."""
         return self.last_report.asdict() if self.last_report is not None else {}
+
+
+RESTART_TOOL = "restart_component"
+
+
+class _Watch:
+    """The monitor's look at the run, every ``monitor_period`` on the component's loop: the
+    supervisor's event log, each component's status, the Monitor's event outcomes."""
+
+    def __init__(self, cortex: Cortex) -> None:
+        self.cortex = cortex
+        self.since = time.monotonic()  # the supervisor's event stamps are CLOCK_MONOTONIC (same host)
+        self.levels: dict[str, str] = {}
+        self.stamps: dict[str, float] = {}
+        self.components: list[str] = []
+        self.status_topics: dict[str, str] = {}
+        self.tree_at = 0.0
+        self.recovering: set[str] = set()
+        self.budget = RecoveryBudget(cortex.config.max_recoveries, cortex.config.recovery_window)
+        self.recent: collections.deque[Observation] = collections.deque(maxlen=50)
+        self._task: asyncio.Future[Any] | None = None
+        self._client: Any = None
+        self._outcomes: Any = None
+
+    def history(self, component: str) -> list[Observation]:
+        return [o for o in self.recent if o.component == component]
+
+    def tick(self) -> None:
+        if self._task is None or self._task.done():
+            self._task = asyncio.ensure_future(self._look())
+
+    async def _look(self) -> None:
+        cortex = self.cortex
+        try:
+            observations = await self._gather()
+        except Exception as exc:  # a look that fails (the supervisor restarting) is retried next tick
+            cortex._errors("watch", "[%s] watching the run: %s: %s", cortex.component_name, type(exc).__name__, exc)
+            return
+        if observations:
+            self.recent.extend(observations)
+            cortex.observe(observations)
+
+    async def _gather(self) -> list[Observation]:
+        from emos.core.rpc import AsyncRpcClient
+        from emos.msgs.status import ComponentStatus
+        from emos.transport.select import open_subscriber
+
+        cortex = self.cortex
+        rt = cortex.runtime()
+        sock = cortex.node.supervisor_socket
+        out: list[Observation] = []
+        if sock and self._client is None:
+            self._client = AsyncRpcClient(sock)
+        now = time.monotonic()
+        if self._client is not None and now - self.tree_at > 2.0:
+            self.tree_at = now
+            tree = await self._client.call(C.SUPERVISOR_TREE, timeout=5.0)
+            names = component_workers(tree.get("tree") if isinstance(tree, dict) else None)
+            skip = {cortex.component_name, *map(str, cortex.config.exclude_components)}
+            self.components = [n for n in names if n not in skip]
+            for name in self.components:
+                topic = Topic(name=f"{name}/status", msg_type=ComponentStatus)
+                self.status_topics[name] = topic.name
+                rt.watch(topic)
+            if self._outcomes is None and cortex._outcomes_topic:
+                self._outcomes = open_subscriber(rt.ctx, Topic(name=cortex._outcomes_topic, msg_type="String"), queue_size=32)
+        if self._client is not None:
+            events = await self._client.call(C.SUPERVISOR_EVENTS, since=self.since, timeout=5.0)
+            known = set(self.components)
+            for event in events if isinstance(events, list) else []:
+                if isinstance(event, dict) and isinstance(event.get("t"), (int, float)):
+                    self.since = max(self.since, float(event["t"]) + 1e-6)
+                o = from_supervisor_event(event, cortex.component_name, known)
+                if o is not None:
+                    out.append(o)
+        for name in self.components:
+            status = rt.latest(self.status_topics.get(name, ""))
+            if status is None:
+                continue
+            stamp = status.header.stamp.to_sec()
+            if stamp <= self.stamps.get(name, 0.0):
+                continue  # seen already, or an older incarnation's
+            self.stamps[name] = stamp
+            o = from_status(name, self.levels.get(name), status)
+            self.levels[name] = level_name(status.status)
+            if o is not None:
+                out.append(o)
+        if self._outcomes is not None:
+            for msg in self._outcomes.take():
+                out.extend(from_event_outcome(getattr(msg, "data", "")))
+        return out
+
+    def close(self) -> None:
+        """From the lifecycle (any thread): stop looking; the client closes on the loop."""
+        loop = self.cortex._node.loop if self.cortex._node is not None else None
+        task, self._task = self._task, None
+        client, self._client = self._client, None
+        if loop is not None and loop.is_running():
+            if task is not None:
+                loop.call_soon_threadsafe(task.cancel)
+            if client is not None:
+                asyncio.run_coroutine_threadsafe(client.close(), loop)
+        if self._outcomes is not None:
+            try:
+                self._outcomes.close()
+            except Exception:
+                pass
+            self._outcomes = None
 
 
 def _own_action(tool: Callable[..., Any], args: dict) -> Any:

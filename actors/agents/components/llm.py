@@ -33,7 +33,7 @@ from emos.msgs import intelligence as I
 from emos.msgs import std as D
 
 from ..db.spec import DISTANCES
-from ..errors import ModelClientError
+from ..errors import GenerationAbandoned, ModelClientError
 from ..logic.history import ChatHistory
 from ..logic.rag import RAGSettings, retrieve, with_context
 from ..logic.streaming import StreamChunker
@@ -391,6 +391,10 @@ class LLM(ModelComponent):
             # Before the first piece went out, a failed stream can be re-sent (or sent to a backup);
             # after it, re-sending would repeat text downstream has already spoken.
             self.call_model(send, retry_allowed=lambda: not published)
+        except GenerationAbandoned as exc:  # switched clients after part of it went out: end it there
+            self._publish_piece("", done=True)
+            self.get_logger().info("[%s] %s (after %d piece(s))", self.component_name, exc, len(published))
+            return
         except ModelClientError as exc:
             if published:
                 self.health_status.set_fail_algorithm(algorithm_names=[self.model_client_name],

@@ -6,7 +6,9 @@ L2-regularized, classes balanced) is fitted at ``initialize`` on the embeddings 
 samples and of the phrases of each route's ``description``; a query goes to the route it gives
 the highest probability. With ``scoring="nearest"`` (EmbodiedAgents' rule) the route of the
 nearest sample wins. Either way a query whose nearest sample lies beyond ``maximum_distance``
-(default: cosine similarity 0.25, see DEFAULT_MAXIMUM_DISTANCE) goes to the default route.
+(default: cosine similarity 0.25, see DEFAULT_MAXIMUM_DISTANCE) goes to the default route; with
+``scoring="learned"`` the phrases of the routes' descriptions count as samples for that bound too
+(what a route declares it covers is not "far" from it; docs/local-models.md).
 
 Why learned: nearest-sample routing follows words more than intent ("Who is at the door?" sits
 next to "Go to the door"); a classifier weighs the directions that separate the routes. On
@@ -186,6 +188,8 @@ class VectorRouter:
         self.db = db_client
         self._by_name = {r.name: r for r in self.routes}
         self._classifier: _Classifier | None = None
+        self._phrases: list[str] = []
+        self._phrase_vectors: Any = None  # the description phrases' embeddings (learned scoring)
         if config.scoring == "learned" and len(self.routes) > 1 and not callable(getattr(db_client, "embed", None)):
             raise TypeError(f"SemanticRouter scoring='learned' needs a db_client with embed() (e.g. ChromaClient), "
                             f"got {type(db_client).__name__}; use scoring='nearest'")
@@ -207,13 +211,20 @@ class VectorRouter:
         self.db.upsert(self.config.router_name, documents, metadatas=metadatas, ids=ids,
                        distance_func=self.config.distance_func)
         self._classifier = None
+        self._phrases, self._phrase_vectors = [], None
         if self.learned:
             texts, labels = list(documents), [m["route_name"] for m in metadatas]
             for route in self.routes:
                 phrases = description_phrases(route.description)
                 texts += phrases
                 labels += [route.name] * len(phrases)
-            self._classifier = _Classifier(self.db.embed(texts), labels)
+            vectors = self.db.embed(texts)
+            self._classifier = _Classifier(vectors, labels)
+            if len(texts) > len(documents):
+                import numpy as np
+
+                self._phrases = texts[len(documents):]
+                self._phrase_vectors = np.asarray(vectors, dtype=np.float64)[len(documents):]
 
     def decide(self, query: str) -> RouteDecision:
         if not isinstance(query, str) or not query.strip():
@@ -243,12 +254,34 @@ class VectorRouter:
             ranked = sorted(scores, key=scores.__getitem__, reverse=True)
             best, margin = ranked[0], scores[ranked[0]] - scores[ranked[1]]
         limit = self.config.distance_limit
-        if hit.distance > limit:
-            return RouteDecision(self.default_route, hit.distance, hit.document, is_default=True,
-                                 reason=f"no route close enough (nearest sample {hit.document!r} at "
-                                        f"{self.config.distance_func} distance {hit.distance:.3f} > {limit:g})",
+        distance, nearest, what = hit.distance, hit.document, "sample"
+        if self._phrase_vectors is not None and vector is not None:
+            phrase_distance, phrase = self._nearest_phrase(vector)
+            if phrase_distance < distance:
+                distance, nearest, what = phrase_distance, phrase, "description phrase"
+        if distance > limit:
+            return RouteDecision(self.default_route, distance, nearest, is_default=True,
+                                 reason=f"no route close enough (nearest {what} {nearest!r} at "
+                                        f"{self.config.distance_func} distance {distance:.3f} > {limit:g})",
                                  scores=scores, margin=margin)
-        return RouteDecision(self._by_name[best], hit.distance, hit.document, scores=scores, margin=margin)
+        return RouteDecision(self._by_name[best], distance, nearest, scores=scores, margin=margin)
+
+    def _nearest_phrase(self, vector: Any) -> tuple[float, str]:
+        """The description phrase nearest to the query's embedding, in ``distance_func``'s units
+        as the store measures them (l2: squared; ip: 1 - dot; cosine: 1 - cosine)."""
+        import numpy as np
+
+        query = np.asarray(vector, dtype=np.float64).reshape(-1)
+        phrases = self._phrase_vectors
+        if self.config.distance_func == "l2":
+            distances = ((phrases - query) ** 2).sum(axis=1)
+        elif self.config.distance_func == "ip":
+            distances = 1.0 - phrases @ query
+        else:
+            norms = np.linalg.norm(phrases, axis=1) * (np.linalg.norm(query) or 1.0)
+            distances = 1.0 - (phrases @ query) / np.where(norms == 0, 1.0, norms)
+        i = int(np.argmin(distances))
+        return float(distances[i]), self._phrases[i]
 
 
 def _tool_name(route_name: str) -> str:

@@ -34,6 +34,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from ..errors import GenerationAbandoned
 from ..types import ChatChunk, ChatMessage, ChatRequest, ChatResponse, ToolCall, ToolSpec, decode_tool_arguments
 from .gguf import EXTRA_HINT, SMOLLM2_FILE, SMOLLM2_NAMES, LocalModelError, LocalModelUnavailable, check_gguf
 
@@ -126,6 +127,13 @@ class LlamaCppResponder:
             raise LocalModelError(f"llama.cpp could not load the GGUF model {str(path)!r}: {exc}") from None
         # llama.cpp contexts are not thread-safe; requests are served one at a time.
         self._lock = threading.Lock()
+        # cancel(): the generation in progress ends at its next token (see _kwargs' logits processor).
+        self._cancel = threading.Event()
+        self._busy = False
+        #: tokens sampled in the generation in progress (or the last one)
+        self.tokens_generated = 0
+        #: tokens sampled after the last cancel() in the generation it cancelled (1: the end token)
+        self.tokens_after_cancel = 0
         template = (getattr(self._llm, "metadata", None) or {}).get("tokenizer.chat_template") or ""
         #: whether the model's chat template renders a request's tools (see the module docstring)
         self.native_tools = "tools" in template
@@ -154,12 +162,48 @@ class LlamaCppResponder:
         seed = request.options.get("seed")
         if isinstance(seed, int) and not isinstance(seed, bool):
             kwargs["seed"] = seed
+        kwargs["logits_processor"] = [self._watch_cancel]
         return kwargs
+
+    def _watch_cancel(self, input_ids: Any, scores: Any) -> Any:
+        """Called by llama.cpp before each token is sampled: once cancel() was called, only the
+        end-of-generation token may follow, so the generation stops at this token (create_chat_
+        completion has no other way to stop, and no abort of a running decode)."""
+        self.tokens_generated += 1
+        if self._cancel.is_set():
+            self.tokens_after_cancel += 1
+            eos = self._llm.token_eos()
+            scores[:] = -float("inf")
+            scores[eos] = 0.0
+        return scores
+
+    def cancel(self) -> bool:
+        """Abandon the generation in progress, without waiting for it: it ends at its next token
+        and its caller gets :class:`GenerationAbandoned`. False if none is in progress."""
+        if not self._busy:
+            return False
+        self._cancel.set()
+        return True
+
+    def _begin(self) -> None:  # under self._lock
+        self._cancel.clear()
+        self._busy = True
+        self.tokens_generated = self.tokens_after_cancel = 0
+
+    def _abandoned(self) -> GenerationAbandoned:
+        return GenerationAbandoned(f"local model {self.name!r}: the answer in progress was abandoned after "
+                                   f"{self.tokens_generated} token(s): the component switched to another model client")
 
     def respond(self, request: ChatRequest, model: str) -> ChatResponse:
         with self._lock:
-            # llama-cpp-python's TypedDicts: read as plain JSON, as the OpenAI codec reads a server's.
-            out: Any = self._llm.create_chat_completion(**self._kwargs(request))
+            self._begin()
+            try:
+                # llama-cpp-python's TypedDicts: read as plain JSON, as the OpenAI codec reads a server's.
+                out: Any = self._llm.create_chat_completion(**self._kwargs(request))
+            finally:
+                self._busy = False
+            if self._cancel.is_set():
+                raise self._abandoned()  # a truncated answer is not published as the answer
         choice = out["choices"][0]
         raw = choice["message"]
         calls = [ToolCall(id=c.get("id", ""), name=c["function"]["name"], arguments=decode_tool_arguments(c["function"].get("arguments")))
@@ -173,14 +217,23 @@ class LlamaCppResponder:
         with self._lock:
             reason = None
             tokens = 0
-            parts: Any = self._llm.create_chat_completion(stream=True, **self._kwargs(request))
-            for part in parts:
-                choice = part["choices"][0]
-                text = (choice.get("delta") or {}).get("content")
-                if text:
-                    tokens += 1  # llama-cpp-python streams one token per chunk
-                    yield ChatChunk(content=text)
-                reason = choice.get("finish_reason") or reason
+            self._begin()
+            try:
+                parts: Any = self._llm.create_chat_completion(stream=True, **self._kwargs(request))
+                for part in parts:
+                    if self._cancel.is_set():
+                        parts.close()
+                        raise self._abandoned()
+                    choice = part["choices"][0]
+                    text = (choice.get("delta") or {}).get("content")
+                    if text:
+                        tokens += 1  # llama-cpp-python streams one token per chunk
+                        yield ChatChunk(content=text)
+                    reason = choice.get("finish_reason") or reason
+            finally:
+                self._busy = False
+            if self._cancel.is_set():
+                raise self._abandoned()
         yield ChatChunk(content="", done=True, finish_reason=reason or "stop", usage={"completion_tokens": tokens})
 
     def close(self) -> None:

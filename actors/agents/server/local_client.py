@@ -113,6 +113,13 @@ class LocalLLMClient(ModelClient):
         except ValueError as exc:
             raise ModelClientError(f"the local model refused the request: {exc}", **self._error_context()) from None
 
+    def cancel_generation(self) -> bool:
+        """Abandon the answer in progress (if any) without waiting: it stops at its next token and
+        raises :class:`~emos.actors.agents.errors.GenerationAbandoned` in the thread that asked.
+        ``change_model_client`` calls it when the component switches away from this client."""
+        responder = self._responder
+        return bool(responder is not None and responder.cancel())
+
     def _deinitialize(self) -> None:
         with self._load_lock:
             responder, self._responder = self._responder, None
