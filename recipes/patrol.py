@@ -2,6 +2,7 @@
 
     emos run recipes/patrol.py                      # one lap
     EMOS_PATROL_LAPS=20 EMOS_PATROL_WORLD=house_person emos run recipes/patrol.py  # docs/missions.md
+    EMOS_PATROL_LAPS=20 EMOS_PATROL_WORLD=house_person EMOS_PATROL_PEDESTRIAN=yielding emos run recipes/patrol.py
 
 The point-navigation stack of ``emos.actors.nav.stacks`` (MapServer on the house map, Planner,
 Controller with Pure Pursuit on the LocalMapper's grid, DriveManager) drives the Simulator's
@@ -13,7 +14,12 @@ waypoint follower) sends it from room to room through the Planner's goal topic a
 Simulator's camera image at each room (``PhotoAtWaypoint``: the camera topic saved to a PNG;
 the Vision component is not needed for a picture). A ``Behaviors`` component (Nav2's behavior
 server) is the Controller's recovery ladder: clear the local grid, back up (checking behind),
-spin. The ``Patrol`` component below sends the ``follow_waypoints`` goal, prints its feedback,
+spin; and it gives way to people (``GiveWayConfig``: on a collision course with a person the
+scan tracker sees, it takes the robot over, above the Controller, and stands short, backs out of
+the doorway or pulls aside until the way is clear; ``EMOS_PATROL_GIVE_WAY=0`` turns it off), while
+the DriveManager's swept check counts where a tracked person will walk as an obstacle
+(``mover_prediction_time``). ``EMOS_PATROL_PEDESTRIAN=yielding`` makes the person stop for a
+robot in its way (and turn back after a while) instead of walking through it. The ``Patrol`` component below sends the ``follow_waypoints`` goal, prints its feedback,
 and writes ``summary.json`` (laps, missed waypoints with reasons, pictures, recoveries used,
 collisions; every contact with a moving obstacle, classified by who closed the gap) to ``$EMOS_PATROL_OUT`` (default ``./patrol_out``). Exit code 0 when every lap was
 done without a missed waypoint or a collision.
@@ -28,12 +34,14 @@ import numpy as np
 
 from emos import Action, BaseComponent, Launcher, Topic
 from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav.components.behaviors import BehaviorsConfig
 from emos.actors.nav.components.waypoints import WaypointFollowerConfig
 from emos.actors.nav.missions import PhotoAtWaypoint
+from emos.actors.nav.recovery import GiveWayConfig
 from emos.actors.nav.stacks import COMMAND_INPUTS, point_navigation_stack
 from emos.actors.sim import Simulator, SimulatorConfig
 from emos.actors.sim.builders import HOUSE_DOCK, charging_dock
-from emos.actors.sim.person import PERSON_RADIUS
+from emos.actors.sim.person import PERSON_RADIUS, house_person
 
 OUT_DIR = os.path.abspath(os.environ.get("EMOS_PATROL_OUT", "patrol_out"))
 LAPS = int(os.environ.get("EMOS_PATROL_LAPS", "1"))
@@ -49,6 +57,13 @@ WORLD = os.environ.get("EMOS_PATROL_WORLD", "house")
 # 1: the Controller tracks moving obstacles (stacks.point_navigation_stack(movers=True): the ArcSampler on CostToGo
 # plans); 0 (the default): Pure Pursuit on the local grid. docs/missions.md compares the two with the walking person.
 MOVERS = os.environ.get("EMOS_PATROL_MOVERS", "0") == "1"
+# The walking person: "blind" (walks through whatever is in its way) or "yielding" (stops for the robot).
+PEDESTRIAN = os.environ.get("EMOS_PATROL_PEDESTRIAN", "blind")
+if PEDESTRIAN not in ("blind", "yielding"):
+    sys.exit(f"patrol: EMOS_PATROL_PEDESTRIAN must be 'blind' or 'yielding', got {PEDESTRIAN!r}")
+# 1 (the default): the Behaviors give way to the person, the DriveManager predicts its walk; 0: neither.
+GIVE_WAY = os.environ.get("EMOS_PATROL_GIVE_WAY", "1") == "1"
+MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 
 my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
                        geometry_params=np.array([0.2, 0.3]))
@@ -56,8 +71,10 @@ odom = Topic(name="/odom", msg_type="Odometry")  # the Simulator's true pose in 
 scan = Topic(name="/scan", msg_type="LaserScan")
 image = Topic(name="/camera/image", msg_type="Image")
 
-sim = Simulator("sim", config=SimulatorConfig(world=WORLD, obstacles=charging_dock(HOUSE_DOCK), camera_rate=2.0,
-                                             camera_width=160, camera_height=120))
+# The yielding person is the house_person world's person with the yielding model: the house plus that person.
+people = [house_person(yielding=True)] if WORLD == "house_person" and PEDESTRIAN == "yielding" else []
+sim = Simulator("sim", config=SimulatorConfig(world="house" if people else WORLD, obstacles=charging_dock(HOUSE_DOCK),
+                                             moving_obstacles=people, camera_rate=2.0, camera_width=160, camera_height=120))
 sim.inputs(command=Topic(name="/cmd_vel", msg_type="Twist"))
 sim.outputs(odom=odom, scan=scan, camera=image)
 
@@ -65,7 +82,10 @@ sim.outputs(odom=odom, scan=scan, camera=image)
 stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="LDS-01"), HOUSE_MAP, odom=odom,
                                command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
                                movers=MOVERS)
-behaviors = stack.behaviors()
+behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
+                                                   give_way=GiveWayConfig(enabled=GIVE_WAY, speed=0.4)))
+if GIVE_WAY:
+    stack.driver.config.mover_prediction_time = MOVER_PREDICTION_TIME
 # Recovery ladder of the Controller (Nav2's recovery subtree): clear, back up, spin.
 stack.controller.on_algorithm_fail(action=[Action(method=behaviors.clear_costmaps), Action(method=behaviors.back_up),
                                            Action(method=behaviors.spin)], max_retries=3)
@@ -177,6 +197,7 @@ class Patrol(BaseComponent):
         summary["collisions"] = max(len(monitor.episodes), int(summary["sim_collided"]))
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
+        summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "movers_controller": MOVERS}
         pictures = os.path.join(OUT_DIR, "pictures")
         summary["pictures"] = sorted(os.listdir(pictures)) if os.path.isdir(pictures) else []
         summary["time_s"] = round(time.monotonic() - t0, 1)

@@ -11,6 +11,10 @@ every fresh scan while it plays one, so an obstacle that appears mid-way stops i
 Backing up is where today's unblock maneuvers are blind: a 270 degree scan sees nothing behind
 the robot. :func:`plan_back_up` therefore refuses when nothing covers the rear (``rear_seen``
 False: no scan beam behind and no local map) instead of driving into the unseen.
+
+Giving way to a person (:func:`plan_give_way`, :class:`GiveWayConfig`) is a recovery move of
+the same kind: the robot stands, backs out of a passage or pulls aside, whichever keeps it out
+of the predicted path of the movers the scan tracker sees, never towards one that is near.
 """
 from __future__ import annotations
 
@@ -20,10 +24,12 @@ from typing import Any
 import attrs
 import numpy as np
 
+from emos.config import validators as V
+
 from .controllers.clearance import pose_clearance
 from .robot import RobotConfig
 
-__all__ = ["BehaviorPlan", "plan_spin", "plan_drive_on_heading", "plan_back_up", "plan_wait", "rear_covered", "scan_covers_rear"]
+__all__ = ["BehaviorPlan", "GiveWayConfig", "GiveWayMove", "plan_give_way", "plan_spin", "plan_drive_on_heading", "plan_back_up", "plan_wait", "rear_covered", "scan_covers_rear"]
 
 POSE_STEP = 0.01  # m between checked poses of a straight drive
 ANGLE_STEP = math.radians(2.0)  # rad between checked poses of a spin
@@ -155,3 +161,149 @@ def plan_wait(duration: float, *, dt: float = 0.1) -> BehaviorPlan:
     duration = _check_number("wait", "duration", duration)
     dt = _check_number("wait", "dt", dt)
     return BehaviorPlan("wait", True, np.zeros((max(1, int(math.ceil(duration / dt))), 3)), dt)
+
+
+# -- give way to a moving obstacle -----------------------------------------------------------------
+
+@attrs.define(frozen=True, kw_only=True)
+class GiveWayConfig:
+    """When and how the ``Behaviors`` give way to a moving obstacle (a person) tracked in the scan.
+
+    ``enabled``: watch for movers on every step and give way on one's own (else only as an
+    action / event method). A mover is *on a collision course* when, both at constant velocity
+    (the robot at its odometry's), the gap between the robot's circle and the mover's is
+    predicted to fall below ``personal_space`` m within ``time_before_collision`` s (Nav2's
+    collision monitor's name for the same look-ahead) while it approaches, or when a mover is
+    nearer than ``near_distance`` m and not moving away (a person turning round has no
+    velocity to predict with yet). Movers farther than ``detection_range`` m are ignored.
+
+    Giving way: every step the yield moves (constant twists up to ``speed`` m/s and the
+    behavior server's ``max_rotational_vel``, checked against the static obstacles over
+    ``simulate_ahead_time`` s, Nav2's name) are scored by the least predicted gap to every mover;
+    then standing where the move ends for ``hold_time`` s more while the movers walk on (a move
+    is only good if the robot is out of the way at its end: backing out along a person's way
+    only puts off the contact); standing still wins when it keeps ``personal_space``, else the
+    move that keeps the largest gap (backing out of a doorway, pulling aside into free space). The robot never moves towards
+    a mover nearer than ``near_distance``. It is done when no mover has been on a collision
+    course for ``clear_time`` s (the way is clear: the Controller drives again), and gives up
+    after ``time_allowance`` s (Nav2's name)."""
+
+    enabled: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
+    time_before_collision: float = attrs.field(default=3.0, validator=V.number(gt=0, le=30, finite=True, what="seconds"))
+    personal_space: float = attrs.field(default=0.25, validator=V.number(ge=0, le=3, finite=True, what="metres"))
+    near_distance: float = attrs.field(default=0.45, validator=V.number(ge=0, le=3, finite=True, what="metres"))
+    detection_range: float = attrs.field(default=4.0, validator=V.number(gt=0, le=30, finite=True, what="metres"))
+    clear_time: float = attrs.field(default=1.5, validator=V.number(ge=0, le=60, finite=True, what="seconds"))
+    time_allowance: float = attrs.field(default=30.0, validator=V.number(gt=0, le=3600, finite=True, what="seconds"))
+    speed: float = attrs.field(default=0.3, validator=V.number(gt=0, le=2, finite=True, what="m/s"))
+    simulate_ahead_time: float = attrs.field(default=4.0, validator=V.number(gt=0, le=10, finite=True, what="seconds"))
+    hold_time: float = attrs.field(default=4.0, validator=V.number(ge=0, le=30, finite=True, what="seconds"))
+
+    def __attrs_post_init__(self) -> None:
+        if self.near_distance < self.personal_space:
+            raise ValueError(f"GiveWayConfig.near_distance ({self.near_distance} m) must be >= personal_space "
+                             f"({self.personal_space} m): a mover inside the personal space is near")
+
+
+@attrs.define(frozen=True)
+class GiveWayMove:
+    """One step of giving way: ``command`` (vx, vy, omega) for now, ``name`` of the move
+    (``stand``, ``back_out``, ``pull_aside``, ``move_on``), ``gap`` (m: the least predicted gap
+    to a mover over the look-ahead if the robot keeps this move)."""
+
+    command: np.ndarray
+    name: str
+    gap: float
+    index: int = -1  # which candidate (pass it back as ``previous`` next step)
+
+
+COMFORT = 0.3  # m beyond the personal space: a larger predicted gap is no better (the least effort wins)
+KEEP_BONUS = 0.08  # m of predicted gap the move of the last step is given over the others (no dithering)
+
+
+def _candidates(speed: float, max_omega: float, n: int, dt: float) -> tuple[np.ndarray, list[str]]:
+    """Yield moves as (C, n, 2) (v, omega) sequences and their names: standing; constant twists
+    (v in +-speed, +-speed/2, 0; omega in +-max, +-max/2, 0); and turns in place to +-45, +-90,
+    +-135 degrees followed by a drive forward at ``speed`` (pulling aside) or, to +-45 and +-90,
+    backward (backing out at an angle)."""
+    seqs: list[np.ndarray] = []
+    names: list[str] = []
+    for v in speed * np.array([0.0, -1.0, -0.5, 0.5, 1.0]):
+        for w in max_omega * np.array([0.0, -1.0, -0.5, 0.5, 1.0]):
+            seqs.append(np.tile([v, w], (n, 1)))
+            names.append("stand" if v == 0.0 and w == 0.0 else "turn" if v == 0.0 else "back_out" if v < 0.0 else
+                         "move_on" if w == 0.0 else "pull_aside")
+    for deg, direction in [(d, 1.0) for d in (45, 90, 135)] + [(d, -1.0) for d in (45, 90)]:
+        turn_steps = int(math.ceil(math.radians(deg) / (max_omega * dt)))
+        for sign in (-1.0, 1.0):
+            seq = np.zeros((n, 2))
+            seq[:turn_steps, 1] = sign * math.radians(deg) / (turn_steps * dt)
+            seq[turn_steps:, 0] = direction * speed
+            seqs.append(seq)
+            names.append("pull_aside" if direction > 0 else "back_out")
+    return np.stack(seqs), names
+
+
+def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.ndarray, velocities: np.ndarray,
+                  radii: np.ndarray, config: GiveWayConfig, *, max_omega: float = 0.5, dt: float = 0.1,
+                  margin: float = 0.03, previous: int | None = None) -> GiveWayMove:
+    """The best yield move now, in the robot frame: ``obstacles`` (N, 2) static points (the
+    movers' own points left out), the movers' ``centres`` (M, 2) and ``velocities`` (M, 2) in
+    the robot frame, ``radii`` (M,). The moves of :func:`_candidates` are rolled out over
+    ``simulate_ahead_time`` s and cut where the footprint would come within ``margin`` of a
+    static point (the robot stops there); a move that takes the robot towards a mover nearer
+    than ``near_distance`` is out. The move with the largest least gap to every mover's
+    prediction wins, gaps beyond ``personal_space`` + ``COMFORT`` counting alike (then the
+    least effort: standing, if it keeps that far). ``previous`` (the ``index`` of the move of
+    the last step) keeps that move while it is nearly as good (``KEEP_BONUS`` m), so the robot
+    does not dither between moves."""
+    dt = _check_number("give_way", "dt", dt)
+    w = _check_number("give_way", "max_omega", max_omega)
+    pts = _points(obstacles)
+    centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+    velocities = np.asarray(velocities, dtype=float).reshape(-1, 2)
+    radii = np.asarray(radii, dtype=float).reshape(-1)
+    n = max(2, int(math.ceil(config.simulate_ahead_time / dt)) + 1)
+    seqs, names = _candidates(config.speed, w, n - 1, dt)
+    # Poses after each step (C, n): the start, then the unicycle integrated at mid-step headings.
+    v, om = seqs[..., 0], seqs[..., 1]
+    th = np.concatenate([np.zeros((len(seqs), 1)), np.cumsum(om * dt, axis=1)], axis=1)
+    mid = 0.5 * (th[:, :-1] + th[:, 1:])
+    x = np.concatenate([np.zeros((len(seqs), 1)), np.cumsum(v * np.cos(mid) * dt, axis=1)], axis=1)
+    y = np.concatenate([np.zeros((len(seqs), 1)), np.cumsum(v * np.sin(mid) * dt, axis=1)], axis=1)
+    # Static obstacles: the robot drives until the footprint would come within the margin, then
+    # stands. A point already too near only stops a move that brings it nearer.
+    clear = pose_clearance(robot, np.stack([x, y, th], axis=-1), pts)
+    bad = (clear < margin) & (clear < clear[:, :1] - 1e-3)
+    stop_at = np.where(bad.any(axis=1), np.argmax(bad, axis=1) - 1, n - 1)
+    idx = np.minimum(np.arange(n)[None, :], np.maximum(stop_at, 0)[:, None])
+    px, py, pth = (np.take_along_axis(a, idx, axis=1) for a in (x, y, th))
+    moving = np.arange(n)[None, :] < stop_at[:, None]
+    vel = np.concatenate([v, np.zeros((len(seqs), 1))], axis=1) * moving
+    # Then standing at the move's end for hold_time s while the movers walk on.
+    n_hold = int(math.ceil(config.hold_time / dt)) if config.hold_time > 0 else 0
+    if n_hold:
+        px, py, pth = (np.concatenate([a, np.repeat(a[:, -1:], n_hold, axis=1)], axis=1) for a in (px, py, pth))
+        vel = np.concatenate([vel, np.zeros((len(seqs), n_hold))], axis=1)
+    t = np.arange(n + n_hold) * dt
+    if len(centres):  # predicted gaps (C, n + n_hold, M) to every mover at constant velocity
+        dx = centres[None, None, :, 0] + velocities[None, None, :, 0] * t[None, :, None] - px[..., None]
+        dy = centres[None, None, :, 1] + velocities[None, None, :, 1] * t[None, :, None] - py[..., None]
+        dist = np.hypot(dx, dy)
+        gap = dist - robot.radius - radii[None, None, :]
+        toward = (vel[..., None] * (np.cos(pth)[..., None] * dx + np.sin(pth)[..., None] * dy)) / np.maximum(dist, 1e-9)
+        forbidden = np.any((gap < config.near_distance) & (toward > 0.02), axis=(1, 2))
+        least = gap.min(axis=(1, 2))
+    else:
+        forbidden = np.zeros(len(seqs), dtype=bool)
+        least = np.full(len(seqs), np.inf)
+    forbidden[0] = False  # standing (the first candidate) is always possible
+    effort = np.abs(v).mean(axis=1) / config.speed + 0.5 * np.abs(om).mean(axis=1) / w
+    # Gaps beyond a comfortable distance are all as good: then the least effort (standing).
+    score = np.where(forbidden, -np.inf, np.minimum(least, config.personal_space + COMFORT) - 0.02 * effort)
+    if previous is not None and 0 <= previous < len(score):
+        score[previous] += KEEP_BONUS
+    best = int(np.argmax(score))
+    if stop_at[best] <= 0:
+        return GiveWayMove(np.zeros(3), "stand", float(least[best]), best)
+    return GiveWayMove(np.array([seqs[best, 0, 0], 0.0, seqs[best, 0, 1]]), names[best], float(least[best]), best)

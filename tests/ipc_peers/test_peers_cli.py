@@ -40,7 +40,7 @@ def test_local_peers_are_measured_interleaved_with_a_row_per_transport_and_size(
 def test_unknown_peers_and_bad_rounds_are_clear_usage_errors():
     done = _bench("--peers", "carrier-pigeon", "--sizes", "8")
     assert done.returncode == 2 and "unknown IPC peer 'carrier-pigeon'" in done.stderr
-    assert "dora" in done.stderr and "zenoh" in done.stderr  # both measurable now (tests/ipc_peers/test_s22_peers.py)
+    assert "dora" in done.stderr and "zenoh" in done.stderr  # both measurable now (tests/ipc_peers/test_dora_zenoh_peers.py)
     done = _bench("--peers", "pipe", "--rounds", "0", "--sizes", "8")
     assert done.returncode == 2 and "--rounds" in done.stderr
 

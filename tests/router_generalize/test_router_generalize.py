@@ -48,7 +48,7 @@ def _rows(path: Path) -> list[tuple[str, str]]:
 SPEC = json.loads((HERE / "routes.json").read_text())
 REPORT = _rows(HERE / "report_queries.tsv")
 REPORT_2 = _rows(HERE / "report_queries_2.tsv")  # a second unseen set, written a session later
-REPORT_3 = _rows(HERE / "report_queries_3.tsv")  # a third (session 22), written before the new bound was scored
+REPORT_3 = _rows(HERE / "report_queries_3.tsv")  # a third, written before the new bound was scored
 TUNING = {name: _rows(path) for name, path in (("tuning_queries.tsv", HERE / "tuning_queries.tsv"),
                                                 ("tuning_queries_2.tsv", HERE / "tuning_queries_2.tsv"),
                                                 ("router_labeled.tsv", DATA_DIR / "router_labeled.tsv"))}
@@ -100,7 +100,7 @@ def test_learned_routing_generalizes_to_the_report_set(client, capsys):
     with capsys.disabled():
         print(f"\nreport set ({len(REPORT)} queries, default distance bound): nearest sample {before:.3f}, learned {learned:.3f}, "
               f"learned + descriptions {described:.3f}")
-    assert described >= 0.88  # measured 0.889 (64/72), 0.903 since the bound counts description phrases (session 22)
+    assert described >= 0.88  # measured 0.889 (64/72), 0.903 since the bound counts description phrases
     assert learned > before
     second = _accuracy(client, "report2-described", "learned", True, REPORT_2)
     unbounded = [_accuracy(client, f"report{i}-unbounded", "learned", True, rows, maximum_distance=4.0)

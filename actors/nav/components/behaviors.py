@@ -1,6 +1,6 @@
 """``Behaviors``: Nav2's behavior server. Recovery moves as event / fallback actions and as
 action servers: ``spin``, ``backup``, ``drive_on_heading``, ``wait``, and ``clear_costmaps``
-(the LocalMapper's ``clear_entirely_local_costmap`` service).
+(the LocalMapper's ``clear_entirely_local_costmap`` service); and ``give_way`` to a person.
 
     behaviors = Behaviors(component_name="behaviors")
     Event(stuck_event, Action(method=behaviors.back_up, kwargs={"distance": 0.3}))
@@ -15,6 +15,14 @@ behavior), e.g. ``back_up refused: obstacle 0.12 m behind``. Commands go to ``ro
 (wire it to a DriveManager command input of a higher priority than the Controller's,
 ``stacks.BEHAVIORS_COMMAND``, to keep its safety zones in the loop, or to the base directly as
 Nav2 does).
+
+Give way (``BehaviorsConfig(give_way=GiveWayConfig(enabled=True))``): the component tracks the
+moving obstacles in its scan (``controllers.movers.MoverWatch``, the scan tracker the movers
+Controller uses) and, when one is on a collision course (``recovery.GiveWayConfig``), takes the
+robot over on its command input, above the Controller's: it stands short of the person, or backs
+out of a passage / pulls aside when the person heads at it (``recovery.plan_give_way``, planned
+again every step), until no mover has been on a collision course for ``clear_time`` s. Then it
+stops publishing and the Controller (and the mission) go on where they were.
 """
 from __future__ import annotations
 
@@ -34,13 +42,24 @@ from emos.geometry import wrap_angle
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 
 from .. import recovery as R
+from ..controllers.movers import Approach, MoverWatch, approaches, near_movers
 from ..controllers.sensors import obstacle_points
 from .base import NavComponentConfig, rate_field
-from .convert import BadInput, grid_points_in_robot_frame, scan_of
+from .convert import BadInput, grid_points_in_robot_frame, scan_of, velocity_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
 from .motion_actions import MotionActionServer
 
 __all__ = ["Behaviors", "BehaviorsConfig"]
+
+MOVER_PAD = 0.15  # m: scan and grid points this near a tracked mover's circle are the mover (not static)
+
+
+def _give_way_config(value: Any) -> R.GiveWayConfig:
+    if isinstance(value, R.GiveWayConfig):
+        return value
+    if isinstance(value, Mapping):
+        return R.GiveWayConfig(**value)
+    raise TypeError(f"BehaviorsConfig.give_way: expected a GiveWayConfig or a dict of its fields, got {type(value).__name__}")
 
 
 @define(kw_only=True)
@@ -48,7 +67,8 @@ class BehaviorsConfig(NavComponentConfig):
     """Nav2's behavior server parameters where they are the same: ``max_rotational_vel`` (rad/s
     of a spin), ``safety_margin`` (m the footprint keeps from obstacles over a move),
     ``sensor_timeout`` (s: an older scan refuses every move), ``local_mapper`` (the component
-    whose grid ``clear_costmaps`` clears)."""
+    whose grid ``clear_costmaps`` clears). ``give_way``: when and how to give way to a moving
+    obstacle (``recovery.GiveWayConfig``; off unless ``enabled``)."""
 
     loop_rate: float = rate_field(10.0)
     max_rotational_vel: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=10.0))
@@ -57,6 +77,7 @@ class BehaviorsConfig(NavComponentConfig):
     local_mapper: str = field(default="mapper")
     xy_tolerance: float = field(default=0.01, validator=in_range(min_value=1e-4, max_value=1.0))
     yaw_tolerance: float = field(default=math.radians(1.0), validator=in_range(min_value=1e-4, max_value=1.0))
+    give_way: R.GiveWayConfig = field(factory=R.GiveWayConfig, converter=_give_way_config)
 
 
 @attrs.define
@@ -71,6 +92,9 @@ class _Running:
     last_yaw: float = 0.0
     result: BehaviorResult | None = None
     stopped: bool = False  # the zero command after the end was sent (a cancel ends it off the loop)
+    last_threat: float = 0.0  # give_way: node time a mover was last on a collision course
+    move: str = ""  # give_way: the yield move of the last step
+    move_index: int | None = None  # give_way: its candidate index (kept while nearly as good)
 
 
 class Behaviors(MotionActionServer):
@@ -88,7 +112,13 @@ class Behaviors(MotionActionServer):
         self._lock = threading.Lock()
         self._running: _Running | None = None
         self._last: BehaviorResult | None = None
-        self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0}
+        self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0, "give_way": 0, "give_way_s": 0}
+        self._give_way_time = 0.0  # s spent giving way (node clock)
+        self._movers = MoverWatch()
+        self._watched_scan: Any = None  # the scan message last fed to the mover tracker
+        if self.config.give_way.enabled:  # its first plan pays imports (~1 s here): not when a person is coming
+            R.plan_give_way(self.config.robot, np.full((2000, 2), 10.0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
+                            self.config.give_way, max_omega=self.config.max_rotational_vel)
         self._create_action_servers()
 
     # -- what the robot sees ------------------------------------------------------------------------
@@ -128,7 +158,8 @@ class Behaviors(MotionActionServer):
         return R.plan_drive_on_heading(robot, pts, remaining, speed=run.speed, dt=dt, margin=m)
 
     # -- starting and playing -----------------------------------------------------------------------
-    def _begin(self, name: str, target: float, speed: float, time_allowance: float, preempt: bool = False) -> tuple[bool, str]:
+    def _begin(self, name: str, target: float, speed: float, time_allowance: float, preempt: bool = False,
+               why: str = "") -> tuple[bool, str]:
         """Check the whole move now and start it; (False, why) when refused. A fallback ladder
         fires its actions again while the failure lasts: a request for the behavior already
         running lets it go on, one for another is refused while it runs (an action goal,
@@ -145,18 +176,23 @@ class Behaviors(MotionActionServer):
             return self._refuse(name, f"{name} refused: no pose on {self.topic_name('location')}")
         run = _Running(name, float(target), float(speed), pose, now, now + float(time_allowance),
                        last_yaw=float(pose[2]) if pose is not None else 0.0)
-        try:
-            plan = self._plan(run, abs(run.target))
-        except (BadInput, ValueError) as exc:
-            return self._refuse(name, f"{name} refused: {exc}")
-        if not plan.feasible:
-            return self._refuse(name, plan.reason)
+        if name == "give_way":  # standing is always possible: each step picks the move (_step_give_way)
+            run.last_threat = now
+        else:
+            try:
+                plan = self._plan(run, abs(run.target))
+            except (BadInput, ValueError) as exc:
+                return self._refuse(name, f"{name} refused: {exc}")
+            if not plan.feasible:
+                return self._refuse(name, plan.reason)
         self._counts["started"] += 1
+        if name == "give_way":
+            self._counts["give_way"] += 1
         with self._lock:
             if self._running is not None and self._running.result is None:
                 self._running.result = BehaviorResult(success=False, message=f"{self._running.name} preempted by {name}")
             self._running = run
-        self.get_logger().info("[%s] %s started (%.3g)", self.component_name, name, target)
+        self.get_logger().info("[%s] %s started (%.3g)%s", self.component_name, name, target, f": {why}" if why else "")
         return True, f"{name} started"
 
     def _refuse(self, name: str, reason: str) -> tuple[bool, str]:
@@ -171,6 +207,9 @@ class Behaviors(MotionActionServer):
         run.result = BehaviorResult(success=success, message=message, total_elapsed_time=clock.now() - run.started)
         self._last = run.result
         self._counts["succeeded" if success else "stopped"] += 1
+        if run.name == "give_way":
+            self._give_way_time += clock.now() - run.started
+            self._counts["give_way_s"] = int(round(self._give_way_time))
         if success:
             self.health_status.set_healthy()
             self.get_logger().info("[%s] %s", self.component_name, message)
@@ -184,6 +223,16 @@ class Behaviors(MotionActionServer):
         if ended is not None and not ended.stopped:  # cancelled or preempted from another thread
             self._stop_robot()
             ended.stopped = True
+        self._watch_movers()
+        if self.config.give_way.enabled and (run is None or run.name != "give_way"):
+            threat = self._threat()
+            if threat is not None and self._begin("give_way", self.config.give_way.time_allowance, self.config.give_way.speed,
+                                                  self.config.give_way.time_allowance, preempt=True, why=threat)[0]:
+                with self._lock:
+                    run = self._running
+        if run is not None and run.name == "give_way":
+            self._step_give_way(run)
+            return
         if run is None:
             if self._last is None or self._last.success:
                 self.health_status.set_healthy()
@@ -220,6 +269,94 @@ class Behaviors(MotionActionServer):
             return
         self._drive(plan.commands[0])
 
+    # -- giving way to a moving obstacle ----------------------------------------------------------------
+    def _watch_movers(self) -> None:
+        """Feed a new scan to the mover tracker, at the pose odometry gives now."""
+        msg = self.latest("sensor_data")
+        if msg is None or msg is self._watched_scan:
+            return
+        pose = self._pose()
+        if pose is None:
+            return
+        try:
+            scan = scan_of(msg)
+        except BadInput:
+            return  # reported where the scan is used for a move
+        self._watched_scan = msg
+        stamp = msg.header.stamp.to_sec() if msg.header.stamp is not None else clock.now()
+        odom = self.latest("location")
+        odom_stamp = getattr(getattr(odom, "header", None), "stamp", None)  # a Pose has none: no rewind then
+        self._movers.update(stamp, obstacle_points(scan), pose, float(scan.angle_increment or 0.0),
+                            pose_stamp=odom_stamp.to_sec() if odom_stamp is not None else None, twist=velocity_of(odom))
+
+    def _approaches(self, pose: np.ndarray) -> list[Approach]:
+        """Every tracked mover within ``detection_range``, relative to the robot moving at its
+        odometry's velocity (world frame)."""
+        cfg = self.config.give_way
+        centres, velocities, radii = self._movers.movers()
+        if len(centres) == 0:
+            return []
+        body = velocity_of(self.latest("location"))
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        v = np.zeros(2) if body is None else np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
+        return [a for a in approaches(pose[:2], v, self.config.robot.radius, centres, velocities, radii, cfg.time_before_collision)
+                if a.gap_now <= cfg.detection_range]
+
+    def _threat(self, pose: np.ndarray | None = None) -> str | None:
+        """Why a mover is on a collision course with the robot (see ``GiveWayConfig``); None if none is."""
+        cfg = self.config.give_way
+        pose = self._pose() if pose is None else pose
+        if pose is None:
+            return None
+        centres = self._movers.movers()[0]
+        for a in self._approaches(pose):
+            coming = a.gap_min < cfg.personal_space and a.closing > 0.05
+            if coming or (a.gap_now < cfg.near_distance and a.closing > -0.05):
+                x, y = centres[a.index]
+                return (f"mover at ({x:.2f}, {y:.2f}) {a.gap_now:.2f} m away, closing at {a.closing:.2f} m/s"
+                        + (f", predicted within {max(a.gap_min, 0.0):.2f} m in {a.time_to_min:.1f} s" if coming else ""))
+        return None
+
+    def _step_give_way(self, run: _Running) -> None:
+        """One step of giving way: done when no mover has been on a collision course for
+        ``clear_time`` s; else the best yield move now (``recovery.plan_give_way``)."""
+        cfg = self.config.give_way
+        now = clock.now()
+        pose = self._pose()
+        if pose is None or run.start_pose is None:
+            self._finish(run, False, f"give_way stopped: lost the pose on {self.topic_name('location')}")
+            return
+        run.done_amount = now - run.started
+        threat = self._threat(pose)
+        if threat is not None:
+            run.last_threat = now
+        moved = float(math.dist(pose[:2], run.start_pose[:2]))
+        if now - run.last_threat >= cfg.clear_time:
+            self._finish(run, True, f"give_way done: the way is clear ({run.done_amount:.1f} s, moved {moved:.2f} m)")
+            return
+        if now > run.deadline:
+            self._finish(run, False, f"give_way stopped: a mover still on a collision course after {cfg.time_allowance:g} s "
+                                     f"(time_allowance; moved {moved:.2f} m)")
+            return
+        try:
+            pts, _ = self._obstacles()
+        except BadInput as exc:
+            self._finish(run, False, f"give_way stopped: {exc}")
+            return
+        centres, velocities, radii = self._movers.movers()
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        rel = centres - pose[:2]
+        local = np.c_[c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]
+        local_v = np.c_[c * velocities[:, 0] + s * velocities[:, 1], -s * velocities[:, 0] + c * velocities[:, 1]]
+        static = pts[~near_movers(pts, local, radii, MOVER_PAD)] if len(pts) else pts
+        move = R.plan_give_way(self.config.robot, static, local, local_v, radii, cfg, max_omega=self.config.max_rotational_vel,
+                               dt=1.0 / self.config.loop_rate, margin=self.config.safety_margin, previous=run.move_index)
+        if move.name != run.move:
+            self.get_logger().info("[%s] give_way: %s (least predicted gap %.2f m)%s", self.component_name, move.name, move.gap,
+                                   f": {threat}" if threat else "")
+        run.move, run.move_index = move.name, move.index
+        self._drive(move.command)
+
     # -- actions (events, fallbacks) ------------------------------------------------------------------
     def spin(self, angle: float = math.pi / 2, time_allowance: float = 30.0) -> bool:
         """Turn in place by ``angle`` rad, if the footprint stays clear over the whole turn."""
@@ -234,6 +371,14 @@ class Behaviors(MotionActionServer):
 
     def wait(self, duration: float = 1.0) -> bool:
         return self._begin("wait", duration, 0.0, duration + 5.0)[0]
+
+    def give_way(self, time_allowance: float | None = None) -> bool:
+        """Give way now (an event action): stand, back out or pull aside until no tracked mover
+        has been on a collision course for ``give_way.clear_time`` s (at most ``time_allowance``
+        s, default ``give_way.time_allowance``). With ``give_way.enabled`` this starts by itself."""
+        cfg = self.config.give_way
+        allowance = cfg.time_allowance if time_allowance is None else float(time_allowance)
+        return self._begin("give_way", allowance, cfg.speed, allowance, preempt=True, why="asked")[0]
 
     def clear_costmaps(self) -> bool:
         """Clear the LocalMapper's grid (its ``clear_entirely_local_costmap`` service)."""
@@ -253,7 +398,8 @@ class Behaviors(MotionActionServer):
         return bool(answer.success)
 
     def stats(self) -> dict[str, int]:
-        """How many behaviors started, succeeded, were refused or stopped (a mission's report)."""
+        """How many behaviors started, succeeded, were refused or stopped (a mission's report);
+        ``give_way``: how many of the starts gave way to a mover, ``give_way_s``: for how long (s)."""
         return dict(self._counts)
 
     @property

@@ -4,7 +4,9 @@ Every command from the controller goes through the safety zones (emergency stop,
 the velocity/acceleration limits and the optional smoothing of :class:`DriveSafety`, and then
 the swept-footprint check (``swept_check``): the robot's footprint over the command's period
 and the stop after it, rotations included, against the latest scan and the blind-spot memory;
-a command that would touch is slowed along its path or becomes a stop (docs/safety.md). A
+a command that would touch is slowed along its path or becomes a stop (docs/safety.md). With
+``mover_prediction_time`` the check also takes the predicted path of tracked moving obstacles
+(``controllers.movers.MoverWatch``) as occupied (docs/missions.md, "Giving way to people"). A
 watchdog at ``loop_rate`` stops the robot (zero command, SYSTEM failure naming the topic) when
 the command input goes stale or its publisher process died, when odometry goes stale
 (``closed_loop``), or when the scan goes stale: the robot never drives on old information.
@@ -41,6 +43,7 @@ from emos.msgs.sensor import LaserScan
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 from emos.msgs.std import Bool, Header
 
+from ..controllers.movers import MoverWatch
 from ..controllers.sensors import obstacle_points
 from ..costmap.config import mask_path
 from ..costmap.filters import SpeedFilter, load_filter_mask
@@ -49,11 +52,12 @@ from ..safety import maneuvers as M
 from ..safety.blind_spot import BlindSpotConfig, BlindSpotMemory
 from ..safety.zones import ZoneCheck
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of
+from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of, velocity_of
 
 __all__ = ["CommandInput", "DriveManager", "DriveManagerConfig"]
 
 SETTLE_S = 1.0  # node-clock s: the longest a maneuver waits for the base to come to rest before it is re-planned
+MOVER_KEEP_CLEAR = 0.1  # m beyond the footprint where a tracked mover's predicted trail ends (mover_prediction_time)
 
 
 def _seconds(lo: float = 1e-3, hi: float = 1e3) -> Any:
@@ -169,6 +173,11 @@ class DriveManagerConfig(NavComponentConfig):
     command_inputs: tuple[CommandInput, ...] = field(factory=tuple, converter=_command_inputs)
     """Prioritised command inputs, each its own topic on the ``command`` key (see the module doc).
     Empty (the default): the ``command`` key's one topic, priority 0, timeout ``cmd_timeout``."""
+    mover_prediction_time: float = field(default=0.0, validator=in_range(min_value=0.0, max_value=5.0))
+    """s: scan clusters tracked as moving (``controllers.movers.MoverWatch``) count, for the swept
+    check, as obstacles over the whole path they are predicted to walk in this time, so the robot
+    does not drive into where a person will be by the time it has stopped (0: off, the scan is
+    taken as static)."""
     speed_mask: str = field(default="", validator=mask_path("speed"))
     """A speed filter mask (Nav2's speed filter; ``emos map zones``): inside its zones every
     command leaving here is scaled down to the zone's limit, whichever input sent it."""
@@ -260,6 +269,7 @@ class DriveManager(NavComponent):
         self._speed_filter = SpeedFilter(load_filter_mask(cfg.speed_mask, "speed")) if cfg.speed_mask else None
         self._cmd_seen: dict[str, Any] = {}  # per command topic: the message whose writers were noted
         self._cmd_writers: dict[str, list[int]] = {}
+        self._mover_watch = MoverWatch() if cfg.mover_prediction_time > 0 else None  # the swept check's moving obstacles
         self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
                             if cfg.blind_spot_memory_time > 0 else None)
         self._remembered_scan: Any = None  # the scan message last put into the blind-spot memory
@@ -478,6 +488,12 @@ class DriveManager(NavComponent):
             # Once per scan (again if the pose became known since): the blind-spot memory placed
             # at the pose of the scan's arrival, as the memory placed the scan itself.
             points = obstacle_points(scan, cfg.sensor_pose)
+            if self._mover_watch is not None:  # where tracked movers will walk counts as an obstacle now
+                odom = self.latest("location")
+                points = self._mover_watch.extend(
+                    points, self._pose(), self._scan_stamp if self._scan_stamp is not None else clock.now(), cfg.mover_prediction_time,
+                    float(scan.angle_increment or 0.0), pose_stamp=odom.header.stamp.to_sec() if isinstance(odom, Odometry) and odom.header.stamp is not None else None,
+                    twist=velocity_of(odom), keep_clear=cfg.robot.radius + MOVER_KEEP_CLEAR)
             if self._blind_spot is not None and pose is not None:
                 blind = self._blind_spot.blind_points(pose, scan, cfg.sensor_pose)
                 if len(blind):

@@ -7,6 +7,10 @@ every obstacle *predicted to that time*. The check goes on past the arc's horizo
 robot standing at the arc's end for ``hold`` s: an arc is only safe if the robot can stop
 after it and not be run into, so the planner never parks in a mover's way. The predicted
 positions grow a margin with time (``margin_rate``: velocity uncertainty).
+
+:class:`MoverWatch` is the same tracking for components that are not arc planners: the
+DriveManager's swept check (``mover_prediction_time``: a mover's predicted trail counts as an
+obstacle) and the ``Behaviors``' give-way (:func:`approaches`: who is on a collision course).
 """
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ if TYPE_CHECKING:
     from ..mapping.tracking import TrackerConfig
     from .arcs import ArcPlanner
 
-__all__ = ["MoverConfig", "PredictedMovers", "PredictionConfig", "near_movers"]
+__all__ = ["Approach", "MoverConfig", "MoverWatch", "PredictedMovers", "PredictionConfig", "approaches", "near_movers", "rewind"]
 
 
 @attrs.define(frozen=True)
@@ -135,3 +139,141 @@ class PredictedMovers:
             gap = gap - (cfg.margin + cfg.margin_rate * t)[None, :, None]
             out.append(gap.min(axis=(1, 2)).astype(float))
         return np.concatenate(out)
+
+
+# -- moving obstacles for the safety layer and the give-way behavior ---------------------------------
+
+REWIND_MAX = 0.5  # s: the most a pose is carried back to its scan's time (an older pose is a stale input)
+
+
+def rewind(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
+    """``pose`` (x, y, yaw) ``dt`` s earlier, the robot having moved at the body ``twist``
+    (vx, vy, omega) meanwhile (an arc at constant twist, integrated backwards)."""
+    x, y, yaw = (float(v) for v in pose[:3])
+    vx, vy, w = (float(v) for v in twist[:3])
+    yaw0 = yaw - w * dt
+    mid = 0.5 * (yaw + yaw0)
+    c, s = math.cos(mid), math.sin(mid)
+    return np.array([x - (c * vx - s * vy) * dt, y - (s * vx + c * vy) * dt, yaw0])
+
+
+def _to_world(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+    return np.c_[pose[0] + c * points[:, 0] - s * points[:, 1], pose[1] + s * points[:, 0] + c * points[:, 1]]
+
+
+def _to_robot(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+    rel = points - np.asarray(pose[:2], dtype=float)
+    return np.c_[c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]
+
+
+class MoverWatch:
+    """The scan tracker (``mapping.tracking.ScanTracker``) fed one scan at a time in the robot
+    frame with the pose it was taken at: the moving-obstacle view that the DriveManager's swept
+    check and the ``Behaviors`` give-way share. Never ground truth: clusters of the scan."""
+
+    def __init__(self, tracker: TrackerConfig | None = None) -> None:
+        from ..mapping.tracking import ScanTracker
+
+        self.tracker = ScanTracker(tracker)
+        self.stamp: float | None = None
+
+    def update(self, stamp: float, points: np.ndarray, pose: np.ndarray, angle_increment: float = 0.0, *,
+               pose_stamp: float | None = None, twist: np.ndarray | None = None) -> None:
+        """Feed one scan: ``points`` (N, 2) in the robot frame, in beam order, taken at ``stamp`` s.
+        ``pose`` (x, y, yaw, world frame) is the robot's at ``pose_stamp`` (default: the scan's);
+        with the body ``twist`` (vx, vy, omega) it is carried back to the scan's time: a pose
+        a tenth of a second newer than the scan, on a robot that turns, shifts a person 2 m
+        away by centimetres from scan to scan, and such jitter keeps the tracker from calling
+        the track moving. A scan older than the last one is ignored."""
+        if self.stamp is not None and stamp <= self.stamp:
+            return
+        pose = np.asarray(pose, dtype=float)
+        if pose_stamp is not None and twist is not None:
+            pose = rewind(pose, np.asarray(twist, dtype=float), min(max(float(pose_stamp) - float(stamp), 0.0), REWIND_MAX))
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        self.tracker.update(float(stamp), _to_world(pts, pose), pose[:2].copy(), float(angle_increment))
+        self.stamp = float(stamp)
+
+    def movers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(centres (M, 2) now, velocities (M, 2) m/s, radii (M,) m), world frame, of the moving tracks."""
+        if self.stamp is None:
+            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+        return self.tracker.movers(self.stamp)
+
+    def trail_points(self, pose: np.ndarray, horizon: float, step: float = 0.1, per_circle: int = 16,
+                     keep_clear: float = 0.0) -> np.ndarray:
+        """Points (K, 2) in the frame of ``pose``: the outline of every moving track at each
+        ``step`` of its constant-velocity prediction from now to ``horizon`` s. Added to a
+        static check's obstacles they make the space a mover is about to walk into an obstacle
+        now: a check that treats the scan as frozen (the DriveManager's swept footprint) then
+        no longer lets the robot drive into where a person will be by the time it stops.
+
+        A trail ends before its circle comes within ``keep_clear`` m (the robot's radius and a
+        margin) of the robot's position: a person heading at the robot would walk into it there
+        anyway, and a trail through and past the robot would stand on all its sides and forbid
+        the one thing left, getting out of the way (the check lets the robot move away from
+        what is already near, never over it)."""
+        centres, velocities, radii = self.movers()
+        if len(centres) == 0 or horizon <= 0:
+            return np.zeros((0, 2))
+        t = np.arange(0.0, horizon + 1e-9, max(step, 1e-3))
+        ang = np.linspace(0.0, 2 * math.pi, per_circle, endpoint=False)
+        ring = np.c_[np.cos(ang), np.sin(ang)]
+        # (M, T, 2) predicted centres; each trail up to (not into) the robot; (K, per_circle, 2) outlines.
+        c = centres[:, None, :] + velocities[:, None, :] * t[None, :, None]
+        reach = np.hypot(c[..., 0] - pose[0], c[..., 1] - pose[1]) - radii[:, None]
+        blocked = reach < keep_clear
+        before = np.cumsum(blocked, axis=1) == 0
+        before[:, 0] = True  # where it is now is in the scan anyway
+        outline = c[before][:, None, :] + np.repeat(radii, before.sum(axis=1))[:, None, None] * ring[None, :, :]
+        return _to_robot(outline.reshape(-1, 2), pose)
+
+    def extend(self, points: np.ndarray, pose: np.ndarray | None, stamp: float, horizon: float,
+               angle_increment: float = 0.0, *, pose_stamp: float | None = None, twist: np.ndarray | None = None,
+               keep_clear: float = 0.0) -> np.ndarray:
+        """Track this scan's ``points`` (robot frame, beam order; see :meth:`update` for the pose)
+        and return them with the movers' predicted trails (:meth:`trail_points`) added; ``points``
+        alone without a pose."""
+        if pose is None:
+            return points
+        self.update(stamp, points, pose, angle_increment, pose_stamp=pose_stamp, twist=twist)
+        trail = self.trail_points(pose, horizon, keep_clear=keep_clear)
+        return np.vstack([points, trail]) if len(trail) else points
+
+
+@attrs.define(frozen=True)
+class Approach:
+    """A mover relative to the robot: ``index`` (its row in the movers' arrays), ``gap_now`` and
+    ``gap_min`` (m between the robot's circle and the mover's, now and the least over the
+    horizon at constant velocities), ``time_to_min`` (s until that least gap), ``closing``
+    (m/s: how fast the distance shrinks now; > 0 approaching)."""
+
+    index: int
+    gap_now: float
+    gap_min: float
+    time_to_min: float
+    closing: float
+
+
+def approaches(robot_xy: np.ndarray, robot_velocity: np.ndarray, robot_radius: float, centres: np.ndarray,
+               velocities: np.ndarray, radii: np.ndarray, horizon: float) -> list[Approach]:
+    """The closest approach of the robot (a circle at ``robot_xy`` moving at ``robot_velocity``,
+    world frame) and each mover within ``horizon`` s, both at constant velocity."""
+    out = []
+    p = np.asarray(robot_xy, dtype=float)[:2]
+    vr = np.asarray(robot_velocity, dtype=float)[:2]
+    for i, (c, v, r) in enumerate(zip(np.asarray(centres, float).reshape(-1, 2), np.asarray(velocities, float).reshape(-1, 2),
+                                      np.asarray(radii, float).reshape(-1))):
+        d = c - p
+        rv = v - vr
+        dist = float(np.hypot(*d))
+        speed2 = float(rv @ rv)
+        t_min = 0.0 if speed2 < 1e-9 else min(max(-float(d @ rv) / speed2, 0.0), horizon)
+        closest = float(np.hypot(*(d + rv * t_min)))
+        closing = -float(d @ rv) / max(dist, 1e-9)
+        reach = robot_radius + float(r)
+        out.append(Approach(i, dist - reach, closest - reach, t_min, closing))
+    return out

@@ -63,7 +63,7 @@ def _bridge_child(domain: int, fastdds: str, conn) -> None:
         ctx = RunContext.create()
         bridge = None
         try:
-            bridge = Ros2Bridge(ctx, topics=["/s22/none"], domain_id=domain, node_name="s22_bridge", fastdds=fastdds)
+            bridge = Ros2Bridge(ctx, topics=["/profile_check/none"], domain_id=domain, node_name="profile_check_bridge", fastdds=fastdds)
             conn.send({"udp": _udp_buffers(), "segments": _segments(), "transport": bridge.transport})
         finally:
             if bridge is not None:
