@@ -90,6 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-swept-check", dest="swept_check", action="store_false",
                         help="through the processes: turn the DriveManager's swept-footprint check off (the safety "
                              "zones alone), to measure what it changes (docs/safety.md)")
+    parser.add_argument("--wall-timeout", type=float, default=600.0, metavar="S",
+                        help="through the processes: a trial with no result after S s of wall time counts as a "
+                             "system failure (default 600; the clock is lock-step, so a loaded machine needs more)")
     from .generate import add_generate_arguments
 
     add_generate_arguments(parser)  # --generate N, --generated-dir DIR (docs/barn-generated.md)
@@ -360,7 +363,8 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace, s
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         png = None if args.png is None else args.png / f"{'dynabarn' if args.dynabarn else 'barn'}_{idx:03d}_seed_{seed}.png"
         try:
-            result = run_episode_process(worlds[idx], opts, keep_log=log, png_path=png, systems=systems)
+            result = run_episode_process(worlds[idx], opts, wall_timeout=getattr(args, "wall_timeout", 600.0), keep_log=log,
+                                         png_path=png, systems=systems)
             if log is not None and result.success:
                 log.unlink(missing_ok=True)  # only the failures are worth keeping
             return result

@@ -229,7 +229,7 @@ def bench_mppi(steps: int = 60) -> dict[str, Any]:
     arr, cpu_ms = 1e3 * np.asarray(times), 1e3 * np.asarray(cpu)
     p50 = float(np.percentile(arr, 50))
     # CPU time says what one core costs when the machine is shared (the wall clock then counts
-    # other processes' turns too); the stages are wall-clock shares of the step.
+    # other processes' turns too); the stages are the thread's CPU time per step.
     return {"p50": p50, "p95": float(np.percentile(arr, 95)), "hz_at_p50": 1e3 / p50,
             "cpu_p50": float(np.percentile(cpu_ms, 50)), "hz_at_cpu_p50": 1e3 / float(np.percentile(cpu_ms, 50)),
             "stages_ms": {k: round(v / steps, 3) for k, v in mppi.stage_ms.items()}}

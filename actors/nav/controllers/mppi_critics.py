@@ -83,8 +83,11 @@ def constraint(c: Any, r: Rollouts) -> np.ndarray:
     """Speed beyond the limits, integrated over the horizon (sampling clips, so this is the
     Ackermann turning-radius constraint in practice: |wz| beyond |vx| * max curvature)."""
     vx_min, vx_max, _vy_max, wz_max = r.limits
+    ackermann = r.robot.model_type.name == "ACKERMANN"
+    if not ackermann and float(r.vx.min()) >= vx_min and float(r.vx.max()) <= vx_max and float(np.abs(r.wz).max()) <= wz_max:
+        return np.zeros(r.vx.shape[0])  # nothing beyond a limit (the usual case: sampling clips)
     over = np.maximum(r.vx - vx_max, 0.0) + np.maximum(vx_min - r.vx, 0.0) + np.maximum(np.abs(r.wz) - wz_max, 0.0)
-    if r.robot.model_type.name == "ACKERMANN":
+    if ackermann:
         over = over + np.maximum(np.abs(r.wz) - np.abs(r.vx) * r.robot.max_curvature, 0.0)
     return _score(c, over.sum(axis=1) * r.dt)
 
@@ -105,7 +108,9 @@ def goal_angle(c: Any, r: Rollouts) -> np.ndarray:
 
 
 def _nearest_path_index(r: Rollouts, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    d2 = (x[..., None] - r.path[:, 0]) ** 2 + (y[..., None] - r.path[:, 1]) ** 2
+    # In the trajectories' dtype (float32 for the batch: half the work of float64's).
+    px, py = r.path[:, 0].astype(x.dtype), r.path[:, 1].astype(x.dtype)
+    d2 = (x[..., None] - px) ** 2 + (y[..., None] - py) ** 2
     return np.asarray(np.argmin(d2, axis=-1))
 
 

@@ -45,6 +45,7 @@ __all__ = ["ScanCache", "SweptConfig", "SweptCheck", "SweptFootprint", "SweptPoi
 _TOL = 1e-3  # m: a point must come this much nearer than it started to count as approached
 _COARSE_STRIDE = 4  # poses: the prefilter looks at every 4th pose's centre
 _PARTS = 2  # after the shared poses, the rest is looked at in this many spans
+_EPS = float(np.finfo(np.float64).eps)  # what np.sinc puts for 0 (0 / 0)
 
 
 def _scales(value: object) -> tuple[float, ...]:
@@ -150,6 +151,12 @@ class SweptFootprint:
                                 lim[2].max_decel])
         self._lag = int(math.ceil(cfg.yaw_lag / cfg.time_step - 1e-9))  # time steps a turn's yaw rate holds
         self._ramps: dict[int, np.ndarray] = {}
+        # What every check needs of the configuration, made once (a check is a few hundred
+        # microseconds, so a handful of small arrays made per call is a measurable share).
+        self._scales = np.array(cfg.scales + (0.0,))  # the candidates: as asked, slower, the stop
+        self._hysteresis = np.where(np.arange(len(self._scales)) == len(self._scales) - 1, 0.0, cfg.hysteresis)
+        self._stop_lag = np.array([0.0, 0.0, cfg.yaw_lag])
+        self._hold_steps = max(1, int(math.ceil(cfg.hold / cfg.time_step - 1e-9)))
 
     # -- prediction ---------------------------------------------------------------------------
     def pipe(self, previous: np.ndarray, lead: float, history: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -162,7 +169,9 @@ class SweptFootprint:
         n1 = self._pipe_steps(lead)
         prev = np.asarray(previous, dtype=np.float64).reshape(3)
         if history is None or len(history[0]) == 0 or n1 == 0:
-            return np.broadcast_to(prev, (n1, 3))
+            out = np.empty((n1, 3))
+            out[:] = prev
+            return out
         times, commands = np.asarray(history[0], dtype=np.float64), np.asarray(history[1], dtype=np.float64).reshape(-1, 3)
         acting = -max(lead, 0.0) + np.arange(n1) * dt - cfg.latency  # when what acts at each step was sent
         # A step's command is the one sent last before its start, or the next one if that is
@@ -189,10 +198,12 @@ class SweptFootprint:
         targets = scales[:, None] * cmd[None, :]
         pipe = self.pipe(prev, lead, history)
         n1 = pipe.shape[0]
-        n2 = max(1, int(math.ceil(cfg.hold / dt - 1e-9)))
+        n2 = self._hold_steps
         # Long enough to stop from the fastest twist anywhere in the sequence.
-        fastest = np.max(np.abs(np.concatenate([pipe, targets])), axis=0) if n1 else np.max(np.abs(targets), axis=0)
-        n3 = int(math.ceil(float(np.max(fastest / self._decel + np.array([0.0, 0.0, cfg.yaw_lag]))) / dt - 1e-9)) + 2
+        fastest = np.abs(targets).max(axis=0)
+        if n1:
+            np.maximum(fastest, np.abs(pipe).max(axis=0), out=fastest)
+        n3 = int(math.ceil(float((fastest / self._decel + self._stop_lag).max()) / dt - 1e-9)) + 2
         commanded = np.zeros((len(scales), n1 + n2 + n3, 3))
         commanded[:, :n1] = pipe
         commanded[:, n1:n1 + n2] = targets[:, None, :]
@@ -235,16 +246,16 @@ class SweptFootprint:
     def _gain_values(self, twists: np.ndarray, sensitivity: np.ndarray | None) -> np.ndarray:
         """:meth:`gain_values` with :meth:`_gain_sensitivity` of ``twists`` given (None: computed)."""
         cfg = self.config
-        w_max = float(np.max(np.abs(twists[..., 2]))) if twists.size else 0.0
-        hi = 1.0 / max(1.0 - cfg.speed_loss * w_max, 0.5)
         w = twists[..., 2]
-        if not np.any(np.abs(twists[..., :2]) > 1e-9) and (np.all(w >= 0.0) or np.all(w <= 0.0)):
+        w_max = float(np.abs(w).max()) if twists.size else 0.0
+        hi = 1.0 / max(1.0 - cfg.speed_loss * w_max, 0.5)
+        if not (np.abs(twists[..., :2]) > 1e-9).any() and ((w >= 0.0).all() or (w <= 0.0).all()):
             # A rotation in place one way: a smaller gain turns through a part of the same sweep.
             return np.array([hi])
         # Enough gains that what lies between two of them stays within gain_gap (see inflation()).
         if sensitivity is None:
             sensitivity = self._gain_sensitivity(twists)
-        need = (hi - cfg.yaw_gain_min) * float(np.max(sensitivity)) / (2.0 * cfg.gain_gap)
+        need = (hi - cfg.yaw_gain_min) * float(sensitivity.max()) / (2.0 * cfg.gain_gap)
         count = int(min(max(cfg.gains, 1 + math.ceil(need)), cfg.max_gains))
         gains = cfg.yaw_gain_min + np.arange(count) * ((hi - cfg.yaw_gain_min) / (count - 1))  # np.linspace, cheaper
         gains[-1] = hi
@@ -262,8 +273,16 @@ class SweptFootprint:
         out = np.zeros((n_c, len(gains), k + 1, 3))
         heading = np.cumsum(dth, axis=-1, out=out[..., 1:, 2])
         mid = heading - 0.5 * dth  # the heading halfway through each step
-        chord = np.sinc(dth * (0.5 / math.pi)) * dt  # numpy's sinc(x) = sin(pi x) / (pi x)
-        c, s = np.cos(mid) * chord, np.sin(mid) * chord
+        # sinc(dth / 2) as numpy's np.sinc(x) = sin(pi x) / (pi x) computes it, the same
+        # operations without its wrapper's overhead.
+        half = math.pi * (dth * (0.5 / math.pi))
+        half = np.where(half, half, _EPS)
+        chord = np.sin(half)
+        chord /= half
+        chord *= dt
+        c, s = np.cos(mid), np.sin(mid)
+        c *= chord
+        s *= chord
         vx, vy = twists[:, None, :, 0], twists[:, None, :, 1]
         np.cumsum(c * vx - s * vy, axis=-1, out=out[..., 1:, 0])
         np.cumsum(s * vx + c * vy, axis=-1, out=out[..., 1:, 1])
@@ -281,8 +300,8 @@ class SweptFootprint:
         np.maximum(end[..., 1:], end[..., :-1], out=theta[..., 1:])
         if speed is None:
             speed = np.hypot(twists[..., 0], twists[..., 1])
-        top = np.max(theta, axis=-1) if theta.shape[-1] else np.zeros(theta.shape[:-1])
-        bound: np.ndarray = np.sum(speed * theta, axis=-1) * dt + self._reach * top
+        top = theta.max(axis=-1) if theta.shape[-1] else np.zeros(theta.shape[:-1])
+        bound: np.ndarray = (speed * theta).sum(axis=-1) * dt + self._reach * top
         return bound
 
     def inflation(self, twists: np.ndarray, gains: np.ndarray) -> np.ndarray:
@@ -304,7 +323,7 @@ class SweptFootprint:
         dt = cfg.time_step
         g_hi = float(gains.max())
         turn = np.abs(twists[..., 2]) * g_hi
-        time_gap = 0.5 * np.max(speed + turn * self._reach, axis=1) * dt
+        time_gap = 0.5 * (speed + turn * self._reach).max(axis=1) * dt
         dg = float(gains[1] - gains[0]) if len(gains) > 1 else 0.0
         gain_gap = 0.5 * dg * sensitivity
         total: np.ndarray = cfg.margin + time_gap + gain_gap
@@ -363,11 +382,11 @@ class SweptFootprint:
         scan = self.prepare(points)
         if len(scan.norm2) == 0:
             return FREE  # nothing to touch
-        still = not (np.any(np.abs(cmd) > 1e-9) or np.any(np.abs(prev) > 1e-9))
-        if still and (history is None or not np.any(np.abs(self.pipe(prev, lead, history)) > 1e-9)):
+        still = not (abs(cmd).max() > 1e-9 or abs(prev).max() > 1e-9)
+        if still and (history is None or not (np.abs(self.pipe(prev, lead, history)) > 1e-9).any()):
             return FREE  # standing still, and staying so
         cfg = self.config
-        scales = np.array(cfg.scales + (0.0,))
+        scales = self._scales
         tw = self.twists(cmd, prev, lead, scales, history)
         speed = np.hypot(tw[..., 0], tw[..., 1])  # (C, K)
         sensitivity = self._gain_sensitivity(tw, speed)
@@ -376,17 +395,17 @@ class SweptFootprint:
         # Only points the footprint can reach: within the bounding radius (plus inflation) of
         # the centre's path, which stays within the path length of the start. The points are
         # sorted by distance from the centre, so those are a prefix.
-        reach = float(np.max(np.sum(speed, axis=1))) * cfg.time_step * (1.0 + 1e-6)
+        reach = float(speed.sum(axis=1).max()) * cfg.time_step * (1.0 + 1e-6)
         n = int(np.searchsorted(scan.norm2, (self._radius + float(inflate.max()) + reach) ** 2, side="right"))
         if n == 0:
             return FREE
         homog, norm2, start = scan.homog[:, :n], scan.norm2[:n], scan.start[:n]
-        step = np.max(speed, axis=1) * cfg.time_step * _COARSE_STRIDE  # (C,) centre travel between coarse poses
+        step = speed.max(axis=1) * cfg.time_step * _COARSE_STRIDE  # (C,) centre travel between coarse poses
 
-        hysteresis = np.where(np.arange(len(scales)) == len(scales) - 1, 0.0, cfg.hysteresis)
+        hysteresis = self._hysteresis
         limit = inflate + hysteresis
         # Poses after a candidate's body has stopped repeat its last one: checked once.
-        moving = np.any(np.abs(tw) > 1e-12, axis=2)
+        moving = (np.abs(tw) > 1e-12).any(axis=2)
         ends = np.where(moving.any(axis=1), tw.shape[1] - np.argmax(moving[:, ::-1], axis=1), 0) + 1
 
         # The first poses, while the pipe drives the robot, are the same for every candidate
@@ -461,7 +480,7 @@ class SweptFootprint:
         np.multiply(centres, -2.0, out=rows[..., :2])
         np.einsum("cgjk,cgjk->cgj", centres, centres, out=rows[..., 2])
         d2 = (rows.reshape(-1, 3) @ homog).reshape(n_c, n_g, n_j, -1)  # (C, G, J, N)
-        close = np.min(d2, axis=1) <= (r * r)[:, None, None] - norm2  # (C, J, N)
+        close = d2.min(axis=1) <= (r * r)[:, None, None] - norm2  # (C, J, N)
         near_any = close.any(axis=1)  # (C, N)
         out: list[tuple[bool, float, bool, bool] | None] = [None] * n_c
         if not near_any.any():
@@ -495,7 +514,7 @@ class SweptFootprint:
             head = shared + 1 if a == 0 and shared >= 0 else 0
             # (C, n) each: the least distance over the span's poses, and over the shared ones
             least, least_head = self._least_distance(frames[:, :, a * stride:b * stride], homog[:, cand], head)
-            lows.append(np.min(least, axis=1))
+            lows.append(least.min(axis=1))
             thr = threshold[:, cand]
             hit = hit | np.any(least < thr, axis=1)
             if least_head is not None:
@@ -503,7 +522,7 @@ class SweptFootprint:
                 head_hit = np.any(least_head < thr, axis=1)
             if hit.all() or (decisive is not None and hit[decisive]):
                 break
-        low = (np.min(lows, axis=0) if lows else np.full(n_c, math.inf)) - limits + self.config.margin
+        low = (np.minimum.reduce(lows) if len(lows) > 1 else lows[0] if lows else np.full(n_c, math.inf)) - limits + self.config.margin
         # The first span, which holds the shared poses, is always looked at (or no point is near it).
         head_clear = ~head_hit if shared >= 0 else np.zeros(n_c, dtype=bool)
         for i in np.flatnonzero(near_any.any(axis=1)):
@@ -529,11 +548,18 @@ class SweptFootprint:
         q *= q
         sq = q[..., 0, :] + q[..., 1, :]  # squared distance outside (0 inside)
 
-        def least(upto: int | None) -> np.ndarray:
-            inner = np.min(depth[:, :, :upto], axis=(1, 2))
-            return np.where(inner < 0.0, inner, np.sqrt(np.min(sq[:, :, :upto], axis=(1, 2))))
+        def least(inner: np.ndarray, outside: np.ndarray) -> np.ndarray:
+            return np.where(inner < 0.0, inner, np.sqrt(outside))
 
-        return least(None), (least(head) if head else None)
+        if not head or head >= k:
+            inner, outside = depth.min(axis=(1, 2)), sq.min(axis=(1, 2))
+            return least(inner, outside), (least(inner, outside) if head else None)
+        # The first poses' least once, and the whole sequence's from it and the rest's (the
+        # same minima as reducing the whole again).
+        inner_head, outside_head = depth[:, :, :head].min(axis=(1, 2)), sq[:, :, :head].min(axis=(1, 2))
+        inner = np.minimum(inner_head, depth[:, :, head:].min(axis=(1, 2)))
+        outside = np.minimum(outside_head, sq[:, :, head:].min(axis=(1, 2)))
+        return least(inner, outside), least(inner_head, outside_head)
 
 
 @attrs.define(frozen=True, eq=False)
