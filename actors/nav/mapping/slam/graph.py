@@ -105,6 +105,30 @@ class PoseGraph:
     def poses(self, count: int) -> np.ndarray:
         return np.array([self.pose(k) for k in range(count)], dtype=np.float64).reshape(-1, 3)
 
+    def optimize_with(self, extra: list[tuple[int, int, np.ndarray, np.ndarray]], start: np.ndarray,
+                      iterations: int = 50) -> np.ndarray:
+        """Levenberg-Marquardt on every factor plus ``extra`` between factors ``(a, b, measured,
+        information)`` (information in ``b``'s frame, under the robust kernel), from ``start``
+        (N, 3); returns (N, 3) poses. ``extra`` is not kept: a refinement pass re-derives its
+        factors from the estimate it starts from (``GraphSlam.finish``)."""
+        g = self._g
+        graph = g.NonlinearFactorGraph(self._all)
+        for a, b, measured, info in extra:
+            info = 0.5 * (np.asarray(info, dtype=np.float64) + np.asarray(info, dtype=np.float64).T) + np.eye(3) * 1e-9
+            est = g.noiseModel.mEstimator
+            kernel = est.Huber.Create(self._robust_k) if self._robust == "huber" else est.Cauchy.Create(self._robust_k)
+            noise = g.noiseModel.Robust.Create(kernel, g.noiseModel.Gaussian.Information(info))
+            graph.add(g.BetweenFactorPose2(int(a), int(b), g.Pose2(*map(float, measured)), noise))
+        values = g.Values()
+        for k, pose in enumerate(np.asarray(start, dtype=np.float64).reshape(-1, 3)):
+            values.insert(k, g.Pose2(*map(float, pose)))
+        params = g.LevenbergMarquardtParams()
+        params.setMaxIterations(int(iterations))
+        result = g.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        self._estimate = result
+        return np.array([[result.atPose2(k).x(), result.atPose2(k).y(), result.atPose2(k).theta()]
+                         for k in range(self.nodes)], dtype=np.float64).reshape(-1, 3)
+
     def optimize_batch(self, iterations: int = 50) -> np.ndarray:
         """Levenberg-Marquardt on every factor, from the iSAM2 estimate; returns (N, 3) poses."""
         g = self._g
