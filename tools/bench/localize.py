@@ -17,7 +17,9 @@ What is measured, on one log:
   (``kept_rate``). RMSE is over the scans past 10 m of every trial. Time to converge: the
   first scan from which the error stays below 0.2 m to the trial's end (``settled_rate``, and
   the median and maximum travel ``settled_m_*``, scans ``settled_scans_*`` and filter CPU
-  ``settled_cpu_s_*`` up to it, over the trials that settled).
+  ``settled_cpu_s_*`` up to it, over the trials that settled). The filter's own verdict:
+  ``search_ended_rate``, the trials whose search ended (one hypothesis held ``converged_weight``)
+  within 10 m, and ``false_convergence_rate``, those whose search ended on a wrong place.
 
 ``--json`` prints ``{"results": [{"localizer": "emos", "position_rmse_m", "heading_rmse_deg",
 "converged_rate", "cpu_s_per_scan", ...}]}``; ``cpu_s_per_scan`` is process CPU time per scan
@@ -60,7 +62,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-particles", type=int, default=None, help="default 2000 (global: 20000)")
     parser.add_argument("--max-beams", type=int, default=None, help="beams per scan the filter scores (default: all, 180)")
     parser.add_argument("--sigma-hit", type=float, default=None, help="default 0.15 (global: 0.2)")
-    parser.add_argument("--min-ess", type=float, default=None, help="min_ess_fraction: tempering (default 0; global: 0.5)")
+    parser.add_argument("--min-ess", type=float, default=None, help="min_ess_fraction: tempering while tracking (default 0)")
+    parser.add_argument("--search-min-ess", type=float, default=None,
+                        help="search_min_ess_fraction: tempering during a global search (default 0.5)")
+    parser.add_argument("--hypothesis-beta", type=float, default=None,
+                        help="hypothesis_beta: weigh the search's hypotheses by their scan-matched peaks (default 0.2; 0: off)")
+    parser.add_argument("--converged-weight", type=float, default=None,
+                        help="converged_weight: the heaviest hypothesis's share that ends a global search (default 0.95)")
     parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
     parser.add_argument("--field", choices=("bilinear", "nearest"), default="bilinear",
                         help="likelihood-field lookup: bilinear distance interpolation (default) or Nav2's nearest cell")
@@ -145,12 +153,15 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
     est = np.zeros_like(seg)
     cpu = 0.0
     cpu_at = np.zeros(len(seg))
+    ended = None  # the scan at which the filter's search ended (it declared itself converged)
     for j in range(len(seg)):
         t0 = time.process_time()
         pf.update(odom[j], data["ranges"][s + j], data["angles"][s + j], scan_max=data["max_range"])
         cpu += time.process_time() - t0
         cpu_at[j] = cpu
         est[j] = _pose_now(pf, odom[j])
+        if ended is None and not pf.searching:
+            ended = j
     pos, head = _errors(est, seg)
     moved = travel[s:end] - travel[s]
     after = moved >= converge_m
@@ -164,7 +175,9 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
             "start": s, "first_below_m": float(moved[below[0]]) if len(below) else None,
             "settled_m": None if settle is None else float(moved[settle]),
             "settled_scans": None if settle is None else settle + 1,
-            "settled_cpu_s": None if settle is None else float(cpu_at[settle])}
+            "settled_cpu_s": None if settle is None else float(cpu_at[settle]),
+            "search_ended_m": None if ended is None else float(moved[ended]),
+            "search_ended_right": ended is not None and bool(pos[ended] < 0.2)}
 
 
 AMCL_PEER = "amcl==0.1.2"
@@ -234,6 +247,11 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
 
     alphas = _floats(args.alphas, 4, "--alphas") if args.alphas else tuple(2.0 * a for a in noise)
     g = args.global_
+    # The search's parameters: the filter's defaults unless given (they act only in --global).
+    search = {name: getattr(args, opt) for name, opt in (("search_min_ess_fraction", "search_min_ess"),
+                                                          ("hypothesis_beta", "hypothesis_beta"),
+                                                          ("converged_weight", "converged_weight"))
+              if getattr(args, opt, None) is not None}
     recovery = _floats(args.recovery, 2, "--recovery") if args.recovery else ((0.001, 0.1) if g else (0.0, 0.0))
     return AmclParams(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                       min_particles=args.min_particles or (2000 if g else 500),
@@ -242,8 +260,8 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
                       sigma_hit=args.sigma_hit if args.sigma_hit is not None else (0.2 if g else 0.15),
                       update_min_d=0.25, update_min_a=0.2, jump_distance=5.0, jump_angle=math.pi,
                       recovery_alpha_slow=recovery[0], recovery_alpha_fast=recovery[1],
-                      min_ess_fraction=args.min_ess if args.min_ess is not None else (0.5 if g else 0.0),
-                      field_interpolation=getattr(args, "field", "bilinear"))
+                      min_ess_fraction=args.min_ess if args.min_ess is not None else 0.0,
+                      field_interpolation=getattr(args, "field", "bilinear"), **search)
 
 
 def _plot(path: str, data: dict[str, Any], trial: dict[str, Any], title: str) -> None:
@@ -290,6 +308,15 @@ def _settling(trials: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _search_end(trials: list[dict[str, Any]], within_m: float = 10.0) -> dict[str, Any]:
+    """The filter's own verdict: the share of trials whose search ended (one hypothesis held
+    ``converged_weight``) within ``within_m`` of travel, and the share that ended on a wrong
+    place (error >= 0.2 m at that scan: a false convergence)."""
+    ended = [t for t in trials if t["search_ended_m"] is not None]
+    return {"search_ended_rate": sum(t["search_ended_m"] <= within_m for t in ended) / max(len(trials), 1),
+            "false_convergence_rate": sum(not t["search_ended_right"] for t in ended) / max(len(trials), 1)}
+
+
 def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, Any]:
     pos = np.concatenate([t["pos"] for t in trials])
     head = np.concatenate([t["head"] for t in trials])
@@ -299,7 +326,8 @@ def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, An
             "converged_rate": float(np.mean([t["converged"] for t in trials])),
             "cpu_s_per_scan": sum(t["cpu"] for t in trials) / max(scans, 1),
             "trials": len(trials), "scans": scans,
-            **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials)} if global_ else {}),
+            **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials), **_search_end(trials)}
+               if global_ else {}),
             "position_max_m": float(pos.max()) if len(pos) else float("nan")}
 
 
@@ -318,7 +346,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         _plot(args.plot, data, trials[0], f"{data['log'].name}: {'global' if args.global_ else 'tracking'}, seed 0")
     return {"dataset": data["log"].name, "mode": "global" if args.global_ else "tracking", "noise_alphas": list(noise),
             "filter": {k: getattr(params, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4", "min_particles",
-                                                      "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand")},
+                                                      "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand",
+                                                      "min_ess_fraction", "search_min_ess_fraction", "hypothesis_beta",
+                                                      "converged_weight")},
             "results": rows}
 
 

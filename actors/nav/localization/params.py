@@ -10,7 +10,7 @@ from typing import Any
 
 from attrs import define, field, fields
 
-from emos.config.validators import in_, in_range
+from emos.config.validators import in_, in_range, number
 
 __all__ = ["AmclParams"]
 
@@ -49,6 +49,19 @@ class AmclParams:
     without covariance (ROS amcl's ``initial_cov_xx``, ``initial_cov_aa``).
     ``field_interpolation``: ``"bilinear"`` (interpolate the likelihood field's distance between
     cell centres) or ``"nearest"`` (Nav2's cell lookup); see ``localization.likelihood``.
+
+    Global localization (not Nav2's; they act only from :meth:`ParticleFilter.global_localization`
+    until the search has converged, so tracking from a known pose is unchanged):
+    ``converged_weight``: the share of the weight the heaviest hypothesis (cluster of particles)
+    must hold for the search to end; until then ``max_particles`` are kept (no KLD shrinking)
+    and the likelihood is tempered with ``search_min_ess_fraction`` (as ``min_ess_fraction``);
+    from then on the filter tracks as from a known pose (``min_ess_fraction``). 1: the search
+    never ends. ``hypothesis_beta``: each scan
+    of the search, the ``max_hypotheses`` heaviest hypotheses are scan-matched to their nearest
+    likelihood peak (every valid beam) and each one's weight is multiplied by
+    ``exp(hypothesis_beta * (its peak - the best peak))`` (log-likelihoods): a near-symmetric
+    candidate that fits the scan worse loses weight at once, not over metres of tempered
+    scans. 0: off.
     """
 
     alpha1: float = _alpha()
@@ -78,6 +91,11 @@ class AmclParams:
     initial_cov_xy: float = field(default=0.25, validator=in_range(min_value=0.0, max_value=1e6))
     initial_cov_yaw: float = field(default=(math.pi / 12) ** 2, validator=in_range(min_value=0.0, max_value=100.0))
     field_interpolation: str = field(default="bilinear", validator=in_(("bilinear", "nearest")))
+    # The search's parameters (not Nav2's): NaN-proof bounds, an int where a count is meant.
+    converged_weight: float = field(default=0.95, validator=number(ge=0.5, le=1.0))
+    search_min_ess_fraction: float = field(default=0.5, validator=number(ge=0.0, le=1.0))
+    hypothesis_beta: float = field(default=0.2, validator=number(ge=0.0, le=10.0))
+    max_hypotheses: int = field(default=8, validator=number(ge=1, le=1000, integer=True))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:

@@ -1,0 +1,116 @@
+"""Global localization's search (issue 36): the full particle budget is kept while more than one
+hypothesis holds weight, near-symmetric hypotheses are told apart by matching each one's scan
+to its likelihood peak, the search ends (and tracking resumes, untempered) once one hypothesis
+holds ``converged_weight``, and tracking from a known pose never enters it. The new parameters
+are validated with errors that name them. Seeded, no processes."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from emos.actors.nav.localization import AmclParams, ParticleFilter, noisy_odometry
+from emos.actors.nav.maps import OccupancyGridMap
+from tests.localization.helpers import BEAMS, MAX_RANGE, RES, cast, loop_path, room_map
+
+pytestmark = pytest.mark.unit
+
+NOISE = (0.01, 0.001, 0.01, 0.001)
+
+
+def _params(**kw):
+    base = dict(alpha1=0.02, alpha2=0.002, alpha3=0.02, alpha4=0.002, max_beams=90, sigma_hit=0.2,
+                laser_max_range=MAX_RANGE, update_min_d=0.1, update_min_a=0.1, min_particles=500,
+                max_particles=3000, min_ess_fraction=0.0, search_min_ess_fraction=0.5)
+    base.update(kw)
+    return AmclParams(**base)
+
+
+def symmetric_room() -> OccupancyGridMap:
+    """A 10 m x 8 m room that looks the same turned by 180 degrees about its centre, but for a
+    small post (0.25 m square) near one corner: two places match almost every beam."""
+    rows, cols = int(8.0 / RES), int(10.0 / RES)
+    data = np.zeros((rows, cols), dtype=np.int8)
+    data[:2, :] = data[-2:, :] = 100
+    data[:, :2] = data[:, -2:] = 100
+    for x0, y0, x1, y1 in [(2.0, 2.0, 3.0, 2.6), (7.5, 1.0, 8.7, 1.4)]:
+        for bx0, by0, bx1, by1 in [(x0, y0, x1, y1), (10.0 - x1, 8.0 - y1, 10.0 - x0, 8.0 - y0)]:
+            data[int(round(by0 / RES)):int(round(by1 / RES)), int(round(bx0 / RES)):int(round(bx1 / RES))] = 100
+    data[int(6.6 / RES):int(6.85 / RES), int(8.6 / RES):int(8.85 / RES)] = 100  # the post
+    return OccupancyGridMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+
+
+def _global_run(params, grid, path, seed, scans):
+    odom = noisy_odometry(path, NOISE, seed=seed)
+    pf = ParticleFilter(params, grid, seed=seed)
+    pf.global_localization()
+    errors, counts, searching, shares = [], [], [], []
+    for i in range(scans):
+        pf.update(odom[i], cast(grid, path[i]), BEAMS, scan_max=MAX_RANGE)
+        errors.append(math.hypot(*(pf.estimate[:2] - path[i, :2])))
+        counts.append(pf.particle_count)
+        searching.append(pf.searching)
+        shares.append(pf.hypothesis_shares.copy())
+    return pf, np.array(errors), counts, searching, shares
+
+
+def test_the_search_keeps_every_particle_until_one_hypothesis_dominates_then_tracks():
+    grid, path = room_map(), loop_path()
+    pf, errors, counts, searching, _ = _global_run(_params(max_beams=60), grid, path, seed=3, scans=40)
+    end = searching.index(False)  # the search ended ...
+    assert all(c == 3000 for c in counts[:end]), "while searching: the whole budget, no KLD shrinking"
+    assert not any(searching[end:]), "... for good"
+    assert counts[-1] < 2000, "then KLD sizes the converged cloud"
+    assert pf.beta == 1.0, "tracking after the search: untempered (min_ess_fraction 0)"
+    assert errors[end:].max() < 0.2 and errors[-10:].max() < 0.1
+
+
+def test_near_symmetric_places_are_told_apart_by_their_scan_matched_peaks():
+    """Half the particles at the robot, half at the place that looks the same but for the post
+    (the room turned by 180 degrees): one scan. Tempered as the search tempers, the scan barely
+    moves the weight (each place's particles sample its peak too coarsely to compare); the
+    hypothesis check matches each place to its peak, finds the post only at the robot, puts
+    the weight there and ends the search."""
+    grid = symmetric_room()
+    truth = np.array([8.0, 6.4, 0.3])      # the post 0.7 m ahead, on the left
+    mirror = np.array([10.0 - truth[0], 8.0 - truth[1], truth[2] - math.pi])
+    shares = {}
+    for beta in (0.0, 0.2):
+        pf = ParticleFilter(_params(hypothesis_beta=beta, max_particles=2000), grid, seed=5)
+        pf.global_localization()
+        spread = pf.rng.normal(size=(2000, 3)) * np.array([0.1, 0.1, 0.05])
+        pf.particles = np.vstack([truth + spread[:1000], mirror + spread[1000:]])
+        pf.update(truth, cast(grid, truth), BEAMS, scan_max=MAX_RANGE)
+        shares[beta] = pf.hypothesis_shares[:2]
+        if beta == 0.0:
+            assert pf.searching and shares[beta].min() > 0.1, f"tempered alone: both places keep weight ({shares[beta]})"
+        else:
+            assert not pf.searching and shares[beta].max() > 0.95, f"checked: one place ({shares[beta]})"
+            assert math.hypot(*(pf.estimate[:2] - truth[:2])) < 0.1, "... the robot's"
+
+
+def test_tracking_from_a_known_pose_never_searches():
+    grid, path = room_map(), loop_path()
+    pf = ParticleFilter(_params(), grid, seed=4)
+    pf.initialize(path[0], np.diag([0.05 ** 2, 0.05 ** 2, 0.03 ** 2]))
+    odom = noisy_odometry(path, NOISE, seed=4)
+    for i in range(20):
+        pf.update(odom[i], cast(grid, path[i]), BEAMS, scan_max=MAX_RANGE)
+        assert not pf.searching and len(pf.hypothesis_shares) == 0
+    pf.global_localization()
+    assert pf.searching, "the service call starts a search"
+    pf.initialize(path[20])
+    assert not pf.searching, "an initial pose ends it"
+
+
+@pytest.mark.parametrize("name, value, match", [
+    ("converged_weight", 0.3, r"AmclParams.converged_weight must be a number in \[0.5, 1.0\], got 0.3"),
+    ("hypothesis_beta", float("nan"), r"AmclParams.hypothesis_beta must be a number in \[0.0, 10.0\], got nan"),
+    ("max_hypotheses", 0, r"AmclParams.max_hypotheses must be an integer in \[1, 1000\], got 0"),
+    ("max_hypotheses", 2.5, r"AmclParams.max_hypotheses must be an integer in \[1, 1000\], got 2.5"),
+    ("search_min_ess_fraction", 1.5, r"AmclParams.search_min_ess_fraction must be a number in \[0.0, 1.0\], got 1.5"),
+])
+def test_new_parameters_are_validated_with_errors_that_name_them(name, value, match):
+    with pytest.raises(ValueError, match=match):
+        AmclParams.of({name: value}, "LocalizerConfig.filter_params")
