@@ -18,8 +18,11 @@ import time
 import pytest
 
 from emos.tools.bench import ipc_peers
+from tests.runtime.helpers import ctrl_c_as_at_a_terminal
 
-pytestmark = pytest.mark.process
+# One worker runs them all: each checks that no dora folder or zenoh segment is left that was not
+# there before it began, which another of them running beside it would break.
+pytestmark = [pytest.mark.process, pytest.mark.xdist_group("dora_zenoh_peers")]
 
 _TIMEOUT_S = 600  # bounds a hang only
 
@@ -131,7 +134,8 @@ def test_an_interrupted_dora_round_stops_everything_and_removes_its_files():
     before = ipc_peers.zenoh_files()
     script = ("from emos.tools.bench import ipc_peers\n"
               "ipc_peers.run_rounds(['dora'], [65536], 1, 10**7, lambda size, wanted: wanted, 2)\n")
-    bench = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    bench = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=ctrl_c_as_at_a_terminal)
     try:
         # the ping node runs with its samples file in the run's folder: find that folder
         ping = _wait_for(lambda: _processes_with("--role\0ping\0--count\0" + str(10**7)), "the dora ping node")
