@@ -63,6 +63,28 @@ def free_domains(n: int) -> list[int]:
     raise RuntimeError(f"no free ROS 2 domain for this test: {len(got)} of {n} found among 20-99")
 
 
+def forked_child_result(target, *args, what: str = "the child") -> dict:
+    """Run ``target(*args, conn)`` in a forked process (a process of its own, as a bridge or an
+    EMOS component runs, with rclpy started there) and return the dict it sends on ``conn``. The
+    child is reaped on every path; a dict with "error" fails the test with that text."""
+    import multiprocessing as mp
+
+    ours, theirs = mp.get_context("fork").Pipe(duplex=False)
+    child = mp.get_context("fork").Process(target=target, args=(*args, theirs))
+    child.start()
+    theirs.close()
+    try:
+        assert ours.poll(6 * HANG_S), f"{what} reported nothing"
+        got = ours.recv()
+    finally:
+        child.join(HANG_S)
+        if child.is_alive():
+            child.kill()
+            child.join()
+    assert "error" not in got, got.get("error")
+    return got
+
+
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook reads the groups into the test ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The ROS 2 tests run in one worker under pytest-xdist (--dist loadgroup): their checks for

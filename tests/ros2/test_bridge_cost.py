@@ -9,7 +9,6 @@ generous factor: only a gross regression fails, not a loaded machine).
 """
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import select
 import time
@@ -19,7 +18,7 @@ import numpy as np
 import psutil
 import pytest
 
-from tests.ros2.conftest import Peer, free_domains
+from tests.ros2.conftest import Peer, forked_child_result, free_domains
 from tests.runtime.helpers import HANG_S
 
 pytestmark = pytest.mark.process
@@ -94,19 +93,7 @@ def test_the_bridge_wakes_a_few_times_per_message_and_costs_cpu_like_an_rclpy_no
     (domain,) = free_domains(1)
     relay = Peer("relay.py", domain, f"{PING}:{PONG}:std_msgs/msg/UInt8MultiArray")
     relay.wait_for(lambda line: line == "ready", what="ready")
-    ours, theirs = mp.get_context("fork").Pipe(duplex=False)
-    child = mp.get_context("fork").Process(target=_emos_side, args=(domain, relay.proc.pid, ROUND_TRIPS, theirs))
-    child.start()
-    theirs.close()
-    try:
-        assert ours.poll(6 * HANG_S), "the EMOS side reported nothing"
-        got = ours.recv()
-    finally:
-        child.join(HANG_S)
-        if child.is_alive():
-            child.kill()
-            child.join()
-    assert "error" not in got, got.get("error")
+    got = forked_child_result(_emos_side, domain, relay.proc.pid, ROUND_TRIPS, what="the EMOS side")
     w = got["wakeups"]
     # One ping and one pong per round trip: each thread wakes about once per message it moves.
     # A loop that spins (or re-runs on its own wake-ups) shows thousands here.

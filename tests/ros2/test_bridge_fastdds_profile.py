@@ -9,7 +9,6 @@ sockets' receive buffer sizes, its mapped segment's size): counts, not times.
 """
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import socket
 import traceback
@@ -17,8 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.ros2.conftest import fastdds_files, free_domains
-from tests.runtime.helpers import HANG_S
+from tests.ros2.conftest import fastdds_files, forked_child_result, free_domains
 
 pytestmark = pytest.mark.process
 
@@ -78,20 +76,7 @@ def _bridge_child(domain: int, fastdds: str, conn) -> None:
 
 def _run_bridge(fastdds: str) -> dict:
     (domain,) = free_domains(1)
-    ours, theirs = mp.get_context("fork").Pipe(duplex=False)
-    child = mp.get_context("fork").Process(target=_bridge_child, args=(domain, fastdds, theirs))
-    child.start()
-    theirs.close()
-    try:
-        assert ours.poll(6 * HANG_S), "the bridge's child reported nothing"
-        got = ours.recv()
-    finally:
-        child.join(HANG_S)
-        if child.is_alive():
-            child.kill()
-            child.join()
-    assert "error" not in got, got.get("error")
-    return got
+    return forked_child_result(_bridge_child, domain, fastdds, what="the bridge's child")
 
 
 def _wanted_buffer() -> int:
