@@ -63,14 +63,28 @@ def free_domains(n: int) -> list[int]:
     raise RuntimeError(f"no free ROS 2 domain for this test: {len(got)} of {n} found among 20-99")
 
 
+def _report_to_parent(target, args: tuple, conn) -> None:
+    """In the forked child: send ``target(*args)``'s dict, or the traceback as "error", and exit
+    without running the parent's atexit handlers (pytest's, rclpy's)."""
+    import traceback
+
+    try:
+        conn.send(target(*args))
+    except BaseException:
+        conn.send({"error": traceback.format_exc()})
+    finally:
+        conn.close()
+        os._exit(0)
+
+
 def forked_child_result(target, *args, what: str = "the child") -> dict:
-    """Run ``target(*args, conn)`` in a forked process (a process of its own, as a bridge or an
-    EMOS component runs, with rclpy started there) and return the dict it sends on ``conn``. The
-    child is reaped on every path; a dict with "error" fails the test with that text."""
+    """Run ``target(*args)`` in a forked process (a process of its own, as a bridge or an EMOS
+    component runs, with rclpy started there) and return the dict it returns. The child is reaped
+    on every path; an exception in it fails the test with its traceback."""
     import multiprocessing as mp
 
     ours, theirs = mp.get_context("fork").Pipe(duplex=False)
-    child = mp.get_context("fork").Process(target=target, args=(*args, theirs))
+    child = mp.get_context("fork").Process(target=_report_to_parent, args=(target, args, theirs))
     child.start()
     theirs.close()
     try:

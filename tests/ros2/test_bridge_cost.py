@@ -9,10 +9,8 @@ generous factor: only a gross regression fails, not a loaded machine).
 """
 from __future__ import annotations
 
-import os
 import select
 import time
-import traceback
 
 import numpy as np
 import psutil
@@ -28,65 +26,59 @@ ROUND_TRIPS = 300
 CPU_FACTOR = 10.0  # EMOS side (bridge both ways + pinger) per message vs the relay's; measured ~2-4x
 
 
-def _emos_side(domain: int, relay_pid: int, round_trips: int, conn) -> None:
-    """A forked child: a run, the bridge, and a pinger on rings; sends back counts and CPU."""
+def _emos_side(domain: int, relay_pid: int, round_trips: int) -> dict:
+    """In a forked child: a run, the bridge, and a pinger on rings; the counts and CPU."""
+    from emos.interop.ros2.bridge import Ros2Bridge
+    from emos.msgs import UInt8MultiArray
+    from emos.transport.context import RunContext
+    from emos.transport.pubsub import Publisher, Subscriber
+    from emos.transport.waker import Waker
+
+    ctx = RunContext.create()
+    bridge = pub = sub = waker = None
     try:
-        from emos.interop.ros2.bridge import Ros2Bridge
-        from emos.msgs import UInt8MultiArray
-        from emos.transport.context import RunContext
-        from emos.transport.pubsub import Publisher, Subscriber
-        from emos.transport.waker import Waker
+        bridge = Ros2Bridge(ctx, topics=[PING, PONG], domain_id=domain, node_name="cost_bridge")
+        pub = Publisher(ctx, PING, UInt8MultiArray, publisher_id="pinger")
+        waker = Waker(ctx)
+        sub = Subscriber(ctx, PONG, UInt8MultiArray, waker=waker)
+        payload = np.zeros(8, np.uint8)
 
-        ctx = RunContext.create()
-        bridge = pub = sub = waker = None
-        try:
-            bridge = Ros2Bridge(ctx, topics=[PING, PONG], domain_id=domain, node_name="cost_bridge")
-            pub = Publisher(ctx, PING, UInt8MultiArray, publisher_id="pinger")
-            waker = Waker(ctx)
-            sub = Subscriber(ctx, PONG, UInt8MultiArray, waker=waker)
-            payload = np.zeros(8, np.uint8)
+        def round_trip(seq: int, resend_s: float | None) -> bool:
+            payload[:] = np.frombuffer(seq.to_bytes(8, "little"), np.uint8)
+            pub.publish(UInt8MultiArray(data=payload))
+            end = time.monotonic() + (resend_s or HANG_S)
+            while time.monotonic() < end:
+                select.select([waker.fd], [], [], 0.05)
+                waker.drain()
+                if any(int.from_bytes(bytes(m.data[:8]), "little") == seq for m in sub.take()):
+                    return True
+            return False
 
-            def round_trip(seq: int, resend_s: float | None) -> bool:
-                payload[:] = np.frombuffer(seq.to_bytes(8, "little"), np.uint8)
-                pub.publish(UInt8MultiArray(data=payload))
-                end = time.monotonic() + (resend_s or HANG_S)
-                while time.monotonic() < end:
-                    select.select([waker.fd], [], [], 0.05)
-                    waker.drain()
-                    if any(int.from_bytes(bytes(m.data[:8]), "little") == seq for m in sub.take()):
-                        return True
-                return False
-
-            seq = 0
-            deadline = time.monotonic() + 3 * HANG_S
-            while True:  # until discovery is done on both sides: the first reply
-                seq += 1
-                if round_trip(seq, 0.2):
-                    break
-                assert time.monotonic() < deadline, "no reply through the bridge and the relay"
-            for _ in range(20):  # warm-up
-                seq += 1
-                assert round_trip(seq, None), f"ping {seq} lost"
-            relay = psutil.Process(relay_pid)
-            w0, cpu0, relay0 = dict(bridge.wakeups), time.process_time(), sum(relay.cpu_times()[:2])
-            for _ in range(round_trips):
-                seq += 1
-                assert round_trip(seq, None), f"ping {seq} lost"
-            w1, cpu1, relay1 = dict(bridge.wakeups), time.process_time(), sum(relay.cpu_times()[:2])
-            conn.send({"wakeups": {k: w1[k] - w0[k] for k in w1}, "emos_cpu_s": cpu1 - cpu0, "relay_cpu_s": relay1 - relay0,
-                       "summary": bridge.summary()})
-        finally:
-            for end in (sub, waker, pub):
-                if end is not None:
-                    end.close()
-            if bridge is not None:
-                bridge.close()
-            ctx.remove_everything()
-    except BaseException:
-        conn.send({"error": traceback.format_exc()})
+        seq = 0
+        deadline = time.monotonic() + 3 * HANG_S
+        while True:  # until discovery is done on both sides: the first reply
+            seq += 1
+            if round_trip(seq, 0.2):
+                break
+            assert time.monotonic() < deadline, "no reply through the bridge and the relay"
+        for _ in range(20):  # warm-up
+            seq += 1
+            assert round_trip(seq, None), f"ping {seq} lost"
+        relay = psutil.Process(relay_pid)
+        w0, cpu0, relay0 = dict(bridge.wakeups), time.process_time(), sum(relay.cpu_times()[:2])
+        for _ in range(round_trips):
+            seq += 1
+            assert round_trip(seq, None), f"ping {seq} lost"
+        w1, cpu1, relay1 = dict(bridge.wakeups), time.process_time(), sum(relay.cpu_times()[:2])
+        return {"wakeups": {k: w1[k] - w0[k] for k in w1}, "emos_cpu_s": cpu1 - cpu0, "relay_cpu_s": relay1 - relay0,
+                "summary": bridge.summary()}
     finally:
-        conn.close()
-        os._exit(0)
+        for end in (sub, waker, pub):
+            if end is not None:
+                end.close()
+        if bridge is not None:
+            bridge.close()
+        ctx.remove_everything()
 
 
 def test_the_bridge_wakes_a_few_times_per_message_and_costs_cpu_like_an_rclpy_node():

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import socket
-import traceback
 from pathlib import Path
 
 import pytest
@@ -52,26 +51,20 @@ def _segments() -> dict[str, int]:
     return sizes
 
 
-def _bridge_child(domain: int, fastdds: str, conn) -> None:
-    """A forked child: a run and a bridge; reports its participant's sockets and segments."""
-    try:
-        from emos.interop.ros2.bridge import Ros2Bridge
-        from emos.transport.context import RunContext
+def _bridge_child(domain: int, fastdds: str) -> dict:
+    """In a forked child: a run and a bridge; its participant's sockets and segments."""
+    from emos.interop.ros2.bridge import Ros2Bridge
+    from emos.transport.context import RunContext
 
-        ctx = RunContext.create()
-        bridge = None
-        try:
-            bridge = Ros2Bridge(ctx, topics=["/profile_check/none"], domain_id=domain, node_name="profile_check_bridge", fastdds=fastdds)
-            conn.send({"udp": _udp_buffers(), "segments": _segments(), "transport": bridge.transport})
-        finally:
-            if bridge is not None:
-                bridge.close()
-            ctx.remove_everything()
-    except BaseException:
-        conn.send({"error": traceback.format_exc()})
+    ctx = RunContext.create()
+    bridge = None
+    try:
+        bridge = Ros2Bridge(ctx, topics=["/profile_check/none"], domain_id=domain, node_name="profile_check_bridge", fastdds=fastdds)
+        return {"udp": _udp_buffers(), "segments": _segments(), "transport": bridge.transport}
     finally:
-        conn.close()
-        os._exit(0)
+        if bridge is not None:
+            bridge.close()
+        ctx.remove_everything()
 
 
 def _run_bridge(fastdds: str) -> dict:
