@@ -89,6 +89,7 @@ ABOUT_NO_SHM = {"zenoh": f"zenoh (no shm): {ZENOH} Python, plain put of bytes ov
                          "through shared memory), no router, no scouting"}
 ENV_PEER_DIR = "EMOS_BENCH_PEERS"
 _PEER_TIMEOUT_S = 600.0  # one peer measurement; only a hung peer reaches it
+_KILL_WAIT_S = 60.0  # a SIGKILLed process that has not exited by then is stuck in the kernel
 _INSTALL_TIMEOUT_S = 900.0
 # Where iceoryx2 and zenoh keep their shared memory on Linux, and how iceoryx2's files of our runs start.
 PEER_SHM_DIR = Path("/dev/shm")
@@ -315,8 +316,27 @@ def _run_peer_group(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess[st
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
-def _session_members(sid: int) -> list[int]:
-    """The processes whose session is ``sid`` (``/proc/<pid>/stat``, field 6)."""
+def _has_exited(pid: int) -> bool:
+    """Every thread of ``pid`` has exited (or the process is gone): only then are its files closed
+    and its locks released. A multi-threaded process's leader shows Z while its other threads are
+    still tearing down, holding the files they share."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return True
+    for tid in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
+                if f.read().rsplit(b")", 1)[1].split()[0] != b"Z":
+                    return False
+        except (OSError, IndexError):
+            continue  # that thread is gone
+    return True
+
+
+def _session_members(sid: int, *, living: bool = False) -> list[int]:
+    """The processes whose session is ``sid`` (``/proc/<pid>/stat``, field 6); with ``living``,
+    not those that have exited and wait to be reaped (see ``_has_exited``)."""
     pids = []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
@@ -326,7 +346,7 @@ def _session_members(sid: int) -> list[int]:
                 fields = f.read().rsplit(b")", 1)[1].split()
         except (OSError, IndexError):
             continue  # gone meanwhile
-        if len(fields) > 3 and int(fields[3]) == sid:
+        if len(fields) > 3 and int(fields[3]) == sid and not (living and _has_exited(int(entry))):
             pids.append(int(entry))
     return pids
 
@@ -334,16 +354,30 @@ def _session_members(sid: int) -> list[int]:
 def _kill_group(pgid: int) -> None:
     """SIGKILL the process group a peer script leads (made by ``start_new_session``) and every
     process left in its session. The session id stays reserved while any member lives, so no
-    unrelated process can carry it."""
+    unrelated process can carry it.
+
+    Returns once they have all exited: SIGKILL is only delivered, and a node that still maps a
+    zenoh segment still holds its lock, so ``remove_zenoh_files`` right after would leave that
+    segment behind. (The wait is bounded; a process that outlives it is reported.)"""
     try:
         os.killpg(pgid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-    for pid in _session_members(pgid):
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+    deadline = time.monotonic() + _KILL_WAIT_S
+    while True:
+        members = _session_members(pgid, living=True)
+        if not members:
+            return
+        for pid in members:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if time.monotonic() > deadline:
+            print(f"emos bench ipc: processes {members} of a peer's session outlived SIGKILL for {_KILL_WAIT_S:.0f} s",
+                  file=sys.stderr)
+            return
+        time.sleep(0.01)
 
 
 def _free_port() -> int:
