@@ -139,7 +139,10 @@ def bench_swept(commands: int = 500) -> dict[str, float]:
     (jackal-barn box, its limits, the default skid-steer motion model) among BARN-like posts
     (radius 0.075 m, one per 0.6 m^2 on average, none inside the robot), commands and previous
     commands drawn over its speed range. Time per call (ms), the points prepared once as the
-    DriveManager prepares them once per scan (``prepare_ms``: that per-scan work, once)."""
+    DriveManager prepares them once per scan (``prepare_ms``: that per-scan work, once).
+    ``history_cpu_p50`` / ``history_cpu_p99``: the thread CPU of one more call per command with
+    a history of sent commands as the DriveManager passes one (the last 0.25 s at 20 Hz, near
+    the previous command), the path it takes in a running system."""
     from emos.actors.sim.robots import PRESETS
     from emos.tools.barn.harness import nav_robot
 
@@ -169,11 +172,19 @@ def bench_swept(commands: int = 500) -> dict[str, float]:
         best.append(min(times))
         first.append(times[0])
         stopped += result.stopped
-    b, f, c = 1e3 * np.asarray(best), 1e3 * np.asarray(first), 1e3 * np.asarray(cpu)
+    sent_at = -0.05 * np.arange(6)[::-1]
+    with_history = []
+    for cmd, prev in zip(cmds, prevs):
+        history = (sent_at, prev + rng.normal(0.0, 0.1, (6, 3)) * [1.0, 0.0, 1.0])
+        c0 = time.thread_time()
+        swept.check(cmd, prev, prepared, lead=0.02, history=history)
+        with_history.append(time.thread_time() - c0)
+    b, f, c, h = 1e3 * np.asarray(best), 1e3 * np.asarray(first), 1e3 * np.asarray(cpu), 1e3 * np.asarray(with_history)
     return {"p50": float(np.percentile(b, 50)), "p99": float(np.percentile(b, 99)), "max": float(b.max()),
             "first_p99": float(np.percentile(f, 99)), "cpu_p50": float(np.percentile(c, 50)),
             "cpu_p99": float(np.percentile(c, 99)), "points": int(len(points)), "stopped": stopped / commands,
-            "prepare_ms": prepare_ms}
+            "prepare_ms": prepare_ms, "history_cpu_p50": float(np.percentile(h, 50)),
+            "history_cpu_p99": float(np.percentile(h, 99))}
 
 
 def bench_dwa(steps: int = 200) -> dict[str, float]:
@@ -302,7 +313,8 @@ def run(args: argparse.Namespace) -> int:
     sw = result["swept_check_ms"]
     print(f"{'swept_check p50 / p99':<26}{sw['p50']:>10.3f}{1.0:>12.1f}   p99 {sw['p99']:.3f} (best of 3 per command; "
           f"first call p99 {sw['first_p99']:.3f}; thread CPU p50 {sw['cpu_p50']:.3f}, p99 {sw['cpu_p99']:.3f}); "
-          f"{sw['points']} scan points, {100 * sw['stopped']:.0f}% of commands stopped")
+          f"{sw['points']} scan points, {100 * sw['stopped']:.0f}% of commands stopped; "
+          f"with a history (the DriveManager's path): thread CPU p50 {sw['history_cpu_p50']:.3f}, p99 {sw['history_cpu_p99']:.3f}")
     print("Same-run peers (direct formulations of the same computation):")
     rays = kernels["_local_map_rays_ms"]
     print(f"  local map by sampling every ray: {rays:.3f} ms ({rays / result['local_map_ms']:.1f}x the cell lookup)")

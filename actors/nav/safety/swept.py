@@ -60,18 +60,21 @@ def _scales(value: object) -> tuple[float, ...]:
 
 def _window_max(values: np.ndarray, width: int) -> np.ndarray:
     """The running maximum (..., K) of non-negative ``values`` (..., K) over the last ``width``
-    entries (fewer at the start), by doubling windows: a few whole-array operations."""
-    out = np.array(values, dtype=np.float64)
-    span = 1
-    while 2 * span <= width:
-        # Overlapping input and output: numpy reads the old values (it buffers overlaps).
-        np.maximum(out[..., span:], out[..., :-span], out=out[..., span:])
-        span *= 2
-    rest = width - span
-    if rest > 0:
-        full = out.copy()
-        np.maximum(out[..., rest:], out[..., :-rest], out=full[..., rest:])
-        out = full
+    entries (fewer at the start), in a fixed handful of whole-array operations (van Herk and
+    Gil-Werman): in blocks of ``width``, the maximum from each block's start to an entry and
+    from an entry to its block's end; a window spans at most two blocks, so its maximum is the
+    latter at its first entry and the former at its last."""
+    n = values.shape[-1]
+    if width <= 1 or n == 0:
+        return np.array(values, dtype=np.float64)
+    blocks = -(-n // width)
+    padded = np.zeros(values.shape[:-1] + (blocks, width))  # 0: neutral for non-negative values
+    padded.reshape(values.shape[:-1] + (blocks * width,))[..., :n] = values
+    ahead = np.maximum.accumulate(padded, axis=-1).reshape(values.shape[:-1] + (-1,))
+    behind = np.maximum.accumulate(padded[..., ::-1], axis=-1)[..., ::-1].reshape(values.shape[:-1] + (-1,))
+    out = ahead[..., :n].copy()  # within the first block: the maximum from the start
+    if n >= width:
+        np.maximum(out[..., width - 1:], behind[..., :n - width + 1], out=out[..., width - 1:])
     return out
 
 
@@ -176,8 +179,9 @@ class SweptFootprint:
         acting = -max(lead, 0.0) + np.arange(n1) * dt - cfg.latency  # when what acts at each step was sent
         # A step's command is the one sent last before its start, or the next one if that is
         # sooner within the step (of the two the robot drives both over the step).
-        first = np.clip(np.searchsorted(times, acting, side="right") - 1, 0, len(times) - 1)
-        last = np.clip(np.searchsorted(times, acting + dt, side="left") - 1, 0, len(times) - 1)
+        # searchsorted gives 0..len(times), so less one only the lower bound needs clipping.
+        first = np.maximum(np.searchsorted(times, acting, side="right") - 1, 0)
+        last = np.maximum(np.searchsorted(times, acting + dt, side="left") - 1, 0)
         a, b = commands[first], commands[last]
         return np.where(np.abs(b) > np.abs(a), b, a)
 
@@ -200,9 +204,9 @@ class SweptFootprint:
         n1 = pipe.shape[0]
         n2 = self._hold_steps
         # Long enough to stop from the fastest twist anywhere in the sequence.
-        fastest = np.abs(targets).max(axis=0)
+        fastest = np.abs(cmd) * float(scales.max())  # the largest |scale * command| per axis
         if n1:
-            np.maximum(fastest, np.abs(pipe).max(axis=0), out=fastest)
+            np.maximum(fastest, np.abs(prev) if history is None else np.abs(pipe).max(axis=0), out=fastest)
         n3 = int(math.ceil(float((fastest / self._decel + self._stop_lag).max()) / dt - 1e-9)) + 2
         commanded = np.zeros((len(scales), n1 + n2 + n3, 3))
         commanded[:, :n1] = pipe
@@ -284,8 +288,14 @@ class SweptFootprint:
         c *= chord
         s *= chord
         vx, vy = twists[:, None, :, 0], twists[:, None, :, 1]
-        np.cumsum(c * vx - s * vy, axis=-1, out=out[..., 1:, 0])
-        np.cumsum(s * vx + c * vy, axis=-1, out=out[..., 1:, 1])
+        if vy.any():
+            np.cumsum(c * vx - s * vy, axis=-1, out=out[..., 1:, 0])
+            np.cumsum(s * vx + c * vy, axis=-1, out=out[..., 1:, 1])
+        else:  # no sideways velocity (a differential drive): the same sums without its zero terms
+            c *= vx
+            s *= vx
+            np.cumsum(c, axis=-1, out=out[..., 1:, 0])
+            np.cumsum(s, axis=-1, out=out[..., 1:, 1])
         return out
 
     def _gain_sensitivity(self, twists: np.ndarray, speed: np.ndarray | None = None) -> np.ndarray:
@@ -405,7 +415,8 @@ class SweptFootprint:
         hysteresis = self._hysteresis
         limit = inflate + hysteresis
         # Poses after a candidate's body has stopped repeat its last one: checked once.
-        moving = (np.abs(tw) > 1e-12).any(axis=2)
+        size = np.abs(tw)
+        moving = np.maximum(np.maximum(size[..., 0], size[..., 1]), size[..., 2]) > 1e-12  # (C, K)
         ends = np.where(moving.any(axis=1), tw.shape[1] - np.argmax(moving[:, ::-1], axis=1), 0) + 1
 
         # The first poses, while the pipe drives the robot, are the same for every candidate
@@ -543,23 +554,31 @@ class SweptFootprint:
             return np.min(circle, axis=(1, 2)), (np.min(circle[:, :, :head], axis=(1, 2)) if head else None)
         q = np.abs(body)
         q -= self._half_col  # beyond the half extents (negative: within)
-        depth = np.maximum(q[..., 0, :], q[..., 1, :])  # (C, G, k, n): negative inside the box (minus the depth)
+        # Both per pose in one array, so that each minimum below is one reduction:
+        # [0] the depth (negative inside the box: minus the depth), [1] the squared distance
+        # outside (0 inside).
+        both = np.empty_like(q)
+        np.maximum(q[..., 0, :], q[..., 1, :], out=both[..., 0, :])
         np.maximum(q, 0.0, out=q)
         q *= q
-        sq = q[..., 0, :] + q[..., 1, :]  # squared distance outside (0 inside)
-
-        def least(inner: np.ndarray, outside: np.ndarray) -> np.ndarray:
-            return np.where(inner < 0.0, inner, np.sqrt(outside))
-
+        np.add(q[..., 0, :], q[..., 1, :], out=both[..., 1, :])
         if not head or head >= k:
-            inner, outside = depth.min(axis=(1, 2)), sq.min(axis=(1, 2))
-            return least(inner, outside), (least(inner, outside) if head else None)
+            whole = _signed(both.min(axis=(1, 2)))
+            return whole, (whole if head else None)
         # The first poses' least once, and the whole sequence's from it and the rest's (the
         # same minima as reducing the whole again).
-        inner_head, outside_head = depth[:, :, :head].min(axis=(1, 2)), sq[:, :, :head].min(axis=(1, 2))
-        inner = np.minimum(inner_head, depth[:, :, head:].min(axis=(1, 2)))
-        outside = np.minimum(outside_head, sq[:, :, head:].min(axis=(1, 2)))
-        return least(inner, outside), least(inner_head, outside_head)
+        first = both[:, :, :head].min(axis=(1, 2))  # (C, 2, n)
+        rest = np.minimum(first, both[:, :, head:].min(axis=(1, 2)))
+        return _signed(rest), _signed(first)
+
+
+def _signed(least: np.ndarray) -> np.ndarray:
+    """The signed distance (C, n) from the least depth and least squared distance outside (C, 2, n)
+    of a point over some poses: inside at one of them (negative depth), the deepest; else the
+    root of the least square. Inside at some pose, the least square is 0, so the sum is exact."""
+    out: np.ndarray = np.sqrt(least[:, 1])
+    out += np.minimum(least[:, 0], 0.0)
+    return out
 
 
 @attrs.define(frozen=True, eq=False)
