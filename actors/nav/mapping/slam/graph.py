@@ -58,6 +58,7 @@ class PoseGraph:
         self._initial = g.Values()
         self._estimate: Any = None
         self.nodes = 0
+        self.extra_keys: list[int] = []
         self.loop_closures = 0
 
     def _noise(self, cov: np.ndarray, robust: bool) -> Any:
@@ -77,6 +78,14 @@ class PoseGraph:
         self._values.insert(key, pose)
         self._initial.insert(key, pose)
         self.nodes += 1
+
+    def add_variable(self, key: int, initial: np.ndarray) -> None:
+        """A pose that is not a scan node (a submap's frame): solved like a node, not counted in
+        ``nodes`` (so ``poses`` and the batch results stay the scans'), kept in ``extra_keys``."""
+        pose = self._g.Pose2(*(float(v) for v in initial))
+        self._values.insert(key, pose)
+        self._initial.insert(key, pose)
+        self.extra_keys.append(int(key))
 
     def add_prior(self, key: int, pose: np.ndarray, cov: np.ndarray) -> None:
         f = self._g.PriorFactorPose2(key, self._g.Pose2(*map(float, pose)), self._noise(cov, False))
@@ -122,6 +131,8 @@ class PoseGraph:
         values = g.Values()
         for k, pose in enumerate(np.asarray(start, dtype=np.float64).reshape(-1, 3)):
             values.insert(k, g.Pose2(*map(float, pose)))
+        for k in self.extra_keys:  # submap frames: from the current estimate
+            values.insert(k, self._estimate.atPose2(k) if self._estimate is not None else self._initial.atPose2(k))
         params = g.LevenbergMarquardtParams()
         params.setMaxIterations(int(iterations))
         result = g.LevenbergMarquardtOptimizer(graph, values, params).optimize()

@@ -91,6 +91,8 @@ class CorrelativeMatcher:
     max_sd_xy: float = 0.08
     max_sd_theta: float = math.radians(2.0)
     polish_iterations: int = 10
+    polish: str = attrs.field(default="bilinear", validator=attrs.validators.in_(("bilinear", "distance")))
+    polish_trim: float = 0.0
 
     def _step(self, points: np.ndarray, resolution: float) -> float:
         if self.angular_step > 0:
@@ -157,7 +159,11 @@ class CorrelativeMatcher:
         pose = np.array([guess[0] + bu * r, guess[1] + bv * r, yaws[ba]])
         cov = self._covariance(score, ba, bu, bv, bscore, len(dth), w, r, step)
         offset = lo * r + grid.origin
-        pose, polished = self._polish(field, offset, r, pts, pose)
+        if self.polish == "distance":
+            pose, polished = _polish_distance(field, offset, r, grid.sigma, pts, pose, self.polish_iterations,
+                                              self.polish_trim)
+        else:
+            pose, polished = self._polish(field, offset, r, pts, pose)
         hess = self._hessian_covariance(field, offset, r, pts, pose, step, window_xy, window_theta)
         sd_xy = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2]).max()), 0.0))
         ambiguous = sd_xy > self.max_sd_xy or math.sqrt(cov[2, 2]) > self.max_sd_theta
@@ -316,3 +322,98 @@ class CorrelativeMatcher:
         info += np.diag([1.0 / window_xy ** 2, 1.0 / window_xy ** 2, 1.0 / window_theta ** 2])
         cov = np.linalg.inv(info)
         return 0.5 * (cov + cov.T)
+
+
+def _keys_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Keys' cubic convolution (a = -1/2, Catmull-Rom) weights of the four samples around a
+    point at fraction ``t`` (N,) past the second, and their derivatives in ``t``: (4, N) each.
+    It reproduces every polynomial of degree two exactly."""
+    t2, t3 = t * t, t * t * t
+    w = 0.5 * np.stack([-t + 2 * t2 - t3, 2 - 5 * t2 + 3 * t3, t + 4 * t2 - 3 * t3, -t2 + t3])
+    dw = 0.5 * np.stack([-1 + 4 * t - 3 * t2, -10 * t + 9 * t2, 1 + 8 * t - 9 * t2, -2 * t + 3 * t2])
+    return w, dw
+
+
+def _bicubic(table: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Keys bicubic interpolation of ``table`` (rows along y) at fractional cell-centre
+    coordinates ``fx``, ``fy`` (N,), with its gradient in cells: (value, d/dfx, d/dfy). Points
+    within one cell of the border are clamped to it (the caller's crop is padded)."""
+    h, wd = table.shape
+    i0 = np.clip(np.floor(fx).astype(np.int64), 1, wd - 3)
+    j0 = np.clip(np.floor(fy).astype(np.int64), 1, h - 3)
+    wx, dwx = _keys_weights(np.clip(fx - i0, 0.0, 1.0))
+    wy, dwy = _keys_weights(np.clip(fy - j0, 0.0, 1.0))
+    k = np.arange(-1, 3)
+    patch = table[(j0[None, :] + k[:, None])[:, None, :], (i0[None, :] + k[:, None])[None, :, :]]  # (4y, 4x, N)
+    rows = np.einsum("xn,yxn->yn", wx, patch)
+    drows = np.einsum("xn,yxn->yn", dwx, patch)
+    return np.einsum("yn,yn->n", wy, rows), np.einsum("yn,yn->n", wy, drows), np.einsum("yn,yn->n", dwy, rows)
+
+
+def _polish_distance(field: np.ndarray, offset: np.ndarray, r: float, sigma: float, pts: np.ndarray,
+                     pose: np.ndarray, iterations: int, trim: float) -> tuple[np.ndarray, float]:
+    """The sub-cell polish without the lattice's bias: Levenberg-Marquardt on the same cost as
+    the bilinear polish, sum (1 - M)^2, but with ``M = exp(-D / 2 sigma^2)`` where ``D`` is the
+    bicubic (Keys) interpolation of the squared distance to the nearest hit, recovered from the
+    field as ``D = -2 sigma^2 ln(field)`` (capped where the field is 0, beyond its reach).
+
+    Why: any bilinear interpolant has its maxima on the samples, so with the bilinear field a
+    wall's hits are pulled onto the nearest row of cell centres, by up to half a cell (2.5 cm),
+    the same way for every hit of a wall parallel to the grid: a bias, not noise. Across a
+    wall ``D`` is exactly quadratic, ``(x - x_wall)^2``, and Keys' cubic reproduces quadratics
+    exactly, so the interpolated crest lies on the wall wherever it falls between samples.
+    Returns the pose and the mean ``M`` of the hits there."""
+    reach2 = float(np.float32(-2.0 * sigma * sigma * math.log(1e-6)))
+    with np.errstate(divide="ignore"):
+        d2 = np.where(field > 1e-6, -2.0 * sigma * sigma * np.log(np.maximum(field, 1e-30)), reach2)
+    inv2s2 = 0.5 / (sigma * sigma)
+
+    def sample(p: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c, s = math.cos(p[2]), math.sin(p[2])
+        x = c * pts[:, 0] - s * pts[:, 1] + p[0]
+        y = s * pts[:, 0] + c * pts[:, 1] + p[1]
+        dist2, gx, gy = _bicubic(d2, (x - offset[0]) / r - 0.5, (y - offset[1]) / r - 0.5)
+        dist2 = np.clip(dist2, 0.0, reach2)
+        m = np.exp(-inv2s2 * dist2)
+        # d(1 - M)/d(world) = M / (2 sigma^2) * dD/d(world); dD/d(world) = dD/d(cell) / r.
+        k = m * inv2s2 / r
+        dxt = -s * pts[:, 0] - c * pts[:, 1]
+        dyt = c * pts[:, 0] - s * pts[:, 1]
+        jac = np.column_stack([k * gx, k * gy, k * (gx * dxt + gy * dyt)])
+        return 1.0 - m, jac, m
+
+    used = pts
+    res, jac, m = sample(pose, used)
+    # Hits farther than ``trim`` sigma from every submap hit at the lattice pose are not used:
+    # the submap has not seen what they hit (a wall past the end of the part it knows), so they
+    # carry no information, only the pull of the tail of the nearest known hit's Gaussian back
+    # along the wall: the bias that measured every step short. Fixed once, so the cost is smooth.
+    if trim > 0:
+        keep = m >= math.exp(-0.5 * trim * trim)
+        if np.count_nonzero(keep) >= 3:
+            used = pts[keep]
+            res, jac, m = res[keep], jac[keep], m[keep]
+    cost = float(res @ res)
+    lam = 1e-3
+    for _ in range(iterations):
+        a = jac.T @ jac
+        g = jac.T @ res
+        try:
+            delta = -np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-9), g)
+        except np.linalg.LinAlgError:
+            break
+        # Never let the polish leave the lattice cell it started in by much.
+        if abs(delta[0]) > r or abs(delta[1]) > r or abs(delta[2]) > math.radians(1.0):
+            lam *= 10.0
+            continue
+        cand = pose + delta
+        res2, jac2, m2 = sample(cand, used)
+        cost2 = float(res2 @ res2)
+        if cost2 < cost:
+            pose, res, jac, m, cost = cand, res2, jac2, m2, cost2
+            lam = max(lam / 10.0, 1e-7)
+            if np.abs(delta).max() < 1e-5:
+                break
+        else:
+            lam *= 10.0
+    return pose, float(sample(pose, pts)[2].mean())  # the score of every hit, as the search's

@@ -12,12 +12,15 @@ Each scan, in :meth:`GraphSlam.add`:
    deviations of the odometry noise model (clamped to ``[min_window_*, max_window_*]``), with a
    weak prior towards the guess (it decides only where the scan does not, e.g. along a
    corridor). The hits are then inserted into the two newest submaps.
-3. **Submaps** (as in Cartographer): a new submap starts every ``scans_per_submap`` scans and
-   each scan goes into the two newest, so a submap holds ``2 * scans_per_submap`` scans when it
-   is finished, and the one matched against always has between 1 and 2 times that many. A
-   submap is a rigid local map anchored at its first scan's node.
-4. **Back end.** Node = scan. An odometry factor (covariance from the motion model) to the
-   previous node, and a scan-match factor from the submap's anchor node (covariance from the
+3. **Submaps** (as in Cartographer): a new submap starts every ``scans_per_submap`` scans (or
+   ``submap_travel`` metres, when set) and each scan goes into the two newest, so a submap holds
+   two periods' scans when it is finished, and the one matched against always has between one
+   and two periods'. A submap is a rigid local map in the frame of its first scan's front-end
+   pose.
+4. **Back end.** Node = scan, plus one variable per submap frame (``submap_nodes``). An
+   odometry factor (covariance from the motion model) to the previous node, and a scan-match
+   factor from each submap the scan went into (its frame; without ``submap_nodes``, only from
+   the matched submap's anchor node) (covariance from the
    match: ``factor_covariance="response"``, the spread of the lattice scores around the best
    pose (Olson) times ``match_cov_scale`` / ``loop_cov_scale``; or ``"hessian"``, the inverse
    curvature of the score at the polished pose over the hit count (``MatchResult.
@@ -34,6 +37,14 @@ end and loop closure) by point-to-line ICP against the submap's hits (``scan_icp
 likelihood-field polish is biased against where scan and submap overlap in part;
 ``refine_passes`` adds, after the batch, scan-to-scan ICP factors between each node and its
 nearest earlier nodes and re-solves (no submap, so no frozen front-end pose, in those factors).
+Measured in docs/slam_notes.md, also off by default: ``match_polish="distance"`` (the matcher's
+bicubic squared-distance polish, unbiased where the bilinear one snaps walls to the lattice)
+with ``polish_trim`` (hits the submap has not seen left out of the polish) and
+``densify_gap`` (submap hits joined along surfaces, so that the field is the distance to the
+wall, not to its sampled hits); ``submap_travel`` (a submap period also ends after that many
+metres of travel, not only after ``scans_per_submap`` scans). On by default (measured there
+too): ``submap_nodes``, each submap's frame a graph variable of its own (as in Cartographer);
+``submap_nodes=False`` is the older graph, in which the frame is its first scan's node.
 
 Why the per-scan cost does not grow with the map: the front end only touches the current
 submap (bounded: ``2 * scans_per_submap`` scans), matching cost is bounded by its window and the
@@ -64,6 +75,7 @@ from .scan_icp import IcpScan, icp_match
 __all__ = ["GraphSlam", "SlamParams", "Submap", "relative_pose", "compose_pose", "scan_points"]
 
 _log = logging.getLogger("emos.nav.mapping.slam")
+_SUBMAP_KEY = 1 << 40  # graph keys of submap frames (``submap_nodes``): far above any scan index
 
 
 @attrs.define(kw_only=True)
@@ -114,6 +126,11 @@ class SlamParams:
     refine_neighbours: int = attrs.field(default=8, validator=attrs.validators.ge(1))
     refine_min_overlap: float = attrs.field(default=0.3, validator=attrs.validators.and_(attrs.validators.ge(0.0), attrs.validators.le(1.0)))
     refine_cov_scale: float = attrs.field(default=30.0, validator=V.finite_positive)
+    match_polish: str = attrs.field(default="bilinear", validator=attrs.validators.in_(("bilinear", "distance")))
+    submap_nodes: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool))
+    submap_travel: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
+    polish_trim: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
+    densify_gap: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
 
 
 @attrs.define(eq=False)
@@ -128,6 +145,7 @@ class Submap:
     finished: bool = False
     points: list[np.ndarray] = attrs.field(factory=list)  # world hits of each scan, for the ICP polish
     icp: IcpScan | None = None  # built from ``points`` when needed; None after an insertion
+    key: int = -1  # the graph variable of the submap's frame: ``anchor``, or its own with ``submap_nodes``
 
 
 def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
@@ -136,6 +154,26 @@ def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_ra
     a = np.asarray(angles, dtype=np.float64)
     ok = np.isfinite(r) & np.isfinite(a) & (r > min_range) & (r < max_range)
     return np.column_stack([r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])])
+
+
+def densify(points: np.ndarray, max_gap: float, step: float) -> np.ndarray:
+    """``points`` (N, 2, in beam order) plus points every ``step`` between consecutive hits at
+    most ``max_gap`` apart (the surface both lie on). Why: the likelihood field is the Gaussian
+    of the distance to the nearest *hit*; where a wall's hits are farther apart than a cell,
+    that distance is a row of cones, not the distance to the wall, and the bicubic polish
+    (``CorrelativeMatcher.polish = "distance"``), exact for a wall, is off by the bumps."""
+    if len(points) < 2 or max_gap <= 0:
+        return points
+    gap = np.hypot(*np.diff(points, axis=0).T)
+    extra = np.where(gap <= max_gap, np.maximum(np.ceil(gap / step).astype(np.int64) - 1, 0), 0)
+    total = int(extra.sum())
+    if not total:
+        return points
+    seg = np.repeat(np.arange(len(gap)), extra)
+    # k-th added point of its segment: 1..extra[seg]
+    k = np.arange(total) - np.repeat(np.cumsum(extra) - extra, extra) + 1
+    t = (k / (extra[seg] + 1.0))[:, None]
+    return np.concatenate([points, points[seg] + t * (points[seg + 1] - points[seg])])
 
 
 class GraphSlam:
@@ -148,7 +186,7 @@ class GraphSlam:
         self.name = name
         self._logger = logger or _log
         self._report = RateLimitedLog(interval=5.0)
-        self.matcher = CorrelativeMatcher()
+        self.matcher = CorrelativeMatcher(polish=self.params.match_polish, polish_trim=self.params.polish_trim)
         self.graph = PoseGraph(robust=self.params.robust, robust_k=self.params.robust_k)
         self.submaps: list[Submap] = []
         self.front: list[np.ndarray] = []  # front-end pose of each node
@@ -162,6 +200,10 @@ class GraphSlam:
         self._accepted: set[tuple[int, int]] = set()
         self._scans: list[np.ndarray] = []  # each node's hits (sensor frame), for the refinement
         self._icp: dict[int, IcpScan] = {}
+        self._inserted: list[Submap] = []  # the submaps the newest scan went into
+        self._start_submap = False  # the next scan starts a submap
+        self._period_scans = 0  # scans and front-end travel (m) since the newest submap started
+        self._period_travel = 0.0
 
     # -- input ---------------------------------------------------------------------------------
     def _problem(self, key: str, msg: str, *args: Any) -> None:
@@ -263,23 +305,37 @@ class GraphSlam:
 
     def _insert(self, i: int, pose: np.ndarray, local: np.ndarray) -> None:
         p = self.params
-        if i % p.scans_per_submap == 0:
+        if i > 0:
+            self._period_travel += math.hypot(pose[0] - self.front[i - 1][0], pose[1] - self.front[i - 1][1])
+        if i == 0 or self._start_submap:
+            key = _SUBMAP_KEY + len(self.submaps) if p.submap_nodes else i
             self.submaps.append(Submap(grid=LikelihoodGrid(p.resolution, p.sigma, margin=5.0), anchor=i,
-                                       anchor_pose=pose.copy()))
-        if not len(local):
-            return
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        world = np.column_stack([c * local[:, 0] - s * local[:, 1] + pose[0], s * local[:, 0] + c * local[:, 1] + pose[1]])
-        for sm in self.submaps[-2:]:
-            if sm.finished:
-                continue
-            sm.grid.insert(world)
-            if p.icp_polish:
-                sm.points.append(world)
-                sm.icp = None
-            sm.scans += 1
-            if sm.scans >= 2 * p.scans_per_submap:
-                sm.finished = True
+                                       anchor_pose=pose.copy(), key=key))
+            self._start_submap, self._period_scans, self._period_travel = False, 0, 0.0
+        self._inserted = []
+        if len(local):
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            world = np.column_stack([c * local[:, 0] - s * local[:, 1] + pose[0],
+                                     s * local[:, 0] + c * local[:, 1] + pose[1]])
+            if p.densify_gap > 0:
+                world = densify(world, p.densify_gap, p.resolution / 2.0)
+            for sm in self.submaps[-2:]:
+                if sm.finished:
+                    continue
+                sm.grid.insert(world)
+                self._inserted.append(sm)
+                if p.icp_polish:
+                    sm.points.append(world)
+                    sm.icp = None
+                sm.scans += 1
+        self._period_scans += 1
+        # A period ends after ``scans_per_submap`` scans or ``submap_travel`` metres of front-end
+        # travel: the next scan starts a submap, and the older live one, which has had two
+        # periods, is finished.
+        if self._period_scans >= p.scans_per_submap or 0 < p.submap_travel <= self._period_travel:
+            self._start_submap = True
+            if len(self.submaps) >= 2:
+                self.submaps[-2].finished = True
 
     def _add_to_graph(self, i: int, delta: np.ndarray, target: Submap | None, match: MatchResult | None) -> None:
         g = self.graph
@@ -287,14 +343,35 @@ class GraphSlam:
             self._guess = self.front[0].copy()
             g.add_node(0, self.front[0])
             g.add_prior(0, self.front[0], np.diag([1e-6, 1e-6, 1e-8]))
-            return
-        prev = g.pose(i - 1)
-        # The graph's pose of the new node before this step's update: where loop closure looks.
-        self._guess = compose_pose(prev, relative_pose(self.front[i - 1], self.front[i]))
-        g.add_node(i, self._guess)
-        g.add_between(i - 1, i, delta, self._odom_cov(delta))
-        if match is not None and target is not None and target.anchor != i:
+        else:
+            prev = g.pose(i - 1)
+            # The graph's pose of the new node before this step's update: where loop closure looks.
+            self._guess = compose_pose(prev, relative_pose(self.front[i - 1], self.front[i]))
+            g.add_node(i, self._guess)
+            g.add_between(i - 1, i, delta, self._odom_cov(delta))
+        if self.params.submap_nodes:
+            self._insertion_factors(i, match)
+        elif match is not None and target is not None and target.anchor != i:
             self._match_factor(target, i, match.pose, match.covariance, loop=False, hess=match.hessian_covariance)
+
+    def _insertion_factors(self, i: int, match: MatchResult | None) -> None:
+        """With ``submap_nodes`` (Cartographer's graph): each submap's frame is a variable of
+        its own, and every scan gets a factor to each submap it went into, at its front-end pose
+        there. Why: with the frame on the anchor scan's node, all of a submap's factors hang on
+        that one scan, which loop closures then pull away from its neighbours (on csail the
+        anchors stood 1 to 1.5 degrees off their neighbours, where scan-to-scan ICP agreed with
+        the neighbours); a frame of its own is held by all 20 of its scans instead. A scan with
+        no match (too few hits) gets no factor (as before): the odometry places it."""
+        g = self.graph
+        new = self.submaps[-1] if self.submaps and self.submaps[-1].anchor == i else None
+        if new is not None:
+            g.add_variable(new.key, self._guess)
+        if match is None:
+            if new is not None:  # the frame needs a tie to the graph all the same
+                g.add_between(new.key, i, np.zeros(3), np.diag([1e-4, 1e-4, 1e-6]))
+            return
+        for sm in self._inserted:  # the matched submap and the newer one share the scan's pose
+            self._match_factor(sm, i, self.front[i], match.covariance, loop=False, hess=match.hessian_covariance)
 
     def _match_factor(self, sm: Submap, i: int, pose: np.ndarray, cov: np.ndarray, loop: bool,
                       hess: np.ndarray | None = None) -> None:
@@ -307,7 +384,7 @@ class GraphSlam:
             cov, scale = hess, p.hessian_cov_scale
         else:
             scale = p.loop_cov_scale if loop else p.match_cov_scale
-        self.graph.add_between(sm.anchor, i, rel, scale * rot @ cov @ rot.T, loop=loop)
+        self.graph.add_between(sm.key, i, rel, scale * rot @ cov @ rot.T, loop=loop)
 
     def _close_loops(self, i: int, pts: np.ndarray) -> bool:
         p = self.params
@@ -317,7 +394,7 @@ class GraphSlam:
         if not cands:
             return False
         here = self._guess
-        anchors = np.array([self.graph.pose(s.anchor) for s in cands])
+        anchors = np.array([self.graph.pose(s.key) for s in cands])
         dist = np.hypot(anchors[:, 0] - here[0], anchors[:, 1] - here[1])
         order = [k for k in np.argsort(dist) if dist[k] <= p.loop_radius][: p.loop_candidates]
         closed = False
