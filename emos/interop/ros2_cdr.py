@@ -84,6 +84,9 @@ class Ros2Codec:
         # fields' converters, the rosbags class, the element size).
         self._tail: dict[type, tuple[str, Callable[[Any], Any], list[tuple[str, Callable[[Any], Any]]], Any, int]] = {}
         self.spliced_bytes = 0  # array bytes written by serialize()'s one-copy path (tests count them)
+        # Per shared class: (ROS 2 type name, to_ros, from_ros), looked up once per message by
+        # serialize()/deserialize() (the bridge calls them for every sample it moves).
+        self._entries: dict[type, tuple[str, Callable[[Any], Any], Callable[[Any], Any]]] = {}
 
     # -- which types ---------------------------------------------------------------------------
     def ros_type(self, cls: type) -> str:
@@ -119,6 +122,14 @@ class Ros2Codec:
         return text
 
     # -- conversion ----------------------------------------------------------------------------
+    def _entry(self, cls: type) -> tuple[str, Callable[[Any], Any], Callable[[Any], Any]]:
+        """``(ROS 2 type name, to_ros, from_ros)`` of a shared class; raises :class:`NotShared`."""
+        entry = self._entries.get(cls)
+        if entry is None:
+            to, frm = self._plan(cls)
+            entry = self._entries[cls] = (canonical_name(cls), to, frm)
+        return entry
+
     def to_ros(self, msg: Any) -> Any:
         """The rosbags message object equal to ``msg``."""
         return self._plan(type(msg))[0](msg)
@@ -136,14 +147,14 @@ class Ros2Codec:
         appended in one ``join``: one copy of the array (``spliced_bytes`` counts them). The
         sequence is the last field, so no later field's alignment depends on where it ends."""
         cls = type(msg)
-        if cls not in self._to:
-            self._plan(cls)  # NotShared for a class ROS 2 lacks, as serialize_view would say
+        if cls not in self._entries:
+            self._entry(cls)  # NotShared for a class ROS 2 lacks, as serialize_view would say
         tail = self._tail.get(cls) if sys.byteorder == "little" else None  # the bytes appended are native-order
         if tail is not None:
             fname, to_array, head_steps, ros_cls, itemsize = tail
             arr = to_array(getattr(msg, fname))
             if arr.nbytes >= SPLICE_MIN_BYTES:
-                name = canonical_name(cls)
+                name = self._entries[cls][0]
                 try:
                     fields = {f: conv(getattr(msg, f)) for f, conv in head_steps}
                     head = self.store.serialize_cdr(ros_cls(**fields, **{fname: arr[:0]}), name)
@@ -158,8 +169,8 @@ class Ros2Codec:
 
     def serialize_view(self, msg: Any) -> memoryview:
         """As :meth:`serialize`, without the final copy: a view of a fresh buffer (for writers)."""
-        name = self.ros_type(type(msg))
-        ros_msg = self.to_ros(msg)
+        name, to_ros, _ = self._entries.get(type(msg)) or self._entry(type(msg))
+        ros_msg = to_ros(msg)
         try:
             return self.store.serialize_cdr(ros_msg, name)
         except Exception as exc:  # struct.error (a value out of range), rosbags' own errors, ...
@@ -167,8 +178,8 @@ class Ros2Codec:
 
     def deserialize(self, cls: type, data: bytes | memoryview) -> Any:
         """A ``cls`` instance from ROS 2 CDR bytes; :class:`CdrError` for bytes that do not decode."""
-        name = self.ros_type(cls)
-        raw = bytes(data)
+        name, _, from_ros = self._entries.get(cls) or self._entry(cls)
+        raw = data if type(data) is bytes else bytes(data)  # (bytes(bytes) is no copy either, but a call)
         if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
             raise CdrError(f"{name}: not a CDR payload (encapsulation header {raw[:4].hex() or 'missing'}, expected 0000 or 0001 ....)")
         try:
@@ -177,7 +188,7 @@ class Ros2Codec:
             obj = self.store.deserialize_cdr(memoryview(raw), name)
         except Exception as exc:  # rosbags raises struct.error, IndexError, UnicodeDecodeError, ...
             raise CdrError(f"cannot decode {len(raw)} bytes as {name}: {exc}") from exc
-        return self.from_ros(cls, obj)
+        return from_ros(obj)
 
     # -- plans: one pair of converters per class, built on first use --------------------------
     def _plan(self, cls: type) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:

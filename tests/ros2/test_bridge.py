@@ -38,6 +38,14 @@ CALL_ON = CAM_ON + ".call"
 CDR = codec_for("jazzy")
 
 
+def say(*words):
+    # One write, newline included: the run is unbuffered (PYTHONUNBUFFERED), where print writes
+    # the text and its newline apart and another process's log line can land between them
+    # (seen: "RT geometry_msgs/msg/TransformStamped equal2026-11-30 ... INFO ...").
+    sys.stdout.write(" ".join(map(str, words)) + "\\n")
+    sys.stdout.flush()
+
+
 class RoundTrip(BaseComponent):
     # Publishes one sample of every shared type until its copy comes back through a ROS 2 relay.
     def custom_on_activate(self):
@@ -51,7 +59,7 @@ class RoundTrip(BaseComponent):
             back = self.get_input(topic_of(t) + "/back")
             if back is not None:
                 same = CDR.serialize(back) == CDR.serialize(msg)
-                print("RT", t, "equal" if same else "DIFFERENT", flush=True)
+                say("RT", t, "equal" if same else "DIFFERENT")
                 self.done.add(t)
             else:
                 self.publish(topic_of(t), msg)
@@ -93,7 +101,7 @@ class Listener(BaseComponent):
             key = None if m is None else (m.data if name == "chatter" else m.header.frame_id)
             if key is not None and key != self.last.get(name):
                 self.last[name] = key
-                print("EMOS", name, key, flush=True)
+                say("EMOS", name, key)
         self.health_status.set_healthy()
 
 
@@ -114,7 +122,7 @@ class Services(BaseComponent):
             client = ServiceClient("/ros_setbool", self.Req, self.Resp, ctx=self.node.ctx, timeout=5.0)
             answer = client.call(self.Req(data=True))
             client.close()
-            print("EMOS setbool answer", answer.success, answer.message, flush=True)
+            say("EMOS setbool answer", answer.success, answer.message)
             self.answered = True
         except Exception as exc:  # not bridged yet
             pass
