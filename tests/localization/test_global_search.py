@@ -77,7 +77,8 @@ def test_near_symmetric_places_are_told_apart_by_their_scan_matched_peaks():
     mirror = np.array([10.0 - truth[0], 8.0 - truth[1], truth[2] - math.pi])
     shares = {}
     for beta in (0.0, 0.2):
-        pf = ParticleFilter(_params(hypothesis_beta=beta, max_particles=2000), grid, seed=5)
+        # One scan: the check, not the convergence rule (converged_updates), is under test.
+        pf = ParticleFilter(_params(hypothesis_beta=beta, max_particles=2000, converged_updates=1), grid, seed=5)
         pf.global_localization()
         spread = pf.rng.normal(size=(2000, 3)) * np.array([0.1, 0.1, 0.05])
         pf.particles = np.vstack([truth + spread[:1000], mirror + spread[1000:]])
@@ -114,3 +115,52 @@ def test_tracking_from_a_known_pose_never_searches():
 def test_new_parameters_are_validated_with_errors_that_name_them(name, value, match):
     with pytest.raises(ValueError, match=match):
         AmclParams.of({name: value}, "LocalizerConfig.filter_params")
+
+
+def test_one_scan_of_a_look_alike_does_not_end_the_search():
+    """The search ends only after the same hypothesis (carried by the odometry) has held
+    ``converged_weight`` on ``converged_updates`` consecutive updates: one view of the robot's
+    place, told apart by the post, leaves the search running; two more views along the way end
+    it there."""
+    grid = symmetric_room()
+    truth = np.array([8.0, 6.4, 0.3])
+    mirror = np.array([10.0 - truth[0], 8.0 - truth[1], truth[2] - math.pi])
+    pf = ParticleFilter(_params(max_particles=2000, converged_updates=3, update_min_d=0.05), grid, seed=5)
+    pf.global_localization()
+    spread = pf.rng.normal(size=(2000, 3)) * np.array([0.1, 0.1, 0.05])
+    pf.particles = np.vstack([truth + spread[:1000], mirror + spread[1000:]])
+    path = [truth + np.array([-0.1 * k * math.cos(0.3), -0.1 * k * math.sin(0.3), 0.0]) for k in range(3)]
+    held = []
+    for pose in path:
+        pf.update(pose, cast(grid, pose), BEAMS, scan_max=MAX_RANGE)
+        held.append((pf.searching, pf.leader_updates, float(pf.hypothesis_shares.max())))
+    assert held[0][0] and held[0][1] == 1 and held[0][2] > 0.95, f"one view: still searching ({held[0]})"
+    assert held[1][0] and held[1][1] == 2, f"two views: still searching ({held[1]})"
+    assert not held[2][0], f"three consistent views end it ({held})"
+    assert math.hypot(*(pf.estimate[:2] - path[-1][:2])) < 0.1, "... at the robot"
+
+
+def test_a_leader_that_changes_place_starts_the_count_again():
+    """The rule itself: a hypothesis that holds the weight but is not where the last leader,
+    moved by the odometry, would be (another place took over) counts from one again; a step
+    below ``converged_weight`` resets the count."""
+    pf = ParticleFilter(_params(converged_updates=3), room_map(), seed=1)
+    pf.global_localization()
+    p = pf.params
+    held = []
+    for odom, lead, share in [((0.0, 0.0, 0.0), (2.0, 2.0, 0.0), 0.97),   # 1
+                              ((0.3, 0.0, 0.0), (2.3, 2.0, 0.0), 0.97),   # 2: moved with the odometry
+                              ((0.6, 0.0, 0.0), (6.0, 4.0, 0.0), 0.97),   # 1: another place
+                              ((0.9, 0.0, 0.0), (6.3, 4.0, 0.0), 0.90),   # 0: below converged_weight
+                              ((1.2, 0.0, 0.0), (6.6, 4.0, 0.0), 0.97),   # 1
+                              ((1.5, 0.0, 0.0), (6.9, 4.0, 0.1), 0.97),   # 2
+                              ((1.8, 0.0, 0.0), (7.2, 4.0, 0.1), 0.97)]:  # 3: holds
+        pf._odom_updated = np.array(odom)
+        done = pf._leader_holds(np.array([share, 1.0 - share]), np.array([lead, (0.0, 0.0, 0.0)]), p)
+        held.append((pf.leader_updates, done))
+    assert held == [(1, False), (2, False), (1, False), (0, False), (1, False), (2, False), (3, True)], held
+
+
+def test_converged_updates_is_validated_by_name():
+    with pytest.raises(ValueError, match=r"AmclParams.converged_updates must be an integer in \[1, 1000\], got 0"):
+        _params(converged_updates=0)

@@ -54,6 +54,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log", required=True, help="CARMEN log (.log or .log.gz) with FLASER lines")
     parser.add_argument("--global", dest="global_", action="store_true", help="global localization from an unknown start")
     parser.add_argument("--seeds", type=int, default=3, help="trials (seeds 0..N-1; default 3)")
+    parser.add_argument("--seed-start", type=int, default=0,
+                        help="first seed (trials use seeds S..S+N-1; default 0): fresh starts for a check on trials not tuned on")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--noise", default=",".join(map(str, DEFAULT_NOISE)),
                         help="odometry noise alpha1..alpha4 (default %(default)s)")
@@ -76,7 +78,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="recovery_alpha_slow,recovery_alpha_fast (default 0,0: none, as Nav2; global: 0.001,0.1)")
     parser.add_argument("--peer", choices=("amcl",), default=None,
                         help="also run Nav2's AMCL (the GPLv3 `amcl` PyPI package, installed by the benchmark into "
-                             "~/.cache/emos/bench/ on first use; tracking only: it has no global localization call)")
+                             "~/.cache/emos/bench/ on first use; with --global it starts from a map-wide Gaussian, as its "
+                             "bindings have no global localization call)")
     parser.add_argument("--max-scans", type=int, default=None, help="use only the first N scans of the log (quick checks)")
     parser.add_argument("--plot", default=None, help="write a PNG of the first trial's estimate against the reference")
 
@@ -136,17 +139,24 @@ def run_tracking(data: dict[str, Any], params: Any, noise: tuple[float, ...], se
             "converged": bool(pos[-1] < 0.2), "particles": float(np.mean(counts))}
 
 
-def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int,
-               converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
-    from emos.actors.nav.localization import noisy_odometry
-
+def _segment(data: dict[str, Any], seed: int, trial_m: float) -> tuple[np.ndarray, int, int]:
+    """The travel along the reference (m, per scan) and a global trial's scans [start, end):
+    a seeded random start, ``trial_m`` of travel."""
     ref = data["reference"]
     travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])
     starts = np.flatnonzero(travel <= travel[-1] - trial_m)
     rng = np.random.default_rng(10_000 + seed)
     s = int(starts[rng.integers(len(starts))])
     end = int(np.searchsorted(travel, travel[s] + trial_m)) + 1
-    seg = ref[s:end]
+    return travel, s, end
+
+
+def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int,
+               converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
+    from emos.actors.nav.localization import noisy_odometry
+
+    travel, s, end = _segment(data, seed, trial_m)
+    seg = data["reference"][s:end]
     odom = noisy_odometry(seg, noise, seed)  # type: ignore[arg-type]
     pf = _filter(data, params, seed)
     pf.global_localization()
@@ -165,6 +175,7 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
     pos, head = _errors(est, seg)
     moved = travel[s:end] - travel[s]
     after = moved >= converge_m
+    cause = _failure_cause(pos, head, moved, after, ended)
     below = np.flatnonzero(pos < 0.2)
     # Time to converge: the first scan from which the error stays under 0.2 m to the trial's end
     # (travel and filter CPU up to it); None when the last scan is not under 0.2 m.
@@ -177,7 +188,32 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
             "settled_scans": None if settle is None else settle + 1,
             "settled_cpu_s": None if settle is None else float(cpu_at[settle]),
             "search_ended_m": None if ended is None else float(moved[ended]),
-            "search_ended_right": ended is not None and bool(pos[ended] < 0.2)}
+            "search_ended_right": ended is not None and bool(pos[ended] < 0.2),
+            "seed": seed, "cause": cause,
+            "error_at_10m_m": float(pos[after][0]) if after.any() else None,
+            "heading_error_at_10m_deg": float(np.degrees(head[after][0])) if after.any() else None}
+
+
+#: Why a global trial did not converge (``_failure_cause``), as counted in ``failures``.
+FAILURE_CAUSES = ("wrong_place", "undecided", "lost")
+
+
+def _failure_cause(pos: np.ndarray, head: np.ndarray, moved: np.ndarray, after: np.ndarray, ended: int | None) -> str | None:
+    """Why a global trial missed (None: it converged, error < 0.2 m at the first scan past the
+    convergence travel). ``wrong_place``: the search ended (one hypothesis held
+    ``converged_weight``) on a place 0.2 m or more from the truth, and the estimate was still
+    wrong at the convergence travel (a symmetric or look-alike place was declared too early);
+    ``undecided``: the search had not ended by then and the heaviest hypothesis was wrong (not
+    enough evidence yet); ``lost``: the search ended on the right place and the estimate left it
+    afterwards (tracking lost it)."""
+    if not after.any():
+        return "undecided"
+    first = int(np.flatnonzero(after)[0])
+    if pos[first] < 0.2:
+        return None
+    if ended is None or ended > first:
+        return "undecided"
+    return "lost" if pos[ended] < 0.2 else "wrong_place"
 
 
 AMCL_PEER = "amcl==0.1.2"
@@ -206,15 +242,10 @@ def _amcl() -> Any:
     return importlib.import_module("amcl")
 
 
-def run_tracking_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int) -> dict[str, Any]:
-    """The same tracking trial with Nav2's AMCL: the same odometry (same seed), map, particle
-    budget, motion alphas, sigma_hit, z_hit/z_rand, beams and recovery rates. Its own seed, its
-    update thresholds and likelihood distance cap are not settable through these bindings."""
-    from emos.actors.nav.localization import noisy_odometry
-
-    amcl = _amcl()
-    ref = data["reference"]
-    odom = noisy_odometry(ref, noise, seed)  # type: ignore[arg-type]
+def _amcl_localizer(amcl: Any, data: dict[str, Any], params: Any) -> Any:
+    """Nav2's AMCL on the benchmark's map with our particle budget, motion alphas, sigma_hit,
+    z_hit/z_rand, beams and recovery rates. Its own seed, its update thresholds and likelihood
+    distance cap are not settable through these bindings."""
     p = params
     loc = amcl.AMCL(p.min_particles, p.max_particles, p.recovery_alpha_slow, p.recovery_alpha_fast,
                     amcl.MotionParameters(p.alpha1, p.alpha2, p.alpha3, p.alpha4, 0.2),
@@ -226,20 +257,66 @@ def run_tracking_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...
     cells = np.where(g.data >= 65, 100, np.where((g.data >= 0) & (g.data <= 25), 0, -1))
     loc.set_map(amcl.create_occupancy_grid_from_list(cells.astype(int).tolist(), g.resolution, g.origin[0], g.origin[1]))
     loc.set_laser_pose(amcl.Vector3D(0.0, 0.0, 0.0))
-    loc.set_initial_pose(amcl.Vector3D(*map(float, ref[0])), amcl.create_diagonal_covariance(0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2))
-    est = np.zeros_like(ref)
+    return loc
+
+
+def _amcl_run(amcl: Any, loc: Any, data: dict[str, Any], odom: np.ndarray, first: int) -> tuple[np.ndarray, float]:
+    """Feed scans ``first``.. with ``odom`` to ``loc``: its estimates and its CPU time (the scan
+    conversion included, as the bindings need it)."""
+    est = np.zeros_like(odom)
     cpu = 0.0
-    for i in range(len(ref)):
-        r, a = data["ranges"][i], data["angles"][i]
+    for i in range(len(odom)):
+        r, a = data["ranges"][first + i], data["angles"][first + i]
         t0 = time.process_time()
         scan = amcl.create_laser_scan_from_list([[float(x), float(b)] for x, b in zip(r, a)], float(data["max_range"]))
         loc.update(scan, amcl.Vector3D(*map(float, odom[i])))
         m = loc.get_pose_mean()
         cpu += time.process_time() - t0
         est[i] = (m.x, m.y, m.theta)
+    return est, cpu
+
+
+def run_tracking_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int) -> dict[str, Any]:
+    """The same tracking trial with Nav2's AMCL: the same odometry (same seed) and map, our
+    particle budget and model parameters (``_amcl_localizer``)."""
+    from emos.actors.nav.localization import noisy_odometry
+
+    amcl = _amcl()
+    ref = data["reference"]
+    odom = noisy_odometry(ref, noise, seed)  # type: ignore[arg-type]
+    loc = _amcl_localizer(amcl, data, params)
+    loc.set_initial_pose(amcl.Vector3D(*map(float, ref[0])), amcl.create_diagonal_covariance(0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2))
+    est, cpu = _amcl_run(amcl, loc, data, odom, 0)
     pos, head = _errors(est, ref)
     return {"estimate": est, "odometry": odom, "pos": pos, "head": head, "cpu": cpu, "scans": len(ref),
             "converged": bool(pos[-1] < 0.2)}
+
+
+def run_global_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int,
+                    converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
+    """The same global trial (segment, odometry) with Nav2's AMCL. Its bindings have no global
+    localization call (Nav2's spreads the particles uniformly over the free cells); the nearest
+    they take is an initial pose with a covariance: the mean and covariance of the free cells'
+    centres and a heading variance of pi^2 / 3 (a uniform heading's), ``max_particles`` drawn
+    from it. For the CPU per scan on the same scans; its convergence is reported, not compared."""
+    from emos.actors.nav.localization import noisy_odometry
+
+    amcl = _amcl()
+    travel, s, end = _segment(data, seed, trial_m)
+    seg = data["reference"][s:end]
+    odom = noisy_odometry(seg, noise, seed)  # type: ignore[arg-type]
+    loc = _amcl_localizer(amcl, data, params)
+    g = data["grid"]
+    free = np.argwhere((g.data >= 0) & (g.data <= 25))[:, ::-1]  # (col, row)
+    xy = g.map_to_world((free + 0.5) * g.resolution)
+    mean, cov = xy.mean(axis=0), np.cov(xy.T)
+    c = amcl.create_diagonal_covariance(float(cov[0, 0]), float(cov[1, 1]), math.pi ** 2 / 3.0)
+    loc.set_initial_pose(amcl.Vector3D(float(mean[0]), float(mean[1]), 0.0), c)
+    est, cpu = _amcl_run(amcl, loc, data, odom, s)
+    pos, head = _errors(est, seg)
+    after = (travel[s:end] - travel[s]) >= converge_m
+    return {"estimate": est, "reference": seg, "pos": pos[after], "head": head[after], "cpu": cpu, "scans": len(seg),
+            "converged": bool(after.any() and pos[after][0] < 0.2), "kept": bool(after.any() and np.all(pos[after] < 0.2))}
 
 
 def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
@@ -326,7 +403,12 @@ def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, An
             "converged_rate": float(np.mean([t["converged"] for t in trials])),
             "cpu_s_per_scan": sum(t["cpu"] for t in trials) / max(scans, 1),
             "trials": len(trials), "scans": scans,
-            **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials), **_search_end(trials)}
+            **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials), **_search_end(trials),
+                "failures": {c: sum(t.get("cause") == c for t in trials) for c in FAILURE_CAUSES},
+                "failed_trials": [{"seed": t["seed"], "cause": t["cause"], "start_scan": t["start"],
+                                   "error_at_10m_m": t["error_at_10m_m"], "heading_error_at_10m_deg": t["heading_error_at_10m_deg"],
+                                   "search_ended_m": t["search_ended_m"]}
+                                  for t in trials if t.get("cause") is not None]}
                if global_ else {}),
             "position_max_m": float(pos.max()) if len(pos) else float("nan")}
 
@@ -335,13 +417,13 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     noise = _floats(args.noise, 4, "--noise")
     params = _params(args, noise)
     data = prepare(args.log, args.max_range, args.max_scans)
-    seeds = range(max(args.seeds, 1))
+    first = getattr(args, "seed_start", 0) or 0
+    seeds = range(first, first + max(args.seeds, 1))
     trials = [(run_global if args.global_ else run_tracking)(data, params, noise, seed) for seed in seeds]
     rows = [_row("emos", trials, args.global_)]
     if args.peer == "amcl":
-        if args.global_:
-            raise ValueError("--peer amcl: the amcl bindings have no global localization call; run it without --global")
-        rows.append(_row("amcl", [run_tracking_amcl(data, params, noise, seed) for seed in seeds], False))
+        peer = run_global_amcl if args.global_ else run_tracking_amcl
+        rows.append(_row("amcl", [peer(data, params, noise, seed) for seed in seeds], False))
     if args.plot:
         _plot(args.plot, data, trials[0], f"{data['log'].name}: {'global' if args.global_ else 'tracking'}, seed 0")
     return {"dataset": data["log"].name, "mode": "global" if args.global_ else "tracking", "noise_alphas": list(noise),

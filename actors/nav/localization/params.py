@@ -61,7 +61,11 @@ class AmclParams:
     likelihood peak (every valid beam) and each one's weight is multiplied by
     ``exp(hypothesis_beta * (its peak - the best peak))`` (log-likelihoods): a near-symmetric
     candidate that fits the scan worse loses weight at once, not over metres of tempered
-    scans. 0: off.
+    scans. 0: off. ``converged_updates``: the search ends only once the same hypothesis (moving
+    with the odometry) has held ``converged_weight`` on this many consecutive sensor updates
+    (each one a new view: the robot moved ``update_min_d`` or turned ``update_min_a``), so
+    that one view of a look-alike place does not end it (default 1: the first such update ends
+    it; 3 was measured on the tuning logs and did not help, see ``ParticleFilter._leader_holds``).
     """
 
     alpha1: float = _alpha()
@@ -96,6 +100,7 @@ class AmclParams:
     search_min_ess_fraction: float = field(default=0.5, validator=number(ge=0.0, le=1.0))
     hypothesis_beta: float = field(default=0.2, validator=number(ge=0.0, le=10.0))
     max_hypotheses: int = field(default=8, validator=number(ge=1, le=1000, integer=True))
+    converged_updates: int = field(default=1, validator=number(ge=1, le=1000, integer=True))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:
