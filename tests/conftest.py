@@ -55,9 +55,67 @@ def _ctrl_c_left_as_found(request: pytest.FixtureRequest):
         warnings.warn(f"{request.node.nodeid} left {' and '.join(changed)} behind; restored", stacklevel=1)
 
 
+class _NeedMarker(Exception):
+    pass
+
+
+def _marker_expression_can_hold(markexpr: str, unit: bool) -> bool:
+    """Whether ``-m markexpr`` can select a test whose ``unit`` marker is ``unit``, whatever its
+    other markers are: every assignment of the other markers the expression asks about is tried."""
+    from _pytest.mark.expression import Expression
+
+    expression = Expression.compile(markexpr)
+
+    def holds(known: dict[str, bool]) -> bool:
+        def matcher(name: str, **kwargs: object) -> bool:
+            if name == "unit" and not kwargs:
+                return unit
+            if name not in known:
+                raise _NeedMarker(name)
+            return known[name]
+        try:
+            return expression.evaluate(matcher)
+        except _NeedMarker as need:
+            return holds({**known, str(need): True}) or holds({**known, str(need): False})
+
+    return holds({})
+
+
+def pytest_ignore_collect(collection_path, config: pytest.Config):
+    """``-m unit`` (the inner loop) does not import the modules that cannot hold a unit test: a
+    module's tiers are its ``pytestmark`` (and markers on its tests), so a test module whose text
+    never says ``mark.unit`` has none, and importing it (torch, pybullet, a ROS 2 check) only
+    cost each xdist worker its time. Any other selection collects as before."""
+    markexpr = config.option.markexpr
+    if not markexpr or collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
+        return None
+    try:
+        if "mark.unit" in collection_path.read_text(encoding="utf-8"):
+            return None
+    except OSError:
+        return None  # collected as usual: pytest reports what is wrong with the file
+    return True if not _marker_expression_can_hold(markexpr, unit=False) else None
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """A test without a tier would be in no loop but the full run: refuse to collect it."""
+    """A test without a tier would be in no loop but the full run: refuse to collect it. Then the
+    long work first: modules with an xdist group (run serially on one worker), then those with
+    process, sim or browser tests, then the unit modules, each module kept whole and in its place
+    among its kind. pytest-xdist hands out work in this order (after its groups, largest first),
+    so the last minutes of ``-n 2`` are short unit tests on both workers, not one worker finishing
+    a 60 s navigation run while the other waits."""
     untiered = sorted({item.nodeid.split("::")[0] for item in items if not any(item.get_closest_marker(t) for t in TIERS)})
     if untiered:
         raise pytest.UsageError(f"test modules without a tier marker ({', '.join(TIERS)}): {', '.join(untiered)}; "
                                 "set pytestmark = pytest.mark.<tier> in each (see tests/conftest.py)")
+
+    def rank(item: pytest.Item) -> int:
+        if item.get_closest_marker("xdist_group"):
+            return 0
+        return 1 if any(item.get_closest_marker(t) for t in ("process", "sim", "browser")) else 2
+
+    module_rank: dict[str, int] = {}
+    for item in items:
+        module = item.nodeid.split("::")[0]
+        module_rank[module] = min(module_rank.get(module, 2), rank(item))
+    items.sort(key=lambda item: module_rank[item.nodeid.split("::")[0]])  # stable: the order within a rank stays

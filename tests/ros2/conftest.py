@@ -165,9 +165,9 @@ class Peer:
         if self.proc.poll() is None and sig != signal.SIGKILL:
             # A peer signalled while rclpy starts (before its try/finally) dies with its Fast DDS
             # participant undestroyed, leaving /dev/shm/fastrtps_* that the tests' leftover checks
-            # then see: let it reach "ready" (or exit) first.
+            # then see: let it reach "ready" (or exit) first. (A robot peer says "ready: domain ...".)
             try:
-                self.wait_for(lambda line: line == "ready", what="ready before being stopped")
+                self.wait_for(lambda line: line == "ready" or line.startswith("ready:"), what="ready before being stopped")
             except AssertionError:
                 pass  # it exited, or never got ready: stop it as it is
         if self.proc.poll() is None:
