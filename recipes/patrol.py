@@ -18,7 +18,9 @@ spin; and it gives way to people (``GiveWayConfig``: on a collision course with 
 scan tracker sees, it takes the robot over, above the Controller, and stands short, backs out of
 the doorway or pulls aside until the way is clear; ``EMOS_PATROL_GIVE_WAY=0`` turns it off), while
 the DriveManager's swept check counts where a tracked person will walk as an obstacle
-(``mover_prediction_time``). ``EMOS_PATROL_PEDESTRIAN=yielding`` makes the person stop for a
+(``mover_prediction_time``). The Behaviors' passage guard (``PassageGuardConfig``) remembers where
+the person walked and holds the robot before that stretch of its path (the middle doorway and the
+way to it) while the person would meet it there (``EMOS_PATROL_PASSAGE_GUARD=0`` turns it off). ``EMOS_PATROL_PEDESTRIAN=yielding`` makes the person stop for a
 robot in its way (and turn back after a while) instead of walking through it. The ``Patrol`` component below sends the ``follow_waypoints`` goal, prints its feedback,
 and writes ``summary.json`` (laps, missed waypoints with reasons, pictures, recoveries used,
 collisions; every contact with a moving obstacle, classified by who closed the gap) to ``$EMOS_PATROL_OUT`` (default ``./patrol_out``). Exit code 0 when every lap was
@@ -35,8 +37,10 @@ import numpy as np
 from emos import Action, BaseComponent, Launcher, Topic
 from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components.behaviors import BehaviorsConfig
+from emos.actors.nav.components.keys import TopicsKeys
 from emos.actors.nav.components.waypoints import WaypointFollowerConfig
 from emos.actors.nav.missions import PhotoAtWaypoint
+from emos.actors.nav.missions.passages import PassageGuardConfig
 from emos.actors.nav.recovery import GiveWayConfig
 from emos.actors.nav.stacks import COMMAND_INPUTS, point_navigation_stack
 from emos.actors.sim import Simulator, SimulatorConfig
@@ -63,6 +67,9 @@ if PEDESTRIAN not in ("blind", "yielding"):
     sys.exit(f"patrol: EMOS_PATROL_PEDESTRIAN must be 'blind' or 'yielding', got {PEDESTRIAN!r}")
 # 1 (the default): the Behaviors give way to the person, the DriveManager predicts its walk; 0: neither.
 GIVE_WAY = os.environ.get("EMOS_PATROL_GIVE_WAY", "1") == "1"
+# 1 (the default): the Behaviors hold the robot before the stretch of its path where the person walks while the
+# person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
+PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 
 my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
@@ -83,7 +90,9 @@ stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", sc
                                command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
                                movers=MOVERS)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
-                                                   give_way=GiveWayConfig(enabled=GIVE_WAY, speed=0.4)))
+                                                   give_way=GiveWayConfig(enabled=GIVE_WAY, speed=0.4),
+                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD)))
+behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:
     stack.driver.config.mover_prediction_time = MOVER_PREDICTION_TIME
 # Recovery ladder of the Controller (Nav2's recovery subtree): clear, back up, spin.
@@ -197,7 +206,7 @@ class Patrol(BaseComponent):
         summary["collisions"] = max(len(monitor.episodes), int(summary["sim_collided"]))
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
-        summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "movers_controller": MOVERS}
+        summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "passage_guard": PASSAGE_GUARD, "movers_controller": MOVERS}
         pictures = os.path.join(OUT_DIR, "pictures")
         summary["pictures"] = sorted(os.listdir(pictures)) if os.path.isdir(pictures) else []
         summary["time_s"] = round(time.monotonic() - t0, 1)

@@ -219,6 +219,7 @@ class GiveWayMove:
 
 COMFORT = 0.3  # m beyond the personal space: a larger predicted gap is no better (the least effort wins)
 KEEP_BONUS = 0.08  # m of predicted gap the move of the last step is given over the others (no dithering)
+BAND_WEIGHT = 0.5  # m of predicted gap a move loses per m its end lies inside the movers' band
 
 
 def _candidates(speed: float, max_omega: float, n: int, dt: float) -> tuple[np.ndarray, list[str]]:
@@ -246,7 +247,8 @@ def _candidates(speed: float, max_omega: float, n: int, dt: float) -> tuple[np.n
 
 def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.ndarray, velocities: np.ndarray,
                   radii: np.ndarray, config: GiveWayConfig, *, max_omega: float = 0.5, dt: float = 0.1,
-                  margin: float = 0.03, previous: int | None = None) -> GiveWayMove:
+                  margin: float = 0.03, previous: int | None = None, band: np.ndarray | None = None,
+                  band_clearance: float = 0.55) -> GiveWayMove:
     """The best yield move now, in the robot frame: ``obstacles`` (N, 2) static points (the
     movers' own points left out), the movers' ``centres`` (M, 2) and ``velocities`` (M, 2) in
     the robot frame, ``radii`` (M,). The moves of :func:`_candidates` are rolled out over
@@ -256,7 +258,9 @@ def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.
     prediction wins, gaps beyond ``personal_space`` + ``COMFORT`` counting alike (then the
     least effort: standing, if it keeps that far). ``previous`` (the ``index`` of the move of
     the last step) keeps that move while it is nearly as good (``KEEP_BONUS`` m), so the robot
-    does not dither between moves."""
+    does not dither between moves. ``band`` (K, 2): where movers walked (robot frame, e.g. the
+    passage guard's ``MoverMemory.band_cells``): a move that ends nearer than ``band_clearance``
+    to it is worse by ``BAND_WEIGHT`` x how far in (wait off the people's way, not in it)."""
     dt = _check_number("give_way", "dt", dt)
     w = _check_number("give_way", "max_omega", max_omega)
     pts = _points(obstacles)
@@ -301,6 +305,11 @@ def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.
     effort = np.abs(v).mean(axis=1) / config.speed + 0.5 * np.abs(om).mean(axis=1) / w
     # Gaps beyond a comfortable distance are all as good: then the least effort (standing).
     score = np.where(forbidden, -np.inf, np.minimum(least, config.personal_space + COMFORT) - 0.02 * effort)
+    if band is not None and len(band):
+        ends = np.c_[px[:, -1], py[:, -1]]
+        b = np.asarray(band, dtype=float).reshape(-1, 2)
+        gap_to_band = np.hypot(ends[:, None, 0] - b[None, :, 0], ends[:, None, 1] - b[None, :, 1]).min(axis=1)
+        score = score - BAND_WEIGHT * np.maximum(band_clearance - gap_to_band, 0.0)
     if previous is not None and 0 <= previous < len(score):
         score[previous] += KEEP_BONUS
     best = int(np.argmax(score))

@@ -187,3 +187,15 @@ def test_the_blind_person_walks_through_a_standing_robot_the_yielding_one_stops_
     least, person = _walk(True, 12.0)
     assert least > PERSON + 0.1  # stopped short of the robot (its radius plus the clearance)
     assert person.stood > 3.0 and person.turned_back == 1  # waited, then gave up and went back
+
+
+def test_a_yield_move_ends_off_the_band_where_people_walk():
+    """Standing would do for a person crossing far ahead, but the robot stands in the band where
+    people walked (the passage guard's memory, e.g. a person's way through a doorway): with the
+    band given, the move ends out of it; without, it stands."""
+    band = np.c_[np.linspace(-3.0, 3.0, 121), np.zeros(121)]  # people walked along the robot's x axis
+    cfg = GiveWayConfig(enabled=True)
+    stand = plan_give_way(ROBOT, None, [[3.0, 2.0]], [[0.0, -0.6]], [PERSON], cfg, max_omega=1.0)
+    assert stand.name == "stand"
+    off = plan_give_way(ROBOT, None, [[3.0, 2.0]], [[0.0, -0.6]], [PERSON], cfg, max_omega=1.0, band=band, band_clearance=0.55)
+    assert off.name != "stand" and np.any(off.command), off

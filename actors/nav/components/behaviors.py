@@ -23,6 +23,14 @@ robot over on its command input, above the Controller's: it stands short of the 
 out of a passage / pulls aside when the person heads at it (``recovery.plan_give_way``, planned
 again every step), until no mover has been on a collision course for ``clear_time`` s. Then it
 stops publishing and the Controller (and the mission) go on where they were.
+
+Passage guard (``BehaviorsConfig(passage_guard=PassageGuardConfig(enabled=True))`` and the
+Planner's ``plan`` wired as an input): the component remembers where the tracked movers walked
+(``missions.passages.MoverMemory``: the band) and holds the robot (``hold_passage``, on the
+same command input) *before* the stretch of its path that lies in the band while it could not
+drive through it and out before a mover arrives (``missions.passages.check_passage``: the
+movers predicted at constant velocity and as movers walked on from there before). A person
+walking a doorway cannot be given way to inside it; the robot waits outside their way instead.
 """
 from __future__ import annotations
 
@@ -44,14 +52,16 @@ from emos.msgs.srv import TriggerRequest, TriggerResponse
 from .. import recovery as R
 from ..controllers.movers import Approach, MoverWatch, approaches, near_movers
 from ..controllers.sensors import obstacle_points
+from ..missions.passages import MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
 from .base import NavComponentConfig, rate_field
-from .convert import BadInput, grid_points_in_robot_frame, scan_of, velocity_of
+from .convert import BadInput, grid_points_in_robot_frame, path_of, scan_of, velocity_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
 from .motion_actions import MotionActionServer
 
 __all__ = ["Behaviors", "BehaviorsConfig"]
 
 MOVER_PAD = 0.15  # m: scan and grid points this near a tracked mover's circle are the mover (not static)
+HOLD_HYSTERESIS = 0.5  # m: a hold goes on while the band is this much farther than ``approach``
 
 
 def _give_way_config(value: Any) -> R.GiveWayConfig:
@@ -62,13 +72,23 @@ def _give_way_config(value: Any) -> R.GiveWayConfig:
     raise TypeError(f"BehaviorsConfig.give_way: expected a GiveWayConfig or a dict of its fields, got {type(value).__name__}")
 
 
+def _passage_guard_config(value: Any) -> PassageGuardConfig:
+    if isinstance(value, PassageGuardConfig):
+        return value
+    if isinstance(value, Mapping):
+        return PassageGuardConfig(**value)
+    raise TypeError(f"BehaviorsConfig.passage_guard: expected a PassageGuardConfig or a dict of its fields, got {type(value).__name__}")
+
+
 @define(kw_only=True)
 class BehaviorsConfig(NavComponentConfig):
     """Nav2's behavior server parameters where they are the same: ``max_rotational_vel`` (rad/s
     of a spin), ``safety_margin`` (m the footprint keeps from obstacles over a move),
     ``sensor_timeout`` (s: an older scan refuses every move), ``local_mapper`` (the component
     whose grid ``clear_costmaps`` clears). ``give_way``: when and how to give way to a moving
-    obstacle (``recovery.GiveWayConfig``; off unless ``enabled``)."""
+    obstacle (``recovery.GiveWayConfig``; off unless ``enabled``). ``passage_guard``: when to wait
+    before the movers' way (``missions.passages.PassageGuardConfig``; off unless ``enabled``,
+    needs the ``plan`` input)."""
 
     loop_rate: float = rate_field(10.0)
     max_rotational_vel: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=10.0))
@@ -78,6 +98,7 @@ class BehaviorsConfig(NavComponentConfig):
     xy_tolerance: float = field(default=0.01, validator=in_range(min_value=1e-4, max_value=1.0))
     yaw_tolerance: float = field(default=math.radians(1.0), validator=in_range(min_value=1e-4, max_value=1.0))
     give_way: R.GiveWayConfig = field(factory=R.GiveWayConfig, converter=_give_way_config)
+    passage_guard: PassageGuardConfig = field(factory=PassageGuardConfig, converter=_passage_guard_config)
 
 
 @attrs.define
@@ -99,7 +120,8 @@ class _Running:
 
 class Behaviors(MotionActionServer):
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
-        **MotionActionServer.allowed_inputs, "local_map": AllowedTopic(types=("OccupancyGrid",), default=None)}
+        **MotionActionServer.allowed_inputs, "local_map": AllowedTopic(types=("OccupancyGrid",), default=None),
+        "plan": AllowedTopic(types=("Path",), default=None)}
     ACTIONS = tuple((name, goal, BehaviorFeedback, BehaviorResult, "_serve") for name, goal in
                     (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal)))
     config: BehaviorsConfig
@@ -112,8 +134,13 @@ class Behaviors(MotionActionServer):
         self._lock = threading.Lock()
         self._running: _Running | None = None
         self._last: BehaviorResult | None = None
-        self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0, "give_way": 0, "give_way_s": 0}
+        self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0, "give_way": 0, "give_way_s": 0,
+                        "passage_hold": 0, "passage_hold_s": 0, "passage_hold_given_up": 0}
         self._give_way_time = 0.0  # s spent giving way (node clock)
+        self._hold_time = 0.0  # s held before a passage (node clock)
+        self._memory = MoverMemory(self.config.passage_guard.memory)
+        self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
+        self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
         self._movers = MoverWatch()
         self._watched_scan: Any = None  # the scan message last fed to the mover tracker
         if self.config.give_way.enabled:  # its first plan pays imports (~1 s here): not when a person is coming
@@ -176,7 +203,7 @@ class Behaviors(MotionActionServer):
             return self._refuse(name, f"{name} refused: no pose on {self.topic_name('location')}")
         run = _Running(name, float(target), float(speed), pose, now, now + float(time_allowance),
                        last_yaw=float(pose[2]) if pose is not None else 0.0)
-        if name == "give_way":  # standing is always possible: each step picks the move (_step_give_way)
+        if name in ("give_way", "hold_passage"):  # standing is always possible: each step picks the move
             run.last_threat = now
         else:
             try:
@@ -186,8 +213,8 @@ class Behaviors(MotionActionServer):
             if not plan.feasible:
                 return self._refuse(name, plan.reason)
         self._counts["started"] += 1
-        if name == "give_way":
-            self._counts["give_way"] += 1
+        if name in ("give_way", "hold_passage"):
+            self._counts["give_way" if name == "give_way" else "passage_hold"] += 1
         with self._lock:
             if self._running is not None and self._running.result is None:
                 self._running.result = BehaviorResult(success=False, message=f"{self._running.name} preempted by {name}")
@@ -210,6 +237,9 @@ class Behaviors(MotionActionServer):
         if run.name == "give_way":
             self._give_way_time += clock.now() - run.started
             self._counts["give_way_s"] = int(round(self._give_way_time))
+        if run.name == "hold_passage":
+            self._hold_time += clock.now() - run.started
+            self._counts["passage_hold_s"] = int(round(self._hold_time))
         if success:
             self.health_status.set_healthy()
             self.get_logger().info("[%s] %s", self.component_name, message)
@@ -233,6 +263,16 @@ class Behaviors(MotionActionServer):
         if run is not None and run.name == "give_way":
             self._step_give_way(run)
             return
+        if self.config.passage_guard.enabled and (run is None or run.name == "hold_passage"):
+            verdict = self._passage_verdict(run)
+            if run is None and verdict is not None and verdict.hold and clock.now() >= self._no_hold_until:
+                guard = self.config.passage_guard
+                if self._begin("hold_passage", guard.max_hold, 0.0, guard.max_hold, why=verdict.reason)[0]:
+                    with self._lock:
+                        run = self._running
+            if run is not None and run.name == "hold_passage":
+                self._step_hold(run, verdict)
+                return
         if run is None:
             if self._last is None or self._last.success:
                 self.health_status.set_healthy()
@@ -284,10 +324,18 @@ class Behaviors(MotionActionServer):
             return  # reported where the scan is used for a move
         self._watched_scan = msg
         stamp = msg.header.stamp.to_sec() if msg.header.stamp is not None else clock.now()
+        last, restarts = self._movers.stamp, self._movers.restarts
         odom = self.latest("location")
         odom_stamp = getattr(getattr(odom, "header", None), "stamp", None)  # a Pose has none: no rewind then
         self._movers.update(stamp, obstacle_points(scan), pose, float(scan.angle_increment or 0.0),
                             pose_stamp=odom_stamp.to_sec() if odom_stamp is not None else None, twist=velocity_of(odom))
+        if self._movers.restarts != restarts:  # the clock went back (a restarted simulator)
+            self.get_logger().warning("[%s] %s: scan stamp %.2f s is %.2f s before the last one: the clock went back, "
+                                      "mover tracking starts again", self.component_name, self.topic_name("sensor_data"),
+                                      stamp, (last or 0.0) - stamp)
+        if self.config.passage_guard.enabled:  # the band: where the movers walked, on the node clock the guard asks at
+            centres, velocities, _ = self._movers.movers()
+            self._memory.observe(clock.now(), centres, velocities)
 
     def _approaches(self, pose: np.ndarray) -> list[Approach]:
         """Every tracked mover within ``detection_range``, relative to the robot moving at its
@@ -316,6 +364,53 @@ class Behaviors(MotionActionServer):
                 return (f"mover at ({x:.2f}, {y:.2f}) {a.gap_now:.2f} m away, closing at {a.closing:.2f} m/s"
                         + (f", predicted within {max(a.gap_min, 0.0):.2f} m in {a.time_to_min:.1f} s" if coming else ""))
         return None
+
+    # -- waiting before the movers' way ------------------------------------------------------------------
+    def _passage_verdict(self, run: _Running | None = None) -> PassageVerdict | None:
+        """The passage guard's verdict now (None: no plan or pose to judge by). While a hold
+        runs, judged from where it began: a robot that stopped a little into the band (the
+        command's latency) is still before the stretch, not in it."""
+        msg, pose = self.latest("plan"), self._pose()
+        guard = self.config.passage_guard
+        if run is not None and run.start_pose is not None:
+            # Held from where the hold began, and on while the band is a little farther than
+            # ``approach`` (a new plan moves its start by centimetres: no stop-and-go).
+            pose = run.start_pose
+            guard = attrs.evolve(guard, approach=guard.approach + HOLD_HYSTERESIS)
+        if msg is None or pose is None:
+            return None
+        try:
+            path = path_of(msg)
+        except BadInput:
+            return None
+        if len(path) < 2:
+            return None
+        centres, velocities, radii = self._movers.movers()
+        verdict = check_passage(path, pose[:2], self._memory, clock.now(), centres, velocities, radii,
+                                self.config.robot.radius, guard)
+        at_edge = verdict.start is not None and verdict.start <= guard.approach
+        if at_edge and not verdict.hold and not self._entering:  # once per way in: why it went (the patrol's logs)
+            seen = ", ".join(f"({c[0]:.2f}, {c[1]:.2f}) at ({v[0]:.2f}, {v[1]:.2f}) m/s" for c, v in zip(centres, velocities))
+            self.get_logger().info("[%s] passage guard: into the band stretch %.2f-%.2f m ahead: %s; movers in view: %s",
+                                   self.component_name, verdict.start, verdict.end, verdict.reason, seen or "none")
+        self._entering = at_edge and not verdict.hold
+        return verdict
+
+    def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
+        """One step of holding before the band stretch: done when the guard no longer says hold;
+        gives up (and lets the robot go through) after ``max_hold`` s."""
+        now = clock.now()
+        run.done_amount = now - run.started
+        if verdict is None or not verdict.hold:
+            self._finish(run, True, f"hold_passage done after {run.done_amount:.1f} s: "
+                                    f"{verdict.reason if verdict is not None else 'no plan or pose to judge by'}")
+            return
+        if now > run.deadline:
+            self._no_hold_until = now + 3.0 * self.config.passage_guard.start_delay + 10.0
+            self._counts["passage_hold_given_up"] += 1
+            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason}")
+            return
+        self._stop_robot()
 
     def _step_give_way(self, run: _Running) -> None:
         """One step of giving way: done when no mover has been on a collision course for
@@ -349,8 +444,14 @@ class Behaviors(MotionActionServer):
         local = np.c_[c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]
         local_v = np.c_[c * velocities[:, 0] + s * velocities[:, 1], -s * velocities[:, 0] + c * velocities[:, 1]]
         static = pts[~near_movers(pts, local, radii, MOVER_PAD)] if len(pts) else pts
+        band = None
+        if self.config.passage_guard.enabled:  # where the movers walk: a yield move should not end in it
+            cells = self._memory.band_cells() - pose[:2]
+            cells = cells[np.hypot(cells[:, 0], cells[:, 1]) < 3.0]
+            band = np.c_[c * cells[:, 0] + s * cells[:, 1], -s * cells[:, 0] + c * cells[:, 1]]
         move = R.plan_give_way(self.config.robot, static, local, local_v, radii, cfg, max_omega=self.config.max_rotational_vel,
-                               dt=1.0 / self.config.loop_rate, margin=self.config.safety_margin, previous=run.move_index)
+                               dt=1.0 / self.config.loop_rate, margin=self.config.safety_margin, previous=run.move_index,
+                               band=band, band_clearance=self.config.passage_guard.band_clearance)
         if move.name != run.move:
             self.get_logger().info("[%s] give_way: %s (least predicted gap %.2f m)%s", self.component_name, move.name, move.gap,
                                    f": {threat}" if threat else "")
@@ -399,7 +500,9 @@ class Behaviors(MotionActionServer):
 
     def stats(self) -> dict[str, int]:
         """How many behaviors started, succeeded, were refused or stopped (a mission's report);
-        ``give_way``: how many of the starts gave way to a mover, ``give_way_s``: for how long (s)."""
+        ``give_way``: how many of the starts gave way to a mover, ``give_way_s``: for how long (s);
+        ``passage_hold``: how many held the robot before the movers' way, ``passage_hold_s``: for
+        how long (s), ``passage_hold_given_up``: how many of those ended at ``max_hold``."""
         return dict(self._counts)
 
     @property

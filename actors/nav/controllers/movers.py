@@ -168,6 +168,9 @@ def _to_robot(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.c_[c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]
 
 
+CLOCK_BACK_S = 1.0  # a scan this much older than the last one means the clock went back
+
+
 class MoverWatch:
     """The scan tracker (``mapping.tracking.ScanTracker``) fed one scan at a time in the robot
     frame with the pose it was taken at: the moving-obstacle view that the DriveManager's swept
@@ -178,6 +181,7 @@ class MoverWatch:
 
         self.tracker = ScanTracker(tracker)
         self.stamp: float | None = None
+        self.restarts = 0  # times the clock went back and tracking started again
 
     def update(self, stamp: float, points: np.ndarray, pose: np.ndarray, angle_increment: float = 0.0, *,
                pose_stamp: float | None = None, twist: np.ndarray | None = None) -> None:
@@ -186,7 +190,13 @@ class MoverWatch:
         with the body ``twist`` (vx, vy, omega) it is carried back to the scan's time: a pose
         a tenth of a second newer than the scan, on a robot that turns, shifts a person 2 m
         away by centimetres from scan to scan, and such jitter keeps the tracker from calling
-        the track moving. A scan older than the last one is ignored."""
+        the track moving. A scan older than the last one is ignored, unless it is older by more
+        than ``CLOCK_BACK_S``: then the clock went back (a restarted simulator starts at 0), and
+        tracking starts again rather than ignoring every scan until the clock catches up."""
+        if self.stamp is not None and stamp < self.stamp - CLOCK_BACK_S:
+            self.tracker = type(self.tracker)(self.tracker.cfg)
+            self.stamp = None
+            self.restarts += 1
         if self.stamp is not None and stamp <= self.stamp:
             return
         pose = np.asarray(pose, dtype=float)

@@ -1,0 +1,203 @@
+"""The passage guard (actors/nav/missions/passages.py): the band of where movers walked, the
+prediction from earlier walks, and when the robot is held before the band stretch of its path.
+
+The scene is the demo house's person (``HOUSE_PERSON_PATH``, 0.6 m/s back and forth: up x = 4.2,
+then along y = 3.25 through the middle doorway to x = 7.0) seen for a minute, and the robot's
+two ways through that doorway on the patrol."""
+import math
+
+import numpy as np
+import pytest
+
+from emos.actors.nav.missions.passages import MoverMemory, PassageGuardConfig, check_passage, path_ahead
+
+pytestmark = pytest.mark.unit
+
+PATH = np.array([(4.2, 0.6), (4.2, 3.25), (7.0, 3.25)])
+SEG = np.hypot(*np.diff(PATH, axis=0).T)
+CUM = np.r_[0.0, np.cumsum(SEG)]
+LENGTH = float(CUM[-1])
+SPEED = 0.6
+PERIOD = 2 * LENGTH / SPEED
+ROBOT_RADIUS, PERSON = 0.2, 0.22
+# The robot's ways through the middle doorway (x = 5, y 2.76 to 3.74) on the patrol.
+LEFT_TO_RIGHT = np.array([(3.0, 2.5), (3.55, 2.85), (4.5, 3.2), (5.0, 3.25), (5.5, 3.1), (6.2, 2.8), (7.0, 2.5)])
+RIGHT_TO_LEFT = np.array([(8.0, 4.6), (8.0, 4.0), (7.5, 3.7), (6.0, 3.3), (5.0, 3.25), (4.0, 3.4), (3.0, 3.8), (2.5, 4.2)])
+
+
+def person(t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The blind person's centre and velocity at ``t`` s (pingpong along PATH)."""
+    s, sign = (t * SPEED) % (2 * LENGTH), 1.0
+    if s > LENGTH:
+        s, sign = 2 * LENGTH - s, -1.0
+    k = min(int(np.searchsorted(CUM, s, side="right")) - 1, len(SEG) - 1)
+    u = (PATH[k + 1] - PATH[k]) / SEG[k]
+    return PATH[k] + u * (s - CUM[k]), u * SPEED * sign
+
+
+def watched(seconds: float = 60.0) -> MoverMemory:
+    memory = MoverMemory()
+    for t in np.arange(0.0, seconds, 0.1):
+        c, v = person(float(t))
+        memory.observe(float(t), c[None], v[None])
+    return memory
+
+
+def hold_point(memory: MoverMemory, path: np.ndarray, config: PassageGuardConfig) -> np.ndarray:
+    """Where a robot driving ``path`` is first held: just before the band."""
+    pts = path_ahead(path, path[0], 50.0)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(pts, axis=0).T))]
+    fine = np.arange(0.0, s[-1], 0.05)
+    xy = np.c_[np.interp(fine, s, pts[:, 0]), np.interp(fine, s, pts[:, 1])]
+    first = int(np.argmax(memory.band_gap(xy) < config.band_clearance))
+    return xy[max(first - 4, 0)]
+
+
+def verdicts(memory: MoverMemory, path: np.ndarray, config: PassageGuardConfig, t0: float = 60.0) -> list[tuple[float, bool]]:
+    robot = hold_point(memory, path, config)
+    out = []
+    for t in np.arange(t0, t0 + PERIOD, 0.25):
+        c, v = person(float(t))
+        out.append((float(t), check_passage(path, robot, memory, float(t), c[None], v[None], np.array([PERSON]),
+                                            ROBOT_RADIUS, config).hold))
+    return out
+
+
+def drive_through(path: np.ndarray, start_xy: np.ndarray, t_start: float, config: PassageGuardConfig) -> float:
+    """Least gap (m) between the robot driving ``path`` from ``start_xy`` (after start_delay s, at
+    config.speed) and the walking person."""
+    pts = path_ahead(path, start_xy, 50.0)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(pts, axis=0).T))]
+    least = math.inf
+    for tau in np.arange(0.0, config.start_delay + s[-1] / config.speed, 0.1):
+        along = min(max(tau - config.start_delay, 0.0) * config.speed, s[-1])
+        r = np.array([np.interp(along, s, pts[:, 0]), np.interp(along, s, pts[:, 1])])
+        least = min(least, float(np.hypot(*(r - person(t_start + tau)[0]))) - ROBOT_RADIUS - PERSON)
+    return least
+
+
+def test_band_is_where_the_person_walked():
+    memory = watched()
+    gaps = memory.band_gap(np.array([(4.2, 2.0), (6.0, 3.25), (2.5, 2.0), (7.0, 2.5), (8.0, 5.5)]))
+    assert gaps[0] < 0.05 and gaps[1] < 0.05
+    assert gaps[2] > 1.5 and gaps[3] > 0.7 and gaps[4] > 2.0  # the patrol's rooms are off the band
+    assert np.isinf(MoverMemory().band_gap(np.zeros((1, 2))))[0]
+
+
+def test_prediction_from_an_earlier_walk_turns_where_the_person_turned():
+    """Walking +x towards the end of its way at x = 7.0: at constant velocity it walks on into
+    the room; as it walked before, it turns and comes back through the doorway."""
+    memory = watched()
+    t = 60.0 + (8.0 - (60.0 % PERIOD)) % PERIOD  # 8 s into a lap: on y = 3.25, walking +x
+    c, v = person(t)
+    assert v[0] > 0.5
+    times = np.array([0.0, 3.0, 5.0])
+    preds = memory.predict(t, c, v, times)
+    assert len(preds) >= 2
+    constant, learned = preds[:2]  # then the same walk a little earlier and later
+    assert constant[-1, 0] > 9.0
+    truth = np.array([person(t + dt)[0] for dt in times])
+    assert np.allclose(learned, truth, atol=0.15)
+    assert memory.predict(t, c, np.zeros(2), times)[0].shape == (3, 2)  # a standing track: constant only
+
+
+def test_memory_forgets_after_its_time():
+    memory = MoverMemory(memory=10.0)
+    for t in np.arange(0.0, 30.0, 0.1):
+        c, v = person(float(t))
+        memory.observe(float(t), c[None], v[None])
+    assert memory.samples()[:, 0].min() >= 30.0 - 10.0 - 0.2
+    memory.observe(31.0, np.zeros((1, 2)), np.zeros((1, 2)))  # a standing track is not a walk
+    assert memory.samples()[-1, 0] < 31.0
+
+
+@pytest.mark.parametrize("path", [LEFT_TO_RIGHT, RIGHT_TO_LEFT], ids=["left_to_right", "right_to_left"])
+def test_held_while_the_person_would_meet_the_robot_and_let_through_when_not(path):
+    """Over one period of the person's walk the robot at the band's edge is held at some times
+    and let through at others; every time it is let through, driving through at the guard's
+    speed keeps it clear of the person; at every time it is held, it would not have been."""
+    config = PassageGuardConfig(enabled=True)
+    memory = watched()
+    start = hold_point(memory, path, config)
+    out = verdicts(memory, path, config)
+    held = [t for t, hold in out if hold]
+    free = [t for t, hold in out if not hold]
+    assert held and free
+    for t in free:
+        assert drive_through(path, start, t, config) > 0.0, f"let through at {t:.2f} s into a contact"
+    # Most held times are real: the robot would have met the person (margins make a few cautious).
+    met = sum(drive_through(path, start, t, config) <= 0.05 for t in held)
+    assert met >= 0.6 * len(held)
+
+
+def test_no_hold_without_band_or_far_from_it_or_inside_it():
+    config = PassageGuardConfig(enabled=True)
+    c, v = person(65.0)
+    assert not check_passage(LEFT_TO_RIGHT, LEFT_TO_RIGHT[0], MoverMemory(), 65.0, c[None], v[None], np.array([PERSON]),
+                             ROBOT_RADIUS, config).hold
+    memory = watched()
+    far = check_passage(LEFT_TO_RIGHT, LEFT_TO_RIGHT[0], memory, 65.0, c[None], v[None], np.array([PERSON]), ROBOT_RADIUS, config)
+    assert not far.hold and "ahead" in far.reason
+    inside = check_passage(LEFT_TO_RIGHT[3:], LEFT_TO_RIGHT[3], memory, 65.0, c[None], v[None], np.array([PERSON]),
+                           ROBOT_RADIUS, config)
+    assert not inside.hold and "already in the band" in inside.reason
+
+
+def test_config_refuses_bad_values():
+    with pytest.raises((ValueError, TypeError), match="speed"):
+        PassageGuardConfig(speed=0.0)
+    with pytest.raises((ValueError, TypeError), match="band_clearance"):
+        PassageGuardConfig(band_clearance=-1.0)
+
+
+def test_a_person_out_of_view_is_predicted_from_earlier_walks():
+    """The person walked out of the scan's view (behind the middle wall, down x = 4.2) 2 s ago:
+    a robot at the band's edge on the right is held while the person would come back round the
+    corner into the doorway; with nobody seen for longer than ``out_of_view``, it goes."""
+    config = PassageGuardConfig(enabled=True)
+    memory = watched()
+    start = hold_point(memory, RIGHT_TO_LEFT, config)
+    t_down = 60.0 + (14.5 - (60.0 % PERIOD)) % PERIOD  # walking down x = 4.2 towards the bottom
+    c, v = person(t_down)
+    assert v[1] < -0.5
+    seen = MoverMemory()
+    for t in np.arange(t_down - 50.0, t_down, 0.1):
+        ci, vi = person(float(t))
+        seen.observe(float(t), ci[None], vi[None])
+    none = np.zeros((0, 2))
+    verdict = check_passage(RIGHT_TO_LEFT, start, seen, t_down + 2.0, none, none, np.zeros(0), ROBOT_RADIUS, config)
+    assert verdict.hold and "out of view" in verdict.reason
+    later = check_passage(RIGHT_TO_LEFT, start, seen, t_down + config.out_of_view + 1.0, none, none, np.zeros(0),
+                          ROBOT_RADIUS, config)
+    assert not later.hold and later.reason == "no mover"
+
+
+def test_the_band_survives_a_clock_going_back():
+    """A restarted simulator starts its clock at 0 again: the memory keeps the band and its
+    walks (moved to end just before the new time) and goes on recording."""
+    memory = watched(60.0)
+    before = memory.band_cells().copy()
+    c, v = person(60.0)
+    memory.observe(2.0, c[None], v[None])
+    rows = memory.samples()
+    assert rows[-1, 0] == 2.0 and rows[-2, 0] < 2.0 and len(rows) > 400
+    assert len(memory.band_cells()) >= len(before)
+    times = np.array([0.0, 3.0])
+    assert len(memory.predict(2.0, c, v, times)) >= 2  # earlier walks still predict
+
+
+def test_mover_tracking_starts_again_when_the_clock_goes_back():
+    """A restarted simulator's clock starts at 0: the tracker must not ignore every scan until the
+    clock catches up with the old run's last stamp."""
+    from emos.actors.nav.controllers.movers import MoverWatch
+
+    watch = MoverWatch()
+    pose = np.zeros(3)
+    person = np.array([[2.0, 0.0], [2.05, 0.02], [2.0, 0.05]])
+    for k in range(5):
+        watch.update(100.0 + 0.1 * k, person, pose)
+    assert watch.stamp == pytest.approx(100.4) and watch.restarts == 0
+    watch.update(100.2, person, pose)  # a little older: an out-of-order scan, ignored
+    assert watch.stamp == pytest.approx(100.4) and watch.restarts == 0
+    watch.update(0.5, person, pose)  # the clock went back
+    assert watch.stamp == pytest.approx(0.5) and watch.restarts == 1
