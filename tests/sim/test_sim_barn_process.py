@@ -100,6 +100,82 @@ def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
     assert ((pixels == (220, 30, 30)).all(axis=1)).any()  # the robot drawn as collided
 
 
+def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp_path):
+    """``stop_in_background``: the result is returned once known and the system stops in a
+    thread of the run's ``TrialSystems`` (the next trial starts meanwhile). After
+    ``wait_stopped`` the system has exited, its folder is gone, its shared memory too, and the
+    log of a failed trial holds the whole stop (copied after it)."""
+    import glob
+    import tempfile
+
+    import psutil
+
+    from emos.actors.sim.barn_worlds import load_barn_worlds
+    from emos.tools.barn.process import TrialSystems, run_episode_process
+
+    worlds = tmp_path / "w.json"  # a cylinder on the start: the robot touches it at once
+    worlds.write_text(json.dumps({"7": {"cylinders": [[-2.25, 3.2]], "path_length": 10.0}}))
+    dirs_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*")))
+    systems = TrialSystems()
+    kept = tmp_path / "failed.log"
+    result = run_episode_process(load_barn_worlds(worlds)[7], StackOptions(world=7, barn_source=str(worlds)),
+                                 wall_timeout=120.0, keep_log=kept, systems=systems, keep_log_on_success=False,
+                                 stop_in_background=True)
+    assert result.collided and not result.success
+    systems.wait_stopped()
+    assert not [p.pid for p in psutil.Process().children(recursive=True)
+                if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*"))) == dirs_before
+    text = kept.read_text()
+    assert "bringup ended" in text and all(f"{name} stopped" in text for name in NAV_COMPONENTS), text[-2000:]
+    run_id = re.search(r"system up: .* \(run (\S+)\)", text).group(1)  # other runs may share /dev/shm
+    assert not [n for n in os.listdir("/dev/shm") if n.startswith(f"emos.{run_id}.")]
+
+
+def test_a_simulator_whose_control_socket_fails_is_a_system_failure_not_the_end_of_the_run(tmp_path):
+    """On a machine at load 40-50 the supervisor killed a trial's components as hung, and the
+    referee's ``sim_status`` call got "connection reset by peer": an RpcConnectionError that ended
+    a 600-trial run. It is the trial's system failing: ``SystemFailed``, counted as such."""
+    import socket
+    import threading
+
+    from emos.core.control import control_socket
+    from emos.core.reconfig import ComponentServices
+    from emos.supervisor.launched import SystemFailed
+    from emos.tools.barn.process import _sim_status
+    from emos.transport.context import RunContext
+
+    run_dir = tmp_path / "run"
+    ctx = RunContext("test-reset", run_dir, owner=True)
+    path = control_socket(ctx, "sim")
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(str(path))
+    server.listen(8)
+    server.settimeout(0.2)
+    stop = threading.Event()
+
+    def hang_up() -> None:  # a Simulator that dies under every request
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            conn.close()
+
+    thread = threading.Thread(target=hang_up, daemon=True)
+    thread.start()
+    log = tmp_path / "system.log"
+    log.write_text("[sim] no status for 2.01 s: killing it as hung\n")
+    try:
+        with pytest.raises(SystemFailed, match=r"world 7: the Simulator did not answer sim_status"):
+            _sim_status(ComponentServices("sim", ctx, timeout=5.0), "world 7", log)
+    finally:
+        stop.set()
+        thread.join(5)
+        server.close()
+        ctx.remove_everything()
+
+
 def test_pose_drift_compares_the_belief_with_the_truth_of_the_same_time():
     from emos.tools.barn.process import _PoseDrift
 

@@ -252,6 +252,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     finally:
         pool.close(cancel=True)
+        if systems is not None:  # the last trials' systems may still be stopping (stop_in_background)
+            systems.wait_stopped()
 
 
 def _time_left(trials: dict, resumed: set, finished: int, wall0: float) -> str:
@@ -363,11 +365,10 @@ def _process_episode(worlds: dict, rules: BarnRules, args: argparse.Namespace, s
         log = None if args.logs is None else args.logs / f"world_{idx:03d}_seed_{seed}.log"
         png = None if args.png is None else args.png / f"{'dynabarn' if args.dynabarn else 'barn'}_{idx:03d}_seed_{seed}.png"
         try:
-            result = run_episode_process(worlds[idx], opts, wall_timeout=getattr(args, "wall_timeout", 600.0), keep_log=log,
-                                         png_path=png, systems=systems)
-            if log is not None and result.success:
-                log.unlink(missing_ok=True)  # only the failures are worth keeping
-            return result
+            # Only the logs of failures are worth keeping. The system stops while the next
+            # trial starts (its result is known before).
+            return run_episode_process(worlds[idx], opts, wall_timeout=getattr(args, "wall_timeout", 600.0), keep_log=log,
+                                       png_path=png, systems=systems, keep_log_on_success=False, stop_in_background=True)
         except SystemFailed as exc:
             # One broken system must not end a 250-world run: it counts as a failure, loudly.
             print(f"emos bench barn: world {idx} seed {seed}: system failure: {exc}", file=sys.stderr, flush=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -46,6 +47,7 @@ class TrialSystems:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._live: set[subprocess.Popen] = set()
+        self._stopping: list[threading.Thread] = []  # teardowns of finished trials still going on
         self.abandoned = threading.Event()
 
     def started(self, proc: subprocess.Popen) -> None:
@@ -68,30 +70,73 @@ class TrialSystems:
             if proc.poll() is None:
                 proc.terminate()
 
+    def stop_later(self, teardown: Callable[[], None], name: str) -> None:
+        """Run ``teardown`` (stop a finished trial's system, keep its log, remove its files) in a
+        thread, so that the next trial starts while this one's supervisor stops its components
+        one by one (0.4 s on an idle machine, 2-3 s beside other work): the result is known
+        before. :meth:`wait_stopped` waits for every one of them."""
+        thread = threading.Thread(target=teardown, name=f"barn-teardown-{name}")
+        with self._lock:
+            self._stopping = [t for t in self._stopping if t.is_alive()]
+            self._stopping.append(thread)
+        thread.start()
+
+    def wait_stopped(self) -> None:
+        """Return once every teardown handed to :meth:`stop_later` has finished (each ends: a
+        system that does not stop on SIGTERM is killed after 30 s)."""
+        with self._lock:
+            stopping, self._stopping = self._stopping, []
+        for thread in stopping:
+            thread.join()
+
 
 STARTUP_TIMEOUT_S = 120.0  # wall: a loaded 2-core machine starts six processes slowly
 COLLISION_POLL_S = 0.2  # wall: how often the referee asks the simulator about contacts
+# wall: the referee's pause between reads of its topics. It only watches (the simulator does not
+# wait for it) and its queues hold every true pose of 40 simulated seconds, so a longer pause
+# loses nothing; at 5 ms its loop took 1.3-2.8 s of CPU time per trial, as much as a navigation
+# component, on the cores the trial's own processes need.
+REFEREE_POLL_S = 0.05
 
 
 def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_timeout: float = 600.0,
                         keep_log: Path | None = None, png_path: Path | None = None,
                         systems: TrialSystems | None = None,
-                        observer: Callable[[Any], Callable[[], None]] | None = None) -> EpisodeResult:
+                        observer: Callable[[Any], Callable[[], None]] | None = None,
+                        keep_log_on_success: bool = True, stop_in_background: bool = False) -> EpisodeResult:
     """Run one world through the processes and score it under ``opts.rules``; with ``png_path``,
     draw the run there (the true path the referee saw, the stack's last plan, the contacts).
+    ``keep_log``: copy the system's log there (``keep_log_on_success=False``: only if the trial
+    did not succeed, or had no result).
     ``systems``: the run's trials in flight; once it is abandoned the trial raises
     :class:`TrialAbandoned` (before it starts, or as soon as its stopped system is noticed).
+    ``stop_in_background`` (with ``systems``): return the result as soon as it is known and stop
+    the system in a thread of ``systems`` (:meth:`TrialSystems.wait_stopped` waits for it); a
+    trial without a result stops its system before raising, as always.
     ``observer``: called with the trial's ``RunContext`` once its system is up (to subscribe to
     its topics: ``scripts/barn_pose_replay.py``); it returns what to call when the trial ends."""
+    background = stop_in_background and systems is not None
     systems = systems or TrialSystems()
     if systems.abandoned.is_set():
         raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: not started, the benchmark is stopping")
     wall0 = time.perf_counter()
     seen = _Seen() if png_path is not None else None
-    with tempfile.TemporaryDirectory(prefix=f"emos-barn-{entry.idx}-") as tmp:
-        recipe = Path(tmp) / "barn_recipe.py"
+    tmp = Path(tempfile.mkdtemp(prefix=f"emos-barn-{entry.idx}-"))
+    log_path = tmp / "system.log"
+    proc: subprocess.Popen | None = None
+
+    def teardown(keep: bool) -> None:
+        try:
+            if proc is not None:
+                _stop(proc)
+            if keep and keep_log is not None and log_path.exists():
+                keep_log.write_bytes(log_path.read_bytes())
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    try:
+        recipe = tmp / "barn_recipe.py"
         recipe.write_text(recipe_source(opts))
-        log_path = Path(tmp) / "system.log"
         with open(log_path, "wb") as log:
             benchmark = os.getpid()
 
@@ -103,22 +148,26 @@ def run_episode_process(entry: BarnWorld | DynaWorld, opts: StackOptions, wall_t
             # without it (one did, holding its shared memory, until stopped by hand).
             proc = subprocess.Popen([sys.executable, "-m", "emos", "run", str(recipe)], stdout=log,
                                     stderr=subprocess.STDOUT, cwd=tmp, preexec_fn=die_with_the_benchmark)
-            systems.started(proc)
-            try:
-                outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen, observer)
-            except Exception:
-                if systems.abandoned.is_set():  # whatever the stopped system made the referee see
-                    raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: stopped with the benchmark") from None
-                raise
-            finally:
-                systems.ended(proc)
-                _stop(proc)
-                if keep_log is not None:
-                    keep_log.write_bytes(log_path.read_bytes())
+        systems.started(proc)
+        try:
+            outcome = _referee(proc, log_path, entry, opts, wall_timeout, seen, observer)
+        finally:
+            systems.ended(proc)
+    except BaseException as exc:  # no result (Ctrl-C included): stop the system now; its log says why
+        teardown(keep=True)
+        if isinstance(exc, Exception) and systems.abandoned.is_set():  # whatever the stopped system made the referee see
+            raise TrialAbandoned(f"world {entry.idx} seed {opts.seed}: stopped with the benchmark") from None
+        raise
     reached, collided, t, distance, reason, misses = outcome
     result = score_run(entry, reached, collided, t, opts.rules)
+    # wall_s: to the result; the system's stop (ordered, component by component) comes after.
     result = attrs.evolve(result, seed=opts.seed, distance_m=distance, wall_s=time.perf_counter() - wall0, reason=reason,
                           deadline_misses=misses)
+    keep = keep_log_on_success or not result.success
+    if background:
+        systems.stop_later(lambda: teardown(keep), f"{entry.idx}-{opts.seed}")
+    else:
+        teardown(keep)
     if seen is not None and png_path is not None:
         _draw(entry, opts, result, seen, png_path)
     return result
@@ -191,6 +240,9 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
     sim = ComponentServices(SIM_NAME, ctx)
     start, goal_xy = start_and_goal(entry)
     monitor = TrialMonitor(start[:2], goal_xy, rules.goal_radius, rules.time_limit)
+
+    def sim_status() -> dict:
+        return _sim_status(sim, f"world {entry.idx}", log_path)
     try:
         t0 = _latest_stamp(truth, proc, log_path)  # the trial starts when the goal is given
         goal = M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=goal_xy[0], y=goal_xy[1]))
@@ -209,7 +261,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 goal_sent = now
             collided = False
             if now >= next_poll:
-                status = sim.execute_method("sim_status")
+                status = sim_status()
                 collided = bool(status.get("collided"))
                 next_poll = now + COLLISION_POLL_S
             for msg in truth.take():
@@ -244,7 +296,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                     seen.plan = [(ps.pose.position.x, ps.pose.position.y) for ps in plan.poses]
             outcome = monitor.outcome
             if outcome is not None:
-                final = sim.execute_method("sim_status")
+                final = sim_status()
                 contacts = final.get("contacts") or []
                 if seen is not None:
                     seen.contacts = list(contacts)
@@ -260,7 +312,7 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
                 raise SystemFailed(f"world {entry.idx}: the system exited with {proc.returncode}:\n{log_tail(log_path)}")
             if now > deadline:
                 raise SystemFailed(f"world {entry.idx}: no result within {wall_timeout:.0f} s wall:\n{log_tail(log_path)}")
-            time.sleep(0.005)
+            time.sleep(REFEREE_POLL_S)
     finally:
         truth.close()
         believed.close()
@@ -269,6 +321,20 @@ def _referee(proc: subprocess.Popen, log_path: Path, entry: BarnWorld | DynaWorl
             stop_observing()
         if plans is not None:
             plans.close()
+
+
+def _sim_status(sim: Any, what: str, log_path: Path) -> dict:
+    """The Simulator's ``sim_status`` over its control socket (``sim``: its ``ComponentServices``)."""
+    from emos.core.rpc import RpcConnectionError, RpcError
+
+    try:
+        return sim.execute_method("sim_status")
+    except (RpcConnectionError, RpcError) as exc:
+        # The Simulator's control socket failed: its process died or was killed (on a machine at
+        # load 40-50 the supervisor's heartbeat watchdog killed a trial's components as hung, and
+        # this error ended a 600-trial run). One broken system must not end the run: a system
+        # failure, as when the system exits.
+        raise SystemFailed(f"{what}: the Simulator did not answer sim_status: {exc}:\n{log_tail(log_path)}") from exc
 
 
 class _PoseDrift:
