@@ -44,6 +44,7 @@ def _emos_receiver(topic: str, count: int, ready: Any, out: Any, mode: str, seco
 
     import uvloop
 
+    from emos.core.node import wake_spin_setting
     from emos.msgs import UInt8MultiArray, codec
     from emos.transport.context import current
     from emos.transport.pubsub import Subscriber
@@ -52,16 +53,15 @@ def _emos_receiver(topic: str, count: int, ready: Any, out: Any, mode: str, seco
     ctx = current()
     loop = uvloop.new_event_loop()
     asyncio.set_event_loop(loop)
-    waker = Waker(ctx)
+    waker = Waker(ctx, spin_us=wake_spin_setting())  # as a component's node does
     sub = Subscriber(ctx, topic, UInt8MultiArray, waker=waker, queue_size=64)
     latencies: list[float] = []
     received = 0
     first = last = 0.0
     done = loop.create_future()
 
-    def on_wake() -> None:
+    def handle() -> None:
         nonlocal received, first, last
-        waker.drain()
         for stamp, raw, _ in sub.take_raw():
             msg = codec.decode(UInt8MultiArray, raw)
             now = time.time_ns()  # received and decoded: the array is usable now
@@ -78,7 +78,9 @@ def _emos_receiver(topic: str, count: int, ready: Any, out: Any, mode: str, seco
                     first = last
 
     try:
-        loop.add_reader(waker.fd, on_wake)
+        # A node's wake-up path: drain, handle, linger for more (waker.serve), so a flat-out
+        # sender meets the receiver users get, not one that parks after every message.
+        loop.add_reader(waker.fd, waker.serve, handle, sub.has_news)
         ready.send("ready")
         if mode == "latency":
             loop.run_until_complete(asyncio.wait_for(done, 120))
