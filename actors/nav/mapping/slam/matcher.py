@@ -37,6 +37,7 @@ scan is what is pooled), never by the size of the map.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import attrs
 import numpy as np
@@ -241,29 +242,7 @@ class CorrelativeMatcher:
             return 1.0 - m, jac, m, np.array(0)
 
         res, jac, m, _ = sample(pose)
-        cost = float(res @ res)
-        lam = 1e-3
-        for _ in range(self.polish_iterations):
-            a = jac.T @ jac
-            g = jac.T @ res
-            try:
-                delta = -np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-9), g)
-            except np.linalg.LinAlgError:
-                break
-            # Never let the polish leave the lattice cell it started in by much.
-            if abs(delta[0]) > r or abs(delta[1]) > r or abs(delta[2]) > math.radians(1.0):
-                lam *= 10.0
-                continue
-            cand = pose + delta
-            res2, jac2, m2, _ = sample(cand)
-            cost2 = float(res2 @ res2)
-            if cost2 < cost:
-                pose, res, jac, m, cost = cand, res2, jac2, m2, cost2
-                lam = max(lam / 10.0, 1e-7)
-                if np.abs(delta).max() < 1e-5:
-                    break
-            else:
-                lam *= 10.0
+        pose, m = _levenberg_marquardt(lambda p: sample(p)[:3], pose, res, jac, m, self.polish_iterations, r)
         return pose, float(m.mean())
 
     @staticmethod
@@ -350,6 +329,38 @@ def _bicubic(table: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> tuple[np.ndar
     return np.einsum("yn,yn->n", wy, rows), np.einsum("yn,yn->n", wy, drows), np.einsum("yn,yn->n", dwy, rows)
 
 
+def _levenberg_marquardt(sample: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], pose: np.ndarray,
+                         res: np.ndarray, jac: np.ndarray, m: np.ndarray, iterations: int, r: float) -> tuple[np.ndarray, np.ndarray]:
+    """The polishes' Levenberg-Marquardt on ``sum(res^2)``: ``sample(pose)`` gives the residuals,
+    their Jacobian in (x, y, theta) and the hits' likelihoods; ``res``, ``jac``, ``m`` are its
+    answer at the starting ``pose``. A step that does not lower the cost is refused, and a step
+    larger than a lattice cell ``r`` (or a degree) is damped: the polish refines the lattice
+    search's pose, it never leaves its cell by much. Returns the pose and its likelihoods."""
+    cost = float(res @ res)
+    lam = 1e-3
+    for _ in range(iterations):
+        a = jac.T @ jac
+        g = jac.T @ res
+        try:
+            delta = -np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-9), g)
+        except np.linalg.LinAlgError:
+            break
+        if abs(delta[0]) > r or abs(delta[1]) > r or abs(delta[2]) > math.radians(1.0):
+            lam *= 10.0
+            continue
+        cand = pose + delta
+        res2, jac2, m2 = sample(cand)
+        cost2 = float(res2 @ res2)
+        if cost2 < cost:
+            pose, res, jac, m, cost = cand, res2, jac2, m2, cost2
+            lam = max(lam / 10.0, 1e-7)
+            if np.abs(delta).max() < 1e-5:
+                break
+        else:
+            lam *= 10.0
+    return pose, m
+
+
 def _polish_distance(field: np.ndarray, offset: np.ndarray, r: float, sigma: float, pts: np.ndarray,
                      pose: np.ndarray, iterations: int, trim: float) -> tuple[np.ndarray, float]:
     """The sub-cell polish without the lattice's bias: Levenberg-Marquardt on the same cost as
@@ -393,27 +404,5 @@ def _polish_distance(field: np.ndarray, offset: np.ndarray, r: float, sigma: flo
         if np.count_nonzero(keep) >= 3:
             used = pts[keep]
             res, jac, m = res[keep], jac[keep], m[keep]
-    cost = float(res @ res)
-    lam = 1e-3
-    for _ in range(iterations):
-        a = jac.T @ jac
-        g = jac.T @ res
-        try:
-            delta = -np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-9), g)
-        except np.linalg.LinAlgError:
-            break
-        # Never let the polish leave the lattice cell it started in by much.
-        if abs(delta[0]) > r or abs(delta[1]) > r or abs(delta[2]) > math.radians(1.0):
-            lam *= 10.0
-            continue
-        cand = pose + delta
-        res2, jac2, m2 = sample(cand, used)
-        cost2 = float(res2 @ res2)
-        if cost2 < cost:
-            pose, res, jac, m, cost = cand, res2, jac2, m2, cost2
-            lam = max(lam / 10.0, 1e-7)
-            if np.abs(delta).max() < 1e-5:
-                break
-        else:
-            lam *= 10.0
+    pose, _ = _levenberg_marquardt(lambda p: sample(p, used), pose, res, jac, m, iterations, r)
     return pose, float(sample(pose, pts)[2].mean())  # the score of every hit, as the search's
