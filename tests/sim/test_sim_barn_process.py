@@ -116,6 +116,19 @@ def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp
     worlds = tmp_path / "w.json"  # a cylinder on the start: the robot touches it at once
     worlds.write_text(json.dumps({"7": {"cylinders": [[-2.25, 3.2]], "path_length": 10.0}}))
     dirs_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*")))
+
+    def living_children() -> set[int]:
+        # this worker may keep processes of other tests' module or session fixtures: count ours
+        alive = set()
+        for child in psutil.Process().children(recursive=True):
+            try:
+                if child.status() != psutil.STATUS_ZOMBIE:
+                    alive.add(child.pid)
+            except psutil.NoSuchProcess:
+                pass  # gone meanwhile
+        return alive
+
+    children_before = living_children()
     systems = TrialSystems()
     kept = tmp_path / "failed.log"
     result = run_episode_process(load_barn_worlds(worlds)[7], StackOptions(world=7, barn_source=str(worlds)),
@@ -123,8 +136,7 @@ def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp
                                  stop_in_background=True)
     assert result.collided and not result.success
     systems.wait_stopped()
-    assert not [p.pid for p in psutil.Process().children(recursive=True)
-                if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    assert not living_children() - children_before
     assert set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*"))) == dirs_before
     text = kept.read_text()
     assert "bringup ended" in text and all(f"{name} stopped" in text for name in NAV_COMPONENTS), text[-2000:]
