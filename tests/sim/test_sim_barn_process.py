@@ -137,7 +137,8 @@ def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp
     assert result.collided and not result.success
     systems.wait_stopped()
     assert not living_children() - children_before
-    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*"))) == dirs_before
+    # another test's trial of world 7 may end meanwhile on the other worker: none may be new
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*"))) - dirs_before == set()
     text = kept.read_text()
     assert "bringup ended" in text and all(f"{name} stopped" in text for name in NAV_COMPONENTS), text[-2000:]
     run_id = re.search(r"system up: .* \(run (\S+)\)", text).group(1)  # other runs may share /dev/shm
