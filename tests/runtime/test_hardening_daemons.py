@@ -112,17 +112,19 @@ def test_no_daemon_outlives_its_crashed_incarnation_in_a_crash_loop(tmp_path, mo
 def test_the_daemon_of_a_sigkilled_component_dies_and_the_run_leaves_none(tmp_path, with_thread):
     system, marker, folder = _start(tmp_path, "steady", with_thread=with_thread)
     try:
-        first = wait_until(lambda: _daemons(folder), timeout=30, what="the first daemon")
+        first = wait_until(lambda: _daemons(folder), timeout=HANG_S, what="the first daemon")
         assert _alive(first[0])
         if with_thread:
             # In a run with threaded components the launcher knows a daemon that left its
             # worker's session only from its sweeps (five a second) of each worker's children.
             time.sleep(1.0)
-        old = system.pid("spawner")
+        # The daemon starts inside the activation; the supervisor's tree lists the incarnation
+        # (and its pid) only once the activation has returned.
+        old = wait_until(lambda: system.state("spawner") == "active" and system.pid("spawner"), timeout=HANG_S, what="the spawner active")
         os.kill(old, signal.SIGKILL)  # no clean-up in the worker: the supervisor must do it
-        system.wait_new_pid("spawner", old, timeout=30)
+        system.wait_new_pid("spawner", old, timeout=HANG_S)
         wait_until(lambda: not _alive(first[0]), timeout=HANG_S, what="the SIGKILLed incarnation's daemon to die")
-        second = wait_until(lambda: len(_daemons(folder)) == 2 and _daemons(folder)[1], timeout=30, what="the new incarnation's daemon")
+        second = wait_until(lambda: len(_daemons(folder)) == 2 and _daemons(folder)[1], timeout=HANG_S, what="the new incarnation's daemon")
         assert _alive(second) and _alive_with(marker) == [second]
     finally:
         assert system.stop() == 0, system.output()[-3000:]
@@ -133,7 +135,7 @@ def test_the_daemon_of_a_sigkilled_component_dies_and_the_run_leaves_none(tmp_pa
 def test_the_daemon_of_a_threaded_component_dies_with_the_run(tmp_path):
     system, marker, folder = _start(tmp_path, "steady", multi=False)
     try:
-        wait_until(lambda: _daemons(folder), timeout=30, what="the daemon")
+        wait_until(lambda: _daemons(folder), timeout=HANG_S, what="the daemon")
         assert len(_alive_with(marker)) == 1
     finally:
         assert system.stop() == 0, system.output()[-3000:]
@@ -142,7 +144,7 @@ def test_the_daemon_of_a_threaded_component_dies_with_the_run(tmp_path):
 
 def test_the_daemon_dies_when_the_launcher_is_sigkilled(tmp_path):
     system, marker, folder = _start(tmp_path, "steady")
-    wait_until(lambda: _daemons(folder), timeout=30, what="the daemon")
+    wait_until(lambda: _daemons(folder), timeout=HANG_S, what="the daemon")
     assert len(_alive_with(marker)) == 1
     system.kill_all()  # the worker gets SIGTERM (parent-death signal) and ends what is below it
     wait_until(lambda: not _alive_with(marker), timeout=HANG_S, what="no daemon left after the launcher's death")
@@ -183,10 +185,11 @@ launcher.add_pkg(components=[Parent(component_name="parent")])
 launcher.bringup()
 """).wait_up()
     try:
-        orphan = int(wait_until(lambda: (out / "orphan").exists() and (out / "orphan").read_text().strip(), timeout=30, what="the orphan's pid"))
-        wait_until(lambda: (out / "own").exists() and (out / "own").read_text(), timeout=30, what="the own child's exit code")
+        orphan = int(wait_until(lambda: (out / "orphan").exists() and (out / "orphan").read_text().strip(), timeout=HANG_S, what="the orphan's pid"))
+        wait_until(lambda: (out / "own").exists() and (out / "own").read_text(), timeout=HANG_S, what="the own child's exit code")
         assert (out / "own").read_text() == "7"
-        worker = system.pid("parent")
+        # The tree lists the incarnation's pid once its activation (which wrote "own") returned.
+        worker = wait_until(lambda: system.state("parent") == "active" and system.pid("parent"), timeout=HANG_S, what="the parent active")
         wait_until(lambda: not _zombie_or_alive(orphan), timeout=HANG_S, what=f"the adopted orphan {orphan} to end and be reaped")
         assert system.pid("parent") == worker
         assert not [c for c in psutil.Process(worker).children() if c.status() == psutil.STATUS_ZOMBIE]

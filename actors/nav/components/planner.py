@@ -286,13 +286,20 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._inflight = self._pool.submit(self._plan_in_worker, self._goal.copy())
 
     def _plan_in_worker(self, goal: np.ndarray) -> None:
-        try:
-            self.plan_once(goal)
-        except Exception as exc:  # reported, never lost in the pool
-            self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
-            self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
-        if self._node is not None:
-            self.node.publish_status()
+        # A goal that arrived while this query ran is planned as soon as it ends: the step that
+        # took it found the worker busy, and waiting for the next step would cost a whole period.
+        while True:
+            try:
+                self.plan_once(goal)
+            except Exception as exc:  # reported, never lost in the pool
+                self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
+                self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
+            if self._node is not None:
+                self.node.publish_status()
+            newest = self._goal
+            if newest is None or self._reached or np.array_equal(newest, goal):
+                return
+            goal = newest.copy()
 
     # -- Server and ActionServer ----------------------------------------------------------------------------
     @staticmethod
