@@ -104,7 +104,7 @@ class ProcStat(NamedTuple):
     start: int  # clock ticks since boot: with the pid, names one process (pids are reused)
 
 
-def _stat(pid: int) -> ProcStat | None:
+def proc_stat(pid: int) -> ProcStat | None:
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
             data = f.read()
@@ -208,7 +208,7 @@ class AdoptedReaper:
         me = os.getpid()
         deep: dict[int, int] = {}
         for child in _children(me):
-            stat = _stat(child)
+            stat = proc_stat(child)
             if stat is None:
                 continue
             if stat.state in ("Z", "X"):
@@ -224,7 +224,7 @@ class AdoptedReaper:
             stack = [child]
             while stack:
                 for pid in _children(stack.pop()):
-                    below = _stat(pid)
+                    below = proc_stat(pid)
                     if below is not None:
                         deep[pid] = below.start
                         stack.append(pid)
@@ -317,12 +317,12 @@ class OrphanReaper:
 
     def _note_kids(self) -> None:
         for worker in self.live:
-            stat = _stat(worker)
+            stat = proc_stat(worker)
             if stat is None or stat.state in ("Z", "X") or stat.ppid != self.me:
                 continue  # ended, its end not handled yet: keep what it had at the last sweep
             kids = {}
             for pid in _children(worker):
-                stat = _stat(pid)
+                stat = proc_stat(pid)
                 if stat is not None and stat.ppid == worker:
                     kids[pid] = stat.start
             self.kids[worker] = kids
@@ -349,7 +349,7 @@ class OrphanReaper:
         for pid in children:
             if pid in self.live or pid in protected:
                 continue
-            stat = _stat(pid)
+            stat = proc_stat(pid)
             if stat is None:
                 continue
             if stat.state in ("Z", "X"):
@@ -368,7 +368,7 @@ class OrphanReaper:
                     self.killed += 1
         present = set(children)
         self.left = {p: t for p, t in self.left.items() if p in present}
-        self.adopted = {p for p in self.adopted if p in present or _stat(p) is not None}  # forget the gone
+        self.adopted = {p for p in self.adopted if p in present or proc_stat(p) is not None}  # forget the gone
         if self.threads_fork:  # without threads, the session rule of _owner covers these too
             self._note_kids()
 
@@ -405,7 +405,7 @@ class OrphanReaper:
             if not left:
                 return
             for pid in left:
-                stat = _stat(pid)
+                stat = proc_stat(pid)
                 if stat is not None and stat.state in ("Z", "X"):
                     self._reap(pid)
                     continue

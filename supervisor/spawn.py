@@ -21,6 +21,7 @@ import asyncio
 import functools
 import logging
 import os
+import select
 import signal
 import socket
 import struct
@@ -36,7 +37,7 @@ import msgpack
 # re-exported here for the zygote, the workers and existing callers.
 from emos.core.prctl import PR_SET_CHILD_SUBREAPER, PR_SET_NAME, PR_SET_PDEATHSIG, become_subreaper, die_with, prctl, set_process_name  # noqa: F401
 from emos.errors import EmosError
-from emos.supervisor.reaper import ENV_WORKER_PID, AdoptedReaper, end_descendants, kill_group, kill_worker_trees
+from emos.supervisor.reaper import ENV_WORKER_PID, AdoptedReaper, end_descendants, kill_group, kill_worker_trees, proc_stat
 
 log = logging.getLogger("emos.supervisor")
 
@@ -76,6 +77,14 @@ class ZygoteError(EmosError, RuntimeError):
 
 
 SPAWN_TIMEOUT_S = 2.0  # a healthy zygote answers in milliseconds; a stopped one never does
+# A zygote that is runnable but starved (a load of 50 on 2 cores, a niced run) can take seconds
+# to answer: it is given up only when it is stopped or gone, or after this long without an answer.
+ZYGOTE_HANG_S = 30.0
+
+
+def _stopped_or_gone(pid: int) -> bool:
+    stat = proc_stat(pid)
+    return stat is None or stat.state in ("T", "t", "Z", "X")
 
 
 class _ZygoteHandle:
@@ -87,6 +96,7 @@ class _ZygoteHandle:
 
     def request(self, req: dict, with_fd: bool = False) -> tuple[dict, int | None]:
         _send(self.sock, req)
+        self._await_reply()
         if not with_fd:
             return _recv(self.sock), None
         msg, fds, _, _ = socket.recv_fds(self.sock, 4, 1)
@@ -100,6 +110,18 @@ class _ZygoteHandle:
                 raise EOFError("zygote channel closed")
             body += chunk
         return msgpack.unpackb(body, raw=False), (fds[0] if fds else None)
+
+    def _await_reply(self) -> None:
+        """Return once the zygote's reply is arriving; TimeoutError (naming why) if the zygote is
+        stopped or gone after SPAWN_TIMEOUT_S, or runs without answering for ZYGOTE_HANG_S."""
+        waited = 0.0
+        while not select.select([self.sock], [], [], SPAWN_TIMEOUT_S)[0]:
+            waited += SPAWN_TIMEOUT_S
+            if _stopped_or_gone(self.pid):
+                raise TimeoutError(f"did not answer within {waited:g} s and is stopped or gone")
+            if waited >= ZYGOTE_HANG_S:
+                raise TimeoutError(f"did not answer within {waited:g} s although it runs (hung)")
+            log.warning("zygote %d has not answered for %g s; it runs (a starved machine?), waiting", self.pid, waited)
 
     def discard(self) -> None:
         """Kill and reap a zygote that failed us."""
@@ -210,8 +232,8 @@ class Zygote:
                 break
             try:
                 reply, _ = self.primary.request({"op": "spawn", "index": index})
-            except TimeoutError:
-                self._replace_primary(f"did not answer within {SPAWN_TIMEOUT_S:g} s")
+            except TimeoutError as exc:
+                self._replace_primary(str(exc))
                 continue
             except (OSError, EOFError) as exc:
                 self._replace_primary(f"is gone ({exc})")
