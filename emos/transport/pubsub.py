@@ -51,6 +51,16 @@ _SCAN_ATTEMPTS = 4  # listings per rescan while rings vanish under it (each grow
 # woken as the copy starts (waker module doc, "Long writes"); smaller copies take a few
 # microseconds, less than the announcement and the early wake-up would cost.
 ANNOUNCE_BYTES = 128 * 1024
+# Frames up to this size are written by one C call (``_ccodec.ring_publish``: encode, claim, copy,
+# commit, fence) and read by one per batch (``ring_take``, below the loan threshold): the Python
+# path costs about 15 interpreter calls per message each way (docs/ipc.md, "Small messages").
+# Bigger frames keep the Python path (announcement, streaming copies, loans) unchanged.
+SMALL_FRAME_BYTES = 64 * 1024
+_C = codec.C_CODEC if hasattr(codec.C_CODEC, "ring_publish") else None  # None: no C codec, or EMOS_CODEC=python
+if _C is not None:
+    _C.ring_layout(R._HEAD, R._FIRST, R._BUSY, R._MAP_IDX, R._PIN_IDX, R.LOAN_ENTRIES, R.SLOT_HEADER, R._MAX_HEAD, R._EMPTY)
+_ring_publish = None if _C is None else _C.ring_publish
+_ring_take = None if _C is None else _C.ring_take
 _COPY_NS_PER_BYTE = 1.0  # first guess of a copy's speed (1 GB/s): measured after each long write
 _ANNOUNCE_MARGIN_NS = 100_000  # slack on the deadline for preemption of the writer
 
@@ -227,7 +237,21 @@ class Publisher:
         if not isinstance(msg, self.msg_cls):
             raise TopicTypeError(f"topic {self.topic!r} carries {self.type_name}, got {type(msg).__name__}")
         stamp = time.time_ns()
-        enc = codec.encode(msg)
+        if _ring_publish is not None:
+            ring = self.ring
+            got = _ring_publish(msg, ring.mm, ring.depth, ring.physical_slots, ring.data_offset, ring.stride, ring.capacity, stamp, SMALL_FRAME_BYTES)
+            if type(got) is int:  # written and committed, fence included: wake who parked
+                if ring.q[R._WAITERS_VER] != self._waiters_version:
+                    self._sync_waiters()
+                if self.sender.fds:
+                    for token in self.sender.wake(fenced=True):
+                        self._drop_waiter(token)
+                return got
+            # Not written (the ring untouched): big, a ring to grow, a slot only the Python path
+            # takes (a loan pins it), or a message the C encoder leaves to the Python codec.
+            enc = got if got is not NotImplemented else codec.encode_python(msg)
+        else:
+            enc = codec.encode(msg)
         nbytes = enc.nbytes
         if nbytes > self.ring.capacity:
             if nbytes > self.max_bytes:
@@ -640,6 +664,16 @@ class Subscriber:
                 self.dropped += head - ring.slot_count - src.cursor
                 src.cursor = head - ring.slot_count
             while src.cursor < head:
+                if _ring_take is not None:
+                    # Small messages in one C call; it stops at anything else (a big message
+                    # to loan, one not written yet, a slot that does not hold together), which
+                    # the Python path below reads as before.
+                    src.cursor, lapped = _ring_take(ring.mm, ring.depth, ring.physical_slots, ring.data_offset, ring.stride, ring.capacity,
+                                                    src.cursor, head, LOAN_MIN_BYTES, out, src.publisher_id)
+                    if lapped:
+                        self.dropped += lapped
+                    if src.cursor >= head:
+                        break
                 status, buf, stamp = src.read(src.cursor)
                 if status == R.OK and buf is not None:
                     out.append((stamp, buf, src.publisher_id))

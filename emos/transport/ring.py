@@ -55,6 +55,16 @@ by store fences, so it too lands after ``seq = 2n+1`` and before the commit. On 
 (arm64) ``WEAK_ORDERING`` adds a full fence at each step that needs one (see ``commit`` and
 ``read``); docs/runtime.md gives the argument.
 
+Small messages in C. ``emos/msgs/_ccodec.c`` (``ring_publish``, ``ring_take``) does what
+:meth:`Ring.begin`, the copy and :meth:`Ring.commit` do, and what :meth:`Ring.read` does, in one
+call per small message (publisher) or per batch of them (subscriber), with the same stores, loads
+and fences in the same order and the same checks of every word it reads from the segment;
+:mod:`emos.transport.pubsub` gives it this module's layout at import (``ring_layout``). It
+handles only the common case (the retiring slot is free, frames up to
+``pubsub.SMALL_FRAME_BYTES``, messages below the loan threshold) and leaves everything else to
+the code here, with the ring untouched. A change to this protocol must be made there too
+(tests/runtime/test_small_message_path.py).
+
 Trust. A segment is opened only through :func:`emos.transport.trust.open_owned` (a regular file
 of our uid, mode 0600, no symbolic link), its header is checked for consistency before any
 field is used, and every index read from shared memory afterwards (a slot number from the map,
