@@ -4,6 +4,7 @@ travel (``submap_travel``), and submap frames as graph variables of their own
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,7 +12,8 @@ import pytest
 pytest.importorskip("gtsam")
 
 from emos.actors.nav.localization import noisy_odometry
-from emos.actors.nav.mapping.slam import GraphSlam, SlamParams, ate_rmse
+from emos.actors.nav.mapping.slam import CorrelativeMatcher, GraphSlam, SlamParams, ate_rmse
+from emos.actors.nav.mapping.slam.matcher import MatchResult
 from emos.actors.nav.mapping.slam.slam import compose_pose
 
 from .test_slam import ANGLES, _cast, _room
@@ -76,3 +78,44 @@ def test_submap_parameters_are_validated() -> None:
         SlamParams(submap_nodes="yes")  # type: ignore[arg-type]
     with pytest.raises(ValueError):
         SlamParams(densify_gap=-0.1)
+
+
+class _RecordingMatcher(CorrelativeMatcher):
+    """The real matcher, keeping each result (the front end's is the first of a scan's calls)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.results: list[MatchResult | None] = []
+
+    def match(self, *args: Any, **kwargs: Any) -> MatchResult | None:
+        result = super().match(*args, **kwargs)
+        self.results.append(result)
+        return result
+
+
+def test_a_scan_in_two_submaps_counts_its_match_once() -> None:
+    """With ``submap_nodes`` a matched scan ties to both submaps it went into, at the same
+    front-end pose: one measurement. The two factors' information together is the match's
+    (its covariance times ``match_cov_scale``, in the node's axes), not twice that."""
+    truth = _line(16, 0.3)
+    odom = noisy_odometry(truth, (0.01, 0.001, 0.01, 0.001), seed=2)
+    params = SlamParams(max_range=20.0, scans_per_submap=4)
+    slam = GraphSlam(params)
+    slam.matcher = recorder = _RecordingMatcher()
+    room = _room()
+    for i, pose in enumerate(truth):
+        recorder.results.clear()
+        slam.add(odom[i], _cast(room, pose, ANGLES), ANGLES)
+    i = len(truth) - 1
+    assert len(slam._inserted) == 2  # the last scan went into two live submaps
+    front = recorder.results[0]
+    assert front is not None
+    factors = [slam.graph._all.at(k) for k in range(slam.graph._all.size())]
+    live = {sm.key for sm in slam._inserted}  # (loop closures tie it to finished submaps too)
+    mine = [f for f in factors if len(f.keys()) == 2 and f.keys()[1] == i and f.keys()[0] in live]
+    assert len(mine) == 2
+    info = sum(f.noiseModel().R().T @ f.noiseModel().R() for f in mine)
+    c, s = math.cos(slam.front[i][2]), math.sin(slam.front[i][2])
+    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    expected = np.linalg.inv(params.match_cov_scale * rot @ front.covariance @ rot.T)
+    np.testing.assert_allclose(info, expected, rtol=1e-6)

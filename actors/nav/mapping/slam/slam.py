@@ -10,8 +10,9 @@ Each scan, in :meth:`GraphSlam.add`:
    scan's hits (within ``match_range``, one per ``voxel`` square) are matched against the
    current submap by :class:`CorrelativeMatcher` in a window of ``window_sigmas`` standard
    deviations of the odometry noise model (clamped to ``[min_window_*, max_window_*]``), with a
-   weak prior towards the guess (it decides only where the scan does not, e.g. along a
-   corridor). The hits are then inserted into the two newest submaps.
+   weak prior towards the guess (``prior_weight``: it decides only where the scan does not, e.g.
+   along a featureless corridor; weak enough that a far end wall's few hits still fix the
+   position along one). The hits are then inserted into the two newest submaps.
 3. **Submaps** (as in Cartographer): a new submap starts every ``scans_per_submap`` scans (or
    ``submap_travel`` metres, when set) and each scan goes into the two newest, so a submap holds
    two periods' scans when it is finished, and the one matched against always has between one
@@ -22,7 +23,8 @@ Each scan, in :meth:`GraphSlam.add`:
    factor from each submap the scan went into (its frame; without ``submap_nodes``, only from
    the matched submap's anchor node) (covariance from the
    match: ``factor_covariance="response"``, the spread of the lattice scores around the best
-   pose (Olson) times ``match_cov_scale`` / ``loop_cov_scale``; or ``"hessian"``, the inverse
+   pose (Olson) times ``match_cov_scale`` (per match: split over the scan's factors, so a match
+   counts once) / ``loop_cov_scale``; or ``"hessian"``, the inverse
    curvature of the score at the polished pose over the hit count (``MatchResult.
    hessian_covariance``) times ``hessian_cov_scale``, the factor that calibrates it against
    the factors' real errors). Every ``loop_every`` scans, the scan is matched against up to
@@ -98,7 +100,10 @@ class SlamParams:
     max_window_xy: float = attrs.field(default=1.0, validator=V.finite_positive)
     min_window_theta: float = attrs.field(default=math.radians(6.0), validator=V.finite_positive)
     max_window_theta: float = attrs.field(default=math.radians(45.0), validator=V.finite_positive)
-    prior_weight: float = attrs.field(default=0.05, validator=attrs.validators.ge(0.0))
+    # 0.02, not 0.05: the prior only breaks ties. Along a corridor a far end wall is a few hits of
+    # a hundred; at 0.05 a guess two odometry sigmas off outweighed them and the front end followed
+    # the odometry's error (aces: corridors measured short). docs/slam_notes.md has the runs.
+    prior_weight: float = attrs.field(default=0.02, validator=attrs.validators.ge(0.0))
     loop_every: int = attrs.field(default=1, validator=attrs.validators.ge(1))
     loop_radius: float = attrs.field(default=15.0, validator=V.finite_positive)
     loop_candidates: int = attrs.field(default=4, validator=attrs.validators.ge(1))
@@ -112,7 +117,10 @@ class SlamParams:
     confirm_theta: float = attrs.field(default=math.radians(2.0), validator=V.finite_positive)
     robust: str = attrs.field(default="huber", validator=attrs.validators.in_(("huber", "cauchy")))
     robust_k: float = attrs.field(default=1.345, validator=V.finite_positive)
-    match_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
+    # The scale of one front-end match; with ``submap_nodes`` it is split over the factors the
+    # match gives (one per submap the scan went into, usually two), so the graph counts the
+    # measurement once. 0.2 (was 0.1, counted twice): docs/slam_notes.md has the runs.
+    match_cov_scale: float = attrs.field(default=0.2, validator=V.finite_positive)
     loop_cov_scale: float = attrs.field(default=0.1, validator=V.finite_positive)
     factor_covariance: str = attrs.field(default="response", validator=attrs.validators.in_(("response", "hessian")))
     hessian_cov_scale: float = attrs.field(default=1.0, validator=V.finite_positive)
@@ -361,7 +369,9 @@ class GraphSlam:
         that one scan, which loop closures then pull away from its neighbours (on csail the
         anchors stood 1 to 1.5 degrees off their neighbours, where scan-to-scan ICP agreed with
         the neighbours); a frame of its own is held by all 20 of its scans instead. A scan with
-        no match (too few hits) gets no factor (as before): the odometry places it."""
+        no match (too few hits) gets no factor (as before): the odometry places it. The factors
+        share one measurement (the match), so each carries its covariance times the number of
+        factors: together they hold the match's information once, not twice."""
         g = self.graph
         new = self.submaps[-1] if self.submaps and self.submaps[-1].anchor == i else None
         if new is not None:
@@ -370,8 +380,10 @@ class GraphSlam:
             if new is not None:  # the frame needs a tie to the graph all the same
                 g.add_between(new.key, i, np.zeros(3), np.diag([1e-4, 1e-4, 1e-6]))
             return
+        share = len(self._inserted)
         for sm in self._inserted:  # the matched submap and the newer one share the scan's pose
-            self._match_factor(sm, i, self.front[i], match.covariance, loop=False, hess=match.hessian_covariance)
+            self._match_factor(sm, i, self.front[i], match.covariance * share, loop=False,
+                               hess=match.hessian_covariance * share)
 
     def _match_factor(self, sm: Submap, i: int, pose: np.ndarray, cov: np.ndarray, loop: bool,
                       hess: np.ndarray | None = None) -> None:
