@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emos.tools.bench.localize import FAILURE_CAUSES, _failure_cause
+from emos.actors.nav.localization import AmclParams, ParticleFilter
+from emos.tools.bench.localize import FAILURE_CAUSES, _failure_cause, _fits_at
+from tests.localization.helpers import BEAMS, MAX_RANGE, cast, room_map
 
 pytestmark = pytest.mark.unit
 
@@ -36,3 +38,19 @@ def test_each_missed_trial_gets_its_cause(pos, ended, cause):
 
 def test_a_trial_too_short_to_reach_the_convergence_travel_is_undecided():
     assert _failure_cause(_pos(), HEAD, MOVED, np.zeros(len(MOVED), dtype=bool), 2) == "undecided"
+
+
+def test_a_miss_records_how_well_the_scan_fits_near_the_logged_pose_and_near_the_estimate():
+    """A missed trial records the scan's fit (mean log-likelihood per beam at the nearest peak)
+    near the logged pose and near the wrong estimate: the scan taken at the logged pose fits
+    best there, so a miss whose estimate fits better is one the scan cannot tell apart."""
+    grid = room_map()
+    truth = np.array([4.0, 4.0, 0.3])
+    wrong = np.array([6.0, 3.0, 2.0])
+    data = {"ranges": [cast(grid, truth)], "angles": [BEAMS], "max_range": MAX_RANGE}
+    pf = ParticleFilter(AmclParams(laser_max_range=MAX_RANGE, sigma_hit=0.2), grid, seed=0)
+    near_truth, near_wrong = _fits_at(pf, data, 0, truth + np.array([0.1, -0.1, 0.05]), wrong)
+    assert near_truth > near_wrong + 0.5, (near_truth, near_wrong)
+    assert near_truth > -1.0, "a perfect scan at its own pose: near the best per-beam value"
+    empty = {"ranges": [np.full(len(BEAMS), np.nan)], "angles": [BEAMS], "max_range": MAX_RANGE}
+    assert all(np.isnan(_fits_at(pf, empty, 0, truth, wrong))), "no valid beam: no fit, no crash"

@@ -164,3 +164,35 @@ def test_a_leader_that_changes_place_starts_the_count_again():
 def test_converged_updates_is_validated_by_name():
     with pytest.raises(ValueError, match=r"AmclParams.converged_updates must be an integer in \[1, 1000\], got 0"):
         _params(converged_updates=0)
+
+
+def test_the_leader_must_hold_over_travel_not_over_turns_on_the_spot():
+    """``converged_travel``: a hypothesis that holds ``converged_weight`` while the robot turns
+    on the spot (every update a view from the same place) does not end the search, however
+    many updates it holds; driving ``converged_travel`` metres with it in the lead does. A
+    change of leader starts the travel from zero again."""
+    pf = ParticleFilter(_params(converged_travel=1.0), room_map(), seed=1)
+    pf.global_localization()
+    p = pf.params
+    held = []
+    steps = [((0.0, 0.0, 0.0), (2.0, 2.0, 0.0)),    # first view: 0 m
+             ((0.0, 0.0, 0.3), (2.0, 2.0, 0.3)),    # turns on the spot: still 0 m
+             ((0.0, 0.0, 0.6), (2.0, 2.0, 0.6)),
+             ((0.0, 0.0, 0.9), (2.0, 2.0, 0.9)),
+             ((0.0, 0.0, 0.0), (2.0, 2.0, 0.0)),
+             ((0.6, 0.0, 0.0), (2.6, 2.0, 0.0)),    # drives 0.6 m with it
+             ((0.9, 0.0, 0.0), (6.0, 5.0, 0.0)),    # another place takes the lead: from 0
+             ((1.5, 0.0, 0.0), (6.6, 5.0, 0.0)),    # 0.6 m
+             ((2.1, 0.0, 0.0), (7.2, 5.0, 0.0))]    # 1.2 m: holds
+    for odom, lead in steps:
+        pf._odom_updated = np.array(odom)
+        done = pf._leader_holds(np.array([0.97, 0.03]), np.array([lead, (0.0, 0.0, 0.0)]), p)
+        held.append((pf.leader_updates, round(pf.leader_travel, 2), done))
+    assert [h[2] for h in held] == [False] * 8 + [True], held
+    assert [h[1] for h in held] == [0.0, 0.0, 0.0, 0.0, 0.0, 0.6, 0.0, 0.6, 1.2], held
+    assert held[4][0] == 5, "five consistent updates, none of them travel"
+
+
+def test_converged_travel_is_validated_by_name():
+    with pytest.raises(ValueError, match=r"AmclParams.converged_travel must be a number in \[0.0, 1000.0\], got -1"):
+        _params(converged_travel=-1)

@@ -25,9 +25,10 @@ One call per laser scan, :meth:`ParticleFilter.update` with the odometry pose at
 
 Global localization (:meth:`ParticleFilter.global_localization`) is a search until one
 hypothesis (cluster) holds ``converged_weight`` on ``converged_updates`` consecutive updates
-(staying where the odometry carries it): the full ``max_particles``, the likelihood
-tempered with ``search_min_ess_fraction``, and each scan the heaviest hypotheses scan-matched
-to their likelihood peaks and reweighted by them (``hypothesis_beta``, see ``_search_step``).
+and over ``converged_travel`` metres of travel (staying where the odometry carries it): the
+full ``max_particles``, the likelihood tempered with ``search_min_ess_fraction``, and each scan
+the heaviest hypotheses scan-matched to their likelihood peaks and reweighted by them
+(``hypothesis_beta``, see ``_search_step``).
 Then the other places' particles are dropped and the filter tracks as from a known pose.
 
 The estimate is the weighted mean of the heaviest cluster (the particles within 1 m and 0.5 rad
@@ -121,6 +122,7 @@ class ParticleFilter:
         self._leader: np.ndarray | None = None
         self._leader_odom: np.ndarray | None = None
         self.leader_updates = 0
+        self.leader_travel = 0.0  # odometry travel (m) over which the current leader has held
 
     # -- the map and the initial state ---------------------------------------------------------------
     def set_map(self, grid: OccupancyGridMap) -> None:
@@ -185,6 +187,7 @@ class ParticleFilter:
         self.searching = True
         self._leader = self._leader_odom = None
         self.leader_updates = 0
+        self.leader_travel = 0.0
 
     def _random_free_poses(self, n: int) -> np.ndarray:
         free = self.field.free_cells
@@ -373,29 +376,37 @@ class ParticleFilter:
 
     def _leader_holds(self, shares: np.ndarray, means: np.ndarray, p: AmclParams) -> bool:
         """True once one hypothesis has held ``converged_weight`` on ``converged_updates``
-        consecutive search steps, staying where the odometry carries it (within 0.5 m and
-        0.5 rad of its last pose moved by the odometry since). Meant for a look-alike place (a
-        corridor, a room repeated along a building) that takes 95 % of the weight on one view
-        and would lose it on the next; waiting for more views costs a few scans of the full
-        particle budget. Off by default (1: the first scan on which a
-        hypothesis holds the weight ends the search): on 50 seeds per tuning log, 3 did not
-        save the trials it was meant for (intel seed 28 still ended on a wrong place, aces
-        seed 5 still lost the right one after ending) and cost intel seed 23, whose search ran
-        on past 10 m and drifted to a wrong place."""
+        consecutive search steps and over ``converged_travel`` metres of odometry travel,
+        staying where the odometry carries it (within 0.5 m and 0.5 rad of its last pose moved
+        by the odometry since). Meant for a look-alike place (a corridor, a room repeated along
+        a building) that takes 95 % of the weight on one view and would lose it on a later one.
+        Travel, not a count of updates: a robot turning on the spot gives an update every
+        ``update_min_a`` of turn, each a view from the same place, so a count can be reached
+        without new evidence (intel seed 28 ends its search on a place 15 m off after 0.47 m of
+        travel, mostly turning); only driving shows the scanner new walls. Both are off by
+        default (1 update, 0 m): ``converged_updates`` 3 was measured on 50 seeds per tuning
+        log and did not help; ``converged_travel`` 1 m and 2 m on intel seed 28 ended the search
+        later on the same wrong place (the right one had no particles left by then, see
+        ``AmclParams``)."""
         if not len(shares) or shares.max() < p.converged_weight:
             self._leader = None
             self.leader_updates = 0
+            self.leader_travel = 0.0
             return False
         lead = means[int(shares.argmax())]
         odom = self._odom_updated
         same = False
+        step = 0.0
         if self._leader is not None and odom is not None and self._leader_odom is not None:
-            moved = compose_pose(self._leader, relative_pose(self._leader_odom, odom))
+            d = relative_pose(self._leader_odom, odom)
+            moved = compose_pose(self._leader, d)
             same = (math.hypot(*(lead[:2] - moved[:2])) <= 0.5
                     and abs(float(wrap_angle(float(lead[2] - moved[2])))) <= 0.5)
+            step = math.hypot(float(d[0]), float(d[1]))
         self.leader_updates = self.leader_updates + 1 if same else 1
+        self.leader_travel = self.leader_travel + step if same else 0.0
         self._leader, self._leader_odom = lead.copy(), None if odom is None else odom.copy()
-        return self.leader_updates >= p.converged_updates
+        return self.leader_updates >= p.converged_updates and self.leader_travel >= p.converged_travel
 
     def _peaks(self, starts: np.ndarray, ranges: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """The log-likelihood of the scan at the nearest peak from each of ``starts`` (m, 3): a
