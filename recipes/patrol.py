@@ -71,6 +71,10 @@ GIVE_WAY = os.environ.get("EMOS_PATROL_GIVE_WAY", "1") == "1"
 # person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
 PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
+# s without a status before the supervisor kills a component as hung (the Launcher's 2 s by default). On a machine
+# at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
+# more than 5 restarts in 10 s end the run): a measurement of the navigation, not of the supervisor, may raise it.
+HEARTBEAT_TIMEOUT = float(os.environ.get("EMOS_PATROL_HEARTBEAT_TIMEOUT", "2.0"))
 
 my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
                        geometry_params=np.array([0.2, 0.3]))
@@ -218,7 +222,7 @@ class Patrol(BaseComponent):
         C.call(os.environ["EMOS_SUPERVISOR_SOCKET"], C.SUPERVISOR_STOP, {"reason": "patrol finished"}, timeout=5.0)
 
 
-launcher = Launcher()
+launcher = Launcher(heartbeat_timeout=HEARTBEAT_TIMEOUT)
 launcher.add_pkg(components=[sim], package_name="simulation", multiprocessing=True)
 stack.launch(launcher)
 launcher.add_pkg(components=[behaviors, follower, Patrol()], package_name="mission", multiprocessing=True)

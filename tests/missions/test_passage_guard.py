@@ -201,3 +201,85 @@ def test_mover_tracking_starts_again_when_the_clock_goes_back():
     assert watch.stamp == pytest.approx(100.4) and watch.restarts == 0
     watch.update(0.5, person, pose)  # the clock went back
     assert watch.stamp == pytest.approx(0.5) and watch.restarts == 1
+
+
+def test_a_short_phantom_track_does_not_replace_the_last_real_sighting():
+    """The person walked out of view 1.3 s ago; since then a short track (clutter a moving
+    robot's scan makes look moving, for 0.5 s, elsewhere) was the last moving track recorded: the
+    guard still predicts the person from where they were really last seen, and holds."""
+    config = PassageGuardConfig(enabled=True)
+    memory = watched()
+    start = hold_point(memory, RIGHT_TO_LEFT, config)
+    t_down = 60.0 + (14.5 - (60.0 % PERIOD)) % PERIOD  # walking down x = 4.2 (as the out-of-view test)
+    seen = MoverMemory()
+    for t in np.arange(t_down - 50.0, t_down, 0.1):
+        ci, vi = person(float(t))
+        seen.observe(float(t), ci[None], vi[None])
+    for t in np.arange(t_down + 0.5, t_down + 1.05, 0.1):  # the phantom: 0.5 s, 0.4 m/s, near the top-left room
+        seen.observe(float(t), np.array([[1.0 + 0.4 * (t - t_down), 5.5]]), np.array([[0.4, 0.0]]))
+    rows, ages = seen.last_sighting(t_down + 1.3)
+    assert len(rows) == 1 and rows[0, 2] < 3.3 and abs(rows[0, 1] - 4.2) < 0.05  # the person on x = 4.2
+    none = np.zeros((0, 2))
+    verdict = check_passage(RIGHT_TO_LEFT, start, seen, t_down + 1.3, none, none, np.zeros(0), ROBOT_RADIUS, config)
+    assert verdict.hold and "out of view" in verdict.reason and "(4.2" in verdict.reason, verdict.reason
+
+
+def test_a_long_walk_is_a_real_sighting_and_a_standing_jitter_is_not():
+    memory = MoverMemory()
+    for k in range(40):  # 4 s of clutter jittering about one place, reported moving at 0.35 m/s
+        t = 0.1 * k
+        memory.observe(t, np.array([[2.0 + 0.05 * (-1) ** k, 1.0]]), np.array([[0.35, 0.0]]))
+    assert len(memory.last_sighting(4.0)[0]) == 0
+    for k in range(30):  # 3 s of a walk at 0.6 m/s
+        t = 5.0 + 0.1 * k
+        memory.observe(t, np.array([[5.0, 0.06 * k]]), np.array([[0.0, 0.6]]))
+    rows, ages = memory.last_sighting(9.0)
+    assert len(rows) == 1 and rows[0, 2] == pytest.approx(0.06 * 29) and ages[0] == pytest.approx(9.0 - 7.9)
+
+
+def test_drive_speed_is_what_the_robot_drove_not_its_stops_turns_or_behaviors():
+    from emos.actors.nav.missions.passages import DriveSpeed
+
+    speed = DriveSpeed()
+    assert speed.speed() is None and speed.start_delay() is None
+    x, t = 0.0, 0.0
+    for k in range(300):  # 30 s: driving at 0.2 m/s, standing 5 s (a picture), a behavior backing at 0.4 m/s
+        t = 0.1 * k
+        standing = 100 <= k < 150
+        behavior = 200 <= k < 230
+        x += 0.0 if standing else (-0.04 if behavior else 0.02)
+        speed.observe(t, x, 0.0, driving=not behavior)
+    assert speed.speed() == pytest.approx(0.2, abs=0.02)
+    speed.released(t, x, 0.0)  # a hold ends; the robot starts 2.5 s later
+    for k in range(1, 60):
+        x += 0.0 if k <= 25 else 0.02
+        speed.observe(t + 0.1 * k, x, 0.0)
+    assert speed.start_delay() == pytest.approx(2.5 + 0.1 * 5, abs=0.15)  # 0.1 m covered 5 steps after it started
+
+
+@pytest.mark.parametrize("path", [LEFT_TO_RIGHT, RIGHT_TO_LEFT], ids=["left_to_right", "right_to_left"])
+def test_the_drive_through_is_predicted_at_the_measured_speed(path):
+    """A robot that drives at 0.15 m/s (a loaded machine: the nominal speed is 0.4) and is let
+    through by the guard never meets the person; at the nominal speed the guard would have let it
+    into a contact."""
+    config = PassageGuardConfig(enabled=True)
+    slow = attrs_evolve(config, speed=0.15)
+    memory = watched()
+    start = hold_point(memory, path, config)
+    nominal_into_contact = 0
+    for t in np.arange(60.0, 60.0 + PERIOD, 0.25):
+        c, v = person(float(t))
+        args = (path, start, memory, float(t), c[None], v[None], np.array([PERSON]), ROBOT_RADIUS, config)
+        measured = check_passage(*args, measured_speed=0.15)
+        if not measured.hold:
+            assert drive_through(path, start, float(t), slow) > 0.0, f"let through at {t:.2f} s into a contact"
+            assert "0.15 m/s" in measured.reason
+        elif not check_passage(*args).hold and drive_through(path, start, float(t), slow) <= 0.0:
+            nominal_into_contact += 1
+    assert nominal_into_contact > 0
+
+
+def attrs_evolve(config: PassageGuardConfig, **changes: float) -> PassageGuardConfig:
+    import attrs
+
+    return attrs.evolve(config, **changes)

@@ -29,7 +29,9 @@ Planner's ``plan`` wired as an input): the component remembers where the tracked
 (``missions.passages.MoverMemory``: the band) and holds the robot (``hold_passage``, on the
 same command input) *before* the stretch of its path that lies in the band while it could not
 drive through it and out before a mover arrives (``missions.passages.check_passage``: the
-movers predicted at constant velocity and as movers walked on from there before). A person
+movers predicted at constant velocity and as movers walked on from there before; the robot's
+drive through predicted at the speed and start delay its odometry showed lately,
+``missions.passages.DriveSpeed``, not a nominal speed a loaded machine does not reach). A person
 walking a doorway cannot be given way to inside it; the robot waits outside their way instead.
 """
 from __future__ import annotations
@@ -52,7 +54,7 @@ from emos.msgs.srv import TriggerRequest, TriggerResponse
 from .. import recovery as R
 from ..controllers.movers import Approach, MoverWatch, approaches, near_movers
 from ..controllers.sensors import obstacle_points
-from ..missions.passages import MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
+from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
 from .base import NavComponentConfig, rate_field
 from .convert import BadInput, grid_points_in_robot_frame, path_of, scan_of, velocity_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
@@ -139,6 +141,7 @@ class Behaviors(MotionActionServer):
         self._give_way_time = 0.0  # s spent giving way (node clock)
         self._hold_time = 0.0  # s held before a passage (node clock)
         self._memory = MoverMemory(self.config.passage_guard.memory)
+        self._drive_speed = DriveSpeed()  # how fast the robot really drives (the guard's drive through)
         self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
         self._movers = MoverWatch()
@@ -254,6 +257,10 @@ class Behaviors(MotionActionServer):
             self._stop_robot()
             ended.stopped = True
         self._watch_movers()
+        if self.config.passage_guard.enabled:
+            pose = self._pose()
+            if pose is not None:
+                self._drive_speed.observe(clock.now(), float(pose[0]), float(pose[1]), driving=run is None)
         if self.config.give_way.enabled and (run is None or run.name != "give_way"):
             threat = self._threat()
             if threat is not None and self._begin("give_way", self.config.give_way.time_allowance, self.config.give_way.speed,
@@ -387,7 +394,8 @@ class Behaviors(MotionActionServer):
             return None
         centres, velocities, radii = self._movers.movers()
         verdict = check_passage(path, pose[:2], self._memory, clock.now(), centres, velocities, radii,
-                                self.config.robot.radius, guard)
+                                self.config.robot.radius, guard, measured_speed=self._drive_speed.speed(),
+                                measured_delay=self._drive_speed.start_delay())
         at_edge = verdict.start is not None and verdict.start <= guard.approach
         if at_edge and not verdict.hold and not self._entering:  # once per way in: why it went (the patrol's logs)
             seen = ", ".join(f"({c[0]:.2f}, {c[1]:.2f}) at ({v[0]:.2f}, {v[1]:.2f}) m/s" for c, v in zip(centres, velocities))
@@ -397,18 +405,23 @@ class Behaviors(MotionActionServer):
         return verdict
 
     def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
-        """One step of holding before the band stretch: done when the guard no longer says hold;
-        gives up (and lets the robot go through) after ``max_hold`` s."""
+        """One step of holding before the band stretch: done when the guard has not said hold for
+        ``release_time`` s; gives up (and lets the robot go through) after ``max_hold`` s."""
         now = clock.now()
         run.done_amount = now - run.started
-        if verdict is None or not verdict.hold:
+        if verdict is not None and verdict.hold:
+            run.last_threat = now
+        if verdict is None or now - run.last_threat >= self.config.passage_guard.release_time:
             self._finish(run, True, f"hold_passage done after {run.done_amount:.1f} s: "
                                     f"{verdict.reason if verdict is not None else 'no plan or pose to judge by'}")
+            pose = self._pose()
+            if pose is not None:  # how long the robot takes to start after a hold: the next drive through's delay
+                self._drive_speed.released(now, float(pose[0]), float(pose[1]))
             return
         if now > run.deadline:
             self._no_hold_until = now + 3.0 * self.config.passage_guard.start_delay + 10.0
             self._counts["passage_hold_given_up"] += 1
-            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason}")
+            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason if verdict is not None else ''}")
             return
         self._stop_robot()
 

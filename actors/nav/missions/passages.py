@@ -12,9 +12,17 @@ the people's way and go through when it can be out again before a person arrives
   besides at constant velocity. Both predictions count.
 * :func:`check_passage`: the *stretch* of the robot's path ahead that lies in the band (within
   ``band_clearance`` of a remembered mover centre: the robot's and a person's radii plus a
-  margin). The robot is held before the stretch when it cannot drive through it (at ``speed``
-  after ``start_delay``, plus ``exit_margin``) without coming within ``margin`` (growing by
-  ``margin_rate`` per second of prediction) of a mover's predicted position.
+  margin). The robot is held before the stretch when it cannot drive through it (at the speed
+  it was *measured* to drive lately, :class:`DriveSpeed`, at most ``speed``, after the start
+  delay it was measured to take, at least ``start_delay``, plus ``exit_margin``) without coming
+  within ``margin`` (growing by ``margin_rate`` per second of prediction) of a mover's predicted
+  position. A loaded machine drives the robot at half its nominal speed: a drive through
+  predicted at the nominal speed ends before the real one does, and the person is back first.
+
+A person out of view (behind a wall) is predicted from their *last real sighting*: the last
+sample of the last walk the memory saw long and far enough to be a person
+(:meth:`MoverMemory.last_sighting`), not the last moving track anywhere: clutter that a moving
+robot's scan makes look moving for a few scans must not take the person's place.
 
 The Behaviors component (``BehaviorsConfig.passage_guard``) runs the check on every step and
 holds the robot on its command input (above the Controller's) while it says so.
@@ -28,7 +36,7 @@ import numpy as np
 
 from emos.config import validators as V
 
-__all__ = ["MoverMemory", "PassageGuardConfig", "PassageVerdict", "check_passage"]
+__all__ = ["DriveSpeed", "MoverMemory", "PassageGuardConfig", "PassageVerdict", "check_passage"]
 
 
 @attrs.define(frozen=True)
@@ -39,11 +47,15 @@ class PassageGuardConfig:
     (robot radius + person radius + a margin). ``approach`` (m): the robot is held when the
     stretch begins within this distance ahead along the path. ``look_ahead`` (m of path
     checked). ``rejoin`` (m): band stretches of the path less than this apart are one stretch.
-    ``speed`` (m/s the robot is assumed to drive the stretch at), ``start_delay`` (s
-    before it moves), ``exit_margin`` (m past the stretch it must reach). ``margin`` (m kept
+    ``speed`` (m/s: the most the robot is assumed to drive the stretch at; the speed it was
+    measured to drive at lately when lower, never below ``min_speed``), ``start_delay`` (s
+    before it moves: the least; the measured delay when longer), ``exit_margin`` (m past the
+    stretch it must reach). ``margin`` (m kept
     from a predicted mover; ``margin_rate`` m more per s of prediction). ``max_hold`` (s): a hold
     longer than this gives up and lets the robot go (a mover that stays is the Controller's and
-    the give-way's). ``out_of_view`` (s): with no mover in view, the one last seen this recently
+    the give-way's). ``release_time`` (s): a hold ends once the way has been clear this long (a
+    person turning at the end of their walk is tracked slow and heading away for a moment: one
+    clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
     e.g. behind a wall, and comes back). ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
     ``match_heading`` (rad): how near and how alike in heading an earlier walk must be to
@@ -55,11 +67,13 @@ class PassageGuardConfig:
     rejoin: float = attrs.field(default=1.0, validator=V.number(ge=0, le=10, finite=True, what="metres"))
     look_ahead: float = attrs.field(default=6.0, validator=V.number(gt=0, le=50, finite=True, what="metres"))
     speed: float = attrs.field(default=0.4, validator=V.number(gt=0, le=5, finite=True, what="m/s"))
+    min_speed: float = attrs.field(default=0.1, validator=V.number(gt=0, le=5, finite=True, what="m/s"))
     start_delay: float = attrs.field(default=1.0, validator=V.number(ge=0, le=10, finite=True, what="seconds"))
     exit_margin: float = attrs.field(default=0.3, validator=V.number(ge=0, le=5, finite=True, what="metres"))
     margin: float = attrs.field(default=0.15, validator=V.number(ge=0, le=3, finite=True, what="metres"))
     margin_rate: float = attrs.field(default=0.02, validator=V.number(ge=0, le=1, finite=True, what="m/s"))
     max_hold: float = attrs.field(default=60.0, validator=V.number(gt=0, le=3600, finite=True, what="seconds"))
+    release_time: float = attrs.field(default=1.0, validator=V.number(ge=0, le=60, finite=True, what="seconds"))
     out_of_view: float = attrs.field(default=15.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
     memory: float = attrs.field(default=180.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
     match_distance: float = attrs.field(default=0.35, validator=V.number(gt=0, le=5, finite=True, what="metres"))
@@ -88,6 +102,88 @@ MAX_PASSES = 4  # earlier passes tried, most recent first (the guard runs at the
 MAX_MOVER_SPEED = 1.5  # m/s: a mover farther from the robot's drive than this covers is not checked
 GHOST_RADIUS = 0.25  # m: the radius of a mover out of view (a person)
 OUT_OF_VIEW_AFTER = 0.5  # s: a mover not recorded walking for longer is out of view (or stopped)
+# A walk is a person's (a real sighting) once recorded unbroken for this long and this far from
+# where it began: clutter that a moving robot's scan makes look moving lasts a few scans and
+# stays where it was (its centre jitters), a walking person covers 0.5 m and more per second.
+REAL_WALK_TIME = 1.0  # s
+REAL_WALK_DISTANCE = 0.5  # m
+MAX_WALKS = 32  # real walks kept for last_sighting (the latest matter)
+
+
+@attrs.define
+class _Walk:
+    """One mover's unbroken record in :class:`MoverMemory`: where and when it began, its last
+    sample (t, x, y, vx, vy), and whether it is a real walk yet."""
+
+    t0: float
+    xy0: tuple[float, float]
+    last: tuple[float, float, float, float, float]
+    real: bool = False
+
+
+class DriveSpeed:
+    """How fast the robot actually drove lately (odometry poses on the component's clock): the
+    speed the passage guard predicts a drive through at, instead of a nominal one. A loaded
+    machine runs the controller late and the robot drives at a fraction of its set speed.
+
+    ``speed()``: the median (``QUANTILE``) of the speeds over ``span`` s pieces of the last
+    ``window`` s of driving (``observe(..., driving=True)``: the Controller's, not a behavior's)
+    in which the robot moved (faster than ``MOVING``: not standing for a picture or turning in
+    place); None before ``MIN_PIECES`` such pieces. ``start_delay()``: the longest of the last delays from a hold's end to the robot
+    having moved ``START_DISTANCE`` (``released()`` marks a hold's end)."""
+
+    MOVING = 0.05  # m/s: slower pieces are standing (a picture) or turning in place, not driving
+    QUANTILE = 0.5
+    MIN_PIECES = 5
+    START_DISTANCE = 0.1  # m
+    MAX_DELAYS = 5
+    MAX_DELAY = 10.0  # s: a longer one was not a start (the robot stayed for another reason)
+
+    def __init__(self, window: float = 30.0, span: float = 1.0) -> None:
+        self.window, self.span = float(window), float(span)
+        self._poses: list[tuple[float, float, float]] = []
+        self._pieces: list[tuple[float, float]] = []  # (end time, m/s) of each span while moving
+        self._release: tuple[float, float, float] | None = None
+        self._delays: list[float] = []
+
+    def observe(self, t: float, x: float, y: float, driving: bool = True) -> None:
+        """The robot at (x, y) at ``t`` s; ``driving``: on its way (not held, not giving way: a
+        behavior's moves are not how fast it drives through)."""
+        t = float(t)
+        if self._poses and t < self._poses[-1][0]:  # the clock went back: start again
+            self._poses, self._pieces, self._release = [], [], None
+        if not driving:
+            self._poses = []
+        self._poses.append((t, float(x), float(y)))
+        while len(self._poses) > 1 and t - self._poses[1][0] >= self.span:
+            self._poses.pop(0)
+        t0, x0, y0 = self._poses[0]
+        if t - t0 >= self.span:
+            v = math.hypot(x - x0, y - y0) / (t - t0)
+            if v >= self.MOVING:
+                self._pieces.append((t, v))
+            self._poses = [self._poses[-1]]
+        while self._pieces and self._pieces[0][0] < t - self.window:
+            self._pieces.pop(0)
+        if self._release is not None:
+            rt, rx, ry = self._release
+            if t - rt > self.MAX_DELAY:
+                self._release = None
+            elif math.hypot(x - rx, y - ry) >= self.START_DISTANCE:
+                self._delays = [*self._delays[-(self.MAX_DELAYS - 1):], t - rt]
+                self._release = None
+
+    def released(self, t: float, x: float, y: float) -> None:
+        """A hold ended at ``t`` with the robot at (x, y): time its start."""
+        self._release = (float(t), float(x), float(y))
+
+    def speed(self) -> float | None:
+        if len(self._pieces) < self.MIN_PIECES:
+            return None
+        return float(np.quantile([v for _, v in self._pieces], self.QUANTILE))
+
+    def start_delay(self) -> float | None:
+        return max(self._delays) if self._delays else None
 
 
 class MoverMemory:
@@ -100,6 +196,7 @@ class MoverMemory:
         self._array: np.ndarray | None = None
         self._cells: np.ndarray | None = None  # band_cells, until the next sample
         self._last_t = -math.inf
+        self._walks: list[_Walk] = []  # each mover's unbroken record (last_sighting)
 
     def observe(self, t: float, centres: np.ndarray, velocities: np.ndarray) -> None:
         """Record the moving tracks seen at ``t`` s: ``centres`` and ``velocities`` (M, 2)."""
@@ -111,6 +208,9 @@ class MoverMemory:
             self._rows = [(r[0] + shift, *r[1:]) for r in self._rows]
             self._last_t += shift
             self._array = None
+            for w in self._walks:
+                w.t0 += shift
+                w.last = (w.last[0] + shift, *w.last[1:])
         if t < self._last_t + SAMPLE_PERIOD:
             return
         centres = np.asarray(centres, dtype=float).reshape(-1, 2)
@@ -120,10 +220,50 @@ class MoverMemory:
             return
         self._last_t = t
         self._rows.extend((t, float(c[0]), float(c[1]), float(v[0]), float(v[1])) for c, v in zip(centres[fast], velocities[fast]))
+        self._follow_walks(self._rows[-int(fast.sum()):])
         cut = t - self.memory
         if self._rows[0][0] < cut:
             self._rows = [r for r in self._rows if r[0] >= cut]
         self._array = self._cells = None
+
+    def _follow_walks(self, rows: list[tuple[float, float, float, float, float]]) -> None:
+        """Extend each open walk by the nearest new sample it could have walked to (a person's
+        pace, as ``_walk_from`` links samples), start a walk for each sample left; a walk is
+        real once long and far enough (``REAL_WALK_TIME``, ``REAL_WALK_DISTANCE``)."""
+        t = rows[0][0]
+        open_walks = [w for w in self._walks if t - w.last[0] <= GAP_LIMIT]
+        taken: set[int] = set()
+        for row in sorted(rows, key=lambda r: min((math.hypot(r[1] - w.last[1], r[2] - w.last[2]) for w in open_walks),
+                                                  default=math.inf)):
+            best, best_d = None, math.inf
+            for i, w in enumerate(open_walks):
+                d = math.hypot(row[1] - w.last[1], row[2] - w.last[2])
+                if i not in taken and d <= 3.0 * (t - w.last[0]) + 0.1 and d < best_d:
+                    best, best_d = i, d
+            if best is None:
+                self._walks.append(_Walk(t, (row[1], row[2]), row))
+                continue
+            taken.add(best)
+            w = open_walks[best]
+            w.last = row
+            if not w.real and t - w.t0 >= REAL_WALK_TIME and math.hypot(row[1] - w.xy0[0], row[2] - w.xy0[1]) >= REAL_WALK_DISTANCE:
+                w.real = True
+        # Keep the open walks and the latest real ones (a walk that never became real is forgotten when it ends).
+        live = [w for w in self._walks if t - w.last[0] <= GAP_LIMIT]
+        done = [w for w in self._walks if t - w.last[0] > GAP_LIMIT and w.real and w.last[0] >= t - self.memory]
+        self._walks = done[-MAX_WALKS:] + live
+
+    def last_sighting(self, now: float) -> tuple[np.ndarray, np.ndarray]:
+        """The last real sighting of the movers: (K, 5) rows (t, x, y, vx, vy), the last sample of
+        each real walk that ended (or goes on) at the latest time a real walk was recorded, and
+        (K,) their ages at ``now`` s. Short tracks (clutter the scan makes look moving) never
+        take the place of a person who walked out of view."""
+        real = [w for w in self._walks if w.real]
+        if not real:
+            return np.zeros((0, 5)), np.zeros(0)
+        latest = max(w.last[0] for w in real)
+        rows = np.array([w.last for w in real if w.last[0] >= latest - SAMPLE_PERIOD], dtype=float).reshape(-1, 5)
+        return rows, float(now) - rows[:, 0]
 
     def samples(self) -> np.ndarray:
         """(N, 5) rows (t, x, y, vx, vy), oldest first."""
@@ -177,11 +317,6 @@ class MoverMemory:
                 walk_xy.append(last[1:3])
             j += len(group)
         return walk_t, walk_xy, last
-
-    def last_seen(self) -> np.ndarray:
-        """(K, 5) rows of the latest time a mover was recorded (one per mover seen then)."""
-        rows = self.samples()
-        return rows[rows[:, 0] == rows[-1, 0]] if len(rows) else rows
 
     def predict(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
                 match_distance: float = 0.35, match_heading: float = math.radians(40.0),
@@ -261,9 +396,14 @@ def _resample(path: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, now: float, centres: np.ndarray,
-                  velocities: np.ndarray, radii: np.ndarray, robot_radius: float, config: PassageGuardConfig) -> PassageVerdict:
+                  velocities: np.ndarray, radii: np.ndarray, robot_radius: float, config: PassageGuardConfig, *,
+                  measured_speed: float | None = None, measured_delay: float | None = None) -> PassageVerdict:
     """Whether to hold the robot before the band stretch of ``path`` ahead (world frame; see the
-    module doc). ``centres``, ``velocities``, ``radii``: the moving tracks now."""
+    module doc). ``centres``, ``velocities``, ``radii``: the moving tracks now.
+    ``measured_speed``, ``measured_delay``: how fast the robot drove lately and how long it took
+    to start after a hold (:class:`DriveSpeed`; None: not measured yet): the drive through is
+    predicted at ``min(speed, measured_speed)`` (at least ``min_speed``) after
+    ``max(start_delay, measured_delay)``."""
     ahead = path_ahead(np.asarray(path, dtype=float), np.asarray(robot_xy, dtype=float), config.look_ahead)
     pts, s = _resample(ahead, 0.05)
     in_band = memory.band_gap(pts) < config.band_clearance
@@ -283,23 +423,26 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
     centres = np.asarray(centres, dtype=float).reshape(-1, 2)
     velocities = np.asarray(velocities, dtype=float).reshape(-1, 2)
     radii = np.asarray(radii, dtype=float).reshape(-1)
-    # The movers in view, and the one(s) last seen walking if that was a while ago but recently
-    # (out of view, e.g. behind a wall): predicted from earlier walks from where they were.
+    # The movers in view, and the one(s) last really seen walking if that was a while ago but
+    # recently (out of view, e.g. behind a wall): predicted from earlier walks from where they were.
     since = np.zeros(len(centres))  # s since each mover checked was seen
-    last = memory.last_seen()
-    if len(last) and OUT_OF_VIEW_AFTER < now - last[0, 0] <= config.out_of_view:
+    last, ages = memory.last_sighting(now)
+    if len(last) and ages.min() > OUT_OF_VIEW_AFTER and ages.max() <= config.out_of_view:
         centres = np.vstack([centres, last[:, 1:3]])
         velocities = np.vstack([velocities, last[:, 3:5]])
         radii = np.r_[radii, np.full(len(last), GHOST_RADIUS)]
-        since = np.r_[since, np.full(len(last), float(now - last[0, 0]))]
+        since = np.r_[since, ages]
     if len(centres) == 0:
         return PassageVerdict(False, "no mover", start, end)
-    # The robot's drive through: standing start_delay s, then at speed to exit_margin past the end.
+    # The robot's drive through: standing for the start delay, then at the speed it drives at
+    # lately (never faster than the configured one) to exit_margin past the end.
+    speed = max(min(config.speed, measured_speed if measured_speed is not None else config.speed), config.min_speed)
+    delay = max(config.start_delay, measured_delay if measured_delay is not None else 0.0)
     dt = 0.2
     reach = min(end + config.exit_margin, float(s[-1]))
-    t_end = config.start_delay + reach / config.speed
+    t_end = delay + reach / speed
     times = np.arange(0.0, t_end + 1e-9, dt)
-    along = np.clip((times - config.start_delay) * config.speed, 0.0, reach)
+    along = np.clip((times - delay) * speed, 0.0, reach)
     robot = np.c_[np.interp(along, s, pts[:, 0]), np.interp(along, s, pts[:, 1])]
     for c, v, r, ago in zip(centres, velocities, radii, since):
         if np.hypot(*(robot - c).T).min() > MAX_MOVER_SPEED * (t_end + ago) + robot_radius + r + config.margin:
@@ -319,5 +462,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
                 seen = f" (out of view, last seen {ago:.1f} s ago)" if ago > 0 else ""
                 return PassageVerdict(True, f"mover at ({c[0]:.2f}, {c[1]:.2f}){seen} predicted at ({pred[k, 0]:.2f}, {pred[k, 1]:.2f}) "
                                             f"in {times[k]:.1f} s, where the robot would be in the band stretch "
-                                            f"{start:.2f}-{end:.2f} m ahead", start, end)
-    return PassageVerdict(False, f"band stretch {start:.2f}-{end:.2f} m ahead is clear", start, end)
+                                            f"{start:.2f}-{end:.2f} m ahead (driven at {speed:.2f} m/s after {delay:.1f} s)",
+                                            start, end)
+    return PassageVerdict(False, f"band stretch {start:.2f}-{end:.2f} m ahead is clear (driven at {speed:.2f} m/s after "
+                                 f"{delay:.1f} s)", start, end)
