@@ -97,6 +97,25 @@ def pytest_ignore_collect(collection_path, config: pytest.Config):
     return True if not _marker_expression_can_hold(markexpr, unit=False) else None
 
 
+#: Fixtures that start a model server (``emos serve models``, which imports sentence-transformers and
+#: loads the embedding model) once per xdist worker (session scope) or once per module on each worker
+#: that runs one of its tests: at load 50 the recipe server's start took 230 s and 166 s, once on each
+#: worker. Their tests share one worker (an xdist_group named after the fixture), which starts each
+#: server once per run. Modules that load the embedding model in the test process say so themselves
+#: (``xdist_group("embedder")``; tests/test_suite_groups.py keeps them in it).
+SHARED_SERVER_FIXTURES = ("model_server", "recipe_server")
+
+
+def pytest_itemcollected(item: pytest.Item) -> None:
+    """Groups the tests of SHARED_SERVER_FIXTURES. Done as each test is collected, so the marker is
+    there before pytest-xdist turns groups into test ids (in its pytest_collection_modifyitems,
+    which may run before ours)."""
+    for name in SHARED_SERVER_FIXTURES:
+        if name in getattr(item, "fixturenames", ()) and not item.get_closest_marker("xdist_group"):
+            item.add_marker(pytest.mark.xdist_group(name))
+            break
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """A test without a tier would be in no loop but the full run: refuse to collect it. Then the
     long work first: modules with an xdist group (run serially on one worker), then those with

@@ -16,7 +16,10 @@ import pytest
 from emos.actors.agents.db import ChromaClient, ChromaDB
 from emos.actors.agents.errors import MalformedResponseError, ModelConnectionError, ModelServerError
 
-pytestmark = pytest.mark.process
+# ChromaClient.initialize loads the embedding model in this process: the module runs in the worker
+# that loads it for the other embedding modules (tests/conftest.py). The timeout bounds a hang only:
+# at load 50 the first load took over 300 s (6 s idle).
+pytestmark = [pytest.mark.process, pytest.mark.timeout(900), pytest.mark.xdist_group("embedder")]
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 

@@ -7,7 +7,10 @@ import os
 
 import pytest
 
-pytestmark = pytest.mark.unit
+# One xdist worker runs every module that loads the embedding model (torch, sentence-transformers,
+# Chroma): it loads them once per run instead of once per worker (tests/conftest.py). The timeout
+# bounds a hang only: importing sentence-transformers took over 300 s at load 50 (6 s idle).
+pytestmark = [pytest.mark.unit, pytest.mark.timeout(900), pytest.mark.xdist_group("embedder")]
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 

@@ -7,7 +7,8 @@ import pytest
 from emos.actors.agents.memory import MemoryStore
 from tests.memory.test_memory_store import Clock, _walk
 
-pytestmark = pytest.mark.process
+# Its ChromaClient loads the embedding model in the test process: one worker does (tests/conftest.py).
+pytestmark = [pytest.mark.process, pytest.mark.timeout(900), pytest.mark.xdist_group("embedder")]
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,10 @@ from pathlib import Path
 import pytest
 
 # The timeout bounds a hang only: loading the embedding model took 155 s on the 2-core machine at
-# load 22 (6 s idle), and the test routes 216 queries.
-pytestmark = [pytest.mark.unit, pytest.mark.statistical, pytest.mark.timeout(900)]
+# load 22 (6 s idle), and the test routes 216 queries. One xdist worker runs every module that
+# loads the embedding model (torch, sentence-transformers, Chroma): it loads them once per run
+# instead of once per worker (tests/conftest.py).
+pytestmark = [pytest.mark.unit, pytest.mark.statistical, pytest.mark.timeout(900), pytest.mark.xdist_group("embedder")]
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
