@@ -3,7 +3,7 @@
 * Speed, in one run with both loaded: tokens per second and first-token latency of the same
   prompts streamed (a) in-process, through the client the LLM component uses with
   ``enable_local_model=True``, and (b) through ``emos serve models --local-llm`` over the
-  OpenAI and Ollama endpoints. Same thread count on both sides (``--threads``, default 2); the
+  OpenAI and Ollama endpoints. Same thread count on both sides (``--threads``, default: the components' own, 1); the
   prompts alternate between the paths so machine load hits both alike.
 * ``fallback_to_local()`` swap: a recipe's LLM component asks a model server, whose process
   is then SIGKILLed while questions keep arriving (every ``--ask-every`` s, as a conversation or
@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from emos.actors.agents.server.llama_backend import default_threads
+
 PROMPTS = [
     "Name three rooms in a house.",
     "What is a robot? Answer in one sentence.",
@@ -37,7 +39,7 @@ PROMPTS = [
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the result as JSON only")
-    parser.add_argument("--threads", type=int, default=2, help="llama.cpp threads on both paths (default 2)")
+    parser.add_argument("--threads", type=int, default=default_threads(), help=f"llama.cpp threads on both paths (default {default_threads()}, the components' default)")
     parser.add_argument("--rounds", type=int, default=3, help="passes over the prompts per path (default 3)")
     parser.add_argument("--max-tokens", type=int, default=48, help="tokens generated per prompt (default 48)")
     parser.add_argument("--swaps", type=int, default=5, help="server kills timed per fallback variant (default 5)")
@@ -128,7 +130,7 @@ launcher.bringup()
 """
 
 
-def swap_recipe(port: int, standby: bool, threads: int = 2) -> str:
+def swap_recipe(port: int, standby: bool, threads: int = 1) -> str:
     return SWAP_RECIPE.format(port=port, standby=standby, threads=threads)
 
 
@@ -183,7 +185,7 @@ def _wait_standby(recipe: Any, timeout: float = 180.0) -> dict[str, Any]:
         time.sleep(0.1)
 
 
-def bench_swap(swaps: int, ask_every: float, standby: bool, threads: int = 2) -> dict[str, Any]:
+def bench_swap(swaps: int, ask_every: float, standby: bool, threads: int = 1) -> dict[str, Any]:
     """Kill the model server ``swaps`` times. Per kill: server death -> the component reports
     COMPONENT_FAILURE (``detect``), -> the local model's first answer (``swap``); then a new
     server on the same port, ``change_model_client("primary")``, and the time until the server

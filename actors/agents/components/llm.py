@@ -77,7 +77,7 @@ class LLMConfig(ModelComponentConfig):
     enable_local_model: bool = field(default=False)
     #: the GGUF file of the local model; None = the packaged SmolLM2-135M-Instruct
     local_model_path: str | None = field(default=None, validator=_optional_path)
-    #: llama.cpp threads of the local model; None = the usable CPUs, at most 4
+    #: llama.cpp threads of the local model; None = 1 (llama_backend.default_threads: no OpenMP barriers)
     ncpu_local_model: int | None = field(default=None, validator=V.number(ge=1, le=256, integer=True, allow_none=True))
     #: context window of the local model in tokens (prompt + answer)
     local_model_context: int = field(default=2048, validator=V.number(ge=256, le=131072, integer=True))

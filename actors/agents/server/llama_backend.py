@@ -53,13 +53,14 @@ def _import_llama() -> Any:
 
 
 def default_threads() -> int:
-    """llama.cpp threads: the CPUs this process may use, at most 4 (more only contend on a
-    shared robot computer; 135M parameters do not need them)."""
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cpus = os.cpu_count() or 1
-    return max(1, min(4, cpus))
+    """llama.cpp threads by default: one. With sleeping OpenMP threads (above) every barrier of
+    a multi-threaded graph costs a futex wake, hundreds per token; one thread has no barriers.
+    SmolLM2 on this machine's 2 cores, in-process decode: idle, 1 thread 72 tokens/s against 2
+    threads 39-53; beside two CPU hogs 35 steady against 25-57. Spinning threads (a bounded
+    GOMP_SPINCOUNT) reach 110-117 idle but fall to 0.5-4.4 beside the hogs: on a robot computer
+    shared with other components that is the case to design for. Ask for more threads with
+    ``ncpu_local_model`` / ``--threads`` for a bigger model on a dedicated computer."""
+    return 1
 
 
 TOOLS_NOTE = ("You can call these tools. To call one, answer with a JSON object "
