@@ -100,7 +100,7 @@ def test_the_system_log_and_picture_of_a_failed_trial_are_kept(tmp_path):
     assert ((pixels == (220, 30, 30)).all(axis=1)).any()  # the robot drawn as collided
 
 
-def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp_path):
+def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp_path, monkeypatch):
     """``stop_in_background``: the result is returned once known and the system stops in a
     thread of the run's ``TrialSystems`` (the next trial starts meanwhile). After
     ``wait_stopped`` the system has exited, its folder is gone, its shared memory too, and the
@@ -115,7 +115,12 @@ def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp
 
     worlds = tmp_path / "w.json"  # a cylinder on the start: the robot touches it at once
     worlds.write_text(json.dumps({"7": {"cylinders": [[-2.25, 3.2]], "path_length": 10.0}}))
-    dirs_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*")))
+    # The trial's folder is made in a temporary directory of this test's own: another test's
+    # trial of world 7 on the other worker makes and removes its folders in /tmp meanwhile.
+    private_tmp = tmp_path / "tmp"
+    private_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private_tmp))
+    assert tempfile.gettempdir() == str(private_tmp)  # where run_episode_process's mkdtemp makes it
 
     def living_children() -> set[int]:
         # this worker may keep processes of other tests' module or session fixtures: count ours
@@ -137,8 +142,7 @@ def test_a_finished_trials_system_stops_in_the_background_and_leaves_nothing(tmp
     assert result.collided and not result.success
     systems.wait_stopped()
     assert not living_children() - children_before
-    # another test's trial of world 7 may end meanwhile on the other worker: none may be new
-    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "emos-barn-7-*"))) - dirs_before == set()
+    assert not glob.glob(os.path.join(private_tmp, "emos-barn-7-*")), "the trial's folder was left"
     text = kept.read_text()
     assert "bringup ended" in text and all(f"{name} stopped" in text for name in NAV_COMPONENTS), text[-2000:]
     run_id = re.search(r"system up: .* \(run (\S+)\)", text).group(1)  # other runs may share /dev/shm
