@@ -125,7 +125,10 @@ def test_the_robot_waits_before_the_persons_way_and_goes_through_without_contact
         assert not sim.execute_method("sim_status").get("collided"), "the Simulator recorded a contact"
         # Held before the person's way: the robot's body short of the person's walk.
         assert abs(held_at[0] - PERSON_X) > ROBOT_RADIUS + PERSON_RADIUS + 0.1, f"held at {held_at}, in the person's way"
-        assert "hold_passage started" in log and "hold_passage done" in log, log[-3000:]
+        # The hold ends by itself, or a give-way takes over from it (a person closing in on the
+        # waiting robot): both are the guard's way; a hold that gave up is not.
+        assert "hold_passage started" in log, log[-3000:]
+        assert "hold_passage done" in log or "hold_passage preempted by give_way" in log, log[-3000:]
         stats = behaviors.execute_method("stats")
         assert stats["passage_hold"] >= 1 and stats["passage_hold_given_up"] == 0, stats
     finally:

@@ -218,10 +218,14 @@ class Behaviors(MotionActionServer):
         self._counts["started"] += 1
         if name in ("give_way", "hold_passage"):
             self._counts["give_way" if name == "give_way" else "passage_hold"] += 1
+        preempted = None
         with self._lock:
             if self._running is not None and self._running.result is None:
-                self._running.result = BehaviorResult(success=False, message=f"{self._running.name} preempted by {name}")
+                preempted = self._running.name
+                self._running.result = BehaviorResult(success=False, message=f"{preempted} preempted by {name}")
             self._running = run
+        if preempted is not None:
+            self.get_logger().info("[%s] %s preempted by %s", self.component_name, preempted, name)
         self.get_logger().info("[%s] %s started (%.3g)%s", self.component_name, name, target, f": {why}" if why else "")
         return True, f"{name} started"
 
