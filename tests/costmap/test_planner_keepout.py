@@ -78,3 +78,38 @@ def test_plan_goes_round_keepout_and_keepout_start_or_goal_fails_naming_the_zone
         h.advance(1.0)
         st = h.wait_for(lambda: (s := _status(h)) is not None and "the start" in s.message and s, what="start-in-keepout failure")
         assert st.level == HealthLevel.ALGORITHM_FAILURE and "keepout zone 'wet_floor'" in st.message
+
+
+def test_a_goal_that_arrives_while_a_query_runs_is_planned_when_it_ends_without_waiting_a_period(tmp_path):
+    """The step that takes a new goal finds the worker busy with the old one: the new goal is
+    planned as soon as that query ends, not a period (here 1 s of robot time) later. The clock
+    stays stopped while the test waits, so only the worker can plan it."""
+    import threading
+
+    from emos.actors.nav.components.convert import grid_msg
+
+    _, keepout = write_room(tmp_path)
+    room = room_grid()
+    planner = _planner(keepout)
+    release, first = threading.Event(), threading.Event()
+    plan_once = planner.plan_once
+
+    def slow_first_query(goal):
+        if not first.is_set():
+            first.set()
+            release.wait(60)  # the first query runs until the test lets it end
+        return plan_once(goal)
+
+    planner.plan_once = slow_first_query
+    with ComponentHarness(planner, tick=0.1) as h:
+        h.feed("/map", grid_msg(room.data, room.resolution, room.origin, "map"))
+        h.feed("/odom", _odom(1.0, 1.0))
+        h.feed("/goal", _goal(4.5, 1.0))
+        h.advance(1.0)
+        h.wait_for(first.is_set, what="the first query running")
+        h.feed("/goal", _goal(1.0, 3.0))
+        h.advance(1.0)  # the step that takes the new goal: the worker is busy
+        release.set()
+        plan = _path(h.wait_for(lambda: (p := h.latest("/plan")) is not None and np.allclose(_path(p)[-1], (1.0, 3.0), atol=0.05) and p,
+                                timeout=30, what="a plan to the second goal"))
+        assert np.allclose(plan[0], (1.0, 1.0), atol=0.05)
