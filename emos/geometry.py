@@ -10,7 +10,7 @@ from typing import Any, overload
 
 import numpy as np
 
-__all__ = ["wrap_angle", "yaw_of_quaternion", "quaternion_of_yaw", "planar_pose", "integrate_pose"]
+__all__ = ["wrap_angle", "yaw_of_quaternion", "quaternion_of_yaw", "planar_pose", "integrate_pose", "arc_steps"]
 
 _TAU = 2.0 * math.pi
 
@@ -83,15 +83,20 @@ def integrate_pose(pose: Any, twist: Any, dt: Any) -> np.ndarray:
         c, s = math.cos(th), math.sin(th)
         return np.array([x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + om * step)])
     pose = np.asarray(pose, dtype=np.float64)
-    cmd = np.asarray(twist, dtype=np.float64)
     x, y, th = pose[..., 0], pose[..., 1], pose[..., 2]
+    dx_b, dy_b, dth = arc_steps(twist, dt)
+    c, s = np.cos(th), np.sin(th)
+    return np.stack(np.broadcast_arrays(x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + dth)), axis=-1)
+
+
+def arc_steps(twist: Any, dt: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(dx, dy, dyaw)`` of holding each body twist (..., 3) for ``dt``: the displacement in the
+    body frame at the step's start, and the heading change (the arcs of :func:`integrate_pose`)."""
+    cmd = np.asarray(twist, dtype=np.float64)
     vx, vy, om = cmd[..., 0], cmd[..., 1], cmd[..., 2]
     dth = om * dt
     small = np.abs(dth) < 1e-6
     safe = np.where(small, 1.0, dth)
     a = np.where(small, 1.0 - dth**2 / 6.0, np.sin(safe) / safe) * dt
     b = np.where(small, dth / 2.0, (1.0 - np.cos(safe)) / safe) * dt
-    dx_b = vx * a - vy * b
-    dy_b = vx * b + vy * a
-    c, s = np.cos(th), np.sin(th)
-    return np.stack(np.broadcast_arrays(x + c * dx_b - s * dy_b, y + s * dx_b + c * dy_b, wrap_angle(th + dth)), axis=-1)
+    return vx * a - vy * b, vx * b + vy * a, dth

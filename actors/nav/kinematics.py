@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from emos.geometry import integrate_pose, wrap_angle
+from emos.geometry import arc_steps, integrate_pose, wrap_angle
 
 from .robot import RobotConfig, RobotType
 
@@ -154,7 +154,7 @@ def ramp_commands(robot: RobotConfig, velocity: np.ndarray, targets: np.ndarray,
         # Moving away from zero (same sign as v, or from rest) is acceleration; else braking.
         speeding = (v * delta > 0) | (v == 0)
         step = np.where(speeding, acc, dec)
-        v = v + np.clip(delta, -step, step)
+        v = v + np.minimum(np.maximum(delta, -step), step)  # np.clip's wrapper costs more than the step
         out[:, k] = v
     return feasible_commands(robot, out)
 
@@ -165,8 +165,16 @@ def integrate_sequence(pose: np.ndarray, commands: np.ndarray, dt: float) -> np.
     if cmds.ndim == 2:
         cmds = cmds[None]
     n, k, _ = cmds.shape
+    start = np.asarray(pose, dtype=np.float64).reshape(3)
     out = np.empty((n, k + 1, 3))
-    out[:, 0] = np.asarray(pose, dtype=np.float64).reshape(3)
-    for i in range(k):
-        out[:, i + 1] = integrate(out[:, i], cmds[:, i], dt)
+    out[:, 0] = start
+    # All steps at once: the heading at each step's start is the running sum of the turns, and
+    # each step's arc, turned into the world by that heading, adds to the running position.
+    dx_b, dy_b, dth = arc_steps(cmds, dt)
+    heading = start[2] + np.cumsum(dth, axis=1)
+    before = np.concatenate([np.full((n, 1), start[2]), heading[:, :-1]], axis=1)
+    c, s = np.cos(before), np.sin(before)
+    out[:, 1:, 0] = start[0] + np.cumsum(c * dx_b - s * dy_b, axis=1)
+    out[:, 1:, 1] = start[1] + np.cumsum(s * dx_b + c * dy_b, axis=1)
+    out[:, 1:, 2] = wrap_angle(heading)
     return out

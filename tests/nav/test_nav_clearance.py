@@ -54,3 +54,36 @@ assert "scipy.spatial" in sys.modules, "not warmed up by the controller"
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+@pytest.mark.parametrize("shape", sorted(FOOTPRINTS))
+@pytest.mark.parametrize("crowd", [False, True])
+def test_trajectory_minimum_refines_only_where_it_can_win_and_equals_the_full_minimum(shape, crowd, monkeypatch):
+    """The controllers' per-trajectory clearance skips the exact footprint distance at poses whose
+    bounding-circle bound cannot be the minimum: the values must be those of every pose refined."""
+    kind, params = FOOTPRINTS[shape]
+    robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=kind, geometry_params=params)
+    rng = np.random.default_rng(11)
+    # rollouts: 60 arcs of 30 poses from near the origin, so closest approaches differ per arc
+    t = np.linspace(0.0, 1.5, 30)
+    v, w = rng.uniform(0.2, 1.0, 60), rng.uniform(-2.0, 2.0, 60)
+    yaw = w[:, None] * t
+    x = np.cumsum(v[:, None] * np.cos(yaw) * 0.05, axis=1) - 1.0
+    y = np.cumsum(v[:, None] * np.sin(yaw) * 0.05, axis=1)
+    poses = np.stack([x, y, yaw], axis=-1)
+    # crowd: a dense wall beside the arcs; else a few posts, as a scan of a sparse room shows them
+    obstacles = (np.c_[np.linspace(-2, 2, 800), rng.normal(0.4, 0.02, 800)] if crowd
+                 else np.concatenate([c + 0.1 * np.c_[np.cos(a), np.sin(a)] for c in rng.uniform(-2.0, 2.0, (6, 2)) for a in [np.linspace(0, 6.2, 20)]]))
+    valid = rng.random((60, 30)) > 0.2
+    valid[0] = False  # a trajectory with nothing to judge: inf, as before
+    monkeypatch.setattr(C, "KDTREE_PAIRS", 0)  # the k-d tree path, where the pruning applies
+    refined = []
+    original = C._clearance_kdtree
+    monkeypatch.setattr(C, "_clearance_kdtree", lambda r, flat, o, tree: refined.append(len(flat)) or original(r, flat, o, tree))
+    want = np.where(valid, C.pose_clearance(robot, poses, obstacles), np.inf).min(axis=-1)
+    refined.clear()
+    got = C.trajectory_min_clearance(robot, poses, obstacles, valid)
+    np.testing.assert_array_equal(got, want)
+    assert np.isinf(got[0]) and np.isfinite(got[1:]).all()
+    if kind is not RobotGeometry.Type.CYLINDER:
+        assert 0 < sum(refined) < 0.8 * valid.sum(), f"refined {sum(refined)} of {valid.sum()} poses"

@@ -88,3 +88,24 @@ def test_frame_round_trip():
     pose = np.array([1.0, 2.0, 0.7])
     pts = np.random.default_rng(0).normal(size=(20, 2))
     np.testing.assert_allclose(to_world_frame(pose, to_robot_frame(pose, pts)), pts, atol=1e-12)
+
+
+def test_a_command_sequence_integrates_in_one_pass_to_the_poses_of_step_by_step_arcs():
+    """``integrate_sequence`` sums all steps at once; every pose must be the one the step-by-step
+    exact arcs (``integrate_pose``, heading wrapped each step) reach, straight steps included."""
+    from emos.actors.nav.kinematics import integrate_sequence
+    from emos.geometry import integrate_pose, wrap_angle
+
+    rng = np.random.default_rng(3)
+    cmds = np.c_[rng.uniform(-0.5, 1.5, 40 * 25), rng.uniform(-0.4, 0.4, 40 * 25), rng.uniform(-3.0, 3.0, 40 * 25)].reshape(40, 25, 3)
+    cmds[:5, :, 2] = 0.0  # straight
+    cmds[5:10, :, 2] = 1e-8  # the small-turn branch
+    start = np.array([0.7, -1.2, 3.0])  # near +pi: the heading wraps along the way
+    got = integrate_sequence(start, cmds, 0.1)
+    want = np.empty_like(got)
+    want[:, 0] = start
+    for k in range(cmds.shape[1]):
+        want[:, k + 1] = integrate_pose(want[:, k], cmds[:, k], 0.1)
+    np.testing.assert_allclose(got[..., :2], want[..., :2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(wrap_angle(got[..., 2] - want[..., 2]), 0.0, atol=1e-9)
+    assert (np.abs(got[..., 2]) <= np.pi).all()

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..robot import RobotConfig, RobotGeometry
 
-__all__ = ["pose_clearance", "trajectory_clearance", "nearby_obstacles", "voxel_downsample", "warm_up"]
+__all__ = ["pose_clearance", "trajectory_clearance", "trajectory_min_clearance", "nearby_obstacles", "voxel_downsample", "warm_up"]
 
 _ROUND = (RobotGeometry.Type.CYLINDER, RobotGeometry.Type.SPHERE, RobotGeometry.Type.CAPSULE,
           RobotGeometry.Type.CONE)
@@ -125,12 +125,12 @@ def _clearance_kdtree(robot: RobotConfig, flat: np.ndarray, obs: np.ndarray, tre
     """:func:`pose_clearance` through a k-d tree of the obstacles: the same exact distances
     (the nearest centre distance, then the footprint distance of every obstacle that can be
     nearer than the bounding circle says) for a fraction of the pair count."""
+    if robot.geometry_type in _ROUND:
+        return tree.query(flat[:, :2], k=1)[0] - robot.radius
     k = min(_NEAREST, obs.shape[0])
     dist, idx = tree.query(flat[:, :2], k=k)
     dist, idx = dist.reshape(flat.shape[0], k), idx.reshape(flat.shape[0], k)
     dmin = dist[:, 0]
-    if robot.geometry_type in _ROUND:
-        return dmin - robot.radius
     bound = dmin + (robot.radius - robot.inner_radius) + 1e-6
     out = dmin - robot.radius
     pose_i, slot = np.nonzero(dist <= bound[:, None])
@@ -158,5 +158,50 @@ def _clearance_kdtree(robot: RobotConfig, flat: np.ndarray, obs: np.ndarray, tre
 
 def trajectory_clearance(robot: RobotConfig, trajectories: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
     """Smallest footprint clearance along each trajectory (T, P, 3) -> (T,)."""
-    clear = pose_clearance(robot, trajectories, obstacles)
-    return clear.min(axis=-1)
+    return trajectory_min_clearance(robot, trajectories, obstacles)
+
+
+def trajectory_min_clearance(robot: RobotConfig, trajectories: np.ndarray, obstacles: np.ndarray,
+                             valid: np.ndarray | None = None) -> np.ndarray:
+    """``pose_clearance(...)`` masked by ``valid`` (T, P) and reduced to its minimum per trajectory
+    (T, P, 3) -> (T,), the same values, but the exact footprint distance is computed only where
+    it can be the minimum.
+
+    The nearest obstacle centre ``d`` bounds a pose's clearance on both sides: at least
+    ``d - radius`` (the bounding circle) and at most ``d - inner_radius`` (the inscribed circle).
+    A pose whose lower bound exceeds the smallest upper bound along its trajectory cannot hold
+    the trajectory's minimum, so only the others are refined. Along a rollout, that leaves the
+    few poses of closest approach.
+    """
+    poses = np.asarray(trajectories, dtype=np.float64)
+    lead = poses.shape[:-1]
+    rows = int(np.prod(lead[:-1])) if len(lead) > 1 else 1
+    flat = poses.reshape(rows, -1, 3)
+    mask = np.ones(flat.shape[:2], dtype=bool) if valid is None else np.asarray(valid, dtype=bool).reshape(flat.shape[:2])
+    obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+    out_shape = lead[:-1]
+    if obs.shape[0] == 0 or flat.shape[1] == 0:
+        return np.full(out_shape, np.inf)
+    tree = _kdtree(obs) if flat.shape[0] * flat.shape[1] * obs.shape[0] >= KDTREE_PAIRS else None
+    if tree is None:
+        clear = pose_clearance(robot, flat, obs)
+        return np.where(mask, clear, np.inf).min(axis=-1).reshape(out_shape)
+    centre, _ = tree.query(flat[..., :2].reshape(-1, 2), k=1)
+    centre = centre.reshape(flat.shape[:2])
+    if robot.geometry_type in _ROUND:  # the bounding circle is the footprint: exact already
+        return np.where(mask, centre - robot.radius, np.inf).min(axis=-1).reshape(out_shape)
+    lower = np.where(mask, centre - robot.radius, np.inf)
+    upper = np.where(mask, centre - robot.inner_radius, np.inf)
+    # First the pose of each trajectory with the smallest upper bound: its exact distance is a
+    # tighter bound than any upper one, then the poses whose lower bound still undercuts it.
+    exact = np.full(flat.shape[:2], np.inf)
+    judged = np.nonzero(np.isfinite(upper.min(axis=1)))[0]
+    first = (judged, upper[judged].argmin(axis=1))
+    if judged.size:
+        exact[first] = _clearance_kdtree(robot, flat[first], obs, tree)
+    candidate = mask & (lower <= exact.min(axis=1, keepdims=True) + 1e-9)
+    candidate[first] = False
+    where = np.nonzero(candidate)
+    if where[0].size:
+        exact[where] = _clearance_kdtree(robot, flat[where], obs, tree)
+    return exact.min(axis=-1).reshape(out_shape)

@@ -9,7 +9,7 @@ import numpy as np
 from ..kinematics import integrate_sequence, ramp_commands, wrap_angle
 from ..robot import RobotConfig, RobotType
 from .base import ControlResult, ControlStatus, FollowerConfig
-from .clearance import nearby_obstacles, pose_clearance, warm_up
+from .clearance import nearby_obstacles, trajectory_min_clearance, warm_up
 from .path import PathProgress, ReferencePath
 from .sensors import ObstacleInput, obstacle_points
 
@@ -109,10 +109,7 @@ class PathFollower:
         if near.shape[0] == 0:
             return np.full(poses.shape[0], np.inf)
         # The start pose is where the robot already is: judge only where it is going.
-        clear = pose_clearance(self.robot, poses[:, 1:], near)
-        if valid is not None:
-            clear = np.where(valid[:, 1:], clear, np.inf)
-        return clear.min(axis=-1)
+        return trajectory_min_clearance(self.robot, poses[:, 1:], near, None if valid is None else valid[:, 1:])
 
     def _no_path(self, pose: np.ndarray) -> ControlResult:
         return ControlResult.stop(pose, ControlStatus.NO_PATH)
