@@ -272,7 +272,8 @@ class Node:
             pub = open_publisher(self.ctx, topic, publisher_id=self.name, depth=topic.qos_profile.queue_size)
             self._publishers[topic.name] = (pub, threading.Lock())
         for topic in self.component.in_topics:
-            sub = open_subscriber(self.ctx, topic, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local)
+            sub = open_subscriber(self.ctx, topic, waker=self._waker, queue_size=topic.qos_profile.queue_size, transient_local=topic.qos_profile.transient_local,
+                                  node_name=self.name)
             self._inputs[topic.name] = _Input(topic, sub)
         if self._waker is not None and self._waker.spin_ns and any(getattr(inp.sub, "threaded_delivery", False) for inp in self._inputs.values()):
             # Zenoh's threads deliver these inputs, and need the interpreter lock to do it, which

@@ -62,7 +62,8 @@ class Topic(BaseAttrs):
     qos_profile: QoSConfig = field(factory=QoSConfig, converter=_qos)
     data_timeout: float = field(default=0.0)
     # "auto" (the run option decides, shared memory unless `emos run --net-topics`), "shm" or
-    # "zenoh" (across hosts): see emos.transport.select.
+    # "zenoh" (across hosts), or "ros2" (on the ROS 2 graph from the component's own process,
+    # emos.interop.ros2.direct): see emos.transport.select.
     transport: str = field(default="auto")
 
     @transport.validator
@@ -71,6 +72,13 @@ class Topic(BaseAttrs):
 
         if value not in TRANSPORTS:
             raise ValueError(f"Topic {self.name!r}: transport must be one of {TRANSPORTS}, got {value!r}")
+        if value == "ros2":  # without ROS 2, fail here, at definition, with what to install
+            from emos.interop.ros2 import env
+
+            try:
+                env.require()
+            except env.Ros2Unavailable as exc:
+                raise env.Ros2Unavailable(f"Topic {self.name!r} (transport='ros2'): {exc}") from None
 
     @data_timeout.validator
     def _check_timeout(self, attribute: Any, value: Any) -> None:

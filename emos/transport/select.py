@@ -2,11 +2,13 @@
 
 Like the middleware layer under a ROS 2 node, a node never builds shared-memory rings or Zenoh
 declarations itself: it asks :func:`open_publisher` / :func:`open_subscriber` for a topic and
-gets an object of the small interface below. Two implementations:
+gets an object of the small interface below. Three implementations:
 
 * ``shm`` (the default and the fast path): :class:`emos.transport.pubsub.Publisher` and
   ``Subscriber`` themselves, returned unwrapped, so local topics cost exactly what they did.
 * ``zenoh``: :mod:`emos.transport.zenoh_net`, for topics that cross hosts.
+* ``ros2``: :mod:`emos.interop.ros2.direct`, the topic on the ROS 2 graph from the component's
+  own process (rclpy), without the run's ROS 2 bridge; only when a topic asks for it.
 
 The choice, per topic: ``Topic(..., transport="zenoh")`` or ``"shm"`` in the recipe pins it;
 the default ``"auto"`` follows the run option ``$EMOS_NET_TOPICS`` (``all``, or a comma
@@ -23,7 +25,7 @@ from emos.transport.context import RunContext
 
 ENV_NET_TOPICS = "EMOS_NET_TOPICS"
 ENV_NET_SERVICES = "EMOS_NET_SERVICES"  # services and actions shared over Zenoh: see emos.transport.zenoh_rpc
-TRANSPORTS = ("auto", "shm", "zenoh")
+TRANSPORTS = ("auto", "shm", "zenoh", "ros2")
 
 
 class TopicPublisher(Protocol):
@@ -151,7 +153,7 @@ def net_topics_option() -> tuple[bool, frozenset[str]]:
 
 
 def transport_of(topic_name: str, declared: str = "auto") -> str:
-    """``"shm"`` or ``"zenoh"`` for a topic declared with ``transport=declared``."""
+    """``"shm"``, ``"zenoh"`` or ``"ros2"`` for a topic declared with ``transport=declared``."""
     if declared not in TRANSPORTS:
         raise ValueError(f"topic {topic_name!r}: transport must be one of {TRANSPORTS}, got {declared!r}")
     if declared != "auto":
@@ -162,7 +164,12 @@ def transport_of(topic_name: str, declared: str = "auto") -> str:
 
 def open_publisher(ctx: RunContext, topic: Any, publisher_id: str | None = None, depth: int = 10) -> TopicPublisher:
     """A publisher for ``topic`` (an :class:`emos.io.topic.Topic`) on its transport."""
-    if transport_of(topic.name, getattr(topic, "transport", "auto")) == "zenoh":
+    chosen = transport_of(topic.name, getattr(topic, "transport", "auto"))
+    if chosen == "ros2":
+        from emos.interop.ros2.direct import Ros2Publisher
+
+        return Ros2Publisher(ctx, topic.name, topic.msg_type, publisher_id=publisher_id, qos=topic.qos_profile)
+    if chosen == "zenoh":
         from emos.transport.zenoh_net import ZenohPublisher
 
         return ZenohPublisher(topic.name, topic.msg_type, publisher_id=publisher_id, transient_local=topic.qos_profile.transient_local, depth=depth)
@@ -173,9 +180,17 @@ def open_publisher(ctx: RunContext, topic: Any, publisher_id: str | None = None,
     return Publisher(ctx, topic.name, topic.msg_type, publisher_id=publisher_id, depth=depth, reuse_recent=not topic.qos_profile.transient_local)
 
 
-def open_subscriber(ctx: RunContext, topic: Any, waker: Any = None, queue_size: int = 10, transient_local: bool = False) -> TopicSubscriber:
-    """A subscriber for ``topic`` on its transport; ``waker`` (the node's) is woken on news."""
-    if transport_of(topic.name, getattr(topic, "transport", "auto")) == "zenoh":
+def open_subscriber(ctx: RunContext, topic: Any, waker: Any = None, queue_size: int = 10, transient_local: bool = False,
+                    node_name: str | None = None) -> TopicSubscriber:
+    """A subscriber for ``topic`` on its transport; ``waker`` (the node's) is woken on news.
+    ``node_name``: whose subscriber (a ``ros2`` topic's node is named after it)."""
+    chosen = transport_of(topic.name, getattr(topic, "transport", "auto"))
+    if chosen == "ros2":
+        from emos.interop.ros2.direct import Ros2Subscriber
+
+        return Ros2Subscriber(ctx, topic.name, topic.msg_type, notify=waker.poke if waker is not None else None, queue_size=queue_size,
+                              qos=topic.qos_profile, node_name=node_name)
+    if chosen == "zenoh":
         from emos.transport.zenoh_net import ZenohSubscriber
 
         notify: Callable[[], None] | None = waker.poke if waker is not None else None

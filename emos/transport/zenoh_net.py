@@ -30,7 +30,6 @@ so :func:`list_topics` can discover the topics of every host in the group.
 """
 from __future__ import annotations
 
-import collections
 import json
 import logging
 import os
@@ -44,6 +43,7 @@ from emos.errors import TransportError
 from emos.msgs.registry import canonical_name
 from emos.ratelimit import RateLimitedLog
 from emos.transport import zenoh_config
+from emos.transport.arrivals import ArrivalQueue
 from emos.transport.context import encode_name
 from emos.transport.netframe import SPLIT_MAGIC, BadFrame, FrameWriter, SplitPayload, encode_framed, read_frame, read_message
 from emos.transport.zenoh_config import ENV_ZENOH_CONFIG
@@ -242,7 +242,7 @@ class ZenohPublisher:
         self._token = self._pub = None
 
 
-class ZenohSubscriber:
+class ZenohSubscriber(ArrivalQueue):
     """Receives one topic from every publisher on its key expression, on any host of the group.
 
     The same reading interface as :class:`emos.transport.pubsub.Subscriber` (``take_raw``,
@@ -266,17 +266,10 @@ class ZenohSubscriber:
         self.fingerprint: str = msg_cls._emos_fingerprint  # type: ignore[attr-defined]
         self._fp = self.fingerprint.encode()
         self.key = topic_key(topic, group)
-        self.queue_size = max(int(queue_size), 1)
-        self.dropped = 0  # taken off the full queue to make room
+        ArrivalQueue.__init__(self, topic, queue_size, notify, _warn)
         self.rejected = 0  # payloads that were not a frame, or not a decodable message, of our type
         self.undecodable = 0  # of those, well-framed ones whose body did not decode (as Subscriber's)
-        # (stamp, message, publisher); a message's arrays are read-only views of the bytes Zenoh
-        # delivered.
-        self._queue: collections.deque[tuple[int, Any, str]] = collections.deque()
-        self._lock = threading.Lock()  # the queue: held for an append or a drain, never while waking
-        self._waking: list[bool] = []  # one entry per callback between its queueing and its wake-up call
-        self._notify = notify
-        self._closed = False
+        # A queued message's arrays are read-only views of the bytes Zenoh delivered.
         self._publishers: set[str] = set()
         self.transient_local = transient_local
         sess = session(config_path)
@@ -306,27 +299,9 @@ class ZenohSubscriber:
             self.undecodable += 1
             self._reject(str(sample.key_expr), exc)
             return
-        waking = self._waking
-        with self._lock:
-            if self._closed:
-                return
-            queue = self._queue
-            if len(queue) >= self.queue_size:
-                queue.popleft()
-                self.dropped += 1
-            queue.append((stamp, msg, pub))
-            waking.append(True)  # see close(): we may wake the reader until we pop this
-        try:
-            if pub not in self._publishers:
-                self._publishers.add(pub)
-            if self._notify is not None:
-                # No lock is held here: the woken reader must never wait for this thread,
-                # which needs the interpreter lock back after its wake-up write.
-                self._notify()
-        except Exception as exc:  # noqa: BLE001
-            _warn.warning(f"notify:{self.topic}", "topic %s: waking the reader failed: %s", self.topic, exc)
-        finally:
-            waking.pop()
+        if pub not in self._publishers:
+            self._publishers.add(pub)
+        self.arrive(stamp, msg, pub)
 
     def _reject(self, key: str, exc: BaseException) -> None:
         self.rejected += 1
@@ -334,36 +309,6 @@ class ZenohSubscriber:
             f"reject:{self.key}", "topic %s: dropping a payload on key %s that is not a %s (%d so far): %s: %s",
             self.topic, key, canonical_name(self.msg_cls), self.rejected, type(exc).__name__, exc,
         )
-
-    # -- reading (the node's thread) --------------------------------------------------------------
-    def take_raw(self) -> list[tuple[int, Any, str]]:
-        """Every queued ``(stamp_ns, message, publisher)``, oldest first (decoded on arrival)."""
-        if not self._queue:
-            return []
-        with self._lock:
-            out = list(self._queue)
-            self._queue.clear()
-        return out
-
-    def latest_raw(self) -> tuple[int, Any, str] | None:
-        with self._lock:
-            if not self._queue:
-                return None
-            item = self._queue[-1]
-            self._queue.clear()
-        return item
-
-    def has_news(self) -> bool:
-        return bool(self._queue)
-
-    def take(self) -> list[Any]:
-        """Every queued message, oldest first."""
-        return [msg for _, msg, _ in self.take_raw()]
-
-    def latest(self) -> Any | None:
-        """The newest queued message (older ones are discarded), or ``None``."""
-        item = self.latest_raw()
-        return None if item is None else item[1]
 
     def publishers(self) -> list[str]:
         return sorted(self._publishers)
@@ -373,16 +318,8 @@ class ZenohSubscriber:
         return [0] * len(self._publishers)
 
     def close(self) -> None:
-        # After this returns no Zenoh thread calls ``notify`` (the caller may close the waker,
-        # and so its descriptor, next): a callback checks ``_closed`` and registers in
-        # ``_waking`` under the lock, so once we have set it only those already registered can
-        # still wake the reader, and we wait for them (a wake-up takes microseconds).
-        with self._lock:
-            self._closed = True
-            self._queue.clear()
-        deadline = time.monotonic() + 2.0
-        while self._waking and time.monotonic() < deadline:
-            time.sleep(0.0005)
+        # After this returns no Zenoh thread calls ``notify`` (see emos.transport.arrivals).
+        self.close_arrivals()
         sub, self._sub = self._sub, None
         if sub is not None:
             try:

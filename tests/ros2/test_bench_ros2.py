@@ -42,7 +42,8 @@ def test_bench_ros2_json_contract_and_nothing_left(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     doc = json.loads(out.stdout)
     rows = doc["results"]
-    assert [(r["pair"], r["payload_bytes"]) for r in rows] == [("rclpy-rclpy", 8), ("rclpy-rclpy", 4096), ("emos-rclpy", 8), ("emos-rclpy", 4096)]
+    assert [(r["pair"], r["payload_bytes"]) for r in rows] == [("rclpy-rclpy", 8), ("rclpy-rclpy", 4096), ("emos-rclpy", 8), ("emos-rclpy", 4096),
+                                                                  ("emos-direct-rclpy", 8), ("emos-direct-rclpy", 4096)]
     for r in rows:
         assert r["p50_us"] > 0 and r["p99_us"] >= r["p50_us"], r
         assert r["cpu_us_per_msg_ros"] >= 0 and r["cpu_us_per_msg_initiator"] >= 0, r
@@ -51,6 +52,7 @@ def test_bench_ros2_json_contract_and_nothing_left(tmp_path):
     # One progress line per pair on stderr.
     assert sum(line.startswith("  rclpy-rclpy:") for line in out.stderr.splitlines()) == 1, out.stderr
     assert sum(line.startswith("  emos-rclpy:") for line in out.stderr.splitlines()) == 1, out.stderr
+    assert sum(line.startswith("  emos-direct-rclpy:") for line in out.stderr.splitlines()) == 1, out.stderr
 
     assert not psutil.Process().children(recursive=True)
     assert not (_bench_processes() - procs_before)

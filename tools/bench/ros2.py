@@ -1,7 +1,7 @@
 """``emos bench ros2``: half round trips between real rclpy nodes, and between an EMOS component
 and an rclpy node through the ROS 2 bridge, in one run (the ``emos bench ipc`` ping-pong method).
 
-Two pairs, each a ping and its echo, ``std_msgs/msg/UInt8MultiArray`` of ``payload_bytes``:
+Three pairs, each a ping and its echo, ``std_msgs/msg/UInt8MultiArray`` of ``payload_bytes``:
 
 * ``rclpy-rclpy``: an rclpy pinger and an rclpy echo, two plain processes (rclpy message
   objects, Fast DDS with its default transports: shared memory between two local processes).
@@ -10,6 +10,9 @@ Two pairs, each a ping and its echo, ``std_msgs/msg/UInt8MultiArray`` of ``paylo
   Each message goes ring -> bridge -> DDS -> echo, and back. The bridge talks loopback UDP (its
   default, docs/ros2.md) unless ``--fastdds shm``, where it uses Fast DDS's default transports
   (shared memory between local processes) as the rclpy nodes do.
+* ``emos-direct-rclpy``: the same pinging component, its ping and echo topics declared
+  ``transport="ros2"`` (emos.interop.ros2.direct): its own rclpy node puts them on the graph, no
+  bridge. Its Fast DDS transports follow ``--fastdds`` as the bridge's do (``$EMOS_ROS2_FASTDDS``).
 
 The echo republishes the message object it received (deserialize, serialize), as a user's relay
 node would. The pinger stamps a sequence number in the first 8 bytes and takes the time when the
@@ -20,8 +23,8 @@ the bridge, a third process, is not pinned).
 
 CPU per message (us of user + system CPU per round trip, over the sampled round trips):
 ``cpu_us_per_msg_ros`` is the rclpy echo's (the same program in both pairs);
-``cpu_us_per_msg_emos`` is the EMOS side's, the pinging component plus the bridge (null for
-``rclpy-rclpy``); ``cpu_us_per_msg_initiator`` is the pinging side's in both pairs (the rclpy
+``cpu_us_per_msg_emos`` is the EMOS side's, the pinging component plus the bridge (the component
+alone for ``emos-direct-rclpy``; null for ``rclpy-rclpy``); ``cpu_us_per_msg_initiator`` is the pinging side's in both pairs (the rclpy
 pinger, or the component plus the bridge), so the two pairs compare side by side. The bridge's
 process is found once, when the warm-up ends, and must be the same process (pid and start time)
 when the phase ends: a bridge not found, or restarted during the phase, makes the row an error
@@ -47,7 +50,7 @@ from typing import Any
 import numpy as np
 
 SIZES = [8, 921_600, 8 * 1024 * 1024]
-PAIRS = ["rclpy-rclpy", "emos-rclpy"]
+PAIRS = ["rclpy-rclpy", "emos-rclpy", "emos-direct-rclpy"]
 PING, PONG = "/bench/ros2_ping", "/bench/ros2_pong"
 ROS_TYPE = "std_msgs/msg/UInt8MultiArray"
 SEQ_BYTES = 8
@@ -63,6 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sizes", default=",".join(map(str, SIZES)), help="payload sizes in bytes (at least 8), comma-separated")
     parser.add_argument("--pairs", default=",".join(PAIRS), help=f"comma-separated, from {','.join(PAIRS)}")
     parser.add_argument("--messages", type=int, default=200, help="round trips per size and pair (fewer for large payloads)")
+    parser.add_argument("--rounds", type=int, default=1, help="measure the pairs this many times, interleaved (the order reversed "
+                        "every other round), pooling each pair's samples")
     parser.add_argument("--cpus", default=_default_cpus(), help="pin the two ends to these CPUs, 'A,B', or 'none' (as emos bench ipc)")
     parser.add_argument("--fastdds", choices=["default", "udp", "shm"], default="default",
                         help="Fast DDS transports: default (rclpy nodes: shared memory between local processes; the bridge: its "
@@ -189,8 +194,9 @@ def _peer_ping(domain: int, cpu: int | None, plan: list[tuple[int, int]], echo_p
 
 
 # ------------------------------------------------------------------ the EMOS side
-def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, echo_pid: int) -> Any:
-    """The pinging component (see ``emos bench ipc --mode component``, whose protocol it follows)."""
+def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, echo_pid: int, direct: bool = False) -> Any:
+    """The pinging component (see ``emos bench ipc --mode component``, whose protocol it follows);
+    ``direct``: its topics on the ROS 2 graph from its own process (``transport="ros2"``), no bridge."""
     import psutil
 
     from emos import Topic
@@ -200,6 +206,8 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
 
     class Ping(Pinger):  # type: ignore[valid-type,misc]  # a class made at run time
         bridge: Any = None  # the bridge's psutil.Process, found when a phase's warm-up ends
+        cpu0: tuple[float, float, float] | None = None  # CPU times when a phase's warm-up ended (see _cpu)
+        cpu_error: str | None = None
 
         def _find_bridge(self) -> Any:
             """The bridge: a worker of the same System, whose CPU counts as EMOS's. A child that
@@ -219,10 +227,16 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
             return None
 
         def _cpu(self) -> tuple[float, float, float]:
+            if direct:  # no bridge: the component's process is the whole EMOS side
+                return time.process_time(), 0.0, _cpu_s(echo_pid)
             t = self.bridge.cpu_times()  # psutil.Process checks it is the same process (pid and start time)
             return time.process_time(), float(t.user + t.system), _cpu_s(echo_pid)
 
         def _warmed_up(self) -> None:
+            if direct:
+                self.cpu_error = None
+                self.cpu0 = self._cpu()
+                return
             self.bridge, self.cpu0, self.cpu_error = self._find_bridge(), None, None
             if self.bridge is None:
                 self.cpu_error = "the ROS 2 bridge's process was not found among the benchmark System's workers"
@@ -244,21 +258,29 @@ def _emos_ping(plan: list[tuple[int, int]], result_path: str, cpu: int | None, e
                            cpu_bridge_s=cpu1[1] - self.cpu0[1])
             return row
 
-    topic = {"msg_type": "UInt8MultiArray"}  # default QoS: what recipes get
+    topic = {"msg_type": "UInt8MultiArray", **({"transport": "ros2"} if direct else {})}  # default QoS: what recipes get
     return Ping(component_name="bench_ping", inputs=[Topic(name=PONG, **topic)], outputs=[Topic(name=PING, **topic)], trigger=Topic(name=PONG, **topic))
 
 
 def _emos_system_main(plan: list[tuple[int, int]], result_path: str, cpu: int | None, echo_pid: int, domain: int, allowed: set[int],
-                      fastdds: str = "udp") -> None:
-    """The supervised System (the Ping component and the bridge), in a process of its own."""
+                      fastdds: str = "udp", direct: bool = False) -> None:
+    """The supervised System (the Ping component and the bridge, or with ``direct`` the Ping
+    component alone, its topics ``transport="ros2"``), in a process of its own."""
     from emos.actors.ros2 import Ros2BridgeComponent, Ros2BridgeConfig
+    from emos.interop.ros2.direct import ENV_FASTDDS
+    from emos.interop.ros2.options import ENV_ROS2_DOMAIN
     from emos.supervisor.system import Package, System, SystemOptions
 
     os.sched_setaffinity(0, allowed)
     os.environ["EMOS_BENCH_SYSTEM_PID"] = str(os.getpid())
-    bridge = Ros2BridgeComponent(config=Ros2BridgeConfig(topics=[PING, PONG], domain_id=domain, fastdds=fastdds))
-    system = System([Package(components=[_emos_ping(plan, result_path, cpu, echo_pid)], multiprocessing=True),
-                     Package(components=[bridge], multiprocessing=True)], SystemOptions(heartbeat_timeout=10.0))
+    ping = Package(components=[_emos_ping(plan, result_path, cpu, echo_pid, direct)], multiprocessing=True)
+    if direct:  # the component's process inherits the domain and the Fast DDS transports
+        os.environ[ENV_ROS2_DOMAIN], os.environ[ENV_FASTDDS] = str(domain), fastdds
+        packages = [ping]
+    else:
+        bridge = Ros2BridgeComponent(config=Ros2BridgeConfig(topics=[PING, PONG], domain_id=domain, fastdds=fastdds))
+        packages = [ping, Package(components=[bridge], multiprocessing=True)]
+    system = System(packages, SystemOptions(heartbeat_timeout=10.0))
     os._exit(system.run())
 
 
@@ -316,7 +338,7 @@ def _row(pair: str, raw: dict[str, Any]) -> dict[str, Any]:
     n = len(raw["half_us"])
     per_msg = lambda s: round(s * 1e6 / n, 1)  # noqa: E731 - seconds over n round trips -> us per message
     return {"pair": pair, "payload_bytes": raw["payload_bytes"], "p50_us": round(p["p50"], 1), "p99_us": round(p["p99"], 1),
-            "cpu_us_per_msg_emos": per_msg(raw["cpu_initiator_s"]) if pair == "emos-rclpy" else None,
+            "cpu_us_per_msg_emos": per_msg(raw["cpu_initiator_s"]) if pair != "rclpy-rclpy" else None,
             "cpu_us_per_msg_bridge": per_msg(raw["cpu_bridge_s"]) if pair == "emos-rclpy" else None,
             "cpu_us_per_msg_ros": per_msg(raw["cpu_ros_s"]), "cpu_us_per_msg_initiator": per_msg(raw["cpu_initiator_s"]),
             "round_trips": n, "seq_mismatches": raw["seq_mismatches"]}
@@ -325,6 +347,13 @@ def _row(pair: str, raw: dict[str, Any]) -> dict[str, Any]:
 def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int, int] | None,
             bridge_fastdds: str = "udp") -> tuple[list[dict[str, Any]], str | None]:
     """One row per size, and an error or None. ``bridge_fastdds``: the bridge's transports."""
+    raws, error = _measure_raw(pair, plan, domain, cpus, bridge_fastdds)
+    return [_row(pair, raw) for raw in raws], error
+
+
+def _measure_raw(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int, int] | None,
+                 bridge_fastdds: str = "udp") -> tuple[list[dict[str, Any]], str | None]:
+    """As :func:`measure`, the rows as the pingers report them (samples and CPU seconds)."""
     from emos.tools.bench import ipc_common
     from emos.tools.bench.ipc_component import await_result
 
@@ -342,19 +371,20 @@ def measure(pair: str, plan: list[tuple[int, int]], domain: int, cpus: tuple[int
                     raw = json.loads(text)
                     if "fatal" in raw or raw["error"]:
                         return rows, raw.get("fatal") or raw["error"]
-                    rows.append(_row(pair, raw))
+                    rows.append(raw)
             finally:
                 ping.stop()
             return rows, None
         with tempfile.TemporaryDirectory(prefix="emos-bench-ros2-") as tmp:
             result_path = str(Path(tmp) / "result.json")
             proc = ipc_common.start_child(_emos_system_main, (plan, result_path, None if cpus is None else cpus[0], echo.proc.pid, domain,
-                                                               os.sched_getaffinity(0), bridge_fastdds), "emos:bench-sys")
+                                                               os.sched_getaffinity(0), bridge_fastdds, pair == "emos-direct-rclpy"),
+                                             "emos:bench-sys")
             raws, error = await_result({"benchmark system": proc}, result_path, budget)
         failed = [raw for raw in raws if raw.get("error")]
         if failed:
-            return [_row(pair, raw) for raw in raws[: raws.index(failed[0])]], f"{failed[0]['payload_bytes']} B: {failed[0]['error']}"
-        return [_row(pair, raw) for raw in raws], error
+            return raws[: raws.index(failed[0])], f"{failed[0]['payload_bytes']} B: {failed[0]['error']}"
+        return raws, error
     finally:
         echo.stop()
 
@@ -380,6 +410,8 @@ def run(args: argparse.Namespace) -> int:
         return _usage_error(f"--pairs must be from {PAIRS}, got {args.pairs!r}")
     if args.messages < 1:
         return _usage_error(f"--messages must be at least 1, got {args.messages}")
+    if args.rounds < 1:
+        return _usage_error(f"--rounds must be at least 1, got {args.rounds}")
     cpus = _parse_cpus(args.cpus)
     if isinstance(cpus, str):
         return _usage_error(cpus)
@@ -412,13 +444,28 @@ def _run_pairs(args: argparse.Namespace, install: Any, sizes: list[int], pairs: 
     plan = [(size, _samples_for(size, args.messages)) for size in sizes]
     print(f"emos bench ros2: {install.describe()}, domain {domain}, "
           f"{'unpinned' if cpus is None else f'ends pinned to CPUs {cpus[0]} and {cpus[1]}'}; payloads {sizes}; Fast DDS {args.fastdds}", file=sys.stderr, flush=True)
-    results: list[dict[str, Any]] = []
     errors: dict[str, str] = {}
+    # Rounds interleave the pairs (the order reversed every other round), so that a load that
+    # changes during the run weighs on every pair alike; a pair's samples and CPU seconds are
+    # pooled over the rounds. A pair that fails is measured no more.
+    pooled: dict[tuple[str, int], dict[str, Any]] = {}
+    for round_no in range(args.rounds):
+        for pair in pairs if round_no % 2 == 0 else pairs[::-1]:
+            if pair in errors:
+                continue
+            raws, error = _measure_raw(pair, plan, domain, cpus, "shm" if args.fastdds == "shm" else "udp")
+            if error:
+                errors[pair] = error
+            for raw in raws:
+                _pool(pooled.setdefault((pair, raw["payload_bytes"]), {}), raw)
+            if args.rounds > 1:
+                said = ", ".join(f"{r['payload_bytes']} B p50 {r['p50_us']:.0f} us" for r in (_row(pair, raw) for raw in raws))
+                print(f"  round {round_no + 1} {pair}: {said or 'no result'}", file=sys.stderr, flush=True)
+    results: list[dict[str, Any]] = []
     for pair in pairs:
-        rows, error = measure(pair, plan, domain, cpus, "shm" if args.fastdds == "shm" else "udp")
+        rows = [_row(pair, pooled[(pair, size)]) for size in sizes if (pair, size) in pooled]
         results += rows
-        if error:
-            errors[pair] = error
+        error = errors.get(pair)
         said = ", ".join(f"{r['payload_bytes']} B p50 {r['p50_us']:.0f} us p99 {r['p99_us']:.0f} us" for r in rows)
         print(f"  {pair}: {said or 'no result'}" + (f"; ERROR {error}" if error else ""), file=sys.stderr, flush=True)
     if args.json:
@@ -432,6 +479,17 @@ def _run_pairs(args: argparse.Namespace, install: Any, sizes: list[int], pairs: 
         for pair, error in errors.items():
             print(f"ERROR {pair}: {error}", file=sys.stderr)
     return 1 if errors else 0
+
+
+def _pool(into: dict[str, Any], raw: dict[str, Any]) -> None:
+    """Add one round's row of a pair and size to ``into``: samples appended, counts and CPU seconds summed."""
+    if not into:
+        into.update(raw, half_us=list(raw["half_us"]))
+        return
+    into["half_us"] += raw["half_us"]
+    for key in ("seq_mismatches", "cpu_initiator_s", "cpu_ros_s", "cpu_bridge_s"):
+        if key in raw:
+            into[key] = into.get(key, 0) + raw[key]
 
 
 def _peer_main(argv: list[str]) -> None:

@@ -260,9 +260,14 @@ def _print_topics(topics: dict, as_json: bool) -> int:
 
 def _with_ros2_marks(ctx, topics: dict) -> dict:
     """Marks the topics the run's ROS 2 bridge carries (``<run dir>/ros2_bridge.json``, written by
-    the bridge: read as untrusted, a bad file only loses the marks)."""
+    the bridge: read as untrusted, a bad file only loses the marks), and adds those components
+    carry on the ROS 2 graph themselves (``transport="ros2"``: no ring, so not listed otherwise)."""
+    from emos.interop.ros2.direct import direct_records
     from emos.interop.ros2.options import STATE_FILE
 
+    for name, record in direct_records(ctx).items():
+        topics[name] = {"type": record["type"], "publishers": record["pub"], "subscribers": len(record["sub"]), "transport": "ros2",
+                        "ros2": {"direction": "direct", "type": record["type"]}}
     try:
         state = json.loads((Path(ctx.run_dir) / STATE_FILE).read_text())
         bridged = state["topics"] if isinstance(state, dict) and isinstance(state.get("topics"), dict) else {}

@@ -40,7 +40,6 @@ How
 from __future__ import annotations
 
 import fnmatch
-import importlib
 import logging
 import os
 import threading
@@ -208,7 +207,7 @@ def _choose_transports(ctx: RunContext, fastdds: str) -> str:
 
         removed = remove_leftovers()
         if removed:
-            log.info("ROS 2 bridge: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
+            log.info("ROS 2: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
     path = ctx.run_dir / f"ros2_fastdds_{fastdds}{'_loopback' if localhost else ''}.xml"
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(fastdds_profile(shm=fastdds == "shm", loopback_only=localhost))
@@ -541,9 +540,17 @@ class Ros2Bridge:
         self.services.discover()
         self.actions.discover(set(self.services.to_ros) | set(self.services.to_emos))
         emos_topics = list_topics(self.ctx)
+        # A topic a component carries on the ROS 2 graph itself (transport="ros2", direct.py) is
+        # not bridged either way: its messages would reach the other side twice.
+        from emos.interop.ros2.direct import direct_topics
+
+        direct = direct_topics(self.ctx)
+        for topic in direct:
+            if self.wanted(topic):
+                self._skip_once(topic, "a component carries it on the ROS 2 graph itself (transport='ros2')", logging.INFO)
         for topic, info in emos_topics.items():
             pubs = [p for p in info.get("publishers", []) if p != PUBLISHER_ID]
-            if pubs and topic not in self.out and topic not in self.inn and self.wanted(topic):
+            if pubs and topic not in self.out and topic not in self.inn and topic not in direct and self.wanted(topic):
                 self._open_out(topic, info["type"])
         for topic, types in self.node.get_topic_names_and_types():
             route = self.out.get(topic) or self.inn.get(topic)
@@ -552,7 +559,7 @@ class Ros2Bridge:
                 if others:  # DDS keeps the two types apart: nothing flows between them
                     self._skip_once(topic, f"type differs between the sides: EMOS {route.ros_type}, ROS 2 {', '.join(others)}")
                 continue
-            if not self.wanted(topic) or "/_action/" in topic:  # an action's own topics: actions.py bridges the action
+            if not self.wanted(topic) or "/_action/" in topic or topic in direct:  # an action's own topics: actions.py bridges the action
                 continue
             publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
                           if (p.node_name, p.node_namespace) != (self.node_name, self.node_namespace)]
@@ -623,13 +630,10 @@ class Ros2Bridge:
         log.info("ROS 2 bridge: %s (%s) ROS 2 -> EMOS, %s", topic, ros_type, Q.describe(qos))
 
     def _ros_class(self, topic: str, ros_type: str) -> Any:
-        package, _, name = ros_type.partition("/msg/")
         try:
-            env.prepare_package(package)
-            return getattr(importlib.import_module(f"{package}.msg"), name)
-        except (ImportError, AttributeError) as exc:
-            dist = f"ros-{self.install.distro}-{package.replace('_', '-')}"
-            self._skip_once(topic, f"{ros_type} needs the ROS 2 package {package}, which rclpy cannot import ({exc}): pip install {dist}")
+            return env.message_class(ros_type, self.install.distro)
+        except ImportError as exc:
+            self._skip_once(topic, str(exc))
             return None
 
     def _incompatible_qos(self, topic: str, direction: str, ours: QoSConfig, info: Any) -> None:

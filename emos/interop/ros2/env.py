@@ -28,12 +28,14 @@ from __future__ import annotations
 
 import ctypes
 import glob
+import importlib
 import importlib.metadata
 import importlib.util
 import os
 import sys
 import sysconfig
 from pathlib import Path
+from typing import Any
 
 import attrs
 
@@ -278,6 +280,18 @@ def prepare_package(package: str) -> None:
     in a process whose loader was not pointed at ROS 2 when it started."""
     if _PRELOADER is not None:
         _PRELOADER.load_package(package)
+
+
+def message_class(ros_type: str, distro: str) -> Any:
+    """rclpy's class of a message type (``sensor_msgs/msg/LaserScan``). Raises ``ImportError``
+    whose text names the ROS 2 package to install when rclpy cannot import it."""
+    package, _, name = ros_type.partition("/msg/")
+    try:
+        prepare_package(package)
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+    except (ImportError, AttributeError) as exc:
+        dist = f"ros-{distro}-{package.replace('_', '-')}"
+        raise ImportError(f"{ros_type} needs the ROS 2 package {package}, which rclpy cannot import ({exc}): pip install {dist}") from None
 
 
 def describe() -> str:
