@@ -48,3 +48,31 @@ def test_a_far_end_wall_beats_the_odometry_guess_along_a_corridor(offset: float)
     # it 0.2 m off, at the guess's side).
     assert abs(m.pose[0] - truth[0]) < 0.03, m.pose
     assert abs(m.pose[1] - truth[1]) < 0.04 and abs(m.pose[2]) < math.radians(0.5), m.pose
+
+
+def test_the_match_covariance_can_leave_the_prior_out() -> None:
+    """The prior towards the guess is the odometry, which the pose graph holds as a factor of its
+    own. With ``cov_with_prior=False`` the response covariance is the scan's alone: along a
+    corridor whose end is out of reach it is as long as the neighbourhood it is taken over,
+    where the default's (with the prior in it) is short."""
+    corridor = np.array([(-50, -1, 50, -1), (-50, 1, 50, 1)], dtype=float)
+    truth = np.array([0.0, 0.1, 0.0])
+    grid = LikelihoodGrid(0.05, 0.05, margin=5.0)
+    for x in np.arange(-6.0, -0.3, 0.83):
+        pose = np.array([x, 0.1 + 0.05 * math.sin(x), 0.0])
+        pts = _points(_cast(corridor, pose, ANGLES, 8.0), ANGLES, 8.0)
+        grid.insert(pts + pose[:2])
+    scan = voxel_filter(_points(_cast(corridor, truth, ANGLES, 8.0), ANGLES, 8.0), SlamParams().voxel)
+    kw = dict(window_xy=0.4, window_theta=math.radians(4.0), prior_sigma=(0.05, 0.02))
+    guess = truth + np.array([0.05, 0.0, 0.0])
+    with_prior = CorrelativeMatcher().match(grid, guess, scan, prior_weight=1.0, **kw)
+    own = CorrelativeMatcher(cov_with_prior=False).match(grid, guess, scan, prior_weight=1.0, **kw)
+    assert with_prior is not None and own is not None
+    # The same pose (the prior decides along the corridor) ...
+    np.testing.assert_allclose(own.pose, with_prior.pose)
+    # ... but along the corridor the scan itself says nothing: its own spread there is as wide
+    # as the covariance neighbourhood (+-6 cells), the prior's is a tenth of that.
+    assert math.sqrt(own.covariance[0, 0]) > 0.1, own.covariance
+    assert own.covariance[0, 0] > 20.0 * with_prior.covariance[0, 0], (own.covariance, with_prior.covariance)
+    # Across it the walls decide.
+    assert own.covariance[1, 1] < own.covariance[0, 0] / 10.0, own.covariance

@@ -81,7 +81,8 @@ class CorrelativeMatcher:
     """Parameters: ``angular_step`` (rad; 0 = from the hits: one cell at the 90th-percentile
     range, clamped to [``min_angular_step``, ``max_angular_step``]); ``cov_cells``,
     ``cov_steps``, ``cov_tau``: the covariance neighbourhood and temperature; ``max_sd_xy`` (m)
-    and ``max_sd_theta`` (rad): beyond these a match is ambiguous; ``polish_iterations``."""
+    and ``max_sd_theta`` (rad): beyond these a match is ambiguous; ``polish_iterations``;
+    ``cov_with_prior``: the covariance from the scores with the prior (default) or without."""
 
     angular_step: float = 0.0
     min_angular_step: float = math.radians(0.25)
@@ -94,6 +95,10 @@ class CorrelativeMatcher:
     polish_iterations: int = 10
     polish: str = attrs.field(default="bilinear", validator=attrs.validators.in_(("bilinear", "distance")))
     polish_trim: float = 0.0
+    # Whether the response covariance is taken from the scores with the prior towards the guess
+    # (True: the old behaviour) or from the scan's own scores (False). The prior is the
+    # odometry, which the pose graph already holds as a factor of its own.
+    cov_with_prior: bool = True
 
     def _step(self, points: np.ndarray, resolution: float) -> float:
         if self.angular_step > 0:
@@ -143,11 +148,12 @@ class CorrelativeMatcher:
 
         evaluated = 0
 
-        def score(a: np.ndarray, u: np.ndarray, v: np.ndarray, b: int) -> np.ndarray:
+        def score(a: np.ndarray, u: np.ndarray, v: np.ndarray, b: int, prior: bool = True) -> np.ndarray:
             nonlocal evaluated
             evaluated += len(a)
             t = tables[b]
-            return t[by[a] + v[:, None], bx[a] + u[:, None]].sum(axis=1) * inv_n * prior_bound(a, u, v, b)
+            raw = t[by[a] + v[:, None], bx[a] + u[:, None]].sum(axis=1) * inv_n
+            return raw * prior_bound(a, u, v, b) if prior else raw
 
         top = _BLOCKS[0]
         offs = np.arange(-w, w + 1, top)
@@ -203,7 +209,7 @@ class CorrelativeMatcher:
         du = np.arange(-k, k + 1)
         da = np.arange(max(ba - m, 0), min(ba + m, n_angles - 1) + 1)
         aa, uu, vv = np.meshgrid(da, bu + du, bv + du, indexing="ij")
-        s = score(aa.ravel(), uu.ravel(), vv.ravel(), 1)
+        s = score(aa.ravel(), uu.ravel(), vv.ravel(), 1, self.cov_with_prior)
         wgt = np.exp((s - s.max()) / self.cov_tau)
         wgt /= wgt.sum()
         x = np.column_stack([uu.ravel() * r, vv.ravel() * r, aa.ravel() * step])

@@ -36,15 +36,22 @@ Each scan, in :meth:`GraphSlam.add`:
 
 Options (off by default; measured in docs/mapping.md): ``icp_polish`` refines each match (front
 end and loop closure) by point-to-line ICP against the submap's hits (``scan_icp``), which the
-likelihood-field polish is biased against where scan and submap overlap in part;
-``refine_passes`` adds, after the batch, scan-to-scan ICP factors between each node and its
-nearest earlier nodes and re-solves (no submap, so no frozen front-end pose, in those factors).
+likelihood-field polish is biased against where scan and submap overlap in part.
+``refine_passes`` (default 1: better on every tuning log but aces, where it is equal;
+docs/slam_notes.md) adds, after the batch (:meth:`GraphSlam.finish`, what ``emos map
+build`` and ``emos bench slam`` end with), scan-to-scan ICP factors between each node and its
+nearest earlier nodes and re-solves (no submap, so no frozen front-end pose, in those factors);
+0 turns it off.
 Measured in docs/slam_notes.md, also off by default: ``match_polish="distance"`` (the matcher's
 bicubic squared-distance polish, unbiased where the bilinear one snaps walls to the lattice)
 with ``polish_trim`` (hits the submap has not seen left out of the polish) and
 ``densify_gap`` (submap hits joined along surfaces, so that the field is the distance to the
 wall, not to its sampled hits); ``submap_travel`` (a submap period also ends after that many
-metres of travel, not only after ``scans_per_submap`` scans). On by default (measured there
+metres of travel, not only after ``scans_per_submap`` scans); the response covariance's
+neighbourhood (``match_cov_cells`` cells, ``match_cov_steps`` heading steps; 6 and 3 by
+default) and ``match_cov_prior=False`` (the covariance from the scan's own scores, without the
+prior towards the odometry guess that the graph already holds as the odometry factor). On by
+default (measured there
 too): ``submap_nodes``, each submap's frame a graph variable of its own (as in Cartographer);
 ``submap_nodes=False`` is the older graph, in which the frame is its first scan's node.
 
@@ -129,7 +136,10 @@ class SlamParams:
     icp_prior_theta: float = attrs.field(default=0.02, validator=V.finite_positive)
     icp_min_conditioning: float = attrs.field(default=0.0, validator=attrs.validators.and_(attrs.validators.ge(0.0), attrs.validators.le(1.0)))
     icp_max_correction: float = attrs.field(default=0.2, validator=V.finite_positive)
-    refine_passes: int = attrs.field(default=0, validator=attrs.validators.ge(0))
+    # One pass of scan-to-scan refinement after the batch: with submap frames in the graph it
+    # lowers the ATE on the tuning logs (intel -5, csail -3 to -11 mm; aces within 1 mm) for a
+    # few ms per scan, once, at the end. docs/slam_notes.md has the runs.
+    refine_passes: int = attrs.field(default=1, validator=attrs.validators.ge(0))
     refine_radius: float = attrs.field(default=4.0, validator=V.finite_positive)
     refine_neighbours: int = attrs.field(default=8, validator=attrs.validators.ge(1))
     refine_min_overlap: float = attrs.field(default=0.3, validator=attrs.validators.and_(attrs.validators.ge(0.0), attrs.validators.le(1.0)))
@@ -139,6 +149,9 @@ class SlamParams:
     submap_travel: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
     polish_trim: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
     densify_gap: float = attrs.field(default=0.0, validator=attrs.validators.ge(0.0))
+    match_cov_steps: int = attrs.field(default=3, validator=attrs.validators.ge(1))
+    match_cov_cells: int = attrs.field(default=6, validator=attrs.validators.ge(1))
+    match_cov_prior: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool))
 
 
 @attrs.define(eq=False)
@@ -194,7 +207,9 @@ class GraphSlam:
         self.name = name
         self._logger = logger or _log
         self._report = RateLimitedLog(interval=5.0)
-        self.matcher = CorrelativeMatcher(polish=self.params.match_polish, polish_trim=self.params.polish_trim)
+        self.matcher = CorrelativeMatcher(polish=self.params.match_polish, polish_trim=self.params.polish_trim,
+                                          cov_steps=self.params.match_cov_steps, cov_cells=self.params.match_cov_cells,
+                                          cov_with_prior=self.params.match_cov_prior)
         self.graph = PoseGraph(robust=self.params.robust, robust_k=self.params.robust_k)
         self.submaps: list[Submap] = []
         self.front: list[np.ndarray] = []  # front-end pose of each node
