@@ -5,9 +5,16 @@ no process tree, simulator or browser: ``python3 -m pytest -m unit`` is the fast
 ``process`` (starts runs, servers or the CLI), ``sim`` (a pybullet world), ``browser`` (headless
 Chromium), and ``statistical`` beside one of those (rates over many trials)."""
 import os
+import sys
 import tempfile
 
 import pytest
+
+# pytest keeps each test module's assertion-rewritten code in __pycache__ unless bytecode writing is
+# off: an environment with PYTHONDONTWRITEBYTECODE=1 made every xdist worker rewrite and compile all
+# the test modules again at each collection (13 s of CPU per worker, 5 s from the cache). Only this
+# process writes; the subprocesses the tests start inherit the environment as it is.
+sys.dont_write_bytecode = False
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -66,7 +66,13 @@ def test_motion_testing_recipe_runs_three_circles_with_nonzero_commands(tmp_path
         # What the DriveManager sent on (recorded from /cmd_vel): half the recipe's limits, never
         # zero (it may slow down near a wall, hence the median).
         middle = [r for r in rows if 1.0 < r["t"] < 9.0]
-        off = [r for r in middle if r["cmd_vx"] * sv <= 0.05 or abs(r["cmd_omega"] - sw * 0.2) > 1e-6]
+        # A zero among them is the DriveManager's watchdog: a process stalled past cmd_timeout
+        # (0.3 s) on a loaded machine, and the robot stops rather than drive on an old command. It
+        # says so in the log; a few such rows are load, not the defect (every command zero).
+        stops = [r for r in middle if r["cmd_vx"] == 0.0 and r["cmd_omega"] == 0.0]
+        assert not stops or "[drive_manager] robot stopped:" in out, (name, stops[:3], out[-3000:])
+        assert len(stops) <= len(middle) // 10, (name, len(stops), len(middle))
+        off = [r for r in middle if r not in stops and (r["cmd_vx"] * sv <= 0.05 or abs(r["cmd_omega"] - sw * 0.2) > 1e-6)]
         assert middle and not off, (name, off)
         assert abs(np.median([r["cmd_vx"] for r in middle]) - sv * 0.2) < 1e-6, name
         # and the robot followed: measured speed of that sign, about 2 m driven in 10 s

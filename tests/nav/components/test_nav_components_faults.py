@@ -171,13 +171,17 @@ launcher.bringup()
     subs = {name: Subscriber(system.ctx, topic, M.OccupancyGrid if "map" in topic else M.PoseStamped, queue_size=200)
             for name, topic in (("ego", "/local_map/occupancy_layer"), ("placed", "/placed/local_map"), ("pose", "/placed/pose"))}
     try:
-        time.sleep(2.0)
+        # Each output by the stamp of its scan, gathered until one scan has all three (the three
+        # arrive at their own moments: a fixed wait before one read only guessed how long that takes).
+        seen: dict[str, dict] = {name: {} for name in subs}
 
-        def by_stamp(name):
-            return {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in subs[name].take()}
+        def one_scan_in_all():
+            for name, sub in subs.items():
+                seen[name].update({(m.header.stamp.sec, m.header.stamp.nanosec): m for m in sub.take()})
+            return set(seen["ego"]) & set(seen["placed"]) & set(seen["pose"])
 
-        ego, placed, poses = wait_until(lambda: (lambda e, p, q: (e, p, q) if set(e) & set(p) & set(q) else None)(
-            by_stamp("ego"), by_stamp("placed"), by_stamp("pose")), 10, what="maps and a pose of one scan")
+        wait_until(one_scan_in_all, 30, what="maps and a pose of one scan")
+        ego, placed, poses = seen["ego"], seen["placed"], seen["pose"]
         stamp = max(set(ego) & set(placed) & set(poses))
         world_map, robot_map, pose = placed[stamp], ego[stamp], pose_of(poses[stamp])
         assert world_map.header.frame_id == "map" and robot_map.header.frame_id == "base_link"
