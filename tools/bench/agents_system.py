@@ -199,6 +199,9 @@ def bench_llm_overhead(queries: int = 40) -> dict[str, Any]:
         server.stop()
 
 
+_READY_S = 120.0  # bounds a component that never answers; a healthy one answers within seconds
+
+
 def bench_vision(duration: float = 10.0, rate: float = 30.0) -> dict[str, Any]:
     from emos.msgs import Detections, Header, Image, Time
 
@@ -218,7 +221,16 @@ def bench_vision(duration: float = 10.0, rate: float = 30.0) -> dict[str, Any]:
         sub = recipe.subscriber("/bench_detections", Detections)
         rng = np.random.default_rng(0)
         frames = [rng.integers(0, 255, (480, 640, 3), dtype=np.uint8) for _ in range(4)]
-        time.sleep(3.0)  # let the component load its detector
+        # Measure from the first answer on: until then the component is loading its detector,
+        # which takes as long as the machine makes it take (a fixed wait either wasted time or
+        # measured the start-up on a busy machine).
+        ready_by = time.monotonic() + _READY_S
+        while not sub.take():
+            if time.monotonic() > ready_by:
+                raise RuntimeError(f"bench_vision answered no frame within {_READY_S:g} s")
+            pub.publish(Image.from_numpy(frames[0], header=Header(stamp=Time.now())))
+            time.sleep(0.2)
+        time.sleep(0.2)  # the answers to the last warm-up frames, dropped below
         sub.take()
         latencies: list[float] = []
         answered = 0
@@ -236,7 +248,7 @@ def bench_vision(duration: float = 10.0, rate: float = 30.0) -> dict[str, Any]:
                 latencies.append(time.time() - msg.header.stamp.to_sec())
             time.sleep(0.001)
         drain_end = time.monotonic() + 2.0
-        while time.monotonic() < drain_end:
+        while time.monotonic() < drain_end and answered < sent:
             for msg in sub.take():
                 answered += 1
                 latencies.append(time.time() - msg.header.stamp.to_sec())
