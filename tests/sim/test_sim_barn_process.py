@@ -261,15 +261,18 @@ def test_sigterm_stops_the_trials_in_flight_at_once_and_records_none_of_them(tmp
             time.sleep(0.5)
         everything = systems + [c for p in systems for c in p.children(recursive=True)]
         time.sleep(3.0)
-        stopped_at = time.monotonic()
+        recorded_before = results.read_text().splitlines() if results.exists() else []
         bench.send_signal(signal.SIGTERM)
-        _, err = bench.communicate(timeout=90)
-        took = time.monotonic() - stopped_at
+        _, err = bench.communicate(timeout=180)  # bounds a hang only
     finally:
         if bench.poll() is None:
             bench.kill()
     assert bench.returncode == 143, err[-3000:]
-    assert took < 45, took  # each system's own stop, not the rest of its trial
+    # At once: the trials in flight were given up (each system's own stop), not driven to their
+    # end, which would have recorded them. A count of results, not seconds: a busy machine may
+    # take long to stop, never to finish a trial.
+    recorded_after = results.read_text().splitlines() if results.exists() else []
+    assert recorded_after[1:] == recorded_before[1:], (recorded_before, recorded_after)
     assert "Traceback" not in err and "system failure" not in err, err[-3000:]
     time.sleep(1.0)
     assert not [p.pid for p in everything if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
