@@ -66,7 +66,13 @@ class LocalMapperConfig(NavComponentConfig):
     Mapping mode (``mapping_bounds`` = (xmin, ymin, xmax, ymax) of a world window): every scan
     is also added to an obstacle memory over that window, at the odometry pose corrected by
     matching the scan against the memory (``scan_matching``; a match is adopted when it raises
-    the scan's mean likelihood by more than ``match_margin`` over the odometry's guess). The memory is published on the
+    the scan's mean likelihood by more than ``match_margin`` over the odometry's guess). Every scan
+    is matched, but the never-forgetting memory takes a scan in only once the corrected pose has
+    moved ``map_update_distance`` m or turned ``map_update_angle`` rad since the last one it took
+    in (Hector SLAM's ``map_update_distance_thresh`` / ``map_update_angle_thresh``): a memory
+    that takes in every scan at 50 scans/s takes each in at a pose off by the millimetre of
+    wheel slip no match can see, smears the obstacles along the motion and lets the estimate
+    follow the odometry's drift (``MemoryMapper``; 0 and 0 take in every scan). The memory is published on the
     ``mapping`` output (an OccupancyGrid in ``frames.world``, every ``map_publish_period`` s;
     a Planner can take it as its map) and the corrected pose on ``localized_pose``. The memory
     never forgets by default (static worlds); ``memory_decay`` (an ``EvidenceConfig`` or a dict
@@ -87,6 +93,8 @@ class LocalMapperConfig(NavComponentConfig):
     mapping_bounds: tuple[float, float, float, float] | None = field(default=None, converter=_bounds)
     scan_matching: bool = field(default=True)
     match_margin: float = field(default=0.01, validator=in_range(min_value=0.0, max_value=1.0))
+    map_update_distance: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=100.0))
+    map_update_angle: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=math.pi))
     mapping_resolution: float = field(default=0.05, validator=in_range(min_value=1e-3, max_value=10.0))
     map_publish_period: float = field(default=1.0, validator=in_range(min_value=0.0, max_value=3600.0))
     #: s: a scan older than this is a SYSTEM failure naming the topic, and no grid is published
@@ -111,7 +119,8 @@ def memory_of(cfg: LocalMapperConfig) -> MemoryMapper | None:
     decay = cfg.memory_decay
     forgetting: dict[str, Any] = {} if decay is None else {"evidence_cap": decay.cap, "free_range": decay.free_range}
     return MemoryMapper(cfg.mapping_bounds, cfg.mapping_resolution, cfg.sensor_pose, cfg.scan_matching,
-                        match_margin=cfg.match_margin, **forgetting)
+                        match_margin=cfg.match_margin, update_distance=cfg.map_update_distance,
+                        update_angle=cfg.map_update_angle, **forgetting)
 
 
 class LocalMapper(NavComponent):
