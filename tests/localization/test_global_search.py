@@ -22,7 +22,10 @@ NOISE = (0.01, 0.001, 0.01, 0.001)
 def _params(**kw):
     base = dict(alpha1=0.02, alpha2=0.002, alpha3=0.02, alpha4=0.002, max_beams=90, sigma_hit=0.2,
                 laser_max_range=MAX_RANGE, update_min_d=0.1, update_min_a=0.1, min_particles=500,
-                max_particles=3000, min_ess_fraction=0.0, search_min_ess_fraction=0.5)
+                max_particles=3000, min_ess_fraction=0.0, search_min_ess_fraction=0.5,
+                # The rules under test here, alone: no travel before the search may end, no
+                # proposals (test_global_proposals.py tests those).
+                converged_travel=0.0, search_candidates=0)
     base.update(kw)
     return AmclParams(**base)
 

@@ -73,6 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="converged_weight: the heaviest hypothesis's share that ends a global search (default 0.95)")
     parser.add_argument("--converged-travel", type=float, default=None,
                         help="converged_travel: metres of travel over which that hypothesis must keep its share (default: the filter's)")
+    parser.add_argument("--search-candidates", type=int, default=None,
+                        help="search_candidates: random poses scored per search scan to propose new places (0: off)")
     parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
     parser.add_argument("--field", choices=("bilinear", "nearest"), default="bilinear",
                         help="likelihood-field lookup: bilinear distance interpolation (default) or Nav2's nearest cell")
@@ -351,7 +353,8 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
     search = {name: getattr(args, opt) for name, opt in (("search_min_ess_fraction", "search_min_ess"),
                                                           ("hypothesis_beta", "hypothesis_beta"),
                                                           ("converged_weight", "converged_weight"),
-                                                          ("converged_travel", "converged_travel"))
+                                                          ("converged_travel", "converged_travel"),
+                                                          ("search_candidates", "search_candidates"))
               if getattr(args, opt, None) is not None}
     recovery = _floats(args.recovery, 2, "--recovery") if args.recovery else ((0.001, 0.1) if g else (0.0, 0.0))
     return AmclParams(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
@@ -455,7 +458,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             "filter": {k: getattr(params, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4", "min_particles",
                                                       "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand",
                                                       "min_ess_fraction", "search_min_ess_fraction", "hypothesis_beta",
-                                                      "converged_weight", "converged_travel")},
+                                                      "converged_weight", "converged_travel", "search_candidates")},
             "results": rows}
 
 

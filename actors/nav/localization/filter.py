@@ -28,7 +28,9 @@ hypothesis (cluster) holds ``converged_weight`` on ``converged_updates`` consecu
 and over ``converged_travel`` metres of travel (staying where the odometry carries it): the
 full ``max_particles``, the likelihood tempered with ``search_min_ess_fraction``, and each scan
 the heaviest hypotheses scan-matched to their likelihood peaks and reweighted by them
-(``hypothesis_beta``, see ``_search_step``).
+(``hypothesis_beta``, see ``_search_step``), and new places proposed from the scan itself
+(``search_candidates``, see ``_propose``): the uniform start often leaves no particle within
+reach of the robot's place, and a search that never had the right place cannot keep it.
 Then the other places' particles are dropped and the filter tracks as from a known pose.
 
 The estimate is the weighted mean of the heaviest cluster (the particles within 1 m and 0.5 rad
@@ -351,7 +353,9 @@ class ParticleFilter:
         places compare on the scan itself."""
         p = self.params
         labels, shares, means = self._hypotheses(p.max_hypotheses)
-        if p.hypothesis_beta > 0 and len(shares) > 1 and len(ranges) > 0:
+        best_peak: float | None = None
+        compare = p.hypothesis_beta > 0 and len(shares) > 1
+        if (compare or p.search_candidates > 0) and len(shares) > 0 and len(ranges) > 0:
             # Two starts per hypothesis: its weighted mean and its best particle on this scan.
             k = len(shares)
             taken = labels >= 0
@@ -360,12 +364,16 @@ class ParticleFilter:
             best[labels[order]] = order  # the last write per hypothesis is its best particle
             starts = np.vstack([means, self.particles[best]])
             peaks = self._peaks(starts, ranges, angles).reshape(2, k).max(axis=0)
-            factor = np.exp(p.hypothesis_beta * (peaks - peaks.max()))
-            w = self.weights * np.where(taken, factor[np.maximum(labels, 0)], 1.0)
-            self.weights = w / w.sum()
-            shares = np.bincount(labels[taken], weights=self.weights[taken], minlength=k)
+            best_peak = float(peaks.max())
+            if compare:
+                factor = np.exp(p.hypothesis_beta * (peaks - best_peak))
+                w = self.weights * np.where(taken, factor[np.maximum(labels, 0)], 1.0)
+                self.weights = w / w.sum()
+                shares = np.bincount(labels[taken], weights=self.weights[taken], minlength=k)
         self.hypothesis_shares = shares
         if not self._leader_holds(shares, means, p):
+            if best_peak is not None:
+                self._propose(means, best_peak, ranges, angles)
             return
         self.searching = False
         # Drop the other places' leftovers: untempered from the next scan on, one stray
@@ -374,20 +382,67 @@ class ParticleFilter:
         w = np.where(labels == int(shares.argmax()), self.weights, 0.0)
         self.weights = w / w.sum()
 
+    def _propose(self, means: np.ndarray, best_peak: float, ranges: np.ndarray, angles: np.ndarray) -> None:
+        """Mixture proposal while searching: look for places the particles do not cover yet.
+        ``search_candidates`` random poses in free space are scored on a subset of the scan's
+        beams (about 30), the ``search_climbs`` best are scan-matched to their nearest likelihood
+        peak (every valid beam, as the hypotheses are), and each peak that is not one of the
+        listed hypotheses and fits within about 23 nats (a factor 0.01 at ``hypothesis_beta``)
+        of the best hypothesis's peak becomes a particle, replacing the lightest ones. Together
+        they get at most ``search_inject_share`` of the weight, each in proportion to
+        ``exp(hypothesis_beta * (its peak - the best peak))`` (capped at 1): a place that fits
+        better than every hypothesis enters as a runner-up, and the next scans' peak comparison
+        decides. Why: the uniform start puts one or two particles within the likelihood
+        peak's reach (0.3 m, 8 deg) of the robot on the Radish maps, often none; such a trial
+        never had the right place to keep (intel seeds 53 and 54, csail seed 53: the logged pose
+        fits the scan better than where the search ended, and no particle was near it from the
+        third scan on). Each scan's new candidates are another draw of that lottery, and a
+        candidate only has to land within the peak's reach, not on it."""
+        p = self.params
+        if p.search_candidates <= 0 or len(self.field.free_cells) == 0:
+            return
+        cand = self._random_free_poses(p.search_candidates)
+        step = max(1, len(ranges) // 30)
+        score = self.field.log_likelihood(cand, ranges[::step], angles[::step], self.sensor_pose)
+        top = np.argsort(score)[-p.search_climbs:]
+        poses, peaks = self._climb(cand[top], ranges, angles)
+        beta = max(p.hypothesis_beta, 1e-3)
+        f = np.minimum(1.0, np.exp(beta * (peaks - best_peak)))
+        keep = f >= 0.01
+        if len(means):
+            d = np.hypot(poses[:, None, 0] - means[None, :, 0], poses[:, None, 1] - means[None, :, 1])
+            covered = (d <= 0.5) & (np.abs(wrap_angle(poses[:, None, 2] - means[None, :, 2])) <= 0.3)
+            keep &= ~covered.any(axis=1)
+        if not keep.any():
+            return
+        poses, f = poses[keep], f[keep]
+        total = p.search_inject_share * min(1.0, float(f.sum()))
+        slots = np.argsort(self.weights, kind="stable")[: len(poses)]
+        w = self.weights.copy()
+        w[slots] = 0.0
+        w *= (1.0 - total) / w.sum()
+        w[slots] = total * f / f.sum()
+        self.particles[slots] = poses
+        self.weights = w
+
     def _leader_holds(self, shares: np.ndarray, means: np.ndarray, p: AmclParams) -> bool:
         """True once one hypothesis has held ``converged_weight`` on ``converged_updates``
         consecutive search steps and over ``converged_travel`` metres of odometry travel,
         staying where the odometry carries it (within 0.5 m and 0.5 rad of its last pose moved
         by the odometry since). Meant for a look-alike place (a corridor, a room repeated along
         a building) that takes 95 % of the weight on one view and would lose it on a later one.
+        ``converged_travel`` is 2 m by default since the proposals (``_propose``): while the
+        search runs they keep bringing in places the particles missed, so a leader that is
+        wrong can still be overtaken over those 2 m (intel seed 53 from seed range 50-69:
+        the search had ended on a wrong place at 4 m; with proposals and 2 m it found the
+        robot at 11 m; without proposals, 1-2 m only delayed the same wrong end).
         Travel, not a count of updates: a robot turning on the spot gives an update every
         ``update_min_a`` of turn, each a view from the same place, so a count can be reached
         without new evidence (intel seed 28 ends its search on a place 15 m off after 0.47 m of
-        travel, mostly turning); only driving shows the scanner new walls. Both are off by
-        default (1 update, 0 m): ``converged_updates`` 3 was measured on 50 seeds per tuning
-        log and did not help; ``converged_travel`` 1 m and 2 m on intel seed 28 ended the search
-        later on the same wrong place (the right one had no particles left by then, see
-        ``AmclParams``)."""
+        travel, mostly turning); only driving shows the scanner new walls. ``converged_updates``
+        is 1 by default: 3 was measured on 50 seeds per tuning log and did not help. Without
+        proposals, ``converged_travel`` 1 m and 2 m on intel seed 28 ended the search later on
+        the same wrong place (the right one had no particles left by then, see ``AmclParams``)."""
         if not len(shares) or shares.max() < p.converged_weight:
             self._leader = None
             self.leader_updates = 0
@@ -412,6 +467,10 @@ class ParticleFilter:
         """The log-likelihood of the scan at the nearest peak from each of ``starts`` (m, 3): a
         coarse-to-fine pattern search as ``_refine``'s, all starts at once, steps halving from
         8 cm / 2 deg to 5 mm / 0.125 deg (reach about 0.3 m and 8 deg)."""
+        return self._climb(starts, ranges, angles)[1]
+
+    def _climb(self, starts: np.ndarray, ranges: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_peaks`` with the peaks' poses: (poses (m, 3), log-likelihoods (m,))."""
         best = starts.copy()
         value = self.field.log_likelihood(best, ranges, angles, self.sensor_pose)
         steps = np.array([-1.0, 0.0, 1.0])
@@ -429,7 +488,8 @@ class ParticleFilter:
                 best[better] = cand[rows[better], i[better]]
                 value[better] = values[rows[better], i[better]]
             dxy, dth = dxy / 2.0, dth / 2.0
-        return np.asarray(value)
+        best[:, 2] = wrap_angle(best[:, 2])
+        return best, np.asarray(value)
 
     # -- the estimate --------------------------------------------------------------------------------
     def _estimate(self) -> None:

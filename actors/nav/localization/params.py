@@ -68,10 +68,16 @@ class AmclParams:
     it; 3 was measured on the tuning logs and did not help, see ``ParticleFilter._leader_holds``).
     ``converged_travel`` (m): and that hypothesis must have held it over this much odometry
     travel (turns on the spot do not count: they show the scanner no new walls). Default 0
-    (off): on intel seed 28, the look-alike miss it was meant for, 1 m and 2 m only delayed the
-    end of the search (0.47 m -> 1.6 m / 3.1 m of travel) on the same wrong place, because the
-    right place had lost its particles at 0.14 m, where the scans fit the map 40-90 nats worse
-    at the logged pose than at the look-alike places.
+    (off): alone, on intel seed 28, 1 m and 2 m only delayed the end of the search on the same
+    wrong place, because the right place had lost its particles at 0.14 m of travel.
+    ``search_candidates`` (default 0, off): each scan of the search, this many random poses in
+    free space are scored on about 30 of the scan's beams; the ``search_climbs`` best are
+    scan-matched to their likelihood peaks and each peak that no hypothesis covers and that
+    fits within about 23 nats of the best hypothesis's peak becomes a particle; together they
+    get at most ``search_inject_share`` of the weight (see ``ParticleFilter._propose``). With
+    20000 candidates and ``converged_travel`` 2 m, fresh seeds 100+ gave no net gain (intel
+    19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), at
+    1.4-1.7x the CPU per scan: off until a full run decides.
     """
 
     alpha1: float = _alpha()
@@ -108,6 +114,9 @@ class AmclParams:
     max_hypotheses: int = field(default=8, validator=number(ge=1, le=1000, integer=True))
     converged_updates: int = field(default=1, validator=number(ge=1, le=1000, integer=True))
     converged_travel: float = field(default=0.0, validator=number(ge=0.0, le=1000.0))
+    search_candidates: int = field(default=0, validator=number(ge=0, le=10_000_000, integer=True))
+    search_climbs: int = field(default=24, validator=number(ge=1, le=10_000, integer=True))
+    search_inject_share: float = field(default=0.05, validator=number(ge=0.0, le=0.5))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:
