@@ -34,15 +34,19 @@ class _Targeted(Nemesis):
         self.target = target
         self.exclude = set(exclude or [])
         self._turn = 0
+        self._seen: set[str] = set()  # every component name the tree has listed during the run
 
     def pick(self) -> tuple[str, int] | None:
         """(component, pid) to hit now, or None when nothing is running."""
         assert self.system is not None
         tree = worker_nodes(self.system.tree()["tree"])
         known = {w["name"] for w in tree}
+        self._seen |= known
         # Threads cannot be signalled separately; a stopped or restarting worker has no pid now.
         workers = {w["name"]: w.get("pid") for w in tree if w.get("mode", "process") == "process"}
         if self.target not in ("random", "each") and self.target not in known:
+            if self.target in self._seen:
+                return None  # it was there: its group was given up (escalation), nothing to hit now
             raise NemesisError(f"{self.kind}: no component named {self.target!r}; components: {', '.join(sorted(known))}")
         names = sorted(n for n, pid in workers.items() if pid and n not in self.exclude)
         if self.target == "random":
