@@ -148,6 +148,9 @@ class Collector:
     def close(self) -> list:
         self._stop.set()
         self._thread.join()
+        # What the player published after the thread's last take (it may have ended between two
+        # takes): the rings are still mapped here.
+        self.got.extend(self.sub.take())
         self.sub.close()
         return self.got
 
