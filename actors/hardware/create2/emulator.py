@@ -94,6 +94,10 @@ class Create2Emulator:
         self.time_scale = float(time_scale)  # > 1: ticks come faster than the real 15 ms (tests in emulator time)
         self.mode = P.MODE_OFF
         self.ticks = 0
+        # None: ticks follow the wall clock, as a real robot's do. An int: the emulator stops at
+        # that tick until it is raised, so a test can move robot time in lockstep with a harness
+        # and a loaded machine cannot make the robot run ahead of its driver.
+        self.tick_limit: int | None = None
         self.cmd_right = self.cmd_left = 0  # mm/s commanded
         self.v_right = self.v_left = 0.0  # m/s actual
         self.counts_left = self.counts_right = 0.0  # cumulative, unwrapped
@@ -176,7 +180,10 @@ class Create2Emulator:
     def _run(self) -> None:
         next_tick = time.monotonic()
         while not self._stop.is_set():
-            timeout = max(0.0, next_tick - time.monotonic())
+            limit = self.tick_limit
+            held = limit is not None and self.ticks >= limit
+            # Held: keep reading the driver's bytes, poll for the next grant (no busy loop).
+            timeout = 0.001 if held else max(0.0, next_tick - time.monotonic())
             master = self._master
             if master >= 0:
                 try:
@@ -187,7 +194,7 @@ class Create2Emulator:
                     self._read(master)
             else:
                 self._stop.wait(timeout)
-            if time.monotonic() >= next_tick:
+            if not held and time.monotonic() >= next_tick:
                 self.step()
                 next_tick += P.STREAM_PERIOD_S / self.time_scale
                 if time.monotonic() - next_tick > 0.5:  # a stalled machine: do not replay seconds at once

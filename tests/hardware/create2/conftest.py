@@ -27,10 +27,13 @@ def twist(v: float, w: float = 0.0) -> Twist:
 
 
 class Lockstep:
-    """Moves a ComponentHarness's clock by the emulator's ticks: robot time = emulator time."""
+    """Moves a ComponentHarness's clock by the emulator's ticks: robot time = emulator time. The
+    emulator is held between ticks and granted the next one only once the harness has caught up,
+    so the driver sees every tick on time however busy the machine is."""
 
     def __init__(self, harness, emu):
         self.h, self.emu, self.last = harness, emu, emu.ticks
+        emu.tick_limit = emu.ticks
 
     def run(self, seconds: float, *, until=None, timeout: float = 60.0):
         """Follow the emulator for ``seconds`` of its time (or until ``until()``); ``timeout`` wall s only bounds a hang."""
@@ -45,6 +48,9 @@ class Lockstep:
             if ticks > self.last:
                 self.h.advance((ticks - self.last) * P.STREAM_PERIOD_S)
                 self.last = ticks
+            elif self.emu.tick_limit is not None and self.emu.tick_limit <= ticks:
+                self.h.run_pending()
+                self.emu.tick_limit = ticks + 1
             else:
                 time.sleep(0.002)
                 self.h.run_pending()
