@@ -348,27 +348,29 @@ class Behaviors(MotionActionServer):
             centres, velocities, _ = self._movers.movers()
             self._memory.observe(clock.now(), centres, velocities)
 
-    def _approaches(self, pose: np.ndarray) -> list[Approach]:
+    def _approaches(self, pose: np.ndarray, standing: bool = False) -> list[Approach]:
         """Every tracked mover within ``detection_range``, relative to the robot moving at its
-        odometry's velocity (world frame)."""
+        odometry's velocity (world frame), or standing where it is (``standing``)."""
         cfg = self.config.give_way
         centres, velocities, radii = self._movers.movers()
         if len(centres) == 0:
             return []
-        body = velocity_of(self.latest("location"))
+        body = None if standing else velocity_of(self.latest("location"))
         c, s = math.cos(pose[2]), math.sin(pose[2])
         v = np.zeros(2) if body is None else np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
         return [a for a in approaches(pose[:2], v, self.config.robot.radius, centres, velocities, radii, cfg.time_before_collision)
                 if a.gap_now <= cfg.detection_range]
 
-    def _threat(self, pose: np.ndarray | None = None) -> str | None:
-        """Why a mover is on a collision course with the robot (see ``GiveWayConfig``); None if none is."""
+    def _threat(self, pose: np.ndarray | None = None, standing: bool = False) -> str | None:
+        """Why a mover is on a collision course with the robot (see ``GiveWayConfig``); None if none is.
+        ``standing``: judged as if the robot stopped where it is, which it does when a give-way
+        hands back; a yield move still under way must not count as the way being clear."""
         cfg = self.config.give_way
         pose = self._pose() if pose is None else pose
         if pose is None:
             return None
         centres = self._movers.movers()[0]
-        for a in self._approaches(pose):
+        for a in self._approaches(pose, standing):
             coming = a.gap_min < cfg.personal_space and a.closing > 0.05
             if coming or (a.gap_now < cfg.near_distance and a.closing > -0.05):
                 x, y = centres[a.index]
@@ -439,7 +441,7 @@ class Behaviors(MotionActionServer):
             self._finish(run, False, f"give_way stopped: lost the pose on {self.topic_name('location')}")
             return
         run.done_amount = now - run.started
-        threat = self._threat(pose)
+        threat = self._threat(pose, standing=True)
         if threat is not None:
             run.last_threat = now
         moved = float(math.dist(pose[:2], run.start_pose[:2]))
