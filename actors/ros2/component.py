@@ -41,7 +41,7 @@ def _qos(instance: Any, attribute: Any, value: Any) -> None:
 
 
 def _fastdds(instance: Any, attribute: Any, value: Any) -> None:
-    from emos.interop.ros2.bridge import FASTDDS_TRANSPORTS
+    from emos.interop.ros2.fastdds import FASTDDS_TRANSPORTS
 
     if value not in FASTDDS_TRANSPORTS:
         raise ValueError(f"Ros2BridgeConfig.fastdds must be one of {', '.join(FASTDDS_TRANSPORTS)}, got {value!r}")

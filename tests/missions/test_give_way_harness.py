@@ -22,7 +22,6 @@ ROBOT_RADIUS, HALF = 0.2, 0.15  # the person: a 0.3 m box
 def _behaviors():
     from emos.actors.nav import RobotConfig, RobotGeometry, RobotType
     from emos.actors.nav.components.behaviors import Behaviors, BehaviorsConfig
-    from emos.actors.nav.recovery import GiveWayConfig
 
     robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
                         geometry_params=np.array([ROBOT_RADIUS, 0.3]))

@@ -121,10 +121,10 @@ class Peer:
         file that appears is EMOS's. ``udp_only=False`` for a peer that must use shared memory."""
         environ = dict(os.environ)
         if udp_only:
-            from emos.interop.ros2.bridge import _UDP_LOOPBACK_PROFILE
+            from emos.interop.ros2.fastdds import UDP_LOOPBACK_PROFILE
 
             profile = Path(tempfile.mkdtemp(prefix="emos-ros2-peer-")) / "udp.xml"
-            profile.write_text(_UDP_LOOPBACK_PROFILE)
+            profile.write_text(UDP_LOOPBACK_PROFILE)
             environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
             environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
             self._profile_dir = profile.parent

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from emos.interop import ros2_cdr
-from emos.interop.ros2 import bridge as B
+from emos.interop.ros2 import fastdds as B
 from emos.interop.ros2_cdr import Ros2Codec
 from emos.msgs import Image, UInt8MultiArray
 from emos.msgs.registry import resolve
@@ -112,9 +112,9 @@ def test_the_bridge_profile_sizes_its_transports_for_large_messages(shm, loopbac
     kinds = {d.findtext("{*}type"): d for d in _find(root, "transport_descriptors/transport_descriptor")}
     assert set(kinds) == ({"SHM", "UDPv4"} if shm else {"UDPv4"})
     udp = kinds["UDPv4"]
-    receive = B._socket_buffer("rmem")
+    receive = B.socket_buffer("rmem")
     if receive is not None:
-        assert int(udp.findtext("{*}receiveBufferSize") or 0) == receive >= B._MIN_SOCKET_BUFFER
+        assert int(udp.findtext("{*}receiveBufferSize") or 0) == receive >= B.MIN_SOCKET_BUFFER
     assert udp.find("{*}sendBufferSize") is None  # the kernel's: see bridge.py
     assert (udp.find("{*}interfaceWhiteList") is not None) == loopback_only
     if shm:

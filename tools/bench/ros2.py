@@ -427,12 +427,12 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # inherited by every helper: meets no other host
     with tempfile.TemporaryDirectory(prefix="emos-bench-ros2-") as tmp:
         if args.fastdds == "udp":
-            from emos.interop.ros2.bridge import _UDP_LOOPBACK_PROFILE
+            from emos.interop.ros2.fastdds import UDP_LOOPBACK_PROFILE
 
             # The bridge's own loopback-UDP profile for every participant; a profiles file
             # replaces the discovery-range setting (rmw would add shared memory back for it).
             profile = Path(tmp) / "udp.xml"
-            profile.write_text(_UDP_LOOPBACK_PROFILE)
+            profile.write_text(UDP_LOOPBACK_PROFILE)
             os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
             os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
         return _run_pairs(args, install, sizes, pairs, cpus, domain)

@@ -45,13 +45,14 @@ import os
 import threading
 import time
 from collections.abc import Iterable
-from pathlib import Path
 from typing import Any, cast
 
 from emos.config.qos import QoSConfig
 from emos.interop.ros2 import env
 from emos.interop.ros2 import qos as Q
+from emos.interop.ros2.fastdds import choose_transports
 from emos.interop.ros2.options import STATE_FILE
+from emos.interop.ros2.reader import READER_WAIT_S, SampleReader
 from emos.interop.ros2_cdr import DISTRIBUTIONS, CdrError, NotShared, codec_for
 from emos.msgs import codec
 from emos.msgs.registry import UnknownMessageType, resolve
@@ -65,164 +66,6 @@ _limited = RateLimitedLog(log, interval=10.0)
 
 PUBLISHER_ID = "ros2_bridge"  # the bridge's rings: never bridged back out
 ROS_INTERNAL = frozenset({"/rosout", "/parameter_events"})
-# Fast DDS transports (Ros2Bridge's ``fastdds``, see _choose_transports): "udp" (the default), UDP
-# only: a SIGKILLed bridge leaves no file, at the cost of UDP's copies, and of losses in the other
-# node's socket buffer that the bridge cannot size (slower than shared memory for large messages,
-# docs/ros2.md); "shm", shared memory between local processes (as ROS 2 nodes on this host use)
-# and UDP. Fast DDS leaves /dev/shm/fastrtps_*
-# behind when a process is SIGKILLed; with "shm" the bridge removes the segments of dead
-# participants when it starts (fastdds_shm.py), but not yet the port segments that live peers
-# still sending to the dead participant re-create (seen in tests/ros2/test_bridge.py's SIGKILL
-# test), which is why "udp" stays the default.
-FASTDDS_TRANSPORTS = ("udp", "shm")
-ENV_FASTDDS_TRANSPORTS = "FASTDDS_BUILTIN_TRANSPORTS"
-ENV_FASTDDS_PROFILES = "FASTRTPS_DEFAULT_PROFILES_FILE"  # Fast DDS 2 (Jazzy and older)
-ENV_FASTDDS3_PROFILES = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS 3 (Kilted on): the old name is deprecated there
-
-# Sizes the bridge's participant asks of its transports. Large messages travel as ~64 KB
-# fragments, all written in one burst; a fragment that finds no room is lost, and Fast DDS repairs
-# it only after its reader's heartbeat-response and its writer's NACK-response delays (5 ms each),
-# so every lost fragment costs ~10 ms (measured per stage in docs/ros2.md: a 921,600 B half
-# round trip at 12-16 ms where the bridge's own work is ~1 ms).
-# * UDP: the kernel's default receive buffer (net.core.rmem_default, 208 KB here) holds about three
-#   fragments; the bridge's sockets ask for 8 MiB, which the kernel caps at net.core.rmem_max.
-#   Only the receive side: with a large send buffer too, tests/ros2/test_bridge.py's 44 topics
-#   at once failed to come back within a minute in 4 runs of 4 at load 50 (that test is
-#   load-sensitive: HEAD's bridge passed 2 of 3, the receive buffer alone 1 of 2). A ROS 2
-#   node's own receive buffer is its own: what the bridge sends it over UDP can still be lost
-#   there (docs/ros2.md, Measured), which shared memory avoids.
-# * Shared memory: Fast DDS's default segment is 512 KB, smaller than one 921,600 B image, so a
-#   writer reuses the buffers of fragments its reader has not read yet; the bridge's segment
-#   (its writers' memory) holds several large messages.
-# * A burst whose last fragments and trailing heartbeat are both lost (the other node's small
-#   socket buffer, under load) is noticed only at the writer's next periodic heartbeat: 3 s by
-#   Fast DDS's default (measured: 921,600 B half round trips of 3 s); the bridge's writers send
-#   one every 50 ms while a reader has not acknowledged everything (none otherwise).
-# * A lost fragment costs its reader's heartbeat-response delay (when it asks for the fragment
-#   again) plus its writer's NACK-response delay (when it re-sends it): Fast DDS's defaults are
-#   5 ms each, the 9-10 ms half round trips of 921,600 B seen with ``shm`` (fragments are lost
-#   where a buffer is smaller than a burst, e.g. a ROS 2 node's default 512 KB segment, which
-#   cannot hold one image, when the bridge is slow to read it). The bridge answers at once on its side of each leg: as a reader it asks as soon
-#   as a heartbeat shows a gap, as a writer it re-sends as soon as it is asked; a repair then
-#   waits only on the other node's delay (~5 ms; measured: p99 of 80 921,600 B round trips
-#   11-13 ms -> 6.2-6.5 ms). (The delays let a writer with many readers merge their requests;
-#   a bridged topic has a few.)
-HEARTBEAT_PERIOD_NS = 50_000_000
-HEARTBEAT_RESPONSE_DELAY_NS = 0
-NACK_RESPONSE_DELAY_NS = 0
-UDP_SOCKET_BUFFER_BYTES = 8 * 1024 * 1024
-SHM_SEGMENT_BYTES = 32 * 1024 * 1024
-_MIN_SOCKET_BUFFER = 65_536  # Fast DDS's UDP transport needs a buffer of one whole datagram
-
-
-def _socket_buffer(kind: str) -> int | None:
-    """The socket buffer to ask for (``kind``: ``rmem``, receiving): ours, capped at what the
-    kernel lets an unprivileged process set; None (Fast DDS's default) if that is too small."""
-    try:
-        most = int(Path(f"/proc/sys/net/core/{kind}_max").read_text())
-    except (OSError, ValueError):
-        most = UDP_SOCKET_BUFFER_BYTES
-    size = min(UDP_SOCKET_BUFFER_BYTES, most)
-    return size if size >= _MIN_SOCKET_BUFFER else None
-
-
-def fastdds_profile(shm: bool, loopback_only: bool) -> str:
-    """The bridge's Fast DDS XML profile: UDPv4 with a large receive buffer (on 127.0.0.1 only when
-    ``loopback_only``), and with ``shm`` Fast DDS's shared-memory transport first, with a large
-    segment (see ``SHM_SEGMENT_BYTES``); and its writers' and readers' reliability timing
-    (``HEARTBEAT_PERIOD_NS``, ``NACK_RESPONSE_DELAY_NS``, ``HEARTBEAT_RESPONSE_DELAY_NS``). QoS
-    policies come from ROS 2 as usual."""
-    receive = _socket_buffer("rmem")
-    buffers = f"\n      <receiveBufferSize>{receive}</receiveBufferSize>" if receive else ""
-    where = "\n      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>" if loopback_only else ""
-    shm_descriptor = f"""
-    <transport_descriptor>
-      <transport_id>emos_shm</transport_id>
-      <type>SHM</type>
-      <segment_size>{SHM_SEGMENT_BYTES}</segment_size>
-    </transport_descriptor>""" if shm else ""
-    ids = ("<transport_id>emos_shm</transport_id>" if shm else "") + "<transport_id>emos_udp</transport_id>"
-    what = ("shared memory between local processes, " if shm else "no shared memory, ") + \
-        ("UDP on 127.0.0.1 only" if loopback_only else "UDP") + ", large receive buffers"
-    return f"""<?xml version="1.0" encoding="UTF-8" ?>
-<!-- Written by the EMOS ROS 2 bridge: {what}. -->
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <transport_descriptors>{shm_descriptor}
-    <transport_descriptor>
-      <transport_id>emos_udp</transport_id>
-      <type>UDPv4</type>{buffers}{where}
-    </transport_descriptor>
-  </transport_descriptors>
-  <participant profile_name="emos_bridge" is_default_profile="true">
-    <rtps>
-      <userTransports>{ids}</userTransports>
-      <useBuiltinTransports>false</useBuiltinTransports>
-    </rtps>
-  </participant>
-  <data_writer profile_name="emos_bridge_writer" is_default_profile="true">
-    <times>
-      <heartbeatPeriod><sec>0</sec><nanosec>{HEARTBEAT_PERIOD_NS}</nanosec></heartbeatPeriod>
-      <nackResponseDelay><sec>0</sec><nanosec>{NACK_RESPONSE_DELAY_NS}</nanosec></nackResponseDelay>
-    </times>
-  </data_writer>
-  <data_reader profile_name="emos_bridge_reader" is_default_profile="true">
-    <times>
-      <heartbeatResponseDelay><sec>0</sec><nanosec>{HEARTBEAT_RESPONSE_DELAY_NS}</nanosec></heartbeatResponseDelay>
-    </times>
-  </data_reader>
-</profiles>
-"""
-
-
-# The loopback-UDP profile, also given to the tests' and the benchmark's rclpy peers that must
-# talk like the bridge.
-_UDP_LOOPBACK_PROFILE = fastdds_profile(shm=False, loopback_only=True)
-
-
-def _users_profile() -> str | None:
-    return os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
-
-
-def _choose_transports(ctx: RunContext, fastdds: str) -> str:
-    """Set up this process's Fast DDS transports for ``fastdds`` (``FASTDDS_TRANSPORTS``);
-    returns what was chosen, for the log.
-
-    A user's own Fast DDS profile file (or ``FASTDDS_BUILTIN_TRANSPORTS``) is used as it is.
-    Otherwise the bridge gives Fast DDS its own profile (:func:`fastdds_profile`): ``"udp"``,
-    UDP only; ``"shm"``, shared memory and UDP, as ROS 2 nodes on this host use. When discovery
-    is limited to this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` or the older
-    ``ROS_LOCALHOST_ONLY=1``), the profile's UDP is on 127.0.0.1 only (the same reach) and the
-    variables are taken out of this process's environment: with them rmw_fastrtps installs its
-    own transports over the profile's."""
-    if fastdds not in FASTDDS_TRANSPORTS:
-        raise ValueError(f"ROS 2 bridge: fastdds must be one of {FASTDDS_TRANSPORTS}, got {fastdds!r}")
-    users = _users_profile()
-    if users:
-        return f"Fast DDS profile {users} (the user's)"
-    localhost = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST" or os.environ.get("ROS_LOCALHOST_ONLY") == "1"
-    if os.environ.get(ENV_FASTDDS_TRANSPORTS) and not localhost:
-        return f"Fast DDS transports {os.environ[ENV_FASTDDS_TRANSPORTS]} (the user's)"
-    if fastdds == "shm":
-        from emos.interop.ros2.fastdds_shm import remove_leftovers
-
-        removed = remove_leftovers()
-        if removed:
-            log.info("ROS 2: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
-    path = ctx.run_dir / f"ros2_fastdds_{fastdds}{'_loopback' if localhost else ''}.xml"
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_text(fastdds_profile(shm=fastdds == "shm", loopback_only=localhost))
-    os.replace(tmp, path)
-    from emos.interop.ros2.env import find
-
-    install = find()
-    fastdds2 = install is None or install.distro in ("humble", "iron", "jazzy")
-    os.environ[ENV_FASTDDS_PROFILES if fastdds2 else ENV_FASTDDS3_PROFILES] = str(path)
-    os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
-    reach = "UDP on 127.0.0.1 only (discovery range LOCALHOST)" if localhost else "UDP"
-    memory = f"shared memory ({SHM_SEGMENT_BYTES >> 20} MiB segment) between local processes and " if fastdds == "shm" else ""
-    return f"Fast DDS {memory}{reach}, receive buffers {_socket_buffer('rmem')} B (profile {path})"
-
 
 class _Out:
     __slots__ = ("sub", "pub", "cls", "ros_type", "sent", "errors")
@@ -239,129 +82,6 @@ class _In:
         self.pub, self.cls, self.ros_type = pub, cls, ros_type
         self.sub: Any = None
         self.received = self.errors = 0
-
-
-_READER_WAIT_S = 0.5  # the reader's wait when nothing comes: it only bounds how late it sees _stop
-
-
-def _run_to_end(coroutine: Any) -> None:
-    """Run an rclpy event handler's ``execute`` coroutine, which awaits nothing (its callback
-    is a plain function), to its end in this thread."""
-    try:
-        coroutine.send(None)
-    except StopIteration:
-        return
-    coroutine.close()  # it awaited something: not ours to drive
-    log.warning("ROS 2 bridge: a QoS event handler waited for something; its event was dropped")
-
-
-class _Reader:
-    """Waits on a set of raw rclpy subscriptions and their QoS event handlers, and takes their
-    samples and events, in the calling thread.
-
-    The subscriptions are created on the bridge's node in :attr:`group`, which rclpy's executor
-    never runs: it leaves the subscriptions and their event handlers out of its wait set. Both
-    must be waited on in one place: while the executor waited on the events and this reader on
-    the data, each woke the other's wait (apparently rmw_fastrtps's one listener per subscription,
-    for its data and its events, wakes one wait set at a time) (measured at 8 B: the executor thread
-    at 21 % of a CPU, 1.5-1.8 ms of bridge CPU per round trip, p50 2-3 ms under load; with one
-    wait set, 0.42 ms and 0.39 ms). rclpy has no public wait-set API: this uses the one
-    ``rclpy.wait_for_message`` and the executor use (``WaitSet``, ``take_message``, the
-    ``Waitable`` methods of an event handler), unchanged from Humble to Kilted."""
-
-    def __init__(self, context: Any):
-        from rclpy import guard_condition
-        from rclpy.callback_groups import CallbackGroup
-        from rclpy.impl.implementation_singleton import rclpy_implementation
-
-        class _TakenByReader(CallbackGroup):
-            def can_execute(self, entity: Any) -> bool:
-                return False  # neither the subscriptions nor their event handlers: see the class doc
-
-            def beginning_execution(self, entity: Any) -> bool:
-                return False
-
-            def ending_execution(self, entity: Any) -> None:
-                pass
-
-        self.context = context
-        self.group = _TakenByReader()
-        self._rclpy = rclpy_implementation
-        make_guard: Any = guard_condition.GuardCondition  # rclpy's code is untyped
-        self._wake: Any = make_guard(None, None, context=context)  # on no node: the executor ignores it
-        self._wait_set: Any = None
-        self._size = (-1, -1)
-        self._subs: list[Any] | None = None  # the set the fields below were gathered for (_prepare)
-        self._events: list[Any] = []
-        self._held: list[Any] = []
-        self._by_pointer: dict[int, int] = {}
-
-    def wake(self) -> None:
-        """End the current wait (the set of subscriptions changed, or the bridge stops)."""
-        try:
-            self._wake.trigger()
-        except Exception:  # destroyed: closing
-            pass
-
-    def wait(self, subs: list[Any], timeout_s: float) -> list[int] | None:
-        """Wait until one of ``subs`` has a sample or an event (or :meth:`wake`, or
-        ``timeout_s``); handles the events, returns the indexes of the subscriptions that have a
-        sample, or None if the wait timed out.
-
-        Called once per sample the bridge moves: what does not change between calls (the
-        entities, their handles, the wait set) is gathered when ``subs`` changes (pass the same
-        list object while the set is the same), and the handles are marked in use by plain
-        calls, not an ExitStack (measured: 14 -> 9 us of Python per wait)."""
-        if subs is not self._subs:
-            self._prepare(subs)
-        wait_set, events, held, by_pointer = self._wait_set, self._events, self._held, self._by_pointer
-        entered = 0
-        try:  # rclpy's handles must not be destroyed while waited on
-            for handle in held:
-                handle.__enter__()
-                entered += 1
-            wait_set.clear_entities()
-            for sub in subs:
-                wait_set.add_subscription(sub.handle)
-            for event in events:
-                event.add_to_wait_set(wait_set)
-            wait_set.add_guard_condition(self._wake.handle)
-            wait_set.wait(int(timeout_s * 1e9))
-            fired = [e for e in events if e.is_ready(wait_set)] if events else events
-            ready = wait_set.get_ready_entities("subscription")
-            woken = bool(ready or fired or wait_set.get_ready_entities("guard_condition"))
-        finally:
-            for handle in held[entered - 1::-1] if entered else ():
-                handle.__exit__(None, None, None)
-        for event in fired:
-            _run_to_end(event.execute(event.take_data()))
-        if not woken:
-            return None
-        return [by_pointer[p] for p in ready if p in by_pointer]
-
-    def _prepare(self, subs: list[Any]) -> None:
-        """The entities of a new set of subscriptions, and a wait set of their size."""
-        events = [e for sub in subs for e in sub.event_handlers]
-        if self._size != (len(subs), len(events)):
-            self._wait_set = self._rclpy.WaitSet(len(subs), 1, 0, 0, 0, len(events), self.context.handle)
-            self._size = (len(subs), len(events))
-        self._events = events
-        self._held = [*(sub.handle for sub in subs), *events, self._wake.handle, self.context.handle]
-        self._by_pointer = {sub.handle.pointer: i for i, sub in enumerate(subs)}
-        self._subs = subs
-
-    @staticmethod
-    def take_all(sub: Any) -> Any:
-        """Every sample ``sub`` holds now, as CDR bytes."""
-        with sub.handle:
-            while True:
-                got = sub.handle.take_message(sub.msg_type, True)
-                if got is None:
-                    return
-                yield got[0]
-
-    def close(self) -> None:
-        self._wake.destroy()
 
 
 class Ros2Bridge:
@@ -381,7 +101,7 @@ class Ros2Bridge:
                  node_name: str = "emos_bridge", qos: dict[str, Any] | None = None, discover_every: float = 0.5,
                  fastdds: str = "udp"):
         self.install = env.ensure_loadable()
-        self.transport = _choose_transports(ctx, fastdds)
+        self.transport = choose_transports(ctx, fastdds)
         import rclpy
         from rclpy.executors import MultiThreadedExecutor
 
@@ -412,7 +132,7 @@ class Ros2Bridge:
             # per EMOS ring), calls to EMOS services, answers of ROS 2 servers (services.py).
             self.executor = MultiThreadedExecutor(num_threads=3, context=self.context)
             self.executor.add_node(self.node)
-            self._reader = _Reader(self.context)
+            self._reader = SampleReader(self.context)
             self.waker = Waker(ctx, background=True)
             from emos.interop.ros2.services import ServiceBridge
 
@@ -457,7 +177,7 @@ class Ros2Bridge:
                     version = self._in_version
                     routes = [(t, r) for t, r in self.inn.items() if r.sub is not None]
                     subs = [r.sub for _t, r in routes]
-            ready = reader.wait(subs, _READER_WAIT_S)
+            ready = reader.wait(subs, READER_WAIT_S)
             if ready is None:
                 continue  # timed out: nothing came
             taken = 0

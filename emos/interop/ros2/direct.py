@@ -17,12 +17,12 @@ first such topic.
   when it is left at its default, the bridge's default for the name: latched for ``/map``, ...),
   and messages travel as CDR bytes (:mod:`emos.interop.ros2_cdr`; a type with no ROS 2
   counterpart fails when the topic is opened, naming it).
-* Fast DDS's transports are the bridge's (``_choose_transports``): loopback-safe UDP by default,
+* Fast DDS's transports are the bridge's (:mod:`emos.interop.ros2.fastdds`): loopback-safe UDP by default,
   or shared memory with ``$EMOS_ROS2_FASTDDS=shm``; with shared memory a participant removes, when
   it starts, the Fast DDS files of dead participants (:mod:`emos.interop.ros2.fastdds_shm`), so a
   component SIGKILLed and restarted cleans what it left.
 * Subscriptions are raw and waited on by one reader thread per process on a wait set of just
-  them (the bridge's ``_Reader``). The reader decodes each sample there (``decodes_on_arrival``,
+  them (:class:`emos.interop.ros2.reader.SampleReader`, as the bridge's). It decodes each sample there (``decodes_on_arrival``,
   as Zenoh's subscriber), queues it and wakes the node; a sample that is not valid CDR of the
   topic's type is dropped with one rate-limited line naming the topic and the type.
 * Each topic carried this way is recorded in ``<run dir>/ros2_direct/`` so that the run's bridge
@@ -43,6 +43,8 @@ from emos.config.qos import QoSConfig
 from emos.errors import TransportError
 from emos.interop.ros2 import env
 from emos.interop.ros2 import qos as Q
+from emos.interop.ros2.fastdds import FASTDDS_TRANSPORTS, choose_transports
+from emos.interop.ros2.reader import READER_WAIT_S, SampleReader
 from emos.interop.ros2_cdr import DISTRIBUTIONS, CdrError, NotShared, Ros2Codec, codec_for
 from emos.msgs.registry import canonical_name
 from emos.ratelimit import RateLimitedLog
@@ -54,7 +56,6 @@ _limited = RateLimitedLog(log, interval=10.0)
 
 ENV_FASTDDS = "EMOS_ROS2_FASTDDS"  # "udp" (default) or "shm": the Fast DDS transports of ros2 topics
 DIRECT_DIR = "ros2_direct"  # in the run directory: one file per topic carried directly
-_READER_WAIT_S = 0.5  # the reader's wait when nothing comes: it only bounds how late it sees a stop
 _NODE_NAME_BAD = re.compile(r"[^A-Za-z0-9_]")
 
 
@@ -124,16 +125,13 @@ class _Participant:
     """This process's rclpy context, node and reader thread, shared by its ``ros2`` topics."""
 
     def __init__(self, ctx: RunContext, name: str):
-        from emos.interop.ros2.bridge import _choose_transports, _Reader
         from emos.interop.ros2.options import from_environment
 
         self.install = env.ensure_loadable()
-        from emos.interop.ros2.bridge import FASTDDS_TRANSPORTS
-
         fastdds = os.environ.get(ENV_FASTDDS, "udp") or "udp"
         if fastdds not in FASTDDS_TRANSPORTS:
             raise ValueError(f"${ENV_FASTDDS} must be one of {', '.join(FASTDDS_TRANSPORTS)}, got {fastdds!r}")
-        self.transport = _choose_transports(ctx, fastdds)
+        self.transport = choose_transports(ctx, fastdds)
         _enabled, _topics, domain = from_environment()
         import rclpy
         from rclpy.signals import SignalHandlerOptions
@@ -145,7 +143,7 @@ class _Participant:
         rclpy.init(context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
         try:
             self.node: Any = rclpy.create_node(node_name_for(name), context=self.context, start_parameter_services=False)
-            self.reader = _Reader(self.context)
+            self.reader = SampleReader(self.context)
         except BaseException:
             rclpy.shutdown(context=self.context)
             raise
@@ -190,7 +188,7 @@ class _Participant:
                     subs = list(self._subs)
                     handles = [s.rclpy_sub for s in subs]
             try:
-                ready = self.reader.wait(handles, _READER_WAIT_S)
+                ready = self.reader.wait(handles, READER_WAIT_S)
             except Exception as exc:  # noqa: BLE001 - a subscription destroyed under the wait: the set changed
                 if self._stop.is_set():
                     return
