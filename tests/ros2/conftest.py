@@ -36,8 +36,15 @@ def fastdds_files() -> set[str]:
     behind (a live node's files, this test's or another test's beside it, are not leftovers)."""
     from tests.runtime.helpers import shm_in_use
 
-    found = {n for n in os.listdir("/dev/shm") if "fastrtps" in n or "fastdds" in n}
+    found = fastdds_names()
     return found - shm_in_use() if found else found
+
+
+def fastdds_names() -> set[str]:
+    """Every Fast DDS /dev/shm file now, owned or not: a test's "before". Taking only the unowned
+    ones there would blame the test for a file whose owner (an earlier test's node) was still
+    alive when it started and died during it."""
+    return {n for n in os.listdir("/dev/shm") if "fastrtps" in n or "fastdds" in n}
 
 
 _CLAIMED: list[int] = []  # lock files held for this process's life: its domains are its own

@@ -11,7 +11,7 @@ import psutil
 import pytest
 
 from emos.transport.context import SHM_DIR, runtime_root
-from tests.ros2.conftest import fastdds_files, free_domains
+from tests.ros2.conftest import fastdds_files, fastdds_names, free_domains
 from tests.runtime.helpers import HANG_S, wait_until
 
 pytestmark = pytest.mark.process
@@ -36,7 +36,7 @@ def test_bench_ros2_json_contract_and_nothing_left(tmp_path):
     runs_before = set(os.listdir(runtime_root()))
     shm_before = {n for n in os.listdir(SHM_DIR) if n.startswith("emos.")}
     procs_before = _bench_processes()
-    fastdds_before = fastdds_files()
+    fastdds_before = fastdds_names()
     out = subprocess.run([sys.executable, "-m", "emos", "bench", "ros2", "--json", "--sizes", "8,4096", "--messages", "5",
                           "--ros-domain-id", str(domain)], capture_output=True, text=True, timeout=6 * HANG_S, cwd=tmp_path)
     assert out.returncode == 0, out.stderr[-3000:]

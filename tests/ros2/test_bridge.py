@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from tests.ros2.conftest import _PEERS, REPO, Peer, fastdds_files, free_domains
+from tests.ros2.conftest import _PEERS, REPO, Peer, fastdds_files, fastdds_names, free_domains
 from tests.ros2.samples import shared_types_with_rclpy, topic_of
 from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
@@ -159,7 +159,7 @@ launcher.bringup()
 def run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ros2run")
     domain, other = free_domains(2)
-    shm_before = fastdds_files()
+    shm_before = fastdds_names()
     system = SystemUnderTest(tmp, RECIPE.format(repo=str(REPO), types=TYPES, cam_on=str(tmp / "cam.on"), domain=domain))
     system.domain, system.other_domain, system.cam_on = domain, other, tmp / "cam.on"
     try:
@@ -299,7 +299,7 @@ def test_image_921600_bytes_at_30_hz_for_10_s_arrives_whole(run):
 def test_the_bridge_sigkilled_is_restarted_streams_resume_and_nothing_is_left(run):
     pid = run.pid("ros2_bridge")
     assert dds_segments(pid) == []  # UDP only: no shared-memory segments to leave behind
-    before = fastdds_files()
+    before = fastdds_names()
     listener = Peer("listener.py", run.domain, "/scan", "sensor_msgs/msg/LaserScan", "default")
     talker = Peer("talker.py", run.domain, "/chatter", "std_msgs/msg/String", 20, "default", "--prefix", "k")
     listener.wait_for(lambda line: line.startswith("got s"), what="scans before the kill")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.ros2.conftest import fastdds_files, forked_child_result, free_domains
+from tests.ros2.conftest import fastdds_files, fastdds_names, forked_child_result, free_domains
 
 pytestmark = pytest.mark.process
 
@@ -85,7 +85,7 @@ def _wanted_buffer() -> int:
 @pytest.mark.parametrize("fastdds", ["udp", "shm"])
 def test_the_bridge_receives_udp_with_large_socket_buffers(fastdds):
     wanted = _wanted_buffer()
-    before = fastdds_files()
+    before = fastdds_names()
     got = _run_bridge(fastdds)
     udp = got["udp"]
     assert udp, f"no UDP socket of the bridge's participant found ({got['transport']})"
@@ -97,7 +97,7 @@ def test_the_bridge_receives_udp_with_large_socket_buffers(fastdds):
 
 
 def test_the_bridges_shared_memory_segment_holds_several_large_messages():
-    before = fastdds_files()
+    before = fastdds_names()
     got = _run_bridge("shm")
     own = {name: size for name, size in got["segments"].items() if "_port" not in name}
     # Fast DDS's default segment is 512 KB: less than one 921,600 B image.

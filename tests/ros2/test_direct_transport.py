@@ -17,7 +17,7 @@ import sys
 import pytest
 
 from emos.transport.context import encode_name
-from tests.ros2.conftest import _PEERS, REPO, Peer, fastdds_files, free_domains
+from tests.ros2.conftest import _PEERS, REPO, Peer, fastdds_files, fastdds_names, free_domains
 from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
@@ -84,7 +84,7 @@ launcher.bringup()
 def run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ros2direct")
     (domain,) = free_domains(1)
-    shm_before = fastdds_files()
+    shm_before = fastdds_names()
     system = SystemUnderTest(tmp, RECIPE.format(repo=str(REPO), scan=SCAN, domain=domain),
                              env={"EMOS_ROS2_DOMAIN_ID": str(domain), "EMOS_ROS2_FASTDDS": "shm"})
     system.domain = domain

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.ros2.conftest import Peer, fastdds_files, free_domains
+from tests.ros2.conftest import Peer, fastdds_files, fastdds_names, free_domains
 from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
@@ -64,7 +64,7 @@ def test_emos_on_kilted_exchanges_topics_with_jazzy_nodes_both_ways(tmp_path):
     said = subprocess.run([str(KILTED_PYTHON), "-m", "emos", "version"], capture_output=True, text=True, timeout=HANG_S)
     assert "ROS 2 kilted (rclpy 9." in said.stdout, said.stdout + said.stderr
     (domain,) = free_domains(1)
-    shm_before = fastdds_files()
+    shm_before = fastdds_names()
     system = SystemUnderTest(tmp_path, RECIPE.format(domain=domain), duration=300, python=str(KILTED_PYTHON)).wait_up()
     try:
         hears = Peer("listener.py", domain, "/k_out", "std_msgs/msg/String", "default")

@@ -17,7 +17,7 @@ import subprocess
 
 import pytest
 
-from tests.ros2.conftest import REPO, Peer, fastdds_files, free_domains
+from tests.ros2.conftest import REPO, Peer, fastdds_files, fastdds_names, free_domains
 from tests.runtime.helpers import HANG_S, SystemUnderTest, wait_until
 
 pytestmark = pytest.mark.process
@@ -41,7 +41,7 @@ def _run_recipe_body(path) -> str:
 
 def test_emos_navigation_drives_the_ros2_robot_to_both_goals(tmp_path):
     (domain,) = free_domains(1)
-    fastdds_before = fastdds_files()
+    fastdds_before = fastdds_names()
     robot = Peer(str(ROBOT), "--domain", domain)
     robot.wait_for(lambda line: line.startswith("ready"), what="the robot ready")
     out_dir = tmp_path / "out"
@@ -88,7 +88,7 @@ launcher.bringup()
 
 def test_an_rclpy_teleop_drives_the_emos_simulator(tmp_path):
     (domain,) = free_domains(1)
-    fastdds_before = fastdds_files()
+    fastdds_before = fastdds_names()
     system = SystemUnderTest(tmp_path, SIM_RECIPE, args=["--ros2", "--ros2-topics", "/cmd_vel,/odom", "--ros-domain-id", str(domain)])
     teleop = None
     try:
