@@ -12,7 +12,7 @@ import pytest
 
 from emos import msgs as M
 from emos.testing import ComponentHarness
-from tests.nav.components.fake_base import base_messages
+from tests.nav.components.fake_base import CommandFollower, base_messages
 
 pytestmark = pytest.mark.unit
 
@@ -35,23 +35,19 @@ def _gap(robot: np.ndarray, person: np.ndarray) -> float:
     return math.hypot(dx, dy) - ROBOT_RADIUS
 
 
-class PersonAndBase:
+class PersonAndBase(CommandFollower):
     """Before every tick: the base moves by the newest command, the person walks on (blind)."""
 
     def __init__(self, robot, person, velocity):
-        self.pose, self.person, self.velocity = np.array(robot, float), np.array(person, float), np.array(velocity, float)
-        self.last_time: float | None = None
+        super().__init__(robot)
+        self.person, self.velocity = np.array(person, float), np.array(velocity, float)
         self.least = math.inf
         self.handed_back: list[tuple[float, np.ndarray, np.ndarray]] = []  # (time, robot pose, person centre)
 
     def __call__(self, h: ComponentHarness) -> None:
-        cmd = h.latest("/cmd_vel")
-        v, w = (cmd.linear.x, cmd.angular.z) if cmd is not None else (0.0, 0.0)
-        dt = 0.0 if self.last_time is None else h.time - self.last_time
-        self.last_time = h.time
-        x, y, th = self.pose
-        self.pose = np.array([x + v * math.cos(th) * dt, y + v * math.sin(th) * dt, th + w * dt])
-        self.person = self.person + self.velocity * dt
+        last = h.time if self.last_time is None else self.last_time
+        v, w = self.move(h)
+        self.person = self.person + self.velocity * (h.time - last)
         self.least = min(self.least, _gap(self.pose, self.person))
         box = (self.person[0] - HALF, self.person[1] - HALF, self.person[0] + HALF, self.person[1] + HALF)
         odom, scan = base_messages(self.pose, v, w, 2 * math.pi, [box])

@@ -67,6 +67,27 @@ class FakeBase(BaseComponent):
         self.health_status.set_healthy()
 
 
+class CommandFollower:
+    """A kinematic base in lockstep with a ``ComponentHarness``: :meth:`move`, called before each
+    tick, drives ``pose`` by the newest command on ``command`` for the time since the last call
+    (exact arcs, ``emos.geometry.integrate_pose``) and returns that command (v, w)."""
+
+    def __init__(self, start, command: str = "/cmd_vel"):
+        self.pose = np.array(start, dtype=float)
+        self.command = command
+        self.last_time: float | None = None
+
+    def move(self, h) -> tuple[float, float]:
+        from emos.geometry import integrate_pose
+
+        cmd = h.latest(self.command)
+        v, w = (cmd.linear.x, cmd.angular.z) if cmd is not None else (0.0, 0.0)
+        dt = 0.0 if self.last_time is None else h.time - self.last_time
+        self.last_time = h.time
+        self.pose = integrate_pose(self.pose, (v, 0.0, w), dt)
+        return v, w
+
+
 def base_messages(pose, v: float, w: float, fov: float, boxes=BOXES) -> tuple[M.Odometry, M.LaserScan]:
     """What the base at ``pose`` (x, y, yaw), moving at ``v`` m/s and ``w`` rad/s, publishes:
     odometry in the map frame, and a 360-beam scan of the room and ``boxes`` over ``fov`` (rad)

@@ -15,7 +15,7 @@ import pytest
 
 from emos import msgs as M
 from emos.testing import ComponentHarness
-from tests.nav.components.fake_base import BOXES, base_messages
+from tests.nav.components.fake_base import BOXES, CommandFollower, base_messages
 
 pytestmark = pytest.mark.unit
 
@@ -35,26 +35,20 @@ def _driver(**config):
     return DriveManager(component_name="driver", config=DriveManagerConfig(robot=_robot(), **config))
 
 
-class RoomBase:
+class RoomBase(CommandFollower):
     """FakeBase's kinematics in lockstep with the harness: before every tick it drives the pose
     by the newest command the DriveManager sent, for one tick, and feeds odometry and a scan of
     the room and its ``boxes`` (``fov_deg`` centred ahead). ``control``: the twist a controller
     sends every tick, None while it is silent."""
 
     def __init__(self, start, fov_deg: float = 360.0):
-        self.pose = np.array(start, dtype=float)
+        super().__init__(start)
         self.fov = math.radians(fov_deg)
         self.boxes = list(BOXES)
         self.control: M.Twist | None = None
-        self.last_time: float | None = None
 
     def __call__(self, h: ComponentHarness) -> None:
-        cmd = h.latest("/cmd_vel")
-        v, w = (cmd.linear.x, cmd.angular.z) if cmd is not None else (0.0, 0.0)
-        dt = 0.0 if self.last_time is None else h.time - self.last_time
-        self.last_time = h.time
-        x, y, th = self.pose
-        self.pose = np.array([x + v * math.cos(th) * dt, y + v * math.sin(th) * dt, th + w * dt])
+        v, w = self.move(h)
         odom, scan = base_messages(self.pose, v, w, self.fov, self.boxes)
         h.feed("/odom", odom)
         h.feed("/scan", scan)
