@@ -44,8 +44,8 @@ from . import grid as G
 PAPER_FILLS = (0.15, 0.20, 0.25, 0.30)
 PAPER_SMOOTHING = (2, 3, 4)
 # Draws per world before giving up (a fill that never leaves a path). The hardest paper set, fill
-# 0.30 with 2 smoothing rounds, leaves a path in about 1 draw of 1,200 (17 of 20,000 measured), so
-# 10,000 draws failed about once in 5,000 worlds (seed 6007, world 152); a world that needed
+# 0.30 with 2 smoothing rounds, leaves a path in about 1 draw of 1,200 (17 of 20,000 measured):
+# the limit must be far beyond that (at 200,000 no paper set gives up), and a world that needed
 # fewer draws is the same whatever the limit.
 MAX_ATTEMPTS = 200_000
 PENALTY = 5.0  # A* cost of entering a cell d <= PENALTY_CELLS from an obstacle: PENALTY / d
