@@ -134,7 +134,13 @@ class GridNavigator:
 
     def _insert_scan(self, obs: Observation) -> None:
         """Place the scan with the robot's own pose estimate (odometry) and the lidar mount,
-        never with the simulator's ground truth; carve free space along the beams first."""
+        never with the simulator's ground truth; carve free space along the beams first.
+
+        Every scan goes in, unlike the LocalMapper's memory (``MemoryMapper``: only after 0.2 m
+        or 0.2 rad of motion, against the smear of a drifting odometry): here the memory is also
+        the arcs' only obstacle source, so an obstacle must be in it the scan it is first seen.
+        Gated like the LocalMapper's, 40 fresh worlds x 2 trials (realistic, seed 7321) scored
+        the same success (1.000) and a lower metric (0.5000 -> 0.4934: 5.49 -> 5.87 s)."""
         mx, my, myaw = self._task.scan_mount
         scan = obs.scan
         assert scan is not None  # update() inserts only observations that carry a scan
