@@ -10,12 +10,10 @@ pytestmark = pytest.mark.process
 
 HANGER = """
 class Hanger(BaseComponent):
-    '''Healthy for HANG_AFTER seconds, then blocks its event loop for good.'''
-    def custom_on_activate(self):
-        self.t0 = time.monotonic()
+    '''Healthy until the test says hang (the HANG_NOW file), then blocks its event loop for good, once.'''
     def _execution_step(self):
         self.health_status.set_healthy()
-        if time.monotonic() - self.t0 > 1.0 and not os.path.exists(os.environ["HUNG_ONCE"]):
+        if os.path.exists(os.environ["HANG_NOW"]) and not os.path.exists(os.environ["HUNG_ONCE"]):
             open(os.environ["HUNG_ONCE"], "w").close()
             time.sleep(3600)
 
@@ -28,14 +26,20 @@ launcher.bringup()
 
 
 def _run(tmp_path, multi: bool) -> None:
-    flag = tmp_path / "hung"
-    system = SystemUnderTest(tmp_path, HANGER.replace("MULTI", str(multi)), env={"HUNG_ONCE": str(flag)}).wait_up(components=["hanger"])
+    flag, trigger = tmp_path / "hung", tmp_path / "hang-now"
+    system = SystemUnderTest(tmp_path, HANGER.replace("MULTI", str(multi)),
+                             env={"HUNG_ONCE": str(flag), "HANG_NOW": str(trigger)}).wait_up(components=["hanger"])
     forger = subprocess.Popen(
         [sys.executable, "-m", "emos", "topic", "pub", "/hanger/status", "ComponentStatus",
          '{"status": 0, "lifecycle_state": "active"}', "--rate", "20", "--count", "0", "--run", system.run_dir.name],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )
     try:
+        # The hang starts only once the forged stream reaches the supervisor (a loaded machine
+        # can take seconds to start the forger): a hang before it would mask nothing.
+        wait_until(lambda: "does not count as its heartbeat" in system.output(), timeout=HANG_S,
+                   what="the supervisor to see the forged status")
+        trigger.touch()
         wait_until(flag.exists, timeout=HANG_S, what="the component to hang")
         # Detected while the forger still publishes on its status topic.
         wait_until(lambda: any(e["event"] == "exit" and e["child"] == "hanger" and e["reason"] == "hang" for e in system.events()),
@@ -46,7 +50,6 @@ def _run(tmp_path, multi: bool) -> None:
         forger.terminate()
         forger.wait(10)
         assert system.stop() == 0
-    assert "does not count as its heartbeat" in system.output()
 
 
 def test_a_forged_status_stream_does_not_mask_a_hung_process(tmp_path):
