@@ -75,6 +75,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="converged_travel: metres of travel over which that hypothesis must keep its share (default: the filter's)")
     parser.add_argument("--search-candidates", type=int, default=None,
                         help="search_candidates: random poses scored per search scan to propose new places (0: off)")
+    parser.add_argument("--runner-up-nats", type=float, default=None,
+                        help="runner_up_nats: keep the search's runner-up hypotheses after it ends while they trail the "
+                             "leader by at most this many nats (default: the filter's)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="any other filter parameter (AmclParams name), e.g. --param runner_up_particles=500")
     parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
     parser.add_argument("--field", choices=("bilinear", "nearest"), default="bilinear",
                         help="likelihood-field lookup: bilinear distance interpolation (default) or Nav2's nearest cell")
@@ -197,7 +202,7 @@ def run_global(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed
             "settled_cpu_s": None if settle is None else float(cpu_at[settle]),
             "search_ended_m": None if ended is None else float(moved[ended]),
             "search_ended_right": ended is not None and bool(pos[ended] < 0.2),
-            "seed": seed, "cause": cause,
+            "seed": seed, "cause": cause, "switches": int(getattr(pf, "switches", 0)),
             "error_at_10m_m": float(pos[after][0]) if after.any() else None,
             "reference_fit": fits[0], "estimate_fit": fits[1],
             "heading_error_at_10m_deg": float(np.degrees(head[after][0])) if after.any() else None}
@@ -354,8 +359,14 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
                                                           ("hypothesis_beta", "hypothesis_beta"),
                                                           ("converged_weight", "converged_weight"),
                                                           ("converged_travel", "converged_travel"),
-                                                          ("search_candidates", "search_candidates"))
+                                                          ("search_candidates", "search_candidates"),
+                                                          ("runner_up_nats", "runner_up_nats"))
               if getattr(args, opt, None) is not None}
+    for item in getattr(args, "param", None) or []:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise argparse.ArgumentTypeError(f"--param: expected NAME=VALUE, got {item!r}")
+        search[name.strip()] = json.loads(value)
     recovery = _floats(args.recovery, 2, "--recovery") if args.recovery else ((0.001, 0.1) if g else (0.0, 0.0))
     return AmclParams(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                       min_particles=args.min_particles or (2000 if g else 500),
@@ -431,10 +442,11 @@ def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, An
             "cpu_s_per_scan": sum(t["cpu"] for t in trials) / max(scans, 1),
             "trials": len(trials), "scans": scans,
             **({"kept_rate": float(np.mean([t["kept"] for t in trials])), **_settling(trials), **_search_end(trials),
+                "runner_up_switches": sum(t.get("switches", 0) for t in trials),
                 "failures": {c: sum(t.get("cause") == c for t in trials) for c in FAILURE_CAUSES},
                 "failed_trials": [{"seed": t["seed"], "cause": t["cause"], "start_scan": t["start"],
                                    "error_at_10m_m": t["error_at_10m_m"], "heading_error_at_10m_deg": t["heading_error_at_10m_deg"],
-                                   "search_ended_m": t["search_ended_m"],
+                                   "search_ended_m": t["search_ended_m"], "switches": t.get("switches", 0),
                                    "reference_fit": t["reference_fit"], "estimate_fit": t["estimate_fit"]}
                                   for t in trials if t.get("cause") is not None]}
                if global_ else {}),
@@ -458,7 +470,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             "filter": {k: getattr(params, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4", "min_particles",
                                                       "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand",
                                                       "min_ess_fraction", "search_min_ess_fraction", "hypothesis_beta",
-                                                      "converged_weight", "converged_travel", "search_candidates")},
+                                                      "converged_weight", "converged_travel", "search_candidates",
+                                                      "runner_up_nats", "runner_up_switch_nats", "runner_up_scan_nats",
+                                                      "runner_up_particles")},
             "results": rows}
 
 

@@ -32,6 +32,9 @@ the heaviest hypotheses scan-matched to their likelihood peaks and reweighted by
 (``search_candidates``, see ``_propose``): the uniform start often leaves no particle within
 reach of the robot's place, and a search that never had the right place cannot keep it.
 Then the other places' particles are dropped and the filter tracks as from a known pose.
+With ``runner_up_nats`` (off by default; issue 36, measured in docs/localization.md) the
+places that fitted about as well as the winner when the search ends are kept as runner-ups
+that can take over later (``_runner_up_step``).
 
 The estimate is the weighted mean of the heaviest cluster (the particles within 1 m and 0.5 rad
 of the heaviest 1 m x 1 m x 45 deg bin); its covariance is the weighted spread of all particles
@@ -88,6 +91,19 @@ def _bins(poses: np.ndarray, size: tuple[float, float, float]) -> np.ndarray:
     return (ix * 1_000_003 + iy) * 1_009 + ia
 
 
+class _RunnerUp:
+    """A hypothesis kept after the search ended (``ParticleFilter._runner_up_step``)."""
+
+    def __init__(self, particles: np.ndarray, deficit: float, weights: np.ndarray | None = None) -> None:
+        self.particles = particles
+        n = len(particles)
+        self.weights = np.full(n, 1.0 / n) if weights is None else weights
+        self.deficit = deficit  # nats by which its peaks trail the leader's, summed (capped per scan)
+        self.mean = np.zeros(3)
+        self.best = np.zeros(3)
+        self.peak_pose = np.zeros(3)
+
+
 class ParticleFilter:
     """Monte Carlo localization against one occupancy grid (see the module docstring).
 
@@ -101,6 +117,9 @@ class ParticleFilter:
         self.params = params
         self.sensor_pose = sensor_pose
         self.rng = np.random.default_rng(seed)
+        # The runner-ups' own stream: keeping them does not change the main cloud's draws, so a
+        # trial in which no runner-up takes over runs exactly as without them.
+        self._runner_rng = np.random.default_rng(None if seed is None else [int(seed), 1])
         self._problem = on_problem or (lambda key, msg: logging.getLogger("emos.nav.localization").warning("%s", msg))
         self.set_map(grid)
         self.particles = np.zeros((0, 3))
@@ -125,6 +144,10 @@ class ParticleFilter:
         self._leader_odom: np.ndarray | None = None
         self.leader_updates = 0
         self.leader_travel = 0.0  # odometry travel (m) over which the current leader has held
+        # Runner-up hypotheses kept after the search ended (``runner_up_nats``): each one's
+        # particles, weights and deficit (nats by which its scan-matched peaks trail the leader's).
+        self.runner_ups: list[_RunnerUp] = []
+        self.switches = 0  # how many times a runner-up took over the estimate
 
     # -- the map and the initial state ---------------------------------------------------------------
     def set_map(self, grid: OccupancyGridMap) -> None:
@@ -173,6 +196,7 @@ class ParticleFilter:
         self._estimate()
         self.initialized = True
         self.searching = False
+        self.runner_ups = []
 
     def global_localization(self) -> None:
         """Particles spread uniformly over the free space of the map, any heading (ValueError if
@@ -190,6 +214,7 @@ class ParticleFilter:
         self._leader = self._leader_odom = None
         self.leader_updates = 0
         self.leader_travel = 0.0
+        self.runner_ups = []
 
     def _random_free_poses(self, n: int) -> np.ndarray:
         free = self.field.free_cells
@@ -226,6 +251,10 @@ class ParticleFilter:
             scale = self.rng.random(len(self.particles)) if self._jumped else None
             self.particles = sample_odometry_motion(self.particles, self._odom_updated, odom,
                                                     (p.alpha1, p.alpha2, p.alpha3, p.alpha4), self.rng, scale)
+            for ru in self.runner_ups:
+                scale = self._runner_rng.random(len(ru.particles)) if self._jumped else None
+                ru.particles = sample_odometry_motion(ru.particles, self._odom_updated, odom,
+                                                      (p.alpha1, p.alpha2, p.alpha3, p.alpha4), self._runner_rng, scale)
         self._jumped = False
         self._odom_updated = odom
         max_range = self._max_range(scan_max)
@@ -257,12 +286,14 @@ class ParticleFilter:
         if p.refine_estimate:
             # Every valid beam: the search scores 27 poses a round, not thousands.
             self._refine(*select_beams(ranges, angles, 100_000, min_range, max_range))
+        if self.runner_ups:
+            self._runner_up_step(loglik, r, a, *select_beams(ranges, angles, 100_000, min_range, max_range))
         self._updates += 1
         if self._updates % p.resample_interval == 0:
             self._resample()
         return True
 
-    def _tempering(self, loglik: np.ndarray, min_ess_fraction: float) -> float:
+    def _tempering(self, loglik: np.ndarray, min_ess_fraction: float, weights: np.ndarray | None = None) -> float:
         """The exponent (0, 1] on this scan's likelihood that keeps the effective sample size
         at ``min_ess_fraction`` of the particles at least (1 when the full likelihood does).
         Beams are not independent (neighbours see the same wall), so their product overstates
@@ -272,7 +303,7 @@ class ParticleFilter:
         target = min_ess_fraction * len(loglik)
         if target <= 1.0:
             return 1.0
-        logw0 = np.log(np.maximum(self.weights, 1e-300))
+        logw0 = np.log(np.maximum(self.weights if weights is None else weights, 1e-300))
         centred = loglik - loglik.max()
 
         def ess(beta: float) -> float:
@@ -354,6 +385,7 @@ class ParticleFilter:
         p = self.params
         labels, shares, means = self._hypotheses(p.max_hypotheses)
         best_peak: float | None = None
+        peaks: np.ndarray | None = None
         compare = p.hypothesis_beta > 0 and len(shares) > 1
         if (compare or p.search_candidates > 0) and len(shares) > 0 and len(ranges) > 0:
             # Two starts per hypothesis: its weighted mean and its best particle on this scan.
@@ -376,10 +408,13 @@ class ParticleFilter:
                 self._propose(means, best_peak, ranges, angles)
             return
         self.searching = False
+        lead = int(shares.argmax())
+        if peaks is not None and p.runner_up_nats > 0:
+            self._keep_runner_ups(labels, shares, peaks, lead)
         # Drop the other places' leftovers: untempered from the next scan on, one stray
         # particle elsewhere that happens to fit can take all the weight from a cloud that
         # is still decimetres wide (seen on intel).
-        w = np.where(labels == int(shares.argmax()), self.weights, 0.0)
+        w = np.where(labels == lead, self.weights, 0.0)
         self.weights = w / w.sum()
 
     def _propose(self, means: np.ndarray, best_peak: float, ranges: np.ndarray, angles: np.ndarray) -> None:
@@ -424,6 +459,86 @@ class ParticleFilter:
         w[slots] = total * f / f.sum()
         self.particles[slots] = poses
         self.weights = w
+
+    # -- after the search: runner-up hypotheses ---------------------------------------------------
+    def _keep_runner_ups(self, labels: np.ndarray, shares: np.ndarray, peaks: np.ndarray, lead: int) -> None:
+        """At the end of a search: keep each other hypothesis whose scan-matched peak on this
+        scan is within ``runner_up_nats`` of the leader's (any of the search's listed hypotheses,
+        the heaviest first) as a runner-up of ``runner_up_particles`` particles, drawn from its
+        own particles by their weights. Its deficit starts at the leader's peak minus its own
+        (capped at ``runner_up_scan_nats``)."""
+        p = self.params
+        for h in np.argsort(-shares, kind="stable"):
+            h = int(h)
+            if h == lead or shares[h] <= 0.0 or peaks[h] < peaks[lead] - p.runner_up_nats:
+                continue
+            mine = np.flatnonzero(labels == h)
+            w = self.weights[mine]
+            if w.sum() <= 0.0:
+                continue
+            pick = mine[low_variance_resample(w / w.sum(), p.runner_up_particles, self._runner_rng)]
+            deficit = float(np.clip(peaks[lead] - peaks[h], -p.runner_up_scan_nats, p.runner_up_scan_nats))
+            self.runner_ups.append(_RunnerUp(self.particles[pick].copy(), deficit))
+
+    def _runner_up_step(self, main_ll: np.ndarray, r: np.ndarray, a: np.ndarray, ranges: np.ndarray,
+                        angles: np.ndarray) -> None:
+        """One scan with runner-ups (``runner_up_nats``): each runner-up's particles are weighed
+        on the scan (tempered to keep half of them effective) and resampled; then the leader
+        (the estimate and the main cloud's best particle) and each runner-up (its mean and best
+        particle) are scan-matched to their peaks on every valid beam, and each runner-up's
+        deficit grows by the leader's peak minus its own, capped at ``runner_up_scan_nats`` either
+        way (one odd scan, a person in front of the scanner or a scan taken mid-turn, does not
+        decide). A runner-up whose deficit exceeds ``runner_up_nats`` is dropped, one whose peak
+        is the leader's place (0.5 m, 0.5 rad) is merged into it, and one that leads by
+        ``runner_up_switch_nats`` takes over: its particles become the filter's, the old leader
+        becomes a runner-up. ``main_ll``: the main cloud's log-likelihoods on this scan (``r``,
+        ``a``: the beams they used; ``ranges``, ``angles``: every valid beam)."""
+        p = self.params
+        if len(ranges) == 0:
+            return
+        for ru in self.runner_ups:
+            ll = self.field.log_likelihood(ru.particles, r, a, self.sensor_pose)
+            beta = self._tempering(ll, 0.5, ru.weights)
+            lw = np.log(np.maximum(ru.weights, 1e-300)) + beta * ll
+            w = np.exp(lw - lw.max())
+            ru.weights = w / w.sum()
+            ru.best = ru.particles[int(np.argmax(ll))].copy()
+            ru.mean = self._weighted_mean(ru.particles, ru.weights)
+        main_best = self.particles[int(np.argmax(main_ll))] if len(main_ll) else self.estimate
+        starts = np.vstack([[self.estimate, main_best]] + [[ru.mean, ru.best] for ru in self.runner_ups])
+        poses, values = self._climb(starts, ranges, angles)
+        pick = values.reshape(-1, 2).argmax(axis=1)
+        peak_pose = poses.reshape(-1, 2, 3)[np.arange(len(pick)), pick]
+        peak = values.reshape(-1, 2).max(axis=1)
+        lead_pose, lead_peak = peak_pose[0], float(peak[0])
+        kept: list[_RunnerUp] = []
+        for i, ru in enumerate(self.runner_ups, start=1):
+            ru.deficit += float(np.clip(lead_peak - peak[i], -p.runner_up_scan_nats, p.runner_up_scan_nats))
+            ru.peak_pose = peak_pose[i]
+            same = (math.hypot(*(peak_pose[i][:2] - lead_pose[:2])) <= 0.5
+                    and abs(float(wrap_angle(float(peak_pose[i][2] - lead_pose[2])))) <= 0.5)
+            if ru.deficit <= p.runner_up_nats and not same:
+                kept.append(ru)
+            else:
+                continue
+            # the runner-up's particles are resampled (uniform weights) for the next scan
+            idx = low_variance_resample(ru.weights, p.runner_up_particles, self._runner_rng)
+            ru.particles, ru.weights = ru.particles[idx], np.full(p.runner_up_particles, 1.0 / p.runner_up_particles)
+        self.runner_ups = kept
+        if not kept:
+            return
+        best = min(kept, key=lambda ru: ru.deficit)
+        if best.deficit > -p.runner_up_switch_nats:
+            return
+        # The runner-up takes over: its cloud becomes the filter's, the leader becomes a runner-up.
+        n = p.runner_up_particles
+        old = _RunnerUp(self.particles[low_variance_resample(self.weights, n, self._runner_rng)], -best.deficit)
+        self.particles, self.weights = best.particles.copy(), best.weights.copy()
+        self.runner_ups = [_RunnerUp(ru.particles, ru.deficit - best.deficit, ru.weights) for ru in kept if ru is not best] + [old]
+        self.switches += 1
+        self._estimate()
+        if p.refine_estimate:
+            self._refine(ranges, angles)
 
     def _leader_holds(self, shares: np.ndarray, means: np.ndarray, p: AmclParams) -> bool:
         """True once one hypothesis has held ``converged_weight`` on ``converged_updates``

@@ -78,6 +78,13 @@ class AmclParams:
     20000 candidates and ``converged_travel`` 2 m, fresh seeds 100+ gave no net gain (intel
     19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), at
     1.4-1.7x the CPU per scan: off until a full run decides.
+    ``runner_up_nats`` (default 0, off): when the search ends, each other hypothesis whose
+    scan-matched peak is within this many nats of the leader's is kept as a runner-up of
+    ``runner_up_particles`` particles, beside the filter's cloud (which is unchanged); every
+    scan, its peak is compared with the leader's, the gap (capped at ``runner_up_scan_nats`` a
+    scan) summed into its deficit; it is dropped once the deficit exceeds ``runner_up_nats``
+    and takes over the estimate once it leads by ``runner_up_switch_nats`` (see
+    ``ParticleFilter._runner_up_step``). Never active when tracking from a known pose.
     """
 
     alpha1: float = _alpha()
@@ -117,6 +124,10 @@ class AmclParams:
     search_candidates: int = field(default=0, validator=number(ge=0, le=10_000_000, integer=True))
     search_climbs: int = field(default=24, validator=number(ge=1, le=10_000, integer=True))
     search_inject_share: float = field(default=0.05, validator=number(ge=0.0, le=0.5))
+    runner_up_nats: float = field(default=0.0, validator=number(ge=0.0, le=1e6))
+    runner_up_switch_nats: float = field(default=30.0, validator=number(ge=0.0, le=1e6))
+    runner_up_scan_nats: float = field(default=20.0, validator=number(gt=0.0, le=1e6))
+    runner_up_particles: int = field(default=300, validator=number(ge=1, le=1_000_000, integer=True))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:
