@@ -69,3 +69,38 @@ def test_our_lock_is_released_after_removal(tmp_path):
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     finally:
         os.close(fd)
+
+
+SWEEP_AGAIN = """
+import os, sys, time
+from emos.interop.ros2.fastdds import choose_transports
+from emos.transport.context import RunContext
+
+base = sys.argv[1]
+for name in (base, base + "_el"):  # a predecessor's files, seconds old: too young for the first sweep
+    open(os.path.join("/dev/shm", name), "wb").close()
+choose_transports(RunContext.create(), "shm")
+print("after the first sweep:", os.path.exists(os.path.join("/dev/shm", base + "_el")), flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_participant_sweeps_again_once_young_leftovers_are_old_enough():
+    """A participant SIGKILLed within seconds of its start and restarted at once leaves files the
+    restart's first sweep must skip (they may belong to a participant that has not locked them
+    yet); the restarted participant sweeps again when they are old enough."""
+    base = f"fastrtps_emostest{os.getpid():x}"
+    proc = subprocess.Popen([sys.executable, "-c", SWEEP_AGAIN, base], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == "after the first sweep: True"
+        deadline = time.monotonic() + 60.0  # bounds a hang only: the second sweep is due 6 s after the first
+        while os.path.exists(f"/dev/shm/{base}_el") and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not os.path.exists(f"/dev/shm/{base}_el") and not os.path.exists(f"/dev/shm/{base}")
+    finally:
+        proc.kill()
+        proc.wait()
+        for name in (base, base + "_el"):
+            if os.path.exists(f"/dev/shm/{name}"):
+                os.unlink(f"/dev/shm/{name}")

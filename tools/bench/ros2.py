@@ -435,7 +435,17 @@ def run(args: argparse.Namespace) -> int:
             profile.write_text(UDP_LOOPBACK_PROFILE)
             os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
             os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-        return _run_pairs(args, install, sizes, pairs, cpus, domain)
+        try:
+            return _run_pairs(args, install, sizes, pairs, cpus, domain)
+        finally:
+            # A helper node stopped before rclpy took its signals over dies without removing its
+            # Fast DDS shared-memory files: the benchmark removes what no live process holds.
+            from emos.interop.ros2.fastdds_shm import remove_leftovers
+
+            removed = remove_leftovers()
+            if removed:
+                print(f"emos bench ros2: removed {len(removed)} Fast DDS file(s) no live process held: {', '.join(sorted(removed))}",
+                      file=sys.stderr)
 
 
 def _run_pairs(args: argparse.Namespace, install: Any, sizes: list[int], pairs: list[str], cpus: tuple[int, int] | None, domain: int) -> int:

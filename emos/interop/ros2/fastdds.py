@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from pathlib import Path
 
 from emos.transport.context import RunContext
@@ -132,6 +133,14 @@ def users_profile() -> str | None:
     return os.environ.get(ENV_FASTDDS_PROFILES) or os.environ.get(ENV_FASTDDS3_PROFILES)
 
 
+def _sweep_leftovers() -> None:
+    from emos.interop.ros2.fastdds_shm import remove_leftovers
+
+    removed = remove_leftovers()
+    if removed:
+        log.info("ROS 2: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
+
+
 def choose_transports(ctx: RunContext, fastdds: str) -> str:
     """Set up this process's Fast DDS transports for ``fastdds`` (``FASTDDS_TRANSPORTS``);
     returns what was chosen, for the log.
@@ -152,11 +161,15 @@ def choose_transports(ctx: RunContext, fastdds: str) -> str:
     if os.environ.get(ENV_FASTDDS_TRANSPORTS) and not localhost:
         return f"Fast DDS transports {os.environ[ENV_FASTDDS_TRANSPORTS]} (the user's)"
     if fastdds == "shm":
-        from emos.interop.ros2.fastdds_shm import remove_leftovers
+        _sweep_leftovers()
+        # Files younger than MIN_AGE_S are skipped (a participant may not have locked them yet),
+        # so a predecessor SIGKILLed within seconds of its start, and restarted at once by the
+        # supervisor, would leave its files for good: sweep once more when they are old enough.
+        from emos.interop.ros2.fastdds_shm import MIN_AGE_S
 
-        removed = remove_leftovers()
-        if removed:
-            log.info("ROS 2: removed %d Fast DDS shared-memory file(s) no live process used: %s", len(removed), ", ".join(sorted(removed)))
+        later = threading.Timer(MIN_AGE_S + 1.0, _sweep_leftovers)
+        later.daemon = True
+        later.start()
     path = ctx.run_dir / f"ros2_fastdds_{fastdds}{'_loopback' if localhost else ''}.xml"
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(fastdds_profile(shm=fastdds == "shm", loopback_only=localhost))
