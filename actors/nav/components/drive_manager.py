@@ -24,6 +24,7 @@ and through the speed cap of ``speed_mask`` (the zones the Controller obeys, enf
 """
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from collections.abc import Mapping
@@ -338,8 +339,11 @@ class DriveManager(NavComponent):
         msg = self.get_input(topic)
         assert msg is not None  # the input has an age, so a message has arrived
         if topic.name != self._driving:
-            if self._driving is not None and len(self._mux) > 1:  # rare (a recovery, docking, a teleop): worth a line
-                self.get_logger().info("[%s] command input %s drives (was %s)", self.component_name, topic.name, self._driving)
+            if self._driving is not None and len(self._mux) > 1:  # a recovery, docking, a teleop: worth a line
+                # Rate-limited per pair: a controller that publishes on two inputs of one priority
+                # (ctrl_publish_type "Parallel") hands over between them at every other command.
+                self._report.log(logging.INFO, f"driving:{topic.name}<{self._driving}", "[%s] command input %s drives (was %s)",
+                                 self.component_name, topic.name, self._driving, logger=self.get_logger())
             self._driving = topic.name
         if key == "multi_command":
             if len(msg.linear_velocities) == 0:
