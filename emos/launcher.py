@@ -15,6 +15,7 @@ import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, TypedDict
 
+from emos import lockstep
 from emos.core.component import BaseComponent
 from emos.frontends import load_frontend
 
@@ -305,6 +306,9 @@ class Launcher:
         if self._monitor is not None and not any(p.name == f"{self._monitor.component_name}_monitor" for p in self._packages):
             self._packages.append(self._monitor_package())  # last: it starts after what it watches
         self._apply_shared()
+        consumers = None
+        if lockstep.requested():  # `emos run --lockstep`: before the UI and bridges join (they follow the wall clock)
+            consumers = lockstep.apply([c for p in self._packages for c in p.components], monitor=self._monitor)
         if self._ui is not None:
             load_frontend("ui").add(self, self._ui)
         # `emos run --ros2` / emos.transport.select.use_ros2(): the ROS 2 bridge (an actor, found
@@ -322,6 +326,8 @@ class Launcher:
                                       report_outcomes=self._monitor is not None)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+        if consumers is not None:
+            log.info("lockstep: the simulator waits every tick for %s", ", ".join(consumers))
         options = SystemOptions(
             heartbeat_timeout=self.heartbeat_timeout, stop_timeout=self.stop_timeout, duration=duration or _RUN_DURATION,
             max_restarts=self.default_policy["max_restarts"], max_seconds=self.default_policy["max_seconds"],

@@ -42,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ros2-topics", metavar="TOPICS", default=None,
                         help="with --ros2: 'all' (default) or topic names / wildcards separated by ','")
     parser.add_argument("--ros-domain-id", metavar="N", type=int, default=None, help="with --ros2: the ROS 2 domain id (default: $ROS_DOMAIN_ID, else 0)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="run on the recipe's Simulator clock: it waits every tick for each component (use_sim_time on all), "
+                             "so a slow or busy machine slows the run, not the robot's reactions")
     parser.add_argument("--ui-host", metavar="ADDRESS", default=None, help="serve the recipe's web UI on this address (e.g. 0.0.0.0: HTTPS and pairing, docs/ui.md)")
     parser.add_argument("--ui-https", action="store_true", help="serve the web UI over HTTPS on loopback too (off loopback it always is)")
     parser.add_argument("--ui-cert", metavar="FILE", default=None, help="the web UI's certificate (PEM), with --ui-key; default: the keystore's or a self-signed one")
@@ -66,6 +69,10 @@ def run(args: argparse.Namespace) -> int:
 
     launcher_mod._RUN_DURATION = args.duration
     os.environ["EMOS_RUN_CLI"] = "1"
+    if getattr(args, "lockstep", False):
+        from emos.lockstep import ENV_LOCKSTEP
+
+        os.environ[ENV_LOCKSTEP] = "1"
     problem = _secure_options(args, path) or _network_options(args) or _ros2_options(args) or _ui_options(args)
     if problem:
         print(f"emos run: {problem}", file=sys.stderr)
