@@ -462,8 +462,12 @@ class Controller(VisionTracking, NavComponent):
                     if result.status is ControlStatus.GOAL_REACHED:
                         self.publish_stop()
                         return ControlPathResult(success=True, message="goal reached")
-                    failing_since = (failing_since or time.monotonic()) if result.status in _FAILURES else None
-                    if failing_since is not None and time.monotonic() - failing_since > 10.0:
+                    # On the node's clock: 10 simulated seconds under a simulator, however slow it runs.
+                    if result.status not in _FAILURES:
+                        failing_since = None
+                    elif failing_since is None:  # not `or`: simulated time starts at 0.0
+                        failing_since = clock.now()
+                    if failing_since is not None and clock.now() - failing_since > 10.0:
                         self.publish_stop()
                         return ControlPathResult(success=False, message=f"{result.status.value} for 10 s")
                 time.sleep(period)

@@ -29,6 +29,7 @@ from attrs.validators import optional
 
 from emos.config.base import ComponentRunType
 from emos.config.validators import in_range
+from emos.core import clock
 from emos.core.keyed import AllowedTopic
 from emos.io.topic import Topic
 
@@ -137,10 +138,10 @@ class MotionServer(NavComponent):
             if not self._queue:
                 return
             name, profile = self._queue.pop(0)
-            self._test = (name, profile, time.monotonic(), [])
+            self._test = (name, profile, clock.now(), [])
             self.get_logger().info("[%s] starting the %s test (%.1f s)", self.component_name, name, self.config.test_period)
         name, profile, t0, rows = self._test
-        t = time.monotonic() - t0
+        t = clock.now() - t0  # the node's clock: simulated seconds under a simulator, as the odometry's
         out = self.get_out_topic("robot_command")
         if t >= self.config.test_period:
             if out is not None:
@@ -197,8 +198,8 @@ class MotionServer(NavComponent):
         if not (goal.duration > 0 and goal.timestep > 0 and math.isfinite(goal.duration)):
             return MotionRecordingResult(success=False, message=f"duration and timestep must be > 0, got {goal.duration}, {goal.timestep}")
         rows: list = []
-        t0 = time.monotonic()
-        while (t := time.monotonic() - t0) < goal.duration and not goal_handle.is_cancel_requested:
+        t0 = clock.now()
+        while (t := clock.now() - t0) < goal.duration and not goal_handle.is_cancel_requested:
             row = self._sample(t)
             if row is not None:
                 rows.append(row)

@@ -353,8 +353,8 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             goal_handle.publish_feedback(PlanPathFeedback(distance_to_goal=self._distance_to_goal(), plan_length=length))
             if not ok and self.health_status.is_algorithm_fail:
                 return PlanPathResult(success=False, message=message)
-            deadline = time.monotonic() + period
-            while time.monotonic() < deadline and not goal_handle.is_cancel_requested and self._action_goal == mine:
+            deadline = clock.now() + period  # the node's clock: a replanning period in simulated seconds under a simulator
+            while clock.now() < deadline and not goal_handle.is_cancel_requested and self._action_goal == mine:
                 if self._check_reached(tolerance):
                     break
                 time.sleep(min(0.05, period))
