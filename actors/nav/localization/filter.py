@@ -34,9 +34,7 @@ reach of the robot's place, and a search that never had the right place cannot k
 Then the other places' particles are dropped and the filter tracks as from a known pose.
 With ``runner_up_nats`` (off by default; issue 36, measured in docs/localization.md) the
 places that fitted about as well as the winner when the search ends are kept as runner-ups
-that can take over later (``_runner_up_step``). With ``search_turn_weight`` (off by default,
-measured there too) the hypotheses' comparison discounts scans taken while turning
-(``_turn_weight``).
+that can take over later (``_runner_up_step``).
 
 The estimate is the weighted mean of the heaviest cluster (the particles within 1 m and 0.5 rad
 of the heaviest 1 m x 1 m x 45 deg bin); its covariance is the weighted spread of all particles
@@ -150,8 +148,6 @@ class ParticleFilter:
         # particles, weights and deficit (nats by which its scan-matched peaks trail the leader's).
         self.runner_ups: list[_RunnerUp] = []
         self.switches = 0  # how many times a runner-up took over the estimate
-        self._turn = 0.0  # |odometry turn| (rad) between the previous call of update() and this one
-        self.turn_weight = 1.0  # the weight of the last search scan's evidence (``search_turn_weight``)
 
     # -- the map and the initial state ---------------------------------------------------------------
     def set_map(self, grid: OccupancyGridMap) -> None:
@@ -238,10 +234,8 @@ class ParticleFilter:
         if odom.shape != (3,) or not np.all(np.isfinite(odom)):
             raise ValueError(f"odometry pose: expected finite (x, y, yaw), got {odom.tolist()}")
         p = self.params
-        self._turn = 0.0
         if self._odom_last is not None:
             step = relative_pose(self._odom_last, odom)
-            self._turn = abs(float(step[2]))
             if math.hypot(step[0], step[1]) > p.jump_distance or abs(step[2]) > p.jump_angle:
                 self._jumped = True
                 self._problem("jump", f"odometry jumped {math.hypot(step[0], step[1]):.2f} m / {math.degrees(step[2]):.0f} deg "
@@ -275,7 +269,6 @@ class ParticleFilter:
         # Not while injecting: a random particle that lands on the robot must be able to win.
         min_ess = p.search_min_ess_fraction if self.searching else p.min_ess_fraction
         self.beta = 1.0 if self._injecting else self._tempering(loglik, min_ess)
-        self.turn_weight = self._turn_weight() if self.searching else 1.0
         logw = np.log(np.maximum(self.weights, 1e-300)) + self.beta * loglik
         logw -= logw.max()
         w = np.exp(logw)
@@ -299,22 +292,6 @@ class ParticleFilter:
         if self._updates % p.resample_interval == 0:
             self._resample()
         return True
-
-    def _turn_weight(self) -> float:
-        """The weight of this scan's hypothesis comparison while searching (``search_turn_weight``,
-        1: off): 1 for a scan taken without turning since the previous one, falling linearly to
-        ``search_turn_weight`` at a turn of ``search_turn_angle`` and beyond. It multiplies the
-        hypotheses' peak gaps (``_search_step``), so a run of scans taken while turning (intel:
-        30 degrees between scans, fitting the true place up to 190 nats worse than look-alikes;
-        aces seed 35: two scans of 14 and 18 degrees took a place that held half the weight)
-        cannot take a place's weight at once; the tempered particle update still sees them.
-        Weighing the tempered update too was measured and dropped: it slows every search, and
-        on the tuning logs more trials were still undecided at 10 m (intel seeds 0-49: 42/50
-        against 47/50)."""
-        p = self.params
-        if p.search_turn_weight >= 1.0:
-            return 1.0
-        return 1.0 - (1.0 - p.search_turn_weight) * min(1.0, self._turn / p.search_turn_angle)
 
     def _tempering(self, loglik: np.ndarray, min_ess_fraction: float, weights: np.ndarray | None = None) -> float:
         """The exponent (0, 1] on this scan's likelihood that keeps the effective sample size
@@ -421,7 +398,7 @@ class ParticleFilter:
             peaks = self._peaks(starts, ranges, angles).reshape(2, k).max(axis=0)
             best_peak = float(peaks.max())
             if compare:
-                factor = np.exp(p.hypothesis_beta * self.turn_weight * (peaks - best_peak))
+                factor = np.exp(p.hypothesis_beta * (peaks - best_peak))
                 w = self.weights * np.where(taken, factor[np.maximum(labels, 0)], 1.0)
                 self.weights = w / w.sum()
                 shares = np.bincount(labels[taken], weights=self.weights[taken], minlength=k)

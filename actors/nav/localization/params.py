@@ -85,17 +85,6 @@ class AmclParams:
     scan) summed into its deficit; it is dropped once the deficit exceeds ``runner_up_nats``
     and takes over the estimate once it leads by ``runner_up_switch_nats`` (see
     ``ParticleFilter._runner_up_step``). Never active when tracking from a known pose.
-    ``search_turn_weight`` (default 1, off) and ``search_turn_angle`` (rad, default 0.5): while
-    searching, each scan's hypothesis comparison (the peak gaps that ``hypothesis_beta``
-    multiplies) is multiplied by a weight that falls linearly from 1 for a scan taken without
-    turning to ``search_turn_weight`` for one taken ``search_turn_angle`` or more after the
-    previous scan (the odometry's turn between the two calls of
-    :meth:`ParticleFilter.update`). Why: scans taken while turning (intel: turns on the spot,
-    30 degrees between scans) can fit the robot's true place far worse than look-alikes for
-    several scans in a row and take all its weight before a scan taken while driving can
-    tell (see ``ParticleFilter._turn_weight``). Measured with weight 0 and angle 0.3: fewer
-    trials converged (fresh seeds 600-629 of intel, aces and csail: 82/90 against 85/90 without),
-    so off. Never active when tracking from a known pose.
     """
 
     alpha1: float = _alpha()
@@ -139,8 +128,6 @@ class AmclParams:
     runner_up_switch_nats: float = field(default=30.0, validator=number(ge=0.0, le=1e6))
     runner_up_scan_nats: float = field(default=20.0, validator=number(gt=0.0, le=1e6))
     runner_up_particles: int = field(default=300, validator=number(ge=1, le=1_000_000, integer=True))
-    search_turn_weight: float = field(default=1.0, validator=number(ge=0.0, le=1.0))
-    search_turn_angle: float = field(default=0.5, validator=number(gt=0.0, le=2 * math.pi))
 
     def __attrs_post_init__(self) -> None:
         if self.min_particles > self.max_particles:
