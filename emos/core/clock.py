@@ -260,3 +260,36 @@ class SimTimeDriver:
     def close(self) -> None:
         self.sub.close()
         self.pub.close()
+
+
+class Pacer:
+    """Paces a loop that runs in its own thread (an action's loop) at ``period`` seconds of the
+    node's clock: ``now()``, so simulated seconds under a simulator. A loop that slept ``period``
+    of wall time stepped 3 times per simulated period on a machine that slowed the simulator 3x,
+    and its algorithm, which takes each step to be ``period`` long, misjudged the target's speed
+    (the vision follower lost the person under ``emos run --lockstep``). Missed periods are
+    skipped, not caught up; time that goes back (a restarted simulator) restarts the pacing.
+    ``now``: the clock to read (tests give their own)."""
+
+    POLL_S = 0.002  # wall seconds between two readings of a simulated clock
+
+    def __init__(self, period: float, now: Callable[[], float] | None = None) -> None:
+        if not period > 0:
+            raise ValueError(f"Pacer period must be > 0 s, got {period}")
+        self.period = period
+        self._now = now or globals()["now"]
+        self._next: float | None = None
+
+    def wait(self, cancelled: Callable[[], bool] = lambda: False) -> None:
+        """Return once the next period has begun (or at once when ``cancelled()``)."""
+        t = self._now()
+        if self._next is None or t < self._next - 2 * self.period:
+            self._next = t
+        self._next += self.period
+        while (t := self._now()) < self._next - 1e-9:
+            if cancelled():
+                return
+            # On the wall clock one sleep does; a simulated clock is read again every POLL_S.
+            time.sleep(self._next - t if sim_time() is None and self._now is now else self.POLL_S)
+        if t >= self._next + self.period:
+            self._next = t  # late by more than a period: skip what was missed

@@ -13,7 +13,6 @@ or stale input as a SYSTEM failure, and the robot is then sent a zero command.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -440,7 +439,7 @@ class Controller(VisionTracking, NavComponent):
     def _main_action_callback(self, goal_handle: Any) -> ControlPathResult:
         goal: ControlPathGoal = goal_handle.goal
         given = goal.path if len(goal.path.poses) else None
-        period = 1.0 / self.config.loop_rate
+        pacer = clock.Pacer(1.0 / self.config.loop_rate)  # steps on the node's clock (simulated seconds under a simulator)
         self._action_active = True
         failing_since: float | None = None
         try:
@@ -451,7 +450,7 @@ class Controller(VisionTracking, NavComponent):
                 plan = given if given is not None else self.latest("plan")
                 if plan is None or len(plan.poses) == 0:
                     self.publish_stop()
-                    time.sleep(period)
+                    pacer.wait(lambda: goal_handle.is_cancel_requested)
                     continue
                 stamp = "goal" if given is not None else (plan.header.stamp.sec, plan.header.stamp.nanosec, len(plan.poses))
                 result = self.follow(plan, stamp)
@@ -470,6 +469,6 @@ class Controller(VisionTracking, NavComponent):
                     if failing_since is not None and clock.now() - failing_since > 10.0:
                         self.publish_stop()
                         return ControlPathResult(success=False, message=f"{result.status.value} for 10 s")
-                time.sleep(period)
+                pacer.wait(lambda: goal_handle.is_cancel_requested)
         finally:
             self._action_active = False

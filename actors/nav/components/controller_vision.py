@@ -9,10 +9,11 @@ lost for good (search timed out or disabled) or the goal is cancelled.
 """
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
+
+from emos.core import clock
 
 from ..controllers import BoundingBox, CameraIntrinsics, ControllersID, ControlStatus
 from ..controllers.registry import CONTROLLERS, make_controller
@@ -106,7 +107,7 @@ class VisionTracking:
             return TrackVisionTargetResult(success=False, message=str(exc))
         if goal.search_timeout > 0:  # both vision followers search for a lost target
             follower.search.timeout = float(goal.search_timeout)
-        period = 1.0 / self.config.loop_rate  # type: ignore[attr-defined]
+        pacer = clock.Pacer(1.0 / self.config.loop_rate)  # type: ignore[attr-defined]  # steps on the node's clock
         # A new goal preempts the one being followed (as a ROS action server does): an event
         # that fires again must not start a second loop sending commands beside the first.
         self._track_goal = mine = getattr(self, "_track_goal", 0) + 1
@@ -127,7 +128,7 @@ class VisionTracking:
                 if cid is ControllersID.VISION_DEPTH:
                     if state is None:
                         self.publish_stop()  # type: ignore[attr-defined]
-                        time.sleep(period)
+                        pacer.wait(lambda: goal_handle.is_cancel_requested)
                         continue
                     pose, vel = state
                     depth = self._depth(msg, follower.config.depth_conversion_factor)
@@ -149,7 +150,7 @@ class VisionTracking:
                     return TrackVisionTargetResult(success=False, message=f"target {goal.label!r} lost")
                 self.health_status.set_healthy()  # type: ignore[attr-defined]
                 self.node.publish_status()  # type: ignore[attr-defined]
-                time.sleep(period)
+                pacer.wait(lambda: goal_handle.is_cancel_requested)
             self.publish_stop()  # type: ignore[attr-defined]
             return TrackVisionTargetResult(success=True, message="cancelled")
         finally:
