@@ -3,7 +3,7 @@
 A loop that slept its period in wall time stepped several times per simulated period when the
 simulator ran slower than real time (``emos run --lockstep`` on a busy machine), and the vision
 follower, which takes each step to last one period, misjudged the person's speed. Here a
-simulated clock moves at a tenth of real time in a thread: the paced loop must step once per
+simulated clock moves at a fifth of real time: the paced loop must step once per
 simulated period, however many wall periods that takes."""
 from __future__ import annotations
 
@@ -46,15 +46,17 @@ def test_a_paced_loop_steps_once_per_period_of_its_clock_not_of_the_wall():
 
     worker = threading.Thread(target=loop)
     worker.start()
-    for _ in range(100):  # 1 simulated second in ticks of 10 ms, each tick several wall polls long
+    for _ in range(250):  # 0.5 simulated seconds at a fifth of real time (2.5 s of wall time)
         time.sleep(0.01)
-        sim.advance(0.01)
+        sim.advance(0.002)
     done.set()
     worker.join(10)
-    # one step at the start and one per 0.1 s after it: 11 over one second (10 or 12 at the ends)
-    assert 10 <= len(steps) <= 12, steps
+    # At most one step at the start and one per 0.1 s of the clock after it: 6 over 0.5 s. A loop
+    # paced on the wall clock would step about 25 times. (Fewer is allowed: a loop starved by a
+    # busy machine skips the periods it missed.)
+    assert 2 <= len(steps) <= 7, steps
     gaps = [b - a for a, b in zip(steps, steps[1:])]
-    assert all(g >= 0.1 - 1e-9 for g in gaps[:-1]), gaps
+    assert all(g >= 0.1 - 1e-9 for g in gaps), gaps
 
 
 def _wait_in_thread(pacer: Pacer) -> threading.Event:
