@@ -8,8 +8,9 @@ command as it would on an idle one, so a run is repeatable and a test of it meas
 not the machine. The recipe itself is unchanged: the switch sets ``use_sim_time`` on every
 component and makes them the Simulator's ``lockstep_consumers``.
 
-Not covered: an action loop in a thread of its own (the Controller's ``track_vision_target``)
-is paced on simulated time but not waited for (docs/simulation.md).
+An action loop in a thread of its own (the Controller's ``track_vision_target`` and path
+actions) is covered too: it paces itself with ``Node.pacer``, which steps it inside its node's
+ticks (``emos.core.clock.Pacer``).
 
 Left out on purpose: the monitor (a Cortex watching the run is an observer, not part of the
 loop the simulator closes) and what the Launcher adds after the recipe's components (the web

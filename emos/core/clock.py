@@ -203,6 +203,11 @@ class SimTimeDriver:
         self._published: deque[tuple[int, float]] = deque(maxlen=512)  # (publish stamp ns, simulated time) of recent ticks
         self._next_step: float | None = None
         self.ticks = 0
+        # Action loops in threads of their own, stepped inside the tick (``Pacer``): the node
+        # thread adds and reads them, action threads join and leave.
+        self._loops: list[_SteppedLoop] = []
+        self._loops_lock = threading.Lock()
+        self._loop_waits: Any = None  # a RateLimitedLog, made on the first overlong step
 
     def has_news(self) -> bool:
         return self.sub.has_news()
@@ -254,34 +259,145 @@ class SimTimeDriver:
             for timer in list(self.timers):  # before the answer: the simulator sees what they publish
                 timer.fire_due(t)
             self.compute_s += time.thread_time() - cpu0  # a timer's work is the stack's compute too
+        if self._loops:
+            self._step_loops(t)
         self.pub.publish(self._ack_cls(clock=tick.clock, compute=self.compute_s))
         self.compute_s = 0.0
+
+    # -- action loops stepped inside the tick ----------------------------------------------------------
+    LOOP_STEP_WAIT_S = 5.0  # wall seconds: only a loop that blocks on this node's own thread takes that long
+
+    def join_loop(self, period: float) -> _SteppedLoop:
+        """Register the calling thread's loop: from the next due tick on, it steps inside ticks."""
+        loop = _SteppedLoop(period, threading.current_thread(), self.time)
+        with self._loops_lock:
+            self._loops.append(loop)
+        return loop
+
+    def leave_loop(self, loop: _SteppedLoop) -> None:
+        loop.left = True
+        loop.done.set()  # a tick waiting for this loop's step goes on
+        with self._loops_lock:
+            if loop in self._loops:
+                self._loops.remove(loop)
+
+    def _step_loops(self, t: float) -> None:
+        """Let each action loop whose period is due at ``t`` take one step, and wait until it has,
+        so the simulator sees its command with this tick's answer and charges its compute."""
+        with self._loops_lock:
+            loops = list(self._loops)
+        for loop in loops:
+            if not loop.due(t):
+                continue
+            loop.done.clear()
+            loop.go.set()
+            waited = 0.0
+            while not loop.done.wait(0.05):
+                waited += 0.05
+                if loop.left or not loop.thread.is_alive() or waited >= self.LOOP_STEP_WAIT_S:
+                    break
+            self.compute_s += loop.take_cpu()
+            if loop.done.is_set() or loop.left:
+                continue
+            if self._loop_waits is None:
+                from emos.ratelimit import RateLimitedLog
+
+                self._loop_waits = RateLimitedLog(log, interval=10.0)
+            if not loop.thread.is_alive():  # it ended without closing its Pacer: no tick waits for it again
+                self.leave_loop(loop)
+                self._loop_waits.warning("loop-gone", "[%s] an action loop (thread %s) ended without closing its Pacer",
+                                         self.name, loop.thread.name)
+            else:
+                self._loop_waits.warning("loop-step", "[%s] an action loop (thread %s) did not finish its step within %.0f s "
+                                         "of the tick at %.3f s; answering the tick without it", self.name,
+                                         loop.thread.name, self.LOOP_STEP_WAIT_S, t)
 
     def close(self) -> None:
         self.sub.close()
         self.pub.close()
 
 
+class _SteppedLoop:
+    """One action loop stepped by a ``SimTimeDriver``: the node thread sets ``go`` when the
+    loop's period is due and waits for ``done``; the loop's thread steps between the two."""
+
+    def __init__(self, period: float, thread: threading.Thread, joined_at: float | None) -> None:
+        self.period, self.thread = period, thread
+        self.go, self.done = threading.Event(), threading.Event()
+        self.done.set()  # not stepping
+        self.left = False
+        self._next = None if joined_at is None else joined_at + period
+        self._cpu = 0.0
+        self._cpu0: float | None = None
+
+    def due(self, t: float) -> bool:
+        if self._next is None or t < self._next - 2 * self.period:
+            self._next = t + self.period  # the first tick seen, or time went back (a restarted simulator)
+            return False
+        if t < self._next - 1e-9:
+            return False
+        while self._next <= t + 1e-9:  # one step per due tick; missed periods are skipped
+            self._next += self.period
+        return True
+
+    def started(self) -> None:
+        self._cpu0 = time.thread_time()
+
+    def finished(self) -> None:
+        if self._cpu0 is not None:
+            self._cpu += time.thread_time() - self._cpu0  # the loop thread's CPU, read in that thread
+            self._cpu0 = None
+        self.done.set()
+
+    def take_cpu(self) -> float:
+        cpu, self._cpu = self._cpu, 0.0
+        return cpu
+
+
 class Pacer:
     """Paces a loop that runs in its own thread (an action's loop) at ``period`` seconds of the
-    node's clock: ``now()``, so simulated seconds under a simulator. A loop that slept ``period``
-    of wall time stepped 3 times per simulated period on a machine that slowed the simulator 3x,
-    and its algorithm, which takes each step to be ``period`` long, misjudged the target's speed
-    (the vision follower lost the person under ``emos run --lockstep``). Missed periods are
-    skipped, not caught up; time that goes back (a restarted simulator) restarts the pacing.
-    ``now``: the clock to read (tests give their own)."""
+    node's clock. A loop that slept ``period`` of wall time stepped 3 times per simulated period
+    on a machine that slowed the simulator 3x, and its algorithm, which takes each step to be
+    ``period`` long, misjudged the target's speed (the vision follower lost the person).
+
+    In a node on simulated time (``driver``: its ``SimTimeDriver``, from ``Node.pacer``), the
+    loop steps *inside* the node's ticks: ``wait()`` returns when a tick makes a period due, and
+    the node answers that tick only after the loop's next ``wait()`` (its step done), so a
+    lockstep simulator sees the loop's command and charges its compute like a Timed step's.
+    Without a driver it reads ``now`` (the wall clock, or a simulator's time followed
+    passively). Missed periods are skipped, not caught up; time that goes back (a restarted
+    simulator) restarts the pacing. Call ``close()`` (or use ``with``) when the loop ends, so a
+    tick never waits for a loop that is gone. ``now``: the clock to read (tests give their own)."""
 
     POLL_S = 0.002  # wall seconds between two readings of a simulated clock
+    CANCEL_POLL_S = 0.02  # wall seconds between two looks at ``cancelled`` while waiting for a tick
 
-    def __init__(self, period: float, now: Callable[[], float] | None = None) -> None:
+    def __init__(self, period: float, now: Callable[[], float] | None = None, driver: SimTimeDriver | None = None) -> None:
         if not period > 0:
             raise ValueError(f"Pacer period must be > 0 s, got {period}")
         self.period = period
         self._now = now or globals()["now"]
         self._next: float | None = None
+        self._driver = driver
+        self._loop: _SteppedLoop | None = None
+
+    def __enter__(self) -> Pacer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """The loop has ended: ticks no longer wait for it."""
+        if self._loop is not None and self._driver is not None:
+            self._driver.leave_loop(self._loop)
+        self._loop = None
 
     def wait(self, cancelled: Callable[[], bool] = lambda: False) -> None:
         """Return once the next period has begun (or at once when ``cancelled()``)."""
+        if self._driver is not None:
+            self._wait_for_tick(self._driver, cancelled)
+            return
         t = self._now()
         if self._next is None or t < self._next - 2 * self.period:
             self._next = t
@@ -293,3 +409,16 @@ class Pacer:
             time.sleep(self._next - t if sim_time() is None and self._now is now else self.POLL_S)
         if t >= self._next + self.period:
             self._next = t  # late by more than a period: skip what was missed
+
+    def _wait_for_tick(self, driver: SimTimeDriver, cancelled: Callable[[], bool]) -> None:
+        loop = self._loop
+        if loop is None:
+            loop = self._loop = driver.join_loop(self.period)
+        else:
+            loop.finished()  # the step since the last wait: the tick that released it may answer now
+        while not loop.go.wait(self.CANCEL_POLL_S):
+            if cancelled():
+                self.close()
+                return
+        loop.go.clear()
+        loop.started()

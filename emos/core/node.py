@@ -22,7 +22,7 @@ from typing import Any
 from emos.config.base import ComponentRunType
 from emos.core import control as C
 from emos.core import lifecycle as L
-from emos.core.clock import SimTimeDriver, SimTimer
+from emos.core.clock import Pacer, SimTimeDriver, SimTimer
 from emos.core.component import BaseComponent
 from emos.core.control import control_socket
 from emos.core.faults import PublishFaults, fault_ops
@@ -635,6 +635,12 @@ class Node:
             timer = _Timer(self.loop, period, callback)
         self._timers.append(timer)
         return timer
+
+    def pacer(self, period: float) -> Pacer:
+        """Paces an action loop that runs in a thread of its own at ``period`` seconds of this
+        node's clock; in a ``use_sim_time`` node it steps inside the ticks, so a lockstep
+        simulator waits for it (``emos.core.clock.Pacer``). Close it when the loop ends."""
+        return Pacer(period, driver=self._sim_time)
 
     def add_service(self, name: str, request_type: Any, response_type: Any, callback: Any) -> None:
         self._extra_servers.append(("service", (name, request_type, response_type, callback)))

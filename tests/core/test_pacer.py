@@ -90,3 +90,125 @@ def test_missed_periods_are_skipped_and_time_that_goes_back_restarts_the_pacing(
 def test_a_period_must_be_positive():
     with pytest.raises(ValueError, match="period must be > 0"):
         Pacer(0.0)
+
+
+# -- in a node on simulated time: the loop steps inside the ticks ---------------------------------------
+@pytest.fixture
+def driver():
+    """A real ``SimTimeDriver`` (the one a ``use_sim_time`` node owns) on a private run's rings."""
+    from emos.core import clock
+    from emos.core.clock import SimTimeDriver
+    from emos.transport.context import RunContext
+    from emos.transport.waker import Waker
+
+    ctx = RunContext.create()
+    waker = Waker(ctx)
+    d = SimTimeDriver(ctx, "follower", waker, period=lambda: 0.05)
+    d.ctx = ctx  # for the test's own subscribers
+    yield d
+    clock.release_driven_time()  # handle() drove this process's clock: give it back to the next test
+    d.close()
+    waker.close()
+    ctx.remove_everything()
+
+
+def _tick(t: float):
+    from emos.msgs import Clock
+    from emos.msgs.std import Time
+
+    return Clock(clock=Time.from_sec(t))
+
+
+def test_a_loop_on_a_sim_time_node_steps_inside_the_tick_that_makes_its_period_due(driver):
+    """The node answers a tick only after the loop's step: each ``handle`` returns with the step
+    it released already taken, one per 0.1 s of ticks, whatever the wall clock does."""
+    pacer = Pacer(0.1, driver=driver)
+    steps: list[float] = []
+    done = threading.Event()
+
+    def loop() -> None:
+        with pacer:
+            while not done.is_set():
+                steps.append(driver.time if driver.time is not None else -1.0)
+                time.sleep(0.02)  # a step that takes a while: the tick must wait for it
+                pacer.wait(done.is_set)
+
+    worker = threading.Thread(target=loop)
+    worker.start()
+    while not driver._loops:  # the first step runs at once; the loop joins at its first wait
+        time.sleep(0.001)
+    seen = []
+    for i in range(1, 101):  # 1.0 simulated second in ticks of 0.01 s, as fast as the test can
+        driver.handle(_tick(0.01 * i), None)
+        seen.append(len(steps))
+    done.set()
+    worker.join(10)
+    assert not worker.is_alive()
+    # Joined at t = None (no tick yet): armed by the first tick (0.01), due every 0.1 s after it.
+    # The step a tick releases is in `steps` when `handle` returns, stamped with that tick's time.
+    assert steps[1:] == pytest.approx([0.11, 0.21, 0.31, 0.41, 0.51, 0.61, 0.71, 0.81, 0.91]), steps
+    assert seen[10] == 2 and seen[9] == 1  # tick 0.11 (index 10) released and waited for the second step
+    assert not driver._loops  # closed with the loop: no tick waits for it any more
+
+
+def test_the_loops_cpu_is_charged_to_the_tick_it_stepped_in(driver):
+    """A lockstep simulator charges the stack's compute from the answers: the loop's step is
+    the node's work like a Timed step, so its thread CPU is in the answer of its tick."""
+    from emos.core.clock import ack_topic
+    from emos.msgs import LockstepAck
+    from emos.transport.pubsub import Subscriber
+
+    acks = Subscriber(driver.ctx, ack_topic("follower"), LockstepAck, queue_size=64)
+    pacer = Pacer(0.1, driver=driver)
+    done = threading.Event()
+
+    def loop() -> None:
+        with pacer:
+            while not done.is_set():
+                end = time.thread_time() + 0.03
+                while time.thread_time() < end:  # 30 ms of this thread's CPU
+                    pass
+                pacer.wait(done.is_set)
+
+    worker = threading.Thread(target=loop)
+    worker.start()
+    while not driver._loops:
+        time.sleep(0.001)
+    charged = []
+    for i in range(1, 31):
+        driver.handle(_tick(0.01 * i), None)
+        charged += [ack.compute for ack in acks.take()]
+    done.set()
+    worker.join(10)
+    acks.close()
+    assert len(charged) == 30  # every tick answered
+    stepped = [i for i, c in enumerate(charged) if c > 0]
+    assert stepped == [10, 20], charged  # ticks 0.11 and 0.21 released a step each ...
+    assert all(charged[i] >= 0.029 for i in stepped), charged  # ... and answered with its CPU
+
+
+def test_a_tick_never_waits_for_a_loop_that_ended_or_was_cancelled(driver):
+    cancelled = threading.Event()
+    pacer = Pacer(0.1, driver=driver)
+    waiting = threading.Thread(target=lambda: pacer.wait(cancelled.is_set))
+    waiting.start()
+    while not driver._loops:
+        time.sleep(0.001)
+    cancelled.set()  # e.g. the action's goal was cancelled while it waited for its period
+    waiting.join(10)
+    assert not waiting.is_alive() and not driver._loops
+    # A loop whose thread ended without closing its pacer (a bug in the action): the tick goes on.
+    forgetful = Pacer(0.1, driver=driver)
+
+    def step_then_return() -> None:
+        forgetful.wait()  # joins, waits for its period; then its thread ends in the middle of a step
+
+    t = threading.Thread(target=step_then_return)
+    t.start()
+    while len(driver._loops) < 1:
+        time.sleep(0.001)
+    for i in range(1, 31):
+        driver.handle(_tick(0.01 * i), None)  # released at 0.11; the thread ends; later ticks go on
+    t.join(10)
+    assert not t.is_alive()
+    assert not driver._loops  # the tick that found it gone let it go

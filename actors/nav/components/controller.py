@@ -439,7 +439,7 @@ class Controller(VisionTracking, NavComponent):
     def _main_action_callback(self, goal_handle: Any) -> ControlPathResult:
         goal: ControlPathGoal = goal_handle.goal
         given = goal.path if len(goal.path.poses) else None
-        pacer = clock.Pacer(1.0 / self.config.loop_rate)  # steps on the node's clock (simulated seconds under a simulator)
+        pacer = self.node.pacer(1.0 / self.config.loop_rate)  # on the node's clock; inside its ticks on simulated time
         self._action_active = True
         failing_since: float | None = None
         try:
@@ -471,4 +471,5 @@ class Controller(VisionTracking, NavComponent):
                         return ControlPathResult(success=False, message=f"{result.status.value} for 10 s")
                 pacer.wait(lambda: goal_handle.is_cancel_requested)
         finally:
+            pacer.close()
             self._action_active = False

@@ -13,8 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from emos.core import clock
-
 from ..controllers import BoundingBox, CameraIntrinsics, ControllersID, ControlStatus
 from ..controllers.registry import CONTROLLERS, make_controller
 from .convert import BadInput, pose_stamped
@@ -107,7 +105,7 @@ class VisionTracking:
             return TrackVisionTargetResult(success=False, message=str(exc))
         if goal.search_timeout > 0:  # both vision followers search for a lost target
             follower.search.timeout = float(goal.search_timeout)
-        pacer = clock.Pacer(1.0 / self.config.loop_rate)  # type: ignore[attr-defined]  # steps on the node's clock
+        pacer = self.node.pacer(1.0 / self.config.loop_rate)  # type: ignore[attr-defined]  # inside the node's ticks on simulated time
         # A new goal preempts the one being followed (as a ROS action server does): an event
         # that fires again must not start a second loop sending commands beside the first.
         self._track_goal = mine = getattr(self, "_track_goal", 0) + 1
@@ -154,5 +152,6 @@ class VisionTracking:
             self.publish_stop()  # type: ignore[attr-defined]
             return TrackVisionTargetResult(success=True, message="cancelled")
         finally:
+            pacer.close()
             if self._track_goal == mine:
                 self._tracking = False

@@ -1,10 +1,11 @@
 """End to end: recipes/vision_tracking_{rgb,depth}.py make the simulated robot follow the walking
 person (real processes: Simulator, Vision with the on-board people detector, Controller,
 DriveManager). Only the test reads the ground truth: the robot's true odometry (no noise) and
-the person's position on its path at the odometry's simulated time. The recipes run on the
-realtime simulator, as a user runs them: under ``emos run --lockstep`` the Controller's
-``track_vision_target`` loop, which runs in its own thread, is paced on simulated time but not
-waited for, so it lags a simulator that runs faster than real time (docs/simulation.md)."""
+the person's position on its path at the odometry's simulated time. The recipes run with
+``emos run --lockstep``: the simulator waits every tick for the detector, the controllers and
+the Controller's ``track_vision_target`` loop (stepped inside the Controller's ticks), so a busy
+machine slows the run, not the robot's reactions (a realtime simulator at load 10 let the
+person walk out of view before the detector had seen the frame)."""
 from __future__ import annotations
 
 import math
@@ -24,7 +25,7 @@ from tests.runtime.helpers import REPO, SystemUnderTest, ctrl_c_as_at_a_terminal
 pytestmark = [pytest.mark.sim, pytest.mark.process]
 
 FOLLOW_S = 20.0  # simulated seconds of following after the first detection (the person crosses ~3 times)
-MIN_FOLLOW_S = 12.0  # at least this much, when a loaded machine runs the simulation slower than real time
+MIN_FOLLOW_S = 12.0  # at least this much, when the wall-clock backstop (a hang) ends the loop first
 
 
 def _constants(source: str) -> tuple[tuple, tuple, float]:
@@ -41,20 +42,21 @@ def _follow(tmp_path, recipe: str, detections: str) -> dict:
     source = (REPO / "recipes" / recipe).read_text()
     spawn, path, speed = _constants(source)
     person = Person(waypoints=np.array(path), speed=speed, mode="pingpong")
-    system = SystemUnderTest(tmp_path, source, env={"PYTHONPATH": str(REPO)})
+    system = SystemUnderTest(tmp_path, source, env={"PYTHONPATH": str(REPO)}, args=["--lockstep"])
     cli = None
     try:
         # The spec starts the tracking from the command line (`ros2 action send_goal`): so do we.
         controller = re.search(r'Controller\(component_name="(\w+)"', source).group(1)
         system.wait_up(timeout=60, components=[controller])
+        assert "lockstep: the simulator waits every tick for" in system.output(), system.output()[-3000:]
         cli = subprocess.Popen([sys.executable, "-m", "emos", "action", "send_goal", "--run", system.ctx.run_id,
                                 controller, "track_vision_target", '{"label": "person"}'],
                                stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, preexec_fn=ctrl_c_as_at_a_terminal)
         odom = Subscriber(system.ctx, "/odom", M.Odometry, queue_size=1000)
         dets = Subscriber(system.ctx, detections, M.Detections, queue_size=100)
         samples, seen, t_first = [], 0, None
-        # The loop ends after FOLLOW_S simulated seconds; the wall deadline only bounds a hang (a
-        # loaded machine runs the simulation at a fraction of real time).
+        # The loop ends after FOLLOW_S simulated seconds; the wall deadline only bounds a hang (in
+        # lockstep a loaded machine runs the simulation at a fraction of real time).
         wall_deadline = time.monotonic() + 300
         while time.monotonic() < wall_deadline:
             time.sleep(0.2)
