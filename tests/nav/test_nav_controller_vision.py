@@ -188,3 +188,24 @@ def test_rgbd_follower_measures_a_detection_once_while_the_robot_turns():
     np.testing.assert_allclose(follower.tracker.position, seen, atol=1e-9)
     follower.compute(turned, np.zeros(3), box, depth, new_measurement=True)  # re-measured: it moves
     assert np.hypot(*(follower.tracker.position - seen)) > 0.1
+
+
+def test_rgbd_follower_projects_a_detection_from_where_the_robot_was_when_the_picture_was_taken():
+    """The detector's box reaches the control step after the robot has turned on: projected with
+    the step's pose it misplaces the target by that turn; projected from the pose at the
+    picture's stamp (``seen_from``, from a ``PoseHistory``) it lands where the target is."""
+    from emos.geometry import PoseHistory
+
+    target = (2.0, 0.6)
+    at_picture = np.array([0.0, 0.0, 0.0])
+    box, depth = camera(at_picture, target)
+    history = PoseHistory()
+    history.add(10.0, at_picture)
+    history.add(10.1, np.array([0.02, 0.0, 0.25]))  # the robot kept turning after the picture
+    now = np.array([0.02, 0.0, 0.25])
+    late = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, VisionRGBDFollowerConfig(target_distance=2.0))
+    late.compute(now, np.zeros(3), box, depth)
+    assert np.hypot(*(late.tracker.position - target)) > 0.4  # off by the turn made since the picture
+    stamped = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, VisionRGBDFollowerConfig(target_distance=2.0))
+    stamped.compute(now, np.zeros(3), box, depth, seen_from=history.at(10.0))
+    np.testing.assert_allclose(stamped.tracker.position, target, atol=0.05)

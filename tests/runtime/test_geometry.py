@@ -57,3 +57,22 @@ def test_integrate_pose_is_exact_and_its_scalar_and_array_paths_agree(twist):
     assert exact[2] == pytest.approx(wrap_angle(float(pose[2])), abs=1e-9)
     batch = integrate_pose(np.stack([start, start]), np.array([twist, twist]), np.array([dt, dt]))
     assert batch.shape == (2, 3) and np.allclose(batch, exact, atol=1e-12)
+
+
+def test_pose_history_interpolates_at_a_stamp_the_short_way_round_and_clamps_outside():
+    from emos.geometry import PoseHistory
+
+    history = PoseHistory(span=1.0)
+    assert history.at(0.0) is None
+    history.add(0.0, [0.0, 0.0, 3.0])
+    history.add(0.5, [1.0, 2.0, -3.0])  # yaw crossed +-pi: 0.28 rad of turn, not 6
+    history.add(0.5, [9.0, 9.0, 0.0])  # a repeated (or older) time is ignored
+    np.testing.assert_allclose(history.at(0.25)[:2], [0.5, 1.0])
+    assert abs(wrap_angle(history.at(0.25)[2] - math.pi)) < 1e-9
+    np.testing.assert_allclose(history.at(-5.0), [0.0, 0.0, 3.0])  # before the oldest: the oldest
+    np.testing.assert_allclose(history.at(7.0), [1.0, 2.0, -3.0])  # after the newest: the newest
+    for k in range(1, 40):  # only the last ``span`` seconds are kept
+        history.add(0.5 + 0.1 * k, [k, 0.0, 0.0])
+    np.testing.assert_allclose(history.at(0.0), history.at(3.3 - 1.0 - 0.1))
+    with pytest.raises(ValueError, match="span"):
+        PoseHistory(span=0.0)

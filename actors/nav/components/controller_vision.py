@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from emos.geometry import PoseHistory
+
 from ..controllers import BoundingBox, CameraIntrinsics, ControllersID, ControlStatus
 from ..controllers.registry import CONTROLLERS, make_controller
 from .convert import BadInput, pose_stamped
@@ -112,6 +114,7 @@ class VisionTracking:
         self.get_logger().info("[%s] track_vision_target: following %r with %s", self.component_name, goal.label, cid.value)  # type: ignore[attr-defined]
         self._tracking = True
         last_msg = None  # the detections message the depth follower measured last
+        history = PoseHistory()  # where the robot was when the camera took each picture
         try:
             while not goal_handle.is_cancel_requested:
                 if self._track_goal != mine:
@@ -129,9 +132,11 @@ class VisionTracking:
                         pacer.wait(lambda: goal_handle.is_cancel_requested)
                         continue
                     pose, vel = state
+                    history.add(_stamp_s(self.latest("location")), pose)  # type: ignore[attr-defined]
                     depth = self._depth(msg, follower.config.depth_conversion_factor)
+                    seen_from = history.at(_stamp_s(msg)) if msg is not None and _stamp_s(msg) > 0 else None
                     result = follower.compute(pose, self._last_cmd if vel is None else vel, box, depth,  # type: ignore[attr-defined]
-                                              new_measurement=msg is not last_msg)
+                                              new_measurement=msg is not last_msg, seen_from=seen_from)
                     last_msg = msg
                 else:
                     result = follower.compute(box, self._last_cmd)  # type: ignore[attr-defined]
@@ -155,3 +160,9 @@ class VisionTracking:
             pacer.close()
             if self._track_goal == mine:
                 self._tracking = False
+
+
+def _stamp_s(msg: Any) -> float:
+    """A message's header stamp in seconds (0.0: none)."""
+    header = getattr(msg, "header", None)
+    return 0.0 if header is None else header.stamp.to_sec()

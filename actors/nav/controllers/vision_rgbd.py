@@ -136,11 +136,14 @@ class VisionRGBDFollower:
         return np.array([pose[0] + c * rx - s * ry, pose[1] + s * rx + c * ry])
 
     def compute(self, pose: np.ndarray, velocity: np.ndarray, target: BoundingBox | None,
-                depth_image: np.ndarray | None, obstacles: ObstacleInput = None, new_measurement: bool = True) -> ControlResult:
+                depth_image: np.ndarray | None, obstacles: ObstacleInput = None, new_measurement: bool = True,
+                seen_from: np.ndarray | None = None) -> ControlResult:
         """One control step. ``new_measurement=False`` says ``target`` is the detection already
         used in an earlier step (the detector runs slower than the control loop): it is not
         measured again, as projecting an old box with the robot's newer pose would move the
-        target with the robot's own turning; the target's predicted position is followed."""
+        target with the robot's own turning; the target's predicted position is followed.
+        ``seen_from``: the robot's pose when the camera took the picture (``PoseHistory`` at
+        the detection's stamp); the box is projected from there (default: ``pose``)."""
         cfg = self.config
         pose, velocity = robot_state(pose, velocity)
         dt = cfg.control_time_step
@@ -151,7 +154,7 @@ class VisionRGBDFollower:
             return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
         measured = None
         if target is not None and depth_image is not None:
-            measured = self._target_world(target, depth_image, pose)
+            measured = self._target_world(target, depth_image, pose if seen_from is None else np.asarray(seen_from, dtype=np.float64))
         if measured is None:
             predicted = self.tracker.predict(dt)
             cmd, status = self.search.step()
