@@ -209,3 +209,26 @@ def test_rgbd_follower_projects_a_detection_from_where_the_robot_was_when_the_pi
     stamped = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, VisionRGBDFollowerConfig(target_distance=2.0))
     stamped.compute(now, np.zeros(3), box, depth, seen_from=history.at(10.0))
     np.testing.assert_allclose(stamped.tracker.position, target, atol=0.05)
+
+
+def test_rgbd_follower_ignores_a_measurement_the_target_cannot_have_walked_to_unless_it_persists():
+    """A false detection (or a box whose depth hit the wall behind) 2 m from the tracked target
+    is not followed; measurements that keep agreeing with each other elsewhere are: the tracker
+    starts again there after ``target_gate_misses`` of them."""
+    cfg = VisionRGBDFollowerConfig(target_distance=2.0, target_gate_misses=3)
+    follower = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, cfg)
+    pose = np.zeros(3)
+    box, depth = camera(pose, (2.0, 0.0))
+    follower.compute(pose, np.zeros(3), box, depth)
+    np.testing.assert_allclose(follower.tracker.position, [2.0, 0.0], atol=0.05)
+    far_box, far_depth = camera(pose, (3.5, 1.2))  # 1.9 m away, 0.1 s later: no person walks that
+    follower.compute(pose, np.zeros(3), far_box, far_depth)
+    follower.compute(pose, np.zeros(3), far_box, far_depth)
+    np.testing.assert_allclose(follower.tracker.position, [2.0, 0.0], atol=0.05)  # ignored twice
+    follower.compute(pose, np.zeros(3), far_box, far_depth)  # the third in a row: it is there
+    np.testing.assert_allclose(follower.tracker.position, [3.5, 1.2], atol=0.05)
+    near_box, near_depth = camera(pose, (3.55, 1.2))  # within the gate: followed as before
+    follower.compute(pose, np.zeros(3), near_box, near_depth)
+    assert 3.5 < follower.tracker.position[0] < 3.56
+    with pytest.raises(ValueError):
+        VisionRGBDFollowerConfig(target_gate_misses=0)

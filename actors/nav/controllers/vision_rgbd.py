@@ -36,6 +36,11 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     """``prediction_horizon``, ``control_horizon`` and ``target_search_pause`` are in steps.
 
     ``target_distance=None`` keeps the distance measured at the first detection.
+    ``target_gate`` (m), ``target_max_speed`` (m/s), ``target_gate_misses``: a measurement farther
+    from the tracked target than ``target_gate + target_max_speed * (time since the last one)``
+    is not the target (a false detection, or a box whose depth patch hit the wall behind): it is
+    ignored and the prediction followed, unless ``target_gate_misses`` measurements in a row
+    disagree, when the tracker starts again from the newest (the target really is there).
     ``camera_rotation_to_robot`` is the quaternion (x, y, z, w) of the camera body frame
     (x forward) on the robot; the optical frame convention (z forward) is applied on top.
     The DWA parameters (samples, sensor pose, ``octree_resolution``, ``costs_weights``,
@@ -50,6 +55,9 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     target_search_pause: float = field(2, 0, 1e6)
     enable_search: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool), on_setattr=setters)
     depth_conversion_factor: float = field(1e-3, 1e-9, 1e3)
+    target_gate: float = field(0.5, 0.0, 1e3)
+    target_max_speed: float = field(2.0, 0.0, 1e3)
+    target_gate_misses: int = field(5, 1, 10_000, int)
     camera_position_to_robot: np.ndarray = attrs.field(factory=lambda: np.zeros(3), converter=vec3, on_setattr=setters, eq=False)
     camera_rotation_to_robot: np.ndarray = attrs.field(factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]), converter=vec4, on_setattr=setters, eq=False)
     max_linear_samples: int = field(20, 1, 1000, int)
@@ -124,6 +132,7 @@ class VisionRGBDFollower:
         self.sensor_pose = sensor_offset(cfg.sensor_position_to_robot, cfg.sensor_rotation_to_robot)
         self._detour_side = 1.0
         self._since_measurement = 0.0
+        self._gate_misses = 0  # measurements in a row outside the gate
 
     def _target_world(self, box: BoundingBox, depth: np.ndarray, pose: np.ndarray) -> np.ndarray | None:
         body = target_from_depth(box, depth, self.intrinsics, self.config.depth_conversion_factor)
@@ -163,7 +172,13 @@ class VisionRGBDFollower:
                 return self._follow(pose, velocity, predicted, obstacles, ControlStatus.WAITING)
             cmds = ramp_commands(self.robot, velocity, cmd[None], dt, cfg.control_horizon)[0]
             return ControlResult(cmds, integrate_sequence(pose, cmds, dt)[0], status)
-        self.tracker.predict(dt)
+        predicted = self.tracker.predict(dt)
+        if predicted is not None and self._outside_gate(measured, predicted):
+            self._gate_misses += 1
+            if self._gate_misses < cfg.target_gate_misses:
+                return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
+            self.tracker = _AlphaBeta()  # it keeps disagreeing: the target is where it is measured
+        self._gate_misses = 0
         position = self.tracker.update(measured, self._since_measurement)  # velocity over the time between measurements
         self._since_measurement = 0.0
         local = measured - pose[:2]
@@ -171,6 +186,11 @@ class VisionRGBDFollower:
         if self.distance is None:
             self.distance = float(np.hypot(*local))
         return self._follow(pose, velocity, position, obstacles, ControlStatus.RUNNING)
+
+    def _outside_gate(self, measured: np.ndarray, predicted: np.ndarray) -> bool:
+        cfg = self.config
+        reach = cfg.target_gate + cfg.target_max_speed * self._since_measurement
+        return float(np.hypot(*(measured - predicted))) > reach
 
     def goal_for(self, pose: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Where to stand: ``distance`` from the target, on the robot's side, facing it."""
