@@ -211,7 +211,11 @@ class Zygote:
             try:
                 done, _ = os.waitpid(handle.pid, os.WNOHANG)
             except ChildProcessError:
-                done = handle.pid  # reaped by someone already: gone all the same
+                # Not our child: reaped already (gone), or a clone not adopted yet (it is its
+                # intermediate's child for a moment after birth, longer on a loaded machine).
+                # Taking the latter for dead dropped a live spare, which then exited on its
+                # closed channel as a zombie nobody knew to reap (chaos sensor-kills, loaded).
+                done = handle.pid if proc_stat(handle.pid) is None else 0
             if not done:
                 continue
             if handle is self.primary:

@@ -66,3 +66,31 @@ def test_a_zygote_that_runs_but_never_answers_is_given_up_as_hung(zygote, monkey
     handle, _ = zygote(600.0)
     with pytest.raises(TimeoutError, match="although it runs"):
         handle.request({"op": "spawn", "index": 0})
+
+
+def test_a_spare_not_yet_adopted_is_not_taken_for_dead():
+    """A cloned spare is its intermediate's child for a moment after birth (longer on a loaded
+    machine): ``replace_dead`` cannot wait for it yet, and must not take that for its death. A
+    spare that no longer exists at all is replaced."""
+    # A live process that is not our child: its parent shell exits at once.
+    out = subprocess.run(["sh", "-c", "sleep 60 >/dev/null 2>&1 & echo $!"], capture_output=True, text=True, check=True)
+    orphan = int(out.stdout.strip())
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        zygote = spawn.Zygote([], [])
+        zygote.spare = handle = spawn._ZygoteHandle(orphan, ours, direct_child=False)
+        zygote.replace_dead()
+        assert zygote.spare is handle  # alive, only not ours (yet): kept
+        os.kill(orphan, signal.SIGKILL)
+        for _ in range(500):  # until init has reaped it
+            if spawn.proc_stat(orphan) is None:
+                break
+            __import__("time").sleep(0.01)
+        zygote.replace_dead()
+        assert zygote.spare is None  # gone: replaced (no primary to clone from here)
+    finally:
+        theirs.close()
+        try:
+            os.kill(orphan, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
