@@ -46,8 +46,8 @@ from typing import Any, cast
 import attrs
 import numpy as np
 
-from emos.core.retry import Backoff, retry, retry_async
-from emos.core.rpc import AsyncRpcClient, RpcClient, RpcConnectionError
+from emos.core.retry import retry, retry_async
+from emos.core.rpc import UNREACHABLE_BACKOFF, AsyncRpcClient, RpcClient, RpcConnectionError
 from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs.registry import canonical_name, resolve
@@ -89,9 +89,6 @@ SUPERVISOR_TREE = "tree"
 SUPERVISOR_EVENTS = "events"
 LIFECYCLE_REQUESTS = ("start", "stop", "restart")
 
-# Retrying a component that does not listen (dead, or restarting): soon at first, then at most
-# five times a second, until the caller's queue_timeout.
-UNREACHABLE_BACKOFF = Backoff(base=0.01, factor=2.0, cap=0.2, timeout=0.0)
 
 
 def is_public_name(name: Any) -> bool:

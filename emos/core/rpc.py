@@ -21,6 +21,7 @@ from typing import Any
 
 import msgpack
 
+from emos.core.retry import Backoff
 from emos.errors import EmosError, TransportError
 
 log = logging.getLogger("emos.rpc")
@@ -42,6 +43,16 @@ class RpcError(EmosError, RuntimeError):
 
 class RpcConnectionError(TransportError, ConnectionError):
     """No connection, or the connection broke before an answer came."""
+
+
+class RpcUnreachable(RpcConnectionError):
+    """Nothing listens at the socket (its server not started yet, or restarting). The request was
+    never sent, so trying again cannot run it twice."""
+
+
+# Retrying a server that does not listen: soon at first, then at most five times a second, until
+# the caller's timeout (``attrs.evolve(UNREACHABLE_BACKOFF, timeout=...)``).
+UNREACHABLE_BACKOFF = Backoff(base=0.01, factor=2.0, cap=0.2, timeout=0.0)
 
 
 def pack_frame(obj: Any) -> bytes:
@@ -189,7 +200,7 @@ class RpcClient:
                 sock.connect(self.path)
             except OSError as exc:
                 sock.close()
-                raise RpcConnectionError(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
+                raise RpcUnreachable(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
             self._sock = sock
         return self._sock
 
@@ -260,7 +271,7 @@ class AsyncRpcClient:
         try:
             self._reader, self._writer = await asyncio.open_unix_connection(self.path)
         except OSError as exc:
-            raise RpcConnectionError(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
+            raise RpcUnreachable(f"cannot connect to {self.path}: {exc.strerror or exc}") from exc
         self._pump = asyncio.ensure_future(self._read_loop())
 
     async def _read_loop(self) -> None:

@@ -15,7 +15,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from emos.core.rpc import AsyncRpcClient, RpcClient, RpcServer
+import attrs
+
+from emos.core.retry import retry, retry_async
+from emos.core.rpc import UNREACHABLE_BACKOFF, AsyncRpcClient, RpcClient, RpcServer, RpcUnreachable
 from emos.errors import EmosError
 from emos.msgs import codec
 from emos.msgs.registry import UnknownMessageType, canonical_name, resolve
@@ -158,7 +161,11 @@ class ActionClient:
         self.goal_type, self.feedback_type, self.result_type = resolve(goal_type), resolve(feedback_type), resolve(result_type)
         self.path = service_socket(self.ctx, name)
 
-    def send_goal(self, goal: Any, feedback_callback: Callable[[Any], None] | None = None, timeout: float | None = None, goal_id: str | None = None) -> Any:
+    def send_goal(self, goal: Any, feedback_callback: Callable[[Any], None] | None = None, timeout: float | None = None,
+                  goal_id: str | None = None, wait_for_server: float = 0.0) -> Any:
+        """Send ``goal`` and block until its result. ``wait_for_server``: seconds to keep trying
+        while nothing serves the action yet (its component still starting, or restarting); the
+        goal itself is sent once."""
         if not isinstance(goal, self.goal_type):
             raise TypeError(f"action {self.name!r} takes goals of {self.goal_type.__name__}, got {type(goal).__name__}")
         goal_id = goal_id or uuid.uuid4().hex
@@ -168,7 +175,8 @@ class ActionClient:
                 feedback_callback(codec.decode(self.feedback_type, frame["feedback"], copy=True))
 
         with RpcClient(self.path, timeout=timeout or 3600.0) as rpc:
-            reply = rpc.call("goal", on_stream=on_stream, goal=codec.pack(goal), goal_id=goal_id)
+            reply = retry(lambda: rpc.call("goal", on_stream=on_stream, goal=codec.pack(goal), goal_id=goal_id),
+                          attrs.evolve(UNREACHABLE_BACKOFF, timeout=max(0.0, wait_for_server)), retry_on=RpcUnreachable)
         result = codec.decode(self.result_type, reply["result"], copy=True)
         if reply.get("canceled"):
             raise ActionCanceled(f"action {self.name!r}: goal {goal_id} was canceled", result) from None
@@ -202,10 +210,14 @@ def describe_interfaces(declared: list[tuple[str, str, tuple[Any, ...]]], servin
     return out
 
 
-async def call_service_async(ctx: RunContext, name: str, request: Any, response_type: Any, timeout: float = 10.0) -> Any:
+async def call_service_async(ctx: RunContext, name: str, request: Any, response_type: Any, timeout: float = 10.0,
+                             wait_for_service: float = 0.0) -> Any:
+    """Call service ``name`` of the run ``ctx``. ``wait_for_service``: seconds to keep trying while
+    nothing serves it yet (its component still starting, or restarting); the request is sent once."""
     client = AsyncRpcClient(service_socket(ctx, name))
     try:
-        raw = await client.call("call", timeout=timeout, request=codec.pack(request))
+        raw = await retry_async(lambda: client.call("call", timeout=timeout, request=codec.pack(request)),
+                                attrs.evolve(UNREACHABLE_BACKOFF, timeout=max(0.0, wait_for_service)), retry_on=RpcUnreachable)
         return codec.decode(resolve(response_type), raw, copy=True)
     finally:
         await client.close()

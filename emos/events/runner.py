@@ -38,15 +38,17 @@ class ActionRuntime:
         does; a runtime that reaches other runs routes by it)."""
         from emos.core.services import call_service_async
 
-        return await call_service_async(self.ctx, name, request, response_type, timeout=self.timeout)
+        return await call_service_async(self.ctx, name, request, response_type, timeout=self.timeout, wait_for_service=self.timeout)
 
     async def send_goal(self, name: str, types: tuple[Any, Any, Any], goal: Any, component: str | None = None) -> Any:
         """Send ``goal`` to action server ``name`` of this run and return without waiting for its
-        result (a goal may run for minutes); ``component`` as for :meth:`call_service`."""
+        result (a goal may run for minutes); ``component`` as for :meth:`call_service`. A server
+        that is not serving yet (an event can fire while its component still starts) is waited
+        for up to :attr:`timeout` seconds."""
         from emos.core.services import ActionClient
 
         client = ActionClient(name, *types, ctx=self.ctx)
-        await self.run_function(client.send_goal, (goal,), {}, None)
+        await self.run_function(client.send_goal, (goal,), {"wait_for_server": self.timeout}, None)
         return True
 
     def latest(self, topic: str) -> Any | None:
