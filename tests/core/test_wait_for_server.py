@@ -10,10 +10,10 @@ import time
 import pytest
 
 from emos import msgs as M
-from emos.msgs.srv import FibonacciFeedback, FibonacciGoal, FibonacciResult
 from emos.core.rpc import RpcConnectionError, RpcUnreachable
 from emos.core.services import ActionClient, ActionServer, ServiceServer, call_service_async
 from emos.events.runner import ActionRuntime
+from emos.msgs.srv import FibonacciFeedback, FibonacciGoal, FibonacciResult
 from emos.transport.context import RunContext
 from tests.runtime.helpers import wait_until
 
