@@ -10,7 +10,6 @@ action ends and so does the following, as in the spec.
 from __future__ import annotations
 
 import threading
-import time
 import uuid
 from typing import Any
 
@@ -63,33 +62,39 @@ class StartVisionTracking(BaseComponent):
         pass
 
     def _run(self) -> None:
+        from emos.core.retry import Backoff, retry
         from emos.core.services import ActionCanceled, ActionClient
 
         stop = self._stop
         assert stop is not None
         client = ActionClient(self.action_name, TrackVisionTargetGoal, TrackVisionTargetFeedback, TrackVisionTargetResult)
         self._client, self._goal_id, self.result = client, uuid.uuid4().hex, None
-        deadline = time.monotonic() + self.connect_timeout
-        last_error = ""
-        while not stop.is_set():
-            try:
-                self.get_logger().info("[%s] sending %s goal (label %r)", self.component_name, self.action_name, self.goal.label)
-                self.result = client.send_goal(self.goal, feedback_callback=self._feedback, goal_id=self._goal_id)
-                log = self.get_logger().info if self.result.success else self.get_logger().warning
-                log("[%s] %s ended: success=%s, %s", self.component_name, self.action_name, self.result.success, self.result.message)
-                return
-            except ActionCanceled:
-                self.get_logger().info("[%s] %s goal cancelled", self.component_name, self.action_name)
-                return
-            except RpcConnectionError as exc:  # the controller is not serving yet
-                last_error = str(exc)
-                if time.monotonic() > deadline:
-                    break
-                stop.wait(0.5)
-        if not stop.is_set():
-            message = f"action {self.action_name} not reachable within {self.connect_timeout:.0f} s: {last_error}"
-            self.get_logger().error("[%s] %s", self.component_name, message)
-            self.health_status.set_fail_system(message=message)
+        log = self.get_logger()
+        log.info("[%s] sending %s goal (label %r)", self.component_name, self.action_name, self.goal.label)
+
+        def send() -> TrackVisionTargetResult:
+            if stop.is_set():  # deactivated while waiting: no goal after that
+                raise RpcConnectionError(f"{self.component_name} deactivated")
+            return client.send_goal(self.goal, feedback_callback=self._feedback, goal_id=self._goal_id)
+
+        try:
+            # Until the controller serves the action (it may start after this component), and
+            # again (the same goal id) if it died under the goal, within connect_timeout of the
+            # first try; a deactivation ends the wait.
+            self.result = retry(send,
+                                Backoff(base=0.5, factor=1.0, timeout=self.connect_timeout), retry_on=RpcConnectionError,
+                                retry_if=lambda _exc: not stop.is_set(), sleep=stop.wait)
+        except ActionCanceled:
+            log.info("[%s] %s goal cancelled", self.component_name, self.action_name)
+            return
+        except RpcConnectionError as exc:
+            if not stop.is_set():
+                message = f"action {self.action_name} not reachable within {self.connect_timeout:.0f} s: {exc}"
+                log.error("[%s] %s", self.component_name, message)
+                self.health_status.set_fail_system(message=message)
+            return
+        (log.info if self.result.success else log.warning)(
+            "[%s] %s ended: success=%s, %s", self.component_name, self.action_name, self.result.success, self.result.message)
 
     _last_visible: bool | None = None
 
