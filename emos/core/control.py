@@ -28,7 +28,7 @@ Nothing arriving is unpickled or imported.
 **Clients**: :class:`ControlClient` (blocking) and :class:`AsyncControlClient` (an event loop,
 many components, one kept connection each). Both retry while nothing listens on the socket (the
 component dead or restarting) for up to ``queue_timeout`` seconds, with the backoff
-:data:`UNREACHABLE_BACKOFF`, then fail with an error naming the component. A component that dies
+:data:`emos.core.rpc.UNREACHABLE_BACKOFF`, then fail with an error naming the component. A component that dies
 *while* it runs a request gets it again from its next incarnation (at-least-once).
 
 This module imports nothing of the component, the node, fallbacks, reconfiguration or actions:
@@ -88,7 +88,6 @@ SUPERVISOR_STOP = "stop"  # end the whole run
 SUPERVISOR_TREE = "tree"
 SUPERVISOR_EVENTS = "events"
 LIFECYCLE_REQUESTS = ("start", "stop", "restart")
-
 
 
 def is_public_name(name: Any) -> bool:
