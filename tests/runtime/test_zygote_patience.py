@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -85,7 +86,7 @@ def test_a_spare_not_yet_adopted_is_not_taken_for_dead():
         for _ in range(500):  # until init has reaped it
             if spawn.proc_stat(orphan) is None:
                 break
-            __import__("time").sleep(0.01)
+            time.sleep(0.01)
         zygote.replace_dead()
         assert zygote.spare is None  # gone: replaced (no primary to clone from here)
     finally:
