@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
+from emos.actors.nav.safety import swept as swept_module
 from emos.actors.nav.safety.swept import SweptConfig, SweptFootprint
 
 pytestmark = pytest.mark.unit
@@ -70,10 +71,11 @@ def generate(seed: int = 2211) -> dict:
     return {"scans": scans, "cases": cases}
 
 
-def decide(data: dict) -> list[list]:
-    """The check's answer per case: [scale, blocked, clearance] (clearance as a string: inf)."""
+def decide(data: dict, native: bool | None = None) -> list[list]:
+    """The check's answer per case: [scale, blocked, clearance] (clearance as a string: inf).
+    ``native``: SweptFootprint's (the C inner loop or not; None: as installed)."""
     robots, configs = _robots(), _configs()
-    checks = {(r, c): SweptFootprint(robots[r], configs[c]) for r in robots for c in configs}
+    checks = {(r, c): SweptFootprint(robots[r], configs[c], native=native) for r in robots for c in configs}
     prepared = {}
     out = []
     for case in data["cases"]:
@@ -90,9 +92,14 @@ def decide(data: dict) -> list[list]:
     return out
 
 
-def test_the_check_decides_as_the_recorded_version_did():
+NATIVE = [False, pytest.param(True, marks=pytest.mark.skipif(
+    swept_module.NATIVE is None, reason="the C inner loop is not built (no compiler at install, or EMOS_SWEPT=python)"))]
+
+
+@pytest.mark.parametrize("native", NATIVE, ids=["numpy", "c"])
+def test_the_check_decides_as_the_recorded_version_did(native):
     recorded = json.loads(DATA.read_text())
-    now = decide(recorded)
+    now = decide(recorded, native)
     expected = recorded["decisions"]
     assert len(now) == len(expected) == len(recorded["cases"])
     differ = [(i, e, n) for i, (e, n) in enumerate(zip(expected, now)) if e[:2] != n[:2]]

@@ -134,7 +134,7 @@ def _circle_scan(pose: np.ndarray, circles: list[tuple[float, float, float]], n:
     return LaserScan2D(ranges, angle_min=-math.pi, angle_increment=2 * math.pi / n, range_max=8.0)
 
 
-def bench_swept(commands: int = 500) -> dict[str, float]:
+def bench_swept(commands: int = 500, native: bool | None = None) -> dict[str, Any]:
     """The DriveManager's swept-footprint check, one call per command: the realistic Jackal
     (jackal-barn box, its limits, the default skid-steer motion model) among BARN-like posts
     (radius 0.075 m, one per 0.6 m^2 on average, none inside the robot), commands and previous
@@ -142,13 +142,15 @@ def bench_swept(commands: int = 500) -> dict[str, float]:
     DriveManager prepares them once per scan (``prepare_ms``: that per-scan work, once).
     ``history_cpu_p50`` / ``history_cpu_p99``: the thread CPU of one more call per command with
     a history of sent commands as the DriveManager passes one (the last 0.25 s at 20 Hz, near
-    the previous command), the path it takes in a running system."""
+    the previous command), the path it takes in a running system. ``native``: SweptFootprint's
+    (None: the C inner loop if it was built, what users get; False: numpy alone); ``native`` in
+    the result says which ran."""
     from emos.actors.sim.robots import PRESETS
     from emos.tools.barn.harness import nav_robot
 
     rng = np.random.default_rng(38)
     robot = nav_robot(PRESETS["jackal-barn"])
-    swept = SweptFootprint(robot)
+    swept = SweptFootprint(robot, native=native)
     xy = rng.uniform(-3.0, 3.0, (60, 2))
     xy = xy[np.hypot(xy[:, 0], xy[:, 1]) > robot.radius + 0.2]
     scan = _circle_scan(np.zeros(3), [(float(x), float(y), 0.075) for x, y in xy])
@@ -184,7 +186,7 @@ def bench_swept(commands: int = 500) -> dict[str, float]:
             "first_p99": float(np.percentile(f, 99)), "cpu_p50": float(np.percentile(c, 50)),
             "cpu_p99": float(np.percentile(c, 99)), "points": int(len(points)), "stopped": stopped / commands,
             "prepare_ms": prepare_ms, "history_cpu_p50": float(np.percentile(h, 50)),
-            "history_cpu_p99": float(np.percentile(h, 99))}
+            "history_cpu_p99": float(np.percentile(h, 99)), "native": swept._native is not None}
 
 
 def bench_dwa(steps: int = 200) -> dict[str, float]:
@@ -249,10 +251,11 @@ def bench_mppi(steps: int = 60) -> dict[str, Any]:
 def measure_kernels(peers: bool = False) -> dict[str, Any]:
     """The JSON kernels; with ``peers`` also the same-run reference formulations."""
     local_ms, local_cold, local_rays = bench_local_map()
-    dense = None
+    dense = swept_numpy = None
     if peers:
         trajectories, _, reference, _, _ = _cost_problem()
         dense = bench_dense_reference_path(trajectories, reference)
+        swept_numpy = bench_swept(native=False)
     cloud_ms, scan_ms = bench_critical_zone()
     return {
         "cost_eval_ms": bench_cost_eval(),
@@ -265,6 +268,7 @@ def measure_kernels(peers: bool = False) -> dict[str, Any]:
         "_local_map_cold_ms": local_cold,
         "_local_map_rays_ms": local_rays,
         "_dense_cost_ms": dense,
+        "_swept_numpy_ms": swept_numpy,
     }
 
 
@@ -318,6 +322,11 @@ def run(args: argparse.Namespace) -> int:
     print("Same-run peers (direct formulations of the same computation):")
     rays = kernels["_local_map_rays_ms"]
     print(f"  local map by sampling every ray: {rays:.3f} ms ({rays / result['local_map_ms']:.1f}x the cell lookup)")
+    numpy_swept = kernels["_swept_numpy_ms"]
+    if sw["native"]:
+        print(f"  swept check in numpy alone (the install without a C compiler): p50 {numpy_swept['p50']:.3f}, "
+              f"p99 {numpy_swept['p99']:.3f} ms, thread CPU p99 {numpy_swept['cpu_p99']:.3f} "
+              f"({numpy_swept['p99'] / sw['p99']:.1f}x the C inner loop's p99)")
     dense = kernels["_dense_cost_ms"]
     print(f"  reference-path distance, exact against all 999 segments (1/50 of the trajectories, "
           f"scaled): {dense:.0f} ms ({dense / result['cost_eval_ms']:.0f}x the whole cost evaluation)")

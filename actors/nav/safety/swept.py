@@ -22,7 +22,9 @@ in one batch, the fastest clear one sent, or the stop.
 A point that is already nearer than the inflated footprint at the start (the robot stopped
 close to something) only blocks a motion that brings it nearer: the robot may always move away.
 
-Pure numpy; the poses are exact arcs (those of :func:`emos.geometry.integrate_pose`, in fewer
+Numpy, with the inner loop (:meth:`SweptFootprint._touches`) in C when it was built
+(``_cswept.c``: the same answers; ``EMOS_SWEPT=python`` or ``native=False`` turns it off). The
+poses are exact arcs (those of :func:`emos.geometry.integrate_pose`, in fewer
 array operations) and the base's response to the commands comes from
 :meth:`SweptFootprint.response`. What depends on the points alone (sorted by distance, their
 homogeneous rows, their distance at the start) is prepared once per scan
@@ -31,7 +33,9 @@ homogeneous rows, their distance at the start) is prepared once per scan
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
+from types import ModuleType
 
 import attrs
 import numpy as np
@@ -46,6 +50,21 @@ _TOL = 1e-3  # m: a point must come this much nearer than it started to count as
 _COARSE_STRIDE = 4  # poses: the prefilter looks at every 4th pose's centre
 _PARTS = 2  # after the shared poses, the rest is looked at in this many spans
 _EPS = float(np.finfo(np.float64).eps)  # what np.sinc puts for 0 (0 / 0)
+
+
+def _load_native() -> ModuleType | None:
+    """The C inner loop (``_cswept.c``) if it was built and not turned off with
+    ``EMOS_SWEPT=python``; else None (the numpy version alone, the same answers)."""
+    if os.environ.get("EMOS_SWEPT", "").lower() == "python":
+        return None
+    try:
+        from emos.actors.nav.safety import _cswept
+    except ImportError:  # installed without a C compiler
+        return None
+    return _cswept
+
+
+NATIVE = _load_native()
 
 
 def _scales(value: object) -> tuple[float, ...]:
@@ -135,7 +154,12 @@ FREE = SweptCheck(1.0, math.inf)
 class SweptFootprint:
     """The check for one robot. ``check(command, previous, points, lead)`` -> :class:`SweptCheck`."""
 
-    def __init__(self, robot: RobotConfig, config: SweptConfig | None = None) -> None:
+    def __init__(self, robot: RobotConfig, config: SweptConfig | None = None, *, native: bool | None = None) -> None:
+        """``native``: use the C inner loop (None: if it was built, False: never, True: it must be)."""
+        if native and NATIVE is None:
+            raise RuntimeError("SweptFootprint(native=True): the C inner loop actors/nav/safety/_cswept.c was not built "
+                               "(no C compiler at install) or EMOS_SWEPT=python turned it off")
+        self._native = NATIVE if native is not False else None
         self.robot = robot
         self.config = config or SweptConfig()
         p = robot.geometry_params
@@ -160,6 +184,9 @@ class SweptFootprint:
         self._hysteresis = np.where(np.arange(len(self._scales)) == len(self._scales) - 1, 0.0, cfg.hysteresis)
         self._stop_lag = np.array([0.0, 0.0, cfg.yaw_lag])
         self._hold_steps = max(1, int(math.ceil(cfg.hold / cfg.time_step - 1e-9)))
+        # What the C inner loop needs of the footprint and this module's constants.
+        self._native_shape = (int(self._box), self._half[0], self._half[1], self._radius, cfg.margin,
+                              _COARSE_STRIDE, _PARTS, _TOL)
 
     # -- prediction ---------------------------------------------------------------------------
     def pipe(self, previous: np.ndarray, lead: float, history: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -360,13 +387,16 @@ class SweptFootprint:
     def prepare(self, points: np.ndarray | SweptPoints) -> SweptPoints:
         """What the check needs of a set of obstacle points (N, 2) that depends on the points
         alone, computed once (the DriveManager does it once per scan, and every command until the
-        next scan reuses it): the points sorted by their distance from the centre, that distance
+        next scan reuses it): the finite points sorted by their distance from the centre, that distance
         squared, the homogeneous rows (x, y, 1) that put them in any pose's frame by one product,
         and their signed distance to the footprint at the start pose."""
         if isinstance(points, SweptPoints) and points.footprint is self:
             return points
         raw = points.points if isinstance(points, SweptPoints) else points
         pts = np.asarray(raw, dtype=np.float64).reshape(-1, 2)
+        finite = np.isfinite(pts).all(axis=1)
+        if not finite.all():  # a NaN or inf point is no obstacle; kept, it would make every clearance NaN
+            pts = pts[finite]
         norm2 = np.einsum("ij,ij->i", pts, pts)
         order = np.argsort(norm2, kind="stable")
         pts, norm2 = pts[order], norm2[order]
@@ -477,6 +507,11 @@ class SweptFootprint:
         The poses are taken in time order in a few spans (the shared ones first), each against
         only the points near it, and the rest is skipped once every candidate touches (their
         clearance is then the least seen so far)."""
+        if self._native is not None:  # the same steps in C (_cswept.c)
+            found: list[tuple[bool, float, bool, bool] | None] = self._native.touches(
+                poses, homog, norm2, start, limits, steps, shared, shared_limit, -1 if decisive is None else decisive,
+                self._native_shape)
+            return found
         n_c, n_g, k1, _ = poses.shape
         stride = _COARSE_STRIDE
         # A point within d of the footprint lies within R + d of the centre, so within that plus
