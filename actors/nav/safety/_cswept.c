@@ -55,49 +55,39 @@ static PyArrayObject *as_array(PyObject *obj, int ndim, const char *name)
     return arr;
 }
 
-/* Per point of one span, over the span's poses of one candidate (all gains): the least depth
- * and least squared distance outside the box, over the first `head` poses (h) and over the
- * rest (t). As SweptFootprint._least_distance's box branch: q = |body| - half, depth =
- * max(qx, qy), outside = max(qx, 0)^2 + max(qy, 0)^2. */
-static void box_minima(const double *poses, Py_ssize_t n_g, Py_ssize_t k1, Py_ssize_t p0, Py_ssize_t p1,
-                       Py_ssize_t head, const double *px, const double *py, Py_ssize_t m, const Shape *shape,
-                       double *depth_h, double *out_h, double *depth_t, double *out_t)
+/* Per point of one span, over the span's poses of one candidate (all gains), running minima
+ * over the first `head` poses (h) and over the rest (t). For the box, as
+ * SweptFootprint._least_distance's box branch: q = |body| - half, the least depth max(qx, qy)
+ * and the least squared distance outside max(qx, 0)^2 + max(qy, 0)^2 (out_*); for the bounding
+ * circle, the least hypot(body) - radius (in depth_*, out_* unused). */
+static void span_minima(const double *poses, Py_ssize_t n_g, Py_ssize_t k1, Py_ssize_t p0, Py_ssize_t p1,
+                        Py_ssize_t head, const double *px, const double *py, Py_ssize_t m, const Shape *shape,
+                        double *depth_h, double *out_h, double *depth_t, double *out_t)
 {
-    const double hx = shape->half_x, hy = shape->half_y;
+    const double hx = shape->half_x, hy = shape->half_y, radius = shape->radius;
     for (Py_ssize_t g = 0; g < n_g; g++) {
         for (Py_ssize_t p = p0; p < p1; p++) {
+            /* The pose's frame: a point's body x = c px + s py + tx, y = -s px + c py + ty. */
             const double *pose = poses + 3 * (g * k1 + p);
             const double c = cos(pose[2]), s = sin(pose[2]);
             const double tx = -(c * pose[0] + s * pose[1]), ty = s * pose[0] - c * pose[1];
             double *depth = p - p0 < head ? depth_h : depth_t;
             double *out = p - p0 < head ? out_h : out_t;
-            for (Py_ssize_t n = 0; n < m; n++) {
-                const double bx = c * px[n] + s * py[n] + tx;
-                const double by = -s * px[n] + c * py[n] + ty;
-                const double qx = fabs(bx) - hx, qy = fabs(by) - hy;
-                const double ox = dmax(qx, 0.0), oy = dmax(qy, 0.0);
-                depth[n] = dmin(depth[n], dmax(qx, qy));
-                out[n] = dmin(out[n], ox * ox + oy * oy);
-            }
-        }
-    }
-}
-
-/* The same for the bounding circle: the least of hypot(body) - radius (kept in depth_*). */
-static void circle_minima(const double *poses, Py_ssize_t n_g, Py_ssize_t k1, Py_ssize_t p0, Py_ssize_t p1,
-                          Py_ssize_t head, const double *px, const double *py, Py_ssize_t m, const Shape *shape,
-                          double *least_h, double *least_t)
-{
-    for (Py_ssize_t g = 0; g < n_g; g++) {
-        for (Py_ssize_t p = p0; p < p1; p++) {
-            const double *pose = poses + 3 * (g * k1 + p);
-            const double c = cos(pose[2]), s = sin(pose[2]);
-            const double tx = -(c * pose[0] + s * pose[1]), ty = s * pose[0] - c * pose[1];
-            double *least = p - p0 < head ? least_h : least_t;
-            for (Py_ssize_t n = 0; n < m; n++) {
-                const double bx = c * px[n] + s * py[n] + tx;
-                const double by = -s * px[n] + c * py[n] + ty;
-                least[n] = dmin(least[n], hypot(bx, by) - shape->radius);
+            if (shape->box) {
+                for (Py_ssize_t n = 0; n < m; n++) {
+                    const double bx = c * px[n] + s * py[n] + tx;
+                    const double by = -s * px[n] + c * py[n] + ty;
+                    const double qx = fabs(bx) - hx, qy = fabs(by) - hy;
+                    const double ox = dmax(qx, 0.0), oy = dmax(qy, 0.0);
+                    depth[n] = dmin(depth[n], dmax(qx, qy));
+                    out[n] = dmin(out[n], ox * ox + oy * oy);
+                }
+            } else {
+                for (Py_ssize_t n = 0; n < m; n++) {
+                    const double bx = c * px[n] + s * py[n] + tx;
+                    const double by = -s * px[n] + c * py[n] + ty;
+                    depth[n] = dmin(depth[n], hypot(bx, by) - radius);
+                }
             }
         }
     }
@@ -237,14 +227,13 @@ static PyObject *touches(PyObject *self, PyObject *args)
             for (Py_ssize_t n = 0; n < m; n++)
                 depth_h[n] = out_h[n] = depth_t[n] = out_t[n] = INFINITY;
             const double *cposes = poses + 3 * c * n_g * k1;
+            span_minima(cposes, n_g, k1, p0, p1, head, px, py, m, &sh, depth_h, out_h, depth_t, out_t);
             if (sh.box) {
-                box_minima(cposes, n_g, k1, p0, p1, head, px, py, m, &sh, depth_h, out_h, depth_t, out_t);
                 for (Py_ssize_t n = 0; n < m; n++) {
                     least_head[n] = signed_distance(depth_h[n], out_h[n]);
                     least[n] = signed_distance(dmin(depth_h[n], depth_t[n]), dmin(out_h[n], out_t[n]));
                 }
             } else {
-                circle_minima(cposes, n_g, k1, p0, p1, head, px, py, m, &sh, depth_h, depth_t);
                 for (Py_ssize_t n = 0; n < m; n++) {
                     least_head[n] = depth_h[n];
                     least[n] = dmin(depth_h[n], depth_t[n]);
