@@ -137,7 +137,6 @@ class ParticleFilter:
         self.beta = 1.0
         self._injecting = False
         self.searching = False  # a global localization that has not converged yet
-        self._start_pool = False  # the next scan starts the search from a larger pool (search_start_pool)
         self.hypothesis_shares = np.zeros(0)  # weight of each hypothesis at the last search step
         # The search's leader: the pose of the hypothesis that held converged_weight at the last
         # search step, the odometry then, and on how many consecutive steps it held it.
@@ -197,7 +196,6 @@ class ParticleFilter:
         self._estimate()
         self.initialized = True
         self.searching = False
-        self._start_pool = False
         self.runner_ups = []
 
     def global_localization(self) -> None:
@@ -213,7 +211,6 @@ class ParticleFilter:
         self._estimate()
         self.initialized = True
         self.searching = True
-        self._start_pool = self.params.search_start_pool > n  # the first scan draws from a larger pool
         self._leader = self._leader_odom = None
         self.leader_updates = 0
         self.leader_travel = 0.0
@@ -268,11 +265,7 @@ class ParticleFilter:
             self._problem("beams", "scan has no valid beam (all NaN, inf, zero or out of range): motion update only")
             self._estimate()
             return True
-        if self._start_pool:
-            self._start_pool = False
-            loglik = self._start_from_pool(r, a)
-        else:
-            loglik = self.field.log_likelihood(self.particles, r, a, self.sensor_pose)
+        loglik = self.field.log_likelihood(self.particles, r, a, self.sensor_pose)
         # Not while injecting: a random particle that lands on the robot must be able to win.
         min_ess = p.search_min_ess_fraction if self.searching else p.min_ess_fraction
         self.beta = 1.0 if self._injecting else self._tempering(loglik, min_ess)
@@ -299,28 +292,6 @@ class ParticleFilter:
         if self._updates % p.resample_interval == 0:
             self._resample()
         return True
-
-    def _start_from_pool(self, r: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """The search's first scan with ``search_start_pool`` (issue 36): the uniform start of
-        ``max_particles`` leaves a handful of particles within reach of the robot, too few for its
-        place to become a hypothesis when a look-alike fits as well. So this scan weighs a pool of
-        uniform free-space poses ``search_start_pool`` strong, draws the particles from it with
-        probability q proportional to its tempered likelihood (the effective count
-        ``max_particles``), and weighs each by 1 / q: the same posterior as the uniform start
-        (importance sampling), with the particles where the scan fits. Returns the drawn
-        particles' log-likelihoods, for the update that goes on as usual."""
-        n = len(self.particles)
-        pool = self._random_free_poses(self.params.search_start_pool)
-        loglik = self.field.log_likelihood(pool, r, a, self.sensor_pose)
-        uniform = np.full(len(pool), 1.0 / len(pool))
-        beta = self._tempering(loglik, n / len(pool), weights=uniform)
-        log_q = beta * (loglik - loglik.max())
-        q = np.exp(log_q)
-        pick = low_variance_resample(q / q.sum(), n, self.rng)
-        self.particles = pool[pick]
-        inverse = np.exp(log_q[pick].min() - log_q[pick])  # 1 / q, scaled to at most 1
-        self.weights = inverse / inverse.sum()
-        return np.asarray(loglik[pick])
 
     def _tempering(self, loglik: np.ndarray, min_ess_fraction: float, weights: np.ndarray | None = None) -> float:
         """The exponent (0, 1] on this scan's likelihood that keeps the effective sample size

@@ -78,11 +78,6 @@ class AmclParams:
     20000 candidates and ``converged_travel`` 2 m, fresh seeds 100+ gave no net gain (intel
     19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), at
     1.4-1.7x the CPU per scan: off until a full run decides.
-    ``search_start_pool`` (default 0, off): the search's first scan weighs this many uniform
-    free-space poses instead of ``max_particles``, and the search starts from ``max_particles``
-    of them drawn by that scan's tempered likelihood (to an effective ``max_particles``), their
-    weights divided by how likely each was to be drawn, so the posterior is the uniform start's
-    with more particles where the scan fits (see ``ParticleFilter._start_from_pool``).
     ``runner_up_nats`` (default 0, off): when the search ends, each other hypothesis whose
     scan-matched peak is within this many nats of the leader's is kept as a runner-up of
     ``runner_up_particles`` particles, beside the filter's cloud (which is unchanged); every
@@ -129,7 +124,6 @@ class AmclParams:
     search_candidates: int = field(default=0, validator=number(ge=0, le=10_000_000, integer=True))
     search_climbs: int = field(default=24, validator=number(ge=1, le=10_000, integer=True))
     search_inject_share: float = field(default=0.05, validator=number(ge=0.0, le=0.5))
-    search_start_pool: int = field(default=0, validator=number(ge=0, le=100_000_000, integer=True))
     runner_up_nats: float = field(default=0.0, validator=number(ge=0.0, le=1e6))
     runner_up_switch_nats: float = field(default=30.0, validator=number(ge=0.0, le=1e6))
     runner_up_scan_nats: float = field(default=20.0, validator=number(gt=0.0, le=1e6))
