@@ -76,8 +76,9 @@ class AmclParams:
     fits within about 23 nats of the best hypothesis's peak becomes a particle; together they
     get at most ``search_inject_share`` of the weight (see ``ParticleFilter._propose``). With
     20000 candidates and ``converged_travel`` 2 m, fresh seeds 100+ gave no net gain (intel
-    19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), at
-    1.4-1.7x the CPU per scan: off until a full run decides.
+    19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), nor
+    the tuning seeds 0-49 (intel 48/50, aces 45/50, csail 50/50 against 47, 46 and 50), at
+    1.4-1.7x the CPU per scan: off.
     ``runner_up_nats`` (default 0, off): when the search ends, each other hypothesis whose
     scan-matched peak is within this many nats of the leader's is kept as a runner-up of
     ``runner_up_particles`` particles, beside the filter's cloud (which is unchanged); every
