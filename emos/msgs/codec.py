@@ -17,6 +17,7 @@ import re
 import struct
 import threading
 import types
+from collections.abc import Mapping
 from typing import Any, TypeVar
 
 import attrs
@@ -413,13 +414,60 @@ encode, decode = (C_CODEC.encode, C_CODEC.decode) if C_CODEC is not None else (e
 # Writing into a ring slot (``write_into(..., stream=True)``, what a publisher does), arrays of
 # at least STREAM_MIN_BYTES are copied with non-temporal (streaming) stores: they write memory
 # without first taking every line of it into this core's cache, which a plain copy does, from
-# memory or, worse, from the cache of the reader's core that read the slot last (_ccodec.c,
-# "streaming copy", also says how the ring's seqlock stays intact). Measured in ping-pong on this
-# 2-core VM (docs/ipc.md, "Streaming copies"): every plain-copy transport swung 3-6x from round to
-# round at 128 KiB-8 MiB (EMOS 921,600 B 39-132 us, iceoryx2 85-160 us, raw shared memory 46-175
-# us), streaming did not (51-56 us); below 128 KiB a copy takes a few microseconds either way.
+# memory or from the cache of the reader's core that read the slot last (_ccodec.c, "streaming
+# copy", also says how the ring's seqlock stays intact). Which is faster depends on whether the
+# slots a topic cycles through stay in the last-level cache (docs/ipc.md, "Streaming copies" and
+# "Plain or streaming: the last-level cache decides"): a ping-pong of two rings cycles about four
+# slots of the message's size. When those fit in half the last-level cache, a plain copy writes
+# into the cache the reader takes its lines from, and streaming would push every line out to
+# memory and make the reader fetch it back (measured on a VM with a 260 MiB L3: 921,600 B 75-81
+# us plain against 120-141 streaming, 8 MiB 676-697 against 1,141-1,377); when they do not, every
+# line comes from memory anyway and a plain copy's read-for-ownership doubles the traffic (a VM
+# with a 32 MiB L3: 8 MiB 410-420 us streaming against 615-770 plain). So streaming starts at an
+# eighth of the last-level cache (at least 128 KiB, below which a copy takes a few microseconds
+# either way; 128 KiB when the cache size is unknown). ``EMOS_STREAM_MIN_BYTES`` sets it.
 # The Python codec (no compiler, or EMOS_CODEC=python) copies with numpy: the same bytes.
-STREAM_MIN_BYTES = 128 * 1024
+_STREAM_FLOOR = 128 * 1024
+
+
+def last_level_cache_bytes(cache_dir: str = "/sys/devices/system/cpu/cpu0/cache") -> int | None:
+    """The size of the largest data or unified cache of CPU 0 (the last level), from sysfs; None
+    when it cannot be read (not Linux, a container without sysfs, a malformed entry)."""
+    sizes = []
+    try:
+        for entry in sorted(os.listdir(cache_dir)):
+            if not entry.startswith("index"):
+                continue
+            with open(os.path.join(cache_dir, entry, "type")) as f:
+                if f.read().strip() == "Instruction":
+                    continue
+            with open(os.path.join(cache_dir, entry, "size")) as f:
+                text = f.read().strip()
+            scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(text[-1:].upper(), 1)
+            sizes.append(int(text[:-1] if scale != 1 else text) * scale)
+    except (OSError, ValueError):
+        return None
+    return max(sizes) if sizes else None
+
+
+def stream_min_bytes(environ: Mapping[str, str] = os.environ, cache_bytes: int | None = None) -> int:
+    """The size from which a publisher streams an array into its ring slot: ``EMOS_STREAM_MIN_BYTES``
+    if set (bytes, a whole number >= 0), else an eighth of the last-level cache
+    (``cache_bytes``, default :func:`last_level_cache_bytes`), at least 128 KiB."""
+    text = environ.get("EMOS_STREAM_MIN_BYTES", "").strip()
+    if text:
+        try:
+            value = int(text)
+        except ValueError:
+            value = -1
+        if value < 0:
+            raise ValueError(f"EMOS_STREAM_MIN_BYTES: expected a whole number of bytes >= 0, got {text!r}")
+        return value
+    cache = last_level_cache_bytes() if cache_bytes is None else cache_bytes
+    return _STREAM_FLOOR if not cache else max(_STREAM_FLOOR, cache // 8)
+
+
+STREAM_MIN_BYTES = stream_min_bytes()
 _stream_copy: Any = getattr(C_CODEC, "stream_copy", None)
 
 

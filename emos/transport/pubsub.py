@@ -261,8 +261,8 @@ class Publisher:
         n, buf = ring.begin(nbytes, self.reuse_recent)
         started = self._announce_write(ring, nbytes) if nbytes >= ANNOUNCE_BYTES else 0  # (no call for small ones)
         try:
-            # Big arrays go in with streaming stores (codec.STREAM_MIN_BYTES): steadier and,
-            # but for a ring slot still hot in this core's cache, faster (docs/ipc.md).
+            # Arrays past codec.STREAM_MIN_BYTES go in with streaming stores: where the slots
+            # a topic cycles through outgrow the last-level cache (docs/ipc.md).
             enc.write_into(buf, stream=True)
         except BaseException:
             ring.abandon()

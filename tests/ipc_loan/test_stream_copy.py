@@ -1,7 +1,9 @@
 """Big arrays are copied into ring slots with streaming (non-temporal) stores (issue 34, 8 MiB):
 the C copy writes exactly the bytes numpy would, the frames do not change, the Python codec
 (no compiler) still writes them alone, and a writer SIGKILLed in the middle of a streaming copy
-never leaves a torn message visible (the copy's fences keep the ring's seqlock)."""
+never leaves a torn message visible (the copy's fences keep the ring's seqlock). Where streaming
+starts depends on the machine's last-level cache (``codec.stream_min_bytes``, tested at the end);
+the tests of the mechanism pin it to 128 KiB (``FLOOR``), so they stream on every machine."""
 import mmap
 import subprocess
 import sys
@@ -20,6 +22,13 @@ from emos.transport.pubsub import Publisher, Subscriber
 from tests.ipc_loan.torn import sigkill_writer_and_check
 
 needs_c = pytest.mark.skipif(codec._stream_copy is None, reason="the codec's C extension is not built here (the Python codec alone)")
+FLOOR = 128 * 1024  # the threshold these tests stream from, whatever the machine's cache
+
+
+@pytest.fixture
+def streaming_from_floor(monkeypatch):
+    """Stream from FLOOR in this process and in writers forked from it."""
+    monkeypatch.setattr(codec, "STREAM_MIN_BYTES", FLOOR)
 
 
 @needs_c
@@ -67,7 +76,7 @@ def _streamed(enc: codec.Encoded) -> bytes:
 
 @needs_c
 @pytest.mark.unit
-def test_frames_with_streamed_arrays_are_byte_for_byte_the_numpy_ones():
+def test_frames_with_streamed_arrays_are_byte_for_byte_the_numpy_ones(streaming_from_floor):
     rng = np.random.default_rng(7)
     msg = M.PointCloud2(
         height=1, width=3, point_step=4, row_step=12,
@@ -100,19 +109,19 @@ import numpy as np
 from emos import msgs as M
 from emos.msgs import codec
 assert codec.C_CODEC is None and codec._stream_copy is None
-data = np.random.default_rng(1).integers(0, 256, codec.STREAM_MIN_BYTES + 11, dtype=np.uint8)
+data = np.random.default_rng(1).integers(0, 256, 128 * 1024 + 11, dtype=np.uint8)
 frame = codec.encode(M.UInt8MultiArray(data=data)).to_bytes()
 assert np.array_equal(codec.decode(M.UInt8MultiArray, frame).data, data)
 print(zlib.crc32(frame))
 """
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    data = np.random.default_rng(1).integers(0, 256, codec.STREAM_MIN_BYTES + 11, dtype=np.uint8)
+    data = np.random.default_rng(1).integers(0, 256, FLOOR + 11, dtype=np.uint8)
     assert int(done.stdout) == zlib.crc32(codec.encode(M.UInt8MultiArray(data=data)).to_bytes())
 
 
 @pytest.mark.unit
-def test_a_published_message_past_the_threshold_arrives_intact(ctx):
+def test_a_published_message_past_the_threshold_arrives_intact(ctx, streaming_from_floor):
     sub = Subscriber(ctx, "/big", M.UInt8MultiArray, queue_size=4)
     pub = Publisher(ctx, "/big", M.UInt8MultiArray, publisher_id="big", depth=2)
     rng = np.random.default_rng(3)
@@ -128,7 +137,7 @@ def test_a_published_message_past_the_threshold_arrives_intact(ctx):
 
 @needs_c
 @pytest.mark.unit
-def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx, monkeypatch):
+def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx, monkeypatch, streaming_from_floor):
     calls = []
     real = codec._stream_copy
 
@@ -168,6 +177,37 @@ def _streaming_writer(run_dir: str, run_id: str, size: int, ready) -> None:
 @needs_c
 @pytest.mark.process
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(size=st.sampled_from([codec.STREAM_MIN_BYTES + 24, (1 << 20) + 8, 4 << 20]), kill_after=st.floats(0.0, 0.05))
-def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, size, kill_after):
+@given(size=st.sampled_from([FLOOR + 24, (1 << 20) + 8, 4 << 20]), kill_after=st.floats(0.0, 0.05))
+def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, streaming_from_floor, size, kill_after):
     sigkill_writer_and_check(ctx, _streaming_writer, size, kill_after)
+
+
+def _fake_cpu_cache(root: Path, entries: dict[str, tuple[str, str]]) -> str:
+    for name, (kind, size) in entries.items():
+        (root / name).mkdir(parents=True)
+        (root / name / "type").write_text(kind + "\n")
+        (root / name / "size").write_text(size + "\n")
+    return str(root)
+
+
+@pytest.mark.unit
+def test_the_last_level_cache_is_read_from_sysfs_and_unreadable_ones_are_none(tmp_path):
+    layout = {"index0": ("Data", "48K"), "index1": ("Instruction", "32K"), "index2": ("Unified", "2048K"),
+              "index3": ("Unified", "266240K")}
+    assert codec.last_level_cache_bytes(_fake_cpu_cache(tmp_path / "a", layout)) == 266240 * 1024
+    assert codec.last_level_cache_bytes(_fake_cpu_cache(tmp_path / "b", {"index0": ("Data", "32M")})) == 32 << 20
+    assert codec.last_level_cache_bytes(_fake_cpu_cache(tmp_path / "c", {"index0": ("Unified", "lots")})) is None
+    assert codec.last_level_cache_bytes(str(tmp_path / "missing")) is None
+    assert codec.last_level_cache_bytes(_fake_cpu_cache(tmp_path / "d", {"index1": ("Instruction", "32K")})) is None
+
+
+@pytest.mark.unit
+def test_streaming_starts_at_an_eighth_of_the_last_level_cache_or_where_the_environment_says():
+    assert codec.stream_min_bytes({}, cache_bytes=32 << 20) == 4 << 20  # a 32 MiB L3: 8 MiB frames stream
+    assert codec.stream_min_bytes({}, cache_bytes=260 << 20) == (260 << 20) // 8  # a 260 MiB L3: up to 32.5 MiB plain
+    assert codec.stream_min_bytes({}, cache_bytes=512 << 10) == FLOOR  # never below 128 KiB
+    assert codec.stream_min_bytes({"EMOS_STREAM_MIN_BYTES": "1048576"}, cache_bytes=260 << 20) == 1 << 20
+    assert codec.stream_min_bytes({"EMOS_STREAM_MIN_BYTES": " 0 "}, cache_bytes=260 << 20) == 0  # stream everything
+    for bad in ("big", "-5", "1.5e6"):
+        with pytest.raises(ValueError, match="EMOS_STREAM_MIN_BYTES: expected a whole number of bytes >= 0"):
+            codec.stream_min_bytes({"EMOS_STREAM_MIN_BYTES": bad})
