@@ -125,7 +125,30 @@ def _check_ancestors(root: Path, uid: int, variable: str | None) -> None:
                                   f"{problem}, so another user could replace it mid-run; {hint}")
 
 
+_PROC = Path("/proc")
+
+
 def _start_token(pid: int) -> int | None:
+    """What tells process ``pid`` from a later one with the same pid (None: no such process).
+
+    On Linux, its start in clock ticks since boot (/proc/PID/stat, field 22), which never
+    changes. Not psutil's ``create_time()``: that adds /proc/stat's ``btime``, a whole number of
+    seconds that moves by one when the system clock is adjusted (NTP, a VM's clock sync), and then
+    every live run looked dead at once and the next launcher's sweep removed their directories
+    (a loaded test run lost nine systems that way). Elsewhere, the start time in 1/100 s."""
+    try:
+        text = (_PROC / str(pid) / "stat").read_text()
+    except FileNotFoundError:
+        if _PROC.is_dir():
+            return None  # no such process
+    except OSError:
+        pass
+    else:
+        # The command name (field 2) may hold spaces and parentheses: the fields after it follow
+        # the last ')'. Field 3 (state) is the first of them, field 22 (starttime) the 20th.
+        fields = text[text.rfind(")") + 2 :].split()
+        if len(fields) >= 20 and fields[19].isdigit():
+            return None if fields[0] == "Z" else int(fields[19])
     try:
         return int(psutil.Process(pid).create_time() * 100)
     except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
