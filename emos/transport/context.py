@@ -133,9 +133,10 @@ def _start_token(pid: int) -> int | None:
 
     On Linux, its start in clock ticks since boot (/proc/PID/stat, field 22), which never
     changes. Not psutil's ``create_time()``: that adds /proc/stat's ``btime``, a whole number of
-    seconds that moves by one when the system clock is adjusted (NTP, a VM's clock sync), and then
-    every live run looked dead at once and the next launcher's sweep removed their directories
-    (a loaded test run lost nine systems that way). Elsewhere, the start time in 1/100 s."""
+    seconds (wall clock minus uptime) that moves when the wall clock jumps against the boot clock
+    (NTP, a VM paused and resumed), and then every live run looked dead at once and the next
+    launcher's sweep removed their directories (a loaded test run lost three systems, ten tests,
+    that way). Elsewhere than Linux, psutil's start time in 1/100 s."""
     try:
         text = (_PROC / str(pid) / "stat").read_text()
     except FileNotFoundError:
