@@ -9,10 +9,8 @@ from __future__ import annotations
 
 import os
 import random
-import shutil
 import subprocess
 import sys
-import sysconfig
 
 import attrs
 import numpy as np
@@ -23,6 +21,7 @@ from emos.msgs import fields as F
 from emos.msgs.registry import registered_types
 from emos.transport import netframe
 from emos.transport.netframe import FrameWriter
+from tests.c_build import can_build_c_extensions
 
 pytestmark = pytest.mark.process
 
@@ -34,8 +33,7 @@ TYPES = sorted(set(registered_types().values()), key=lambda cls: cls.__name__)
 def test_the_c_codec_is_built_wherever_a_compiler_is():
     """An install with a C compiler and Python's headers builds it: a silent build failure would
     leave every user on the slow path, so it is a failure here."""
-    headers = os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h"))
-    if not (shutil.which("cc") or shutil.which("gcc")) or not headers or os.environ.get("EMOS_CODEC") == "python":
+    if not can_build_c_extensions() or os.environ.get("EMOS_CODEC") == "python":
         pytest.skip("no C compiler or Python headers here, or the C codec turned off")
     assert C is not None, "emos.msgs._ccodec is missing: run `pip install -e .` again and read the compiler's output"
     assert codec.encode is C.encode and codec.decode is C.decode

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -20,6 +21,7 @@ import pytest
 from emos.actors.nav.robot import AngularCtrlLimits, LinearCtrlLimits, RobotConfig
 from emos.actors.nav.safety import swept as swept_module
 from emos.actors.nav.safety.swept import SweptConfig, SweptFootprint
+from tests.c_build import can_build_c_extensions
 
 pytestmark = pytest.mark.unit
 
@@ -108,6 +110,15 @@ def test_the_check_decides_as_the_recorded_version_did(native):
     # floating-point operations may differ; the decisions above are exact).
     for i, (e, n) in enumerate(zip(expected, now)):
         assert float(n[2]) == pytest.approx(float(e[2]), abs=1e-9), (i, e, n)
+
+
+def test_the_c_inner_loop_is_built_wherever_a_compiler_is():
+    """Else the check would silently run at numpy's cost (p99 about 1 ms against 0.4)."""
+    if not can_build_c_extensions() or os.environ.get("EMOS_SWEPT", "").lower() == "python":
+        pytest.skip("no C compiler or Python headers here, or the C inner loop turned off")
+    assert swept_module.NATIVE is not None, ("emos.actors.nav.safety._cswept is missing: run `pip install -e .` "
+                                             "again and read the compiler's output")
+    assert SweptFootprint(_robots()["box"])._native is swept_module.NATIVE
 
 
 def test_the_recorded_set_exercises_every_answer():
