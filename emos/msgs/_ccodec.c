@@ -1235,20 +1235,24 @@ static PyObject *stream_copy(PyObject *self, PyObject *const *args, Py_ssize_t n
 
 /* The ring's header layout as u64 indices, from ring.py (ring_layout), and the slot header size. */
 static Py_ssize_t r_head = -1, r_first, r_busy, r_map, r_pin, r_pins, r_slot_header, r_max_head;
+static Py_ssize_t r_untracked, r_waiters, r_cursors, r_max_waiters;
 static unsigned long long r_empty;
 
 static PyObject *ring_layout(PyObject *self, PyObject *args)
 {
-    Py_ssize_t head, first, busy, map, pin, pins, slot_header, max_head;
+    Py_ssize_t head, first, busy, map, pin, pins, slot_header, max_head, untracked, waiters, cursors, max_waiters;
     unsigned long long empty;
-    if (!PyArg_ParseTuple(args, "nnnnnnnnK:ring_layout", &head, &first, &busy, &map, &pin, &pins, &slot_header, &max_head, &empty))
+    if (!PyArg_ParseTuple(args, "nnnnnnnnKnnnn:ring_layout", &head, &first, &busy, &map, &pin, &pins, &slot_header, &max_head, &empty,
+                          &untracked, &waiters, &cursors, &max_waiters))
         return NULL;
-    if (head < 0 || first < 0 || busy < 0 || map < 0 || pin < 0 || pins <= 0 || slot_header < 24 || slot_header % 8 || max_head <= 0) {
-        PyErr_SetString(PyExc_ValueError, "ring_layout: indices must be >= 0, pins > 0, the slot header a multiple of 8 of at least 24 B");
+    if (head < 0 || first < 0 || busy < 0 || map < 0 || pin < 0 || pins <= 0 || slot_header < 24 || slot_header % 8 || max_head <= 0
+        || untracked < 0 || waiters < 0 || cursors < 0 || max_waiters <= 0) {
+        PyErr_SetString(PyExc_ValueError, "ring_layout: indices must be >= 0, pins and waiters > 0, the slot header a multiple of 8 of at least 24 B");
         return NULL;
     }
     r_head = head, r_first = first, r_busy = busy, r_map = map, r_pin = pin, r_pins = pins;
     r_slot_header = slot_header, r_max_head = max_head, r_empty = empty;
+    r_untracked = untracked, r_waiters = waiters, r_cursors = cursors, r_max_waiters = max_waiters;
     Py_RETURN_NONE;
 }
 
@@ -1289,6 +1293,75 @@ static Py_ssize_t slot_at(const geometry *g, unsigned long long slot, unsigned l
         || (unsigned long long)r_slot_header > (unsigned long long)len - start - room)
         return -1;
     return (Py_ssize_t)(start / 8);
+}
+
+/* Whether every header word the writer's paths read lies inside a mapping of ``words`` u64. */
+static int header_fits(const geometry *g, Py_ssize_t words)
+{
+    return r_map + (Py_ssize_t)g->depth <= words && r_pin + r_pins <= words && r_head < words && r_first < words && r_busy < words
+        && r_untracked < words && r_waiters + r_max_waiters <= words && r_cursors + r_max_waiters <= words;
+}
+
+/* Ring._claim(slot, n, retiring): mark ``slot`` (its header at u64 ``idx``) as being written with
+ * message ``n``, unless (``check_retiring``) it holds another message than the one it retires,
+ * nothing or our own unfinished ``n``, or a loan pins it. 1 if claimed; 0 with the slot untouched. */
+static int claim_slot(volatile unsigned long long *q, Py_ssize_t idx, unsigned long long slot, unsigned long long n, int check_retiring,
+                      unsigned long long retiring)
+{
+    unsigned long long before = LOAD(&q[idx]);
+    if (check_retiring && before && before != 2 * retiring + 2 && before != 2 * n + 1)
+        return 0;
+    STORE(&q[idx], 2 * n + 1);
+    FULL_FENCE();  /* our mark before we look at the pins (Dekker, ring.py) */
+    for (Py_ssize_t i = 0; i < r_pins; i++)
+        if (LOAD(&q[r_pin + i]) == slot + 1) {
+            STORE(&q[idx], before);  /* untouched: the loaning reader keeps a valid message */
+            return 0;
+        }
+    return 1;
+}
+
+/* Ring.commit: length and stamp, then what vouches for them, in order; then a full fence, so that
+ * our head store comes before the caller reads the waiter table and who is spinning
+ * (pubsub.Publisher: Dekker again). */
+static void commit_slot(volatile unsigned long long *q, const geometry *g, Py_ssize_t idx, unsigned long long slot, unsigned long long n,
+                        unsigned long long nbytes, unsigned long long stamp)
+{
+    STORE(&q[idx + 1], nbytes);
+    STORE(&q[idx + 2], stamp);
+    STORE_REL(&q[idx], 2 * n + 2);
+    STORE_REL(&q[r_map + n % g->depth], (n << 16) | slot);
+    STORE_REL(&q[r_head], n + 1);
+    if (LOAD(&q[r_busy]))
+        STORE(&q[r_busy], 0);
+    FULL_FENCE();
+}
+
+/* The slot for message ``n``, claimed, as Ring.begin picks it: with ``recent``, the slot of
+ * message n - 2 if every tracked reader has read past it (Ring._recent_slot), else the slot of
+ * the message it retires (Ring._claim). Returns the slot's header index and sets ``*slot_out``,
+ * or -1 with the ring untouched (Ring._claim_any's search, a damaged word: the Python path). */
+static Py_ssize_t claim_next(volatile unsigned long long *q, const geometry *g, Py_ssize_t len, unsigned long long n, int recent,
+                             unsigned long long *slot_out)
+{
+    if (recent && n >= 2 && g->depth > 2 && !LOAD(&q[r_untracked])) {
+        int behind = 0;
+        for (Py_ssize_t i = 0; i < r_max_waiters && !behind; i++)  /* the token before its cursor (add_waiter's order) */
+            if (LOAD_ACQ(&q[r_waiters + i]) && LOAD(&q[r_cursors + i]) < n - 1)
+                behind = 1;
+        unsigned long long entry = LOAD(&q[r_map + (n - 2) % g->depth]), slot = entry & 0xFFFF;
+        Py_ssize_t idx = behind || entry >> 16 != n - 2 ? -1 : slot_at(g, slot, g->capacity, len);
+        if (idx >= 0 && LOAD(&q[idx]) == 2 * n - 2 && claim_slot(q, idx, slot, n, 0, 0)) {
+            *slot_out = slot;
+            return idx;
+        }
+    }
+    unsigned long long entry = LOAD(&q[r_map + n % g->depth]), slot = entry & 0xFFFF;
+    Py_ssize_t idx = slot_at(g, slot, g->capacity, len);
+    if (idx < 0 || !claim_slot(q, idx, slot, n, 1, entry >> 16))
+        return -1;
+    *slot_out = slot;
+    return idx;
 }
 
 /* ring_publish(msg, mm, depth, physical, data_offset, stride, capacity, stamp_ns, limit):
@@ -1339,53 +1412,26 @@ static PyObject *ring_publish(PyObject *self, PyObject *const *args, Py_ssize_t 
             goto done;
         volatile unsigned long long *q = (volatile unsigned long long *)buf.buf;
         Py_ssize_t words = buf.len / 8;
-        if (r_map + (Py_ssize_t)g.depth <= words && r_pin + r_pins <= words && r_head < words && r_first < words && r_busy < words) {
-            unsigned long long n = LOAD(&q[r_head]);
-            unsigned long long entry = LOAD(&q[r_map + n % g.depth]);
-            unsigned long long slot = entry & 0xFFFF, retiring = entry >> 16;
-            Py_ssize_t idx = n < (unsigned long long)r_max_head ? slot_at(&g, slot, g.capacity, buf.len) : -1;
+        if (header_fits(&g, words)) {
+            unsigned long long n = LOAD(&q[r_head]), slot = 0;
+            Py_ssize_t idx = n < (unsigned long long)r_max_head ? claim_next(q, &g, buf.len, n, 0, &slot) : -1;
             if (idx >= 0) {
-                /* Ring._claim(slot, n, retiring): the slot still holds the message it retires
-                 * (or nothing yet, or our own unfinished n), and no loan pins it. */
-                unsigned long long before = LOAD(&q[idx]);
-                if (!before || before == 2 * retiring + 2 || before == 2 * n + 1) {
-                    STORE(&q[idx], 2 * n + 1);
-                    FULL_FENCE();  /* our mark before we look at the pins (Dekker, ring.py) */
-                    int pinned = 0;
-                    for (Py_ssize_t i = 0; i < r_pins; i++)
-                        if (LOAD(&q[r_pin + i]) == slot + 1)
-                            pinned = 1;
-                    if (pinned) {
-                        STORE(&q[idx], before);  /* untouched: the Python path picks another slot */
-                    } else {
-                        char *dst = (char *)buf.buf + idx * 8 + r_slot_header;
-                        for (int b = 0; b < 4; b++)  /* u32 meta_len, little-endian as codec.py's frames */
-                            dst[b] = (char)((e.w.len >> (8 * b)) & 0xFF);
-                        memcpy(dst + 4, e.w.data, e.w.len);
-                        memset(dst + 4 + e.w.len, 0, header - 4 - e.w.len);
-                        Py_ssize_t pos = header;
-                        for (Py_ssize_t i = 0; i < PyList_GET_SIZE(e.arrays); i++) {
-                            PyArrayObject *arr = (PyArrayObject *)PyList_GET_ITEM(e.arrays, i);
-                            Py_ssize_t an = PyArray_NBYTES(arr), padded = (an + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1);
-                            memcpy(dst + pos, PyArray_DATA(arr), an);
-                            memset(dst + pos + an, 0, padded - an);
-                            pos += padded;
-                        }
-                        /* Ring.commit: length and stamp, then what vouches for them, in order. */
-                        STORE(&q[idx + 1], (unsigned long long)nbytes);
-                        STORE(&q[idx + 2], stamp);
-                        STORE_REL(&q[idx], 2 * n + 2);
-                        STORE_REL(&q[r_map + n % g.depth], (n << 16) | slot);
-                        STORE_REL(&q[r_head], n + 1);
-                        if (LOAD(&q[r_busy]))
-                            STORE(&q[r_busy], 0);
-                        /* Our head store before the caller reads the waiter table and who is
-                         * spinning (pubsub.Publisher._finish: Dekker again). */
-                        FULL_FENCE();
-                        written = 1;
-                        out = PyLong_FromUnsignedLongLong(n);
-                    }
+                char *dst = (char *)buf.buf + idx * 8 + r_slot_header;
+                for (int b = 0; b < 4; b++)  /* u32 meta_len, little-endian as codec.py's frames */
+                    dst[b] = (char)((e.w.len >> (8 * b)) & 0xFF);
+                memcpy(dst + 4, e.w.data, e.w.len);
+                memset(dst + 4 + e.w.len, 0, header - 4 - e.w.len);
+                Py_ssize_t pos = header;
+                for (Py_ssize_t i = 0; i < PyList_GET_SIZE(e.arrays); i++) {
+                    PyArrayObject *arr = (PyArrayObject *)PyList_GET_ITEM(e.arrays, i);
+                    Py_ssize_t an = PyArray_NBYTES(arr), padded = (an + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1);
+                    memcpy(dst + pos, PyArray_DATA(arr), an);
+                    memset(dst + pos + an, 0, padded - an);
+                    pos += padded;
                 }
+                commit_slot(q, &g, idx, slot, n, (unsigned long long)nbytes, stamp);
+                written = 1;
+                out = PyLong_FromUnsignedLongLong(n);
             }
         }
         PyBuffer_Release(&buf);
@@ -1402,6 +1448,118 @@ done:
         PyMem_Free(e.w.data);
     Py_DECREF(e.arrays);
     return out;
+}
+
+/* Bytes ring_write has copied with streaming stores, for tests and diagnostics (streamed()). */
+static unsigned long long streamed_bytes;
+
+static PyObject *streamed(PyObject *self, PyObject *unused)
+{
+    return PyLong_FromUnsignedLongLong(__atomic_load_n(&streamed_bytes, __ATOMIC_RELAXED));
+}
+
+/* ring_write(enc, mm, depth, physical, data_offset, stride, capacity, stamp_ns, recent_min, stream_min):
+ * the encoded message ``enc`` (codec.Encoded) written and committed as the ring's next message,
+ * fence included: returns its number. Or ``None`` with the ring untouched, for the Python path
+ * (Ring.begin, Encoded.write_into, Ring.commit): a frame past the slot, an array that is not
+ * C-contiguous, a slot Ring.begin must search for (Ring._claim_any), a damaged word.
+ *
+ * For big messages, which ring_publish leaves encoded: the announcement and early wake-up stay
+ * in Python before this call (pubsub.Publisher._announce_write). ``recent_min``: a frame of that
+ * many bytes or more may take the slot of message n - 2 (Ring.begin's ``recent``; 0: never).
+ * ``stream_min``: arrays of that many bytes or more are copied with streaming stores
+ * (codec.STREAM_MIN_BYTES). The GIL is released for the copy, as numpy's copy releases it. Why in
+ * C: the Python path ran about 40 interpreter steps around a big copy (claim, announce, commit,
+ * fence) on caches that copy had just flushed, 15-20 us at 8 MiB (docs/ipc.md, "Big messages"). */
+static PyObject *ring_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 10) {
+        PyErr_Format(PyExc_TypeError, "ring_write(enc, mm, depth, physical, data_offset, stride, capacity, stamp_ns, recent_min, stream_min) takes 10 arguments, got %zd", nargs);
+        return NULL;
+    }
+    if (r_head < 0) {
+        PyErr_SetString(PyExc_RuntimeError, "ring_write: ring_layout() was not called");
+        return NULL;
+    }
+    geometry g;
+    if (parse_geometry(args + 2, &g) < 0)
+        return NULL;
+    unsigned long long vals[3];
+    for (int i = 0; i < 3; i++) {
+        vals[i] = PyLong_AsUnsignedLongLong(args[7 + i]);
+        if (vals[i] == (unsigned long long)-1 && PyErr_Occurred())
+            return NULL;
+    }
+    unsigned long long stamp = vals[0], recent_min = vals[1], stream_min = vals[2];
+    PyObject *meta = PyObject_GetAttrString(args[0], "meta");
+    PyObject *listed = meta == NULL ? NULL : PyObject_GetAttrString(args[0], "arrays");
+    /* A tuple of our own: the list could change while the GIL is released for the copy. */
+    PyObject *arrays = listed == NULL || !PyList_Check(listed) ? NULL : PyList_AsTuple(listed);
+    Py_XDECREF(listed);
+    PyObject *result = NULL;
+    if (arrays == NULL || !PyBytes_Check(meta)) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_TypeError, "ring_write: enc must be a codec.Encoded (meta bytes, arrays list)");
+        goto out;
+    }
+    Py_ssize_t meta_len = PyBytes_GET_SIZE(meta);
+    Py_ssize_t header = (4 + meta_len + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1), nbytes = header;
+    Py_ssize_t count = PyTuple_GET_SIZE(arrays);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *arr = PyTuple_GET_ITEM(arrays, i);
+        if (!PyArray_Check(arr) || !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)arr)) {
+            result = Py_NewRef(Py_None);
+            goto out;
+        }
+        nbytes += (PyArray_NBYTES((PyArrayObject *)arr) + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1);
+    }
+    if ((unsigned long long)nbytes > g.capacity || meta_len > 0xFFFFFFFF) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    Py_buffer buf;
+    if (PyObject_GetBuffer(args[1], &buf, PyBUF_WRITABLE) < 0)
+        goto out;
+    volatile unsigned long long *q = (volatile unsigned long long *)buf.buf;
+    unsigned long long n = 0, slot = 0;
+    Py_ssize_t idx = -1;
+    if (header_fits(&g, buf.len / 8)) {
+        n = LOAD(&q[r_head]);
+        int recent = recent_min && (unsigned long long)nbytes >= recent_min;
+        idx = n < (unsigned long long)r_max_head ? claim_next(q, &g, buf.len, n, recent, &slot) : -1;
+    }
+    if (idx < 0) {
+        PyBuffer_Release(&buf);
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    char *dst = (char *)buf.buf + idx * 8 + r_slot_header;
+    const char *meta_bytes = PyBytes_AS_STRING(meta);
+    Py_BEGIN_ALLOW_THREADS
+    for (int b = 0; b < 4; b++)  /* u32 meta_len, little-endian as codec.py's frames */
+        dst[b] = (char)((meta_len >> (8 * b)) & 0xFF);
+    memcpy(dst + 4, meta_bytes, meta_len);
+    memset(dst + 4 + meta_len, 0, header - 4 - meta_len);
+    Py_ssize_t pos = header;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyArrayObject *arr = (PyArrayObject *)PyTuple_GET_ITEM(arrays, i);
+        Py_ssize_t an = PyArray_NBYTES(arr), padded = (an + ALIGN - 1) & ~(Py_ssize_t)(ALIGN - 1);
+        if (EMOS_STREAM_STORES && (unsigned long long)an >= stream_min) {
+            copy_streaming(dst + pos, PyArray_DATA(arr), (size_t)an);
+            __atomic_add_fetch(&streamed_bytes, (unsigned long long)an, __ATOMIC_RELAXED);
+        } else
+            memcpy(dst + pos, PyArray_DATA(arr), an);
+        memset(dst + pos + an, 0, padded - an);
+        pos += padded;
+    }
+    commit_slot(q, &g, idx, slot, n, (unsigned long long)nbytes, stamp);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&buf);
+    result = PyLong_FromUnsignedLongLong(n);
+out:
+    Py_XDECREF(meta);
+    Py_XDECREF(arrays);
+    return result;
 }
 
 /* ring_take(mm, depth, physical, data_offset, stride, capacity, cursor, head, copy_max, out, publisher):
@@ -1494,6 +1652,97 @@ static PyObject *ring_take(PyObject *self, PyObject *const *args, Py_ssize_t nar
     return Py_BuildValue("(KK)", cursor, lapped);
 }
 
+/* ring_loan(mm, depth, physical, data_offset, stride, capacity, n, entry): message ``n``
+ * pinned through pin ``entry`` and lent as a read-only uint8 view of its slot, as Ring.loan
+ * does it: ``(OK, view, stamp_ns)``, or ``(NOT_READY | LAPPED, None, 0)`` with the entry free
+ * again. ``None`` (the pin left free) for anything that does not hold together (a slot outside
+ * the ring, a length past the slot, a pin entry out of range): Ring.loan then reads the words
+ * again and raises its own error. Why in C: a big message's take ran about 20 interpreter
+ * steps on caches the message's own copy had just flushed (8 us at 8 MiB; docs/ipc.md, "Big
+ * messages: one C call each way").
+ *
+ * Protocol (ring.py's module doc): the pin store, a full fence (Dekker's handshake with a
+ * writer claiming the slot, which stores seq odd, fences and then reads the pins), then seq must
+ * be 2n+2; the view's memoryview holds a buffer export of ``mm``, so the mapping outlives the
+ * ring's close for as long as the loan lives, as numpy.frombuffer's does. */
+static PyObject *ring_loan(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "ring_loan(mm, depth, physical, data_offset, stride, capacity, n, entry) takes 8 arguments, got %zd", nargs);
+        return NULL;
+    }
+    if (r_head < 0) {
+        PyErr_SetString(PyExc_RuntimeError, "ring_loan: ring_layout() was not called");
+        return NULL;
+    }
+    geometry g;
+    if (parse_geometry(args + 1, &g) < 0)
+        return NULL;
+    unsigned long long n = PyLong_AsUnsignedLongLong(args[6]);
+    if (n == (unsigned long long)-1 && PyErr_Occurred())
+        return NULL;
+    unsigned long long entry = PyLong_AsUnsignedLongLong(args[7]);
+    if (entry == (unsigned long long)-1 && PyErr_Occurred())
+        return NULL;
+    Py_buffer buf;
+    if (PyObject_GetBuffer(args[0], &buf, PyBUF_WRITABLE) < 0)
+        return NULL;
+    volatile unsigned long long *q = (volatile unsigned long long *)buf.buf;
+    Py_ssize_t words = buf.len / 8;
+    PyObject *result = NULL;
+    if (entry >= (unsigned long long)r_pins || r_pin + r_pins > words || r_map + (Py_ssize_t)g.depth > words || r_first >= words) {
+        result = Py_NewRef(Py_None);
+        goto done;
+    }
+    unsigned long long mapped = LOAD(&q[r_map + n % g.depth]), held = mapped >> 16;  /* Ring._locate */
+    if (held != n) {
+        int status = n < LOAD(&q[r_first]) ? 1 : (held == r_empty || held < n) ? 0 : 1;  /* LAPPED 1, NOT_READY 0 */
+        result = Py_BuildValue("(iOi)", status, Py_None, 0);
+        goto done;
+    }
+    unsigned long long slot = mapped & 0xFFFF;
+    Py_ssize_t idx = slot_at(&g, slot, g.capacity, buf.len);
+    if (idx < 0) {
+        result = Py_NewRef(Py_None);  /* a slot outside the ring: Ring.loan raises RingCorrupt */
+        goto done;
+    }
+    STORE(&q[r_pin + entry], slot + 1);
+    FULL_FENCE();  /* the pin before we look at seq (a claiming writer fences, then reads pins) */
+    unsigned long long seq = LOAD_ACQ(&q[idx]);
+    unsigned long long length = LOAD(&q[idx + 1]), stamp = LOAD(&q[idx + 2]);
+    if (seq != 2 * n + 2) {
+        STORE(&q[r_pin + entry], 0);
+        result = Py_BuildValue("(iOi)", 1, Py_None, 0);  /* LAPPED: reused since we looked */
+        goto done;
+    }
+    if (length > g.capacity) {
+        STORE(&q[r_pin + entry], 0);
+        result = Py_NewRef(Py_None);  /* pinned and complete, so the writer did not write this */
+        goto done;
+    }
+    PyObject *owner = PyMemoryView_FromObject(args[0]);  /* a buffer export: keeps the mapping */
+    if (owner == NULL) {
+        STORE(&q[r_pin + entry], 0);
+        goto done;
+    }
+    npy_intp dims[1] = {(npy_intp)length};
+    PyObject *view = PyArray_NewFromDescr(&PyArray_Type, PyArray_DescrFromType(NPY_UINT8), 1, dims, NULL,
+                                          (char *)buf.buf + idx * 8 + r_slot_header, NPY_ARRAY_C_CONTIGUOUS | NPY_ARRAY_ALIGNED, NULL);
+    if (view == NULL || PyArray_SetBaseObject((PyArrayObject *)view, owner) < 0) {  /* steals owner */
+        if (view == NULL)
+            Py_DECREF(owner);
+        Py_XDECREF(view);
+        STORE(&q[r_pin + entry], 0);
+        goto done;
+    }
+    result = Py_BuildValue("(iNK)", 2, view, stamp);  /* OK */
+    if (result == NULL)
+        STORE(&q[r_pin + entry], 0);
+done:
+    PyBuffer_Release(&buf);
+    return result;
+}
+
 /* ================================================================================== module */
 
 static PyObject *setup(PyObject *self, PyObject *args)
@@ -1542,6 +1791,11 @@ static PyMethodDef methods[] = {
     {"ring_layout", ring_layout, METH_VARARGS, "ring_layout(head, first, busy, map, pin, pins, slot_header, max_head, empty): ring.py's header layout"},
     {"ring_publish", (PyCFunction)(void (*)(void))ring_publish, METH_FASTCALL,
      "ring_publish(msg, mm, depth, physical, data_offset, stride, capacity, stamp_ns, limit) -> message number, or Encoded / NotImplemented (ring untouched)"},
+    {"ring_loan", (PyCFunction)(void (*)(void))ring_loan, METH_FASTCALL,
+     "ring_loan(mm, depth, physical, data_offset, stride, capacity, n, entry) -> (status, view, stamp_ns), or None (left to Ring.loan)"},
+    {"streamed", streamed, METH_NOARGS, "streamed() -> bytes ring_write has copied with streaming stores in this process"},
+    {"ring_write", (PyCFunction)(void (*)(void))ring_write, METH_FASTCALL,
+     "ring_write(enc, mm, depth, physical, data_offset, stride, capacity, stamp_ns, recent_min, stream_min) -> message number, or None (ring untouched)"},
     {"ring_take", (PyCFunction)(void (*)(void))ring_take, METH_FASTCALL,
      "ring_take(mm, depth, physical, data_offset, stride, capacity, cursor, head, copy_max, out, publisher) -> (cursor, lapped)"},
     {NULL, NULL, 0, NULL},

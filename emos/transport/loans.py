@@ -34,6 +34,7 @@ from emos.transport import ring as R
 if TYPE_CHECKING:
     from emos.transport.pubsub import Publisher
 
+_ring_loan = getattr(R.RING_C, "ring_loan", None)  # None: no C codec, or one built before it
 LOANS_PER_SUBSCRIBER = 2
 # Below this a copy is cheaper than a loan's bookkeeping (a fence, a weak reference: ~2 us).
 LOAN_MIN_BYTES = 16 * 1024
@@ -62,7 +63,11 @@ class LoanBook:
         if not self.free:
             return None
         entry = self.free.pop()
-        status, view, stamp = self.ring.loan(n, entry)
+        ring = self.ring
+        got = None if _ring_loan is None else _ring_loan(ring.mm, ring.depth, ring.physical_slots, ring.data_offset, ring.stride, ring.capacity, n, entry)
+        # One C call (ring.py's module doc); anything it does not take, Ring.loan reads again and
+        # reports (a slot outside the ring, a length past it: RingCorrupt).
+        status, view, stamp = got if got is not None else ring.loan(n, entry)
         if status != R.OK or view is None:
             self.free.append(entry)
             return status, None, 0

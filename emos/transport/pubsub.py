@@ -56,11 +56,10 @@ ANNOUNCE_BYTES = 128 * 1024
 # path costs about 15 interpreter calls per message each way (docs/ipc.md, "Small messages").
 # Bigger frames keep the Python path (announcement, streaming copies, loans) unchanged.
 SMALL_FRAME_BYTES = 64 * 1024
-_C = codec.C_CODEC if hasattr(codec.C_CODEC, "ring_publish") else None  # None: no C codec, or EMOS_CODEC=python
-if _C is not None:
-    _C.ring_layout(R._HEAD, R._FIRST, R._BUSY, R._MAP_IDX, R._PIN_IDX, R.LOAN_ENTRIES, R.SLOT_HEADER, R._MAX_HEAD, R._EMPTY)
+_C = R.RING_C  # None: no C codec, or EMOS_CODEC=python
 _ring_publish = None if _C is None else _C.ring_publish
 _ring_take = None if _C is None else _C.ring_take
+_ring_write = getattr(_C, "ring_write", None)  # None: no C codec, or one built before it
 _COPY_NS_PER_BYTE = 1.0  # first guess of a copy's speed (1 GB/s): measured after each long write
 _ANNOUNCE_MARGIN_NS = 100_000  # slack on the deadline for preemption of the writer
 
@@ -258,8 +257,16 @@ class Publisher:
                 raise MessageTooLarge(f"topic {self.topic!r}: a {self.type_name} of {nbytes} B exceeds the limit of {self.max_bytes} B")
             self._grow(nbytes)
         ring = self.ring
-        n, buf = ring.begin(nbytes, self.reuse_recent)
         started = self._announce_write(ring, nbytes) if nbytes >= ANNOUNCE_BYTES else 0  # (no call for small ones)
+        if _ring_write is not None:
+            # Claim, copy (streaming past codec.STREAM_MIN_BYTES), commit and fence in one C call;
+            # None: the ring untouched, for the Python path below (a slot to search for, say).
+            n = _ring_write(enc, ring.mm, ring.depth, ring.physical_slots, ring.data_offset, ring.stride, ring.capacity, stamp,
+                            R.RECENT_MIN_BYTES if self.reuse_recent else 0, codec.STREAM_MIN_BYTES)
+            if n is not None:
+                self._committed(nbytes, started)
+                return int(n)
+        n, buf = ring.begin(nbytes, self.reuse_recent)
         try:
             # Arrays past codec.STREAM_MIN_BYTES go in with streaming stores: where the slots
             # a topic cycles through outgrow the last-level cache (docs/ipc.md).
@@ -285,14 +292,19 @@ class Publisher:
 
     def _finish(self, ring: R.Ring, n: int, nbytes: int, stamp: int, started: int) -> None:
         """Commit message ``n`` and wake the readers that are not spinning."""
-        if started:
-            took = time.monotonic_ns() - started
-            self._ns_per_byte = 0.75 * self._ns_per_byte + 0.25 * took / nbytes
         ring.commit(n, nbytes, stamp)
         # Our head store before we read the waiter table: a subscriber registers (stores), then
         # reads head; with a fence on both sides one of us sees the other, so a subscriber that
         # registered just now either reads this message or is woken for it (Dekker again).
         full_fence()
+        self._committed(nbytes, started)
+
+    def _committed(self, nbytes: int, started: int) -> None:
+        """After a commit and its full fence: learn the copy's speed, wake who is not spinning."""
+        if started:
+            took = time.monotonic_ns() - started
+            self._ns_per_byte = 0.75 * self._ns_per_byte + 0.25 * took / nbytes
+        ring = self.ring
         if ring.q[R._WAITERS_VER] != self._waiters_version:
             self._sync_waiters()
         if self.sender.fds:

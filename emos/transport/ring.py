@@ -59,11 +59,13 @@ Small messages in C. ``emos/msgs/_ccodec.c`` (``ring_publish``, ``ring_take``) d
 :meth:`Ring.begin`, the copy and :meth:`Ring.commit` do, and what :meth:`Ring.read` does, in one
 call per small message (publisher) or per batch of them (subscriber), with the same stores, loads
 and fences in the same order and the same checks of every word it reads from the segment;
-:mod:`emos.transport.pubsub` gives it this module's layout at import (``ring_layout``). It
-handles only the common case (the retiring slot is free, frames up to
-``pubsub.SMALL_FRAME_BYTES``, messages below the loan threshold) and leaves everything else to
-the code here, with the ring untouched. A change to this protocol must be made there too
-(tests/runtime/test_small_message_path.py).
+this module gives it its layout at import (``RING_C``, at the end). It handles only the common
+case (the retiring slot is free, frames up to ``pubsub.SMALL_FRAME_BYTES``, messages below the
+loan threshold) and leaves everything else to the code here, with the ring untouched. A big
+message's loan is one C call too (``ring_loan``, what :meth:`Ring.loan` does; the loan book
+calls it and falls back to :meth:`Ring.loan` for anything it does not take). A change to this
+protocol must be made there too (tests/runtime/test_small_message_path.py,
+tests/ipc_loan/test_loan_c_path.py).
 
 Trust. A segment is opened only through :func:`emos.transport.trust.open_owned` (a regular file
 of our uid, mode 0600, no symbolic link), its header is checked for consistency before any
@@ -85,6 +87,7 @@ from pathlib import Path
 import numpy as np
 
 from emos.errors import TransportError
+from emos.msgs import codec
 from emos.transport import ring_check
 from emos.transport.context import SHM_DIR
 from emos.transport.fence import WEAK_ORDERING, full_fence
@@ -683,3 +686,11 @@ def segment_exists(name: str) -> bool:
 
 def segment_path(name: str) -> Path:
     return SHM_DIR / name
+
+
+# The C fast path of this protocol (module doc, "Small messages in C"), told this module's header
+# layout once; None without the C codec or with EMOS_CODEC=python.
+RING_C = codec.C_CODEC if hasattr(codec.C_CODEC, "ring_publish") else None
+if RING_C is not None:
+    RING_C.ring_layout(_HEAD, _FIRST, _BUSY, _MAP_IDX, _PIN_IDX, LOAN_ENTRIES, SLOT_HEADER, _MAX_HEAD, _EMPTY, _UNTRACKED, _WAITERS_IDX,
+                       _CURSOR_IDX, MAX_WAITERS)

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from emos import msgs as M
 from emos.msgs import codec
+from emos.transport import pubsub
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
 from tests.ipc_loan.torn import sigkill_writer_and_check
@@ -137,7 +138,10 @@ def test_a_published_message_past_the_threshold_arrives_intact(ctx, streaming_fr
 
 @needs_c
 @pytest.mark.unit
-def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx, monkeypatch, streaming_from_floor):
+@pytest.mark.parametrize("path", ["c", "python"])
+def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx, monkeypatch, streaming_from_floor, path):
+    """Both of the publisher's paths for big frames: one C call (``_ccodec.ring_write``, which
+    counts what it streams) and the Python one (``codec._stream_copy``, counted here)."""
     calls = []
     real = codec._stream_copy
 
@@ -146,13 +150,20 @@ def test_a_publisher_streams_big_arrays_into_its_ring_and_copies_small_ones(ctx,
         return real(dst, offset, src)
 
     monkeypatch.setattr(codec, "_stream_copy", counting)
+    if path == "python":
+        monkeypatch.setattr(pubsub, "_ring_write", None)
     sub = Subscriber(ctx, "/cam", M.Image, queue_size=4)
     pub = Publisher(ctx, "/cam", M.Image, publisher_id="cam", depth=2)
     frame = np.random.default_rng(5).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    before = codec.C_CODEC.streamed()
     pub.publish(M.Image.from_numpy(frame))
     pub.publish(M.Image.from_numpy(frame[:8, :8]))  # 192 B: a plain copy
     got = sub.take()
-    assert calls == [frame.nbytes]
+    streamed = codec.C_CODEC.streamed() - before
+    if path == "c":
+        assert (calls, streamed) == ([], frame.nbytes if codec.C_CODEC.STREAM_STORES else 0)
+    else:
+        assert (calls, streamed) == ([frame.nbytes], 0)
     assert np.array_equal(got[0].to_numpy(), frame) and np.array_equal(got[1].to_numpy(), frame[:8, :8])
     del got
     sub.close()
