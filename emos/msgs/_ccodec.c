@@ -1498,8 +1498,10 @@ static PyObject *ring_write(PyObject *self, PyObject *const *args, Py_ssize_t na
     Py_XDECREF(listed);
     PyObject *result = NULL;
     if (arrays == NULL || !PyBytes_Check(meta)) {
-        if (!PyErr_Occurred())
-            PyErr_SetString(PyExc_TypeError, "ring_write: enc must be a codec.Encoded (meta bytes, arrays list)");
+        if (PyErr_Occurred() && !PyErr_ExceptionMatches(PyExc_AttributeError))
+            goto out;  /* out of memory, say: not ours to rename */
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "ring_write: enc must be a codec.Encoded (meta bytes, arrays list), got %.100s", Py_TYPE(args[0])->tp_name);
         goto out;
     }
     Py_ssize_t meta_len = PyBytes_GET_SIZE(meta);

@@ -16,7 +16,7 @@ from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
 from tests.ipc_loan.torn import FORK, sigkill_writer_and_check
 
-pytestmark = pytest.mark.process
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("ring_path")]  # readers loan in C and in Python
 
 
 def _loaning_writer(run_dir: str, run_id: str, size: int, ready) -> None:

@@ -22,6 +22,8 @@ from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
 from tests.ipc_loan.torn import sigkill_writer_and_check
 
+pytestmark = pytest.mark.usefixtures("ring_path")  # the C calls and the Python path alike
+
 BIG = R.RECENT_MIN_BYTES + 40
 DEPTH = 10
 
