@@ -122,7 +122,7 @@ print(zlib.crc32(frame))
 
 
 @pytest.mark.unit
-def test_a_published_message_past_the_threshold_arrives_intact(ctx, streaming_from_floor):
+def test_a_published_message_past_the_threshold_arrives_intact(ctx, streaming_from_floor, ring_path):
     sub = Subscriber(ctx, "/big", M.UInt8MultiArray, queue_size=4)
     pub = Publisher(ctx, "/big", M.UInt8MultiArray, publisher_id="big", depth=2)
     rng = np.random.default_rng(3)
@@ -189,7 +189,7 @@ def _streaming_writer(run_dir: str, run_id: str, size: int, ready) -> None:
 @pytest.mark.process
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(size=st.sampled_from([FLOOR + 24, (1 << 20) + 8, 4 << 20]), kill_after=st.floats(0.0, 0.05))
-def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, streaming_from_floor, size, kill_after):
+def test_no_torn_message_when_the_writer_is_sigkilled_mid_streaming_copy(ctx, streaming_from_floor, ring_path, size, kill_after):
     sigkill_writer_and_check(ctx, _streaming_writer, size, kill_after)
 
 
