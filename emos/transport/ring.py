@@ -423,9 +423,10 @@ class Ring:
         return self.data_offset + self._pending_slot * self.stride + SLOT_HEADER
 
     def announce(self, until_ns: int) -> None:
-        """Say that the message being written (after :meth:`begin`) should be complete by
-        ``until_ns`` (``time.monotonic_ns``): a reader that lingers for messages keeps spinning
-        until then instead of parking in the middle of a long copy (``waker.Waker.serve``).
+        """Say that the message about to be written (the publisher announces before it claims
+        the slot) should be complete by ``until_ns`` (``time.monotonic_ns``): a reader that
+        lingers for messages keeps spinning until then instead of parking in the middle of a
+        long copy (``waker.Waker.serve``).
         Only a hint: a writer killed mid-copy leaves a deadline that simply passes."""
         self.q[_BUSY] = until_ns
 
