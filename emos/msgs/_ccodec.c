@@ -1282,6 +1282,30 @@ static int parse_geometry(PyObject *const *args, geometry *g)
     return 0;
 }
 
+/* The start every ring call shares: ``nargs == want`` (else a TypeError naming ``signature``),
+ * the layout given (ring_layout), the geometry from args[geom] on, and ``count`` unsigned
+ * integers from args[first] on into ``vals``. 0, or -1 with the error set. */
+static int ring_args(const char *signature, PyObject *const *args, Py_ssize_t nargs, Py_ssize_t want, Py_ssize_t geom, geometry *g,
+                     Py_ssize_t first, int count, unsigned long long *vals)
+{
+    if (nargs != want) {
+        PyErr_Format(PyExc_TypeError, "%s takes %zd arguments, got %zd", signature, want, nargs);
+        return -1;
+    }
+    if (r_head < 0) {
+        PyErr_Format(PyExc_RuntimeError, "%s: ring_layout() was not called", signature);
+        return -1;
+    }
+    if (parse_geometry(args + geom, g) < 0)
+        return -1;
+    for (int i = 0; i < count; i++) {
+        vals[i] = PyLong_AsUnsignedLongLong(args[first + i]);
+        if (vals[i] == (unsigned long long)-1 && PyErr_Occurred())
+            return -1;
+    }
+    return 0;
+}
+
 /* u64 index of slot ``slot``'s header, or -1 if the slot with ``room`` payload bytes does not lie
  * inside the mapping of ``len`` bytes. */
 static Py_ssize_t slot_at(const geometry *g, unsigned long long slot, unsigned long long room, Py_ssize_t len)
@@ -1371,19 +1395,9 @@ static Py_ssize_t claim_next(volatile unsigned long long *q, const geometry *g, 
  * (the C encoder leaves the message to the Python codec). */
 static PyObject *ring_publish(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 9) {
-        PyErr_Format(PyExc_TypeError, "ring_publish(msg, mm, depth, physical, data_offset, stride, capacity, stamp_ns, limit) takes 9 arguments, got %zd", nargs);
-        return NULL;
-    }
-    if (r_head < 0) {
-        PyErr_SetString(PyExc_RuntimeError, "ring_publish: ring_layout() was not called");
-        return NULL;
-    }
     geometry g;
-    if (parse_geometry(args + 2, &g) < 0)
-        return NULL;
-    unsigned long long stamp = PyLong_AsUnsignedLongLong(args[7]);
-    if (stamp == (unsigned long long)-1 && PyErr_Occurred())
+    unsigned long long stamp;
+    if (ring_args("ring_publish(msg, mm, depth, physical, data_offset, stride, capacity, stamp_ns, limit)", args, nargs, 9, 2, &g, 7, 1, &stamp) < 0)
         return NULL;
     Py_ssize_t limit = PyLong_AsSsize_t(args[8]);
     if (limit == -1 && PyErr_Occurred())
@@ -1473,23 +1487,11 @@ static PyObject *streamed(PyObject *self, PyObject *unused)
  * fence) on caches that copy had just flushed, 15-20 us at 8 MiB (docs/ipc.md, "Big messages"). */
 static PyObject *ring_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 10) {
-        PyErr_Format(PyExc_TypeError, "ring_write(enc, mm, depth, physical, data_offset, stride, capacity, stamp_ns, recent_min, stream_min) takes 10 arguments, got %zd", nargs);
-        return NULL;
-    }
-    if (r_head < 0) {
-        PyErr_SetString(PyExc_RuntimeError, "ring_write: ring_layout() was not called");
-        return NULL;
-    }
     geometry g;
-    if (parse_geometry(args + 2, &g) < 0)
-        return NULL;
     unsigned long long vals[3];
-    for (int i = 0; i < 3; i++) {
-        vals[i] = PyLong_AsUnsignedLongLong(args[7 + i]);
-        if (vals[i] == (unsigned long long)-1 && PyErr_Occurred())
-            return NULL;
-    }
+    if (ring_args("ring_write(enc, mm, depth, physical, data_offset, stride, capacity, stamp_ns, recent_min, stream_min)", args, nargs, 10, 2, &g, 7, 3,
+                  vals) < 0)
+        return NULL;
     unsigned long long stamp = vals[0], recent_min = vals[1], stream_min = vals[2];
     PyObject *meta = PyObject_GetAttrString(args[0], "meta");
     PyObject *listed = meta == NULL ? NULL : PyObject_GetAttrString(args[0], "arrays");
@@ -1572,26 +1574,12 @@ out:
  * messages were overwritten before they could be read (LAPPED). */
 static PyObject *ring_take(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 11) {
-        PyErr_Format(PyExc_TypeError, "ring_take(mm, depth, physical, data_offset, stride, capacity, cursor, head, copy_max, out, publisher) takes 11 arguments, got %zd", nargs);
-        return NULL;
-    }
-    if (r_head < 0) {
-        PyErr_SetString(PyExc_RuntimeError, "ring_take: ring_layout() was not called");
-        return NULL;
-    }
     geometry g;
-    if (parse_geometry(args + 1, &g) < 0)
+    unsigned long long vals[3];
+    if (ring_args("ring_take(mm, depth, physical, data_offset, stride, capacity, cursor, head, copy_max, out, publisher)", args, nargs, 11, 1, &g, 6, 3,
+                  vals) < 0)
         return NULL;
-    unsigned long long cursor = PyLong_AsUnsignedLongLong(args[6]);
-    if (cursor == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
-    unsigned long long head = PyLong_AsUnsignedLongLong(args[7]);
-    if (head == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
-    unsigned long long copy_max = PyLong_AsUnsignedLongLong(args[8]);
-    if (copy_max == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
+    unsigned long long cursor = vals[0], head = vals[1], copy_max = vals[2];
     PyObject *out = args[9], *publisher = args[10];
     if (!PyList_Check(out)) {
         PyErr_SetString(PyExc_TypeError, "ring_take: out must be a list");
@@ -1669,23 +1657,11 @@ static PyObject *ring_take(PyObject *self, PyObject *const *args, Py_ssize_t nar
  * ring's close for as long as the loan lives, as numpy.frombuffer's does. */
 static PyObject *ring_loan(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 8) {
-        PyErr_Format(PyExc_TypeError, "ring_loan(mm, depth, physical, data_offset, stride, capacity, n, entry) takes 8 arguments, got %zd", nargs);
-        return NULL;
-    }
-    if (r_head < 0) {
-        PyErr_SetString(PyExc_RuntimeError, "ring_loan: ring_layout() was not called");
-        return NULL;
-    }
     geometry g;
-    if (parse_geometry(args + 1, &g) < 0)
+    unsigned long long vals[2];
+    if (ring_args("ring_loan(mm, depth, physical, data_offset, stride, capacity, n, entry)", args, nargs, 8, 1, &g, 6, 2, vals) < 0)
         return NULL;
-    unsigned long long n = PyLong_AsUnsignedLongLong(args[6]);
-    if (n == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
-    unsigned long long entry = PyLong_AsUnsignedLongLong(args[7]);
-    if (entry == (unsigned long long)-1 && PyErr_Occurred())
-        return NULL;
+    unsigned long long n = vals[0], entry = vals[1];
     Py_buffer buf;
     if (PyObject_GetBuffer(args[0], &buf, PyBUF_WRITABLE) < 0)
         return NULL;

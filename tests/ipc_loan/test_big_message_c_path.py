@@ -11,8 +11,6 @@ both paths through the ``ring_path`` fixture (test_recent_slots.py, test_loan_si
 """
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 import pytest
 
@@ -22,6 +20,7 @@ from emos.transport import loans, pubsub
 from emos.transport import ring as R
 from emos.transport.pubsub import Publisher, Subscriber
 from emos.transport.waker import Waker
+from tests.python_calls import python_calls
 
 pytestmark = [pytest.mark.unit,
               pytest.mark.skipif(pubsub._ring_write is None or loans._ring_loan is None,
@@ -243,24 +242,6 @@ def test_a_loaned_view_keeps_the_mapping_and_its_pin_until_it_is_dropped(ctx):
     pins.close()
 
 
-def _python_calls(fn, *args) -> int:
-    """How many Python functions ``fn(*args)`` entered (C calls not counted): the interpreter's
-    share of a call, independent of the machine's speed and load."""
-    calls = 0
-
-    def count(frame, event, arg):
-        nonlocal calls
-        if event == "call":
-            calls += 1
-
-    sys.setprofile(count)
-    try:
-        fn(*args)
-    finally:
-        sys.setprofile(None)
-    return calls - 1  # fn itself
-
-
 def test_a_big_message_costs_few_python_calls_each_way(ctx, monkeypatch):
     """What the C calls are for: a big publish entered 22 Python functions (begin, claim,
     announce, write_into, commit, fences) and a loaned take 13; now 9 and 9 at most (the
@@ -279,13 +260,13 @@ def test_a_big_message_costs_few_python_calls_each_way(ctx, monkeypatch):
         for _ in range(2):
             pub.publish(msg)
             del sub.take_raw()[:]
-        publish_calls = min(_python_calls(pub.publish, msg) for _ in range(3))
+        publish_calls = min(python_calls(pub.publish, msg) for _ in range(3))
         del sub.take_raw()[:]
         take_calls = 1 << 30
         for _ in range(3):
             pub.publish(msg)
             taken: list = []
-            take_calls = min(take_calls, _python_calls(lambda: taken.extend(sub.take_raw())))  # noqa: B023 - called at once
+            take_calls = min(take_calls, python_calls(lambda: taken.extend(sub.take_raw())))  # noqa: B023 - called at once
             assert len(taken) == 1
             taken.clear()  # ends the loan
         counts[path] = (publish_calls, take_calls)

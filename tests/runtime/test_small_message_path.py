@@ -13,7 +13,6 @@ import multiprocessing as mp
 import os
 import random
 import signal
-import sys
 import zlib
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from emos.transport import pubsub
 from emos.transport import ring as R
 from emos.transport.context import RunContext
 from emos.transport.pubsub import Publisher, Subscriber
+from tests.python_calls import python_calls
 from tests.runtime.test_ccodec import SAMPLES
 
 needs_c = pytest.mark.skipif(codec.C_CODEC is None, reason="the C codec is not built (no compiler at install, or EMOS_CODEC=python)")
@@ -188,24 +188,6 @@ def test_damaged_ring_words_are_left_to_the_python_path(ctx, damage):
     pub.close()
 
 
-def _python_calls(fn, *args) -> int:
-    """How many Python functions ``fn(*args)`` entered (C calls not counted): a measure of the
-    interpreter's share of a call that does not depend on the machine's speed or load."""
-    calls = 0
-
-    def count(frame, event, arg):
-        nonlocal calls
-        if event == "call":
-            calls += 1
-
-    sys.setprofile(count)
-    try:
-        fn(*args)
-    finally:
-        sys.setprofile(None)
-    return calls - 1  # fn itself
-
-
 @needs_c
 @pytest.mark.unit
 def test_a_small_message_costs_few_python_calls_each_way(ctx):
@@ -224,14 +206,14 @@ def test_a_small_message_costs_few_python_calls_each_way(ctx):
     sub.take_raw()
     # The fewest over a few tries: a machine stalled past the subscriber's periodic rescan
     # (RESCAN_EVERY_NS) would add a directory scan to one of them.
-    publish_calls = min(_python_calls(pub.publish, msg) for _ in range(5))
+    publish_calls = min(python_calls(pub.publish, msg) for _ in range(5))
     sub.take_raw()
     take_calls = 1 << 30
     for _ in range(3):
         for _ in range(16):
             pub.publish(msg)
         batch: list = []
-        take_calls = min(take_calls, _python_calls(lambda: batch.extend(sub.take_raw())))  # noqa: B023 - called at once
+        take_calls = min(take_calls, python_calls(lambda: batch.extend(sub.take_raw())))  # noqa: B023 - called at once
         assert len(batch) == 16
     assert publish_calls <= 2, f"a small publish entered {publish_calls} Python functions"
     assert take_calls <= 8, f"taking 16 small messages entered {take_calls} Python functions"
