@@ -34,7 +34,7 @@ from emos.transport import ring as R
 if TYPE_CHECKING:
     from emos.transport.pubsub import Publisher
 
-_ring_loan = getattr(R.RING_C, "ring_loan", None)  # None: no C codec, or one built before it
+_ring_loan = None if R.RING_C is None else R.RING_C.ring_loan
 LOANS_PER_SUBSCRIBER = 2
 # Below this a copy is cheaper than a loan's bookkeeping (a fence, a weak reference: ~2 us).
 LOAN_MIN_BYTES = 16 * 1024

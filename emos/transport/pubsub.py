@@ -59,7 +59,7 @@ SMALL_FRAME_BYTES = 64 * 1024
 _C = R.RING_C  # None: no C codec, or EMOS_CODEC=python
 _ring_publish = None if _C is None else _C.ring_publish
 _ring_take = None if _C is None else _C.ring_take
-_ring_write = getattr(_C, "ring_write", None)  # None: no C codec, or one built before it
+_ring_write = None if _C is None else _C.ring_write
 _COPY_NS_PER_BYTE = 1.0  # first guess of a copy's speed (1 GB/s): measured after each long write
 _ANNOUNCE_MARGIN_NS = 100_000  # slack on the deadline for preemption of the writer
 

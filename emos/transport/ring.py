@@ -690,8 +690,9 @@ def segment_path(name: str) -> Path:
 
 
 # The C fast path of this protocol (module doc, "Small messages in C"), told this module's header
-# layout once; None without the C codec or with EMOS_CODEC=python.
-RING_C = codec.C_CODEC if hasattr(codec.C_CODEC, "ring_publish") else None
+# layout once; None without the C codec, with EMOS_CODEC=python, or with a build older than this
+# layout (no ring_write: its ring_layout takes fewer words), which then runs the Python path.
+RING_C = codec.C_CODEC if hasattr(codec.C_CODEC, "ring_write") else None
 if RING_C is not None:
     RING_C.ring_layout(_HEAD, _FIRST, _BUSY, _MAP_IDX, _PIN_IDX, LOAN_ENTRIES, SLOT_HEADER, _MAX_HEAD, _EMPTY, _UNTRACKED, _WAITERS_IDX,
                        _CURSOR_IDX, MAX_WAITERS)
