@@ -24,11 +24,8 @@ Peers:
 Each row says what its transport is (``about``), and a round of a peer that reports how the
 payload travelled (zenoh: ``shm``) records it.
 
-Peers that need packages run in one benchmark-only virtual environment that this module creates
-(``python -m venv``, then ``pip install`` of pinned versions) under ``$EMOS_BENCH_PEERS`` (default
-``~/.cache/emos-bench/peers``): never a dependency of EMOS, never imported by it. A registry that
-cannot be reached, or a package that installs but cannot run here, is a clear error naming the
-peer and packages. Every peer script runs in a session of its own; when it ends, however it
+Peers that need packages run in the benchmark-only virtual environment of ``peer_env`` (pinned
+versions under ``$EMOS_BENCH_PEERS``, never a dependency of EMOS). Every peer script runs in a session of its own; when it ends, however it
 ends, every process left in that session is killed and the files the peer made are removed
 (``remove_iceoryx2_files``, ``remove_zenoh_files``, the run's temporary folder).
 """
@@ -52,9 +49,13 @@ from typing import Any
 
 import numpy as np
 
-from emos.errors import EmosError
-from emos.tools.bench import ipc_common, ipc_pingpong
+from emos.tools.bench import ipc_common, ipc_pingpong, peer_env
 from emos.tools.bench.common import percentiles
+from emos.tools.bench.peer_env import ENV_PEER_DIR as ENV_PEER_DIR
+from emos.tools.bench.peer_env import PeerUnavailable as PeerUnavailable
+from emos.tools.bench.peer_env import peer_dir as peer_dir
+from emos.tools.bench.peer_env import peer_env_has as peer_env_has
+from emos.tools.bench.peer_env import peer_python as peer_python
 from emos.transport.fence import WEAK_ORDERING
 
 LOCAL_PEERS = ["shm-spin", "pipe"]
@@ -87,36 +88,14 @@ ABOUT = {
 }
 ABOUT_NO_SHM = {"zenoh": f"zenoh (no shm): {ZENOH} Python, plain put of bytes over tcp/127.0.0.1 (the payload did not travel "
                          "through shared memory), no router, no scouting"}
-ENV_PEER_DIR = "EMOS_BENCH_PEERS"
 _PEER_TIMEOUT_S = 600.0  # one peer measurement; only a hung peer reaches it
 _KILL_WAIT_S = 60.0  # a SIGKILLed process that has not exited by then is stuck in the kernel
-_INSTALL_TIMEOUT_S = 900.0
 # Where iceoryx2 and zenoh keep their shared memory on Linux, and how iceoryx2's files of our runs start.
 PEER_SHM_DIR = Path("/dev/shm")
 IOX2_SHM_DIR = PEER_SHM_DIR
 _IOX2_PREFIX = "iox2emos"
 ZENOH_SHM_SUFFIX = ".zenoh"  # zenoh's shared memory: /dev/shm/<number>.zenoh
 _REPORTED = ("shm",)  # zenoh: whether the reply arrived as shared memory
-
-
-class PeerUnavailable(EmosError, RuntimeError):
-    """A peer that cannot be measured here (its packages do not install, or it is unknown)."""
-
-
-def peer_dir() -> Path:
-    return Path(os.environ.get(ENV_PEER_DIR) or "~/.cache/emos-bench/peers").expanduser()
-
-
-def peer_python() -> Path:
-    return peer_dir() / "bin" / "python"
-
-
-def peer_env_has(module: str) -> bool:
-    """Whether the peer environment exists and imports ``module`` (no install attempted)."""
-    python = peer_python()
-    if not python.exists():
-        return False
-    return subprocess.run([str(python), "-c", f"import {module}"], capture_output=True, timeout=120).returncode == 0
 
 
 def _command_problem(peer: str) -> str | None:
@@ -144,31 +123,7 @@ def peer_ready(peer: str) -> bool:
 def ensure_peer_env(peer: str, log: Any = None) -> Path:
     """The peer environment's Python with ``peer``'s packages, creating and filling it if needed."""
     packages, module = VENV_PEERS[peer]
-    python = peer_python()
-    if peer_ready(peer):
-        return python
-    where = peer_dir()
-    if log:
-        log(f"installing {' '.join(packages)} into the benchmark-only environment {where} (once)...")
-    if not python.exists():
-        where.parent.mkdir(parents=True, exist_ok=True)
-        made = subprocess.run([sys.executable, "-m", "venv", str(where)], capture_output=True, text=True, timeout=_INSTALL_TIMEOUT_S)
-        if made.returncode != 0:
-            raise PeerUnavailable(f"peer {peer}: cannot create the virtual environment {where}: {made.stderr.strip()[-400:]}")
-    try:
-        pip = subprocess.run([str(python), "-m", "pip", "install", "--disable-pip-version-check", "-q", *packages],
-                             capture_output=True, text=True, timeout=_INSTALL_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        raise PeerUnavailable(f"peer {peer}: pip install {' '.join(packages)} into {where} did not finish in {_INSTALL_TIMEOUT_S:.0f} s "
-                              "(is the package registry reachable?)") from None
-    if pip.returncode != 0 or not peer_env_has(module):
-        detail = (pip.stderr or pip.stdout).strip().splitlines()[-3:]
-        raise PeerUnavailable(f"peer {peer}: cannot install {' '.join(packages)} into {where} (the package registry may be "
-                              f"unreachable): {' | '.join(detail) or 'no output'}")
-    problem = _command_problem(peer)
-    if problem:
-        raise PeerUnavailable(f"peer {peer}: {' '.join(packages)} installed into {where}, but {problem}")
-    return python
+    return peer_env.ensure(peer, packages, module, log=log, command_problem=lambda: _command_problem(peer))
 
 
 # ------------------------------------------------------------------ shm-spin: the copies alone

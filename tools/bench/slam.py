@@ -22,6 +22,11 @@ What is measured, on one log:
 - ``--param NAME=VALUE`` (repeatable): set a ``SlamParams`` field for this run (e.g.
   ``--param factor_covariance=hessian --param hessian_cov_scale=50``); the result then holds
   ``params``, what was changed from the defaults.
+- ``--peer karto``: also run OpenKarto, the SLAM slam_toolbox is built on (``slam_peer_karto``:
+  ``yag-slam``, LGPLv3, with slam_toolbox's default matcher settings), on the same scans and the
+  same noisy odometry in the same run, scored by the same formulas; its row is in ``peers``.
+  Installed into the benchmark-only environment (``peer_env``) on first use, never a dependency
+  of EMOS.
 """
 from __future__ import annotations
 
@@ -36,7 +41,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["add_arguments", "run", "measure"]
+__all__ = ["add_arguments", "run", "measure", "KARTO_PACKAGES"]
+
+# yag-slam imports cv2 without declaring it; the rest are its declared dependencies, pinned.
+KARTO_PACKAGES = ["yag-slam==0.3.0", "karto-scanmatcher==1.0.0", "sparse-bundle-adjustment==0.9.6",
+                  "opencv-python-headless==5.0.0.93", "numpy"]
+_PEER_TIMEOUT_S = 3600.0  # one peer run on one log; only a hung peer reaches it
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="set a SlamParams field (repeatable), e.g. --param factor_covariance=response")
+    parser.add_argument("--peer", choices=("karto",), default=None,
+                        help="also run OpenKarto (slam_toolbox's SLAM, the LGPLv3 `yag-slam` package, installed by the "
+                             "benchmark into its own environment) on the same scans and odometry")
 
 
 def _params(items: list[str]) -> dict[str, Any]:
@@ -149,6 +162,15 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "loop_closures": len(slam.loops), "log_duration_s": duration,
         **({"params": {k: list(v) if isinstance(v, tuple) else v for k, v in overrides.items()}} if overrides else {}),
     }
+    peer_est = None
+    if getattr(args, "peer", None) == "karto":
+        peer_est, peer_doc = run_karto(scans, odom, args.max_range, log=None if args.quiet else _stderr)
+        result["peers"] = [{
+            "slam": "karto", "ate_rmse_m": ate_rmse(peer_est, ref), "rpe_1m_rmse_m": rpe_rmse(peer_est, ref, 1.0),
+            "rpe_5m_rmse_m": rpe_rmse(peer_est, ref, 5.0), "cpu_s_per_scan": peer_doc["cpu_s"] / max(len(scans), 1),
+            "realtime_factor": (duration / peer_doc["cpu_s"]) if duration is not None and peer_doc["cpu_s"] > 0 else None,
+            "loop_closures": peer_doc["loop_closures"], "about": "OpenKarto (yag-slam 0.3.0: karto-scanmatcher + SPA), "
+            "slam_toolbox's default matcher settings, every scan processed"}]
     if args.map or args.plot:
         grid = _build_map(est, scans, args.max_range)
         if args.map:
@@ -157,9 +179,53 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             result["map"] = str(save_map(grid, args.map))
         if args.plot:
             reference = args.reference or _default_reference(args.log)
-            _plot(args.plot, grid, est, ref, reference, f"{log.name}: ATE {result['ate_rmse_m']:.3f} m, seed {args.seed}")
+            peer = None if peer_est is None else (peer_est, f"OpenKarto (ATE {result['peers'][0]['ate_rmse_m']:.3f} m)")
+            _plot(args.plot, grid, est, ref, reference, f"{log.name}: ATE {result['ate_rmse_m']:.3f} m, seed {args.seed}", peer)
             result["plot"] = args.plot
     return result
+
+
+def _stderr(text: str) -> None:
+    print(f"emos bench slam: {text}", file=sys.stderr, flush=True)
+
+
+def run_karto(scans: list[Any], odom: np.ndarray, max_range: float, log: Any = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """OpenKarto's optimised poses for ``scans`` from ``odom`` (``slam_peer_karto`` in the peer
+    environment), and its report (``cpu_s``, ``loop_closures``)."""
+    import subprocess
+    import tempfile
+
+    from emos.actors.nav.localization import beam_angles
+    from emos.tools.bench import peer_env
+
+    counts = {len(s.ranges) for s in scans}
+    if len(counts) != 1:
+        raise peer_env.PeerUnavailable(f"peer karto: needs one beam count for the whole log, got {sorted(counts)}")
+    python = peer_env.ensure("karto", KARTO_PACKAGES, "yag_slam", log=log)
+    script = Path(__file__).with_name("slam_peer_karto.py")
+    with tempfile.TemporaryDirectory(prefix="emos-bench-karto-") as tmp:
+        given, got = Path(tmp) / "input.npz", Path(tmp) / "output.npz"
+        np.savez(given, ranges=np.array([s.ranges for s in scans], dtype=np.float64), odom=odom,
+                 angles=beam_angles(counts.pop()), max_range=max_range)
+        if log:
+            log(f"running the peer karto on {len(scans)} scans...")
+        try:
+            done = subprocess.run([str(python), str(script), "--input", str(given), "--output", str(got)],
+                                  capture_output=True, text=True, timeout=_PEER_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise peer_env.PeerUnavailable(f"peer karto: no result in {_PEER_TIMEOUT_S:.0f} s") from None
+        if done.returncode != 0:
+            raise peer_env.PeerUnavailable(f"peer karto failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
+        try:
+            doc = json.loads(done.stdout.strip().splitlines()[-1])
+            est = np.load(got)["est"]
+            report = {"cpu_s": float(doc["cpu_s"]), "loop_closures": int(doc["loop_closures"])}
+        except (ValueError, KeyError, TypeError, IndexError, OSError):
+            raise peer_env.PeerUnavailable(f"peer karto printed no result: {done.stdout[-200:]!r}") from None
+    if est.shape != odom.shape or not np.all(np.isfinite(est)):
+        raise peer_env.PeerUnavailable(f"peer karto returned poses of shape {est.shape} (finite: "
+                                       f"{bool(np.all(np.isfinite(est)))}) for {len(odom)} scans")
+    return est, report
 
 
 def _build_map(poses: np.ndarray, scans: list[Any], max_range: float) -> Any:
@@ -176,7 +242,11 @@ def _default_reference(log_path: str) -> str | None:
     return base + ".png" if os.path.exists(base + ".png") else None
 
 
-def _plot(path: str, grid: Any, est: np.ndarray, ref: np.ndarray, reference: str | None, title: str) -> None:
+def _plot(path: str, grid: Any, est: np.ndarray, ref: np.ndarray, reference: str | None, title: str,
+          peer: tuple[np.ndarray, str] | None = None) -> None:
+    """EMOS's map with the reference (aligned to it), EMOS's trajectory and a peer's if given,
+    beside the reference map picture; with a peer, a third panel: each scan's position error
+    (after each trajectory's own SE(2) alignment to the reference, as the ATE counts it)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -187,14 +257,18 @@ def _plot(path: str, grid: Any, est: np.ndarray, ref: np.ndarray, reference: str
     img = np.where(grid.data < 0, 0.8, 1.0 - grid.data / 100.0)
     h, w = grid.data.shape
     ox, oy, _ = grid.origin
-    panels = 2 if reference else 1
-    fig, axes = plt.subplots(1, panels, figsize=(7 * panels, 7))
-    ax = axes[0] if panels == 2 else axes
+    panels = 1 + (reference is not None) + (peer is not None)
+    fig, axes = plt.subplots(1, panels, figsize=(7 * panels, 7), squeeze=False)
+    axes = axes[0]
+    ax = axes[0]
     ax.imshow(img, cmap="gray", origin="lower", vmin=0, vmax=1,
               extent=(ox, ox + w * grid.resolution, oy, oy + h * grid.resolution))
     al = align_se2(ref, est)  # the reference in the map's frame
     ax.plot(al[:, 0], al[:, 1], "-", color="tab:green", lw=2, label="reference (corrected log)")
     ax.plot(est[:, 0], est[:, 1], "-", color="tab:blue", lw=0.8, label="EMOS SLAM")
+    if peer is not None:
+        peer_in_map = align_se2(peer[0], est)  # the peer's trajectory in EMOS's map frame
+        ax.plot(peer_in_map[:, 0], peer_in_map[:, 1], "-", color="tab:red", lw=0.8, label=peer[1])
     ax.set_title(f"EMOS SLAM map: {title}", fontsize=9)
     # Frame the walls: no-echo beams through windows paint free rays far beyond the building.
     occ_rows, occ_cols = np.nonzero(grid.data >= 65)
@@ -209,6 +283,16 @@ def _plot(path: str, grid: Any, est: np.ndarray, ref: np.ndarray, reference: str
         axes[1].imshow(ref_img, cmap="gray")
         axes[1].set_title(f"reference map ({Path(str(reference)).name})", fontsize=9)
         axes[1].axis("off")
+    if peer is not None:
+        ex = axes[-1]
+        for poses, label, color in ((est, "EMOS SLAM", "tab:blue"), (peer[0], peer[1], "tab:red")):
+            err = np.hypot(*(align_se2(poses, ref)[:, :2] - ref[:, :2]).T)
+            ex.plot(err, "-", color=color, lw=0.9, label=f"{label}: RMSE {np.sqrt(np.mean(err ** 2)):.3f} m")
+        ex.set_xlabel("scan")
+        ex.set_ylabel("position error after alignment (m)")
+        ex.set_title("error against the reference, scan by scan", fontsize=9)
+        ex.grid(alpha=0.3)
+        ex.legend(loc="best", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -216,10 +300,11 @@ def _plot(path: str, grid: Any, est: np.ndarray, ref: np.ndarray, reference: str
 
 def run(args: argparse.Namespace) -> int:
     from emos.actors.nav.localization import CarmenLogError
+    from emos.tools.bench.peer_env import PeerUnavailable
 
     try:
         result = measure(args)
-    except CarmenLogError as exc:
+    except (CarmenLogError, PeerUnavailable) as exc:
         print(f"emos bench slam: {exc}", file=sys.stderr)
         return 2
     if args.json:
@@ -231,6 +316,12 @@ def run(args: argparse.Namespace) -> int:
           f"RPE 1 m {result['rpe_1m_rmse_m']:.4f} m, RPE 5 m {result['rpe_5m_rmse_m']:.4f} m")
     print(f"  CPU {result['cpu_s_per_scan'] * 1000:.1f} ms/scan, real-time factor "
           f"{'n/a (no usable timestamps)' if rtf is None else f'{rtf:.0f}x'}, loop closures {result['loop_closures']}")
+    for peer in result.get("peers", []):
+        prtf = peer["realtime_factor"]
+        print(f"  peer {peer['slam']}: ATE RMSE {peer['ate_rmse_m']:.4f} m ({peer['ate_rmse_m'] / max(result['ate_rmse_m'], 1e-9):.1f}x "
+              f"EMOS's), RPE 1 m {peer['rpe_1m_rmse_m']:.4f} m, RPE 5 m {peer['rpe_5m_rmse_m']:.4f} m, "
+              f"CPU {peer['cpu_s_per_scan'] * 1000:.1f} ms/scan, real-time factor {'n/a' if prtf is None else f'{prtf:.0f}x'}, "
+              f"loop closures {peer['loop_closures']}")
     for key in ("map", "plot"):
         if key in result:
             print(f"  {key}: {result[key]}")
