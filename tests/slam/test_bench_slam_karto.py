@@ -33,10 +33,10 @@ def _args(**over: object) -> argparse.Namespace:
 
 
 @needs_karto
-def test_karto_maps_the_same_scans_from_the_same_odometry_and_is_scored_alike() -> None:
+def test_karto_maps_the_same_scans_from_the_same_odometry_and_is_scored_alike(tmp_path: Path) -> None:
     from emos.tools.bench.slam import measure
 
-    result = measure(_args())
+    result = measure(_args(plot=str(tmp_path / "both.png")))
     (peer,) = result["peers"]
     assert peer["slam"] == "karto" and "slam_toolbox" in peer["about"]
     # It did SLAM on that odometry: far better than the odometry alone (which is metres off).
@@ -44,6 +44,7 @@ def test_karto_maps_the_same_scans_from_the_same_odometry_and_is_scored_alike() 
     assert 0.0 < peer["ate_rmse_m"] < 0.5 * result["odometry_ate_rmse_m"], peer
     assert 0.0 < peer["rpe_1m_rmse_m"] < 0.5 and peer["cpu_s_per_scan"] > 0
     assert isinstance(peer["loop_closures"], int)
+    assert (tmp_path / "both.png").stat().st_size > 10_000  # the map with both trajectories, and the error panel
 
 
 def _run_peer(tmp_path: Path, ranges: np.ndarray, angles: np.ndarray, odom: np.ndarray) -> subprocess.CompletedProcess[str]:
