@@ -43,7 +43,7 @@ import numpy as np
 
 __all__ = ["add_arguments", "run", "measure", "KARTO_PACKAGES"]
 
-# yag-slam imports cv2 without declaring it; the rest are its declared dependencies, pinned.
+# yag-slam imports cv2 without declaring it; its own packages are pinned, numpy is whatever they accept.
 KARTO_PACKAGES = ["yag-slam==0.3.0", "karto-scanmatcher==1.0.0", "sparse-bundle-adjustment==0.9.6",
                   "opencv-python-headless==5.0.0.93", "numpy"]
 _PEER_TIMEOUT_S = 3600.0  # one peer run on one log; only a hung peer reaches it
