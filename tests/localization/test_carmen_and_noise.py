@@ -58,14 +58,14 @@ def test_malformed_lines_are_skipped_counted_and_logged_with_file_and_line(tmp_p
     assert log.skipped == 55
     text = caplog.text
     assert f"CARMEN log {path} line 4: skipping a malformed FLASER line" in text
-    assert "55 malformed FLASER/ODOM lines skipped in all" in text
+    assert "55 malformed lines skipped in all" in text
     assert len(caplog.records) < 10, "the burst of bad lines is rate-limited"
 
 
 def test_a_log_without_scans_is_an_error_naming_the_file(tmp_path):
     path = tmp_path / "empty.log"
     path.write_text("# nothing\nODOM 0 0 0 0 0 0 0 h 0\n")
-    with pytest.raises(CarmenLogError, match=r"empty.log: no valid FLASER line"):
+    with pytest.raises(CarmenLogError, match=r"empty.log: no valid front-laser scan"):
         read_carmen(path)
     with pytest.raises(CarmenLogError, match="cannot read it"):
         read_carmen(tmp_path / "missing.log")

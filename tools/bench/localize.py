@@ -80,7 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "leader by at most this many nats (default: the filter's)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="any other filter parameter (AmclParams name), e.g. --param runner_up_particles=500")
-    parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
+    parser.add_argument("--max-range", type=float, default=None,
+                        help="readings at or beyond this are no echo (m; default 30, or the laser's own range when "
+                             "the log declares a shorter one)")
     parser.add_argument("--field", choices=("bilinear", "nearest"), default="bilinear",
                         help="likelihood-field lookup: bilinear distance interpolation (default) or Nav2's nearest cell")
     parser.add_argument("--recovery", default=None,
@@ -93,14 +95,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", default=None, help="write a PNG of the first trial's estimate against the reference")
 
 
-def prepare(log_path: str, max_range: float = 30.0, max_scans: int | None = None) -> dict[str, Any]:
-    """The log (its first ``max_scans`` scans), its beam angles and the reference map built from it."""
-    from emos.actors.nav.localization import beam_angles, build_reference_map, read_carmen
+def prepare(log_path: str, max_range: float | None = None, max_scans: int | None = None) -> dict[str, Any]:
+    """The log (its first ``max_scans`` scans), its beam angles, the range beyond which a reading
+    is no echo (``CarmenLog.no_echo_range``) and the reference map built from it."""
+    from emos.actors.nav.localization import build_reference_map, read_carmen
 
     log = read_carmen(log_path)
     if max_scans is not None:
         log.scans = log.scans[: max(max_scans, 2)]
-    angles = [beam_angles(len(s.ranges)) for s in log.scans]
+    max_range = log.no_echo_range(max_range)
+    angles = [s.angles for s in log.scans]
     ranges = [s.ranges for s in log.scans]
     grid = build_reference_map(log.poses, ranges, angles, resolution=0.05, max_range=max_range)
     return {"log": log, "angles": angles, "ranges": ranges, "reference": log.poses, "grid": grid, "max_range": max_range}
@@ -349,7 +353,7 @@ def run_global_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...],
             "converged": bool(after.any() and pos[after][0] < 0.2), "kept": bool(after.any() and np.all(pos[after] < 0.2))}
 
 
-def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
+def _params(args: argparse.Namespace, noise: tuple[float, ...], max_range: float) -> Any:
     from emos.actors.nav.localization import AmclParams
 
     alphas = _floats(args.alphas, 4, "--alphas") if args.alphas else tuple(2.0 * a for a in noise)
@@ -371,7 +375,7 @@ def _params(args: argparse.Namespace, noise: tuple[float, ...]) -> Any:
     return AmclParams(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                       min_particles=args.min_particles or (2000 if g else 500),
                       max_particles=args.max_particles or (20000 if g else 2000),
-                      max_beams=args.max_beams or 180, laser_max_range=args.max_range,
+                      max_beams=args.max_beams or 180, laser_max_range=max_range,
                       sigma_hit=args.sigma_hit if args.sigma_hit is not None else (0.2 if g else 0.15),
                       update_min_d=0.25, update_min_a=0.2, jump_distance=5.0, jump_angle=math.pi,
                       recovery_alpha_slow=recovery[0], recovery_alpha_fast=recovery[1],
@@ -455,8 +459,8 @@ def _row(name: str, trials: list[dict[str, Any]], global_: bool) -> dict[str, An
 
 def measure(args: argparse.Namespace) -> dict[str, Any]:
     noise = _floats(args.noise, 4, "--noise")
-    params = _params(args, noise)
     data = prepare(args.log, args.max_range, args.max_scans)
+    params = _params(args, noise, data["max_range"])
     first = getattr(args, "seed_start", 0) or 0
     seeds = range(first, first + max(args.seeds, 1))
     trials = [(run_global if args.global_ else run_tracking)(data, params, noise, seed) for seed in seeds]
@@ -467,6 +471,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     if args.plot:
         _plot(args.plot, data, trials[0], f"{data['log'].name}: {'global' if args.global_ else 'tracking'}, seed 0")
     return {"dataset": data["log"].name, "mode": "global" if args.global_ else "tracking", "noise_alphas": list(noise),
+            "laser": data["log"].laser, "no_echo_range_m": data["max_range"],
             "filter": {k: getattr(params, k) for k in ("alpha1", "alpha2", "alpha3", "alpha4", "min_particles",
                                                       "max_particles", "max_beams", "sigma_hit", "z_hit", "z_rand",
                                                       "min_ess_fraction", "search_min_ess_fraction", "hypothesis_beta",

@@ -54,7 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="odometry noise seed (default 0)")
     parser.add_argument("--json", action="store_true", help="print the machine-readable result only")
     parser.add_argument("--noise", default=None, help="odometry noise alpha1..alpha4 (default: bench localize's)")
-    parser.add_argument("--max-range", type=float, default=30.0, help="readings at or beyond this are no echo (m)")
+    parser.add_argument("--max-range", type=float, default=None,
+                        help="readings at or beyond this are no echo (m; default 30, or the laser's own range when "
+                             "the log declares a shorter one)")
     parser.add_argument("--scans", type=int, default=0, help="use only the first N scans (0: all)")
     parser.add_argument("--map", default=None, help="save the built map as map_server YAML + PGM here")
     parser.add_argument("--plot", default=None, help="write a PNG of the built map beside the reference map")
@@ -132,23 +134,24 @@ class _Progress:
 
 
 def measure(args: argparse.Namespace) -> dict[str, Any]:
-    from emos.actors.nav.localization import beam_angles, noisy_odometry, read_carmen
+    from emos.actors.nav.localization import noisy_odometry, read_carmen
     from emos.actors.nav.mapping.slam import GraphSlam, SlamParams, ate_rmse, rpe_rmse
 
     noise = _noise(args.noise)
     log = read_carmen(args.log)
     scans = log.scans[: args.scans] if args.scans and args.scans > 0 else log.scans
+    max_range = log.no_echo_range(args.max_range)
     ref = np.array([s.pose for s in scans], dtype=np.float64)
     odom = noisy_odometry(ref, noise, args.seed)
     overrides = _params(getattr(args, "param", []) or [])
-    base: dict[str, Any] = {"max_range": args.max_range, "odom_alphas": tuple(2.0 * a for a in noise)}
+    base: dict[str, Any] = {"max_range": max_range, "odom_alphas": tuple(2.0 * a for a in noise)}
     params = SlamParams(**{**base, **overrides})
     slam = GraphSlam(params, name=f"bench slam {log.name}")
     # The progress line goes to stderr: shown unless --quiet, and with --json only on a terminal.
     progress = _Progress(len(scans), f"SLAM {log.name}", enabled=not args.quiet and (not args.json or sys.stderr.isatty()))
     t0 = time.process_time()
     for i, scan in enumerate(scans):
-        slam.add(odom[i], scan.ranges, beam_angles(len(scan.ranges)))
+        slam.add(odom[i], scan.ranges, scan.angles)
         progress.show(i + 1, f"loops {len(slam.loops)}")
     est = slam.finish()
     cpu = time.process_time() - t0
@@ -159,12 +162,12 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "cpu_s_per_scan": cpu / max(len(scans), 1),
         "realtime_factor": (duration / cpu) if duration is not None and cpu > 0 else None,
         "seed": args.seed, "noise_alphas": list(noise), "odometry_ate_rmse_m": ate_rmse(odom, ref),
-        "loop_closures": len(slam.loops), "log_duration_s": duration,
+        "loop_closures": len(slam.loops), "log_duration_s": duration, "laser": log.laser, "no_echo_range_m": max_range,
         **({"params": {k: list(v) if isinstance(v, tuple) else v for k, v in overrides.items()}} if overrides else {}),
     }
     peer_est = None
     if getattr(args, "peer", None) == "karto":
-        peer_est, peer_doc = run_karto(scans, odom, args.max_range, log=None if args.quiet else _stderr)
+        peer_est, peer_doc = run_karto(scans, odom, max_range, log=None if args.quiet else _stderr)
         result["peers"] = [{
             "slam": "karto", "ate_rmse_m": ate_rmse(peer_est, ref), "rpe_1m_rmse_m": rpe_rmse(peer_est, ref, 1.0),
             "rpe_5m_rmse_m": rpe_rmse(peer_est, ref, 5.0), "cpu_s_per_scan": peer_doc["cpu_s"] / max(len(scans), 1),
@@ -172,7 +175,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             "loop_closures": peer_doc["loop_closures"], "about": "OpenKarto (yag-slam 0.3.0: karto-scanmatcher + SPA), "
             "slam_toolbox's default matcher settings, every scan processed"}]
     if args.map or args.plot:
-        grid = _build_map(est, scans, args.max_range)
+        grid = _build_map(est, scans, max_range)
         if args.map:
             from emos.actors.nav.maps.map_yaml import save_map
 
@@ -195,18 +198,19 @@ def run_karto(scans: list[Any], odom: np.ndarray, max_range: float, log: Any = N
     import subprocess
     import tempfile
 
-    from emos.actors.nav.localization import beam_angles
     from emos.tools.bench import peer_env
 
-    counts = {len(s.ranges) for s in scans}
-    if len(counts) != 1:
-        raise peer_env.PeerUnavailable(f"peer karto: needs one beam count for the whole log, got {sorted(counts)}")
+    angles = scans[0].angles
+    if any(len(s.angles) != len(angles) or not np.array_equal(s.angles, angles) for s in scans):
+        counts = sorted({len(s.angles) for s in scans})
+        raise peer_env.PeerUnavailable(f"peer karto: needs one laser geometry for the whole log, got beam counts {counts}"
+                                       " or differing angles")
     python = peer_env.ensure("karto", KARTO_PACKAGES, "yag_slam", log=log)
     script = Path(__file__).with_name("slam_peer_karto.py")
     with tempfile.TemporaryDirectory(prefix="emos-bench-karto-") as tmp:
         given, got = Path(tmp) / "input.npz", Path(tmp) / "output.npz"
         np.savez(given, ranges=np.array([s.ranges for s in scans], dtype=np.float64), odom=odom,
-                 angles=beam_angles(counts.pop()), max_range=max_range)
+                 angles=angles, max_range=max_range)
         if log:
             log(f"running the peer karto on {len(scans)} scans...")
         try:
@@ -229,9 +233,9 @@ def run_karto(scans: list[Any], odom: np.ndarray, max_range: float, log: Any = N
 
 
 def _build_map(poses: np.ndarray, scans: list[Any], max_range: float) -> Any:
-    from emos.actors.nav.localization import beam_angles, build_reference_map
+    from emos.actors.nav.localization import build_reference_map
 
-    return build_reference_map(poses, [s.ranges for s in scans], [beam_angles(len(s.ranges)) for s in scans],
+    return build_reference_map(poses, [s.ranges for s in scans], [s.angles for s in scans],
                                resolution=0.05, max_range=max_range)
 
 
