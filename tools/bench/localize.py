@@ -31,6 +31,7 @@ import argparse
 import json
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -88,9 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--recovery", default=None,
                         help="recovery_alpha_slow,recovery_alpha_fast (default 0,0: none, as Nav2; global: 0.001,0.1)")
     parser.add_argument("--peer", choices=("amcl",), default=None,
-                        help="also run Nav2's AMCL (the GPLv3 `amcl` PyPI package, installed by the benchmark into "
-                             "~/.cache/emos/bench/ on first use; with --global it starts from a map-wide Gaussian, as its "
-                             "bindings have no global localization call)")
+                        help="also run Nav2's AMCL (the GPLv3 `amcl` PyPI package, installed on first use into the "
+                             "benchmark-only environment $EMOS_BENCH_PEERS, default ~/.cache/emos-bench/peers, and run "
+                             "there; with --global it starts from a map-wide Gaussian, as its bindings have no global "
+                             "localization call)")
     parser.add_argument("--max-scans", type=int, default=None, help="use only the first N scans of the log (quick checks)")
     parser.add_argument("--plot", default=None, help="write a PNG of the first trial's estimate against the reference")
 
@@ -250,107 +252,110 @@ def _failure_cause(pos: np.ndarray, head: np.ndarray, moved: np.ndarray, after: 
     return "lost" if pos[ended] < 0.2 else "wrong_place"
 
 
-AMCL_PEER = "amcl==0.1.2"
+AMCL_PACKAGES = ["amcl==0.1.2"]  # Nav2's AMCL with Python bindings (GPLv3): the benchmark's peer environment only
+_AMCL_TIMEOUT_S = 3600.0
 
 
-def _amcl() -> Any:
-    """The `amcl` package (Nav2's AMCL with Python bindings, GPLv3): imported if installed, else
-    installed once into a private cache folder by pip. Never a dependency of EMOS itself."""
-    import importlib
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
+def amcl_trials(data: dict[str, Any], params: Any, specs: list[dict[str, Any]], log: Any = None) -> list[tuple[np.ndarray, float]]:
+    """Nav2's AMCL (``localize_peer_amcl`` in the peer environment) on the benchmark's map and
+    scans, one trial per spec (``odom`` (m, 3), ``first`` scan, ``initial`` pose and its diagonal
+    ``variance``), with our particle budget, motion alphas, sigma_hit, z_hit/z_rand, beams and
+    recovery rates: each trial's estimates and its CPU time. Its own seed, update thresholds and
+    likelihood distance cap are not settable through its bindings."""
+    import tempfile
 
-    try:
-        return importlib.import_module("amcl")
-    except ImportError:
-        pass
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    target = cache / "emos" / "bench" / AMCL_PEER.replace("==", "-")
-    if not (target / "amcl").is_dir():
-        print(f"emos bench localize: installing the benchmark peer {AMCL_PEER} (GPLv3) into {target}", file=sys.stderr)
-        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target), AMCL_PEER],
-                       check=True)
-    sys.path.insert(0, str(target))
-    return importlib.import_module("amcl")
+    from emos.tools.bench import peer_env
 
-
-def _amcl_localizer(amcl: Any, data: dict[str, Any], params: Any) -> Any:
-    """Nav2's AMCL on the benchmark's map with our particle budget, motion alphas, sigma_hit,
-    z_hit/z_rand, beams and recovery rates. Its own seed, its update thresholds and likelihood
-    distance cap are not settable through these bindings."""
-    p = params
-    loc = amcl.AMCL(p.min_particles, p.max_particles, p.recovery_alpha_slow, p.recovery_alpha_fast,
-                    amcl.MotionParameters(p.alpha1, p.alpha2, p.alpha3, p.alpha4, 0.2),
-                    amcl.LaserParameters(p.z_hit, 0.05, 0.05, p.z_rand, p.sigma_hit, 0.1, 0.05, p.max_beams), "differential")
+    python = peer_env.ensure("amcl", AMCL_PACKAGES, "amcl", log=log)
+    script = Path(__file__).with_name("localize_peer_amcl.py")
     g = data["grid"]
     # Nav2's AMCL reads 100 as occupied, 0 as free and anything else as unknown (its convertMap):
     # the map as map_server's trinary thresholds give it (0.65 / 0.25, the thresholds our filter
     # uses too). Cells as rows of y, the origin at the lower-left corner, as these bindings take it.
-    cells = np.where(g.data >= 65, 100, np.where((g.data >= 0) & (g.data <= 25), 0, -1))
-    loc.set_map(amcl.create_occupancy_grid_from_list(cells.astype(int).tolist(), g.resolution, g.origin[0], g.origin[1]))
-    loc.set_laser_pose(amcl.Vector3D(0.0, 0.0, 0.0))
-    return loc
+    cells = np.where(g.data >= 65, 100, np.where((g.data >= 0) & (g.data <= 25), 0, -1)).astype(np.int8)
+    ranges, angles = data["ranges"], data["angles"]
+    offsets = np.concatenate([[0], np.cumsum([len(r) for r in ranges])])
+    budget = {k: getattr(params, k) for k in ("min_particles", "max_particles", "recovery_alpha_slow", "recovery_alpha_fast",
+                                              "alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand", "sigma_hit",
+                                              "max_beams")}
+    trials = {}
+    for k, spec in enumerate(specs):
+        trials.update({f"odom_{k}": spec["odom"], f"first_{k}": spec["first"], f"initial_{k}": spec["initial"],
+                       f"variance_{k}": spec["variance"]})
+    with tempfile.TemporaryDirectory(prefix="emos-bench-amcl-") as tmp:
+        given, got = Path(tmp) / "input.npz", Path(tmp) / "output.npz"
+        np.savez(given, cells=cells, resolution=g.resolution, origin=np.asarray(g.origin[:2], dtype=np.float64),
+                 ranges=np.concatenate(ranges).astype(np.float64), angles=np.concatenate(angles).astype(np.float64),
+                 offsets=offsets, max_range=float(data["max_range"]), params=json.dumps(budget), trials=len(specs), **trials)
+        if log:
+            log(f"running the peer amcl: {len(specs)} trials")
+        doc = peer_env.run_script("amcl", python, script, ["--input", str(given), "--output", str(got)], _AMCL_TIMEOUT_S)
+        try:
+            out = np.load(got)
+            results = [(np.asarray(out[f"est_{k}"]), float(doc["cpu_s"][k])) for k in range(len(specs))]
+        except (ValueError, KeyError, TypeError, IndexError, OSError):
+            raise peer_env.PeerUnavailable(f"peer amcl printed no result: {doc!r}") from None
+    for (est, _), spec in zip(results, specs):
+        if est.shape != spec["odom"].shape or not np.all(np.isfinite(est)):
+            raise peer_env.PeerUnavailable(f"peer amcl returned poses of shape {est.shape} for {len(spec['odom'])} scans")
+    return results
 
 
-def _amcl_run(amcl: Any, loc: Any, data: dict[str, Any], odom: np.ndarray, first: int) -> tuple[np.ndarray, float]:
-    """Feed scans ``first``.. with ``odom`` to ``loc``: its estimates and its CPU time (the scan
-    conversion included, as the bindings need it)."""
-    est = np.zeros_like(odom)
-    cpu = 0.0
-    for i in range(len(odom)):
-        r, a = data["ranges"][first + i], data["angles"][first + i]
-        t0 = time.process_time()
-        scan = amcl.create_laser_scan_from_list([[float(x), float(b)] for x, b in zip(r, a)], float(data["max_range"]))
-        loc.update(scan, amcl.Vector3D(*map(float, odom[i])))
-        m = loc.get_pose_mean()
-        cpu += time.process_time() - t0
-        est[i] = (m.x, m.y, m.theta)
-    return est, cpu
-
-
-def run_tracking_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int) -> dict[str, Any]:
-    """The same tracking trial with Nav2's AMCL: the same odometry (same seed) and map, our
-    particle budget and model parameters (``_amcl_localizer``)."""
+def tracking_amcl_spec(data: dict[str, Any], noise: tuple[float, ...], seed: int) -> dict[str, Any]:
+    """The tracking trial of ``seed`` for Nav2's AMCL: the same odometry (same seed) and map, the
+    same start (the first reference pose, 0.1 m / 0.1 m / 3 deg standard deviations)."""
     from emos.actors.nav.localization import noisy_odometry
 
-    amcl = _amcl()
     ref = data["reference"]
-    odom = noisy_odometry(ref, noise, seed)  # type: ignore[arg-type]
-    loc = _amcl_localizer(amcl, data, params)
-    loc.set_initial_pose(amcl.Vector3D(*map(float, ref[0])), amcl.create_diagonal_covariance(0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2))
-    est, cpu = _amcl_run(amcl, loc, data, odom, 0)
+    return {"odom": noisy_odometry(ref, noise, seed), "first": 0, "initial": np.asarray(ref[0], dtype=np.float64),  # type: ignore[arg-type]
+            "variance": np.array([0.1 ** 2, 0.1 ** 2, math.radians(3.0) ** 2])}
+
+
+def tracking_amcl_result(data: dict[str, Any], est: np.ndarray, cpu: float) -> dict[str, Any]:
+    ref = data["reference"]
     pos, head = _errors(est, ref)
-    return {"estimate": est, "odometry": odom, "pos": pos, "head": head, "cpu": cpu, "scans": len(ref),
-            "converged": bool(pos[-1] < 0.2)}
+    return {"estimate": est, "pos": pos, "head": head, "cpu": cpu, "scans": len(ref), "converged": bool(pos[-1] < 0.2)}
 
 
-def run_global_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seed: int,
-                    converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
-    """The same global trial (segment, odometry) with Nav2's AMCL. Its bindings have no global
-    localization call (Nav2's spreads the particles uniformly over the free cells); the nearest
-    they take is an initial pose with a covariance: the mean and covariance of the free cells'
-    centres and a heading variance of pi^2 / 3 (a uniform heading's), ``max_particles`` drawn
-    from it. For the CPU per scan on the same scans; its convergence is reported, not compared."""
+def global_amcl_spec(data: dict[str, Any], noise: tuple[float, ...], seed: int, trial_m: float = 20.0) -> dict[str, Any]:
+    """The global trial of ``seed`` (segment, odometry) for Nav2's AMCL. Its bindings have no
+    global localization call (Nav2's spreads the particles uniformly over the free cells); the
+    nearest they take is an initial pose with a covariance: the mean and covariance of the free
+    cells' centres and a heading variance of pi^2 / 3 (a uniform heading's), ``max_particles``
+    drawn from it. For the CPU per scan on the same scans; its convergence is reported, not
+    compared."""
     from emos.actors.nav.localization import noisy_odometry
 
-    amcl = _amcl()
-    travel, s, end = _segment(data, seed, trial_m)
-    seg = data["reference"][s:end]
-    odom = noisy_odometry(seg, noise, seed)  # type: ignore[arg-type]
-    loc = _amcl_localizer(amcl, data, params)
+    _, s, end = _segment(data, seed, trial_m)
     g = data["grid"]
     free = np.argwhere((g.data >= 0) & (g.data <= 25))[:, ::-1]  # (col, row)
     xy = g.map_to_world((free + 0.5) * g.resolution)
     mean, cov = xy.mean(axis=0), np.cov(xy.T)
-    c = amcl.create_diagonal_covariance(float(cov[0, 0]), float(cov[1, 1]), math.pi ** 2 / 3.0)
-    loc.set_initial_pose(amcl.Vector3D(float(mean[0]), float(mean[1]), 0.0), c)
-    est, cpu = _amcl_run(amcl, loc, data, odom, s)
+    return {"odom": noisy_odometry(data["reference"][s:end], noise, seed), "first": s,  # type: ignore[arg-type]
+            "initial": np.array([mean[0], mean[1], 0.0]), "variance": np.array([cov[0, 0], cov[1, 1], math.pi ** 2 / 3.0]),
+            "seed": seed}
+
+
+def global_amcl_result(data: dict[str, Any], spec: dict[str, Any], est: np.ndarray, cpu: float,
+                       converge_m: float = 10.0, trial_m: float = 20.0) -> dict[str, Any]:
+    travel, s, end = _segment(data, spec["seed"], trial_m)
+    seg = data["reference"][s:end]
     pos, head = _errors(est, seg)
     after = (travel[s:end] - travel[s]) >= converge_m
     return {"estimate": est, "reference": seg, "pos": pos[after], "head": head[after], "cpu": cpu, "scans": len(seg),
             "converged": bool(after.any() and pos[after][0] < 0.2), "kept": bool(after.any() and np.all(pos[after] < 0.2))}
+
+
+def run_amcl(data: dict[str, Any], params: Any, noise: tuple[float, ...], seeds: range, global_: bool,
+             log: Any = None) -> list[dict[str, Any]]:
+    """Nav2's AMCL on the same trials as ours (same seeds, odometry, map and budget), in one run
+    of the peer."""
+    if global_:
+        specs = [global_amcl_spec(data, noise, seed) for seed in seeds]
+        return [global_amcl_result(data, spec, est, cpu)
+                for spec, (est, cpu) in zip(specs, amcl_trials(data, params, specs, log))]
+    specs = [tracking_amcl_spec(data, noise, seed) for seed in seeds]
+    return [tracking_amcl_result(data, est, cpu) for est, cpu in amcl_trials(data, params, specs, log)]
 
 
 def _params(args: argparse.Namespace, noise: tuple[float, ...], max_range: float) -> Any:
@@ -466,8 +471,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     trials = [(run_global if args.global_ else run_tracking)(data, params, noise, seed) for seed in seeds]
     rows = [_row("emos", trials, args.global_)]
     if args.peer == "amcl":
-        peer = run_global_amcl if args.global_ else run_tracking_amcl
-        rows.append(_row("amcl", [peer(data, params, noise, seed) for seed in seeds], False))
+        rows.append(_row("amcl", run_amcl(data, params, noise, seeds, args.global_, log=_stderr), False))
     if args.plot:
         _plot(args.plot, data, trials[0], f"{data['log'].name}: {'global' if args.global_ else 'tracking'}, seed 0")
     return {"dataset": data["log"].name, "mode": "global" if args.global_ else "tracking", "noise_alphas": list(noise),
@@ -481,14 +485,21 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             "results": rows}
 
 
+def _stderr(text: str) -> None:
+    import sys
+
+    print(f"emos bench localize: {text}", file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
     import sys
 
     from emos.actors.nav.localization import CarmenLogError
+    from emos.tools.bench.peer_env import PeerUnavailable
 
     try:
         result = measure(args)
-    except (CarmenLogError, argparse.ArgumentTypeError, ValueError) as exc:
+    except (CarmenLogError, PeerUnavailable, argparse.ArgumentTypeError, ValueError) as exc:
         print(f"emos bench localize: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -72,3 +72,24 @@ def ensure(peer: str, packages: list[str], module: str, *, log: Callable[[str], 
     if problem:
         raise PeerUnavailable(f"peer {peer}: {' '.join(packages)} installed into {where}, but {problem}")
     return python
+
+
+def run_script(peer: str, python: Path, script: Path, args: list[str], timeout_s: float) -> dict[str, Any]:
+    """Run a peer's script (``tools/bench/*_peer_*.py``) with the peer environment's ``python``
+    and return the JSON object it prints last; a time-out, a failure or no such line is a
+    PeerUnavailable naming the peer and what went wrong."""
+    import json
+
+    try:
+        done = subprocess.run([str(python), str(script), *args], capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        raise PeerUnavailable(f"peer {peer}: no result in {timeout_s:.0f} s") from None
+    if done.returncode != 0:
+        raise PeerUnavailable(f"peer {peer} failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
+    try:
+        doc = json.loads(done.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        doc = None
+    if not isinstance(doc, dict):
+        raise PeerUnavailable(f"peer {peer} printed no result: {done.stdout[-200:]!r}")
+    return doc

@@ -195,7 +195,6 @@ def _stderr(text: str) -> None:
 def run_karto(scans: list[Any], odom: np.ndarray, max_range: float, log: Any = None) -> tuple[np.ndarray, dict[str, Any]]:
     """OpenKarto's optimised poses for ``scans`` from ``odom`` (``slam_peer_karto`` in the peer
     environment), and its report (``cpu_s``, ``loop_closures``)."""
-    import subprocess
     import tempfile
 
     from emos.tools.bench import peer_env
@@ -213,19 +212,12 @@ def run_karto(scans: list[Any], odom: np.ndarray, max_range: float, log: Any = N
                  angles=angles, max_range=max_range)
         if log:
             log(f"running the peer karto on {len(scans)} scans...")
+        doc = peer_env.run_script("karto", python, script, ["--input", str(given), "--output", str(got)], _PEER_TIMEOUT_S)
         try:
-            done = subprocess.run([str(python), str(script), "--input", str(given), "--output", str(got)],
-                                  capture_output=True, text=True, timeout=_PEER_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            raise peer_env.PeerUnavailable(f"peer karto: no result in {_PEER_TIMEOUT_S:.0f} s") from None
-        if done.returncode != 0:
-            raise peer_env.PeerUnavailable(f"peer karto failed (exit {done.returncode}): {done.stderr.strip()[-400:]}")
-        try:
-            doc = json.loads(done.stdout.strip().splitlines()[-1])
             est = np.load(got)["est"]
             report = {"cpu_s": float(doc["cpu_s"]), "loop_closures": int(doc["loop_closures"])}
-        except (ValueError, KeyError, TypeError, IndexError, OSError):
-            raise peer_env.PeerUnavailable(f"peer karto printed no result: {done.stdout[-200:]!r}") from None
+        except (ValueError, KeyError, TypeError, OSError):
+            raise peer_env.PeerUnavailable(f"peer karto printed no result: {doc!r}") from None
     if est.shape != odom.shape or not np.all(np.isfinite(est)):
         raise peer_env.PeerUnavailable(f"peer karto returned poses of shape {est.shape} (finite: "
                                        f"{bool(np.all(np.isfinite(est)))}) for {len(odom)} scans")
