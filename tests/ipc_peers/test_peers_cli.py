@@ -9,6 +9,7 @@ import tempfile
 import pytest
 
 from emos.tools.bench import ipc_peers
+from tests.bench_peers import unreachable_registry_env
 
 pytestmark = pytest.mark.process
 
@@ -46,10 +47,7 @@ def test_unknown_peers_and_bad_rounds_are_clear_usage_errors():
 
 
 def test_a_registry_that_cannot_be_reached_is_a_clear_error(tmp_path):
-    env = dict(os.environ)
-    env.update({ipc_peers.ENV_PEER_DIR: str(tmp_path / "peers"), "PIP_CONFIG_FILE": os.devnull, "PIP_INDEX_URL": "http://127.0.0.1:9/simple",
-                "PIP_EXTRA_INDEX_URL": "", "PIP_FIND_LINKS": str(tmp_path), "PIP_RETRIES": "0", "PIP_TIMEOUT": "3", "PIP_NO_CACHE_DIR": "1"})
-    env.pop("PIP_CONSTRAINT", None)
+    env = unreachable_registry_env(tmp_path)
     done = _bench("--peers", "iceoryx2", "--sizes", "8", "--rounds", "1", env=env)
     assert done.returncode == 2
     assert "peer iceoryx2: cannot install iceoryx2==0.10.0" in done.stderr and "registry" in done.stderr

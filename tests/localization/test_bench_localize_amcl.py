@@ -4,7 +4,6 @@ registry are clear errors."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +13,7 @@ import pytest
 
 from emos.actors.nav.localization import noisy_odometry, read_carmen
 from emos.tools.bench import peer_env
+from tests.bench_peers import unreachable_registry_env
 from tests.localization.helpers import ACES_LOG
 
 pytestmark = pytest.mark.process
@@ -75,11 +75,7 @@ def test_the_peer_refuses_inputs_that_do_not_fit_by_name(tmp_path: Path, over: d
 
 
 def test_an_unreachable_registry_is_a_clear_error(tmp_path: Path):
-    env = dict(os.environ)
-    env.update({peer_env.ENV_PEER_DIR: str(tmp_path / "peers"), "PIP_CONFIG_FILE": os.devnull,
-                "PIP_INDEX_URL": "http://127.0.0.1:9/simple", "PIP_EXTRA_INDEX_URL": "", "PIP_FIND_LINKS": str(tmp_path),
-                "PIP_RETRIES": "0", "PIP_TIMEOUT": "3", "PIP_NO_CACHE_DIR": "1"})
-    env.pop("PIP_CONSTRAINT", None)
+    env = unreachable_registry_env(tmp_path)
     done = subprocess.run([sys.executable, "-m", "emos", "bench", "localize", "--log", str(ACES_LOG), "--max-scans", "5",
                            "--peer", "amcl", "--json"], capture_output=True, text=True, env=env, timeout=600)
     assert done.returncode == 2, done.stderr

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 
 from emos.tools.bench import peer_env
+from tests.bench_peers import unreachable_registry_env
 
 pytest.importorskip("gtsam")
 pytestmark = pytest.mark.process
@@ -91,11 +91,7 @@ def test_the_peer_reads_nan_inf_and_max_range_as_no_echo_and_refuses_mismatched_
 
 
 def test_an_unreachable_registry_is_a_clear_error(tmp_path: Path) -> None:
-    env = dict(os.environ)
-    env.update({peer_env.ENV_PEER_DIR: str(tmp_path / "peers"), "PIP_CONFIG_FILE": os.devnull,
-                "PIP_INDEX_URL": "http://127.0.0.1:9/simple", "PIP_EXTRA_INDEX_URL": "", "PIP_FIND_LINKS": str(tmp_path),
-                "PIP_RETRIES": "0", "PIP_TIMEOUT": "3", "PIP_NO_CACHE_DIR": "1"})
-    env.pop("PIP_CONSTRAINT", None)
+    env = unreachable_registry_env(tmp_path)
     done = subprocess.run([sys.executable, "-m", "emos", "bench", "slam", "--log", str(OREBRO), "--scans", "5",
                            "--peer", "karto", "--json", "--quiet"], capture_output=True, text=True, env=env, timeout=600)
     assert done.returncode == 2, done.stderr
