@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -65,3 +66,43 @@ def test_map_build_names_a_file_that_is_not_mcap(tmp_path):
     out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "map", "build", str(bad), "-o", str(tmp_path / "x")],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode != 0 and "not.mcap" in out.stderr
+
+
+OREBRO = Path(__file__).parent / "data" / "orebro-corrected.log.gz"
+
+
+def test_map_build_reads_a_carmen_log_into_the_map_its_reference_makes(tmp_path):
+    """A real Radish log (Örebro) built with `emos map build` gives the building's map: its walls
+    lie where the map from the log's reference trajectory has them."""
+    from emos.actors.nav.localization import build_reference_map, read_carmen
+
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "map", "build", str(OREBRO), "-o", str(tmp_path / "orebro")],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "237 scans read" in out.stderr and "orebro.yaml" in out.stdout
+    built = load_map(tmp_path / "orebro.yaml")
+    log = read_carmen(OREBRO)
+    ref = build_reference_map(log.poses, [s.ranges for s in log.scans], [s.angles for s in log.scans],
+                              resolution=built.resolution, max_range=30.0)
+    walls = np.argwhere(built.data == 100)
+    assert len(walls) > 1000
+    # How far each wall cell of the built map lies from the nearest wall of the reference map
+    # (occupied by map_server's threshold). The SLAM's trajectory is 5-10 cm from the log's
+    # reference on these logs (docs/mapping.md), so its walls are too.
+    from scipy.ndimage import distance_transform_edt
+
+    to_wall = distance_transform_edt(ref.data < 65) * ref.resolution
+    xy = built.map_to_world((walls[:, ::-1] + 0.5) * built.resolution)
+    c, r = np.floor(ref.world_to_map(xy) / ref.resolution).astype(int).T
+    inside = (r >= 0) & (r < ref.data.shape[0]) & (c >= 0) & (c < ref.data.shape[1])
+    assert inside.all()
+    d = to_wall[r, c]
+    assert np.median(d) <= 0.1 and np.percentile(d, 90) <= 0.25, np.percentile(d, [50, 90])
+
+
+def test_map_build_names_a_carmen_log_without_scans(tmp_path):
+    bad = tmp_path / "empty.log"
+    bad.write_text("PARAM robot_front_laser_max 50 host 0\nODOM 0 0 0 0 0 0 1.0 host 1.0\n")
+    out = subprocess.run([sys.executable, "-m", "emos.tools.cli", "map", "build", str(bad), "-o", str(tmp_path / "x")],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "empty.log: no valid front-laser scan" in out.stderr and "Traceback" not in out.stderr

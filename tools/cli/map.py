@@ -10,7 +10,9 @@ LaserScan and Odometry topics (``--scan``, ``--odom``; each scan is paired with 
 odometry recorded before it; a scan becomes a node when the robot moved ``--min-d`` m or turned
 ``--min-a`` rad since the last node), with a progress line, ends with a batch optimisation of
 the graph, and saves ``office.yaml`` + ``office.pgm`` (the ROS map_server format the MapServer
-reads). ``show`` draws a saved map to a PNG (``-o``, default next to the YAML).
+reads). It reads a CARMEN log (``.log``, ``.log.gz``, ``.clf``: the Radish datasets, and what
+older CARMEN robots recorded) the same way, each front-laser scan at the pose the log gives it
+as its odometry. ``show`` draws a saved map to a PNG (``-o``, default next to the YAML).
 
 Record a run first with ``emos map record -o run.mcap`` (or ``emos record /scan /odom -o
 run.mcap``) while driving the robot.
@@ -32,8 +34,10 @@ __all__ = ["add_arguments", "run", "build", "record_args"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="map_verb", required=True)
     b = sub.add_parser("build", help="offline SLAM on a recording: map_server YAML + PGM",
-                       description="offline SLAM on an MCAP recording (LaserScan + Odometry): map_server YAML + PGM")
-    b.add_argument("file", help="an MCAP recording (emos record) with a LaserScan and an Odometry topic")
+                       description="offline SLAM on an MCAP recording (LaserScan + Odometry) or a CARMEN log "
+                                   "(.log, .log.gz, .clf: the scans at their logged poses): map_server YAML + PGM")
+    b.add_argument("file", help="an MCAP recording (emos record, ros2 bag record) with a LaserScan and an Odometry "
+                                "topic, or a CARMEN log (.log, .log.gz, .clf)")
     b.add_argument("-o", "--output", required=True, help="map name or path without suffix: writes NAME.yaml and NAME.pgm")
     b.add_argument("--scan", default="/scan", help="LaserScan topic (default /scan)")
     b.add_argument("--odom", default="/odom", help="Odometry topic (default /odom)")
@@ -69,20 +73,21 @@ def _beams(scan: Any) -> tuple[np.ndarray, np.ndarray]:
     return np.where(r >= scan_max, np.inf, r), a0 + inc * np.arange(r.size if abs(n - r.size) <= 1 else n)
 
 
-def build(args: argparse.Namespace) -> Path:
+#: Suffixes of CARMEN logs (the Radish datasets): ``emos map build`` reads them as well as MCAP.
+CARMEN_SUFFIXES = (".log", ".log.gz", ".clf", ".clf.gz")
+
+
+def is_carmen(path: str) -> bool:
+    return str(path).lower().endswith(CARMEN_SUFFIXES)
+
+
+def _mcap_scans(args: argparse.Namespace) -> Any:
+    """(odometry pose, ranges, angles) of each LaserScan of the recording, the pose the newest
+    odometry recorded before it (None before the first)."""
     from emos.actors.nav.components.convert import BadInput, pose_of
-    from emos.actors.nav.localization import build_reference_map, relative_pose
-    from emos.actors.nav.mapping.slam import POSEGRAPH_SUFFIX, GraphSlam, SlamParams, save_posegraph
-    from emos.actors.nav.maps import save_map
     from emos.interop.mcap_read import read_bag
 
-    slam = GraphSlam(SlamParams(max_range=args.max_range), name=f"map build {args.file} ({args.scan})")
     odom: np.ndarray | None = None
-    last: np.ndarray | None = None
-    kept: list[tuple[np.ndarray, np.ndarray]] = []
-    scans = 0
-    shown = 0.0
-    show = not args.quiet
     for m in read_bag(args.file, topics=[args.scan, args.odom]):
         msg = m.decode()
         if m.topic == args.odom:
@@ -91,6 +96,33 @@ def build(args: argparse.Namespace) -> Path:
             except BadInput as exc:
                 print(f"emos map build: {args.odom}: {exc}; odometry message skipped", file=sys.stderr)
             continue
+        yield (odom, *_beams(msg))
+
+
+def build(args: argparse.Namespace) -> Path:
+    from emos.actors.nav.localization import build_reference_map, relative_pose
+    from emos.actors.nav.mapping.slam import POSEGRAPH_SUFFIX, GraphSlam, SlamParams, save_posegraph
+    from emos.actors.nav.maps import save_map
+
+    carmen = is_carmen(args.file)
+    max_range = args.max_range
+    if carmen:
+        # A CARMEN log's scans at the poses the log gives them (raw odometry in a raw log, the
+        # corrected trajectory in a "corrected" one); a laser's own shorter range is its no echo.
+        from emos.actors.nav.localization import read_carmen
+
+        log = read_carmen(args.file)
+        max_range = log.no_echo_range(args.max_range)
+        source: Any = ((s.pose, s.ranges, s.angles) for s in log.scans)
+    else:
+        source = _mcap_scans(args)
+    slam = GraphSlam(SlamParams(max_range=max_range), name=f"map build {args.file}" + ("" if carmen else f" ({args.scan})"))
+    last: np.ndarray | None = None
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    scans = 0
+    shown = 0.0
+    show = not args.quiet
+    for odom, r, a in source:
         scans += 1
         if odom is None:
             continue  # no odometry yet: the scan cannot be placed
@@ -98,7 +130,6 @@ def build(args: argparse.Namespace) -> Path:
             d = relative_pose(last, odom)
             if math.hypot(d[0], d[1]) < args.min_d and abs(d[2]) < args.min_a:
                 continue
-        r, a = _beams(msg)
         slam.add(odom, r, a)
         kept.append((r, a))
         last = odom
@@ -108,11 +139,12 @@ def build(args: argparse.Namespace) -> Path:
             sys.stderr.write(f"\rmap build: {scans} scans read, {len(kept)} nodes, {len(slam.loops)} loop closures   ")
             sys.stderr.flush()
     if not kept:
-        raise SystemExit(f"emos map build: {args.file}: no {args.scan} scan with {args.odom} odometry before it")
+        raise SystemExit(f"emos map build: {args.file}: no {args.scan} scan with {args.odom} odometry before it"
+                         if not carmen else f"emos map build: {args.file}: no scan")
     poses = slam.finish()
     use = [k for k, (r, a) in enumerate(kept) if r.size == a.size]
     grid = build_reference_map(poses[use], [kept[k][0] for k in use], [kept[k][1] for k in use],
-                               resolution=args.resolution, max_range=args.max_range)
+                               resolution=args.resolution, max_range=max_range)
     out = save_map(grid, Path(str(args.output)).with_suffix(".yaml") if not str(args.output).endswith(".yaml") else Path(args.output))
     # The pose graph beside it, as the Mapper saves it: a Mapper in localization mode loads it.
     p = slam.params
@@ -158,6 +190,7 @@ def record_args(args: argparse.Namespace) -> argparse.Namespace:
 
 
 def run(args: argparse.Namespace) -> int:
+    from emos.actors.nav.localization import CarmenLogError
     from emos.actors.nav.maps import MapFileError
     from emos.interop.mcap_read import NotMcapFile
 
@@ -174,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
             print(build(args))
         else:
             print(show_map(args))
-    except (NotMcapFile, MapFileError, OSError) as exc:
+    except (NotMcapFile, CarmenLogError, MapFileError, OSError) as exc:
         print(f"emos map {args.map_verb}: {exc}", file=sys.stderr)
         return 2
     return 0
