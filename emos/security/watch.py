@@ -69,6 +69,7 @@ class SecurityWatch:
         self.denied_seen = 0
         self._log = RateLimitedLog(log, interval=interval)
         self._queue: queue.Queue[str | None] = queue.Queue(maxsize=1024)  # bounded: peers can mint tokens
+        self._closing = threading.Event()
         self._worker = threading.Thread(target=self._work, name="emos-security-watch", daemon=True)
         self._worker.start()
         # Zenoh's thread only queues: the admin-space queries below must not run inside its callback.
@@ -76,7 +77,7 @@ class SecurityWatch:
 
     def _on_token(self, sample: Any) -> None:
         key = str(sample.key_expr)
-        if _PUB_MARK in key and sample.kind == self._zenoh.SampleKind.PUT:
+        if _PUB_MARK in key and not self._closing.is_set() and sample.kind == self._zenoh.SampleKind.PUT:
             try:
                 self._queue.put_nowait(key)
             except queue.Full:
@@ -135,7 +136,7 @@ class SecurityWatch:
     def _work(self) -> None:
         while True:
             key = self._queue.get()
-            if key is None:
+            if key is None or self._closing.is_set():
                 return
             try:
                 self.check(key)
@@ -143,12 +144,24 @@ class SecurityWatch:
                 self._log.warning(("error", type(exc).__name__), "security watch: checking %s failed: %s", key, exc)
 
     def close(self) -> None:
+        """Stop the checks, then undeclare the subscriber. In that order: Zenoh (1.10) can
+        deadlock undeclaring a liveliness subscriber while another thread of the session waits
+        for an admin-space reply (the undeclare holds the routing tables' lock that delivering
+        the reply needs, and waits for a lock the reply holds), so no query may be in flight."""
+        self._closing.set()
+        try:
+            self._queue.put_nowait(None)
+        except queue.Full:
+            pass  # the worker sees _closing after its current check
+        # Each check is a few admin queries of at most 2 s each.
+        self._worker.join(timeout=30.0)
+        if self._worker.is_alive():
+            log.warning("security watch: a check did not end in 30 s; the subscriber is left to the session's close")
+            return
         try:
             self._sub.undeclare()
         except Exception as exc:  # noqa: BLE001 - the session may be closed already
             log.debug("security watch: undeclaring: %s", exc)
-        self._queue.put(None)
-        self._worker.join(timeout=5.0)
 
 
 def main(argv: list[str] | None = None) -> int:
