@@ -183,11 +183,35 @@ def test_rgbd_follower_measures_a_detection_once_while_the_robot_turns():
     follower.compute(pose, np.zeros(3), box, depth)
     seen = follower.tracker.position.copy()
     np.testing.assert_allclose(seen, [2.0, 0.6], atol=0.05)
-    turned = np.array([0.0, 0.0, 0.3])  # the robot turned towards it; the box is the old one
+    turned = np.array([0.0, 0.0, 0.15])  # the robot turned towards it; the box is the old one
     follower.compute(turned, np.zeros(3), box, depth, new_measurement=False)
     np.testing.assert_allclose(follower.tracker.position, seen, atol=1e-9)
     follower.compute(turned, np.zeros(3), box, depth, new_measurement=True)  # re-measured: it moves
-    assert np.hypot(*(follower.tracker.position - seen)) > 0.1
+    assert np.hypot(*(follower.tracker.position - seen)) > 0.1  # (0.3 m off: within the gate, taken)
+
+
+def test_rgbd_follower_takes_a_far_reachable_measurement_only_once_the_next_confirms_it():
+    """After a gap in the detections the target could have walked far (``target_max_speed``), and
+    a single false detection there would swing the robot away from the person: a measurement
+    beyond ``target_gate`` but within reach is followed only once the next one agrees with it."""
+    cfg = VisionRGBDFollowerConfig(target_distance=2.0)
+    pose = np.zeros(3)
+    follower = VisionRGBDFollower(make_robot("DIFFERENTIAL_DRIVE"), K, cfg)
+    follower.compute(pose, np.zeros(3), *camera(pose, (2.0, 0.0)))
+    for _ in range(10):  # a second without detections: the person may be up to 2.5 m away now
+        follower.compute(pose, np.zeros(3), None, None)
+    ghost = camera(pose, (2.3, 0.9))  # 0.95 m off: reachable, not near
+    follower.compute(pose, np.zeros(3), *ghost)
+    np.testing.assert_allclose(follower.tracker.position, [2.0, 0.0], atol=0.05)  # one alone: not taken
+    follower.compute(pose, np.zeros(3), *camera(pose, (2.05, 0.0)))  # the person, where predicted
+    np.testing.assert_allclose(follower.tracker.position, [2.05, 0.0], atol=0.05)
+    for _ in range(10):
+        follower.compute(pose, np.zeros(3), None, None)
+    moved = (2.4, 0.9)  # the person really walked there during the gap: two detections agree
+    follower.compute(pose, np.zeros(3), *camera(pose, moved))
+    assert np.hypot(*(follower.tracker.position - [2.05, 0.0])) < 0.05
+    follower.compute(pose, np.zeros(3), *camera(pose, (2.42, 0.9)))
+    np.testing.assert_allclose(follower.tracker.position, [2.42, 0.9], atol=0.05)  # taken, and not blended with the old estimate
 
 
 def test_rgbd_follower_projects_a_detection_from_where_the_robot_was_when_the_picture_was_taken():

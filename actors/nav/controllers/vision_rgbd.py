@@ -36,11 +36,15 @@ class VisionRGBDFollowerConfig(FollowerConfig):
     """``prediction_horizon``, ``control_horizon`` and ``target_search_pause`` are in steps.
 
     ``target_distance=None`` keeps the distance measured at the first detection.
-    ``target_gate`` (m), ``target_max_speed`` (m/s), ``target_gate_misses``: a measurement farther
-    from the tracked target than ``target_gate + target_max_speed * (time since the last one)``
-    is not the target (a false detection, or a box whose depth patch hit the wall behind): it is
-    ignored and the prediction followed, unless ``target_gate_misses`` measurements in a row
-    disagree, when the tracker starts again from the newest (the target really is there).
+    ``target_gate`` (m), ``target_max_speed`` (m/s), ``target_gate_misses``: a measurement within
+    ``target_gate`` of the tracked target's prediction is the target. One farther than
+    ``target_gate + target_max_speed * (time since the last one)`` is not (a false detection, or a
+    box whose depth patch hit the wall behind): it is ignored and the prediction followed,
+    unless ``target_gate_misses`` measurements in a row disagree, when the tracker starts again
+    from the newest (the target really is there). One in between (the target could have walked
+    there since it was last seen, after a gap in the detections) is taken once the next
+    measurement confirms it (within ``target_gate`` of it): a single false detection after a gap
+    is not followed.
     ``camera_rotation_to_robot`` is the quaternion (x, y, z, w) of the camera body frame
     (x forward) on the robot; the optical frame convention (z forward) is applied on top.
     The DWA parameters (samples, sensor pose, ``octree_resolution``, ``costs_weights``,
@@ -133,6 +137,7 @@ class VisionRGBDFollower:
         self._detour_side = 1.0
         self._since_measurement = 0.0
         self._gate_misses = 0  # measurements in a row outside the gate
+        self._candidate: np.ndarray | None = None  # a far but reachable measurement waiting to be confirmed
 
     def _target_world(self, box: BoundingBox, depth: np.ndarray, pose: np.ndarray) -> np.ndarray | None:
         body = target_from_depth(box, depth, self.intrinsics, self.config.depth_conversion_factor)
@@ -173,11 +178,21 @@ class VisionRGBDFollower:
             cmds = ramp_commands(self.robot, velocity, cmd[None], dt, cfg.control_horizon)[0]
             return ControlResult(cmds, integrate_sequence(pose, cmds, dt)[0], status)
         predicted = self.tracker.predict(dt)
-        if predicted is not None and self._outside_gate(measured, predicted):
-            self._gate_misses += 1
-            if self._gate_misses < cfg.target_gate_misses:
-                return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
-            self.tracker = _AlphaBeta()  # it keeps disagreeing: the target is where it is measured
+        if predicted is not None:
+            verdict = self._gate(measured, predicted)
+            if verdict == "outside":
+                self._candidate = None
+                self._gate_misses += 1
+                if self._gate_misses < cfg.target_gate_misses:
+                    return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
+                self.tracker = _AlphaBeta()  # it keeps disagreeing: the target is where it is measured
+            elif verdict == "reachable":
+                confirmed = self._candidate is not None and float(np.hypot(*(measured - self._candidate))) <= cfg.target_gate
+                if not confirmed:
+                    self._candidate = measured
+                    return self._follow(pose, velocity, predicted, obstacles, ControlStatus.RUNNING)
+                self.tracker = _AlphaBeta()  # confirmed: the target is there, not partway from the old estimate
+        self._candidate = None
         self._gate_misses = 0
         position = self.tracker.update(measured, self._since_measurement)  # velocity over the time between measurements
         self._since_measurement = 0.0
@@ -187,10 +202,14 @@ class VisionRGBDFollower:
             self.distance = float(np.hypot(*local))
         return self._follow(pose, velocity, position, obstacles, ControlStatus.RUNNING)
 
-    def _outside_gate(self, measured: np.ndarray, predicted: np.ndarray) -> bool:
+    def _gate(self, measured: np.ndarray, predicted: np.ndarray) -> str:
+        """``"near"`` (within ``target_gate`` of the prediction), ``"reachable"`` (the target could
+        have walked there since its last measurement) or ``"outside"``."""
         cfg = self.config
-        reach = cfg.target_gate + cfg.target_max_speed * self._since_measurement
-        return float(np.hypot(*(measured - predicted))) > reach
+        off = float(np.hypot(*(measured - predicted)))
+        if off <= cfg.target_gate:
+            return "near"
+        return "reachable" if off <= cfg.target_gate + cfg.target_max_speed * self._since_measurement else "outside"
 
     def goal_for(self, pose: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Where to stand: ``distance`` from the target, on the robot's side, facing it."""
