@@ -131,14 +131,16 @@ def test_bad_laser_lines_and_parameters_are_skipped_and_named(tmp_path, caplog):
              _robotlaser([1.0, 2.0, 3.0], 0.0, 4.0, (0.0, 0.0, 0.0)),        # 3: beams wider than a turn
              _robotlaser([1.0, 2.0, 3.0], 0.0, 0.1, (0.0, 0.0, 0.0), max_range=-1.0),  # 4: negative range
              " ".join(good.split()[:12]) + "\n",                              # 5: torn after the ranges
-             "PARAM laser_front_laser_fov 400 host 0\n"]                      # 6: no such field of view
+             "PARAM laser_front_laser_fov 400 host 0\n",                     # 6: no such field of view
+             "PARAM robot_frontlaser_offset nan host 0\n"]                   # 7: not a number
     with caplog.at_level(logging.WARNING, logger="emos.nav.localization.carmen"):
         log = read_carmen(_write(tmp_path / "bad.log", lines), report=RateLimitedLog(interval=0.0))
-    assert len(log.scans) == 1 and log.skipped == 5
+    assert len(log.scans) == 1 and log.skipped == 6
     text = caplog.text
     assert "line 3: skipping a malformed ROBOTLASER1 line (3 beams 4.0 rad apart do not fit in one turn)" in text
     assert "line 4: skipping a malformed ROBOTLASER1 line (maximum range -1.0 is not positive)" in text
     assert "line 6: skipping a malformed PARAM line (field of view 400 is not in (0, 360] degrees)" in text
+    assert "line 7: skipping a malformed PARAM line (a value is not finite)" in text
 
 
 def _as_forms(src: Path, dst_robot: Path, dst_raw: Path, scans: int) -> None:

@@ -228,7 +228,12 @@ def _fov_param(value: str) -> float:
     return math.pi * (deg / 180.0)
 
 
-_PARAMS: dict[str, Callable[[str], float]] = {"laser_front_laser_fov": _fov_param, "robot_front_laser_max": float, "robot_frontlaser_offset": float}
+def _finite_param(value: str) -> float:
+    return _floats([value])[0]
+
+
+_PARAMS: dict[str, Callable[[str], float]] = {"laser_front_laser_fov": _fov_param, "robot_front_laser_max": _finite_param,
+                                              "robot_frontlaser_offset": _finite_param}
 
 
 def _lines(path: Path) -> Iterator[str]:
@@ -248,10 +253,9 @@ def _flaser_scans(found: list[_Flaser], params: dict[str, float]) -> list[Carmen
     fov = params.get("laser_front_laser_fov", math.pi)
     max_range = params.get("robot_front_laser_max", math.inf)
     max_range = max_range if max_range > 0 else math.inf
-    angles: dict[int, np.ndarray] = {}
-    return [CarmenScan(ranges=f.ranges, pose=f.pose, timestamp=f.timestamp, line=f.line,
-                       angles=angles.setdefault(len(f.ranges), beam_angles(len(f.ranges), fov)), max_range=max_range)
-            for f in found]
+    angles = {n: beam_angles(n, fov) for n in {len(f.ranges) for f in found}}  # one array per beam count
+    return [CarmenScan(ranges=f.ranges, pose=f.pose, timestamp=f.timestamp, line=f.line, angles=angles[len(f.ranges)],
+                       max_range=max_range) for f in found]
 
 
 def _rawlaser_scans(found: list[tuple], odom: np.ndarray, params: dict[str, float], p: Path,
