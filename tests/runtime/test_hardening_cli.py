@@ -176,6 +176,23 @@ def test_ctrl_c_ends_serve_models_cleanly():
     assert serve.returncode == 130 and "Traceback" not in err, err  # 128 + SIGINT, after a clean shutdown
 
 
+def test_the_sigterm_handler_imports_nothing():
+    """A SIGTERM that lands while a command's modules are still being imported must not import
+    inside that import: the handler did (`emos.tools.cli.common`), and under load the echo below
+    died of a circular import ("cannot access submodule 'futures' of module 'concurrent'"), exit
+    1 with a traceback instead of 143."""
+    code = ("import sys\n"
+            "from emos.tools.cli import _terminated\n"
+            "assert 'emos.tools.cli.common' not in sys.modules\n"
+            "try:\n"
+            "    _terminated(15, None)\n"
+            "except SystemExit as exc:\n"
+            "    print(exc.code, 'emos.tools.cli.common' in sys.modules)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["143", "False"], done.stdout
+
+
 def test_sigterm_at_any_moment_of_topic_echo_leaves_nothing(system):
     """SIGTERM early, while the echo is still setting up, leaves no half-made FIFO either."""
     before = _fifos(system)

@@ -138,11 +138,14 @@ def _terminated(signum: int, frame: object) -> None:
     # SIGTERM unwinds like Ctrl-C, so every command's `finally` releases what it holds (a
     # topic's ring, a wake-up FIFO, benchmark children); 143 = 128 + SIGTERM. Noted first, for
     # the loops that check it should this SystemExit land where Python swallows it.
-    from emos.tools.cli import common
-
-    common.note_termination(signum)
-    if common.hold_signal(signum):
-        return  # inside signals_deferred(): delivered as the block ends
+    # No import here: a SIGTERM that lands while the command's modules are being imported would
+    # import inside that import (a circular-import traceback, exit 1). A command that defers
+    # signals or checks for termination has imported `common` already.
+    common = sys.modules.get("emos.tools.cli.common")
+    if common is not None and hasattr(common, "hold_signal"):
+        common.note_termination(signum)
+        if common.hold_signal(signum):
+            return  # inside signals_deferred(): delivered as the block ends
     raise SystemExit(128 + signum)
 
 
