@@ -58,6 +58,9 @@ needs_iceoryx2 = pytest.mark.skipif(
     not ipc_peers.peer_env_has("iceoryx2"),
     reason="the iceoryx2 peer environment (~/.cache/emos-bench/peers) is not installed; "
            "`emos bench ipc --peers iceoryx2` creates it from the package registry, which this test does not reach")
+# The iceoryx2 tests compare iceoryx2's files before and after: run side by side on two workers,
+# one saw the other's (a loaded suite run). One worker runs them, one after the other.
+one_iceoryx2_at_a_time = pytest.mark.xdist_group("iceoryx2_peers")
 
 
 def _iceoryx2_leftovers() -> set[str]:
@@ -69,6 +72,7 @@ def _iceoryx2_leftovers() -> set[str]:
 
 
 @needs_iceoryx2
+@one_iceoryx2_at_a_time
 def test_iceoryx2_is_measured_from_its_own_environment_and_leaves_no_files():
     before = _iceoryx2_leftovers()
     done = _bench("--peers", "iceoryx2,iceoryx2-poll", "--rounds", "1", "--sizes", "64", "--messages", "20", "--json")
@@ -80,6 +84,7 @@ def test_iceoryx2_is_measured_from_its_own_environment_and_leaves_no_files():
 
 
 @needs_iceoryx2
+@one_iceoryx2_at_a_time
 def test_an_iceoryx2_peer_that_hangs_is_killed_with_its_echo_and_its_files_removed(monkeypatch):
     """A peer past its time limit: the peer and the echo it forked are killed (their process
     group), and what iceoryx2 made for them is removed all the same."""
