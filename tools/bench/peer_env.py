@@ -2,7 +2,7 @@
 
 Benchmarks compare EMOS with what a robotics engineer would pick instead (iceoryx2, zenoh and
 dora for ``emos bench ipc``; OpenKarto, the scan matcher of slam_toolbox, for ``emos bench
-slam``). Their packages go into one virtual environment that this module creates (``python -m
+slam``; Nav2's AMCL for ``emos bench localize``). Their packages go into one virtual environment that this module creates (``python -m
 venv``, then ``pip install`` of pinned versions) under ``$EMOS_BENCH_PEERS`` (default
 ``~/.cache/emos-bench/peers``): never a dependency of EMOS, never imported by it; a peer runs as a
 script of its own with that environment's Python. A registry that cannot be reached, or a package
