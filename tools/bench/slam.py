@@ -232,9 +232,9 @@ def _build_map(poses: np.ndarray, scans: list[Any], max_range: float) -> Any:
 
 
 def _default_reference(log_path: str) -> str | None:
-    base = str(log_path)
-    for suffix in (".gz", ".log", ".clf"):
-        base = base[: -len(suffix)] if base.endswith(suffix) else base
+    from emos.actors.nav.localization.carmen import carmen_stem
+
+    base = carmen_stem(log_path)
     return base + ".png" if os.path.exists(base + ".png") else None
 
 

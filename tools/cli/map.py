@@ -73,14 +73,6 @@ def _beams(scan: Any) -> tuple[np.ndarray, np.ndarray]:
     return np.where(r >= scan_max, np.inf, r), a0 + inc * np.arange(r.size if abs(n - r.size) <= 1 else n)
 
 
-#: Suffixes of CARMEN logs (the Radish datasets): ``emos map build`` reads them as well as MCAP.
-CARMEN_SUFFIXES = (".log", ".log.gz", ".clf", ".clf.gz")
-
-
-def is_carmen(path: str) -> bool:
-    return str(path).lower().endswith(CARMEN_SUFFIXES)
-
-
 def _mcap_scans(args: argparse.Namespace) -> Any:
     """(odometry pose, ranges, angles) of each LaserScan of the recording, the pose the newest
     odometry recorded before it (None before the first)."""
@@ -100,7 +92,7 @@ def _mcap_scans(args: argparse.Namespace) -> Any:
 
 
 def build(args: argparse.Namespace) -> Path:
-    from emos.actors.nav.localization import build_reference_map, relative_pose
+    from emos.actors.nav.localization import build_reference_map, is_carmen, relative_pose
     from emos.actors.nav.mapping.slam import POSEGRAPH_SUFFIX, GraphSlam, SlamParams, save_posegraph
     from emos.actors.nav.maps import save_map
 

@@ -46,10 +46,13 @@ from emos.errors import EmosError
 from emos.geometry import wrap_angle
 from emos.ratelimit import RateLimitedLog
 
-__all__ = ["CarmenScan", "CarmenLog", "CarmenLogError", "read_carmen", "beam_angles", "LASER_FORMS"]
+__all__ = ["CarmenScan", "CarmenLog", "CarmenLogError", "read_carmen", "beam_angles", "carmen_stem", "is_carmen", "LASER_FORMS",
+           "CARMEN_SUFFIXES"]
 
 _log = logging.getLogger("emos.nav.localization.carmen")
 
+#: How CARMEN log files are named (gzip-compressed or not).
+CARMEN_SUFFIXES = (".log", ".log.gz", ".clf", ".clf.gz")
 #: The front laser's message types, in the order a log is read from.
 LASER_FORMS = ("FLASER", "ROBOTLASER1", "RAWLASER1")
 _MAX_BEAMS = 100_000
@@ -105,10 +108,19 @@ class CarmenLog:
 
     @property
     def name(self) -> str:
-        base = os.path.basename(self.path)
-        for suffix in (".gz", ".log", ".clf"):
-            base = base[: -len(suffix)] if base.endswith(suffix) else base
-        return base
+        return os.path.basename(carmen_stem(self.path))
+
+
+def carmen_stem(path: str | os.PathLike[str]) -> str:
+    """``path`` without its CARMEN suffix (``.log.gz``, ``.clf``, ...; a bare ``.gz`` too)."""
+    text = str(path)
+    suffix = next((x for x in CARMEN_SUFFIXES if text.lower().endswith(x)), ".gz" if text.endswith(".gz") else "")
+    return text[: len(text) - len(suffix)]
+
+
+def is_carmen(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is named like a CARMEN log."""
+    return str(path).lower().endswith(CARMEN_SUFFIXES)
 
 
 def beam_angles(n: int, fov: float = math.pi) -> np.ndarray:
