@@ -10,7 +10,10 @@ component and makes them the Simulator's ``lockstep_consumers``.
 
 An action loop in a thread of its own (the Controller's ``track_vision_target`` and path
 actions) is covered too: it paces itself with ``Node.pacer``, which steps it inside its node's
-ticks (``emos.core.clock.Pacer``).
+ticks (``emos.core.clock.Pacer``). So is a detector that hands its frames to a worker thread
+(``Vision``): its node answers a tick once the worker has done that tick's frames
+(``SimTimeDriver.hold_ticks_for``). A language model's answers are not waited for (see
+``ModelComponent.STEPS_INSIDE_TICKS``).
 
 Left out on purpose: the monitor (a Cortex watching the run is an observer, not part of the
 loop the simulator closes) and what the Launcher adds after the recipe's components (the web

@@ -208,6 +208,8 @@ class SimTimeDriver:
         self._loops: list[_SteppedLoop] = []
         self._loops_lock = threading.Lock()
         self._loop_waits: Any = None  # a RateLimitedLog, made on the first overlong step
+        # Step workers whose steps belong to the tick that triggered them (hold_ticks_for).
+        self._workers: list[Any] = []
 
     def has_news(self) -> bool:
         return self.sub.has_news()
@@ -261,11 +263,42 @@ class SimTimeDriver:
             self.compute_s += time.thread_time() - cpu0  # a timer's work is the stack's compute too
         if self._loops:
             self._step_loops(t)
+        if self._workers:
+            self._wait_for_workers(t)
         self.pub.publish(self._ack_cls(clock=tick.clock, compute=self.compute_s))
         self.compute_s = 0.0
 
-    # -- action loops stepped inside the tick ----------------------------------------------------------
-    LOOP_STEP_WAIT_S = 5.0  # wall seconds: only a loop that blocks on this node's own thread takes that long
+    # -- work in other threads, done inside the tick ---------------------------------------------------
+    STEP_WAIT_S = 5.0  # wall seconds: only a step that blocks on something outside the run takes that long
+
+    def hold_ticks_for(self, worker: Any) -> None:
+        """Answer each tick only once ``worker`` (a ``StepWorker``) has finished the steps the
+        tick's inputs gave it, and charge their CPU: a detector that hands its frames to a
+        worker thread then sees every frame of a lockstep run, however slow the machine, as a
+        Timed step would. Without this the simulator ran on while the worker was busy, and
+        which frames were detected (and so where the robot went) depended on the machine."""
+        if worker not in self._workers:
+            self._workers.append(worker)
+
+    def release_ticks_from(self, worker: Any) -> None:
+        if worker in self._workers:
+            self._workers.remove(worker)
+
+    def _wait_for_workers(self, t: float) -> None:
+        for worker in list(self._workers):
+            finished = worker.wait_steps(self.STEP_WAIT_S)
+            self.compute_s += worker.take_cpu()
+            if not finished:
+                self._overlong_step("worker-step", "[%s] the step worker %s did not finish its steps within %.0f s of the "
+                                    "tick at %.3f s; answering the tick without them", self.name, worker.name,
+                                    self.STEP_WAIT_S, t)
+
+    def _overlong_step(self, key: str, message: str, *args: Any) -> None:
+        if self._loop_waits is None:
+            from emos.ratelimit import RateLimitedLog
+
+            self._loop_waits = RateLimitedLog(log, interval=10.0)
+        self._loop_waits.warning(key, message, *args)
 
     def join_loop(self, period: float) -> _SteppedLoop:
         """Register the calling thread's loop: from the next due tick on, it steps inside ticks."""
@@ -294,23 +327,19 @@ class SimTimeDriver:
             waited = 0.0
             while not loop.done.wait(0.05):
                 waited += 0.05
-                if loop.left or not loop.thread.is_alive() or waited >= self.LOOP_STEP_WAIT_S:
+                if loop.left or not loop.thread.is_alive() or waited >= self.STEP_WAIT_S:
                     break
             self.compute_s += loop.take_cpu()
             if loop.done.is_set() or loop.left:
                 continue
-            if self._loop_waits is None:
-                from emos.ratelimit import RateLimitedLog
-
-                self._loop_waits = RateLimitedLog(log, interval=10.0)
             if not loop.thread.is_alive():  # it ended without closing its Pacer: no tick waits for it again
                 self.leave_loop(loop)
-                self._loop_waits.warning("loop-gone", "[%s] an action loop (thread %s) ended without closing its Pacer",
-                                         self.name, loop.thread.name)
+                self._overlong_step("loop-gone", "[%s] an action loop (thread %s) ended without closing its Pacer",
+                                    self.name, loop.thread.name)
             else:
-                self._loop_waits.warning("loop-step", "[%s] an action loop (thread %s) did not finish its step within %.0f s "
-                                         "of the tick at %.3f s; answering the tick without it", self.name,
-                                         loop.thread.name, self.LOOP_STEP_WAIT_S, t)
+                self._overlong_step("loop-step", "[%s] an action loop (thread %s) did not finish its step within %.0f s "
+                                    "of the tick at %.3f s; answering the tick without it", self.name,
+                                    loop.thread.name, self.STEP_WAIT_S, t)
 
     def close(self) -> None:
         self.sub.close()

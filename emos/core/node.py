@@ -642,6 +642,17 @@ class Node:
         simulator waits for it (``emos.core.clock.Pacer``). Close it when the loop ends."""
         return Pacer(period, driver=self._sim_time)
 
+    def hold_ticks_for(self, worker: Any) -> None:
+        """In a ``use_sim_time`` node, answer each tick only once ``worker`` (a ``StepWorker``
+        of this component) has done the steps of that tick (``SimTimeDriver.hold_ticks_for``);
+        on the wall clock, nothing to do."""
+        if self._sim_time is not None:
+            self._sim_time.hold_ticks_for(worker)
+
+    def release_ticks_from(self, worker: Any) -> None:
+        if self._sim_time is not None:
+            self._sim_time.release_ticks_from(worker)
+
     def add_service(self, name: str, request_type: Any, response_type: Any, callback: Any) -> None:
         self._extra_servers.append(("service", (name, request_type, response_type, callback)))
 

@@ -9,12 +9,18 @@ The backlog is bounded and says what happens when it is full: ``latest`` keeps o
 job (a camera frame older than the one just received is worth nothing; the replaced jobs are
 counted as dropped), ``queue`` keeps up to ``max_pending`` jobs and drops the oldest beyond
 that (a user's questions should all be answered, but not hours late).
+
+Jobs submitted as *steps* (``submit(job, step=True)``: the component's work on a trigger, not
+its housekeeping such as reconnecting to a model server) are counted, so a lockstep clock can
+wait for the steps of a tick (``wait_steps``) and charge the CPU they took (``take_cpu``):
+see ``emos.core.clock.SimTimeDriver.hold_ticks_for``.
 """
 from __future__ import annotations
 
 import collections
 import logging
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -34,9 +40,11 @@ class StepWorker:
         self.on_error = on_error
         self.dropped = 0
         self.done = 0
-        self._jobs: collections.deque[Callable[[], Any]] = collections.deque()
+        self._jobs: collections.deque[tuple[Callable[[], Any], bool]] = collections.deque()  # (job, is a step)
         self._cond = threading.Condition()
         self._busy = False
+        self._steps = 0  # step jobs waiting or running
+        self._cpu_s = 0.0  # thread CPU seconds of the jobs run since the last take_cpu()
         self._stopping = False
         self._thread: threading.Thread | None = None
         self._log = logging.getLogger(f"emos.{name}.worker")
@@ -54,7 +62,7 @@ class StepWorker:
         """Drop queued jobs, let the running one finish (up to ``timeout``); True if it did."""
         with self._cond:
             self._stopping = True
-            self._jobs.clear()
+            self._drop_waiting(count=False)
             self._cond.notify_all()
             thread = self._thread
         if thread is None:
@@ -82,29 +90,49 @@ class StepWorker:
             return len(self._jobs)
 
     # ------------------------------------------------------------------ jobs
-    def submit(self, job: Callable[[], Any]) -> bool:
-        """Queue ``job``; False if the worker is not running (the job is not kept)."""
+    def submit(self, job: Callable[[], Any], step: bool = False) -> bool:
+        """Queue ``job`` (``step``: the component's work on a trigger, see the module's doc);
+        False if the worker is not running (the job is not kept)."""
         with self._cond:
             if self._thread is None or self._stopping:
                 return False
             while len(self._jobs) >= self.max_pending:
-                self._jobs.popleft()
+                _, was_step = self._jobs.popleft()
+                self._steps -= was_step
                 self.dropped += 1
-            self._jobs.append(job)
+            self._jobs.append((job, step))
+            self._steps += step
             self._cond.notify()
         return True
 
     def clear(self) -> int:
         """Drop every waiting job (counted as dropped); the running one goes on."""
         with self._cond:
-            n = len(self._jobs)
-            self._jobs.clear()
+            return self._drop_waiting(count=True)
+
+    def _drop_waiting(self, count: bool) -> int:
+        n = len(self._jobs)
+        self._steps -= sum(step for _, step in self._jobs)
+        self._jobs.clear()
+        if count:
             self.dropped += n
-            return n
+        self._cond.notify_all()
+        return n
 
     def wait_idle(self, timeout: float) -> bool:
         with self._cond:
             return self._cond.wait_for(lambda: not self._busy and not self._jobs, timeout)
+
+    def wait_steps(self, timeout: float) -> bool:
+        """Wait (up to ``timeout`` wall seconds) until no step job is waiting or running; True if none is."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._steps == 0, timeout)
+
+    def take_cpu(self) -> float:
+        """Thread CPU seconds of the jobs finished since the last call."""
+        with self._cond:
+            cpu, self._cpu_s = self._cpu_s, 0.0
+            return cpu
 
     def _run(self) -> None:
         while True:
@@ -114,8 +142,9 @@ class StepWorker:
                     self._busy = False
                     self._cond.notify_all()
                     return
-                job = self._jobs.popleft()
+                job, step = self._jobs.popleft()
                 self._busy = True
+            cpu0 = time.thread_time()
             try:
                 job()
             except BaseException as exc:  # a job must never kill the worker
@@ -129,5 +158,7 @@ class StepWorker:
             finally:
                 with self._cond:
                     self._busy = False
+                    self._steps -= step
+                    self._cpu_s += time.thread_time() - cpu0
                     self.done += 1
                     self._cond.notify_all()

@@ -1,4 +1,5 @@
-"""``emos.core.clock.Pacer``: an action loop steps once per period of the node's clock.
+"""``emos.core.clock.Pacer``: an action loop steps once per period of the node's clock; and a
+step worker held by a ``SimTimeDriver`` finishes a tick's steps before the tick is answered.
 
 A loop that slept its period in wall time stepped several times per simulated period when the
 simulator ran slower than real time (``emos run --lockstep`` on a busy machine), and the vision
@@ -212,3 +213,115 @@ def test_a_tick_never_waits_for_a_loop_that_ended_or_was_cancelled(driver):
     t.join(10)
     assert not t.is_alive()
     assert not driver._loops  # the tick that found it gone let it go
+
+
+# -- a step worker held by the driver: its steps belong to the tick that triggered them ------------------
+def _spin_cpu(seconds: float) -> None:
+    end = time.thread_time() + seconds
+    while time.thread_time() < end:
+        pass
+
+
+def test_a_held_worker_finishes_the_ticks_steps_before_the_answer_which_carries_their_cpu(driver):
+    """A detector hands each frame to its worker thread. Under lockstep, the tick that brought the
+    frame is answered only once the worker has detected it (and published), with the worker's CPU
+    in the answer: the simulator must not run on while the detector is busy, or which frames get
+    detected depends on the machine's speed."""
+    from emos.core.clock import ack_topic
+    from emos.core.offload import StepWorker
+    from emos.msgs import LockstepAck
+    from emos.transport.pubsub import Subscriber
+
+    acks = Subscriber(driver.ctx, ack_topic("follower"), LockstepAck, queue_size=64)
+    detector = StepWorker("detector", "latest")
+    detector.start()
+    driver.hold_ticks_for(detector)
+    detected: list[int] = []
+    answered_after: list[int] = []
+    charged: list[float] = []
+    try:
+        for i in range(1, 11):
+            frame = i
+
+            def detect(frame: int = frame) -> None:
+                _spin_cpu(0.02)
+                detected.append(frame)
+
+            assert detector.submit(detect, step=True)  # what Vision's step does with a frame
+            driver.handle(_tick(0.01 * i), None)
+            answered_after.append(len(detected))
+            charged += [ack.compute for ack in acks.take()]
+    finally:
+        driver.release_ticks_from(detector)
+        detector.stop()
+        acks.close()
+    assert detected == list(range(1, 11))  # every frame, none replaced by a newer one
+    assert answered_after == list(range(1, 11))  # each answer came after that tick's frame was done
+    assert len(charged) == 10 and all(c >= 0.019 for c in charged), charged
+
+
+def test_housekeeping_jobs_and_released_workers_do_not_hold_ticks(driver, caplog):
+    """A reconnect to a model server (not a step) may block for seconds: the tick goes on. A step
+    that overruns the wait is reported by name and the tick is answered without it."""
+    from emos.core.offload import StepWorker
+
+    worker = StepWorker("detector", "queue")
+    worker.start()
+    driver.hold_ticks_for(worker)
+    gate = threading.Event()
+    try:
+        worker.submit(gate.wait)  # housekeeping, blocking until the test lets it go
+        assert worker.wait_steps(0)  # no step waiting or running: nothing for a tick to wait for
+        driver.handle(_tick(0.01), None)
+        assert not gate.is_set() and worker.busy  # answered while the housekeeping job still runs
+        gate.set()
+        assert worker.wait_idle(10)
+
+        gate.clear()
+        worker.submit(gate.wait, step=True)  # a step stuck on something outside the run
+        driver.STEP_WAIT_S = 0.05  # the instance's bound: the test need not wait 5 s
+        with caplog.at_level("WARNING", logger="emos.clock"):
+            driver.handle(_tick(0.02), None)
+        assert "step worker detector did not finish its steps" in caplog.text
+        gate.set()
+        assert worker.wait_steps(10)
+
+        driver.release_ticks_from(worker)
+        gate.clear()
+        worker.submit(gate.wait, step=True)
+        driver.handle(_tick(0.03), None)  # released: the tick does not wait for its step
+        assert worker.busy
+    finally:
+        gate.set()
+        worker.stop()
+
+
+def test_replaced_and_dropped_steps_are_not_waited_for():
+    """A ``latest`` worker replaces a waiting frame with a newer one; ``stop`` drops the waiting
+    jobs: neither may leave a step counted that will never run (a tick would wait for it)."""
+    from emos.core.offload import StepWorker
+
+    worker = StepWorker("camera", "latest")
+    worker.start()
+    gate = threading.Event()
+    done: list[int] = []
+    worker.submit(gate.wait, step=True)
+    while not worker.busy or worker.pending:
+        time.sleep(0.001)
+    for i in range(5):
+        worker.submit(lambda i=i: done.append(i), step=True)  # each replaces the one before
+    assert worker.dropped == 4 and not worker.wait_steps(0)
+    gate.set()
+    assert worker.wait_steps(10) and done == [4]
+    gate.clear()
+    worker.submit(gate.wait, step=True)
+    while worker.pending:
+        time.sleep(0.001)
+    worker.submit(lambda: done.append(5), step=True)
+    stopper = threading.Thread(target=worker.stop)
+    stopper.start()
+    while worker.pending:  # stop drops the waiting step at once ...
+        time.sleep(0.001)
+    gate.set()  # ... and lets the running one end
+    stopper.join(10)
+    assert worker.wait_steps(0) and done == [4]

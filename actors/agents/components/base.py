@@ -114,6 +114,11 @@ class ModelComponent(BaseComponent):
     PENDING_POLICY: ClassVar[str] = "queue"
     #: whether the component can run without a model client (e.g. Vision with the local classifier)
     MODEL_OPTIONAL: ClassVar[bool] = False
+    #: under simulated time, whether a tick is answered only after the steps it triggered (a
+    #: detector's frames: perception is part of the loop a lockstep simulator closes). Not for a
+    #: model that answers requests: freezing simulated time while a language model thinks would
+    #: hide its latency from the robot, which on a real one keeps moving meanwhile.
+    STEPS_INSIDE_TICKS: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -354,6 +359,8 @@ class ModelComponent(BaseComponent):
         self._worker = StepWorker(self.component_name, self.PENDING_POLICY, self.config.max_pending,
                                   on_error=self._on_job_error)
         self._worker.start()
+        if self.STEPS_INSIDE_TICKS:
+            self.node.hold_ticks_for(self._worker)
         self._client_ready = False
         ready: concurrent.futures.Future[Any] = concurrent.futures.Future()
         if not self._worker.submit(lambda: self._activate_in_worker(ready)):
@@ -409,6 +416,8 @@ class ModelComponent(BaseComponent):
 
     def custom_on_deactivate(self) -> None:
         if self._worker is not None:
+            if self._node is not None:
+                self._node.release_ticks_from(self._worker)
             self._worker.stop(timeout=5.0)
             self._worker = None
         for client in self._clients.values():
@@ -437,7 +446,7 @@ class ModelComponent(BaseComponent):
         if job is None:
             return
         worker = self._worker
-        if worker is None or not worker.submit(lambda: self._run_job(job)):
+        if worker is None or not worker.submit(lambda: self._run_job(job), step=True):
             self._errors("worker", "[%s] step skipped: the model worker is not running", self.component_name)
 
     def missing_inputs(self, inputs: Mapping[str, Any]) -> list[str]:

@@ -68,6 +68,7 @@ class Vision(ModelComponent):
     ALLOWED_OUTPUTS: ClassVar[tuple[type, ...]] = DETECTION_OUTPUTS
     PENDING_POLICY: ClassVar[str] = "latest"
     MODEL_OPTIONAL: ClassVar[bool] = True
+    STEPS_INSIDE_TICKS: ClassVar[bool] = True
 
     def __init__(self, *, inputs: list[Topic], outputs: list[Topic], model_client: Any = None,
                  config: VisionConfig | None = None, trigger: Any = 1.0, component_name: str, **kwargs: Any) -> None:
