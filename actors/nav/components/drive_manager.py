@@ -373,11 +373,13 @@ class DriveManager(NavComponent):
             # robot keeps standing still, and a source that said so and went quiet is no fault.
             self._command = np.zeros(3)
             return None
+        # A dead publisher first: its last command is soon too old as well, and "it died" says
+        # more than "no command" (which of the two a loaded machine noticed first was chance).
+        if not self._publisher_alive(topic, src):
+            return topic, f"the process that published the last command on {topic.name} died"
         if age > timeout:
             what = "cmd_timeout" if not cfg.command_inputs or key == "multi_command" else f"{topic.name} timeout"
             return topic, f"no command for {age:.2f} s ({what} {timeout:g} s)"
-        if not self._publisher_alive(topic, src):
-            return topic, f"the process that published the last command on {topic.name} died"
         self._command = self._speed_capped(cmd)
         if cfg.closed_loop:
             odom_age = self.age_of("location")
