@@ -27,8 +27,9 @@ Global localization (:meth:`ParticleFilter.global_localization`) is a search unt
 hypothesis (cluster) holds ``converged_weight`` on ``converged_updates`` consecutive updates
 and over ``converged_travel`` metres of travel (staying where the odometry carries it): the
 full ``max_particles``, the likelihood tempered with ``search_min_ess_fraction``, and each scan
-the heaviest hypotheses scan-matched to their likelihood peaks and reweighted by them
-(``hypothesis_beta``, see ``_search_step``), and new places proposed from the scan itself
+the heaviest hypotheses scan-matched to their likelihood peaks and reweighted by them, each
+peak less a cost for every beam that would pass through a wall from there
+(``hypothesis_beta``, ``search_through_wall_nats``, see ``_search_step``), and new places proposed from the scan itself
 (``search_candidates``, see ``_propose``): the uniform start often leaves no particle within
 reach of the robot's place, and a search that never had the right place cannot keep it.
 Then the other places' particles are dropped and the filter tracks as from a known pose.
@@ -395,7 +396,7 @@ class ParticleFilter:
             order = np.flatnonzero(taken)[np.argsort(loglik[taken], kind="stable")]
             best[labels[order]] = order  # the last write per hypothesis is its best particle
             starts = np.vstack([means, self.particles[best]])
-            peaks = self._peaks(starts, ranges, angles).reshape(2, k).max(axis=0)
+            peaks = self._search_peaks(starts, ranges, angles)[1].reshape(2, k).max(axis=0)
             best_peak = float(peaks.max())
             if compare:
                 factor = np.exp(p.hypothesis_beta * (peaks - best_peak))
@@ -440,7 +441,7 @@ class ParticleFilter:
         step = max(1, len(ranges) // 30)
         score = self.field.log_likelihood(cand, ranges[::step], angles[::step], self.sensor_pose)
         top = np.argsort(score)[-p.search_climbs:]
-        poses, peaks = self._climb(cand[top], ranges, angles)
+        poses, peaks = self._search_peaks(cand[top], ranges, angles)
         beta = max(p.hypothesis_beta, 1e-3)
         f = np.minimum(1.0, np.exp(beta * (peaks - best_peak)))
         keep = f >= 0.01
@@ -577,6 +578,16 @@ class ParticleFilter:
         self.leader_travel = self.leader_travel + step if same else 0.0
         self._leader, self._leader_odom = lead.copy(), None if odom is None else odom.copy()
         return self.leader_updates >= p.converged_updates and self.leader_travel >= p.converged_travel
+
+    def _search_peaks(self, starts: np.ndarray, ranges: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The search's measure of a place: ``_climb`` to the nearest peak, less
+        ``search_through_wall_nats`` for each beam that passes through a wall from there."""
+        p = self.params
+        poses, values = self._climb(starts, ranges, angles)
+        if p.search_through_wall_nats > 0:
+            values = values - p.search_through_wall_nats * self.field.through_walls(
+                poses, ranges, angles, self.sensor_pose, p.search_through_wall_margin)
+        return poses, values
 
     def _peaks(self, starts: np.ndarray, ranges: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """The log-likelihood of the scan at the nearest peak from each of ``starts`` (m, 3): a
