@@ -359,8 +359,8 @@ class ModelComponent(BaseComponent):
         self._worker = StepWorker(self.component_name, self.PENDING_POLICY, self.config.max_pending,
                                   on_error=self._on_job_error)
         self._worker.start()
-        if self.STEPS_INSIDE_TICKS:
-            self.node.hold_ticks_for(self._worker)
+        if self.STEPS_INSIDE_TICKS and self._node is not None:
+            self._node.hold_ticks_for(self._worker)
         self._client_ready = False
         ready: concurrent.futures.Future[Any] = concurrent.futures.Future()
         if not self._worker.submit(lambda: self._activate_in_worker(ready)):
