@@ -49,3 +49,39 @@ def loop_path(n: int = 120) -> np.ndarray:
     y = 4.0 + 1.6 * np.sin(t)
     yaw = np.arctan2(1.6 * np.cos(t), -2.8 * np.sin(t))
     return np.column_stack([x, y, yaw])
+
+
+def twin_corridors(extra: tuple[tuple[float, float, float, float], ...] = ()) -> OccupancyGridMap:
+    """Two closed corridors, 12 m x 2 m, one above the other (A: y 0.1-2.1, B: y 3.1-5.1), alike
+    but for the ``extra`` boxes (xmin, ymin, xmax, ymax in metres): the look-alike places of the
+    global search's tests."""
+    data = np.zeros((int(6.0 / RES), int(12.0 / RES)), dtype=np.int8)
+
+    def box(x0: float, y0: float, x1: float, y1: float) -> None:
+        data[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = 100
+
+    for y in (0.0, 3.0):
+        box(0.0, y, 12.0, y + 0.1)
+        box(0.0, y + 2.1, 12.0, y + 2.2)
+        box(0.0, y, 0.1, y + 2.2)
+        box(11.9, y, 12.0, y + 2.2)
+    for b in extra:
+        box(*b)
+    return OccupancyGridMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+
+
+def tracked_estimates(grid: OccupancyGridMap, params: list, path: np.ndarray, max_range: float,
+                      noise: tuple[float, ...] = (0.01, 0.001, 0.01, 0.001), seed: int = 1) -> list[np.ndarray]:
+    """The final estimate of a filter tracking ``path`` from a known start, once per parameter
+    set: for the checks that a search-only option leaves tracking bit-identical."""
+    from emos.actors.nav.localization import ParticleFilter, noisy_odometry
+
+    odom = noisy_odometry(path, noise, seed=seed)
+    out = []
+    for p in params:
+        pf = ParticleFilter(p, grid, seed=seed)
+        pf.initialize(path[0], np.diag([0.05 ** 2, 0.05 ** 2, 0.03 ** 2]))
+        for i in range(len(path)):
+            pf.update(odom[i], cast(grid, path[i], BEAMS, max_range), BEAMS, scan_max=max_range)
+        out.append(pf.estimate.copy())
+    return out

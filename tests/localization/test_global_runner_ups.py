@@ -12,7 +12,8 @@ import pytest
 
 from emos.actors.nav.localization import AmclParams, ParticleFilter, noisy_odometry
 from emos.actors.nav.maps import OccupancyGridMap
-from tests.localization.helpers import BEAMS, RES, cast
+from tests.localization.helpers import BEAMS, cast, tracked_estimates
+from tests.localization.helpers import twin_corridors as corridors
 
 pytestmark = pytest.mark.unit
 
@@ -21,22 +22,10 @@ RANGE = 3.0  # a short-range scanner: the far end of a corridor is out of sight 
 
 
 def twin_corridors() -> OccupancyGridMap:
-    """Two closed corridors, 12 m x 2 m, one above the other (A: y 0.1-2.1, B: y 3.1-5.1), the
-    same but for a cabinet on A's north wall at x 7.5-8.5. From the west end, 3 m of range sees
-    the same walls in both; only from x > 4.5 does the cabinet show which corridor it is."""
-    rows, cols = int(6.0 / RES), int(12.0 / RES)
-    data = np.zeros((rows, cols), dtype=np.int8)
-
-    def box(x0: float, y0: float, x1: float, y1: float) -> None:
-        data[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = 100
-
-    for y in (0.0, 3.0):
-        box(0.0, y, 12.0, y + 0.1)
-        box(0.0, y + 2.1, 12.0, y + 2.2)
-        box(0.0, y, 0.1, y + 2.2)
-        box(11.9, y, 12.0, y + 2.2)
-    box(7.5, 1.5, 8.5, 2.1)  # the cabinet, in A only
-    return OccupancyGridMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+    """The helpers' twin corridors with a cabinet on A's north wall at x 7.5-8.5. From the west
+    end, 3 m of range sees the same walls in both; only from x > 4.5 does the cabinet show which
+    corridor it is."""
+    return corridors(((7.5, 1.5, 8.5, 2.1),))
 
 
 def _params(**kw):
@@ -91,15 +80,13 @@ def test_runner_ups_never_exist_when_tracking_from_a_known_pose():
     grid = twin_corridors()
     path = np.array([[0.8 + 0.1 * k, 1.0, 0.0] for k in range(30)])
     odom = noisy_odometry(path, NOISE, seed=1)
-    tracked = []
-    for nats in (0.0, 60.0):
-        pf = ParticleFilter(_params(runner_up_nats=nats), grid, seed=1)
-        pf.initialize(path[0], np.diag([0.05 ** 2, 0.05 ** 2, 0.03 ** 2]))
-        for i in range(len(path)):
-            pf.update(odom[i], cast(grid, path[i], BEAMS, RANGE), BEAMS, scan_max=RANGE)
-            assert not pf.runner_ups
-        tracked.append(pf.estimate.copy())
-    assert np.array_equal(tracked[0], tracked[1]), "tracking is bit-identical with the option on"
+    pf = ParticleFilter(_params(runner_up_nats=60.0), grid, seed=1)
+    pf.initialize(path[0], np.diag([0.05 ** 2, 0.05 ** 2, 0.03 ** 2]))
+    for i in range(len(path)):
+        pf.update(odom[i], cast(grid, path[i], BEAMS, RANGE), BEAMS, scan_max=RANGE)
+        assert not pf.runner_ups
+    off, on = tracked_estimates(grid, [_params(runner_up_nats=n) for n in (0.0, 60.0)], path, RANGE)
+    assert np.array_equal(off, on), "tracking is bit-identical with the option on"
 
 
 @pytest.mark.parametrize("name, value, match", [

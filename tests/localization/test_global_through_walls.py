@@ -11,7 +11,8 @@ import pytest
 
 from emos.actors.nav.localization import AmclParams, LikelihoodField, ParticleFilter, noisy_odometry
 from emos.actors.nav.maps import OccupancyGridMap
-from tests.localization.helpers import BEAMS, RES, cast
+from tests.localization.helpers import BEAMS, cast, tracked_estimates
+from tests.localization.helpers import twin_corridors as corridors
 
 pytestmark = pytest.mark.unit
 
@@ -21,23 +22,11 @@ STUB = (2.0, 0.4, 2.05, 1.8)  # a 5 cm x 1.4 m wall across corridor B, offsets f
 
 
 def twin_corridors(stub: bool = True) -> OccupancyGridMap:
-    """Two closed corridors, 12 m x 2 m (A: y 0.1-2.1, B: y 3.1-5.1), alike but for a thin wall
-    standing across B at x = 2 (0.2 m gaps at its ends). From A's west end the robot's beams to
-    the side walls beyond x = 2 cross where B's wall stands, and end on walls both places have."""
-    data = np.zeros((int(6.0 / RES), int(12.0 / RES)), dtype=np.int8)
-
-    def box(x0: float, y0: float, x1: float, y1: float) -> None:
-        data[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = 100
-
-    for y in (0.0, 3.0):
-        box(0.0, y, 12.0, y + 0.1)
-        box(0.0, y + 2.1, 12.0, y + 2.2)
-        box(0.0, y, 0.1, y + 2.2)
-        box(11.9, y, 12.0, y + 2.2)
-    if stub:
-        x0, y0, x1, y1 = STUB
-        box(x0, 3.1 + y0, x1, 3.1 + y1)
-    return OccupancyGridMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+    """The helpers' twin corridors with a thin wall standing across B at x = 2 (0.2 m gaps at its
+    ends). From A's west end the robot's beams to the side walls beyond x = 2 cross where B's
+    wall stands, and end on walls both places have."""
+    x0, y0, x1, y1 = STUB
+    return corridors(((x0, 3.1 + y0, x1, 3.1 + y1),) if stub else ())
 
 
 ROBOT = np.array([0.8, 1.1, 0.0])
@@ -93,17 +82,9 @@ def test_without_the_count_the_look_alike_with_more_particles_wins():
 
 
 def test_tracking_from_a_known_pose_is_bit_identical_with_the_option_on():
-    grid = twin_corridors()
     path = np.array([[0.8 + 0.1 * k, 1.1, 0.0] for k in range(20)])
-    odom = noisy_odometry(path, NOISE, seed=1)
-    tracked = []
-    for nats in (0.0, 2.0):
-        pf = ParticleFilter(_params(search_through_wall_nats=nats), grid, seed=1)
-        pf.initialize(path[0], np.diag([0.05 ** 2, 0.05 ** 2, 0.03 ** 2]))
-        for i in range(len(path)):
-            pf.update(odom[i], cast(grid, path[i], BEAMS, RANGE), BEAMS, scan_max=RANGE)
-        tracked.append(pf.estimate.copy())
-    assert np.array_equal(tracked[0], tracked[1])
+    off, on = tracked_estimates(twin_corridors(), [_params(search_through_wall_nats=n) for n in (0.0, 2.0)], path, RANGE)
+    assert np.array_equal(off, on)
 
 
 @pytest.mark.parametrize("name, value, match", [
