@@ -85,3 +85,14 @@ def tracked_estimates(grid: OccupancyGridMap, params: list, path: np.ndarray, ma
             pf.update(odom[i], cast(grid, path[i], BEAMS, max_range), BEAMS, scan_max=max_range)
         out.append(pf.estimate.copy())
     return out
+
+
+def corridor_params(max_range: float, **kw):
+    """The filter parameters of the twin-corridor tests (a short-range scanner, 2000 particles)."""
+    from emos.actors.nav.localization import AmclParams
+
+    base = dict(alpha1=0.02, alpha2=0.002, alpha3=0.02, alpha4=0.002, max_beams=90, sigma_hit=0.2,
+                laser_max_range=max_range, update_min_d=0.1, update_min_a=0.1, min_particles=500, max_particles=2000,
+                search_min_ess_fraction=0.5, converged_travel=0.0, search_candidates=0)
+    base.update(kw)
+    return AmclParams(**base)

@@ -12,7 +12,7 @@ import pytest
 
 from emos.actors.nav.localization import AmclParams, ParticleFilter, noisy_odometry
 from emos.actors.nav.maps import OccupancyGridMap
-from tests.localization.helpers import BEAMS, cast, tracked_estimates
+from tests.localization.helpers import BEAMS, cast, corridor_params, tracked_estimates
 from tests.localization.helpers import twin_corridors as corridors
 
 pytestmark = pytest.mark.unit
@@ -29,11 +29,7 @@ def twin_corridors() -> OccupancyGridMap:
 
 
 def _params(**kw):
-    base = dict(alpha1=0.02, alpha2=0.002, alpha3=0.02, alpha4=0.002, max_beams=90, sigma_hit=0.2,
-                laser_max_range=RANGE, update_min_d=0.1, update_min_a=0.1, min_particles=500, max_particles=2000,
-                search_min_ess_fraction=0.5, converged_travel=0.0, search_candidates=0)
-    base.update(kw)
-    return AmclParams(**base)
+    return corridor_params(RANGE, **kw)
 
 
 def _drive(params, seed=3):
