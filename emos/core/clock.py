@@ -289,11 +289,11 @@ class SimTimeDriver:
             finished = worker.wait_steps(self.STEP_WAIT_S)
             self.compute_s += worker.take_cpu()
             if not finished:
-                self._overlong_step("worker-step", "[%s] the step worker %s did not finish its steps within %.0f s of the "
+                self._step_warning("worker-step", "[%s] the step worker %s did not finish its steps within %.0f s of the "
                                     "tick at %.3f s; answering the tick without them", self.name, worker.name,
                                     self.STEP_WAIT_S, t)
 
-    def _overlong_step(self, key: str, message: str, *args: Any) -> None:
+    def _step_warning(self, key: str, message: str, *args: Any) -> None:
         if self._loop_waits is None:
             from emos.ratelimit import RateLimitedLog
 
@@ -334,10 +334,10 @@ class SimTimeDriver:
                 continue
             if not loop.thread.is_alive():  # it ended without closing its Pacer: no tick waits for it again
                 self.leave_loop(loop)
-                self._overlong_step("loop-gone", "[%s] an action loop (thread %s) ended without closing its Pacer",
+                self._step_warning("loop-gone", "[%s] an action loop (thread %s) ended without closing its Pacer",
                                     self.name, loop.thread.name)
             else:
-                self._overlong_step("loop-step", "[%s] an action loop (thread %s) did not finish its step within %.0f s "
+                self._step_warning("loop-step", "[%s] an action loop (thread %s) did not finish its step within %.0f s "
                                     "of the tick at %.3f s; answering the tick without it", self.name,
                                     loop.thread.name, self.STEP_WAIT_S, t)
 
