@@ -67,6 +67,8 @@ if PEDESTRIAN not in ("blind", "yielding"):
     sys.exit(f"patrol: EMOS_PATROL_PEDESTRIAN must be 'blind' or 'yielding', got {PEDESTRIAN!r}")
 # 1 (the default): the Behaviors give way to the person, the DriveManager predicts its walk; 0: neither.
 GIVE_WAY = os.environ.get("EMOS_PATROL_GIVE_WAY", "1") == "1"
+# m/s of the give-way's moves (GiveWayConfig.speed): the person walks at 0.6 m/s, and backing slower is caught.
+GIVE_WAY_SPEED = float(os.environ.get("EMOS_PATROL_GIVE_WAY_SPEED", "0.4"))
 # 1 (the default): the Behaviors hold the robot before the stretch of its path where the person walks while the
 # person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
 PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
@@ -94,7 +96,7 @@ stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", sc
                                command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
                                movers=MOVERS)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
-                                                   give_way=GiveWayConfig(enabled=GIVE_WAY, speed=0.4),
+                                                   give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
                                                    passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD)))
 behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:

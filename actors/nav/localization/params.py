@@ -94,6 +94,8 @@ class AmclParams:
     Default 2 (0: off): on 420 fresh seeds of the tuning logs 396 trials converged against 390
     without, on the held-out logs fhw 19/20 and orebro 20/20 against 17 and 18; 1, 4 and 8 nats
     lost more on the tuning seeds (docs/localization.md, "Beams through walls").
+    The proposals (``search_candidates``, off) take the same count off their candidates' peaks;
+    the two were not measured together on the logs.
     """
 
     alpha1: float = _alpha()
