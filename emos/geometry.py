@@ -125,6 +125,11 @@ class PoseHistory:
         while len(self._poses) > 2 and self._poses[1][0] < t - self.span:
             self._poses.popleft()
 
+    @property
+    def span_times(self) -> tuple[float, float] | None:
+        """(oldest, newest) time held; None: nothing added yet."""
+        return (self._poses[0][0], self._poses[-1][0]) if self._poses else None
+
     def at(self, t: float) -> np.ndarray | None:
         """The pose at time ``t`` (None: nothing added yet)."""
         if not self._poses:

@@ -91,6 +91,7 @@ def _at(rows: np.ndarray, stamp: float) -> np.ndarray:
 
 def replay(args: argparse.Namespace) -> int:
     from emos.actors.nav.components.local_mapper import memory_of
+    from emos.geometry import PoseHistory
     from emos.actors.nav.controllers.sensors import LaserScan2D
     from emos.actors.sim.jackal import JACKAL_LASER
     from emos.tools.barn.stack import StackOptions, build_system
@@ -109,17 +110,25 @@ def replay(args: argparse.Namespace) -> int:
     print("pose errors against the truth (m), x and y")
     print(f"{'t s':>6}  {'replayed':>15}  {'recorded belief':>15}  {'odometry':>15}")
     worst = 0.0
+    odometry = PoseHistory()  # the odometry at each scan's stamp, looked up as the LocalMapper does
+    fed = 0
     for k in range(n):
         stamp = float(z["scan_t"][k])
+        while fed < len(odom) and odom[fed, 0] <= stamp + 1e-9:
+            odometry.add(float(odom[fed, 0]), odom[fed, 1:4])
+            fed += 1
         scan = LaserScan2D(ranges=z["scan_ranges"][k], angle_min=float(z["scan_amin"][k]),
                            angle_increment=float(z["scan_ainc"][k]), range_min=JACKAL_LASER.range_min,
                            range_max=JACKAL_LASER.range_max)
-        o, t = _at(odom, stamp), _at(truth, stamp)
-        pose = memory.update(scan, o[1:4])
+        o, t = odometry.at(stamp), _at(truth, stamp)
+        assert o is not None  # the recording has odometry from its first scan on
+        pose = memory.update(scan, o)
         worst = max(worst, float(np.hypot(pose[0] - t[1], pose[1] - t[2])))
         if stamp >= next_print or k == n - 1:
             b = _at(belief, stamp)
-            cells = [f"{a - t[1]:+7.3f} {c - t[2]:+7.3f}" for a, c in ((pose[0], pose[1]), (b[1], b[2]), (o[1], o[2]))]
+            cells = [f"{a - t[1]:+7.3f} {c - t[2]:+7.3f}" for a, c in ((pose[0], pose[1]), (b[1], b[2]), (o[0], o[1]))]
+            if abs(b[0] - stamp) > 1e-6:  # the trial ended before the stack's belief of this scan was recorded
+                cells[1] = f"{'-':>7} {'-':>7}"
             print(f"{stamp - t0:6.1f}  " + "  ".join(cells))
             next_print = stamp + args.every
     print(f"largest replayed pose error {worst:.3f} m over {n} scans")

@@ -16,6 +16,7 @@ import os
 import signal
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -48,7 +49,7 @@ _NO_INPUT = object()  # Node._run_step without a triggering message (a timer's s
 
 
 class _Input:
-    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode", "sim_at")
+    __slots__ = ("topic", "sub", "raw", "stamp_ns", "decoded", "received_ns", "decode", "sim_at", "cache")
 
     def __init__(self, topic: Topic, sub: TopicSubscriber):
         self.topic, self.sub = topic, sub
@@ -60,6 +61,7 @@ class _Input:
         self.received_ns = 0
         self.decoded: Any = None
         self.sim_at: float | None = None  # simulated time it was taken at (a node on sim time)
+        self.cache: deque[Any] | None = None  # the newest messages, decoded, when the component asked (Node.cache_input)
 
 
 def wake_spin_setting() -> float:
@@ -436,6 +438,8 @@ class Node:
                 continue
             stamp, raw, _ = items[-1]
             inp.raw, inp.stamp_ns, inp.received_ns, inp.decoded = raw, stamp, now, None
+            if inp.cache is not None:
+                self._fill_cache(inp, items)
             inp.sim_at = sim_clock.time_at(stamp) if sim_clock is not None else None
             if inp.topic in triggers:
                 if active and len(items) == 1:  # the usual case: no generator to run
@@ -469,6 +473,35 @@ class Node:
             # for it (republishing the tick) instead of running on while its inputs are dropped,
             # so whether a consumer sees the first scans does not depend on how fast it started.
             self._sim_time.handle(tick, self._run_step if timed else None, answer=self._been_active)
+
+    def cache_input(self, topic: Topic | str, size: int) -> None:
+        """Keep the newest ``size`` messages of an input, decoded, not only the latest (ROS's
+        ``message_filters.Cache``): for a component that pairs a message with another input as
+        it was at that message's stamp (a scan with the odometry when it was taken), which the
+        latest alone cannot give once the component runs behind."""
+        if not (isinstance(size, int) and size >= 1):
+            raise ValueError(f"component {self.name!r}: cache_input({topic!r}) size must be an int >= 1, got {size!r}")
+        inp = self._input(topic)
+        inp.cache = deque(inp.cache or (), maxlen=size)
+
+    def cached(self, topic: Topic | str) -> list[Any]:
+        """The messages kept by :meth:`cache_input`, oldest first (empty: none yet, or no cache)."""
+        cache = self._input(topic).cache
+        return list(cache) if cache is not None else []
+
+    def _fill_cache(self, inp: _Input, items: list[tuple[int, Any, str]]) -> None:
+        assert inp.cache is not None
+        msg = None
+        for _, raw, _ in items:
+            try:
+                msg = inp.decode(raw)
+            except Exception as exc:  # noqa: BLE001 - one bad message must not stop the node's inputs
+                msg = None
+                self._step_errors.warning(("cache", inp.topic.name), "[%s] a message on %s did not decode: %s",
+                                          self.name, inp.topic.name, exc, logger=self.log)
+                continue
+            inp.cache.append(msg)
+        inp.decoded = msg  # the latest, decoded once (None: it did not decode, and latest() says why)
 
     def _hold(self, inp: _Input, items: list[tuple[int, Any]]) -> None:
         """Keep triggering messages that arrived while not active, the newest ``queue_size`` of

@@ -343,13 +343,17 @@ def test_a_recorded_trial_replays_through_the_stacks_mapper_to_the_same_poses(tm
                          cwd=tmp_path, capture_output=True, text=True, timeout=180, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "world 3 seed 1: goal" in out.stdout and trace.exists() and trace.with_suffix(".png").exists()
-    out = subprocess.run([sys.executable, script, "replay", str(trace), "--every", "1"],
+    out = subprocess.run([sys.executable, script, "replay", str(trace), "--every", "0.001"],
                          cwd=tmp_path, capture_output=True, text=True, timeout=180, env=env)
     assert out.returncode == 0, out.stderr[-3000:]
-    rows = [list(map(float, line.split())) for line in out.stdout.splitlines() if re.match(r"\s*\d+\.\d\s", line)]
-    assert len(rows) >= 4, out.stdout
-    replayed, believed, odometry = np.array([r[1:3] for r in rows]), np.array([r[3:5] for r in rows]), np.array([r[5:7] for r in rows])
-    # The stack took the latest odometry when each scan arrived, the replay the one at the
-    # scan's stamp: a centimetre or two apart, where the odometry alone is off by decimetres.
-    assert np.abs(replayed - believed).max() < 0.05, out.stdout
+    # Every scan's row; a "-" where the trial ended before the stack's belief of that scan was
+    # recorded (the last scan or two: a busy machine's recorder may not have read it yet).
+    rows = [line.split() for line in out.stdout.splitlines() if re.match(r"\s*\d+\.\d\s", line)]
+    assert len(rows) >= 200, out.stdout
+    compared = np.array([list(map(float, r)) for r in rows if "-" not in r])
+    assert len(compared) >= len(rows) - 3, out.stdout
+    replayed, believed, odometry = compared[:, 1:3], compared[:, 3:5], compared[:, 5:7]
+    # Both pair each scan with the odometry at its stamp and take in every scan: the same
+    # poses to the printed millimetre, where the odometry alone is off by decimetres.
+    assert np.abs(replayed - believed).max() < 0.0015, out.stdout
     assert np.abs(odometry).max() > 0.1, out.stdout  # real wheel + IMU odometry, not the truth

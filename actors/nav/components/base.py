@@ -11,6 +11,7 @@ from emos.config import validators as V
 from emos.config.base import BaseComponentConfig, ComponentRunType
 from emos.core.keyed import KeyedComponent, key_name
 from emos.errors import ConfigError
+from emos.geometry import PoseHistory
 from emos.io.topic import Topic
 from emos.ratelimit import RateLimitedLog
 
@@ -18,6 +19,8 @@ from ..robot import RobotConfig, RobotFrames, RobotGeometry, RobotType
 from .convert import BadInput, pose_of, velocity_of
 
 __all__ = ["NavComponentConfig", "NavComponent", "default_robot"]
+
+_STAMPED_LOCATIONS = ("Odometry", "PoseStamped", "PoseWithCovarianceStamped")
 
 
 def default_robot() -> RobotConfig:
@@ -41,9 +44,16 @@ class NavComponent(KeyedComponent):
 
     config: NavComponentConfig
 
+    # How many location messages a component that looks poses up by stamp keeps (odometry at
+    # 50 Hz: 1.3 s), and how far before the oldest a stamp may lie and still be clamped to it:
+    # further, the two inputs' clocks do not agree, and the latest pose is the better guess.
+    LOCATION_CACHE = 64
+    LOCATION_STAMP_SLACK_S = 0.5
+
     def __init__(self, component_name: str, config: NavComponentConfig | None = None, **kwargs: Any) -> None:
         super().__init__(component_name, config=config, **kwargs)
         self._report = RateLimitedLog(interval=5.0)  # logs to get_logger(), given per call
+        self._location_history: PoseHistory | None = None
 
     @classmethod
     def config_class(cls) -> type[NavComponentConfig]:
@@ -102,6 +112,57 @@ class NavComponent(KeyedComponent):
         except BadInput as exc:
             self.fail_input("location", f"{name}: {exc}")
             return None
+
+    def cache_location(self) -> None:
+        """Keep the recent messages of the ``location`` input, for :meth:`location_at` (call in
+        ``custom_on_configure``; without a location topic, nothing to keep)."""
+        topic = self.get_in_topic("location")
+        if topic is not None and topic.msg_type.__name__ in _STAMPED_LOCATIONS:  # a bare Pose has no time
+            self.node.cache_input(topic, self.LOCATION_CACHE)
+            self._location_history = PoseHistory()
+
+    def location_at(self, stamp: float) -> np.ndarray | None:
+        """The ``location`` input's pose at ``stamp`` (s, the clock of the messages' headers),
+        interpolated between the messages around it, as tf2 looks a transform up at a scan's
+        time: a component that runs behind pairs each scan with where the robot was when it was
+        taken, not with the latest odometry. The latest pose when the input is not cached, the
+        stamp is unset (0) or lies more than ``LOCATION_STAMP_SLACK_S`` before the oldest kept
+        (clocks that do not agree: reported); the newest when the stamp is newer than all.
+        None (and a SYSTEM failure naming the topic) when there is no usable location yet."""
+        history = self._location_history
+        if history is not None:
+            for t, pose in self._new_locations(history):
+                history.add(t, pose)
+        held = history.span_times if history is not None else None
+        if history is None or held is None or stamp <= 0.0:
+            state = self.robot_state()
+            return None if state is None else state[0]
+        if stamp < held[0] - self.LOCATION_STAMP_SLACK_S:
+            self._report.warning("location:clock", "[%s] a message stamped %.3f s is %.2f s older than the oldest of "
+                                 "%s kept (%.3f s): the two clocks do not agree; using the latest pose",
+                                 self.component_name, stamp, held[0] - stamp, self.topic_name("location"), held[0],
+                                 logger=self.get_logger())
+            return history.at(held[1])
+        return history.at(stamp)
+
+    def _new_locations(self, history: PoseHistory) -> list[tuple[float, np.ndarray]]:
+        """The cached location messages newer than ``history``'s newest, as (stamp, pose); a
+        message with a bad pose or no stamp is reported and skipped."""
+        held = history.span_times
+        newest = held[1] if held is not None else -np.inf
+        fresh = []
+        for msg in reversed(self.node.cached(self.get_in_topic("location"))):
+            header = getattr(msg, "header", None)
+            t = header.stamp.to_sec() if header is not None else 0.0
+            if t <= 0.0:
+                continue  # an unset stamp: it cannot be placed in time
+            if t <= newest:
+                break
+            try:
+                fresh.append((t, pose_of(msg)))
+            except BadInput as exc:
+                self.fail_input("location", f"{self.topic_name('location')}: {exc}")
+        return fresh[::-1]
 
     # -- reporting -----------------------------------------------------------------------------------
     def fail_input(self, key: Any, message: str) -> None:

@@ -23,7 +23,7 @@ from ..local_map import MapConfig
 from ..mapping import EvidenceConfig, MemoryMapper
 from ..mapping.scan_matching import compose
 from .base import NavComponent, NavComponentConfig, rate_field
-from .convert import BadInput, grid_msg, localized_odometry, pose_of, pose_stamped, scan_of
+from .convert import BadInput, grid_msg, localized_odometry, pose_stamped, scan_of
 
 __all__ = ["LocalMapper", "LocalMapperConfig", "memory_of"]
 
@@ -152,6 +152,7 @@ class LocalMapper(NavComponent):
                              f"measured twist), so the location input must be an Odometry topic too; got "
                              f"{'none' if loc is None else f'{loc.name} ({loc.msg_type.__name__})'}")
         self.default_trigger("sensor_data")
+        self.cache_location()  # each scan is placed where the robot was when it was taken
         self._builder = GridBuilder(self.config.map_params, sensor_pose=self.config.sensor_pose, keep_memory=self.config.keep_memory)
         self._memory = memory_of(self.config)
         self._memory_published = -math.inf
@@ -204,11 +205,9 @@ class LocalMapper(NavComponent):
                 why = "a world-frame local_map" if in_world and not self.config.keep_memory else "keep_memory"
                 self.fail_input("location", f"{why} needs odometry on {self.topic_name('location')}")
                 return
-            try:
-                pose = pose_of(loc)
-            except BadInput as exc:
-                self.fail_input("location", str(exc))
-                return
+            pose = self.location_at(scan_msg.header.stamp.to_sec())
+            if pose is None:
+                return  # reported by location_at
         grid = self._builder.update(scan, pose)
         o = self._builder.origin
         origin: tuple[float, float, float] | np.ndarray
