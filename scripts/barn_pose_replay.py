@@ -91,9 +91,9 @@ def _at(rows: np.ndarray, stamp: float) -> np.ndarray:
 
 def replay(args: argparse.Namespace) -> int:
     from emos.actors.nav.components.local_mapper import memory_of
-    from emos.geometry import PoseHistory
     from emos.actors.nav.controllers.sensors import LaserScan2D
     from emos.actors.sim.jackal import JACKAL_LASER
+    from emos.geometry import PoseHistory
     from emos.tools.barn.stack import StackOptions, build_system
 
     z = np.load(args.trace)

@@ -148,10 +148,11 @@ class NavComponent(KeyedComponent):
     def _new_locations(self, history: PoseHistory) -> list[tuple[float, np.ndarray]]:
         """The cached location messages newer than ``history``'s newest, as (stamp, pose); a
         message with a bad pose or no stamp is reported and skipped."""
+        topic = self.get_in_topic("location")
         held = history.span_times
         newest = held[1] if held is not None else -np.inf
-        fresh = []
-        for msg in reversed(self.node.cached(self.get_in_topic("location"))):
+        fresh: list[tuple[float, np.ndarray]] = []
+        for msg in reversed(self.node.cached(topic) if topic is not None else []):
             header = getattr(msg, "header", None)
             t = header.stamp.to_sec() if header is not None else 0.0
             if t <= 0.0:
