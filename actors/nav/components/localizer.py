@@ -129,6 +129,7 @@ class Localizer(NavComponent):
 
     def custom_on_configure(self) -> None:
         self.default_trigger("sensor_data")
+        self.cache_location()  # each scan is matched from the odometry of its own stamp
         self._lock = threading.Lock()  # the service and the steps share the filter
         self._filter: ParticleFilter | None = None
         self._map_msg: Any = None
@@ -323,10 +324,9 @@ class Localizer(NavComponent):
         if scan is self._last_scan:
             return  # Timed: no new scan since the last step
         self._last_scan = scan
-        state = self.robot_state()  # reports a missing or bad odometry message by topic
-        if state is None:
+        odom = self.location_at(scan.header.stamp.to_sec())  # reports a missing or bad odometry message by topic
+        if odom is None:
             return
-        odom = state[0]
         beams = self._scan_beams(scan)
         healthy = beams is not None and self._filter.field.has_obstacles
         r, a = beams if beams is not None else (np.zeros(0), np.zeros(0))

@@ -133,6 +133,7 @@ class Mapper(NavComponent):
 
     def custom_on_configure(self) -> None:
         self.default_trigger("sensor_data")
+        self.cache_location()  # each scan is added at the odometry of its own stamp
         self._lock = threading.Lock()  # the save service and the steps share the map
         self._slam = GraphSlam(self.config.slam_params, name=f"{self.component_name} ({self.topic_name('sensor_data')})",
                                logger=self.get_logger())
@@ -215,10 +216,9 @@ class Mapper(NavComponent):
         if scan is self._last_scan:
             return
         self._last_scan = scan
-        state = self.robot_state()  # reports a missing or bad odometry message by topic
-        if state is None:
+        odom = self.location_at(scan.header.stamp.to_sec())  # reports a missing or bad odometry message by topic
+        if odom is None:
             return
-        odom = state[0]
         beams = self._beams(scan)
         if beams is None:
             self._publish_tf(scan.header.stamp)
