@@ -75,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--converged-travel", type=float, default=None,
                         help="converged_travel: metres of travel over which that hypothesis must keep its share (default: the filter's)")
     parser.add_argument("--search-candidates", type=int, default=None,
-                        help="search_candidates: random poses scored per search scan to propose new places (0: off)")
+                        help="search_candidates: random poses scored per search scan to propose new places (default 20000; 0: off)")
     parser.add_argument("--runner-up-nats", type=float, default=None,
                         help="runner_up_nats: keep the search's runner-up hypotheses after it ends while they trail the "
                              "leader by at most this many nats (default: the filter's)")

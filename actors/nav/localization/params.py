@@ -70,15 +70,15 @@ class AmclParams:
     travel (turns on the spot do not count: they show the scanner no new walls). Default 0
     (off): alone, on intel seed 28, 1 m and 2 m only delayed the end of the search on the same
     wrong place, because the right place had lost its particles at 0.14 m of travel.
-    ``search_candidates`` (default 0, off): each scan of the search, this many random poses in
+    ``search_candidates`` (default 20000): each scan of the search, this many random poses in
     free space are scored on about 30 of the scan's beams; the ``search_climbs`` best are
     scan-matched to their likelihood peaks and each peak that no hypothesis covers and that
     fits within about 23 nats of the best hypothesis's peak becomes a particle; together they
-    get at most ``search_inject_share`` of the weight (see ``ParticleFilter._propose``). With
-    20000 candidates and ``converged_travel`` 2 m, fresh seeds 100+ gave no net gain (intel
-    19/19 against 18/19, aces 14/18 against 15/18, csail 20/20 both; docs/localization.md), nor
-    the tuning seeds 0-49 (intel 48/50, aces 45/50, csail 50/50 against 47, 46 and 50), at
-    1.4-1.7x the CPU per scan: off.
+    get at most ``search_inject_share`` of the weight (see ``ParticleFilter._propose``). 0: off.
+    Alone they gained nothing (every trial they fixed, another stayed undecided); together
+    with the through-wall count below (which scores their candidates too), 407 of 420 fresh
+    trials on the tuning logs converged against 396 with the count alone, at about the same CPU per scan (the search ends sooner); held out fhw 19/20,
+    orebro 20/20 as before (docs/localization.md, "Proposals and the wall count together").
     ``runner_up_nats`` (default 0, off): when the search ends, each other hypothesis whose
     scan-matched peak is within this many nats of the leader's is kept as a runner-up of
     ``runner_up_particles`` particles, beside the filter's cloud (which is unchanged); every
@@ -91,11 +91,10 @@ class AmclParams:
     more than ``search_through_wall_margin`` (m) short of its end point (``LikelihoodField.
     through_walls``). The likelihood field scores only where beams end, so a look-alike place
     with walls where the robot's beams went straight through fits as well as the robot's place.
-    Default 2 (0: off): on 420 fresh seeds of the tuning logs 396 trials converged against 390
-    without, on the held-out logs fhw 19/20 and orebro 20/20 against 17 and 18; 1, 4 and 8 nats
-    lost more on the tuning seeds (docs/localization.md, "Beams through walls").
-    The proposals (``search_candidates``, off) take the same count off their candidates' peaks;
-    the two were not measured together on the logs.
+    Default 2 (0: off): on 420 fresh seeds of the tuning logs, without proposals, 396 trials
+    converged against 390 without the count, on the held-out logs fhw 19/20 and orebro 20/20
+    against 17 and 18; 1, 4 and 8 nats lost more on the tuning seeds (docs/localization.md, "Beams through walls").
+    The proposals (``search_candidates``) take the same count off their candidates' peaks.
     """
 
     alpha1: float = _alpha()
@@ -132,7 +131,7 @@ class AmclParams:
     max_hypotheses: int = field(default=8, validator=number(ge=1, le=1000, integer=True))
     converged_updates: int = field(default=1, validator=number(ge=1, le=1000, integer=True))
     converged_travel: float = field(default=0.0, validator=number(ge=0.0, le=1000.0))
-    search_candidates: int = field(default=0, validator=number(ge=0, le=10_000_000, integer=True))
+    search_candidates: int = field(default=20_000, validator=number(ge=0, le=10_000_000, integer=True))
     search_climbs: int = field(default=24, validator=number(ge=1, le=10_000, integer=True))
     search_inject_share: float = field(default=0.05, validator=number(ge=0.0, le=0.5))
     runner_up_nats: float = field(default=0.0, validator=number(ge=0.0, le=1e6))
