@@ -146,9 +146,12 @@ launcher.bringup()
         assert abs(p.pose.position.x - 1.0) < 0.05 and abs(p.pose.position.y - 1.0) < 0.05
         # The pose and the memory carry the stamp of the scan they were made from (a controller
         # pairs them with other data by it; a publish-time stamp would match nothing).
+        # Waited for, not read after a fixed sleep: a loaded machine may not step the mapper for
+        # a second. The scans are read last, so the ones the pose and the memory came from are in.
         time.sleep(1.0)
+        p = wait_until(lambda: next(iter(pose.take()[-1:]), None), 30, what="a newer pose")
+        grid = wait_until(lambda: next(iter(memory.take()[-1:]), None), 30, what="a newer memory")
         stamps = {(s.header.stamp.sec, s.header.stamp.nanosec) for s in scans.take()}
-        p, grid = pose.take()[-1], wait_until(lambda: next(iter(memory.take()[-1:]), None), 30, what="a newer memory")
         assert (p.header.stamp.sec, p.header.stamp.nanosec) in stamps, (p.header.stamp, sorted(stamps)[-3:])
         assert (grid.header.stamp.sec, grid.header.stamp.nanosec) in stamps
     finally:
