@@ -72,6 +72,8 @@ GIVE_WAY_SPEED = float(os.environ.get("EMOS_PATROL_GIVE_WAY_SPEED", "0.4"))
 # 1 (the default): the Behaviors hold the robot before the stretch of its path where the person walks while the
 # person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
 PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
+# s a person out of view is still predicted from (PassageGuardConfig.out_of_view); past it the guard lets the robot in.
+OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 # s without a status before the supervisor kills a component as hung (the Launcher's 2 s by default). On a machine
 # at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
@@ -97,7 +99,7 @@ stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", sc
                                movers=MOVERS)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
-                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD)))
+                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW)))
 behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:
     stack.driver.config.mover_prediction_time = MOVER_PREDICTION_TIME

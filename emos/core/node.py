@@ -480,7 +480,8 @@ class Node:
         it was at that message's stamp (a scan with the odometry when it was taken), which the
         latest alone cannot give once the component runs behind."""
         if not (isinstance(size, int) and size >= 1):
-            raise ValueError(f"component {self.name!r}: cache_input({topic!r}) size must be an int >= 1, got {size!r}")
+            name = topic.name if isinstance(topic, Topic) else topic
+            raise ValueError(f"component {self.name!r}: cache_input({name!r}) size must be an int >= 1, got {size!r}")
         inp = self._input(topic)
         inp.cache = deque(inp.cache or (), maxlen=size)
 

@@ -77,8 +77,9 @@ class AmclParams:
     get at most ``search_inject_share`` of the weight (see ``ParticleFilter._propose``). 0: off.
     Alone they gained nothing (every trial they fixed, another stayed undecided); together
     with the through-wall count below (which scores their candidates too), 407 of 420 fresh
-    trials on the tuning logs converged against 396 with the count alone, at about the same CPU per scan (the search ends sooner); held out fhw 19/20,
-    orebro 20/20 as before (docs/localization.md, "Proposals and the wall count together").
+    trials on the tuning logs converged against 396 with the count alone, at about the same
+    CPU per scan (the search ends sooner); held out fhw 19/20, orebro 20/20 as before
+    (docs/localization.md, "Proposals and the wall count together").
     ``runner_up_nats`` (default 0, off): when the search ends, each other hypothesis whose
     scan-matched peak is within this many nats of the leader's is kept as a runner-up of
     ``runner_up_particles`` particles, beside the filter's cloud (which is unchanged); every
@@ -93,7 +94,8 @@ class AmclParams:
     with walls where the robot's beams went straight through fits as well as the robot's place.
     Default 2 (0: off): on 420 fresh seeds of the tuning logs, without proposals, 396 trials
     converged against 390 without the count, on the held-out logs fhw 19/20 and orebro 20/20
-    against 17 and 18; 1, 4 and 8 nats lost more on the tuning seeds (docs/localization.md, "Beams through walls").
+    against 17 and 18; 1, 4 and 8 nats lost more on the tuning seeds (docs/localization.md,
+    "Beams through walls").
     The proposals (``search_candidates``) take the same count off their candidates' peaks.
     """
 
