@@ -72,6 +72,9 @@ GIVE_WAY_SPEED = float(os.environ.get("EMOS_PATROL_GIVE_WAY_SPEED", "0.4"))
 # 1 (the default): the Behaviors hold the robot before the stretch of its path where the person walks while the
 # person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
 PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
+# 1: the Planner plans on CostToGo with the people layer (a soft cost where the guard's band says people walked: routes
+# cross their way instead of following it); 0 (the default): the stack's KPIECE1 planner, no layer.
+PEOPLE_LAYER = os.environ.get("EMOS_PATROL_PEOPLE_LAYER", "0") == "1"
 # s a person out of view is still predicted from (PassageGuardConfig.out_of_view); past it the guard lets the robot in.
 OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
@@ -96,7 +99,7 @@ sim.outputs(odom=odom, scan=scan, camera=image)
 # The house's point-navigation stack; the DriveManager ranks the recovery behaviors over the Controller.
 stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="LDS-01"), HOUSE_MAP, odom=odom,
                                command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
-                               movers=MOVERS)
+                               movers=MOVERS, people_layer=PEOPLE_LAYER)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
                                                    passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW)))
@@ -214,7 +217,8 @@ class Patrol(BaseComponent):
         summary["collisions"] = max(len(monitor.episodes), int(summary["sim_collided"]))
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
-        summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "passage_guard": PASSAGE_GUARD, "movers_controller": MOVERS}
+        summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "passage_guard": PASSAGE_GUARD, "movers_controller": MOVERS,
+                            "people_layer": PEOPLE_LAYER, "planner": stack.planner.config.planner_id}
         pictures = os.path.join(OUT_DIR, "pictures")
         summary["pictures"] = sorted(os.listdir(pictures)) if os.path.isdir(pictures) else []
         summary["time_s"] = round(time.monotonic() - t0, 1)

@@ -23,7 +23,10 @@ ROS 2's twist_mux ranks its inputs), so their commands never interleave with the
 scan's clusters and checking each arc, and standing at its end for ``MOVERS_HOLD`` s, against
 their positions predicted at constant velocity): it does not drive into a walking person and
 avoids stopping where one is heading; a person who turns can still walk into it
-(docs/missions.md, "Patrol with recovery behaviors").
+(docs/missions.md, "Patrol with recovery behaviors"). ``people_layer=True`` plans on the
+``CostToGo`` grid planner with the people layer (``PlannerConfig.people``): ``stack.behaviors()``
+then wires the Behaviors' band of where people walked (``PEOPLE_BAND``) to the Planner, and the
+routes cross the people's way instead of following it (their passage guard must be enabled).
 """
 from __future__ import annotations
 
@@ -51,13 +54,15 @@ from .local_map import MapConfig
 from .robot import RobotConfig, RobotFrames
 
 __all__ = ["BEHAVIORS_COMMAND", "COMMAND_INPUTS", "CONTROLLER_COMMAND", "DOCKING_COMMAND", "LOCALIZER_FILTER", "MOVERS_HOLD",
-           "MOVERS_MAX_SPEED", "NavigationStack", "point_navigation_stack"]
+           "MOVERS_MAX_SPEED", "NavigationStack", "PEOPLE_BAND", "point_navigation_stack"]
 
 MOVERS_MAX_SPEED = 0.5  # m/s: the top speed of the movers=True Controller (a house with people in it)
 MOVERS_HOLD = 2.5  # s: how long the robot must be able to stand at an arc's end out of every predicted mover's way
 CONTROLLER_COMMAND = Topic(name="/control", msg_type="Twist")
 BEHAVIORS_COMMAND = Topic(name="/control/behaviors", msg_type="Twist")
 DOCKING_COMMAND = Topic(name="/control/docking", msg_type="Twist")
+#: where people walked: the Behaviors' band, the Planner's people layer
+PEOPLE_BAND = Topic(name="/people_band", msg_type="OccupancyGrid")
 #: The DriveManager's prioritised inputs for a stack with recovery behaviors and docking: a
 #: docking approach over a recovery behavior over the Controller. The Controller's timeout is
 #: the DriveManager's cmd_timeout; the others release the robot 0.5 s after their last command.
@@ -143,6 +148,12 @@ class NavigationStack:
         behaviors = Behaviors(name, config=config)
         behaviors.inputs(sensor_data=self.scan, location=self.location, local_map=self.local_mapper.get_out_topic("local_map"))
         behaviors.outputs(robot_command=self._command_input(BEHAVIORS_COMMAND, f"Behaviors {name!r}"))
+        if self.planner.config.people.enabled:
+            if not behaviors.config.passage_guard.enabled:
+                raise ValueError(f"Behaviors {name!r}: the Planner plans with the people layer, which the passage guard's "
+                                 f"band feeds: give BehaviorsConfig(passage_guard=PassageGuardConfig(enabled=True))")
+            behaviors.outputs(people=PEOPLE_BAND)
+            self.planner.inputs(people=PEOPLE_BAND)
         return behaviors
 
     def docking_server(self, name: str = "docking", config: DockingServerConfig | None = None) -> DockingServer:
@@ -156,7 +167,8 @@ class NavigationStack:
 def point_navigation_stack(robot: RobotConfig, frames: RobotFrames, map_file: str, *, odom: Topic, command: Topic,
                            scan: Topic | None = None, localize: bool = False, tf: Topic | None = None,
                            initial_pose: Sequence[float] = (0.0, 0.0, 0.0), seed: int = 0,
-                           command_inputs: Sequence[CommandInput] = (), movers: bool = False) -> NavigationStack:
+                           command_inputs: Sequence[CommandInput] = (), movers: bool = False,
+                           people_layer: bool = False) -> NavigationStack:
     """The main job's point-navigation stack (see the module doc) on ``map_file``.
 
     ``odom`` is the base's odometry; ``command`` the velocity topic the DriveManager publishes;
@@ -166,15 +178,17 @@ def point_navigation_stack(robot: RobotConfig, frames: RobotFrames, map_file: st
     name the odometry's own frame. ``command_inputs``: the DriveManager's prioritised inputs
     (``COMMAND_INPUTS`` for a stack with recovery behaviors or docking; empty: the Controller's one
     input). ``movers``: the Controller tracks moving obstacles in the scan and yields to them (see
-    the module doc)."""
+    the module doc). ``people_layer``: plan on ``CostToGo`` with the people layer (the module doc)."""
     if localize and frames.odom == frames.world:
         raise ValueError(f"point_navigation_stack: localize=True needs the odometry in its own frame, but frames.odom "
                          f"is {frames.odom!r}, the same as frames.world (give RobotFrames(odom='odom'))")
     # movers: the ArcSampler's own planner (BARN's pairing): CostToGo's paths keep to the middle of
     # corridors and doorways, where the arcs' clearance scoring wants them.
     planner_config = PlannerConfig(loop_rate=1.0)
-    if movers:
+    if movers or people_layer:
         planner_config.planner_id = "CostToGo"
+    if people_layer:
+        planner_config.people = attrs.evolve(planner_config.people, enabled=True)
     planner = Planner(component_name="planner", config=planner_config)
     planner.run_type = "Timed"
     controller = Controller(component_name="controller")

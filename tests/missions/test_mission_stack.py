@@ -63,3 +63,18 @@ def test_movers_gives_the_controller_the_moving_obstacle_tracker():
     assert config.movers.prediction.hold == MOVERS_HOLD  # never stop where a mover arrives within that long
     assert stack.controller.get_in_topic("sensor_data").name == SCAN.name  # movers are tracked in the scan
     assert stack.planner.config.planner_id == "CostToGo"  # the ArcSampler's pairing: paths in the middle of doorways
+
+
+def test_people_layer_plans_on_costtogo_and_takes_the_behaviors_band():
+    from emos.actors.nav.components.behaviors import BehaviorsConfig
+    from emos.actors.nav.stacks import PEOPLE_BAND
+
+    plain = _stack(command_inputs=COMMAND_INPUTS)
+    assert not plain.planner.config.people.enabled and plain.planner.get_in_topic("people") is None
+    assert plain.behaviors().get_out_topic("people") is None
+    stack = _stack(command_inputs=COMMAND_INPUTS, people_layer=True)
+    assert stack.planner.config.planner_id == "CostToGo" and stack.planner.config.people.enabled
+    behaviors = stack.behaviors(config=BehaviorsConfig(passage_guard={"enabled": True}))
+    assert behaviors.get_out_topic("people").name == stack.planner.get_in_topic("people").name == PEOPLE_BAND.name
+    with pytest.raises(ValueError, match="passage_guard"):  # the band is the passage guard's
+        _stack(command_inputs=COMMAND_INPUTS, people_layer=True).behaviors()

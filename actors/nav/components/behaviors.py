@@ -33,6 +33,9 @@ movers predicted at constant velocity and as movers walked on from there before;
 drive through predicted at the speed and start delay its odometry showed lately,
 ``missions.passages.DriveSpeed``, not a nominal speed a loaded machine does not reach). A person
 walking a doorway cannot be given way to inside it; the robot waits outside their way instead.
+With the ``people`` output wired (to the Planner's ``people`` input, ``PlannerConfig.people``)
+the band is published once a second as an OccupancyGrid, and the Planner's routes cross it
+rather than follow it (:mod:`emos.actors.nav.costmap.people`).
 """
 from __future__ import annotations
 
@@ -54,15 +57,17 @@ from emos.msgs.srv import TriggerRequest, TriggerResponse
 from .. import recovery as R
 from ..controllers.movers import Approach, MoverWatch, approaches, near_movers
 from ..controllers.sensors import obstacle_points
+from ..costmap.people import BAND_RESOLUTION, band_grid
 from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
 from .base import NavComponentConfig, rate_field
-from .convert import BadInput, grid_points_in_robot_frame, path_of, scan_of, velocity_of
+from .convert import BadInput, grid_msg, grid_points_in_robot_frame, path_of, scan_of, velocity_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
 from .motion_actions import MotionActionServer
 
 __all__ = ["Behaviors", "BehaviorsConfig"]
 
 MOVER_PAD = 0.15  # m: scan and grid points this near a tracked mover's circle are the mover (not static)
+BAND_PERIOD = 1.0  # s between the band's publications (the Planner re-plans at 1 Hz)
 HOLD_HYSTERESIS = 0.5  # m: a hold goes on while the band is this much farther than ``approach``
 
 
@@ -124,6 +129,10 @@ class Behaviors(MotionActionServer):
     allowed_inputs: ClassVar[Mapping[str, AllowedTopic]] = {
         **MotionActionServer.allowed_inputs, "local_map": AllowedTopic(types=("OccupancyGrid",), default=None),
         "plan": AllowedTopic(types=("Path",), default=None)}
+    allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
+        **MotionActionServer.allowed_outputs,
+        # The passage guard's band (where movers walked) for the Planner's people layer.
+        "people": AllowedTopic(types=("OccupancyGrid",), default=None)}
     ACTIONS = tuple((name, goal, BehaviorFeedback, BehaviorResult, "_serve") for name, goal in
                     (("spin", SpinGoal), ("backup", BackUpGoal), ("drive_on_heading", DriveOnHeadingGoal), ("wait", WaitGoal)))
     config: BehaviorsConfig
@@ -146,9 +155,13 @@ class Behaviors(MotionActionServer):
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
         self._movers = MoverWatch()
         self._watched_scan: Any = None  # the scan message last fed to the mover tracker
+        self._band_published = (-math.inf, -math.inf)  # (node time of the last people message, its last sample's time)
         if self.config.give_way.enabled:  # its first plan pays imports (~1 s here): not when a person is coming
             R.plan_give_way(self.config.robot, np.full((2000, 2), 10.0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
                             self.config.give_way, max_omega=self.config.max_rotational_vel)
+        if self.get_out_topic("people") is not None and not self.config.passage_guard.enabled:
+            raise ValueError(f"{self.component_name}: the 'people' output publishes the passage guard's band: give "
+                             f"BehaviorsConfig(passage_guard=PassageGuardConfig(enabled=True))")
         self._create_action_servers()
 
     # -- what the robot sees ------------------------------------------------------------------------
@@ -347,6 +360,21 @@ class Behaviors(MotionActionServer):
         if self.config.passage_guard.enabled:  # the band: where the movers walked, on the node clock the guard asks at
             centres, velocities, _ = self._movers.movers()
             self._memory.observe(clock.now(), centres, velocities)
+            self._publish_band()
+
+    def _publish_band(self) -> None:
+        """The band on the ``people`` output (when wired), at most once per ``BAND_PERIOD`` s and
+        only when a mover was recorded since."""
+        out = self.get_out_topic("people")
+        samples = self._memory.samples()
+        if out is None or not len(samples):
+            return
+        now, newest = clock.now(), float(samples[-1, 0])
+        if newest == self._band_published[1] or 0.0 <= now - self._band_published[0] < BAND_PERIOD:
+            return
+        self._band_published = (now, newest)
+        data, origin = band_grid(self._memory.band_cells())
+        self.publish(out, grid_msg(data, BAND_RESOLUTION, origin, self.config.frames.world))
 
     def _approaches(self, pose: np.ndarray, standing: bool = False) -> list[Approach]:
         """Every tracked mover within ``detection_range``, relative to the robot moving at its

@@ -37,8 +37,9 @@ from emos.io.topic import Topic
 from emos.msgs.nav import Path
 from emos.msgs.std import Bool, Header
 
-from ..costmap import CostmapConfig, LayeredCostmap, SmootherConfig, smooth_path
+from ..costmap import CostmapConfig, LayeredCostmap, PeopleLayerConfig, SmootherConfig, people_cost, smooth_path, walked_points
 from ..planning import OMPLConfig
+from ..planning.grid_planner import GRID_PLANNERS
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, goal_of, grid_map_of, grid_msg, path_msg
 from .interfaces import PlanPathFeedback, PlanPathGoal, PlanPathRequest, PlanPathResponse, PlanPathResult
@@ -73,6 +74,16 @@ def _smoother(value: Any) -> SmootherConfig:
     return _nested(SmootherConfig, value)
 
 
+def _people(value: Any) -> PeopleLayerConfig:
+    return _nested(PeopleLayerConfig, value)
+
+
+def _people_needs_a_grid_planner(instance: Any, attribute: Any, value: PeopleLayerConfig) -> None:
+    if value.enabled and instance.planner_id not in GRID_PLANNERS:
+        raise ValueError(f"PlannerConfig.people: the people layer is a cost on the grid planners' cells "
+                         f"(planner_id one of {', '.join(GRID_PLANNERS)}), got planner_id {instance.planner_id!r}")
+
+
 @define(kw_only=True)
 class PlannerConfig(NavComponentConfig):
     """``planner_id``: an OMPL geometric planner (``"ompl.geometric.RRTConnect"``, ...) or a
@@ -90,6 +101,10 @@ class PlannerConfig(NavComponentConfig):
     costmap: CostmapConfig = field(factory=CostmapConfig, converter=_costmap, on_setattr=attrs.setters.convert)
     #: Nav2's simple smoother after each plan (enabled=True), collision-checked on the costmap
     smoother: SmootherConfig = field(factory=SmootherConfig, converter=_smoother, on_setattr=attrs.setters.convert)
+    #: a soft cost where people walked (the ``people`` input, the Behaviors' band): CostToGo only;
+    #: see emos.actors.nav.costmap.people
+    people: PeopleLayerConfig = field(factory=PeopleLayerConfig, converter=_people, validator=_people_needs_a_grid_planner,
+                                      on_setattr=[attrs.setters.convert, attrs.setters.validate])
 
 
 class _MainInterface:
@@ -111,6 +126,8 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         # intrinsics and the transform tree that places the camera on the robot.
         "depth_camera_info": AllowedTopic(types=("CameraInfo",), default=Topic(name="/camera/aligned_depth_to_color/camera_info", msg_type="CameraInfo")),
         "tf": AllowedTopic(types=("TFMessage",), default=Topic(name="/tf", msg_type="TFMessage")),
+        # Where people walked (the Behaviors' ``people`` output), for the people layer.
+        "people": AllowedTopic(types=("OccupancyGrid",), default=None),
     }
     allowed_outputs: ClassVar[Mapping[str, AllowedTopic]] = {
         "plan": AllowedTopic(types=("Path",), default=Topic(name="/plan", msg_type="Path"), required=True),
@@ -154,6 +171,14 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         cm = self.config.costmap
         use_costmap = cm.enabled or bool(cm.keepout_mask or cm.speed_mask)
         self.costmap = LayeredCostmap(cm, self.config.robot.inner_radius) if use_costmap else None
+        self._people_key: Any = None  # (people message, map key) of the layer the planner has
+        if self.config.people.enabled:
+            if not hasattr(self._algo, "set_extra_cost"):
+                raise ValueError(f"{self.component_name}: PlannerConfig.people needs a grid planner (planner_id='CostToGo'), "
+                                 f"got {self.config.planner_id!r}")
+            if self.get_in_topic("people") is None:
+                raise ValueError(f"{self.component_name}: PlannerConfig.people is enabled but the 'people' input has no topic "
+                                 f"(wire the Behaviors' 'people' output to it)")
         self.create_path_services()
 
     def custom_on_deactivate(self) -> None:
@@ -185,7 +210,29 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                     self.publish(out, grid_msg(master.to_occupancy(), grid.resolution, grid.origin, msg.header.frame_id or self.config.frames.world))
             self._algo.set_map(grid)
             self._map_key = key
+        if self.config.people.enabled:
+            self._apply_people()
         return True
+
+    def _apply_people(self) -> None:
+        """The people layer from the latest ``people`` band onto the planner's map (when either is
+        new). A bad band is reported and the last good one kept: planning goes on."""
+        msg = self.latest("people")
+        if msg is None:
+            return
+        key = (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.info.width, msg.info.height, self._map_key)
+        if key == self._people_key:
+            return
+        self._people_key = key
+        try:
+            walked = walked_points(grid_map_of(msg))
+        except (BadInput, ValueError) as exc:
+            self._report.warning("input:people", "[%s] %s: %s: keeping the last people layer", self.component_name,
+                                 self.topic_name("people"), exc, logger=self.get_logger())
+            return
+        grid = self._algo.grid
+        if grid is not None:
+            self._algo.set_extra_cost(people_cost(grid, walked, self.config.people))
 
     def plan_once(self, goal: np.ndarray) -> tuple[bool, str, np.ndarray]:
         """Plan from the current location to ``goal``; publishes the plan. (ok, message, path)."""

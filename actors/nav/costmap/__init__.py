@@ -18,6 +18,7 @@ from .grid import Costmap2D
 from .inflation_layer import InflationLayer, inflation_cost
 from .layered import LayeredCostmap
 from .obstacle_layer import ObstacleLayer
+from .people import PeopleLayerConfig, band_grid, people_cost, walked_points
 from .smoother import smooth_path
 from .static_layer import StaticLayer
 from .zones import ZONE_KINDS, Zone, points_in_polygon, rasterize, zone_from_dict
@@ -25,7 +26,7 @@ from .zones import ZONE_KINDS, Zone, points_in_polygon, rasterize, zone_from_dic
 __all__ = [
     "FREE_SPACE", "INSCRIBED_INFLATED_OBSTACLE", "LETHAL_OBSTACLE", "MAX_NON_OBSTACLE", "NO_INFORMATION",
     "FILTER_TYPES", "ZONE_KINDS", "Costmap2D", "CostmapConfig", "FilterMask", "FilterMaskError", "InflationLayer",
-    "KeepoutFilter", "LayeredCostmap", "ObstacleLayer", "SmootherConfig", "SpeedFilter", "SpeedLimit", "StaticLayer",
+    "KeepoutFilter", "LayeredCostmap", "ObstacleLayer", "PeopleLayerConfig", "SmootherConfig", "SpeedFilter", "SpeedLimit", "StaticLayer",
     "Zone", "costs_to_occupancy", "inflation_cost", "load_filter_mask", "occupancy_to_costs", "points_in_polygon",
-    "rasterize", "smooth_path", "zone_from_dict",
+    "band_grid", "people_cost", "rasterize", "smooth_path", "walked_points", "zone_from_dict",
 ]

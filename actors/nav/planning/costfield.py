@@ -100,8 +100,11 @@ class CostField:
         self._pred = np.full(shape[0] * shape[1], -9999)
 
     def compute(self, occupied: np.ndarray, goal_cell: tuple[int, int], hit_xy: np.ndarray | None = None,
-                origin: np.ndarray | None = None) -> None:
+                origin: np.ndarray | None = None, extra_cost: np.ndarray | None = None) -> None:
         """Recompute cost-to-go for the obstacle cells ``occupied`` and the goal cell.
+
+        ``extra_cost`` (the grid's shape, >= 0): a soft cost per cell added to the clearance
+        penalty, e.g. where people walk (a cell of cost 3 costs four times its length).
 
         With ``hit_xy`` (rows, cols, 2: the exact obstacle point stored in each occupied cell)
         and the grid ``origin``, clearance is measured from cell centres to those exact points
@@ -130,6 +133,8 @@ class CostField:
         span = self.inflation_radius - self.soft_radius
         closeness = np.clip((self.inflation_radius - clear) / span, 0.0, 1.0)
         penalty = np.where(clear <= self.soft_radius, self.soft_weight, self.inflation_weight * closeness**2)
+        if extra_cost is not None:
+            penalty = penalty + extra_cost.ravel()
         keep = free[self._a] & free[self._b]
         a, b = self._a[keep], self._b[keep]
         w = self._len[keep] * self.resolution * (1.0 + 0.5 * (penalty[a] + penalty[b]))

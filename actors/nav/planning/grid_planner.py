@@ -55,6 +55,21 @@ class CostToGoPlanner:
         self._field: CostField | None = None
         self.blocks: list[tuple[float, float]] = []  # temporary blocks (world x, y)
         self.last_path: np.ndarray | None = None
+        self._extra_cost: np.ndarray | None = None
+
+    def set_extra_cost(self, cost: np.ndarray | None) -> None:
+        """A soft cost per cell of the map (its shape, finite, >= 0; None: none) that plans avoid
+        where they can: a cell of cost c costs 1 + c times its length (e.g. where people walk,
+        :mod:`emos.actors.nav.costmap.people`). Kept until replaced; dropped by a map of another shape."""
+        if cost is None:
+            self._extra_cost = None
+            return
+        cost = np.asarray(cost, dtype=float)
+        if self.grid is not None and cost.shape != self.grid.data.shape:
+            raise ValueError(f"CostToGoPlanner.set_extra_cost: expected the map's shape {self.grid.data.shape}, got {cost.shape}")
+        if not np.all(np.isfinite(cost)) or (cost < 0).any():
+            raise ValueError("CostToGoPlanner.set_extra_cost: costs must be finite and >= 0")
+        self._extra_cost = cost
 
     def set_map(self, grid: OccupancyGridMap) -> None:
         cfg = self.config
@@ -63,6 +78,8 @@ class CostToGoPlanner:
         shape = grid.data.shape
         if self._field is None or self._field.shape != shape or self._field.resolution != grid.resolution:
             self._field = footprint_field(shape, grid.resolution, self.robot.inner_radius, self.clearance_band, self.inflation)
+        if self._extra_cost is not None and self._extra_cost.shape != shape:
+            self._extra_cost = None
 
     def _with_blocks(self) -> np.ndarray:
         assert self.grid is not None and self._occupied is not None
@@ -121,14 +138,14 @@ class CostToGoPlanner:
             return PlanResult(False, np.zeros((0, 3)), self.name, status, time.perf_counter() - t0, 0.0, 0.0, message)
 
         field = self._field
-        field.compute(self._with_blocks(), g_cell)
+        field.compute(self._with_blocks(), g_cell, extra_cost=self._extra_cost)
         if field.clearance[g_cell] <= field.lethal_radius:
             return failed("INVALID_GOAL", f"the goal is within {field.lethal_radius:.2f} m of an obstacle (or in one)")
         escape = field.escape_from(s_cell)
         if escape is None and self.blocks:
             # Our own blocks have boxed the robot in: forget them and plan again.
             self.blocks.clear()
-            field.compute(self._occupied, g_cell)
+            field.compute(self._occupied, g_cell, extra_cost=self._extra_cost)
             escape = field.escape_from(s_cell)
         if escape is None:
             if field.clearance[s_cell] <= field.lethal_radius:
