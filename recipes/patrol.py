@@ -32,6 +32,7 @@ import sys
 import threading
 import time
 
+import attrs
 import numpy as np
 
 from emos import Action, BaseComponent, Launcher, Topic
@@ -75,6 +76,8 @@ PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
 # 1: the Planner plans on CostToGo with the people layer (a soft cost where the guard's band says people walked: routes
 # cross their way instead of following it); 0 (the default): the stack's KPIECE1 planner, no layer.
 PEOPLE_LAYER = os.environ.get("EMOS_PATROL_PEOPLE_LAYER", "0") == "1"
+# The layer's weight (PeopleLayerConfig.weight, 3 by default); 0: CostToGo's routes without the layer (for comparison).
+PEOPLE_WEIGHT = float(os.environ.get("EMOS_PATROL_PEOPLE_WEIGHT", "3"))
 # s a person out of view is still predicted from (PassageGuardConfig.out_of_view); past it the guard lets the robot in.
 OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
@@ -100,6 +103,8 @@ sim.outputs(odom=odom, scan=scan, camera=image)
 stack = point_navigation_stack(my_robot, RobotFrames(world="map", odom="map", scan="LDS-01"), HOUSE_MAP, odom=odom,
                                command=Topic(name="/cmd_vel", msg_type="Twist"), scan=scan, command_inputs=COMMAND_INPUTS,
                                movers=MOVERS, people_layer=PEOPLE_LAYER)
+if PEOPLE_LAYER:
+    stack.planner.config.people = attrs.evolve(stack.planner.config.people, weight=PEOPLE_WEIGHT)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
                                                    passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW)))
@@ -218,7 +223,7 @@ class Patrol(BaseComponent):
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
         summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "passage_guard": PASSAGE_GUARD, "movers_controller": MOVERS,
-                            "people_layer": PEOPLE_LAYER, "planner": stack.planner.config.planner_id}
+                            "people_layer": PEOPLE_LAYER and PEOPLE_WEIGHT, "planner": stack.planner.config.planner_id}
         pictures = os.path.join(OUT_DIR, "pictures")
         summary["pictures"] = sorted(os.listdir(pictures)) if os.path.isdir(pictures) else []
         summary["time_s"] = round(time.monotonic() - t0, 1)

@@ -172,6 +172,49 @@ def test_a_person_out_of_view_is_predicted_from_earlier_walks():
     assert not later.hold and later.reason == "no mover"
 
 
+@pytest.mark.parametrize("path, window", [(LEFT_TO_RIGHT, True), (RIGHT_TO_LEFT, False)], ids=["left to right", "right to left"])
+def test_a_person_who_walked_out_of_view_and_back_before_is_expected_back_when_they_were(path, window):
+    """The robot sees the house's person only above y = 2.9 (the walk down x = 4.2 is out of its
+    view): each time the person walks out of view they come back 7.7 s later. Without what the
+    memory learned of those returns the guard held the robot for as long as the person was out
+    of view; with it, it lets the robot through when the person will be back too late to meet
+    it (from the left room, right after the person went out of view: the robot is across their
+    way and through the doorway ahead of them), and every such drive through keeps clear of the
+    true walk. From the right room the drive through ends where the person comes back: held."""
+    config = PassageGuardConfig(enabled=True)
+
+    def in_view(c: np.ndarray) -> bool:
+        return bool(c[1] > 2.9)
+
+    seen = MoverMemory()
+    t_end = 120.0
+    for t in np.arange(0.0, t_end, 0.1):
+        c, v = person(float(t))
+        if in_view(c):
+            seen.observe(float(t), c[None], v[None])
+    assert len(seen.returns()) >= 5  # one per walk down the leg
+    start = hold_point(seen, path, config)
+    none = np.zeros((0, 2))
+    went, held_out_of_view, last_seen = [], 0, -np.inf
+    for t in np.arange(t_end, t_end + 2 * PERIOD, 0.1):
+        c, v = person(float(t))
+        if in_view(c):
+            seen.observe(float(t), c[None], v[None])
+            last_seen = float(t)
+            continue
+        if t - last_seen <= 0.6:
+            continue  # the scan tracker still has the person's track for a moment (OUT_OF_VIEW_AFTER)
+        verdict = check_passage(path, start, seen, float(t), none, none, np.zeros(0), ROBOT_RADIUS, config)
+        if verdict.hold:
+            held_out_of_view += 1
+            assert "out of view" in verdict.reason and "coming back" in verdict.reason, verdict.reason
+        else:
+            went.append(float(t))
+            assert drive_through(path, start, float(t), config) > 0.0, (t, verdict.reason)
+    assert held_out_of_view > 0  # the person comes back: not let through every time
+    assert bool(went) == window, went
+
+
 def test_the_band_survives_a_clock_going_back():
     """A restarted simulator starts its clock at 0 again: the memory keeps the band and its
     walks (moved to end just before the new time) and goes on recording."""

@@ -108,17 +108,22 @@ OUT_OF_VIEW_AFTER = 0.5  # s: a mover not recorded walking for longer is out of 
 REAL_WALK_TIME = 1.0  # s
 REAL_WALK_DISTANCE = 0.5  # m
 MAX_WALKS = 32  # real walks kept for last_sighting (the latest matter)
+# A real walk that begins this soon after the previous one ended is the mover coming back into
+# view (a person who walked down a corridor out of the scan's view and back):
+# MoverMemory.predict_return learns how long it stayed out of view and where it came back.
+RETURN_WITHIN = 30.0  # s
 
 
 @attrs.define
 class _Walk:
-    """One mover's unbroken record in :class:`MoverMemory`: where and when it began, its last
-    sample (t, x, y, vx, vy), and whether it is a real walk yet."""
+    """One mover's unbroken record in :class:`MoverMemory`: where and when it began, its first
+    and last samples (t, x, y, vx, vy), and whether it is a real walk yet."""
 
     t0: float
     xy0: tuple[float, float]
     last: tuple[float, float, float, float, float]
     real: bool = False
+    first: tuple[float, float, float, float, float] | None = None
 
 
 class DriveSpeed:
@@ -241,7 +246,7 @@ class MoverMemory:
                 if i not in taken and d <= 3.0 * (t - w.last[0]) + 0.1 and d < best_d:
                     best, best_d = i, d
             if best is None:
-                self._walks.append(_Walk(t, (row[1], row[2]), row))
+                self._walks.append(_Walk(t, (row[1], row[2]), row, first=row))
                 continue
             taken.add(best)
             w = open_walks[best]
@@ -373,6 +378,70 @@ class MoverMemory:
         return out
 
 
+    def returns(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
+        """(exit, reappearance) samples (t, x, y, vx, vy): the end of each remembered real walk
+        and the beginning of the next real walk when it began within ``RETURN_WITHIN`` s after
+        (not while it was still in view): where and when movers came back into view."""
+        real = sorted((w for w in self._walks if w.real and w.first is not None), key=lambda w: w.t0)
+        out = []
+        for a, b in zip(real[:-1], real[1:]):
+            assert b.first is not None
+            if GAP_LIMIT < b.t0 - a.last[0] <= RETURN_WITHIN:
+                out.append((a.last, b.first))
+        return out
+
+    def predict_return(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
+                       match_distance: float = 0.35, match_heading: float = math.radians(40.0)) -> list[np.ndarray]:
+        """Predicted centres (len(times), 2) of a mover that walked out of view at ``centre`` with
+        ``velocity`` at ``now``, at ``times`` s from then, as movers that left the view there the
+        same way came back before (:meth:`returns`): on at its speed, turning back so as to be where
+        the earlier one reappeared when it did (a person walking down a corridor and back), then
+        on as that earlier walk went from there; [] when no such return is remembered. Each of the
+        latest ``MAX_PASSES`` returns is a prediction, each taken ``LEADS`` s early and late."""
+        c = np.asarray(centre, dtype=float)
+        v = np.asarray(velocity, dtype=float)
+        times = np.asarray(times, dtype=float)
+        speed = float(np.hypot(*v))
+        if speed < MIN_SPEED:
+            return []
+        out: list[np.ndarray] = []
+        for exit_row, back_row in self.returns()[::-1]:
+            if exit_row[0] > now - MATCH_AGE or math.hypot(exit_row[1] - c[0], exit_row[2] - c[1]) > match_distance:
+                continue
+            rows = self.samples()
+            if not len(rows) or back_row[0] < rows[0, 0] - 1e-9:
+                continue  # the walk back is forgotten already
+            ev = np.asarray(exit_row[3:5])
+            if float(ev @ v) < math.cos(match_heading) * float(np.hypot(*ev)) * speed:
+                continue
+            away = back_row[0] - exit_row[0]  # s out of view
+            shift = c - np.asarray(exit_row[1:3])
+            back = np.asarray(back_row[1:3]) + shift
+            # Out along its heading and back, at its speed, to be where it came back in time.
+            turn_at = max(0.0, (speed * away - float(np.hypot(*(back - c)))) / 2.0)
+            turn = c + v / speed * turn_at
+            walk_t, walk_xy, last = self._walk_from(self._row_index(back_row), float(times[-1]) + max(LEADS) if len(times) else 0.0)
+            key_t = np.r_[0.0, turn_at / speed, away + np.asarray(walk_t, dtype=float)]
+            key_xy = np.vstack([c, turn, np.asarray(walk_xy, dtype=float) + shift])
+            for lead in LEADS:
+                at = np.maximum(times + lead, 0.0)
+                pred = np.c_[np.interp(at, key_t, key_xy[:, 0]), np.interp(at, key_t, key_xy[:, 1])]
+                beyond = at > key_t[-1]  # past the record of the walk back: on at its last velocity
+                pred[beyond] = key_xy[-1] + np.asarray(last[3:5]) * (at[beyond] - key_t[-1])[:, None]
+                out.append(pred)
+            if len(out) >= MAX_PASSES * len(LEADS):
+                break
+        return out
+
+    def _row_index(self, row: tuple[float, ...]) -> int:
+        """The index in :meth:`samples` of a remembered sample ``row`` (nearest at its time)."""
+        rows = self.samples()
+        lo = int(np.searchsorted(rows[:, 0], row[0] - 1e-9))
+        hi = max(int(np.searchsorted(rows[:, 0], row[0] + 1e-9, side="right")), lo + 1)
+        group = rows[lo:hi]
+        return lo + int(np.argmin(np.hypot(group[:, 1] - row[1], group[:, 2] - row[2])))
+
+
 def _arc_lengths(path: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
 
@@ -449,6 +518,14 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             continue  # too far to meet the robot in the band stretch whatever it does
         preds = memory.predict(now - ago, c, v, times + ago, match_distance=config.match_distance,
                                match_heading=config.match_heading, learned_only=bool(ago > 0))
+        back = ""
+        if ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
+            # Where it went out of view is past the earlier walks' records (they went out of view
+            # there too): predicted as movers that left the view there came back, if remembered.
+            returns = memory.predict_return(now - ago, c, v, times + ago, match_distance=config.match_distance,
+                                            match_heading=config.match_heading)
+            if returns:
+                preds, back = returns, ", coming back as movers that left the view there did"
         if ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
             # Out of view and no earlier walk from there recorded over the drive through: where
             # it is is unknown; it walked here less than out_of_view s ago: wait to see it.
@@ -459,7 +536,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             gap = np.hypot(*(pred - robot).T) - robot_radius - r - (config.margin + config.margin_rate * times)
             if (gap < 0).any():
                 k = int(np.argmax(gap < 0))
-                seen = f" (out of view, last seen {ago:.1f} s ago)" if ago > 0 else ""
+                seen = f" (out of view, last seen {ago:.1f} s ago{back})" if ago > 0 else ""
                 return PassageVerdict(True, f"mover at ({c[0]:.2f}, {c[1]:.2f}){seen} predicted at ({pred[k, 0]:.2f}, {pred[k, 1]:.2f}) "
                                             f"in {times[k]:.1f} s, where the robot would be in the band stretch "
                                             f"{start:.2f}-{end:.2f} m ahead (driven at {speed:.2f} m/s after {delay:.1f} s)",
