@@ -80,6 +80,8 @@ PEOPLE_LAYER = os.environ.get("EMOS_PATROL_PEOPLE_LAYER", "0") == "1"
 PEOPLE_WEIGHT = float(os.environ.get("EMOS_PATROL_PEOPLE_WEIGHT", "3"))
 # s a person out of view is still predicted from (PassageGuardConfig.out_of_view); past it the guard lets the robot in.
 OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
+# s the robot waits at the band's edge for a person to come into view when none is known (PassageGuardConfig.unseen_wait).
+UNSEEN_WAIT = float(os.environ.get("EMOS_PATROL_UNSEEN_WAIT", "0"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 # s without a status before the supervisor kills a component as hung (the Launcher's 2 s by default). On a machine
 # at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
@@ -107,7 +109,8 @@ if PEOPLE_LAYER:
     stack.planner.config.people = attrs.evolve(stack.planner.config.people, weight=PEOPLE_WEIGHT)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
-                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW)))
+                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW,
+                                                                                   unseen_wait=UNSEEN_WAIT)))
 behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:
     stack.driver.config.mover_prediction_time = MOVER_PREDICTION_TIME

@@ -153,6 +153,7 @@ class Behaviors(MotionActionServer):
         self._drive_speed = DriveSpeed()  # how fast the robot really drives (the guard's drive through)
         self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
+        self._unseen_waited = False  # at this band edge the robot waited unseen_wait s for a mover to come into view
         self._movers = MoverWatch()
         self._watched_scan: Any = None  # the scan message last fed to the mover tracker
         self._band_published = (-math.inf, -math.inf)  # (node time of the last people message, its last sample's time)
@@ -431,6 +432,17 @@ class Behaviors(MotionActionServer):
                                 self.config.robot.radius, guard, measured_speed=self._drive_speed.speed(),
                                 measured_delay=self._drive_speed.start_delay())
         at_edge = verdict.start is not None and verdict.start <= guard.approach
+        if not at_edge:
+            self._unseen_waited = False
+        elif verdict.unseen and guard.unseen_wait > 0 and not self._unseen_waited:
+            # Nobody in view: wait (once per way in) for one of the band's people to come into view.
+            waited = run.done_amount if run is not None and run.name == "hold_passage" else 0.0
+            if waited >= guard.unseen_wait:
+                self._unseen_waited = True
+                verdict = attrs.evolve(verdict, reason=f"no mover came into view within unseen_wait ({guard.unseen_wait:.0f} s)")
+            else:
+                verdict = attrs.evolve(verdict, hold=True, reason=f"no mover in view or seen within out_of_view: waiting up to "
+                                                                  f"{guard.unseen_wait:.0f} s for one to come into view")
         if at_edge and not verdict.hold and not self._entering:  # once per way in: why it went (the patrol's logs)
             seen = ", ".join(f"({c[0]:.2f}, {c[1]:.2f}) at ({v[0]:.2f}, {v[1]:.2f}) m/s" for c, v in zip(centres, velocities))
             self.get_logger().info("[%s] passage guard: into the band stretch %.2f-%.2f m ahead: %s; movers in view: %s",

@@ -57,7 +57,10 @@ class PassageGuardConfig:
     person turning at the end of their walk is tracked slow and heading away for a moment: one
     clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
-    e.g. behind a wall, and comes back). ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
+    e.g. behind a wall, and comes back). ``unseen_wait`` (s, 0: off): with nobody in view or seen
+    within ``out_of_view`` (the people who walked the band are somewhere out of view), the robot
+    waits at the band's edge up to this long for one to come into view before it goes in
+    (the Behaviors: ``PassageVerdict.unseen``). ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
     ``match_heading`` (rad): how near and how alike in heading an earlier walk must be to
     predict from it."""
 
@@ -75,6 +78,7 @@ class PassageGuardConfig:
     max_hold: float = attrs.field(default=60.0, validator=V.number(gt=0, le=3600, finite=True, what="seconds"))
     release_time: float = attrs.field(default=1.0, validator=V.number(ge=0, le=60, finite=True, what="seconds"))
     out_of_view: float = attrs.field(default=15.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
+    unseen_wait: float = attrs.field(default=0.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
     memory: float = attrs.field(default=180.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
     match_distance: float = attrs.field(default=0.35, validator=V.number(gt=0, le=5, finite=True, what="metres"))
     match_heading: float = attrs.field(default=math.radians(40.0), validator=V.number(gt=0, le=math.pi, finite=True, what="radians"))
@@ -83,12 +87,15 @@ class PassageGuardConfig:
 @attrs.define(frozen=True)
 class PassageVerdict:
     """``hold``: wait before the stretch now; ``reason`` says why (or why not); ``start``,
-    ``end``: the stretch's arc lengths along the path ahead (m; None when no stretch ahead)."""
+    ``end``: the stretch's arc lengths along the path ahead (m; None when no stretch ahead);
+    ``unseen``: the stretch is ahead and no mover is known (in view or seen lately): where the
+    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``)."""
 
     hold: bool
     reason: str
     start: float | None = None
     end: float | None = None
+    unseen: bool = False
 
 
 SAMPLE_PERIOD = 0.1  # s between the remembered samples of one mover
@@ -502,7 +509,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
         radii = np.r_[radii, np.full(len(last), GHOST_RADIUS)]
         since = np.r_[since, ages]
     if len(centres) == 0:
-        return PassageVerdict(False, "no mover", start, end)
+        return PassageVerdict(False, "no mover", start, end, unseen=True)
     # The robot's drive through: standing for the start delay, then at the speed it drives at
     # lately (never faster than the configured one) to exit_margin past the end.
     speed = max(min(config.speed, measured_speed if measured_speed is not None else config.speed), config.min_speed)
