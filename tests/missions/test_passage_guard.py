@@ -180,8 +180,9 @@ def test_a_person_who_walked_out_of_view_and_back_before_is_expected_back_when_t
     of view; with it, it lets the robot through when the person will be back too late to meet
     it (from the left room, right after the person went out of view: the robot is across their
     way and through the doorway ahead of them), and every such drive through keeps clear of the
-    true walk. From the right room the drive through ends where the person comes back: held."""
-    config = PassageGuardConfig(enabled=True)
+    true walk. From the right room the drive through ends where the person comes back: held.
+    Without ``returns`` it is held for as long as the person is out of view."""
+    config = PassageGuardConfig(enabled=True, returns=True)
 
     def in_view(c: np.ndarray) -> bool:
         return bool(c[1] > 2.9)
@@ -213,6 +214,13 @@ def test_a_person_who_walked_out_of_view_and_back_before_is_expected_back_when_t
             assert drive_through(path, start, float(t), config) > 0.0, (t, verdict.reason)
     assert held_out_of_view > 0  # the person comes back: not let through every time
     assert bool(went) == window, went
+    off = attrs_evolve(config, returns=False)
+    for t in np.arange(t_end + 2 * PERIOD, t_end + 3 * PERIOD, 0.5):
+        c, v = person(float(t))
+        if in_view(c):
+            seen.observe(float(t), c[None], v[None])
+        elif t - seen.samples()[-1, 0] > 0.6:
+            assert check_passage(path, start, seen, float(t), none, none, np.zeros(0), ROBOT_RADIUS, off).hold
 
 
 def test_the_band_survives_a_clock_going_back():

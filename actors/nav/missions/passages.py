@@ -60,7 +60,9 @@ class PassageGuardConfig:
     e.g. behind a wall, and comes back). ``unseen_wait`` (s, 0: off): with nobody in view or seen
     within ``out_of_view`` (the people who walked the band are somewhere out of view), the robot
     waits at the band's edge up to this long for one to come into view before it goes in
-    (the Behaviors: ``PassageVerdict.unseen``). ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
+    (the Behaviors: ``PassageVerdict.unseen``). ``returns``: a mover out of view past the earlier
+    walks' records is predicted as movers that left the view there came back
+    (:meth:`MoverMemory.predict_return`) instead of holding the robot until it is seen again. ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
     ``match_heading`` (rad): how near and how alike in heading an earlier walk must be to
     predict from it."""
 
@@ -79,6 +81,7 @@ class PassageGuardConfig:
     release_time: float = attrs.field(default=1.0, validator=V.number(ge=0, le=60, finite=True, what="seconds"))
     out_of_view: float = attrs.field(default=15.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
     unseen_wait: float = attrs.field(default=0.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
+    returns: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
     memory: float = attrs.field(default=180.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
     match_distance: float = attrs.field(default=0.35, validator=V.number(gt=0, le=5, finite=True, what="metres"))
     match_heading: float = attrs.field(default=math.radians(40.0), validator=V.number(gt=0, le=math.pi, finite=True, what="radians"))
@@ -526,7 +529,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
         preds = memory.predict(now - ago, c, v, times + ago, match_distance=config.match_distance,
                                match_heading=config.match_heading, learned_only=bool(ago > 0))
         back = ""
-        if ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
+        if config.returns and ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
             # Where it went out of view is past the earlier walks' records (they went out of view
             # there too): predicted as movers that left the view there came back, if remembered.
             returns = memory.predict_return(now - ago, c, v, times + ago, match_distance=config.match_distance,
