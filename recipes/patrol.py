@@ -20,7 +20,9 @@ the doorway or pulls aside until the way is clear; ``EMOS_PATROL_GIVE_WAY=0`` tu
 the DriveManager's swept check counts where a tracked person will walk as an obstacle
 (``mover_prediction_time``). The Behaviors' passage guard (``PassageGuardConfig``) remembers where
 the person walked and holds the robot before that stretch of its path (the middle doorway and the
-way to it) while the person would meet it there (``EMOS_PATROL_PASSAGE_GUARD=0`` turns it off). ``EMOS_PATROL_PEDESTRIAN=yielding`` makes the person stop for a
+way to it) while the person would meet it there (``EMOS_PATROL_PASSAGE_GUARD=0`` turns it off), and
+publishes that band to the Planner, whose ``CostToGo`` routes cross it instead of following it (the
+people layer; ``EMOS_PATROL_PEOPLE_LAYER=0``: the stack's KPIECE1 planner). ``EMOS_PATROL_PEDESTRIAN=yielding`` makes the person stop for a
 robot in its way (and turn back after a while) instead of walking through it. The ``Patrol`` component below sends the ``follow_waypoints`` goal, prints its feedback,
 and writes ``summary.json`` (laps, missed waypoints with reasons, pictures, recoveries used,
 collisions; every contact with a moving obstacle, classified by who closed the gap) to ``$EMOS_PATROL_OUT`` (default ``./patrol_out``). Exit code 0 when every lap was
@@ -73,15 +75,20 @@ GIVE_WAY_SPEED = float(os.environ.get("EMOS_PATROL_GIVE_WAY_SPEED", "0.4"))
 # 1 (the default): the Behaviors hold the robot before the stretch of its path where the person walks while the
 # person would be there before the robot is through (PassageGuardConfig); 0: no passage guard.
 PASSAGE_GUARD = os.environ.get("EMOS_PATROL_PASSAGE_GUARD", "1") == "1"
-# 1: the Planner plans on CostToGo with the people layer (a soft cost where the guard's band says people walked: routes
-# cross their way instead of following it); 0 (the default): the stack's KPIECE1 planner, no layer.
-PEOPLE_LAYER = os.environ.get("EMOS_PATROL_PEOPLE_LAYER", "0") == "1"
-# The layer's weight (PeopleLayerConfig.weight, 3 by default); 0: CostToGo's routes without the layer (for comparison).
-PEOPLE_WEIGHT = float(os.environ.get("EMOS_PATROL_PEOPLE_WEIGHT", "3"))
+# 1 (the default): the Planner plans on CostToGo with the people layer (a soft cost where the guard's band says people
+# walked: routes cross their way instead of following it; docs/missions.md, "Routes off the people's way"); 0: the
+# stack's KPIECE1 planner, no layer.
+PEOPLE_LAYER = os.environ.get("EMOS_PATROL_PEOPLE_LAYER", "1") == "1"
+# The layer's weight (PeopleLayerConfig.weight; 10 here: the shortest crossing of the house person's walk, no contact
+# in ten laps where 3 had one); 0: CostToGo's routes without the layer (for comparison).
+PEOPLE_WEIGHT = float(os.environ.get("EMOS_PATROL_PEOPLE_WEIGHT", "10"))
+# 1: a person out of view is predicted as people who left the view there came back (PassageGuardConfig.returns).
+RETURNS = os.environ.get("EMOS_PATROL_RETURNS", "0") == "1"
 # s a person out of view is still predicted from (PassageGuardConfig.out_of_view); past it the guard lets the robot in.
 OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
-# s the robot waits at the band's edge for a person to come into view when none is known (PassageGuardConfig.unseen_wait).
-UNSEEN_WAIT = float(os.environ.get("EMOS_PATROL_UNSEEN_WAIT", "0"))
+# s the robot waits at the band's edge for a person to come into view when none is known (PassageGuardConfig.unseen_wait;
+# 20 s here: longer than the house person's 18.2 s walk there and back; docs/missions.md); 0: it goes in at once.
+UNSEEN_WAIT = float(os.environ.get("EMOS_PATROL_UNSEEN_WAIT", "20"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 # s without a status before the supervisor kills a component as hung (the Launcher's 2 s by default). On a machine
 # at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
@@ -110,7 +117,7 @@ if PEOPLE_LAYER:
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
                                                    passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW,
-                                                                                   unseen_wait=UNSEEN_WAIT)))
+                                                                                   unseen_wait=UNSEEN_WAIT, returns=RETURNS)))
 behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:
     stack.driver.config.mover_prediction_time = MOVER_PREDICTION_TIME
@@ -226,7 +233,8 @@ class Patrol(BaseComponent):
         summary["first_contacts"] = status.get("contacts", [])  # where it first touched something, if it did
         summary["recoveries"] = C.ControlClient("behaviors", self.node.ctx, timeout=10.0).execute_method("stats")
         summary["setup"] = {"pedestrian": PEDESTRIAN, "give_way": GIVE_WAY, "passage_guard": PASSAGE_GUARD, "movers_controller": MOVERS,
-                            "people_layer": PEOPLE_LAYER and PEOPLE_WEIGHT, "planner": stack.planner.config.planner_id}
+                            "people_layer_weight": PEOPLE_WEIGHT if PEOPLE_LAYER else None,
+                            "planner": stack.planner.config.planner_id, "returns": RETURNS, "unseen_wait_s": UNSEEN_WAIT}
         pictures = os.path.join(OUT_DIR, "pictures")
         summary["pictures"] = sorted(os.listdir(pictures)) if os.path.isdir(pictures) else []
         summary["time_s"] = round(time.monotonic() - t0, 1)
