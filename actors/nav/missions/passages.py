@@ -387,13 +387,12 @@ class MoverMemory:
             out.append(pred)
         return out
 
-
     def returns(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
         """(exit, reappearance) samples (t, x, y, vx, vy): the end of each remembered real walk
         and the beginning of the next real walk when it began within ``RETURN_WITHIN`` s after
         (not while it was still in view): where and when movers came back into view."""
         real = sorted((w for w in self._walks if w.real and w.first is not None), key=lambda w: w.t0)
-        out = []
+        out: list[tuple[tuple[float, ...], tuple[float, ...]]] = []
         for a, b in zip(real[:-1], real[1:]):
             assert b.first is not None
             if GAP_LIMIT < b.t0 - a.last[0] <= RETURN_WITHIN:
