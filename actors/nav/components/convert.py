@@ -93,11 +93,11 @@ def points_of(msg: PointCloud2) -> np.ndarray:
     return pts[np.all(np.isfinite(pts), axis=1)]
 
 
-def grid_map_of(msg: OccupancyGrid) -> OccupancyGridMap:
-    """The global map message as an OccupancyGridMap (world frame)."""
+def grid_map_of(msg: OccupancyGrid, what: str = "map") -> OccupancyGridMap:
+    """A world-frame grid message (the global map; ``what`` names it in errors) as an OccupancyGridMap."""
     info = msg.info
     if info.width == 0 or info.height == 0:
-        raise BadInput("map: empty OccupancyGrid (width or height is 0)")
+        raise BadInput(f"{what}: empty OccupancyGrid (width or height is 0)")
     o = info.origin
     return OccupancyGridMap.from_flat(msg.data, int(info.width), int(info.height), float(info.resolution),
                                       (o.position.x, o.position.y, o.orientation.yaw()), msg.header.frame_id or "map")

@@ -225,7 +225,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             return
         self._people_key = key
         try:
-            walked = walked_points(grid_map_of(msg))
+            walked = walked_points(grid_map_of(msg, what="people band"))
         except (BadInput, ValueError) as exc:
             self._report.warning("input:people", "[%s] %s: %s: keeping the last people layer", self.component_name,
                                  self.topic_name("people"), exc, logger=self.get_logger())
