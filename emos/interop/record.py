@@ -181,18 +181,23 @@ class Recorder:
                     next_report = now + progress_every
                     progress(self.report(now - start))
             self.step()
-        except OSError as exc:  # the file, not a message: nothing more can be recorded
-            self.write_error = exc
+        except OSError as exc:
+            # Only the file's errors end a recording quietly as a write failure; anything else
+            # is a fault of ours and is raised as it is, not reported as the disk's.
+            if exc is not self.write_error:
+                raise
 
     def step(self) -> int:
         """Write every message that arrived since the last call; returns how many. Raises the
-        OSError of a failed write (full disk, I/O error): the recording cannot go on."""
+        OSError of a failed write (full disk, I/O error), kept in :attr:`write_error`: the
+        recording cannot go on."""
         items = self.tap.take()
         now = time.time_ns()
         for topic, stamp, frame in items:
             try:
                 self.writer.write_frame(topic, self.tap.types[topic], frame, stamp, now)
-            except OSError:
+            except OSError as exc:
+                self.write_error = exc
                 raise
             except Exception as exc:  # one undecodable message must not end the recording
                 n = self.errors[topic] = self.errors.get(topic, 0) + 1

@@ -96,7 +96,7 @@ class TopicTap:
             return []
         self._shm_mtime = mtime
         self._scanned_at_ns = time.time_ns()
-        new = []
+        new: list[str] = []
         for topic, info in list_topics(self.ctx).items():
             if topic in self.subs or not info["publishers"] or not self.wanted(topic):
                 continue
@@ -108,6 +108,14 @@ class TopicTap:
                 if (topic, type_name) not in self._refused:
                     self._refused.add((topic, type_name))
                     log.warning("topic %s (%s) skipped: %s (register the type by importing its module, see --import)", topic, type_name, exc)
+                continue
+            except OSError as exc:
+                if not self.ctx.run_dir.exists():
+                    # The system is stopping: its run directory, where subscribers register, went
+                    # away between the listing and now. Nothing more to follow.
+                    return new
+                n = self.errors[topic] = self.errors.get(topic, 0) + 1
+                _limited.error(f"subscribe:{topic}", "topic %s: cannot subscribe (%d tries so far, tried again later): %s", topic, n, exc)
                 continue
             self.subs[topic] = sub
             self.types[topic] = cls

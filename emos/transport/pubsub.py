@@ -826,11 +826,19 @@ def list_topics(ctx: RunContext) -> dict[str, dict[str, Any]]:
         if pub not in entry["publishers"]:
             entry["publishers"].append(pub)
         ring.close()
-    subs_dir = ctx.run_dir / "subs"
-    if subs_dir.is_dir():
-        for folder in subs_dir.iterdir():
-            info = topics.setdefault(decode_name(folder.name), {"type": "?", "publishers": []})
-            info["subscribers"] = len(list(folder.iterdir()))
+    # A stopping system removes its run directory while we read it, and any process of the run's
+    # user may leave something else than a folder here: neither may fail the listing.
+    try:
+        folders = list((ctx.run_dir / "subs").iterdir())
+    except OSError:
+        folders = []
+    for folder in folders:
+        try:
+            subscribers = len(list(folder.iterdir()))
+        except OSError:
+            continue
+        info = topics.setdefault(decode_name(folder.name), {"type": "?", "publishers": []})
+        info["subscribers"] = subscribers
     return topics
 
 
