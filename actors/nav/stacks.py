@@ -122,6 +122,21 @@ class NavigationStack:
         launcher.robot = self.robot
         launcher.frames = self.frames
 
+    def use_zones(self, keepout_mask: str = "", speed_mask: str = "") -> None:
+        """Keepout and speed zones (mask YAML files in the map's frame, ``emos map zones``) for the
+        whole stack, as Nav2 puts its filters on both costmaps: the Planner plans round keepout
+        zones; the Controller takes their edges as obstacles and caps its speed in speed zones; the
+        DriveManager, whatever input drives, stops a command whose swept footprint would enter a
+        keepout zone and caps speed too. Each mask is loaded and checked here."""
+        if keepout_mask:
+            self.planner.config.costmap.keepout_mask = keepout_mask
+            self.controller.config.keepout_mask = keepout_mask
+            self.driver.config.keepout_mask = keepout_mask
+        if speed_mask:
+            self.planner.config.costmap.speed_mask = speed_mask
+            self.controller.config.speed_mask = speed_mask
+            self.driver.config.speed_mask = speed_mask
+
     # -- mission parts, wired to the stack --------------------------------------------------------
     def _command_input(self, topic: Topic, who: str) -> Topic:
         """``topic`` if the DriveManager has it among its command inputs; else a clear error."""

@@ -33,8 +33,9 @@ from ..controllers import ControllersID, ControlResult, ControlStatus
 from ..controllers.clearance import warm_up as clearance_warm_up
 from ..controllers.follower import PathFollower
 from ..controllers.registry import CONTROLLERS, make_controller
+from ..controllers.sensors import LaserScan2D, obstacle_points
 from ..costmap.config import mask_path
-from ..costmap.filters import SpeedFilter, load_filter_mask
+from ..costmap.filters import KeepoutObstacles, SpeedFilter, load_filter_mask
 from ..kinematics import integrate
 from ..stuck import ProgressChecker, StallHold
 from .base import NavComponent, NavComponentConfig, rate_field
@@ -73,7 +74,11 @@ class ControllerConfig(NavComponentConfig):
     run before the mapper has taken the tick's scan, a scan and a half: 30 ms, 6 cm at 2 m/s).
     ``world_map_range`` (m): how far around the robot a world-frame ``local_map`` is read (beyond
     every built-in algorithm's reach at 2 m/s). ``speed_mask``: a speed filter mask (Nav2's speed
-    filter; ``emos map zones``): inside its zones commands are scaled down to the zone's limit."""
+    filter; ``emos map zones``): inside its zones commands are scaled down to the zone's limit.
+    ``keepout_mask``: a keepout filter mask (in ``frames.world``): the edges of its zones within
+    ``world_map_range`` are obstacles to every algorithm, whatever the obstacle input, so the
+    robot is not driven into a zone by a plan that crosses one (a planner without the mask, a
+    path sent from outside) or by the algorithm's own detours (:class:`KeepoutObstacles`)."""
 
     loop_rate: float = rate_field(10.0)
     algorithm: str = field(default=ControllersID.DWA.value, converter=_algorithm, on_setattr=attrs.setters.convert)
@@ -90,6 +95,7 @@ class ControllerConfig(NavComponentConfig):
     pose_prediction: float = field(default=0.2, validator=in_range(min_value=0.0, max_value=1.0))
     world_map_range: float = field(default=5.0, validator=in_range(min_value=0.1, max_value=1e4))
     speed_mask: str = field(default="", validator=mask_path("speed"))
+    keepout_mask: str = field(default="", validator=mask_path("keepout"))
 
 
 class Controller(VisionTracking, NavComponent):
@@ -191,6 +197,7 @@ class Controller(VisionTracking, NavComponent):
         self._finished_stamp: Any = None
         self._sequence: tuple[np.ndarray, int] | None = None
         self._speed_filter = SpeedFilter(load_filter_mask(self.config.speed_mask, "speed")) if self.config.speed_mask else None
+        self._keepout = KeepoutObstacles(load_filter_mask(self.config.keepout_mask, "keepout")) if self.config.keepout_mask else None
         self._last_cmd = np.zeros(3)
         self._action_active = False
         self._failing_since = None
@@ -351,10 +358,28 @@ class Controller(VisionTracking, NavComponent):
                 self.fail_input("sensor_data", str(exc))
                 self.publish_stop()
                 return None
+        obstacles = self._with_keepout(obstacles, pose, follower, extra)
         result = follower.compute(pose, velocity, obstacles, **extra)
         self.publish_result(result)
         self._report_step(result, pose, follower)
         return result
+
+    def _with_keepout(self, obstacles: Any, pose: np.ndarray, follower: PathFollower, extra: dict[str, Any]) -> Any:
+        """The step's obstacles with the keepout zones' edges near the robot added (as points in
+        the robot frame; ``follower.sensor_pose`` is then the robot's own)."""
+        if self._keepout is None:
+            return obstacles
+        edges, inside = self._keepout.around(pose, self.config.world_map_range, clear=self.config.robot.radius)
+        if inside is not None:
+            self._report.warning("keepout:inside", "[%s] the robot is inside keepout zone %s: the zone is not kept out "
+                                 "of until the robot has left it", self.component_name, inside, logger=self.get_logger())
+        if not len(edges):
+            return obstacles
+        if isinstance(obstacles, LaserScan2D) and follower.tracks_movers and "scan" not in extra:
+            extra["scan"] = obstacles  # movers are tracked in the scan's beam order, which points lose
+        points = obstacle_points(obstacles, follower.sensor_pose)
+        follower.sensor_pose = (0.0, 0.0, 0.0)
+        return np.vstack([points, edges])
 
     def _report_step(self, result: ControlResult, pose: np.ndarray, follower: PathFollower) -> None:
         """Health after one step: failures (after ``failure_tolerance``), stalls (the progress

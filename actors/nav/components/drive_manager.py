@@ -47,7 +47,7 @@ from emos.msgs.std import Bool, Header
 from ..controllers.movers import MoverWatch
 from ..controllers.sensors import obstacle_points
 from ..costmap.config import mask_path
-from ..costmap.filters import SpeedFilter, load_filter_mask
+from ..costmap.filters import KeepoutObstacles, SpeedFilter, load_filter_mask
 from ..safety import CommandFilterConfig, DriveSafety, SafetyZonesConfig, SweptConfig
 from ..safety import maneuvers as M
 from ..safety.blind_spot import BlindSpotConfig, BlindSpotMemory
@@ -57,6 +57,7 @@ from .convert import BadInput, pose_of, scan_of, twist_msg, twist_of, velocity_o
 
 __all__ = ["CommandInput", "DriveManager", "DriveManagerConfig"]
 
+KEEPOUT_REACH = 2.0  # m round the robot: beyond any stop the swept check plans (2 m/s, latency, braking)
 SETTLE_S = 1.0  # node-clock s: the longest a maneuver waits for the base to come to rest before it is re-planned
 MOVER_KEEP_CLEAR = 0.1  # m beyond the footprint where a tracked mover's predicted trail ends (mover_prediction_time)
 
@@ -134,7 +135,10 @@ class DriveManagerConfig(NavComponentConfig):
     long ``stop()`` (an event action) holds the robot still whatever the controller sends.
     ``command_inputs``: prioritised command inputs (twist_mux; empty: the one ``command`` input,
     timed out after ``cmd_timeout``). ``speed_mask``: a speed filter mask (the Controller's): every
-    command sent is capped to the zone's limit at the robot's location."""
+    command sent is capped to the zone's limit at the robot's location. ``keepout_mask``: a keepout
+    filter mask (the Controller's, in the frame of ``location``): the swept check takes the edges of
+    its zones as obstacles, so no input (a recovery behavior, docking, a teleop) drives the robot
+    into a zone."""
 
     loop_rate: float = rate_field(20.0)
     closed_loop: bool = field(default=True)
@@ -182,6 +186,10 @@ class DriveManagerConfig(NavComponentConfig):
     speed_mask: str = field(default="", validator=mask_path("speed"))
     """A speed filter mask (Nav2's speed filter; ``emos map zones``): inside its zones every
     command leaving here is scaled down to the zone's limit, whichever input sent it."""
+    keepout_mask: str = field(default="", validator=mask_path("keepout"))
+    """A keepout filter mask (Nav2's keepout filter; ``emos map zones``): the edges of its zones
+    near the robot are obstacles to the swept check (needs ``swept_check`` and the ``location``
+    input), whichever input sent the command. A robot already inside a zone may drive out."""
 
     def __attrs_post_init__(self) -> None:
         if self.slowdown_zone_distance < self.critical_zone_distance:
@@ -268,6 +276,9 @@ class DriveManager(NavComponent):
             self._trigger = self._command_topics()  # the topics wired now (inputs may have changed since __init__)
         self._driving: str | None = None  # the command input that drives now (its topic name), for the log
         self._speed_filter = SpeedFilter(load_filter_mask(cfg.speed_mask, "speed")) if cfg.speed_mask else None
+        self._keepout = KeepoutObstacles(load_filter_mask(cfg.keepout_mask, "keepout")) if cfg.keepout_mask else None
+        self._keepout_edges = np.zeros((0, 2))  # the keepout edges of the swept check's points (robot frame)
+        self._keepout_pose: np.ndarray | None = None  # the pose they were placed at
         self._cmd_seen: dict[str, Any] = {}  # per command topic: the message whose writers were noted
         self._cmd_writers: dict[str, list[int]] = {}
         self._mover_watch = MoverWatch() if cfg.mover_prediction_time > 0 else None  # the swept check's moving obstacles
@@ -504,9 +515,11 @@ class DriveManager(NavComponent):
                 blind = self._blind_spot.blind_points(pose, scan, cfg.sensor_pose)
                 if len(blind):
                     points = np.vstack([points, blind])
-            return points
+            edges = self._keepout_near()
+            return np.vstack([points, edges]) if len(edges) else points
 
-        points = self._safety.swept_points(getattr(self, "_scan_msg", None), pose is not None, scan_points)
+        known = pose is not None or (self._keepout is not None and self._pose() is not None)
+        points = self._safety.swept_points(getattr(self, "_scan_msg", None), known, scan_points)
         now = clock.now()
         # The scan's age from its stamp (the sensor's time); a stamp from another clock (or none):
         # since it arrived here, the rest being counted in actuation_latency.
@@ -518,6 +531,35 @@ class DriveManager(NavComponent):
             self._sent.popleft()  # keep one sent before the horizon: it still acts then
         times = np.array([t - now for t, _ in self._sent])
         return points, lead, (times, np.array([c for _, c in self._sent]).reshape(-1, 3))
+
+    def _keepout_near(self) -> np.ndarray:
+        """The keepout zones' edges within ``KEEPOUT_REACH`` of the robot (robot frame) for the
+        swept check, placed at the pose odometry gives now; none without a pose or a mask."""
+        self._keepout_edges, self._keepout_pose = np.zeros((0, 2)), None
+        pose = self._pose() if self._keepout is not None else None
+        if self._keepout is None or pose is None:
+            return self._keepout_edges
+        edges, inside = self._keepout.around(pose, KEEPOUT_REACH, clear=self.config.robot.radius + self.config.swept_margin)
+        if inside is not None:
+            self._report.warning("keepout:inside", "[%s] the robot is inside keepout zone %s: every input may drive it "
+                                 "until it is out", self.component_name, inside, logger=self.get_logger())
+        self._keepout_edges, self._keepout_pose = edges, pose
+        return edges
+
+    def _keepout_named(self) -> str:
+        """"; keepout zone X is d m away" for a stop of the swept check with a zone's edge within
+        1 m of the footprint (the points do not say which one the stop was for), else ""."""
+        if not len(self._keepout_edges) or self._keepout_pose is None:
+            return ""
+        d = np.hypot(self._keepout_edges[:, 0], self._keepout_edges[:, 1]) - self.config.robot.radius
+        i = int(np.argmin(d))
+        if d[i] > KEEPOUT_REACH / 2:
+            return ""
+        x, y, yaw = (float(v) for v in self._keepout_pose[:3])
+        px, py = self._keepout_edges[i]
+        world = np.array([x + math.cos(yaw) * px - math.sin(yaw) * py, y + math.sin(yaw) * px + math.cos(yaw) * py])
+        assert self._keepout is not None  # edges exist only with a mask
+        return f"; keepout zone {self._keepout.zone_by(world)} is {max(d[i], 0.0):.2f} m away"
 
     def _range_sensors_min(self) -> float:
         """Nearest reading (m beyond the footprint) of Float range sensors, inf if none."""
@@ -588,7 +630,8 @@ class DriveManager(NavComponent):
         swept = self._safety.last_swept
         what = "even a stop now comes within" if swept.blocked else "would bring the footprint within"
         return (f"swept footprint: command (v {command[0]:.2f} m/s, w {command[2]:.2f} rad/s) {what} "
-                f"{self.config.swept_margin:g} m of an obstacle (clearance {swept.clearance:.3f} m): stopped")
+                f"{self.config.swept_margin:g} m of an obstacle (clearance {swept.clearance:.3f} m): stopped"
+                f"{self._keepout_named()}")
 
     def _send(self, cmd: np.ndarray, check: ZoneCheck, stop: bool = False) -> None:
         if stop:

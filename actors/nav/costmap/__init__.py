@@ -13,7 +13,7 @@ from .costs import (
     costs_to_occupancy,
     occupancy_to_costs,
 )
-from .filters import FILTER_TYPES, FilterMask, FilterMaskError, KeepoutFilter, SpeedFilter, SpeedLimit, load_filter_mask
+from .filters import FILTER_TYPES, FilterMask, FilterMaskError, KeepoutFilter, KeepoutObstacles, SpeedFilter, SpeedLimit, load_filter_mask
 from .grid import Costmap2D
 from .inflation_layer import InflationLayer, inflation_cost
 from .layered import LayeredCostmap
@@ -26,7 +26,7 @@ from .zones import ZONE_KINDS, Zone, points_in_polygon, rasterize, zone_from_dic
 __all__ = [
     "FREE_SPACE", "INSCRIBED_INFLATED_OBSTACLE", "LETHAL_OBSTACLE", "MAX_NON_OBSTACLE", "NO_INFORMATION",
     "FILTER_TYPES", "ZONE_KINDS", "Costmap2D", "CostmapConfig", "FilterMask", "FilterMaskError", "InflationLayer",
-    "KeepoutFilter", "LayeredCostmap", "ObstacleLayer", "PeopleLayerConfig", "SmootherConfig", "SpeedFilter", "SpeedLimit", "StaticLayer",
+    "KeepoutFilter", "KeepoutObstacles", "LayeredCostmap", "ObstacleLayer", "PeopleLayerConfig", "SmootherConfig", "SpeedFilter", "SpeedLimit", "StaticLayer",
     "Zone", "costs_to_occupancy", "inflation_cost", "load_filter_mask", "occupancy_to_costs", "points_in_polygon",
     "band_grid", "people_cost", "rasterize", "smooth_path", "walked_points", "zone_from_dict",
 ]

@@ -31,7 +31,7 @@ from ..maps.grid import OccupancyGridMap
 from .costs import LETHAL_OBSTACLE, NO_INFORMATION
 from .zones import Zone, zone_from_dict
 
-__all__ = ["FILTER_TYPES", "FilterMask", "FilterMaskError", "KeepoutFilter", "SpeedFilter", "SpeedLimit",
+__all__ = ["FILTER_TYPES", "FilterMask", "FilterMaskError", "KeepoutFilter", "KeepoutObstacles", "SpeedFilter", "SpeedLimit",
            "check_speed_limit", "load_filter_mask"]
 
 FILTER_TYPES = ("keepout", "speed_percent", "speed_absolute")
@@ -173,6 +173,69 @@ class KeepoutFilter:
         if int(self.mask.values_at(p[None])[0]) >= 100:
             return self.mask.zone_name_at(p)
         return None
+
+
+class KeepoutObstacles:
+    """A keepout mask's zones as obstacle points round the robot, for what drives it (the
+    Controller's algorithms, the DriveManager's swept check): the edges of the lethal cells
+    (mask value 100), a point every half cell along each side that faces a cell outside the zone,
+    so a footprint kept clear of the points stays out of the zone's cells.
+
+    :meth:`around` gives the points near the robot in its own frame. A robot already inside a
+    zone (its centre in a lethal cell: a zone drawn under it, a localization jump) gets none: it
+    must be able to drive out, and nothing drove it in that this could undo; the edge points its
+    footprint already touches are left out too, so it can back away from a zone it grazed."""
+
+    def __init__(self, mask: FilterMask) -> None:
+        self.filter = KeepoutFilter(mask)
+        self.points = self._edge_points(mask.grid)
+
+    @staticmethod
+    def _edge_points(grid: OccupancyGridMap) -> np.ndarray:
+        lethal = np.asarray(grid.data) >= 100
+        if not lethal.any():
+            return np.zeros((0, 2))
+        padded = np.pad(lethal, 1, constant_values=False)  # off the mask: no zone
+        iy, ix = np.nonzero(lethal)
+        half = 0.5
+        offsets = np.array([-half, 0.0, half])
+        pts = []
+        # (neighbour's row and column step, the side's fixed coordinate, which coordinate runs along it)
+        for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+            open_side = ~padded[iy + 1 + dy, ix + 1 + dx]
+            cx, cy = ix[open_side] + 0.5, iy[open_side] + 0.5
+            for o in offsets:
+                if dx:
+                    pts.append(np.c_[cx + dx * half, cy + o])
+                else:
+                    pts.append(np.c_[cx + o, cy + dy * half])
+        cells = np.unique(np.round(np.vstack(pts) * 2).astype(np.int64), axis=0) / 2.0  # shared corners once
+        out: np.ndarray = grid.map_to_world(cells * grid.resolution)
+        return out
+
+    def around(self, pose: np.ndarray, reach: float, clear: float = 0.0) -> tuple[np.ndarray, str | None]:
+        """((M, 2) edge points within ``reach`` m of the robot at ``pose`` (x, y, yaw in the mask's
+        frame), in the robot's frame, leaving out those within ``clear`` m of its centre (its
+        footprint); the zone the robot's centre is in, else None (and then no points))."""
+        x, y, yaw = (float(v) for v in np.asarray(pose, dtype=float)[:3])
+        inside = self.filter.zone_at(np.array([x, y]))
+        if inside is not None or len(self.points) == 0:
+            return np.zeros((0, 2)), inside
+        d = self.points - (x, y)
+        dist = np.hypot(d[:, 0], d[:, 1])
+        near = d[(dist <= reach) & (dist > clear)]
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.c_[c * near[:, 0] + s * near[:, 1], -s * near[:, 0] + c * near[:, 1]], None
+
+    def zone_by(self, point: np.ndarray) -> str:
+        """The name of the zone whose edge passes through (or nearest) ``point`` (x, y)."""
+        p = np.asarray(point, dtype=float)[:2]
+        q = 0.25 * self.filter.mask.grid.resolution
+        for dx, dy in ((0, 0), (q, 0), (-q, 0), (0, q), (0, -q), (q, q), (-q, q), (q, -q), (-q, -q)):
+            name = self.filter.zone_at(p + (dx, dy))
+            if name is not None:
+                return name
+        return f"of mask {self.filter.mask.path.name}"
 
 
 class SpeedFilter:
