@@ -27,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--planner", default="CostToGo", help="planner id (default CostToGo; any OMPL id works)")
     parser.add_argument("--zone", type=float, default=0.6, help="keepout square side, m (default 0.6)")
+    parser.add_argument("--drive", type=int, default=0, metavar="LEGS",
+                        help="drive LEGS seeded mission legs through the processes in the simulated house instead "
+                             "(ground truth entries; tools/bench/costmap_drive.py)")
+    parser.add_argument("--scope", choices=("stack", "local"), default="stack",
+                        help="with --drive: zones on the whole stack (use_zones), or on the Controller and "
+                             "DriveManager only (the Planner's plans cross them)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
@@ -113,6 +119,10 @@ def measure(queries: int = 200, seed: int = 0, planner_id: str = "CostToGo", zon
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.drive:
+        from . import costmap_drive
+
+        return costmap_drive.run(args)
     out = measure(args.queries, args.seed, args.planner, args.zone)
     if args.json:
         print(json.dumps(out, indent=2))
