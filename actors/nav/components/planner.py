@@ -163,6 +163,11 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._lock = threading.Lock()  # one query at a time on the planner
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.component_name}-plan")
         self._inflight: concurrent.futures.Future | None = None
+        # The worker's state, under its own lock: a step that finds it busy leaves a request it
+        # serves as soon as its query ends (checked and cleared with the busy flag, so none is lost).
+        self._plan_state = threading.Lock()
+        self._busy = False
+        self._replan = False
         self._map_key: Any = None
         self._goal: np.ndarray | None = None
         self._goal_key: Any = None
@@ -284,8 +289,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             self.get_logger().warning("[%s] block_tightest_spot: no plan ahead of the robot to block", self.component_name)
             return False
         self.get_logger().info("[%s] blocked the plan's tightest spot at (%.2f, %.2f); re-planning", self.component_name, *spot)
-        if self._goal is not None and (self._inflight is None or self._inflight.done()):
-            self._inflight = self._pool.submit(self._plan_in_worker, self._goal.copy())
+        self._request_plan()
         return True
 
     def _distance_to_goal(self) -> float:
@@ -328,25 +332,48 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             self._take_goal(goal_msg)
         if self._goal is None or self._check_reached():
             return
-        if self._inflight is not None and not self._inflight.done():
-            return  # the previous query is still running
-        self._inflight = self._pool.submit(self._plan_in_worker, self._goal.copy())
+        self._request_plan()
+
+    def _request_plan(self) -> None:
+        """Plan towards the goal on the worker now or, while it runs a query, right after it."""
+        goal = self._goal
+        if goal is None:
+            return
+        with self._plan_state:
+            if self._busy:
+                self._replan = True
+                return
+            self._busy = True
+        try:
+            self._inflight = self._pool.submit(self._plan_in_worker, goal.copy())
+        except BaseException:  # a pool shut down with the component: nothing runs
+            with self._plan_state:
+                self._busy = False
+            raise
 
     def _plan_in_worker(self, goal: np.ndarray) -> None:
-        # A goal that arrived while this query ran is planned as soon as it ends: the step that
-        # took it found the worker busy, and waiting for the next step would cost a whole period.
-        while True:
-            try:
-                self.plan_once(goal)
-            except Exception as exc:  # reported, never lost in the pool
-                self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
-                self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
-            if self._node is not None:
-                self.node.publish_status()
-            newest = self._goal
-            if newest is None or self._reached or np.array_equal(newest, goal):
-                return
-            goal = newest.copy()
+        # A step that found the worker busy (a new goal, or just its period) is served as soon as
+        # this query ends: waiting for the next step would cost a whole period.
+        try:
+            while True:
+                try:
+                    self.plan_once(goal)
+                except Exception as exc:  # reported, never lost in the pool
+                    self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
+                    self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")
+                if self._node is not None:
+                    self.node.publish_status()
+                with self._plan_state:
+                    newest = self._goal
+                    if newest is None or self._reached or not self._replan:
+                        self._busy = False
+                        return
+                    self._replan = False
+                goal = newest.copy()
+        except BaseException:
+            with self._plan_state:
+                self._busy = False
+            raise
 
     # -- Server and ActionServer ----------------------------------------------------------------------------
     @staticmethod
