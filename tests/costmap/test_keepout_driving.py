@@ -142,3 +142,7 @@ def test_use_zones_puts_the_masks_on_the_planner_controller_and_drive_manager(ma
     assert stack.planner.config.costmap.keepout_mask == stack.controller.config.keepout_mask == stack.driver.config.keepout_mask == mask
     with pytest.raises(FilterMaskError, match="nope.yaml"):
         stack.use_zones(keepout_mask=str(tmp_path / "nope.yaml"))
+    from emos.actors.nav.components import DriveManagerConfig
+
+    with pytest.raises(ValueError, match="keepout_mask .* is kept by the swept check; set swept_check=True"):
+        DriveManagerConfig(keepout_mask=mask, swept_check=False)

@@ -192,6 +192,10 @@ class DriveManagerConfig(NavComponentConfig):
     input), whichever input sent the command. A robot already inside a zone may drive out."""
 
     def __attrs_post_init__(self) -> None:
+        if self.keepout_mask and not self.swept_check:
+            # The swept check is what keeps the zones: a mask without it would be ignored silently.
+            raise ValueError(f"DriveManagerConfig: keepout_mask {self.keepout_mask!r} is kept by the swept check; "
+                             f"set swept_check=True (or leave keepout_mask empty)")
         if self.slowdown_zone_distance < self.critical_zone_distance:
             raise ValueError(f"DriveManagerConfig: slowdown_zone_distance ({self.slowdown_zone_distance}) must be >= "
                              f"critical_zone_distance ({self.critical_zone_distance})")
