@@ -135,8 +135,14 @@ class Create2Emulator:
     def unplug(self) -> None:
         """Close the pty: the driver's next read/write fails, as when the cable is pulled. The
         robot itself carries on as the real one does: same mode, same last command (it keeps
-        driving: nothing but a new command stops a Create 2)."""
+        driving: nothing but a new command stops a Create 2).
+
+        The link goes with the device, as /dev/ttyUSB0 does: left behind it would name a pty
+        number the kernel hands to the next pty opened on this machine, and a driver retrying the
+        link would talk to that other device (another test's emulator, two readers on one line)."""
         with self.lock:
+            if self.link and os.path.islink(self.link):
+                os.unlink(self.link)
             for fd in (self._master, self._slave):
                 if fd >= 0:
                     os.close(fd)

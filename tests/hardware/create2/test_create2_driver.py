@@ -116,6 +116,22 @@ def test_unplug_reports_system_failure_naming_port_and_replug_resumes(emulator):
         assert emulator.cmd_right == 200 and emulator.mode == P.MODE_SAFE
 
 
+def test_an_unplugged_link_never_leads_to_the_pty_that_takes_its_old_number(tmp_path):
+    """The kernel gives a closed pty's number to the next pty opened on the machine (another
+    test's emulator, in another worker). A link left behind by the unplug would take a
+    reconnecting driver to that device: it must go with the device and come back with it."""
+    from emos.actors.hardware.create2.emulator import Create2Emulator
+
+    link = str(tmp_path / "ttyCreate2")
+    with Create2Emulator(link=link) as first:
+        first.unplug()
+        with Create2Emulator() as stranger:  # most likely takes old_port's number
+            assert not os.path.lexists(link), f"{link} still leads to {os.readlink(link)} (the stranger is {stranger.port})"
+            first.replug()
+            assert os.path.realpath(link) == first.port != stranger.port
+    assert not os.path.lexists(link)
+
+
 def test_missing_port_is_a_clear_error_naming_it(tmp_path):
     port = str(tmp_path / "ttyUSB9")
     with pytest.raises(Create2PortError, match=r"ttyUSB9.*does not exist"):
