@@ -94,6 +94,7 @@ class WaypointFollower(NavComponent):
         self._pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.component_name}-task")
         self.last_result: FollowWaypointsResult | None = None
         self._paused: WaypointMission | None = None
+        self._misses_logged = 0  # of the current mission's misses (each is logged once)
         for name, with_tasks in (("follow_waypoints", True), ("navigate_through_poses", False)):
             self.create_action_server(f"{self.component_name}/{name}", FollowWaypointsGoal, FollowWaypointsFeedback,
                                       FollowWaypointsResult, lambda handle, t=with_tasks: self._serve(handle, t))
@@ -125,6 +126,7 @@ class WaypointFollower(NavComponent):
             self._task_cancel = threading.Event()
             self._task = None
             self._mission, self._with_tasks = mission, with_tasks
+            self._misses_logged = 0
             self._begin_leg(mission)
         self.get_logger().info("[%s] mission: %d waypoints, number_of_loops %d, from waypoint %d", self.component_name,
                                len(mission.waypoints), mission.number_of_loops, mission.index)
@@ -205,8 +207,14 @@ class WaypointFollower(NavComponent):
                 self.get_logger().info("[%s] mission ended: %s", self.component_name, mission.message)
             elif mission.state == NAVIGATING and self._last_goal != mission.current:
                 self._begin_leg(mission)
-        if mission.missed and not mission.finished:
-            self.fail_algorithm("follow_waypoints", f"missed waypoint {mission.missed[-1][0]}: {mission.missed[-1][1]}")
+        if mission.last_missed and not mission.finished:
+            # The status says the miss until the next waypoint is reached; the log says it once.
+            message = f"missed waypoint {mission.missed[-1][0]}: {mission.missed[-1][1]}"
+            if len(mission.missed) != self._misses_logged:
+                self._misses_logged = len(mission.missed)
+                self.fail_algorithm("follow_waypoints", message)
+            else:
+                self.health_status.set_fail_algorithm(algorithm_names=["follow_waypoints"], message=message)
         elif mission.state == "failed":
             self.fail_algorithm("follow_waypoints", mission.message)
         else:

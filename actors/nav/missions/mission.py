@@ -37,6 +37,8 @@ class WaypointMission:
         self.missed: list[tuple[int, str]] = []
         self.reached: list[int] = []
         self.message = ""
+        # The last waypoint's outcome: a miss stays the news until a waypoint is reached.
+        self.last_missed = False
 
     @property
     def finished(self) -> bool:
@@ -64,6 +66,7 @@ class WaypointMission:
         if self.state != NAVIGATING:
             raise RuntimeError(f"WaypointMission: reached in state {self.state}")
         self.reached.append(self.index)
+        self.last_missed = False
         self.state = TASK
 
     def on_task_done(self, ok: bool, why: str = "") -> None:
@@ -77,6 +80,7 @@ class WaypointMission:
     def on_failure(self, why: str) -> None:
         """The current waypoint failed (unreachable, timed out, task failed)."""
         self.missed.append((self.index, why))
+        self.last_missed = True
         if self.stop_on_failure:
             self.state = FAILED
             self.message = f"waypoint {self.index} {self.current[:2]} failed: {why}; stopped (stop_on_failure)"
