@@ -31,6 +31,7 @@ routes cross the people's way instead of following it (their passage guard must 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -158,8 +159,15 @@ class NavigationStack:
 
     def behaviors(self, name: str = "behaviors", config: BehaviorsConfig | None = None) -> Behaviors:
         """Nav2's recovery behaviors on the stack's scan, pose and local grid (what the scan no
-        longer sees, behind the robot), driving on ``BEHAVIORS_COMMAND``."""
+        longer sees, behind the robot), driving on ``BEHAVIORS_COMMAND``. They get the stack's map
+        as ``static_map`` (movers on its walls are not people) unless the config names one, when
+        the stack's pose is in the map's frame (localized, or odometry in the world frame) and the
+        map is a YAML file here (the MapServer reports a missing one when it starts)."""
         config = config or BehaviorsConfig(local_mapper=self.local_mapper.component_name)
+        map_file = self.map_server.config.map_file_path
+        in_map_frame = self.localizer is not None or self.frames.odom == self.frames.world
+        if not config.static_map and in_map_frame and map_file.endswith((".yaml", ".yml")) and os.path.isfile(map_file):
+            config = attrs.evolve(config, static_map=map_file)
         behaviors = Behaviors(name, config=config)
         behaviors.inputs(sensor_data=self.scan, location=self.location, local_map=self.local_mapper.get_out_topic("local_map"))
         behaviors.outputs(robot_command=self._command_input(BEHAVIORS_COMMAND, f"Behaviors {name!r}"))

@@ -78,3 +78,22 @@ def test_people_layer_plans_on_costtogo_and_takes_the_behaviors_band():
     assert behaviors.get_out_topic("people").name == stack.planner.get_in_topic("people").name == PEOPLE_BAND.name
     with pytest.raises(ValueError, match="passage_guard"):  # the band is the passage guard's
         _stack(command_inputs=COMMAND_INPUTS, people_layer=True).behaviors()
+
+
+def test_the_behaviors_get_the_stacks_map_for_movers_on_walls_when_the_pose_is_in_its_frame():
+    import os
+
+    import emos.actors.sim.data as data
+    from emos.actors.nav.components.behaviors import BehaviorsConfig
+
+    house = os.path.join(os.path.dirname(data.__file__), "house.yaml")
+
+    def stack(odom_frame: str):
+        return point_navigation_stack(ROBOT, RobotFrames(world="map", odom=odom_frame), house, odom=ODOM,
+                                      command=Topic(name="/cmd_vel", msg_type="Twist"), scan=SCAN, command_inputs=COMMAND_INPUTS)
+
+    assert stack("map").behaviors().config.static_map == house
+    assert stack("odom").behaviors().config.static_map == ""  # raw odometry drifts off the map's frame
+    mine = BehaviorsConfig(static_map=house, static_map_clearance=0.0)  # the user's choice stands (0: off)
+    assert stack("map").behaviors(config=mine).config is mine
+    assert _stack(command_inputs=COMMAND_INPUTS).behaviors().config.static_map == ""  # no such file here

@@ -55,7 +55,7 @@ from emos.geometry import wrap_angle
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 
 from .. import recovery as R
-from ..controllers.movers import Approach, MoverWatch, approaches, near_movers
+from ..controllers.movers import Approach, MoverWatch, WallFilter, approaches, near_movers
 from ..controllers.sensors import obstacle_points
 from ..costmap.people import BAND_RESOLUTION, band_grid
 from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
@@ -79,6 +79,16 @@ def _give_way_config(value: Any) -> R.GiveWayConfig:
     raise TypeError(f"BehaviorsConfig.give_way: expected a GiveWayConfig or a dict of its fields, got {type(value).__name__}")
 
 
+def _map_path(instance: Any, attribute: Any, value: Any) -> None:
+    """A map_server YAML ('': none), loaded where it is set: a bad one names its file."""
+    if not isinstance(value, str):
+        raise TypeError(f"BehaviorsConfig.{attribute.name}: expected a map YAML path (str), got {type(value).__name__}")
+    if value:
+        from ..maps import load_map
+
+        load_map(value)
+
+
 def _passage_guard_config(value: Any) -> PassageGuardConfig:
     if isinstance(value, PassageGuardConfig):
         return value
@@ -95,7 +105,11 @@ class BehaviorsConfig(NavComponentConfig):
     whose grid ``clear_costmaps`` clears). ``give_way``: when and how to give way to a moving
     obstacle (``recovery.GiveWayConfig``; off unless ``enabled``). ``passage_guard``: when to wait
     before the movers' way (``missions.passages.PassageGuardConfig``; off unless ``enabled``,
-    needs the ``plan`` input)."""
+    needs the ``plan`` input). ``static_map`` (a map_server YAML in the frame of the ``location``
+    input; the navigation stack gives its own map): a tracked "mover" whose centre lies within
+    ``static_map_clearance`` m of the map's walls is a piece of wall the robot's motion smeared,
+    not a person, and starts no give-way and no passage hold (``controllers.movers.WallFilter``;
+    0 m: off)."""
 
     loop_rate: float = rate_field(10.0)
     max_rotational_vel: float = field(default=0.5, validator=in_range(min_value=1e-3, max_value=10.0))
@@ -106,6 +120,8 @@ class BehaviorsConfig(NavComponentConfig):
     yaw_tolerance: float = field(default=math.radians(1.0), validator=in_range(min_value=1e-4, max_value=1.0))
     give_way: R.GiveWayConfig = field(factory=R.GiveWayConfig, converter=_give_way_config)
     passage_guard: PassageGuardConfig = field(factory=PassageGuardConfig, converter=_passage_guard_config)
+    static_map: str = field(default="", validator=_map_path)
+    static_map_clearance: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=1.0))
 
 
 @attrs.define
@@ -154,7 +170,12 @@ class Behaviors(MotionActionServer):
         self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
         self._unseen_waited = False  # at this band edge the robot waited unseen_wait s for a mover to come into view
-        self._movers = MoverWatch()
+        walls = None
+        if self.config.static_map and self.config.static_map_clearance > 0:
+            from ..maps import load_map
+
+            walls = WallFilter(load_map(self.config.static_map), self.config.static_map_clearance)
+        self._movers = MoverWatch(walls=walls)
         self._watched_scan: Any = None  # the scan message last fed to the mover tracker
         self._band_published = (-math.inf, -math.inf)  # (node time of the last people message, its last sample's time)
         if self.config.give_way.enabled:  # its first plan pays imports (~1 s here): not when a person is coming
@@ -561,8 +582,9 @@ class Behaviors(MotionActionServer):
         """How many behaviors started, succeeded, were refused or stopped (a mission's report);
         ``give_way``: how many of the starts gave way to a mover, ``give_way_s``: for how long (s);
         ``passage_hold``: how many held the robot before the movers' way, ``passage_hold_s``: for
-        how long (s), ``passage_hold_given_up``: how many of those ended at ``max_hold``."""
-        return dict(self._counts)
+        how long (s), ``passage_hold_given_up``: how many of those ended at ``max_hold``;
+        ``movers_on_walls``: tracks left out as pieces of the static map's walls (once per scan each)."""
+        return {**self._counts, "movers_on_walls": self._movers.left_out}
 
     @property
     def last_result(self) -> BehaviorResult | None:

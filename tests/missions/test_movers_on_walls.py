@@ -1,0 +1,107 @@
+"""Movers on the static map's walls are not people (``controllers.movers.WallFilter``): the scan
+tracker calls a piece of wall moving when the robot's motion smears it, and in the patrol's house
+such "movers" started a fifth of the give-ways, inside the very stretches the passage guard had
+let the robot into. The Behaviors with ``static_map`` leave them out; a person off the walls is
+given way to as before. On robot time (``ComponentHarness``), a kinematic base and a scan of boxes."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from emos import msgs as M
+from emos.actors.nav.controllers.movers import MoverWatch, WallFilter
+from emos.actors.nav.maps import OccupancyGridMap, load_map
+from emos.actors.nav.maps.map_yaml import save_map
+from emos.testing import ComponentHarness
+from tests.nav.components.fake_base import ROOM, CommandFollower, base_messages
+
+pytestmark = pytest.mark.unit
+
+RES = 0.05
+SHELF = (3.5, 2.9, 5.9, 3.1)  # xmin, ymin, xmax, ymax: a wall of the map the scan does not see
+HALF = 0.15  # the mover: a 0.3 m box
+
+
+def _room_map(tmp_path) -> str:
+    """The fake base's room (walls on its border) and the shelf, as a map_server YAML."""
+    w, h = int(round((ROOM[2] + 0.5) / RES)), int(round((ROOM[3] + 0.5) / RES))
+    data = np.zeros((h, w), dtype=np.int8)
+    xs, ys = (np.arange(w) + 0.5) * RES - 0.25, (np.arange(h) + 0.5) * RES - 0.25
+    gx, gy = np.meshgrid(xs, ys)
+    border = (gx < ROOM[0]) | (gx > ROOM[2]) | (gy < ROOM[1]) | (gy > ROOM[3])
+    shelf = (gx >= SHELF[0]) & (gx <= SHELF[2]) & (gy >= SHELF[1]) & (gy <= SHELF[3])
+    data[border | shelf] = 100
+    return str(save_map(OccupancyGridMap(data=data, resolution=RES, origin=(-0.25, -0.25, 0.0)), tmp_path / "room.yaml"))
+
+
+def test_the_wall_filter_marks_centres_on_the_maps_walls_only(tmp_path):
+    walls = WallFilter(load_map(_room_map(tmp_path)), clearance=0.1)
+    on = walls.on_walls(np.array([[4.0, 3.0], [5.9, 3.05], [4.0, 3.18], [4.0, 2.6], [1.0, 1.0], [40.0, 3.0]]))
+    assert on.tolist() == [True, True, True, False, False, False]  # on it, at its end, 0.08 m off; 0.3 m off, open floor, off the map
+    nowhere = WallFilter(OccupancyGridMap(data=np.zeros((10, 10), dtype=np.int8), resolution=0.1))
+    assert not nowhere.on_walls(np.array([[0.5, 0.5]])).any()
+    with pytest.raises(ValueError, match="clearance"):
+        WallFilter(nowhere.grid, clearance=-0.1)
+
+
+def test_a_mover_watch_with_walls_leaves_the_tracks_on_them_out_and_counts_them(tmp_path):
+    watch = MoverWatch(walls=WallFilter(load_map(_room_map(tmp_path))))
+    plain = MoverWatch()
+    for k in range(30):  # a 0.3 m cluster sliding along the shelf at 0.5 m/s, seen from (1, 3)
+        t = 0.1 * k
+        cx = 5.6 - 0.5 * t
+        pts = np.c_[np.full(8, cx - HALF - 1.0), np.linspace(-HALF, HALF, 8)]  # its face, robot frame
+        for w in (watch, plain):
+            w.update(t, pts, np.array([1.0, 3.0, 0.0]), angle_increment=math.radians(1.0))
+    assert len(plain.movers()[0]) == 1  # the tracker calls it moving
+    assert len(watch.movers()[0]) == 0 and watch.left_out > 0
+
+
+class SlidingBox(CommandFollower):
+    """Before every tick: the base moves by the newest command; the box slides at ``velocity``
+    until its centre reaches ``stop_x``."""
+
+    def __init__(self, robot, box, velocity, stop_x):
+        super().__init__(robot)
+        self.box, self.velocity, self.stop_x = np.array(box, float), np.array(velocity, float), stop_x
+
+    def __call__(self, h: ComponentHarness) -> None:
+        last = h.time if self.last_time is None else self.last_time
+        v, w = self.move(h)
+        if self.box[0] > self.stop_x:
+            self.box = self.box + self.velocity * (h.time - last)
+        b = (self.box[0] - HALF, self.box[1] - HALF, self.box[0] + HALF, self.box[1] + HALF)
+        odom, scan = base_messages(self.pose, v, w, 2 * math.pi, [b])
+        odom.header.stamp = scan.header.stamp = M.Time.from_sec(h.time)
+        h.feed("/odom", odom)
+        h.feed("/scan", scan)
+
+
+def _give_ways(static_map: str, robot, box, stop_x: float) -> dict:
+    from emos.actors.nav import RobotConfig, RobotGeometry, RobotType
+    from emos.actors.nav.components.behaviors import Behaviors, BehaviorsConfig
+
+    config = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
+                         geometry_params=np.array([0.2, 0.3]))
+    behaviors = Behaviors("behaviors", config=BehaviorsConfig(robot=config, loop_rate=10.0, max_rotational_vel=1.0,
+                                                              give_way={"enabled": True}, static_map=static_map))
+    world = SlidingBox(robot=robot, box=box, velocity=(-0.4, 0.0), stop_x=stop_x)
+    with ComponentHarness(behaviors, start_time=5.0) as h:
+        while h.time < 14.0:
+            h.advance(0.1, each_tick=world)
+        return behaviors.stats()
+
+
+def test_a_mover_on_the_maps_wall_starts_no_give_way_a_person_off_it_does(tmp_path):
+    room = _room_map(tmp_path)
+    # A piece of the shelf "moving" at the robot (its visible face stays on the shelf): without
+    # the map it is given way to, with the map it is left out.
+    without = _give_ways("", robot=(2.0, 3.0, 0.0), box=(5.7, 3.0), stop_x=3.8)
+    with_map = _give_ways(room, robot=(2.0, 3.0, 0.0), box=(5.7, 3.0), stop_x=3.8)
+    assert without["give_way"] >= 1, without
+    assert with_map["give_way"] == 0 and with_map["movers_on_walls"] > 0, with_map
+    # A person walking at the robot 0.6 m off the shelf: given way to, with the map too.
+    person = _give_ways(room, robot=(2.0, 2.2, 0.0), box=(5.7, 2.2), stop_x=2.9)
+    assert person["give_way"] >= 1 and person["movers_on_walls"] == 0, person
