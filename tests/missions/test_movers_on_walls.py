@@ -105,3 +105,14 @@ def test_a_mover_on_the_maps_wall_starts_no_give_way_a_person_off_it_does(tmp_pa
     # A person walking at the robot 0.6 m off the shelf: given way to, with the map too.
     person = _give_ways(room, robot=(2.0, 2.2, 0.0), box=(5.7, 2.2), stop_x=2.9)
     assert person["give_way"] >= 1 and person["movers_on_walls"] == 0, person
+
+
+def test_a_static_map_that_cannot_be_read_is_refused_where_it_is_set(tmp_path):
+    from emos.actors.nav.components.behaviors import BehaviorsConfig
+
+    with pytest.raises(Exception, match=r"nope\.yaml"):
+        BehaviorsConfig(static_map=str(tmp_path / "nope.yaml"))
+    with pytest.raises(TypeError, match="static_map"):
+        BehaviorsConfig(static_map=3)
+    with pytest.raises(ValueError, match="static_map_clearance"):
+        BehaviorsConfig(static_map_clearance=-0.1)
