@@ -15,6 +15,8 @@ from .sensors import ObstacleInput, obstacle_points
 
 __all__ = ["PathFollower"]
 
+TURN_HYSTERESIS = 0.35  # rad (20 degrees) either side of +-pi where an in-place turn keeps its way
+
 
 class PathFollower:
     """What the Controller component asks of a path-following algorithm, as Nav2's
@@ -42,6 +44,7 @@ class PathFollower:
         self.path: ReferencePath | None = None
         self.progress: PathProgress | None = None
         self.sensor_pose = (0.0, 0.0, 0.0)
+        self._turn = 0.0  # the way the last in-place rotation turned (+1 left, -1 right, 0 none yet)
 
     # -- path -------------------------------------------------------------------------
     def set_path(self, path: np.ndarray) -> None:
@@ -83,11 +86,19 @@ class PathFollower:
         return min(vmax, math.sqrt(2.0 * 0.5 * self.robot.ctrl_vx_limits.max_decel * remaining) + 0.05)
 
     def rotate_command(self, heading_error: float) -> np.ndarray:
-        """In-place rotation that removes ``heading_error`` (rad) without overshoot."""
+        """In-place rotation that removes ``heading_error`` (rad) without overshoot. With the
+        target nearly behind (within ``TURN_HYSTERESIS`` of +-pi) it keeps turning the way it
+        last turned: there the sign of the wrapped error flips with every centimetre a re-plan
+        moves the path, and a robot that followed it turned back and forth in place for good
+        (seen in `emos bench costmap --drive`, a new KPIECE1 path every second)."""
         lim = self.robot.ctrl_omega_limits
         # The largest speed from which braking still stops within the remaining angle.
         w = min(lim.max_vel, math.sqrt(2.0 * lim.max_decel * abs(heading_error)))
-        return np.array([0.0, 0.0, -math.copysign(w, heading_error)])
+        turn = -math.copysign(1.0, heading_error)
+        if self._turn != 0.0 and abs(heading_error) > math.pi - TURN_HYSTERESIS:
+            turn = self._turn
+        self._turn = turn
+        return np.array([0.0, 0.0, turn * w])
 
     def needs_rotation(self, heading_error: float) -> bool:
         return self.robot.model_type is not RobotType.ACKERMANN and abs(heading_error) > self.config.rotate_in_place_angle

@@ -73,6 +73,8 @@ def test_planner_saves_loads_and_records_paths(tmp_path):
         h.outputs("/plan")
         loaded = h.call("planner/load_plan_from_file", path_file("driven.csv"))
         assert loaded.success, loaded.message
-        got = h.outputs("/plan")[-1]  # published by the service, at once
-        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in got.poses])
-        assert xy.shape == (len(driven), 2) and np.allclose(xy, driven[:, :2], atol=1e-6)
+        # Published by the service at once; the Planner's worker, still planning to the goal,
+        # may publish its own plan beside it (a busy machine: a failure in a loaded suite run).
+        plans = [np.array([(p.pose.position.x, p.pose.position.y) for p in m.poses]) for m in h.outputs("/plan")]
+        assert any(xy.shape == (len(driven), 2) and np.allclose(xy, driven[:, :2], atol=1e-6) for xy in plans), \
+            [xy.shape for xy in plans]
