@@ -17,7 +17,7 @@ import numpy as np
 from emos.errors import EmosError
 from emos.geometry import wrap_angle
 
-__all__ = ["PathFileError", "save_path_csv", "load_path_csv", "PathRecorder", "headings_along"]
+__all__ = ["PathFileError", "save_path_csv", "load_path_csv", "PathRecorder", "headings_along", "path_ahead"]
 
 _HEADER = ("x", "y", "yaw")
 
@@ -34,6 +34,17 @@ def headings_along(xy: np.ndarray) -> np.ndarray:
     d = np.diff(p[:, :2], axis=0)
     yaw = np.arctan2(d[:, 1], d[:, 0])
     return np.r_[yaw, yaw[-1]]
+
+
+def path_ahead(path: np.ndarray, xy: np.ndarray, max_offset: float) -> np.ndarray | None:
+    """The part of ``path`` ((N, 2+) points) from its point nearest ``xy`` to its end, or None
+    when ``xy`` is farther than ``max_offset`` m from every point (the robot has left it)."""
+    p = np.asarray(path, dtype=np.float64)
+    if len(p) == 0:
+        return None
+    d = np.hypot(p[:, 0] - xy[0], p[:, 1] - xy[1])
+    nearest = int(np.argmin(d))
+    return p[nearest:] if d[nearest] <= max_offset else None
 
 
 def save_path_csv(path: np.ndarray, file: str | os.PathLike) -> Path:

@@ -95,6 +95,19 @@ class NavigationStack:
     map_pose: MapFramePose | None = None
     scan: Topic = attrs.field(factory=lambda: Topic(name="/scan", msg_type="LaserScan"))
 
+    def __attrs_post_init__(self) -> None:
+        if not self.driver.config.static_map:  # the DriveManager's movers on the map's walls are not people
+            self.driver.config.static_map = self.static_map_file
+
+    @property
+    def static_map_file(self) -> str:
+        """The stack's map file for telling movers from walls (``controllers.movers.WallFilter``):
+        when the stack's pose is in the map's frame (localized, or odometry in the world frame)
+        and the map is a YAML file here (the MapServer reports a missing one when it starts); else ''."""
+        map_file = self.map_server.config.map_file_path
+        in_map_frame = self.localizer is not None or self.frames.odom == self.frames.world
+        return map_file if in_map_frame and map_file.endswith((".yaml", ".yml")) and os.path.isfile(map_file) else ""
+
     @property
     def navigation(self) -> list[Any]:
         """The Kompass components, in the order the launcher starts them."""
@@ -164,10 +177,8 @@ class NavigationStack:
         the stack's pose is in the map's frame (localized, or odometry in the world frame) and the
         map is a YAML file here (the MapServer reports a missing one when it starts)."""
         config = config or BehaviorsConfig(local_mapper=self.local_mapper.component_name)
-        map_file = self.map_server.config.map_file_path
-        in_map_frame = self.localizer is not None or self.frames.odom == self.frames.world
-        if not config.static_map and in_map_frame and map_file.endswith((".yaml", ".yml")) and os.path.isfile(map_file):
-            config = attrs.evolve(config, static_map=map_file)
+        if not config.static_map and self.static_map_file:
+            config = attrs.evolve(config, static_map=self.static_map_file)
         behaviors = Behaviors(name, config=config)
         behaviors.inputs(sensor_data=self.scan, location=self.location, local_map=self.local_mapper.get_out_topic("local_map"))
         behaviors.outputs(robot_command=self._command_input(BEHAVIORS_COMMAND, f"Behaviors {name!r}"))

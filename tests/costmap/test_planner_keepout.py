@@ -94,11 +94,11 @@ def test_a_goal_that_arrives_while_a_query_runs_is_planned_when_it_ends_without_
     release, first = threading.Event(), threading.Event()
     plan_once = planner.plan_once
 
-    def slow_first_query(goal):
+    def slow_first_query(goal, **kwargs):
         if not first.is_set():
             first.set()
             release.wait(60)  # the first query runs until the test lets it end
-        return plan_once(goal)
+        return plan_once(goal, **kwargs)
 
     planner.plan_once = slow_first_query
     with ComponentHarness(planner, tick=0.1) as h:

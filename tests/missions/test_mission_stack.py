@@ -80,7 +80,7 @@ def test_people_layer_plans_on_costtogo_and_takes_the_behaviors_band():
         _stack(command_inputs=COMMAND_INPUTS, people_layer=True).behaviors()
 
 
-def test_the_behaviors_get_the_stacks_map_for_movers_on_walls_when_the_pose_is_in_its_frame():
+def test_the_behaviors_and_drive_manager_get_the_stacks_map_for_movers_on_walls_when_the_pose_is_in_its_frame():
     import os
 
     import emos.actors.sim.data as data
@@ -94,6 +94,8 @@ def test_the_behaviors_get_the_stacks_map_for_movers_on_walls_when_the_pose_is_i
 
     assert stack("map").behaviors().config.static_map == house
     assert stack("odom").behaviors().config.static_map == ""  # raw odometry drifts off the map's frame
+    assert stack("map").driver.config.static_map == house  # the DriveManager's mover trails too
+    assert stack("odom").driver.config.static_map == ""
     mine = BehaviorsConfig(static_map=house, static_map_clearance=0.0)  # the user's choice stands (0: off)
     assert stack("map").behaviors(config=mine).config is mine
     assert _stack(command_inputs=COMMAND_INPUTS).behaviors().config.static_map == ""  # no such file here

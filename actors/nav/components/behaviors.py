@@ -55,7 +55,7 @@ from emos.geometry import wrap_angle
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 
 from .. import recovery as R
-from ..controllers.movers import Approach, MoverWatch, WallFilter, approaches, near_movers
+from ..controllers.movers import Approach, MoverWatch, WallFilter, approaches, near_movers, static_map_path
 from ..controllers.sensors import obstacle_points
 from ..costmap.people import BAND_RESOLUTION, band_grid
 from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
@@ -77,16 +77,6 @@ def _give_way_config(value: Any) -> R.GiveWayConfig:
     if isinstance(value, Mapping):
         return R.GiveWayConfig(**value)
     raise TypeError(f"BehaviorsConfig.give_way: expected a GiveWayConfig or a dict of its fields, got {type(value).__name__}")
-
-
-def _map_path(instance: Any, attribute: Any, value: Any) -> None:
-    """A map_server YAML ('': none), loaded where it is set: a bad one names its file."""
-    if not isinstance(value, str):
-        raise TypeError(f"BehaviorsConfig.{attribute.name}: expected a map YAML path (str), got {type(value).__name__}")
-    if value:
-        from ..maps import load_map
-
-        load_map(value)
 
 
 def _passage_guard_config(value: Any) -> PassageGuardConfig:
@@ -120,7 +110,7 @@ class BehaviorsConfig(NavComponentConfig):
     yaw_tolerance: float = field(default=math.radians(1.0), validator=in_range(min_value=1e-4, max_value=1.0))
     give_way: R.GiveWayConfig = field(factory=R.GiveWayConfig, converter=_give_way_config)
     passage_guard: PassageGuardConfig = field(factory=PassageGuardConfig, converter=_passage_guard_config)
-    static_map: str = field(default="", validator=_map_path)
+    static_map: str = field(default="", validator=static_map_path)
     static_map_clearance: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=1.0))
 
 
@@ -170,12 +160,7 @@ class Behaviors(MotionActionServer):
         self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
         self._unseen_waited = False  # at this band edge the robot waited unseen_wait s for a mover to come into view
-        walls = None
-        if self.config.static_map and self.config.static_map_clearance > 0:
-            from ..maps import load_map
-
-            walls = WallFilter(load_map(self.config.static_map), self.config.static_map_clearance)
-        self._movers = MoverWatch(walls=walls)
+        self._movers = MoverWatch(walls=WallFilter.from_map_file(self.config.static_map, self.config.static_map_clearance))
         self._watched_scan: Any = None  # the scan message last fed to the mover tracker
         self._band_published = (-math.inf, -math.inf)  # (node time of the last people message, its last sample's time)
         if self.config.give_way.enabled:  # its first plan pays imports (~1 s here): not when a person is coming

@@ -44,7 +44,7 @@ from emos.msgs.sensor import LaserScan
 from emos.msgs.srv import TriggerRequest, TriggerResponse
 from emos.msgs.std import Bool, Header
 
-from ..controllers.movers import MoverWatch
+from ..controllers.movers import MoverWatch, WallFilter, static_map_path
 from ..controllers.sensors import obstacle_points
 from ..costmap.config import mask_path
 from ..costmap.filters import KeepoutObstacles, SpeedFilter, load_filter_mask
@@ -183,6 +183,12 @@ class DriveManagerConfig(NavComponentConfig):
     check, as obstacles over the whole path they are predicted to walk in this time, so the robot
     does not drive into where a person will be by the time it has stopped (0: off, the scan is
     taken as static)."""
+    static_map: str = field(default="", validator=static_map_path)
+    """A map_server YAML in the frame of the ``location`` input ('': none): with
+    ``mover_prediction_time``, a tracked "mover" within ``static_map_clearance`` m of the map's
+    walls is a piece of wall the robot's own motion smeared and gets no predicted trail
+    (``controllers.movers.WallFilter``; the scan's points themselves are always checked)."""
+    static_map_clearance: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=1.0))
     speed_mask: str = field(default="", validator=mask_path("speed"))
     """A speed filter mask (Nav2's speed filter; ``emos map zones``): inside its zones every
     command leaving here is scaled down to the zone's limit, whichever input sent it."""
@@ -285,7 +291,9 @@ class DriveManager(NavComponent):
         self._keepout_pose: np.ndarray | None = None  # the pose they were placed at
         self._cmd_seen: dict[str, Any] = {}  # per command topic: the message whose writers were noted
         self._cmd_writers: dict[str, list[int]] = {}
-        self._mover_watch = MoverWatch() if cfg.mover_prediction_time > 0 else None  # the swept check's moving obstacles
+        # The swept check's moving obstacles (none on the static map's walls)
+        self._mover_watch = (MoverWatch(walls=WallFilter.from_map_file(cfg.static_map, cfg.static_map_clearance))
+                             if cfg.mover_prediction_time > 0 else None)
         self._blind_spot = (BlindSpotMemory(BlindSpotConfig(memory_time=cfg.blind_spot_memory_time, radius=cfg.blind_spot_radius))
                             if cfg.blind_spot_memory_time > 0 else None)
         self._remembered_scan: Any = None  # the scan message last put into the blind-spot memory

@@ -38,8 +38,10 @@ from emos.msgs.nav import Path
 from emos.msgs.std import Bool, Header
 
 from ..costmap import CostmapConfig, LayeredCostmap, PeopleLayerConfig, SmootherConfig, people_cost, smooth_path, walked_points
+from ..paths import path_ahead
 from ..planning import OMPLConfig
 from ..planning.grid_planner import GRID_PLANNERS
+from ..planning.interpolation import path_length
 from .base import NavComponent, NavComponentConfig, rate_field
 from .convert import BadInput, goal_of, grid_map_of, grid_msg, path_msg
 from .interfaces import PlanPathFeedback, PlanPathGoal, PlanPathRequest, PlanPathResponse, PlanPathResult
@@ -48,6 +50,10 @@ from .planner_paths import PathFiles
 from .planners import check_planner_id, make_global_planner
 
 __all__ = ["Planner", "PlannerConfig"]
+
+#: a re-plan keeps the followed plan only while the robot is within this of it (m); farther
+#: (pushed aside, or given way) the plan from where it is now is taken
+KEPT_PLAN_MAX_OFFSET = 0.5
 
 
 def _ompl(value: Any) -> OMPLConfig:
@@ -88,13 +94,22 @@ def _people_needs_a_grid_planner(instance: Any, attribute: Any, value: PeopleLay
 class PlannerConfig(NavComponentConfig):
     """``planner_id``: an OMPL geometric planner (``"ompl.geometric.RRTConnect"``, ...) or a
     grid planner (``"CostToGo"``). ``ompl``: the OMPL settings (timeouts, thresholds, planner
-    parameters). ``distance_tolerance`` (m): the robot counts as arrived within it."""
+    parameters). ``distance_tolerance`` (m): the robot counts as arrived within it.
+
+    ``replan_min_gain``: OMPL's planners sample at random, so two plans to one goal differ (and a
+    plan round a zone on the left may follow one round it on the right, turning the robot back
+    and forth). Each re-plan towards the same goal therefore keeps the plan the robot is
+    following while that is still free on the map and the robot is on it, unless the new plan
+    is this fraction shorter than what is left of it; a re-plan that finds no path in time
+    keeps it too. 0: every re-plan replaces it. Grid planners are deterministic and always give
+    their new plan (a people layer may change their costs)."""
 
     loop_rate: float = rate_field(1.0)
     planner_id: str = field(default="ompl.geometric.KPIECE1", validator=lambda i, a, v: check_planner_id(v))
     ompl: OMPLConfig = field(factory=OMPLConfig, converter=_ompl, on_setattr=attrs.setters.convert)
     distance_tolerance: float = field(default=0.15, validator=in_range(min_value=1e-3, max_value=100.0))
     planning_timeout: float = field(default=5.0, validator=in_range(min_value=1e-3, max_value=1e4))
+    replan_min_gain: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=1.0))
     #: metres per unit of an integer (16UC1, mono16) depth image of a pixel goal; 32FC1 is metres
     depth_conversion_factor: float = field(default=1e-3, validator=in_range(min_value=1e-9, max_value=1e3))
     #: the global costmap (Nav2 names): used when enabled or given a mask; see emos.actors.nav.costmap
@@ -173,6 +188,8 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._goal_key: Any = None
         self._reached = False
         self.last_plan: np.ndarray | None = None
+        self._followed: tuple[Any, np.ndarray] | None = None  # (goal key, plan) the re-plans may keep
+        self.plans_kept = 0  # re-plans that kept the followed plan (shorter by too little, or none found)
         cm = self.config.costmap
         use_costmap = cm.enabled or bool(cm.keepout_mask or cm.speed_mask)
         self.costmap = LayeredCostmap(cm, self.config.robot.inner_radius) if use_costmap else None
@@ -239,8 +256,30 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         if grid is not None:
             self._algo.set_extra_cost(people_cost(grid, walked, self.config.people))
 
-    def plan_once(self, goal: np.ndarray) -> tuple[bool, str, np.ndarray]:
-        """Plan from the current location to ``goal``; publishes the plan. (ok, message, path)."""
+    def _plan_to_keep(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        """What is left of the plan the robot follows towards ``goal``, when a re-plan may keep
+        it (see ``replan_min_gain``): the robot on it and all of it free on the current map."""
+        first_collision = getattr(self._algo, "first_collision", None)  # the sampling planners
+        if self._followed is None or first_collision is None or self.config.replan_min_gain <= 0:
+            return None
+        goal_key, plan = self._followed
+        if goal_key != tuple(np.round(goal, 6)):
+            return None
+        ahead = path_ahead(plan, start[:2], KEPT_PLAN_MAX_OFFSET)
+        if ahead is None or len(ahead) < 2 or first_collision(ahead) is not None:
+            return None
+        return ahead
+
+    def _keep(self, why: str) -> tuple[bool, str, np.ndarray]:
+        assert self._followed is not None
+        self.plans_kept += 1
+        self.health_status.set_healthy()
+        return True, f"kept the plan being followed ({why})", self._followed[1]
+
+    def plan_once(self, goal: np.ndarray, *, may_keep: bool = False) -> tuple[bool, str, np.ndarray]:
+        """Plan from the current location to ``goal``; publishes the plan. (ok, message, path).
+        ``may_keep``: a re-plan of the goal being driven to, which may keep the plan the robot
+        follows (``PlannerConfig.replan_min_gain``); a kept plan is not published again."""
         with self._lock:
             state = self.robot_state()
             if state is None or not self._ensure_map():
@@ -252,6 +291,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                     message = f"the {what} ({point[0]:.2f}, {point[1]:.2f}) is inside keepout zone {zone}"
                     self.fail_algorithm(self.config.planner_id, message)
                     return False, message, np.zeros((0, 3))
+            kept = self._plan_to_keep(start, goal) if may_keep else None
             try:
                 result = self._algo.plan(start, goal, timeout=self.config.planning_timeout)
             except ValueError as exc:  # a goal (or the robot) off the map
@@ -259,12 +299,20 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 return False, str(exc), np.zeros((0, 3))
             if not result.solved:
                 msg = f"{result.status}: {result.message}"
+                if kept is not None:
+                    self._report.warning("replan:kept", "[%s] a re-plan to (%.2f, %.2f) found no path (%s); following the last plan, "
+                                         "still free", self.component_name, goal[0], goal[1], msg, logger=self.get_logger())
+                    return self._keep(f"a re-plan found none: {msg}")
                 self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {msg}")
                 return False, msg, np.zeros((0, 3))
             if self.config.smoother.enabled:
                 master = self.costmap.master if self.costmap is not None else None
                 result = attrs.evolve(result, path=smooth_path(result.path, self.config.smoother, master))
+            if kept is not None and result.length_m > (1.0 - self.config.replan_min_gain) * path_length(kept):
+                return self._keep(f"the new one, {result.length_m:.2f} m, is not {self.config.replan_min_gain:.0%} shorter "
+                                  f"than the {path_length(kept):.2f} m left")
             self.last_plan = result.path
+            self._followed = (tuple(np.round(goal, 6)), result.path) if may_keep else None
             self.publish(self.required_out_topic("plan"), path_msg(result.path, self.config.frames.world))
             self.health_status.set_healthy()
             return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path
@@ -357,7 +405,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         try:
             while True:
                 try:
-                    self.plan_once(goal)
+                    self.plan_once(goal, may_keep=True)
                 except Exception as exc:  # reported, never lost in the pool
                     self.get_logger().exception("[%s] planning failed: %s", self.component_name, exc)
                     self.health_status.set_fail_component(component_names=[self.component_name], message=f"{type(exc).__name__}: {exc}")

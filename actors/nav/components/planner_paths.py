@@ -65,6 +65,7 @@ class PathFiles:
     # plan and the goal it was re-planned towards.
     _goal: np.ndarray | None
     last_plan: np.ndarray | None
+    _followed: tuple[Any, np.ndarray] | None
 
     def create_path_services(self) -> None:
         name = self.component_name  # type: ignore[attr-defined]
@@ -100,6 +101,7 @@ class PathFiles:
         except ValueError as exc:
             return PathFromToFileResponse(success=False, message=str(exc))
         self._goal = None  # stop re-planning over the loaded path
+        self._followed = None
         self.last_plan = poses
         self.publish(self.get_out_topic("plan"), path_msg(poses, self.config.frames.world))  # type: ignore[attr-defined]
         return PathFromToFileResponse(success=True, message=f"{len(poses)} poses loaded and published")

@@ -16,7 +16,7 @@ obstacle) and the ``Behaviors``' give-way (:func:`approaches`: who is on a colli
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from ..maps.grid import OccupancyGridMap
     from .arcs import ArcPlanner
 
-__all__ = ["Approach", "MoverConfig", "MoverWatch", "PredictedMovers", "PredictionConfig", "WallFilter", "approaches",
+__all__ = ["Approach", "MoverConfig", "MoverWatch", "PredictedMovers", "PredictionConfig", "WallFilter", "approaches", "static_map_path",
            "near_movers", "rewind"]
 
 
@@ -174,6 +174,17 @@ def _to_robot(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
 CLOCK_BACK_S = 1.0  # a scan this much older than the last one means the clock went back
 
 
+def static_map_path(instance: Any, attribute: Any, value: Any) -> None:
+    """attrs validator of a config's static map for the :class:`WallFilter` (a map_server YAML,
+    '': none): loaded where it is set, so a bad one names its file at definition."""
+    if not isinstance(value, str):
+        raise TypeError(f"{type(instance).__name__}.{attribute.name}: expected a map YAML path (str), got {type(value).__name__}")
+    if value:
+        from ..maps import load_map
+
+        load_map(value)
+
+
 class WallFilter:
     """Tracks a static map says cannot be people. A robot's own motion smears the walls it scans
     (a pose a few centimetres off the scan's time), and the scan tracker then calls a piece of
@@ -192,6 +203,15 @@ class WallFilter:
         self.grid = grid
         self.clearance = float(clearance)
         self.distance = distance_map(grid)  # m from each cell's centre to the nearest wall cell's (inf: none)
+
+    @classmethod
+    def from_map_file(cls, map_file: str, clearance: float) -> WallFilter | None:
+        """The filter of a map_server YAML, or None when there is no file or ``clearance`` is 0 (off)."""
+        if not map_file or clearance <= 0:
+            return None
+        from ..maps import load_map
+
+        return cls(load_map(map_file), clearance)
 
     def on_walls(self, centres: np.ndarray) -> np.ndarray:
         """(M,) True where a centre (M, 2) lies within ``clearance`` of a wall of the map."""

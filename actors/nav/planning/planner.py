@@ -290,18 +290,25 @@ class OMPLGeometricPlanner:
             self._ptc.terminate()
             return True
 
+    def first_collision(self, path: np.ndarray) -> np.ndarray | None:
+        """The first pose along ``path`` ((N, 3) poses, consecutive poses joined by the
+        straight SE2 motion) at which the robot would touch the current map, or None when the
+        whole path is free (with the fcl check of a plan's final verification)."""
+        checker = self.checker
+        if checker is None:
+            raise RuntimeError("OMPLGeometricPlanner.first_collision: call set_map first")
+        res = checker.grid.resolution
+        radius = max(checker.outer_radius, 1e-6)
+        # Dense enough that no body point moves more than res/4 between checked poses.
+        dense = interpolate_se2(np.asarray(path, dtype=np.float64).reshape(-1, 3), res / 8.0, res / (8.0 * radius))
+        ok = checker.are_valid(dense, exact=True)
+        return None if ok.all() else dense[~ok][0]
+
     def _finish(
         self, states: np.ndarray, name: str, t_plan: float, t_simpl: float, message: str = ""
     ) -> PlanResult:
-        checker = self.checker
-        assert checker is not None
-        res = checker.grid.resolution
-        radius = max(checker.outer_radius, 1e-6)
-        # Verify on a path dense enough that no body point moves more than res/4 between poses.
-        dense = interpolate_se2(states, res / 8.0, res / (8.0 * radius))
-        ok = checker.are_valid(dense, exact=True)
-        if not ok.all():
-            bad = dense[~ok][0]
+        bad = self.first_collision(states)
+        if bad is not None:
             return PlanResult(
                 False, np.zeros((0, 3)), name, "PATH_IN_COLLISION", t_plan, t_simpl, 0.0,
                 f"final fcl verification rejected the path at ({bad[0]:.3f}, {bad[1]:.3f}, {bad[2]:.3f})",
