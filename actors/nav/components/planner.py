@@ -101,8 +101,9 @@ class PlannerConfig(NavComponentConfig):
     and forth). Each re-plan towards the same goal therefore keeps the plan the robot is
     following while that is still free on the map and the robot is on it, unless the new plan
     is this fraction shorter than what is left of it; a re-plan that finds no path in time
-    keeps it too. 0: every re-plan replaces it. Grid planners are deterministic and always give
-    their new plan (a people layer may change their costs)."""
+    keeps it too. A kept plan is published again unchanged (its stamp too). 0: every re-plan
+    replaces it. Grid planners are deterministic and always give their new plan (a people
+    layer may change their costs)."""
 
     loop_rate: float = rate_field(1.0)
     planner_id: str = field(default="ompl.geometric.KPIECE1", validator=lambda i, a, v: check_planner_id(v))
@@ -188,7 +189,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._goal_key: Any = None
         self._reached = False
         self.last_plan: np.ndarray | None = None
-        self._followed: tuple[Any, np.ndarray] | None = None  # (goal key, plan) the re-plans may keep
+        self._followed: tuple[Any, np.ndarray, Any] | None = None  # (goal key, plan, its message) the re-plans may keep
         self.plans_kept = 0  # re-plans that kept the followed plan (shorter by too little, or none found)
         cm = self.config.costmap
         use_costmap = cm.enabled or bool(cm.keepout_mask or cm.speed_mask)
@@ -262,7 +263,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         first_collision = getattr(self._algo, "first_collision", None)  # the sampling planners
         if self._followed is None or first_collision is None or self.config.replan_min_gain <= 0:
             return None
-        goal_key, plan = self._followed
+        goal_key, plan, _ = self._followed
         if goal_key != tuple(np.round(goal, 6)):
             return None
         ahead = path_ahead(plan, start[:2], KEPT_PLAN_MAX_OFFSET)
@@ -272,14 +273,18 @@ class Planner(PixelGoals, PathFiles, NavComponent):
 
     def _keep(self, why: str) -> tuple[bool, str, np.ndarray]:
         assert self._followed is not None
+        _, plan, msg = self._followed
         self.plans_kept += 1
+        # Published again as it was (its stamp too: a Controller following it goes on where it
+        # is), so a late subscriber or a restarted Controller has it.
+        self.publish(self.required_out_topic("plan"), msg)
         self.health_status.set_healthy()
-        return True, f"kept the plan being followed ({why})", self._followed[1]
+        return True, f"kept the plan being followed ({why})", plan
 
     def plan_once(self, goal: np.ndarray, *, may_keep: bool = False) -> tuple[bool, str, np.ndarray]:
         """Plan from the current location to ``goal``; publishes the plan. (ok, message, path).
         ``may_keep``: a re-plan of the goal being driven to, which may keep the plan the robot
-        follows (``PlannerConfig.replan_min_gain``); a kept plan is not published again."""
+        follows (``PlannerConfig.replan_min_gain``); a kept plan is published again unchanged."""
         with self._lock:
             state = self.robot_state()
             if state is None or not self._ensure_map():
@@ -312,8 +317,9 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 return self._keep(f"the new one, {result.length_m:.2f} m, is not {self.config.replan_min_gain:.0%} shorter "
                                   f"than the {path_length(kept):.2f} m left")
             self.last_plan = result.path
-            self._followed = (tuple(np.round(goal, 6)), result.path) if may_keep else None
-            self.publish(self.required_out_topic("plan"), path_msg(result.path, self.config.frames.world))
+            msg = path_msg(result.path, self.config.frames.world)
+            self._followed = (tuple(np.round(goal, 6)), result.path, msg) if may_keep else None
+            self.publish(self.required_out_topic("plan"), msg)
             self.health_status.set_healthy()
             return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path
 

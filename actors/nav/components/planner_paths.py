@@ -65,7 +65,7 @@ class PathFiles:
     # plan and the goal it was re-planned towards.
     _goal: np.ndarray | None
     last_plan: np.ndarray | None
-    _followed: tuple[Any, np.ndarray] | None
+    _followed: tuple[Any, np.ndarray, Any] | None
 
     def create_path_services(self) -> None:
         name = self.component_name  # type: ignore[attr-defined]

@@ -1,4 +1,4 @@
-"""The Planner's re-plans keep the plan the robot follows (``PlannerConfig.replan_min_gain``), on
+"""The Planner's re-plans keep the plan the robot follows (``PlannerConfig.replan_min_gain``, published again with its first stamp), on
 the component harness with OMPL's KPIECE1 (the stack's default, a sampling planner): a block in
 the middle of a room has a route round it on either side, and re-plans at random must not switch
 the robot from one to the other. A plan the robot has left, or that the map now blocks, is
@@ -55,20 +55,30 @@ def _xy(msg) -> np.ndarray:
 
 
 class _Periods:
-    """Runs planning periods one at a time: each ends when the worker has published a plan or
-    kept the one being followed (the harness's clock moves; the query runs on a real thread)."""
+    """Runs planning periods one at a time: each ends when the worker has published a new plan
+    or kept the one being followed (the harness's clock moves; the query runs on a real thread).
+    ``plans``: the new plans; a kept one is published again with its first stamp."""
 
     def __init__(self, h: ComponentHarness, planner) -> None:
-        self.h, self.planner, self.plans = h, planner, []
+        self.h, self.planner, self.plans, self.stamps = h, planner, [], []
+        self.republished = 0
 
     def run(self) -> str:
         kept, published = self.planner.plans_kept, len(self.plans)
         self.h.advance(1.0)
         self.h.wait_for(lambda: self._collect() > published or self.planner.plans_kept > kept, what="a planning period's outcome")
+        self._collect()
         return "published" if len(self.plans) > published else "kept"
 
     def _collect(self) -> int:
-        self.plans += [_xy(m) for m in self.h.outputs("/plan")]
+        for m in self.h.outputs("/plan"):
+            stamp = (m.header.stamp.sec, m.header.stamp.nanosec)
+            if self.stamps and stamp == self.stamps[-1]:
+                self.republished += 1
+                assert np.allclose(_xy(m), self.plans[-1])
+            else:
+                self.stamps.append(stamp)
+                self.plans.append(_xy(m))
         return len(self.plans)
 
 
@@ -78,16 +88,23 @@ def _start(h: ComponentHarness, blocks=(BLOCK,)) -> None:
     h.feed("/goal", M.PointStamped(header=M.Header(frame_id="map"), point=M.Point(x=GOAL[0], y=GOAL[1])))
 
 
+def _first_plan(h: ComponentHarness, planner) -> tuple[_Periods, np.ndarray, float]:
+    """The first period's plan and the side of the block it goes round (+1 above, -1 below)."""
+    _start(h)
+    periods = _Periods(h, planner)
+    assert periods.run() == "published"
+    first = periods.plans[0]
+    side = float(np.sign(np.mean(first[:, 1]) - 2.0))
+    assert side != 0
+    return periods, first, side
+
+
 def test_re_plans_keep_the_followed_plan_while_the_robot_is_on_it():
     planner = _planner()
     with ComponentHarness(planner, tick=0.1) as h:
-        _start(h)
-        periods = _Periods(h, planner)
-        assert periods.run() == "published"
-        first = periods.plans[0]
-        side = np.sign(np.mean(first[:, 1]) - 2.0)  # above or below the block
-        assert side != 0
+        periods, first, side = _first_plan(h, planner)
         assert [periods.run() for _ in range(5)] == ["kept"] * 5, "a re-plan replaced the plan the robot follows"
+        h.wait_for(lambda: periods._collect() and periods.republished >= 5, what="the kept plan published again")
         # The robot moves along it: still kept, and the plan is still the first one.
         along = first[len(first) // 2]
         h.feed("/odom", _odom(float(along[0]), float(along[1])))
@@ -99,11 +116,7 @@ def test_re_plans_keep_the_followed_plan_while_the_robot_is_on_it():
 def test_a_robot_off_the_plan_gets_a_new_one():
     planner = _planner()
     with ComponentHarness(planner, tick=0.1) as h:
-        _start(h)
-        periods = _Periods(h, planner)
-        assert periods.run() == "published"
-        first = periods.plans[0]
-        side = np.sign(np.mean(first[:, 1]) - 2.0)
+        periods, first, side = _first_plan(h, planner)
         # Pushed across to the other side of the block (farther than 0.5 m from every plan point).
         x, y = 3.0, 2.0 - side * 1.0
         assert np.min(np.hypot(first[:, 0] - x, first[:, 1] - y)) > 0.5
@@ -116,11 +129,7 @@ def test_a_robot_off_the_plan_gets_a_new_one():
 def test_a_plan_the_map_now_blocks_is_replaced():
     planner = _planner()
     with ComponentHarness(planner, tick=0.1) as h:
-        _start(h)
-        periods = _Periods(h, planner)
-        assert periods.run() == "published"
-        first = periods.plans[0]
-        side = np.sign(np.mean(first[:, 1]) - 2.0)
+        periods, first, side = _first_plan(h, planner)
         # A new map: the side the plan goes round is walled off from the block to the room's wall.
         wall = (2.9, 2.8, 3.1, 4.0) if side > 0 else (2.9, 0.0, 3.1, 1.2)
         h.feed("/map", _room([BLOCK, wall]))
@@ -132,10 +141,7 @@ def test_a_plan_the_map_now_blocks_is_replaced():
 def test_a_re_plan_that_finds_nothing_keeps_the_plan():
     planner = _planner()
     with ComponentHarness(planner, tick=0.1) as h:
-        _start(h)
-        periods = _Periods(h, planner)
-        assert periods.run() == "published"
-        first = periods.plans[0]
+        periods, first, _ = _first_plan(h, planner)
         # The robot brushes the block beside its plan (a pose the planner refuses to start from:
         # INVALID_START); the plan ahead is still free, so the robot keeps following it.
         checker = planner._algo.checker
