@@ -303,19 +303,19 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 self.fail_algorithm(self.config.planner_id, str(exc))
                 return False, str(exc), np.zeros((0, 3))
             if not result.solved:
-                msg = f"{result.status}: {result.message}"
+                why = f"{result.status}: {result.message}"
                 if kept is not None:
                     self._report.warning("replan:kept", "[%s] a re-plan to (%.2f, %.2f) found no path (%s); following the last plan, "
-                                         "still free", self.component_name, goal[0], goal[1], msg, logger=self.get_logger())
-                    return self._keep(f"a re-plan found none: {msg}")
-                self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {msg}")
-                return False, msg, np.zeros((0, 3))
+                                         "still free", self.component_name, goal[0], goal[1], why, logger=self.get_logger())
+                    return self._keep(f"a re-plan found none: {why}")
+                self.fail_algorithm(self.config.planner_id, f"no path to ({goal[0]:.2f}, {goal[1]:.2f}): {why}")
+                return False, why, np.zeros((0, 3))
             if self.config.smoother.enabled:
                 master = self.costmap.master if self.costmap is not None else None
                 result = attrs.evolve(result, path=smooth_path(result.path, self.config.smoother, master))
-            if kept is not None and result.length_m > (1.0 - self.config.replan_min_gain) * path_length(kept):
-                return self._keep(f"the new one, {result.length_m:.2f} m, is not {self.config.replan_min_gain:.0%} shorter "
-                                  f"than the {path_length(kept):.2f} m left")
+            if kept is not None and path_length(result.path) > (1.0 - self.config.replan_min_gain) * path_length(kept):
+                return self._keep(f"the new one, {path_length(result.path):.2f} m, is not {self.config.replan_min_gain:.0%} "
+                                  f"shorter than the {path_length(kept):.2f} m left")
             self.last_plan = result.path
             msg = path_msg(result.path, self.config.frames.world)
             self._followed = (tuple(np.round(goal, 6)), result.path, msg) if may_keep else None
