@@ -54,6 +54,8 @@ __all__ = ["Planner", "PlannerConfig"]
 #: a re-plan keeps the followed plan only while the robot is within this of it (m); farther
 #: (pushed aside, or given way) the plan from where it is now is taken
 KEPT_PLAN_MAX_OFFSET = 0.5
+#: m closer to the goal along a kept plan that count as progress (``replan_stall_time``)
+KEPT_PLAN_PROGRESS = 0.2
 
 
 def _ompl(value: Any) -> OMPLConfig:
@@ -102,7 +104,9 @@ class PlannerConfig(NavComponentConfig):
     following while that is still free on the map and the robot is on it, unless the new plan
     is this fraction shorter than what is left of it; a re-plan that finds no path in time
     keeps it too. A kept plan is published again unchanged (its stamp too). 0: every re-plan
-    replaces it. Grid planners are deterministic and always give their new plan (a people
+    replaces it. ``replan_stall_time`` (s): a plan along which the robot has not come 0.2 m
+    closer to the goal in this long is not kept (a plan squeezing past a corner that the
+    Controller cannot follow; 0: kept however the robot does). Grid planners are deterministic and always give their new plan (a people
     layer may change their costs)."""
 
     loop_rate: float = rate_field(1.0)
@@ -111,6 +115,7 @@ class PlannerConfig(NavComponentConfig):
     distance_tolerance: float = field(default=0.15, validator=in_range(min_value=1e-3, max_value=100.0))
     planning_timeout: float = field(default=5.0, validator=in_range(min_value=1e-3, max_value=1e4))
     replan_min_gain: float = field(default=0.1, validator=in_range(min_value=0.0, max_value=1.0))
+    replan_stall_time: float = field(default=10.0, validator=in_range(min_value=0.0, max_value=1e4))
     #: metres per unit of an integer (16UC1, mono16) depth image of a pixel goal; 32FC1 is metres
     depth_conversion_factor: float = field(default=1e-3, validator=in_range(min_value=1e-9, max_value=1e3))
     #: the global costmap (Nav2 names): used when enabled or given a mask; see emos.actors.nav.costmap
@@ -190,6 +195,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         self._reached = False
         self.last_plan: np.ndarray | None = None
         self._followed: tuple[Any, np.ndarray, Any] | None = None  # (goal key, plan, its message) the re-plans may keep
+        self._followed_progress = (math.inf, 0.0)  # (least plan left seen, node time it last shrank by KEPT_PLAN_PROGRESS)
         self.plans_kept = 0  # re-plans that kept the followed plan (shorter by too little, or none found)
         cm = self.config.costmap
         use_costmap = cm.enabled or bool(cm.keepout_mask or cm.speed_mask)
@@ -269,6 +275,14 @@ class Planner(PixelGoals, PathFiles, NavComponent):
         ahead = path_ahead(plan, start[:2], KEPT_PLAN_MAX_OFFSET)
         if ahead is None or len(ahead) < 2 or first_collision(ahead) is not None:
             return None
+        left, now = path_length(ahead), clock.now()
+        least, since = self._followed_progress
+        if left <= least - KEPT_PLAN_PROGRESS:
+            self._followed_progress = (left, now)
+        elif self.config.replan_stall_time > 0 and now - since > self.config.replan_stall_time:
+            self.get_logger().info("[%s] no progress along the plan for %.0f s (%.2f m left): taking a new one",
+                                   self.component_name, now - since, left)
+            return None
         return ahead
 
     def _keep(self, why: str) -> tuple[bool, str, np.ndarray]:
@@ -319,6 +333,7 @@ class Planner(PixelGoals, PathFiles, NavComponent):
             self.last_plan = result.path
             msg = path_msg(result.path, self.config.frames.world)
             self._followed = (tuple(np.round(goal, 6)), result.path, msg) if may_keep else None
+            self._followed_progress = (path_length(result.path), clock.now())
             self.publish(self.required_out_topic("plan"), msg)
             self.health_status.set_healthy()
             return True, f"{result.length_m:.2f} m in {result.planning_time_s:.3f} s", result.path

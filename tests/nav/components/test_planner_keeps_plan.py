@@ -113,6 +113,19 @@ def test_re_plans_keep_the_followed_plan_while_the_robot_is_on_it():
         assert planner.health_status.is_healthy
 
 
+def test_a_plan_the_robot_makes_no_progress_along_is_not_kept_past_the_stall_time():
+    # The robot stands at the start (a plan the Controller cannot follow): kept for
+    # replan_stall_time (10 s of robot time), then a new plan is taken, and kept again.
+    planner = _planner()
+    with ComponentHarness(planner, tick=0.1) as h:
+        periods, _, _ = _first_plan(h, planner)
+        outcomes = [periods.run() for _ in range(14)]
+        assert outcomes[:9] == ["kept"] * 9, outcomes
+        assert "published" in outcomes[9:12], outcomes
+        renewed = outcomes.index("published", 9)
+        assert outcomes[renewed + 1:] == ["kept"] * (len(outcomes) - renewed - 1), outcomes
+
+
 def test_a_robot_off_the_plan_gets_a_new_one():
     planner = _planner()
     with ComponentHarness(planner, tick=0.1) as h:
