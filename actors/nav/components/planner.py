@@ -490,9 +490,9 @@ class Planner(PixelGoals, PathFiles, NavComponent):
                 self.get_logger().info("[%s] %s: goal (%.2f, %.2f) reached", self.component_name, self.main_action_name, goal[0], goal[1])
                 plan = path_msg(self.last_plan, self.config.frames.world) if self.last_plan is not None else Path()
                 return PlanPathResult(success=True, message="goal reached", plan=plan)
-            ok, message, path = self.plan_once(goal)
+            ok, message, path = self.plan_once(goal, may_keep=True)
             self.node.publish_status()
-            length = float(np.sum(np.hypot(*np.diff(path[:, :2], axis=0).T))) if ok and len(path) > 1 else math.nan
+            length = path_length(path) if ok and len(path) > 1 else math.nan
             goal_handle.publish_feedback(PlanPathFeedback(distance_to_goal=self._distance_to_goal(), plan_length=length))
             if not ok and self.health_status.is_algorithm_fail:
                 return PlanPathResult(success=False, message=message)
