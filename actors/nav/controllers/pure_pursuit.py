@@ -44,6 +44,7 @@ class PurePursuit(PathFollower):
         # towards the path" and "turn away", and never passes.
         self._side = 0.0
         self._commit = 0
+        self._spins_from = 0  # the first turn-in-place row of the last candidates()
 
     def nominal_command(self, pose: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, bool]:
         """Pure pursuit command towards the lookahead point; also whether it rotates in place."""
@@ -117,6 +118,8 @@ class PurePursuit(PathFollower):
         best = int(ok[0])
         chosen = targets[best] - targets[0]
         offset = chosen[1] if self.robot.model_type is RobotType.OMNI else chosen[2]
+        if best >= self._spins_from:  # a turn in place: its side is its own turn, not its offset from the arc
+            offset = targets[best][2]
         if best > 0 and offset != 0.0:
             self._side, self._commit = math.copysign(1.0, offset), steps
         else:
@@ -169,8 +172,15 @@ class PurePursuit(PathFollower):
         half = full.copy()
         half[:, :2] *= 0.5
         out = np.stack([full, half], axis=1).reshape(-1, 3)
+        self._spins_from = len(out)
         if robot.model_type is RobotType.DIFFERENTIAL_DRIVE:
+            # Turns in place, the arc's own way first (or the committed side's): a robot whose
+            # arc is blocked turns on towards its target. Trying +w first whatever the arc
+            # wanted, and then taking the side from the turn's offset to the arc (a slower turn
+            # the same way reads as the other side), a robot in a doorway whose arc to the path
+            # was blocked turned back and forth in place for good (`emos bench costmap --drive`).
+            way = self._side if self._commit > 0 else (math.copysign(1.0, nominal[2]) if nominal[2] != 0.0 else 1.0)
             spin = np.zeros((2 * k.size, 3))
-            spin[:, 2] = deltas[1:]
+            spin[:, 2] = np.stack([way * k, -way * k], axis=1).reshape(-1)
             out = np.vstack([out, spin])
         return out
