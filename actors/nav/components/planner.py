@@ -106,8 +106,8 @@ class PlannerConfig(NavComponentConfig):
     keeps it too. A kept plan is published again unchanged (its stamp too). 0: every re-plan
     replaces it. ``replan_stall_time`` (s): a plan along which the robot has not come 0.2 m
     closer to the goal in this long is not kept (a plan squeezing past a corner that the
-    Controller cannot follow; 0: kept however the robot does). Grid planners are deterministic and always give their new plan (a people
-    layer may change their costs)."""
+    Controller cannot follow; 0: kept however the robot does). Grid planners are deterministic
+    and always give their new plan (a people layer may change their costs)."""
 
     loop_rate: float = rate_field(1.0)
     planner_id: str = field(default="ompl.geometric.KPIECE1", validator=lambda i, a, v: check_planner_id(v))
