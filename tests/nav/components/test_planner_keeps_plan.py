@@ -100,7 +100,10 @@ def _first_plan(h: ComponentHarness, planner) -> tuple[_Periods, np.ndarray, flo
 
 
 def test_re_plans_keep_the_followed_plan_while_the_robot_is_on_it():
-    planner = _planner()
+    # KPIECE1's plans in this room differ in length by up to 10.5 % (200 queries, the longest
+    # against the shortest; more when a busy machine cuts the simplifier's 10 ms short): a gain
+    # of 0.3 keeps every one of them, whichever came first.
+    planner = _planner(replan_min_gain=0.3)
     with ComponentHarness(planner, tick=0.1) as h:
         periods, first, side = _first_plan(h, planner)
         assert [periods.run() for _ in range(5)] == ["kept"] * 5, "a re-plan replaced the plan the robot follows"
@@ -113,10 +116,29 @@ def test_re_plans_keep_the_followed_plan_while_the_robot_is_on_it():
         assert planner.health_status.is_healthy
 
 
+def test_a_notably_shorter_plan_replaces_the_followed_one():
+    # The plan followed is a long way round (north of the block, along the room's top wall):
+    # a re-plan finds one more than 10 % shorter, and it replaces it.
+    from emos.actors.nav.components.convert import path_msg
+
+    planner = _planner()
+    with ComponentHarness(planner, tick=0.1) as h:
+        periods, first, _ = _first_plan(h, planner)
+        corners = np.array([START, (1.0, 3.6), (5.0, 3.6), GOAL])
+        xy = np.vstack([np.linspace(a, b, 40, endpoint=False) for a, b in zip(corners[:-1], corners[1:])] + [corners[-1:]])
+        detour = np.c_[xy, np.zeros(len(xy))]
+        assert planner._algo.first_collision(detour) is None  # free: only its length may replace it
+        goal_key, _, _ = planner._followed
+        planner._followed = (goal_key, detour, path_msg(detour, "map"))
+        assert periods.run() == "published"
+        assert np.hypot(*np.diff(periods.plans[-1], axis=0).T).sum() < 0.9 * 7.2
+
+
 def test_a_plan_the_robot_makes_no_progress_along_is_not_kept_past_the_stall_time():
     # The robot stands at the start (a plan the Controller cannot follow): kept for
-    # replan_stall_time (10 s of robot time), then a new plan is taken, and kept again.
-    planner = _planner()
+    # replan_stall_time (10 s of robot time), then a new plan is taken, and kept again (the gain
+    # as in the first test).
+    planner = _planner(replan_min_gain=0.3)
     with ComponentHarness(planner, tick=0.1) as h:
         periods, _, _ = _first_plan(h, planner)
         outcomes = [periods.run() for _ in range(14)]
