@@ -180,9 +180,11 @@ def test_a_re_plan_that_finds_nothing_keeps_the_plan():
         # The robot brushes the block beside its plan (a pose the planner refuses to start from:
         # INVALID_START); the plan ahead is still free, so the robot keeps following it.
         checker = planner._algo.checker
-        i = int(np.argmin(np.abs(first[:, 0] - 3.0)))
+        x0, y0, x1, y1 = BLOCK
+        nearest_on_block = np.c_[np.clip(first[:, 0], x0, x1), np.clip(first[:, 1], y0, y1)]
+        i = int(np.argmin(np.hypot(*(first - nearest_on_block).T)))  # where the plan passes closest
         p = first[i]
-        toward = np.array([3.0, 2.0]) - p
+        toward = nearest_on_block[i] - p
         toward /= np.linalg.norm(toward)
         q = p.copy()
         while checker.is_valid_exact(float(q[0]), float(q[1]), 0.0):
