@@ -107,7 +107,7 @@ MIN_SPEED = 0.3  # m/s: slower tracks are not remembered as walking (people walk
 CLOCK_BACK = 1.0  # s: a sample this much older than the last one means the clock went back
 GAP_LIMIT = 0.6  # s: a longer gap in the record ends a remembered walk (the mover was not seen)
 MATCH_AGE = 2.0  # s: a walk is predicted from one at least this old (not the walk going on)
-LEADS = (0.0, -0.5, 0.5, 1.0)  # s: the earlier walk is followed this much ahead (timing uncertainty of a track)
+LEADS = (0.0, -0.5, 0.5)  # s: the earlier walk is followed this much ahead (timing uncertainty of a track)
 MAX_PASSES = 4  # earlier passes tried, most recent first (the guard runs at the component's rate)
 MAX_MOVER_SPEED = 1.5  # m/s: a mover farther from the robot's drive than this covers is not checked
 GHOST_RADIUS = 0.25  # m: the radius of a mover out of view (a person)
@@ -338,7 +338,11 @@ class MoverMemory:
                 learned_only: bool = False) -> list[np.ndarray]:
         """Predicted centres (len(times), 2) of a mover at ``centre`` with ``velocity`` now, at
         ``times`` s from now: at constant velocity, and, when an earlier walk passed here the
-        same way, as that walk went on (until the record of it ends; then at its last velocity).
+        same way, as that walk went on (until the record of it ends; then as a mover that left
+        the record there came back, :meth:`returns`, when one did; else at its last velocity).
+        A track slower than a walk (``MIN_SPEED``: a person turning round at the end of their
+        walk, where the tracker's velocity passes through zero, or setting off) has no "same
+        way": every way an earlier walk went on from here is a prediction.
         ``learned_only``: only the earlier walk, and NaN past its record (a mover out of view:
         where it went is unknown but for what movers did before)."""
         c = np.asarray(centre, dtype=float)
@@ -347,45 +351,88 @@ class MoverMemory:
         out = [] if learned_only else [c[None, :] + v[None, :] * times[:, None]]
         rows = self.samples()
         speed = float(np.hypot(*v))
-        if len(rows) == 0 or speed < MIN_SPEED:
+        slow = speed < MIN_SPEED
+        if len(rows) == 0 or (slow and learned_only):
             return out
         old = rows[:, 0] <= now - MATCH_AGE
         near = np.hypot(rows[:, 1] - c[0], rows[:, 2] - c[1]) <= match_distance
-        rs = np.hypot(rows[:, 3], rows[:, 4])
-        cos = (rows[:, 3] * v[0] + rows[:, 4] * v[1]) / np.maximum(rs * speed, 1e-9)
-        match = np.flatnonzero(old & near & (cos >= math.cos(match_heading)))
+        if slow:
+            match = np.flatnonzero(old & near)
+        else:
+            rs = np.hypot(rows[:, 3], rows[:, 4])
+            cos = (rows[:, 3] * v[0] + rows[:, 4] * v[1]) / np.maximum(rs * speed, 1e-9)
+            match = np.flatnonzero(old & near & (cos >= math.cos(match_heading)))
         if len(match) == 0:
             return out
         horizon = (float(times[-1]) if len(times) else 0.0) + max(LEADS)
-        # The most recent earlier walk through here whose record covers the horizon (the mover
-        # was not always in view), else the one recorded longest.
-        # One pass by here: matches less than a second apart; of each, the sample nearest the mover.
-        passes = np.split(match, np.flatnonzero(np.diff(rows[match, 0]) > 1.0) + 1)
-        best: tuple[list[float], list[np.ndarray], np.ndarray] | None = None
-        for group in passes[::-1][:MAX_PASSES]:
+        # One pass by here: matches less than a second apart (for a slow track also split where
+        # the walk turned: the way out and the way back are two passes); of each, the sample
+        # nearest the mover.
+        cuts = np.diff(rows[match, 0]) > 1.0
+        if slow:
+            cuts |= np.einsum("ij,ij->i", rows[match[:-1], 3:5], rows[match[1:], 3:5]) < 0.0
+        passes = np.split(match, np.flatnonzero(cuts) + 1)
+        walks: list[tuple[list[float], list[np.ndarray], np.ndarray]] = []
+        for group in passes[::-1][:2 * MAX_PASSES if slow else MAX_PASSES]:
             k = int(group[np.argmin(np.hypot(rows[group, 1] - c[0], rows[group, 2] - c[1]))])
-            walk = self._walk_from(k, horizon)
-            if best is None or walk[0][-1] > best[0][-1]:
-                best = walk
-            if best[0][-1] >= horizon:
+            walk = self._walk_from(k, horizon) if learned_only else self._walk_on(k, horizon)
+            if slow:  # every way on from here counts
+                walks.append(walk)
+                continue
+            # The most recent earlier walk through here whose record covers the horizon (the
+            # mover was not always in view), else the one recorded longest.
+            if not walks or walk[0][-1] > walks[0][0][-1]:
+                walks = [walk]
+            if walks[0][0][-1] >= horizon:
                 break
-        assert best is not None
-        walk_t, walk_xy, last = best
-        if len(walk_t) < 2:
-            return out
-        wt, wxy = np.array(walk_t), np.array(walk_xy)
-        shift = c - wxy[0]  # the walk as it went, from where the mover is now
-        # The track's velocity lags its walk (a fit over the last second): near a turn it still
-        # says "down" when the person walks up again. The walk is also taken a little earlier
-        # and later (LEADS s), each a hypothesis.
-        for lead in LEADS:
-            at = np.maximum(times + lead, 0.0)
-            pred = np.c_[np.interp(at, wt, wxy[:, 0]), np.interp(at, wt, wxy[:, 1])] + shift
-            beyond = at > wt[-1]
-            if beyond.any():  # past the record: on at the walk's last velocity (unknown for a mover out of view)
-                pred[beyond] = np.nan if learned_only else wxy[-1] + shift + last[3:5] * (at[beyond] - wt[-1])[:, None]
-            out.append(pred)
+        for walk_t, walk_xy, last in walks:
+            if len(walk_t) < 2:
+                continue
+            wt, wxy = np.array(walk_t), np.array(walk_xy)
+            shift = c - wxy[0]  # the walk as it went, from where the mover is now
+            # The track's velocity lags its walk (a fit over the last second): near a turn it
+            # still says "down" when the person walks up again. The walk is also taken a little
+            # earlier and later (LEADS s), each a hypothesis.
+            for lead in LEADS:
+                at = np.maximum(times + lead, 0.0)
+                pred = np.c_[np.interp(at, wt, wxy[:, 0]), np.interp(at, wt, wxy[:, 1])] + shift
+                beyond = at > wt[-1]
+                if beyond.any():  # past the record: on at the walk's last velocity (unknown for a mover out of view)
+                    pred[beyond] = np.nan if learned_only else wxy[-1] + shift + last[3:5] * (at[beyond] - wt[-1])[:, None]
+                out.append(pred)
         return out
+
+    def _walk_on(self, k: int, horizon: float, chains: int = 2) -> tuple[list[float], list[np.ndarray], np.ndarray]:
+        """:meth:`_walk_from`, and where its record ends before ``horizon`` at the end of a
+        remembered walk that a mover came back from (:meth:`returns`: it left the tracker's
+        view, or slowed below a walk at a turn), on out along its heading and back to where it
+        reappeared when it did, then as that walk went (at most ``chains`` times): a person
+        heading for the end of their walk turns there, as before, rather than walking on
+        through the wall at the last velocity."""
+        walk_t, walk_xy, last = self._walk_from(k, horizon)
+        for _ in range(chains):
+            if walk_t[-1] >= horizon:
+                break
+            back_row = self._reappearance(last)
+            if back_row is None:
+                break
+            key_t, key_xy = _out_and_back(np.asarray(last[1:3]), np.asarray(last[3:5]), np.asarray(back_row[1:3]),
+                                          back_row[0] - float(last[0]))
+            t_back = walk_t[-1] + float(key_t[-1])
+            more_t, more_xy, last = self._walk_from(self._row_index(back_row), max(horizon - t_back, 0.0))
+            walk_t = walk_t + [walk_t[-1] + float(t) for t in key_t[1:-1]] + [t_back + t for t in more_t]
+            walk_xy = walk_xy + list(key_xy[1:-1]) + list(more_xy)
+        return walk_t, walk_xy, last
+
+    def _reappearance(self, exit_row: np.ndarray) -> tuple[float, ...] | None:
+        """The first sample of the walk that came back after the remembered walk ending at
+        ``exit_row`` (:meth:`returns`), if it is remembered still; else None."""
+        rows = self.samples()
+        for exit_, back in self.returns():
+            if abs(exit_[0] - float(exit_row[0])) <= SAMPLE_PERIOD / 2 and \
+                    math.hypot(exit_[1] - float(exit_row[1]), exit_[2] - float(exit_row[2])) <= 0.1:
+                return back if len(rows) and back[0] >= rows[0, 0] - 1e-9 else None
+        return None
 
     def returns(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
         """(exit, reappearance) samples (t, x, y, vx, vy): the end of each remembered real walk
@@ -425,13 +472,10 @@ class MoverMemory:
                 continue
             away = back_row[0] - exit_row[0]  # s out of view
             shift = c - np.asarray(exit_row[1:3])
-            back = np.asarray(back_row[1:3]) + shift
-            # Out along its heading and back, at its speed, to be where it came back in time.
-            turn_at = max(0.0, (speed * away - float(np.hypot(*(back - c)))) / 2.0)
-            turn = c + v / speed * turn_at
+            turn_t, turn_xy = _out_and_back(c, v, np.asarray(back_row[1:3]) + shift, away)
             walk_t, walk_xy, last = self._walk_from(self._row_index(back_row), float(times[-1]) + max(LEADS) if len(times) else 0.0)
-            key_t = np.r_[0.0, turn_at / speed, away + np.asarray(walk_t, dtype=float)]
-            key_xy = np.vstack([c, turn, np.asarray(walk_xy, dtype=float) + shift])
+            key_t = np.r_[turn_t[:-1], away + np.asarray(walk_t, dtype=float)]
+            key_xy = np.vstack([turn_xy[:-1], np.asarray(walk_xy, dtype=float) + shift])
             for lead in LEADS:
                 at = np.maximum(times + lead, 0.0)
                 pred = np.c_[np.interp(at, key_t, key_xy[:, 0]), np.interp(at, key_t, key_xy[:, 1])]
@@ -449,6 +493,19 @@ class MoverMemory:
         hi = max(int(np.searchsorted(rows[:, 0], row[0] + 1e-9, side="right")), lo + 1)
         group = rows[lo:hi]
         return lo + int(np.argmin(np.hypot(group[:, 1] - row[1], group[:, 2] - row[2])))
+
+
+def _out_and_back(exit_xy: np.ndarray, velocity: np.ndarray, back_xy: np.ndarray, away: float) -> tuple[np.ndarray, np.ndarray]:
+    """Key times (s from leaving, the last ``away``) and positions (3, 2) of a mover that left
+    the record at ``exit_xy`` with ``velocity`` and came back into it at ``back_xy`` ``away`` s
+    later: on along its heading at its speed, turning back so as to be at ``back_xy`` in time (a
+    person walking down a corridor out of view and back, or to the end of their walk and back)."""
+    speed = float(np.hypot(*velocity))
+    if speed <= 1e-9:
+        return np.array([0.0, away]), np.vstack([exit_xy, back_xy])
+    turn_at = max(0.0, (speed * away - float(np.hypot(*(back_xy - exit_xy)))) / 2.0)
+    turn_t = min(turn_at / speed, away)
+    return np.array([0.0, turn_t, away]), np.vstack([exit_xy, exit_xy + velocity / speed * turn_at, back_xy])
 
 
 def _arc_lengths(path: np.ndarray) -> np.ndarray:
