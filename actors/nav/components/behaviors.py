@@ -58,7 +58,7 @@ from .. import recovery as R
 from ..controllers.movers import Approach, MoverWatch, WallFilter, approaches, near_movers, static_map_path
 from ..controllers.sensors import obstacle_points
 from ..costmap.people import BAND_RESOLUTION, band_grid
-from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage
+from ..missions.passages import DriveSpeed, MoverMemory, PassageGuardConfig, PassageVerdict, check_passage, walks_past
 from .base import NavComponentConfig, rate_field
 from .convert import BadInput, grid_msg, grid_points_in_robot_frame, path_of, scan_of, velocity_of
 from .mission_interfaces import BackUpGoal, BehaviorFeedback, BehaviorResult, DriveOnHeadingGoal, SpinGoal, WaitGoal
@@ -69,6 +69,7 @@ __all__ = ["Behaviors", "BehaviorsConfig"]
 MOVER_PAD = 0.15  # m: scan and grid points this near a tracked mover's circle are the mover (not static)
 BAND_PERIOD = 1.0  # s between the band's publications (the Planner re-plans at 1 Hz)
 HOLD_HYSTERESIS = 0.5  # m: a hold goes on while the band is this much farther than ``approach``
+SPARED_EPISODE_GAP = 1.0  # s: give-ways not started this far apart are counted (and logged) once
 
 
 def _give_way_config(value: Any) -> R.GiveWayConfig:
@@ -152,7 +153,8 @@ class Behaviors(MotionActionServer):
         self._running: _Running | None = None
         self._last: BehaviorResult | None = None
         self._counts = {"started": 0, "succeeded": 0, "refused": 0, "stopped": 0, "give_way": 0, "give_way_s": 0,
-                        "passage_hold": 0, "passage_hold_s": 0, "passage_hold_given_up": 0}
+                        "passage_hold": 0, "passage_hold_s": 0, "passage_hold_given_up": 0, "known_walks_spared": 0}
+        self._spared_at = -math.inf  # node time a give-way was last not started for a mover on a known walk
         self._give_way_time = 0.0  # s spent giving way (node clock)
         self._hold_time = 0.0  # s held before a passage (node clock)
         self._memory = MoverMemory(self.config.passage_guard.memory)
@@ -383,6 +385,12 @@ class Behaviors(MotionActionServer):
         data, origin = band_grid(self._memory.band_cells())
         self.publish(out, grid_msg(data, BAND_RESOLUTION, origin, self.config.frames.world))
 
+    def _robot_velocity(self, pose: np.ndarray, standing: bool = False) -> np.ndarray:
+        """The robot's velocity (world frame) from its odometry; zero when judged ``standing``."""
+        body = None if standing else velocity_of(self.latest("location"))
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return np.zeros(2) if body is None else np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
+
     def _approaches(self, pose: np.ndarray, standing: bool = False) -> list[Approach]:
         """Every tracked mover within ``detection_range``, relative to the robot moving at its
         odometry's velocity (world frame), or standing where it is (``standing``)."""
@@ -390,9 +398,7 @@ class Behaviors(MotionActionServer):
         centres, velocities, radii = self._movers.movers()
         if len(centres) == 0:
             return []
-        body = None if standing else velocity_of(self.latest("location"))
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        v = np.zeros(2) if body is None else np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
+        v = self._robot_velocity(pose, standing)
         return [a for a in approaches(pose[:2], v, self.config.robot.radius, centres, velocities, radii, cfg.time_before_collision)
                 if a.gap_now <= cfg.detection_range]
 
@@ -404,10 +410,23 @@ class Behaviors(MotionActionServer):
         pose = self._pose() if pose is None else pose
         if pose is None:
             return None
-        centres = self._movers.movers()[0]
+        centres, velocities, radii = self._movers.movers()
+        guard = self.config.passage_guard
         for a in self._approaches(pose, standing):
             coming = a.gap_min < cfg.personal_space and a.closing > 0.05
-            if coming or (a.gap_now < cfg.near_distance and a.closing > -0.05):
+            near = a.gap_now < cfg.near_distance and a.closing > -0.05
+            if coming and not near and guard.enabled and guard.known_walks and walks_past(
+                    self._memory, clock.now(), centres[a.index], velocities[a.index], pose[:2], self._robot_velocity(pose, standing),
+                    self.config.robot.radius + float(radii[a.index]) + cfg.personal_space, cfg.time_before_collision, guard):
+                if clock.now() - self._spared_at > SPARED_EPISODE_GAP:
+                    self._counts["known_walks_spared"] += 1
+                    x, y = centres[a.index]
+                    self.get_logger().info("[%s] give_way not started: mover at (%.2f, %.2f) %.2f m away heads at the robot "
+                                           "in a straight line, but walks where earlier walks went, all of which kept clear of it",
+                                           self.component_name, x, y, a.gap_now)
+                self._spared_at = clock.now()
+                continue
+            if coming or near:
                 x, y = centres[a.index]
                 return (f"mover at ({x:.2f}, {y:.2f}) {a.gap_now:.2f} m away, closing at {a.closing:.2f} m/s"
                         + (f", predicted within {max(a.gap_min, 0.0):.2f} m in {a.time_to_min:.1f} s" if coming else ""))
@@ -568,6 +587,8 @@ class Behaviors(MotionActionServer):
         ``give_way``: how many of the starts gave way to a mover, ``give_way_s``: for how long (s);
         ``passage_hold``: how many held the robot before the movers' way, ``passage_hold_s``: for
         how long (s), ``passage_hold_given_up``: how many of those ended at ``max_hold``;
+        ``known_walks_spared``: how many times a give-way was not started for a mover walking
+        where earlier walks went clear of the robot (``PassageGuardConfig.known_walks``);
         ``movers_on_walls``: tracks left out as pieces of the static map's walls (once per scan each)."""
         return {**self._counts, "movers_on_walls": self._movers.left_out}
 

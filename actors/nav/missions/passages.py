@@ -36,7 +36,7 @@ import numpy as np
 
 from emos.config import validators as V
 
-__all__ = ["DriveSpeed", "MoverMemory", "PassageGuardConfig", "PassageVerdict", "check_passage"]
+__all__ = ["DriveSpeed", "MoverMemory", "PassageGuardConfig", "PassageVerdict", "check_passage", "walks_past"]
 
 
 @attrs.define(frozen=True)
@@ -64,7 +64,12 @@ class PassageGuardConfig:
     walks' records is predicted as movers that left the view there came back
     (:meth:`MoverMemory.predict_return`) instead of holding the robot until it is seen again. ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
     ``match_heading`` (rad): how near and how alike in heading an earlier walk must be to
-    predict from it."""
+    predict from it. ``known_walks``: the give-way (``GiveWayConfig``) does not start for a mover
+    whose straight line meets the robot while it walks where earlier walks went the same way
+    and every one of them keeps clear of it (:func:`walks_past`: a person coming along the band
+    towards a robot waiting outside it turns at the corner of their walk, as they did before;
+    one who leaves the remembered walks, or comes within the give-way's ``near_distance``, is
+    given way to as before)."""
 
     enabled: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
     band_clearance: float = attrs.field(default=0.55, validator=V.number(gt=0, le=5, finite=True, what="metres"))
@@ -85,6 +90,7 @@ class PassageGuardConfig:
     memory: float = attrs.field(default=180.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
     match_distance: float = attrs.field(default=0.35, validator=V.number(gt=0, le=5, finite=True, what="metres"))
     match_heading: float = attrs.field(default=math.radians(40.0), validator=V.number(gt=0, le=math.pi, finite=True, what="radians"))
+    known_walks: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool))
 
 
 @attrs.define(frozen=True)
@@ -493,6 +499,22 @@ class MoverMemory:
         hi = max(int(np.searchsorted(rows[:, 0], row[0] + 1e-9, side="right")), lo + 1)
         group = rows[lo:hi]
         return lo + int(np.argmin(np.hypot(group[:, 1] - row[1], group[:, 2] - row[2])))
+
+
+def walks_past(memory: MoverMemory, now: float, centre: np.ndarray, velocity: np.ndarray, robot_xy: np.ndarray,
+               robot_velocity: np.ndarray, reach: float, horizon: float, config: PassageGuardConfig) -> bool:
+    """Whether the mover at ``centre`` with ``velocity`` walks where earlier walks went the same
+    way (:meth:`MoverMemory.predict`'s walks from here, at each of their timings, ``LEADS``) and
+    every such walk keeps its centre at least ``reach`` m from the robot's (at ``robot_xy``,
+    moving at ``robot_velocity``, world frame) over ``horizon`` s. False when no earlier walk
+    matches: a mover off the remembered walks is judged at constant velocity alone."""
+    times = np.arange(0.0, horizon + 1e-9, 0.1)
+    learned = memory.predict(now, np.asarray(centre, dtype=float), np.asarray(velocity, dtype=float), times,
+                             match_distance=config.match_distance, match_heading=config.match_heading)[1:]
+    if not learned:
+        return False
+    robot = np.asarray(robot_xy, dtype=float)[None, :2] + np.asarray(robot_velocity, dtype=float)[None, :2] * times[:, None]
+    return all(float(np.hypot(*(walk - robot).T).min()) >= reach for walk in learned)
 
 
 def _out_and_back(exit_xy: np.ndarray, velocity: np.ndarray, back_xy: np.ndarray, away: float) -> tuple[np.ndarray, np.ndarray]:

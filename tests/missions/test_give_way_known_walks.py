@@ -1,0 +1,127 @@
+"""The give-way and the passage guard's memory (``PassageGuardConfig.known_walks``) on robot time
+(``emos.testing.ComponentHarness``): a blind person walks an L back and forth, along y = 3 towards
+a robot standing 1.2 m beyond the corner, then away down x = 3.6. At the corner their straight
+line runs into the robot, so the give-way alone backs it out of the way on every pass; the robot
+waiting at a passage's edge was so pushed out of its place each time the person came by (ten-lap
+patrols in the house). With the memory of the person's earlier walks, which all turned at the
+corner, a person walking as they did is not given way to; one who walks on past the corner at the
+robot is, in time."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from emos import msgs as M
+from emos.testing import ComponentHarness
+from tests.nav.components.fake_base import CommandFollower, base_messages
+
+pytestmark = pytest.mark.unit
+
+ROBOT_RADIUS, HALF = 0.2, 0.15  # the person: a 0.3 m box
+WALK = np.array([(5.6, 3.0), (3.6, 3.0), (3.6, 0.4)])  # the L, walked back and forth at SPEED
+SPEED = 0.6
+ROBOT = (2.4, 3.0, 0.0)  # 1.2 m beyond the corner, facing it
+SEG = np.hypot(*np.diff(WALK, axis=0).T)
+LENGTH = float(SEG.sum())
+PERIOD = 2 * LENGTH / SPEED
+
+
+def walked(t: float) -> np.ndarray:
+    """The person's centre at ``t`` s on the L (pingpong from WALK[0])."""
+    s = (t * SPEED) % (2 * LENGTH)
+    s = 2 * LENGTH - s if s > LENGTH else s
+    k = 0 if s <= SEG[0] else 1
+    s -= 0.0 if k == 0 else SEG[0]
+    return WALK[k] + (WALK[k + 1] - WALK[k]) / SEG[k] * s
+
+
+def _gap(robot: np.ndarray, person: np.ndarray) -> float:
+    dx = max(abs(robot[0] - person[0]) - HALF, 0.0)
+    dy = max(abs(robot[1] - person[1]) - HALF, 0.0)
+    return math.hypot(dx, dy) - ROBOT_RADIUS
+
+
+def _behaviors(known_walks: bool):
+    from emos.actors.nav import RobotConfig, RobotGeometry, RobotType
+    from emos.actors.nav.components.behaviors import Behaviors, BehaviorsConfig
+
+    robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
+                        geometry_params=np.array([ROBOT_RADIUS, 0.3]))
+    return Behaviors("behaviors", config=BehaviorsConfig(robot=robot, loop_rate=10.0, max_rotational_vel=1.0,
+                                                         give_way={"enabled": True},
+                                                         passage_guard={"enabled": True, "known_walks": known_walks}))
+
+
+class Scene(CommandFollower):
+    """Before every tick: the person walks (``path(t)``), the base moves by the newest command
+    unless ``anchored`` (a robot held where it stands: each pass is then judged from the same
+    place), both are scanned."""
+
+    def __init__(self, path, anchored: bool):
+        super().__init__(ROBOT)
+        self.path, self.anchored = path, anchored
+        self.person = path(0.0)
+        self.least = math.inf
+
+    def __call__(self, h: ComponentHarness) -> None:
+        v, w = (0.0, 0.0) if self.anchored else self.move(h)
+        self.person = self.path(h.time - START)
+        self.least = min(self.least, _gap(self.pose, self.person))
+        box = (self.person[0] - HALF, self.person[1] - HALF, self.person[0] + HALF, self.person[1] + HALF)
+        odom, scan = base_messages(self.pose, v, w, 2 * math.pi, [box])
+        odom.header.stamp = scan.header.stamp = M.Time.from_sec(h.time)  # the mover tracker's clock
+        h.feed("/odom", odom)
+        h.feed("/scan", scan)
+
+
+START = 5.0
+
+
+def _give_ways_per_pass(known_walks: bool, passes: int = 4) -> tuple[list[int], dict]:
+    """Give-ways started during each pass of the person (one period of the L), robot anchored."""
+    behaviors = _behaviors(known_walks)
+    scene = Scene(walked, anchored=True)
+    counts = []
+    with ComponentHarness(behaviors, start_time=START) as h:
+        for k in range(passes):
+            before = behaviors.stats()["give_way"]
+            while h.time < START + (k + 1) * PERIOD:
+                h.advance(0.1, each_tick=scene)
+            counts.append(behaviors.stats()["give_way"] - before)
+        return counts, behaviors.stats()
+
+
+def test_a_person_walking_as_before_past_a_waiting_robot_is_not_given_way_to():
+    without, _ = _give_ways_per_pass(known_walks=False)
+    assert all(n >= 1 for n in without), without  # the straight line at the corner meets the robot on every pass
+    known, stats = _give_ways_per_pass(known_walks=True)
+    assert known[0] >= 1, known  # nothing remembered yet on the first pass
+    assert known[2:] == [0, 0], known  # walks remembered (2 s old at least): the person turns at the corner, as before
+    assert stats["known_walks_spared"] >= 2, stats
+
+
+def test_a_person_who_walks_on_past_the_corner_at_the_robot_is_given_way_to_in_time():
+    """Three passes as before, then on the way along y = 3 the person walks straight on past the
+    corner at the robot (and on to x = 0.5): the remembered walks no longer match once they are
+    past the corner, and the give-way takes the robot out of the way."""
+    turn_back = 3 * PERIOD  # the start of the fourth pass: at WALK[0], walking towards the corner
+
+    def deviating(t: float) -> np.ndarray:
+        if t < turn_back:
+            return walked(t)
+        return np.array([max(WALK[0][0] - SPEED * (t - turn_back), 0.5), WALK[0][1]])
+
+    behaviors = _behaviors(known_walks=True)
+    scene = Scene(deviating, anchored=False)
+    with ComponentHarness(behaviors, start_time=START) as h:
+        while h.time < START + turn_back:
+            h.advance(0.1, each_tick=scene)
+        scene.least = math.inf
+        before = behaviors.stats()["give_way"]
+        while h.time < START + turn_back + 12.0:
+            h.advance(0.1, each_tick=scene)
+        stats = behaviors.stats()
+    assert stats["give_way"] > before, stats
+    assert scene.least > 0.0, f"the person walked into the robot (least gap {scene.least:.3f} m)"
