@@ -412,3 +412,31 @@ def test_a_person_walking_out_of_view_is_expected_back_as_people_came_back_befor
         elif gap <= 0.0:
             held_into_contact += 1
     assert went and held_into_contact
+
+
+def test_a_phantom_walk_does_not_take_the_place_of_where_the_person_came_back_from():
+    """While the person walks down x = 4.2 out of view, the edge of the shadow they cast sweeps
+    along the far room's wall, and the scan tracker sees a "mover" there for a second (in the
+    house: (5.2, 2.3) to (5.4, 1.8) at 0.6 m/s, each time). It ends after the person left the
+    view and before they came back: the return is the person's (from the bottom of their walk
+    to where they came back up, or at the far end, where the tracker sees them slow as they turn
+    round), never the phantom's (which at most returns to where it was seen before)."""
+    memory = MoverMemory()
+    phantoms = 0
+    for t in np.arange(1.0, 100.0, 0.1):
+        c, v = tracked(float(t))
+        centres, velocities = ([c], [v]) if c[1] > 1.3 else ([], [])
+        if c[0] < 4.3 and 1.4 < c[1] < 2.1 and v[1] < -0.5:  # walking down, just before leaving the view
+            k = (2.1 - c[1]) / SPEED  # s since the phantom appeared
+            centres.append(np.array([5.2, 2.3]) + k * np.array([0.27, -0.55]))
+            velocities.append(np.array([0.27, -0.55]))
+            phantoms += 1
+        memory.observe(float(t), np.array(centres).reshape(-1, 2), np.array(velocities).reshape(-1, 2))
+    assert phantoms > 40
+    returns = memory.returns()
+    assert sum(exit_[2] < 2.0 for exit_, _ in returns) >= 4  # from the bottom of the walk (and from its far end)
+    def phantom(sample: tuple[float, ...]) -> bool:
+        return 5.0 < sample[1] < 6.0 and sample[2] < 2.5
+
+    for exit_, back in returns:  # the person to the person; the phantom (once gone) at most to itself
+        assert phantom(exit_) == phantom(back), f"({exit_[1]:.2f}, {exit_[2]:.2f}) -> ({back[1]:.2f}, {back[2]:.2f})"

@@ -441,16 +441,22 @@ class MoverMemory:
         return None
 
     def returns(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
-        """(exit, reappearance) samples (t, x, y, vx, vy): the end of each remembered real walk
-        and the beginning of the next real walk when it began within ``RETURN_WITHIN`` s after
-        (not while it was still in view): where and when movers came back into view."""
+        """(exit, reappearance) samples (t, x, y, vx, vy), oldest first: where and when movers
+        came back into view. Each real walk that began within ``RETURN_WITHIN`` s after another
+        ended (not while that was still in view) is the return of the one of those that ended
+        nearest to where it began, and each ended walk returns once, the first time: a short
+        phantom walk (the edge of the shadow a person casts on the wall behind sweeps along it)
+        that ended in between is not where the person came back from."""
         real = sorted((w for w in self._walks if w.real and w.first is not None), key=lambda w: w.t0)
-        out: list[tuple[tuple[float, ...], tuple[float, ...]]] = []
-        for a, b in zip(real[:-1], real[1:]):
+        pairs: dict[int, tuple[_Walk, _Walk]] = {}  # id(exit walk) -> (exit, return)
+        for b in real:
             assert b.first is not None
-            if GAP_LIMIT < b.t0 - a.last[0] <= RETURN_WITHIN:
-                out.append((a.last, b.first))
-        return out
+            gone = [a for a in real if GAP_LIMIT < b.t0 - a.last[0] <= RETURN_WITHIN and id(a) not in pairs]
+            if gone:
+                a = min(gone, key=lambda w: math.hypot(w.last[1] - b.first[1], w.last[2] - b.first[2]))  # type: ignore[index]
+                pairs[id(a)] = (a, b)
+        out = [(a.last, b.first) for a, b in pairs.values() if b.first is not None]
+        return sorted(out, key=lambda pair: pair[0][0])
 
     def predict_return(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
                        match_distance: float = 0.35, match_heading: float = math.radians(40.0)) -> list[np.ndarray]:
