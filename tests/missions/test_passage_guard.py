@@ -306,6 +306,18 @@ def test_drive_speed_is_what_the_robot_drove_not_its_stops_turns_or_behaviors():
         x += 0.0 if k <= 25 else 0.02
         speed.observe(t + 0.1 * k, x, 0.0)
     assert speed.start_delay() == pytest.approx(2.5 + 0.1 * 5, abs=0.15)  # 0.1 m covered 5 steps after it started
+    # A hold ends and another begins 0.5 s later, before the robot moved; it drives off 0.5 s
+    # after the second ends: the delay is 1 s (timed from the second), not the first's 5.
+    t += 6.0
+    speed.released(t, x, 0.0)
+    for k in range(1, 60):
+        held = 5 <= k < 40
+        x += 0.02 if k >= 45 else 0.0
+        if k == 40:
+            speed.released(t + 0.1 * k, x, 0.0)
+        speed.observe(t + 0.1 * k, x, 0.0, driving=not held)
+    assert speed.start_delay() == pytest.approx(2.5 + 0.1 * 5, abs=0.15)  # the longest of the last delays: still the first
+    assert speed._delays[-1] == pytest.approx(0.5 + 0.1 * 5, abs=0.15)
 
 
 @pytest.mark.parametrize("path", [LEFT_TO_RIGHT, RIGHT_TO_LEFT], ids=["left_to_right", "right_to_left"])
@@ -420,7 +432,7 @@ def test_a_phantom_walk_does_not_take_the_place_of_where_the_person_came_back_fr
     house: (5.2, 2.3) to (5.4, 1.8) at 0.6 m/s, each time). It ends after the person left the
     view and before they came back: the return is the person's (from the bottom of their walk
     to where they came back up, or at the far end, where the tracker sees them slow as they turn
-    round), never the phantom's (which at most returns to where it was seen before)."""
+    round), never the phantom's."""
     memory = MoverMemory()
     phantoms = 0
     for t in np.arange(1.0, 100.0, 0.1):
@@ -438,5 +450,5 @@ def test_a_phantom_walk_does_not_take_the_place_of_where_the_person_came_back_fr
     def phantom(sample: tuple[float, ...]) -> bool:
         return 5.0 < sample[1] < 6.0 and sample[2] < 2.5
 
-    for exit_, back in returns:  # the person to the person; the phantom (once gone) at most to itself
-        assert phantom(exit_) == phantom(back), f"({exit_[1]:.2f}, {exit_[2]:.2f}) -> ({back[1]:.2f}, {back[2]:.2f})"
+    for exit_, back in returns:  # the person to the person; the phantom's second is no walk to return from
+        assert not phantom(exit_) and not phantom(back), f"({exit_[1]:.2f}, {exit_[2]:.2f}) -> ({back[1]:.2f}, {back[2]:.2f})"

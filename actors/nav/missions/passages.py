@@ -128,6 +128,7 @@ MAX_WALKS = 32  # real walks kept for last_sighting (the latest matter)
 # view (a person who walked down a corridor out of the scan's view and back):
 # MoverMemory.predict_return learns how long it stayed out of view and where it came back.
 RETURN_WITHIN = 30.0  # s
+RETURN_WALK_TIME = 2.0  # s: walks shorter than this neither leave nor come back in MoverMemory.returns
 
 
 @attrs.define
@@ -174,7 +175,9 @@ class DriveSpeed:
         if self._poses and t < self._poses[-1][0]:  # the clock went back: start again
             self._poses, self._pieces, self._release = [], [], None
         if not driving:
-            self._poses = []
+            # Held again (or a behavior's move) before the robot had driven off: that release
+            # was no start, and timing it to the next drive would count the hold in the delay.
+            self._poses, self._release = [], None
         self._poses.append((t, float(x), float(y)))
         while len(self._poses) > 1 and t - self._poses[1][0] >= self.span:
             self._poses.pop(0)
@@ -442,12 +445,14 @@ class MoverMemory:
 
     def returns(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
         """(exit, reappearance) samples (t, x, y, vx, vy), oldest first: where and when movers
-        came back into view. Each real walk that began within ``RETURN_WITHIN`` s after another
-        ended (not while that was still in view) is the return of the one of those that ended
-        nearest to where it began, and each ended walk returns once, the first time: a short
-        phantom walk (the edge of the shadow a person casts on the wall behind sweeps along it)
-        that ended in between is not where the person came back from."""
-        real = sorted((w for w in self._walks if w.real and w.first is not None), key=lambda w: w.t0)
+        came back into view. Of the walks recorded for ``RETURN_WALK_TIME`` s at least (a
+        person going somewhere; the phantom walk a person's shadow makes, its edge sweeping
+        along the wall behind them, lasts about a second), each that began within
+        ``RETURN_WITHIN`` s after another ended (not while that was still in view) is the return
+        of the one of those that ended nearest to where it began, and each ended walk returns
+        once, the first time."""
+        real = sorted((w for w in self._walks if w.real and w.first is not None and w.last[0] - w.t0 >= RETURN_WALK_TIME),
+                      key=lambda w: w.t0)
         pairs: dict[int, tuple[_Walk, _Walk]] = {}  # id(exit walk) -> (exit, return)
         for b in real:
             assert b.first is not None
