@@ -10,13 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from emos import msgs as M
 from emos.testing import ComponentHarness
-from tests.nav.components.fake_base import CommandFollower, base_messages
+from tests.missions.person_scene import HALF, ROBOT_RADIUS, feed, gap
+from tests.nav.components.fake_base import CommandFollower
 
 pytestmark = pytest.mark.unit
 
-ROBOT_RADIUS, HALF = 0.2, 0.15  # the person: a 0.3 m box
 
 
 def _behaviors():
@@ -27,12 +26,6 @@ def _behaviors():
                         geometry_params=np.array([ROBOT_RADIUS, 0.3]))
     return Behaviors("behaviors", config=BehaviorsConfig(robot=robot, loop_rate=10.0, max_rotational_vel=1.0,
                                                          give_way={"enabled": True}))
-
-
-def _gap(robot: np.ndarray, person: np.ndarray) -> float:
-    dx = max(abs(robot[0] - person[0]) - HALF, 0.0)
-    dy = max(abs(robot[1] - person[1]) - HALF, 0.0)
-    return math.hypot(dx, dy) - ROBOT_RADIUS
 
 
 class PersonAndBase(CommandFollower):
@@ -48,12 +41,8 @@ class PersonAndBase(CommandFollower):
         last = h.time if self.last_time is None else self.last_time
         v, w = self.move(h)
         self.person = self.person + self.velocity * (h.time - last)
-        self.least = min(self.least, _gap(self.pose, self.person))
-        box = (self.person[0] - HALF, self.person[1] - HALF, self.person[0] + HALF, self.person[1] + HALF)
-        odom, scan = base_messages(self.pose, v, w, 2 * math.pi, [box])
-        odom.header.stamp = scan.header.stamp = M.Time.from_sec(h.time)  # the mover tracker's clock
-        h.feed("/odom", odom)
-        h.feed("/scan", scan)
+        self.least = min(self.least, gap(self.pose, self.person))
+        feed(h, self.pose, v, w, self.person)
 
 
 def test_give_way_hands_back_only_when_the_standing_robot_is_out_of_the_persons_way():

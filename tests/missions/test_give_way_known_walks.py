@@ -13,13 +13,12 @@ import math
 import numpy as np
 import pytest
 
-from emos import msgs as M
 from emos.testing import ComponentHarness
-from tests.nav.components.fake_base import CommandFollower, base_messages
+from tests.missions.person_scene import ROBOT_RADIUS, feed, gap
+from tests.nav.components.fake_base import CommandFollower
 
 pytestmark = pytest.mark.unit
 
-ROBOT_RADIUS, HALF = 0.2, 0.15  # the person: a 0.3 m box
 WALK = np.array([(5.6, 3.0), (3.6, 3.0), (3.6, 0.4)])  # the L, walked back and forth at SPEED
 SPEED = 0.6
 ROBOT = (2.4, 3.0, 0.0)  # 1.2 m beyond the corner, facing it
@@ -35,12 +34,6 @@ def walked(t: float) -> np.ndarray:
     k = 0 if s <= SEG[0] else 1
     s -= 0.0 if k == 0 else SEG[0]
     return WALK[k] + (WALK[k + 1] - WALK[k]) / SEG[k] * s
-
-
-def _gap(robot: np.ndarray, person: np.ndarray) -> float:
-    dx = max(abs(robot[0] - person[0]) - HALF, 0.0)
-    dy = max(abs(robot[1] - person[1]) - HALF, 0.0)
-    return math.hypot(dx, dy) - ROBOT_RADIUS
 
 
 def _behaviors(known_walks: bool):
@@ -68,12 +61,8 @@ class Scene(CommandFollower):
     def __call__(self, h: ComponentHarness) -> None:
         v, w = (0.0, 0.0) if self.anchored else self.move(h)
         self.person = self.path(h.time - START)
-        self.least = min(self.least, _gap(self.pose, self.person))
-        box = (self.person[0] - HALF, self.person[1] - HALF, self.person[0] + HALF, self.person[1] + HALF)
-        odom, scan = base_messages(self.pose, v, w, 2 * math.pi, [box])
-        odom.header.stamp = scan.header.stamp = M.Time.from_sec(h.time)  # the mover tracker's clock
-        h.feed("/odom", odom)
-        h.feed("/scan", scan)
+        self.least = min(self.least, gap(self.pose, self.person))
+        feed(h, self.pose, v, w, self.person)
 
 
 START = 5.0
