@@ -450,3 +450,24 @@ def test_a_phantom_walk_does_not_take_the_place_of_where_the_person_came_back_fr
 
     for exit_, back in returns:  # the person to the person; the phantom's second is no walk to return from
         assert not phantom(exit_) and not phantom(back), f"({exit_[1]:.2f}, {exit_[2]:.2f}) -> ({back[1]:.2f}, {back[2]:.2f})"
+
+
+def test_a_phantom_in_view_is_predicted_as_the_phantom_walked_not_as_the_person():
+    """The robot sees the person down to y = 1.0 this time: when the phantom (above) ends, the
+    person is still in view 1.3 m away, walking down. A phantom seen again where it was is
+    predicted to sweep on as it did, not to have become the person (before, a record was
+    continued by whatever was within 3 m/s of its last sample, and the guard held the robot for a
+    phantom "predicted at (4.11, 2.46)", on the person's walk, every pass)."""
+    memory = MoverMemory()
+    for t in np.arange(1.0, 100.0, 0.1):
+        c, v = tracked(float(t))
+        centres, velocities = ([c], [v]) if c[1] > 1.0 else ([], [])
+        if c[0] < 4.3 and 1.5 < c[1] < 2.2 and v[1] < -0.5:
+            k = (2.2 - c[1]) / SPEED
+            centres.append(np.array([5.2, 2.3]) + k * np.array([0.27, -0.55]))
+            velocities.append(np.array([0.27, -0.55]))
+        memory.observe(float(t), np.array(centres).reshape(-1, 2), np.array(velocities).reshape(-1, 2))
+    preds = memory.predict(100.0, np.array([5.22, 2.26]), np.array([0.27, -0.55]), np.arange(0.0, 8.01, 0.2))
+    assert len(preds) > 1  # earlier passes of the phantom
+    for walk in preds[1:]:
+        assert walk[:, 0].min() > 4.8, np.round(walk[::5], 2).tolist()

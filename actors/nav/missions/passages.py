@@ -116,6 +116,9 @@ MATCH_AGE = 2.0  # s: a walk is predicted from one at least this old (not the wa
 LEADS = (0.0, -0.5, 0.5)  # s: the earlier walk is followed this much ahead (timing uncertainty of a track)
 MAX_PASSES = 4  # earlier passes tried, most recent first (the guard runs at the component's rate)
 MAX_MOVER_SPEED = 1.5  # m/s: a mover farther from the robot's drive than this covers is not checked
+# Two samples are one mover's walk when it could have walked from one to the other at MAX_MOVER_SPEED (plus
+# LINK_SLACK m of the tracked centre's jitter); faster links took a phantom's walk on as a person's 1.3 m away.
+LINK_SLACK = 0.1  # m
 GHOST_RADIUS = 0.25  # m: the radius of a mover out of view (a person)
 OUT_OF_VIEW_AFTER = 0.5  # s: a mover not recorded walking for longer is out of view (or stopped)
 # A walk is a person's (a real sighting) once recorded unbroken for this long and this far from
@@ -251,8 +254,8 @@ class MoverMemory:
         self._array = self._cells = None
 
     def _follow_walks(self, rows: list[tuple[float, float, float, float, float]]) -> None:
-        """Extend each open walk by the nearest new sample it could have walked to (a person's
-        pace, as ``_walk_from`` links samples), start a walk for each sample left; a walk is
+        """Extend each open walk by the nearest new sample it could have walked to
+        (``MAX_MOVER_SPEED``, as ``_walk_from`` links samples), start a walk for each sample left; a walk is
         real once long and far enough (``REAL_WALK_TIME``, ``REAL_WALK_DISTANCE``)."""
         t = rows[0][0]
         open_walks = [w for w in self._walks if t - w.last[0] <= GAP_LIMIT]
@@ -262,7 +265,7 @@ class MoverMemory:
             best, best_d = None, math.inf
             for i, w in enumerate(open_walks):
                 d = math.hypot(row[1] - w.last[1], row[2] - w.last[2])
-                if i not in taken and d <= 3.0 * (t - w.last[0]) + 0.1 and d < best_d:
+                if i not in taken and d <= MAX_MOVER_SPEED * (t - w.last[0]) + LINK_SLACK and d < best_d:
                     best, best_d = i, d
             if best is None:
                 self._walks.append(_Walk(t, (row[1], row[2]), row, first=row))
@@ -325,7 +328,7 @@ class MoverMemory:
         if len(seg) and np.all(np.diff(seg[:, 0]) > 0):  # one mover recorded at a time: vectorized
             gaps = np.flatnonzero(np.diff(seg[:, 0]) > GAP_LIMIT)
             seg = seg[:int(gaps[0]) + 1] if len(gaps) else seg
-            jumps = np.flatnonzero(np.hypot(*np.diff(seg[:, 1:3], axis=0).T) > 3.0 * np.diff(seg[:, 0]) + 0.1)
+            jumps = np.flatnonzero(np.hypot(*np.diff(seg[:, 1:3], axis=0).T) > MAX_MOVER_SPEED * np.diff(seg[:, 0]) + LINK_SLACK)
             seg = seg[:int(jumps[0]) + 1] if len(jumps) else seg  # another mover: the walk's record ends
             return list(seg[:, 0] - t0), list(seg[:, 1:3]), seg[-1]
         walk_t, walk_xy = [0.0], [rows[k, 1:3]]
@@ -335,7 +338,7 @@ class MoverMemory:
                 break
             group = rows[j:int(np.searchsorted(rows[:, 0], rows[j, 0], side="right"))]
             i = int(np.argmin(np.hypot(group[:, 1] - last[1], group[:, 2] - last[2])))
-            if math.hypot(group[i, 1] - last[1], group[i, 2] - last[2]) <= 3.0 * (rows[j, 0] - last[0]) + 0.1:
+            if math.hypot(group[i, 1] - last[1], group[i, 2] - last[2]) <= MAX_MOVER_SPEED * (rows[j, 0] - last[0]) + LINK_SLACK:
                 last = group[i]
                 walk_t.append(float(last[0] - t0))
                 walk_xy.append(last[1:3])
