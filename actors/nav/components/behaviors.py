@@ -32,7 +32,9 @@ drive through it and out before a mover arrives (``missions.passages.check_passa
 movers predicted at constant velocity and as movers walked on from there before; the robot's
 drive through predicted at the speed and start delay its odometry showed lately,
 ``missions.passages.DriveSpeed``, not a nominal speed a loaded machine does not reach). A person
-walking a doorway cannot be given way to inside it; the robot waits outside their way instead.
+walking a doorway cannot be given way to inside it; the robot waits outside their way instead,
+and a mover walking where earlier walks went clear of it (round the corner of their walk before
+reaching it) is not given way to there (``PassageGuardConfig.known_walks``).
 With the ``people`` output wired (to the Planner's ``people`` input, ``PlannerConfig.people``)
 the band is published once a second as an OccupancyGrid, and the Planner's routes cross it
 rather than follow it (:mod:`emos.actors.nav.costmap.people`).
