@@ -237,6 +237,17 @@ def test_the_band_survives_a_clock_going_back():
     assert len(memory.predict(2.0, c, v, times)) >= 2  # earlier walks still predict
 
 
+def test_returns_keep_their_timing_when_the_clock_goes_back():
+    memory = tracked_memory(100.0)
+    before = [(b[0] - a[0], a[1:3], b[1:3]) for a, b in memory.returns()]
+    c, v = tracked(100.0)
+    memory.observe(2.0, c[None], v[None])  # a restarted simulator
+    after = [(b[0] - a[0], a[1:3], b[1:3]) for a, b in memory.returns()]
+    assert len(after) == len(before) >= 4
+    assert all(abs(x[0] - y[0]) < 1e-9 and x[1:] == y[1:] for x, y in zip(before, after))
+    assert all(b[0] < 2.0 for _, b in memory.returns())
+
+
 def test_mover_tracking_starts_again_when_the_clock_goes_back():
     """A restarted simulator's clock starts at 0: the tracker must not ignore every scan until the
     clock catches up with the old run's last stamp."""

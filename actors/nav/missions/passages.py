@@ -222,6 +222,7 @@ class MoverMemory:
         self._rows: list[tuple[float, float, float, float, float]] = []
         self._array: np.ndarray | None = None
         self._cells: np.ndarray | None = None  # band_cells, until the next sample
+        self._returns: list[tuple[tuple[float, ...], tuple[float, ...]]] | None = None  # returns(), until the next sample
         self._last_t = -math.inf
         self._walks: list[_Walk] = []  # each mover's unbroken record (last_sighting)
 
@@ -234,10 +235,12 @@ class MoverMemory:
             shift = t - SAMPLE_PERIOD - self._last_t
             self._rows = [(r[0] + shift, *r[1:]) for r in self._rows]
             self._last_t += shift
-            self._array = None
+            self._array = self._returns = None
             for w in self._walks:
                 w.t0 += shift
                 w.last = (w.last[0] + shift, *w.last[1:])
+                if w.first is not None:  # returns() times the reappearance from it
+                    w.first = (w.first[0] + shift, *w.first[1:])
         if t < self._last_t + SAMPLE_PERIOD:
             return
         centres = np.asarray(centres, dtype=float).reshape(-1, 2)
@@ -251,7 +254,7 @@ class MoverMemory:
         cut = t - self.memory
         if self._rows[0][0] < cut:
             self._rows = [r for r in self._rows if r[0] >= cut]
-        self._array = self._cells = None
+        self._array = self._cells = self._returns = None
 
     def _follow_walks(self, rows: list[tuple[float, float, float, float, float]]) -> None:
         """Extend each open walk by the nearest new sample it could have walked to
@@ -454,6 +457,8 @@ class MoverMemory:
         ``RETURN_WITHIN`` s after another ended (not while that was still in view) is the return
         of the one of those that ended nearest to where it began, and each ended walk returns
         once, the first time."""
+        if self._returns is not None:  # asked for every pass of every mover on each guard step
+            return list(self._returns)
         real = sorted((w for w in self._walks if w.real and w.first is not None and w.last[0] - w.t0 >= RETURN_WALK_TIME),
                       key=lambda w: w.t0)
         pairs: dict[int, tuple[_Walk, _Walk]] = {}  # id(exit walk) -> (exit, return)
@@ -464,7 +469,8 @@ class MoverMemory:
                 a = min(gone, key=lambda w: math.hypot(w.last[1] - b.first[1], w.last[2] - b.first[2]))  # type: ignore[index]
                 pairs[id(a)] = (a, b)
         out = [(a.last, b.first) for a, b in pairs.values() if b.first is not None]
-        return sorted(out, key=lambda pair: pair[0][0])
+        self._returns = sorted(out, key=lambda pair: pair[0][0])
+        return list(self._returns)
 
     def predict_return(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
                        match_distance: float = 0.35, match_heading: float = math.radians(40.0)) -> list[np.ndarray]:
