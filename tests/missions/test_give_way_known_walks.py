@@ -114,3 +114,66 @@ def test_a_person_who_walks_on_past_the_corner_at_the_robot_is_given_way_to_in_t
         stats = behaviors.stats()
     assert stats["give_way"] > before, stats
     assert scene.least > 0.0, f"the person walked into the robot (least gap {scene.least:.3f} m)"
+
+
+# A robot standing beside the end of a person's walk (a passage hold at the walk's end, the
+# patrol's right-to-left crossing): the person comes within near_distance where they turn round.
+END_WALK = np.array([(5.6, 3.0), (3.0, 3.0)])
+BESIDE_THE_END = (3.0, 2.28, math.pi / 2)  # 0.37 m from the person's box where they turn
+
+
+def along_end_walk(t: float) -> np.ndarray:
+    span = float(END_WALK[0][0] - END_WALK[1][0])
+    s = (t * SPEED) % (2 * span)
+    return np.array([END_WALK[0][0] - (s if s <= span else 2 * span - s), 3.0])
+
+
+END_PERIOD = 2 * float(END_WALK[0][0] - END_WALK[1][0]) / SPEED
+
+
+def _standing_give_ways(known_walks: bool, passes: int = 4) -> tuple[list[int], float]:
+    behaviors = _behaviors(known_walks)
+    scene = Scene(along_end_walk, anchored=True)
+    scene.pose = np.array(BESIDE_THE_END)
+    counts = []
+    with ComponentHarness(behaviors, start_time=START) as h:
+        for k in range(passes):
+            before = behaviors.stats()["give_way"]
+            while h.time < START + (k + 1) * END_PERIOD:
+                h.advance(0.1, each_tick=scene)
+            counts.append(behaviors.stats()["give_way"] - before)
+    return counts, scene.least
+
+
+def test_a_person_turning_near_a_standing_robot_as_before_is_not_given_way_to():
+    without, least = _standing_give_ways(known_walks=False)
+    assert all(n >= 1 for n in without), without  # near_distance: on every turn at the end
+    known, least = _standing_give_ways(known_walks=True)
+    assert known[2:] == [0, 0], known  # every earlier walk turned there, clear of the robot
+    assert least > 0.2, least
+
+
+def test_a_person_who_walks_at_a_standing_robot_from_the_end_of_their_walk_is_given_way_to():
+    """Three passes as before, then at the end of the walk the person turns down, at the robot:
+    off the remembered walks, the give-way starts at once."""
+    turn_down = 3 * END_PERIOD - END_PERIOD / 2  # at the end of the walk, (3.0, 3.0)
+
+    def deviating(t: float) -> np.ndarray:
+        if t < turn_down:
+            return along_end_walk(t)
+        return np.array([3.0, max(3.0 - SPEED * (t - turn_down), 0.5)])
+
+    behaviors = _behaviors(known_walks=True)
+    scene = Scene(deviating, anchored=True)  # held where it waits until the person turns at it
+    scene.pose = np.array(BESIDE_THE_END)
+    started_at = None
+    with ComponentHarness(behaviors, start_time=START) as h:
+        while h.time < START + turn_down:
+            h.advance(0.1, each_tick=scene)
+        scene.anchored = False
+        before = behaviors.stats()["give_way"]
+        while h.time < START + turn_down + 6.0:
+            h.advance(0.1, each_tick=scene)
+            if started_at is None and behaviors.stats()["give_way"] > before:
+                started_at = h.time - START - turn_down
+    assert started_at is not None and started_at <= 0.5, started_at

@@ -482,3 +482,63 @@ def test_a_phantom_in_view_is_predicted_as_the_phantom_walked_not_as_the_person(
     assert len(preds) > 1  # earlier passes of the phantom
     for walk in preds[1:]:
         assert walk[:, 0].min() > 4.8, np.round(walk[::5], 2).tolist()
+
+
+def test_a_verdict_after_a_release_judges_the_drive_the_release_began():
+    """Let go when the way has been clear for ``release_time``, the robot starts after the start
+    delay; a verdict while it has not moved yet judges that drive (``let_go``: the release's),
+    not one a whole delay later, which held a patrol's robot again 0.3-0.6 s after its release
+    on a window it had. The person as the tracker sees them, three of their walks, the
+    left-to-right crossing (the right-to-left one has no window for a robot at 0.4 m/s here)."""
+    config = PassageGuardConfig(enabled=True)
+    memory = tracked_memory(60.0)
+    start = hold_point(memory, LEFT_TO_RIGHT, config)
+    clear: list[bool] = []
+    releases, re_held = [], 0
+    for t in np.arange(60.0, 60.0 + 3 * PERIOD, 0.1):
+        c, v = tracked(float(t))
+        if c[1] > 1.3:  # the bottom of the walk is out of the left room's view
+            memory.observe(float(t), c[None], v[None])
+        clear.append(not check_passage(LEFT_TO_RIGHT, start, memory, float(t), c[None], v[None], np.array([PERSON]),
+                                       ROBOT_RADIUS, config).hold)
+        if len(clear) > 11 and all(clear[-11:]) and not clear[-12]:
+            releases.append(float(t))
+    assert len(releases) >= 3, releases
+    for t in releases:  # the same memory (the walks after a release make no difference a second later)
+        assert drive_through(LEFT_TO_RIGHT, start, t, config) > 0.0
+        for gone in (0.2, 0.4, 0.6, 0.8):
+            c, v = tracked(t + gone)
+            args = (LEFT_TO_RIGHT, start, memory, t + gone, c[None], v[None], np.array([PERSON]), ROBOT_RADIUS, config)
+            re_held += check_passage(*args).hold
+            verdict = check_passage(*args, let_go=gone)
+            assert not verdict.hold, f"{gone} s after the release at {t:.1f} s: {verdict.reason}"
+            assert f"after {config.start_delay - gone:.1f} s" in verdict.reason, verdict.reason
+    assert re_held > 0  # judged as a drive a whole delay later
+    c, v = tracked(60.0)
+    driving = check_passage(LEFT_TO_RIGHT, start, memory, 60.0, c[None], v[None], np.array([PERSON]), ROBOT_RADIUS, config,
+                            under_way=True)
+    assert "after 0.0 s" in driving.reason, driving.reason
+
+
+def test_a_hold_for_a_walking_mover_says_so_and_one_for_a_standing_mover_does_not():
+    """``PassageVerdict.walking``: what a hold past ``max_hold`` holds on for (a person coming by
+    or back), not a person standing in the way (the Controller's and the give-way's)."""
+    config = PassageGuardConfig(enabled=True)
+    memory = watched()
+    start = hold_point(memory, LEFT_TO_RIGHT, config)
+    walking = [check_passage(LEFT_TO_RIGHT, start, memory, float(t), *(a[None] for a in person(float(t))),
+                             np.array([PERSON]), ROBOT_RADIUS, config) for t in np.arange(60.0, 60.0 + PERIOD, 0.25)]
+    assert any(v.hold for v in walking) and all(v.walking for v in walking if v.hold)
+    # Someone standing at the doorway, in the robot's way (not on the remembered walks' line).
+    standing = check_passage(LEFT_TO_RIGHT, start, MoverMemory(), 60.0, np.array([[5.0, 3.25]]), np.zeros((1, 2)),
+                             np.array([PERSON]), ROBOT_RADIUS, config)
+    assert standing.reason.startswith("no band")  # nothing remembered: no band, no hold
+    # 20 s after the person's walks were last recorded (none seen lately, none out of view).
+    standing = check_passage(LEFT_TO_RIGHT, start, memory, 80.0, np.array([[5.0, 3.0]]), np.zeros((1, 2)),
+                             np.array([PERSON]), ROBOT_RADIUS, config)
+    assert standing.hold and not standing.walking, standing
+    # The same slow track where a person walked a second ago: turning round, walking.
+    c, v = person(60.0)
+    turning = check_passage(LEFT_TO_RIGHT, start, memory, 60.1, c[None], np.zeros((1, 2)), np.array([PERSON]), ROBOT_RADIUS,
+                            config)
+    assert turning.hold and turning.walking, turning

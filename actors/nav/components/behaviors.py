@@ -132,6 +132,7 @@ class _Running:
     last_threat: float = 0.0  # give_way: node time a mover was last on a collision course
     move: str = ""  # give_way: the yield move of the last step
     move_index: int | None = None  # give_way: its candidate index (kept while nearly as good)
+    overdue: bool = False  # hold_passage: past max_hold, holding on for a walking mover
 
 
 class Behaviors(MotionActionServer):
@@ -414,18 +415,22 @@ class Behaviors(MotionActionServer):
             return None
         centres, velocities, radii = self._movers.movers()
         guard = self.config.passage_guard
+        # A robot that really stands (not one judged as if it stood, mid give-way) is not pushed
+        # away by a mover that comes near on a known walk either: a person turning at the end of
+        # their walk beside a robot waiting there, as every earlier walk turned clear of it.
+        stands = not standing and float(np.hypot(*self._robot_velocity(pose))) < DriveSpeed.MOVING
         for a in self._approaches(pose, standing):
             coming = a.gap_min < cfg.personal_space and a.closing > 0.05
             near = a.gap_now < cfg.near_distance and a.closing > -0.05
-            if coming and not near and guard.enabled and guard.known_walks and walks_past(
+            if (coming or near) and (stands or not near) and guard.enabled and guard.known_walks and walks_past(
                     self._memory, clock.now(), centres[a.index], velocities[a.index], pose[:2], self._robot_velocity(pose, standing),
                     self.config.robot.radius + float(radii[a.index]) + cfg.personal_space, cfg.time_before_collision, guard):
                 if clock.now() - self._spared_at > SPARED_EPISODE_GAP:
                     self._counts["known_walks_spared"] += 1
                     x, y = centres[a.index]
-                    self.get_logger().info("[%s] give_way not started: mover at (%.2f, %.2f) %.2f m away heads at the robot "
-                                           "in a straight line, but walks where earlier walks went, all of which kept clear of it",
-                                           self.component_name, x, y, a.gap_now)
+                    self.get_logger().info("[%s] give_way not started: mover at (%.2f, %.2f) %.2f m away %s, but walks where "
+                                           "earlier walks went, all of which kept clear of it", self.component_name, x, y, a.gap_now,
+                                           "is near the standing robot" if near else "heads at the robot in a straight line")
                 self._spared_at = clock.now()
                 continue
             if coming or near:
@@ -455,9 +460,12 @@ class Behaviors(MotionActionServer):
         if len(path) < 2:
             return None
         centres, velocities, radii = self._movers.movers()
+        # Let go (not held): the drive through began at the release, or is under way already.
+        under_way = run is None and float(np.hypot(*self._robot_velocity(pose))) >= DriveSpeed.MOVING
+        let_go = self._drive_speed.since_release(clock.now()) if run is None else None
         verdict = check_passage(path, pose[:2], self._memory, clock.now(), centres, velocities, radii,
                                 self.config.robot.radius, guard, measured_speed=self._drive_speed.speed(),
-                                measured_delay=self._drive_speed.start_delay())
+                                measured_delay=self._drive_speed.start_delay(), under_way=under_way, let_go=let_go)
         at_edge = verdict.start is not None and verdict.start <= guard.approach
         if not at_edge:
             self._unseen_waited = False
@@ -479,7 +487,9 @@ class Behaviors(MotionActionServer):
 
     def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
         """One step of holding before the band stretch: done when the guard has not said hold for
-        ``release_time`` s; gives up (and lets the robot go through) after ``max_hold`` s."""
+        ``release_time`` s; gives up (and lets the robot go through) after ``max_hold`` s, unless a
+        walking mover holds it then (``PassageVerdict.walking``): letting the robot in while a person
+        comes back put it in their way; it holds on until the way is clear."""
         now = clock.now()
         run.done_amount = now - run.started
         if verdict is not None and verdict.hold:
@@ -491,7 +501,12 @@ class Behaviors(MotionActionServer):
             if pose is not None:  # how long the robot takes to start after a hold: the next drive through's delay
                 self._drive_speed.released(now, float(pose[0]), float(pose[1]))
             return
-        if now > run.deadline:
+        if now > run.deadline and verdict is not None and verdict.hold and verdict.walking:
+            if not run.overdue:  # once per hold: why it goes on past max_hold
+                run.overdue = True
+                self.get_logger().info("[%s] hold_passage holds on past max_hold (%.0f s): %s", self.component_name,
+                                       self.config.passage_guard.max_hold, verdict.reason)
+        elif now > run.deadline:
             self._no_hold_until = now + 3.0 * self.config.passage_guard.start_delay + 10.0
             self._counts["passage_hold_given_up"] += 1
             self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason if verdict is not None else ''}")

@@ -53,7 +53,8 @@ class PassageGuardConfig:
     stretch it must reach). ``margin`` (m kept
     from a predicted mover; ``margin_rate`` m more per s of prediction). ``max_hold`` (s): a hold
     longer than this gives up and lets the robot go (a mover that stays is the Controller's and
-    the give-way's). ``release_time`` (s): a hold ends once the way has been clear this long (a
+    the give-way's), unless what holds it then is a walking mover (``PassageVerdict.walking``: a
+    person coming by or back, in view or out of it): it holds on until the way is clear. ``release_time`` (s): a hold ends once the way has been clear this long (a
     person turning at the end of their walk is tracked slow and heading away for a moment: one
     clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
@@ -98,13 +99,17 @@ class PassageVerdict:
     """``hold``: wait before the stretch now; ``reason`` says why (or why not); ``start``,
     ``end``: the stretch's arc lengths along the path ahead (m; None when no stretch ahead);
     ``unseen``: the stretch is ahead and no mover is known (in view or seen lately): where the
-    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``)."""
+    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``). ``walking``:
+    the hold is for a mover that walks (in view faster than ``MIN_SPEED`` or slower for less
+    than ``STANDING_AFTER`` s, or out of view): one that will come by, not one standing in the
+    way (a hold past ``max_hold`` goes on for it)."""
 
     hold: bool
     reason: str
     start: float | None = None
     end: float | None = None
     unseen: bool = False
+    walking: bool = False
 
 
 SAMPLE_PERIOD = 0.1  # s between the remembered samples of one mover
@@ -132,6 +137,7 @@ MAX_WALKS = 32  # real walks kept for last_sighting (the latest matter)
 # MoverMemory.predict_return learns how long it stayed out of view and where it came back.
 RETURN_WITHIN = 30.0  # s
 RETURN_WALK_TIME = 2.0  # s: walks shorter than this neither leave nor come back in MoverMemory.returns
+STANDING_AFTER = 3.0  # s: a mover slower than a walk this long is standing (turning round takes a second or two)
 
 
 @attrs.define
@@ -211,6 +217,11 @@ class DriveSpeed:
 
     def start_delay(self) -> float | None:
         return max(self._delays) if self._delays else None
+
+    def since_release(self, t: float) -> float | None:
+        """S since a hold's end (``released``) while the robot has not driven off yet; None when
+        no release is being timed (it drove off, was held again, or ``MAX_DELAY`` passed)."""
+        return None if self._release is None else max(0.0, float(t) - self._release[0])
 
 
 class MoverMemory:
@@ -294,6 +305,17 @@ class MoverMemory:
         latest = max(w.last[0] for w in real)
         rows = np.array([w.last for w in real if w.last[0] >= latest - SAMPLE_PERIOD], dtype=float).reshape(-1, 5)
         return rows, float(now) - rows[:, 0]
+
+    def walked_lately(self, now: float, centre: np.ndarray) -> bool:
+        """Whether a mover was recorded walking near ``centre`` (as far as it could have come
+        since, at ``MAX_MOVER_SPEED``) in the last ``STANDING_AFTER`` s: a slow track there is a
+        person turning round or pausing, not one standing."""
+        for t, x, y, _, _ in reversed(self._rows):
+            if t < now - STANDING_AFTER:
+                return False
+            if math.hypot(x - centre[0], y - centre[1]) <= MAX_MOVER_SPEED * max(now - t, 0.0) + LINK_SLACK:
+                return True
+        return False
 
     def samples(self) -> np.ndarray:
         """(N, 5) rows (t, x, y, vx, vy), oldest first."""
@@ -574,13 +596,18 @@ def _resample(path: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
 
 def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, now: float, centres: np.ndarray,
                   velocities: np.ndarray, radii: np.ndarray, robot_radius: float, config: PassageGuardConfig, *,
-                  measured_speed: float | None = None, measured_delay: float | None = None) -> PassageVerdict:
+                  measured_speed: float | None = None, measured_delay: float | None = None, under_way: bool = False,
+                  let_go: float | None = None) -> PassageVerdict:
     """Whether to hold the robot before the band stretch of ``path`` ahead (world frame; see the
     module doc). ``centres``, ``velocities``, ``radii``: the moving tracks now.
     ``measured_speed``, ``measured_delay``: how fast the robot drove lately and how long it took
     to start after a hold (:class:`DriveSpeed`; None: not measured yet): the drive through is
     predicted at ``min(speed, measured_speed)`` (at least ``min_speed``) after
-    ``max(start_delay, measured_delay)``."""
+    ``max(start_delay, measured_delay)``, less what of it is gone: none when the robot is
+    ``under_way`` (driving already), the first ``let_go`` s when a hold let it go that long ago
+    and it has not driven off yet (:meth:`DriveSpeed.since_release`: the drive the release judged
+    began then; judging it as one a whole delay later re-held the robot on a window it had).
+    A robot standing longer than the delay after its release is late: the whole delay again."""
     ahead = path_ahead(np.asarray(path, dtype=float), np.asarray(robot_xy, dtype=float), config.look_ahead)
     pts, s = _resample(ahead, 0.05)
     in_band = memory.band_gap(pts) < config.band_clearance
@@ -615,6 +642,10 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
     # lately (never faster than the configured one) to exit_margin past the end.
     speed = max(min(config.speed, measured_speed if measured_speed is not None else config.speed), config.min_speed)
     delay = max(config.start_delay, measured_delay if measured_delay is not None else 0.0)
+    if under_way:
+        delay = 0.0
+    elif let_go is not None and 0.0 <= let_go < delay:
+        delay -= let_go
     dt = 0.2
     reach = min(end + config.exit_margin, float(s[-1]))
     t_end = delay + reach / speed
@@ -639,7 +670,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             # it is is unknown; it walked here less than out_of_view s ago: wait to see it.
             return PassageVerdict(True, f"mover last seen {ago:.1f} s ago at ({c[0]:.2f}, {c[1]:.2f}) is out of view and "
                                         f"its walk from there is not known for the {times[-1]:.1f} s through the band stretch "
-                                        f"{start:.2f}-{end:.2f} m ahead", start, end)
+                                        f"{start:.2f}-{end:.2f} m ahead", start, end, walking=True)
         for pred in preds:
             gap = np.hypot(*(pred - robot).T) - robot_radius - r - (config.margin + config.margin_rate * times)
             if (gap < 0).any():
@@ -648,6 +679,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
                 return PassageVerdict(True, f"mover at ({c[0]:.2f}, {c[1]:.2f}){seen} predicted at ({pred[k, 0]:.2f}, {pred[k, 1]:.2f}) "
                                             f"in {times[k]:.1f} s, where the robot would be in the band stretch "
                                             f"{start:.2f}-{end:.2f} m ahead (driven at {speed:.2f} m/s after {delay:.1f} s)",
-                                            start, end)
+                                            start, end, walking=bool(ago > 0 or np.hypot(*v) >= MIN_SPEED
+                                                                        or memory.walked_lately(now, c)))
     return PassageVerdict(False, f"band stretch {start:.2f}-{end:.2f} m ahead is clear (driven at {speed:.2f} m/s after "
                                  f"{delay:.1f} s)", start, end)
