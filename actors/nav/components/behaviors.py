@@ -437,6 +437,33 @@ class Behaviors(MotionActionServer):
                 x, y = centres[a.index]
                 return (f"mover at ({x:.2f}, {y:.2f}) {a.gap_now:.2f} m away, closing at {a.closing:.2f} m/s"
                         + (f", predicted within {max(a.gap_min, 0.0):.2f} m in {a.time_to_min:.1f} s" if coming else ""))
+            turning = self._turn_threat(pose, standing, centres[a.index], velocities[a.index], float(radii[a.index]))
+            if turning is not None:
+                return turning
+        return None
+
+    def _turn_threat(self, pose: np.ndarray, standing: bool, centre: np.ndarray, velocity: np.ndarray, radius: float) -> str | None:
+        """Why a mover whose straight line runs into a wall of the static map is on a collision
+        course once it turns along the wall (either way, ``WallFilter.turns``): within
+        ``personal_space`` of the robot within ``time_before_collision`` s, closer than it is now.
+        None when not, with no map, or when earlier walks from here the same way are remembered
+        (they say where it goes: the known-walks rule judges it)."""
+        walls = self._movers.walls
+        if walls is None:
+            return None
+        cfg, guard = self.config.give_way, self.config.passage_guard
+        times = np.arange(0.0, cfg.time_before_collision + 1e-9, 0.1)
+        ways = walls.turns(centre, velocity, radius, times)
+        if not ways or len(self._memory.predict(clock.now(), centre, velocity, times[:2], match_distance=guard.match_distance,
+                                                match_heading=guard.match_heading)) > 1:
+            return None
+        robot = pose[:2] + self._robot_velocity(pose, standing) * times[:, None]
+        for way in ways:
+            gap = np.hypot(*(way - robot).T) - self.config.robot.radius - radius
+            k = int(np.argmin(gap))
+            if gap[k] < cfg.personal_space and gap[k] < gap[0] - 0.05:
+                return (f"mover at ({centre[0]:.2f}, {centre[1]:.2f}) {gap[0]:.2f} m away walks into a wall: turning along it "
+                        f"at ({way[k][0]:.2f}, {way[k][1]:.2f}) it comes within {max(gap[k], 0.0):.2f} m in {times[k]:.1f} s")
         return None
 
     # -- waiting before the movers' way ------------------------------------------------------------------
@@ -465,7 +492,8 @@ class Behaviors(MotionActionServer):
         let_go = self._drive_speed.since_release(clock.now()) if run is None else None
         verdict = check_passage(path, pose[:2], self._memory, clock.now(), centres, velocities, radii,
                                 self.config.robot.radius, guard, measured_speed=self._drive_speed.speed(),
-                                measured_delay=self._drive_speed.start_delay(), under_way=under_way, let_go=let_go)
+                                measured_delay=self._drive_speed.start_delay(), under_way=under_way, let_go=let_go,
+                                walls=self._movers.walls)
         at_edge = verdict.start is not None and verdict.start <= guard.approach
         if not at_edge:
             self._unseen_waited = False

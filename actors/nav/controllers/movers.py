@@ -172,6 +172,12 @@ def _to_robot(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
 
 
 CLOCK_BACK_S = 1.0  # a scan this much older than the last one means the clock went back
+# WallFilter.turns: a mover whose body would come within TURN_MARGIN m of a wall turns along it; a
+# way that runs into a wall within TURN_CLEAR_TIME s of the turn is not one (the corner's other
+# side); movers slower than TURN_MIN_SPEED m/s have no line to follow.
+TURN_MARGIN = 0.05  # m
+TURN_CLEAR_TIME = 0.5  # s
+TURN_MIN_SPEED = 0.2  # m/s
 
 
 def static_map_path(instance: Any, attribute: Any, value: Any) -> None:
@@ -215,11 +221,49 @@ class WallFilter:
 
     def on_walls(self, centres: np.ndarray) -> np.ndarray:
         """(M,) True where a centre (M, 2) lies within ``clearance`` of a wall of the map."""
-        cells = self.grid.world_to_grid(np.asarray(centres, dtype=float).reshape(-1, 2))
+        return self.wall_distance(centres) <= self.clearance
+
+    def wall_distance(self, points: np.ndarray) -> np.ndarray:
+        """(M,) m from each point (M, 2) to the nearest wall of the map (inf off the map: it does
+        not know what is there)."""
+        cells = self.grid.world_to_grid(np.asarray(points, dtype=float).reshape(-1, 2))
         inside = self.grid.in_bounds(cells)
-        out = np.zeros(len(cells), dtype=bool)
-        out[inside] = self.distance[cells[inside, 1], cells[inside, 0]] <= self.clearance
+        out = np.full(len(cells), np.inf)
+        out[inside] = self.distance[cells[inside, 1], cells[inside, 0]]
         return out
+
+    def turns(self, centre: np.ndarray, velocity: np.ndarray, radius: float, times: np.ndarray) -> list[np.ndarray]:
+        """Where a mover goes whose straight line runs into a wall before ``times[-1]`` s: along
+        the wall, either way, from where its body would touch it (a person does not walk through
+        walls; at a corner they turn, and the tracker's velocity lags the turn by a second, so a
+        person turning a corner towards the robot is predicted walking on into the wall until
+        they are half-way to it). Positions (len(times), 2) at ``times`` (s from now) for each
+        way that stays off the walls for ``TURN_CLEAR_TIME`` s after the turn (standing where it
+        meets the next one); [] when the line stays clear, starts at a wall, or the mover walks
+        slower than ``TURN_MIN_SPEED``."""
+        c, v = np.asarray(centre, dtype=float)[:2], np.asarray(velocity, dtype=float)[:2]
+        speed = float(np.hypot(*v))
+        times = np.asarray(times, dtype=float)
+        if speed < TURN_MIN_SPEED or len(times) < 2:
+            return []
+        line = c + v * times[:, None]
+        touch = self.wall_distance(line) < radius + TURN_MARGIN
+        if not touch.any() or touch[0]:
+            return []
+        k = int(np.argmax(touch)) - 1  # the last sample clear of the wall: where the turn is
+        u = v / speed
+        ways = []
+        for side in (1.0, -1.0):
+            along = np.array([-u[1], u[0]]) * side * speed
+            way = np.where((times <= times[k])[:, None], line, line[k] + along * np.clip(times - times[k], 0.0, None)[:, None])
+            blocked = np.flatnonzero((times > times[k]) & (self.wall_distance(way) < radius + TURN_MARGIN))
+            if len(blocked):  # the next wall: it stops there (or turns again, unknown)
+                j = int(blocked[0])
+                if times[j] - times[k] <= TURN_CLEAR_TIME:
+                    continue  # the corner's other side: no way there
+                way[j:] = way[j - 1]
+            ways.append(way)
+        return ways
 
 
 class MoverWatch:

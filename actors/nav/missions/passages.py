@@ -9,7 +9,10 @@ the people's way and go through when it can be out again before a person arrives
   *band* -- and how each walked on from where it was: a mover seen again where (and heading the
   way) one walked before is predicted to walk on as that one did (a person who turned at the end
   of a corridor turns there again: the learned-motion-pattern prediction of Bennewitz et al.),
-  besides at constant velocity. Both predictions count.
+  besides at constant velocity. Both predictions count. Where nothing is learned yet (the first
+  walk), a straight line into a wall of the static map turns along it, either way
+  (``WallFilter.turns``): a person turning a corner towards the robot is tracked walking on
+  into the wall for a second.
 * :func:`check_passage`: the *stretch* of the robot's path ahead that lies in the band (within
   ``band_clearance`` of a remembered mover centre: the robot's and a person's radii plus a
   margin). The robot is held before the stretch when it cannot drive through it (at the speed
@@ -30,11 +33,15 @@ holds the robot on its command input (above the Controller's) while it says so.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import attrs
 import numpy as np
 
 from emos.config import validators as V
+
+if TYPE_CHECKING:
+    from ..controllers.movers import WallFilter
 
 __all__ = ["DriveSpeed", "MoverMemory", "PassageGuardConfig", "PassageVerdict", "check_passage", "walks_past"]
 
@@ -597,7 +604,7 @@ def _resample(path: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
 def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, now: float, centres: np.ndarray,
                   velocities: np.ndarray, radii: np.ndarray, robot_radius: float, config: PassageGuardConfig, *,
                   measured_speed: float | None = None, measured_delay: float | None = None, under_way: bool = False,
-                  let_go: float | None = None) -> PassageVerdict:
+                  let_go: float | None = None, walls: WallFilter | None = None) -> PassageVerdict:
     """Whether to hold the robot before the band stretch of ``path`` ahead (world frame; see the
     module doc). ``centres``, ``velocities``, ``radii``: the moving tracks now.
     ``measured_speed``, ``measured_delay``: how fast the robot drove lately and how long it took
@@ -607,7 +614,10 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
     ``under_way`` (driving already), the first ``let_go`` s when a hold let it go that long ago
     and it has not driven off yet (:meth:`DriveSpeed.since_release`: the drive the release judged
     began then; judging it as one a whole delay later re-held the robot on a window it had).
-    A robot standing longer than the delay after its release is late: the whole delay again."""
+    A robot standing longer than the delay after its release is late: the whole delay again.
+    ``walls`` (the static map's): a mover in view with no earlier walk from here the same way,
+    whose straight line runs into a wall, is predicted turning along it either way
+    (:meth:`WallFilter.turns`; the first lap, before anything is remembered)."""
     ahead = path_ahead(np.asarray(path, dtype=float), np.asarray(robot_xy, dtype=float), config.look_ahead)
     pts, s = _resample(ahead, 0.05)
     in_band = memory.band_gap(pts) < config.band_clearance
@@ -657,6 +667,8 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             continue  # too far to meet the robot in the band stretch whatever it does
         preds = memory.predict(now - ago, c, v, times + ago, match_distance=config.match_distance,
                                match_heading=config.match_heading, learned_only=bool(ago > 0))
+        if walls is not None and ago == 0 and len(preds) == 1:  # nothing learned here: the walls say where it turns
+            preds += walls.turns(c, v, r, times)
         back = ""
         if config.returns and ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
             # Where it went out of view is past the earlier walks' records (they went out of view
