@@ -518,27 +518,3 @@ def test_a_verdict_after_a_release_judges_the_drive_the_release_began():
     driving = check_passage(LEFT_TO_RIGHT, start, memory, 60.0, c[None], v[None], np.array([PERSON]), ROBOT_RADIUS, config,
                             under_way=True)
     assert "after 0.0 s" in driving.reason, driving.reason
-
-
-def test_a_hold_for_a_walking_mover_says_so_and_one_for_a_standing_mover_does_not():
-    """``PassageVerdict.walking``: what a hold past ``max_hold`` holds on for (a person coming by
-    or back), not a person standing in the way (the Controller's and the give-way's)."""
-    config = PassageGuardConfig(enabled=True)
-    memory = watched()
-    start = hold_point(memory, LEFT_TO_RIGHT, config)
-    walking = [check_passage(LEFT_TO_RIGHT, start, memory, float(t), *(a[None] for a in person(float(t))),
-                             np.array([PERSON]), ROBOT_RADIUS, config) for t in np.arange(60.0, 60.0 + PERIOD, 0.25)]
-    assert any(v.hold for v in walking) and all(v.walking for v in walking if v.hold)
-    # Someone standing at the doorway, in the robot's way (not on the remembered walks' line).
-    standing = check_passage(LEFT_TO_RIGHT, start, MoverMemory(), 60.0, np.array([[5.0, 3.25]]), np.zeros((1, 2)),
-                             np.array([PERSON]), ROBOT_RADIUS, config)
-    assert standing.reason.startswith("no band")  # nothing remembered: no band, no hold
-    # 20 s after the person's walks were last recorded (none seen lately, none out of view).
-    standing = check_passage(LEFT_TO_RIGHT, start, memory, 80.0, np.array([[5.0, 3.0]]), np.zeros((1, 2)),
-                             np.array([PERSON]), ROBOT_RADIUS, config)
-    assert standing.hold and not standing.walking, standing
-    # The same slow track where a person walked a second ago: turning round, walking.
-    c, v = person(60.0)
-    turning = check_passage(LEFT_TO_RIGHT, start, memory, 60.1, c[None], np.zeros((1, 2)), np.array([PERSON]), ROBOT_RADIUS,
-                            config)
-    assert turning.hold and turning.walking, turning

@@ -1,8 +1,8 @@
 """A passage hold at ``max_hold`` on robot time (``emos.testing.ComponentHarness``): a person walks
 back and forth across the robot's way, always coming by again before the robot could be
 through. A hold that gave up at ``max_hold`` whatever the guard said let the robot in while the
-person was coming back (a twenty-lap patrol's contact); now it holds on while a walking person
-holds it, and gives up at once when the guard says the way is clear."""
+person was coming back (a twenty-lap patrol's contact); now it holds on while a mover holds it,
+and gives up at once when the guard says the way is clear."""
 from __future__ import annotations
 
 import math

@@ -132,7 +132,7 @@ class _Running:
     last_threat: float = 0.0  # give_way: node time a mover was last on a collision course
     move: str = ""  # give_way: the yield move of the last step
     move_index: int | None = None  # give_way: its candidate index (kept while nearly as good)
-    overdue: bool = False  # hold_passage: past max_hold, holding on for a walking mover
+    overdue: bool = False  # hold_passage: past max_hold, holding on for a mover
 
 
 class Behaviors(MotionActionServer):
@@ -516,8 +516,8 @@ class Behaviors(MotionActionServer):
     def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
         """One step of holding before the band stretch: done when the guard has not said hold for
         ``release_time`` s; gives up (and lets the robot go through) after ``max_hold`` s, unless a
-        walking mover holds it then (``PassageVerdict.walking``): letting the robot in while a person
-        comes back put it in their way; it holds on until the way is clear."""
+        mover holds it then (not an ``unseen`` wait): letting the robot in while a person came back
+        put it in their way; it holds on, and goes on the first verdict that is not a mover's."""
         now = clock.now()
         run.done_amount = now - run.started
         if verdict is not None and verdict.hold:
@@ -529,7 +529,7 @@ class Behaviors(MotionActionServer):
             if pose is not None:  # how long the robot takes to start after a hold: the next drive through's delay
                 self._drive_speed.released(now, float(pose[0]), float(pose[1]))
             return
-        if now > run.deadline and verdict is not None and verdict.hold and verdict.walking:
+        if now > run.deadline and verdict is not None and verdict.hold and not verdict.unseen:
             if not run.overdue:  # once per hold: why it goes on past max_hold
                 run.overdue = True
                 self.get_logger().info("[%s] hold_passage holds on past max_hold (%.0f s): %s", self.component_name,

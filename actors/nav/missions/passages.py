@@ -60,8 +60,9 @@ class PassageGuardConfig:
     stretch it must reach). ``margin`` (m kept
     from a predicted mover; ``margin_rate`` m more per s of prediction). ``max_hold`` (s): a hold
     longer than this gives up and lets the robot go (a mover that stays is the Controller's and
-    the give-way's), unless what holds it then is a walking mover (``PassageVerdict.walking``: a
-    person coming by or back, in view or out of it): it holds on until the way is clear. ``release_time`` (s): a hold ends once the way has been clear this long (a
+    the give-way's), unless a mover holds it then (in view or out of it: the scan tracker drops
+    a track that stands for a second, so a mover is a person coming by or back): it holds on,
+    and the first verdict that is not a mover's lets the robot go. ``release_time`` (s): a hold ends once the way has been clear this long (a
     person turning at the end of their walk is tracked slow and heading away for a moment: one
     clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
@@ -106,17 +107,13 @@ class PassageVerdict:
     """``hold``: wait before the stretch now; ``reason`` says why (or why not); ``start``,
     ``end``: the stretch's arc lengths along the path ahead (m; None when no stretch ahead);
     ``unseen``: the stretch is ahead and no mover is known (in view or seen lately): where the
-    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``). ``walking``:
-    the hold is for a mover that walks (in view faster than ``MIN_SPEED`` or slower for less
-    than ``STANDING_AFTER`` s, or out of view): one that will come by, not one standing in the
-    way (a hold past ``max_hold`` goes on for it)."""
+    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``)."""
 
     hold: bool
     reason: str
     start: float | None = None
     end: float | None = None
     unseen: bool = False
-    walking: bool = False
 
 
 SAMPLE_PERIOD = 0.1  # s between the remembered samples of one mover
@@ -144,7 +141,6 @@ MAX_WALKS = 32  # real walks kept for last_sighting (the latest matter)
 # MoverMemory.predict_return learns how long it stayed out of view and where it came back.
 RETURN_WITHIN = 30.0  # s
 RETURN_WALK_TIME = 2.0  # s: walks shorter than this neither leave nor come back in MoverMemory.returns
-STANDING_AFTER = 3.0  # s: a mover slower than a walk this long is standing (turning round takes a second or two)
 
 
 @attrs.define
@@ -312,17 +308,6 @@ class MoverMemory:
         latest = max(w.last[0] for w in real)
         rows = np.array([w.last for w in real if w.last[0] >= latest - SAMPLE_PERIOD], dtype=float).reshape(-1, 5)
         return rows, float(now) - rows[:, 0]
-
-    def walked_lately(self, now: float, centre: np.ndarray) -> bool:
-        """Whether a mover was recorded walking near ``centre`` (as far as it could have come
-        since, at ``MAX_MOVER_SPEED``) in the last ``STANDING_AFTER`` s: a slow track there is a
-        person turning round or pausing, not one standing."""
-        for t, x, y, _, _ in reversed(self._rows):
-            if t < now - STANDING_AFTER:
-                return False
-            if math.hypot(x - centre[0], y - centre[1]) <= MAX_MOVER_SPEED * max(now - t, 0.0) + LINK_SLACK:
-                return True
-        return False
 
     def samples(self) -> np.ndarray:
         """(N, 5) rows (t, x, y, vx, vy), oldest first."""
@@ -682,7 +667,7 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             # it is is unknown; it walked here less than out_of_view s ago: wait to see it.
             return PassageVerdict(True, f"mover last seen {ago:.1f} s ago at ({c[0]:.2f}, {c[1]:.2f}) is out of view and "
                                         f"its walk from there is not known for the {times[-1]:.1f} s through the band stretch "
-                                        f"{start:.2f}-{end:.2f} m ahead", start, end, walking=True)
+                                        f"{start:.2f}-{end:.2f} m ahead", start, end)
         for pred in preds:
             gap = np.hypot(*(pred - robot).T) - robot_radius - r - (config.margin + config.margin_rate * times)
             if (gap < 0).any():
@@ -691,7 +676,6 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
                 return PassageVerdict(True, f"mover at ({c[0]:.2f}, {c[1]:.2f}){seen} predicted at ({pred[k, 0]:.2f}, {pred[k, 1]:.2f}) "
                                             f"in {times[k]:.1f} s, where the robot would be in the band stretch "
                                             f"{start:.2f}-{end:.2f} m ahead (driven at {speed:.2f} m/s after {delay:.1f} s)",
-                                            start, end, walking=bool(ago > 0 or np.hypot(*v) >= MIN_SPEED
-                                                                        or memory.walked_lately(now, c)))
+                                            start, end)
     return PassageVerdict(False, f"band stretch {start:.2f}-{end:.2f} m ahead is clear (driven at {speed:.2f} m/s after "
                                  f"{delay:.1f} s)", start, end)
