@@ -62,9 +62,9 @@ class PassageGuardConfig:
     longer than this gives up and lets the robot go (a mover that stays is the Controller's and
     the give-way's), unless a mover holds it then (in view or out of it: the scan tracker drops
     a track that stands for a second, so a mover is a person coming by or back): it holds on,
-    and the first verdict that is not a mover's lets the robot go. ``release_time`` (s): a hold ends once the way has been clear this long (a
-    person turning at the end of their walk is tracked slow and heading away for a moment: one
-    clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
+    and the first verdict that is not a mover's lets the robot go. ``release_time`` (s): a hold
+    ends once the way has been clear this long (a person turning at the end of their walk is
+    tracked slow and heading away for a moment: one clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
     e.g. behind a wall, and comes back). ``unseen_wait`` (s, 0: off): with nobody in view or seen
     within ``out_of_view`` (the people who walked the band are somewhere out of view), the robot
