@@ -68,24 +68,27 @@ class Scene(CommandFollower):
 START = 5.0
 
 
-def _give_ways_per_pass(known_walks: bool, passes: int = 4) -> tuple[list[int], dict]:
-    """Give-ways started during each pass of the person (one period of the L), robot anchored."""
+def _give_ways_per_pass(known_walks: bool, passes: int = 4, path=walked, period: float = PERIOD,
+                        robot=ROBOT) -> tuple[list[int], dict, float]:
+    """Give-ways started during each pass of the person (one ``period`` of ``path``), the robot
+    anchored at ``robot``; the stats and the least gap at the end."""
     behaviors = _behaviors(known_walks)
-    scene = Scene(walked, anchored=True)
+    scene = Scene(path, anchored=True)
+    scene.pose = np.array(robot, dtype=float)
     counts = []
     with ComponentHarness(behaviors, start_time=START) as h:
         for k in range(passes):
             before = behaviors.stats()["give_way"]
-            while h.time < START + (k + 1) * PERIOD:
+            while h.time < START + (k + 1) * period:
                 h.advance(0.1, each_tick=scene)
             counts.append(behaviors.stats()["give_way"] - before)
-        return counts, behaviors.stats()
+        return counts, behaviors.stats(), scene.least
 
 
 def test_a_person_walking_as_before_past_a_waiting_robot_is_not_given_way_to():
-    without, _ = _give_ways_per_pass(known_walks=False)
+    without, _, _ = _give_ways_per_pass(known_walks=False)
     assert all(n >= 1 for n in without), without  # the straight line at the corner meets the robot on every pass
-    known, stats = _give_ways_per_pass(known_walks=True)
+    known, stats, _ = _give_ways_per_pass(known_walks=True)
     assert known[0] >= 1, known  # nothing remembered yet on the first pass
     assert known[2:] == [0, 0], known  # walks remembered (2 s old at least): the person turns at the corner, as before
     assert stats["known_walks_spared"] >= 2, stats
@@ -131,24 +134,11 @@ def along_end_walk(t: float) -> np.ndarray:
 END_PERIOD = 2 * float(END_WALK[0][0] - END_WALK[1][0]) / SPEED
 
 
-def _standing_give_ways(known_walks: bool, passes: int = 4) -> tuple[list[int], float]:
-    behaviors = _behaviors(known_walks)
-    scene = Scene(along_end_walk, anchored=True)
-    scene.pose = np.array(BESIDE_THE_END)
-    counts = []
-    with ComponentHarness(behaviors, start_time=START) as h:
-        for k in range(passes):
-            before = behaviors.stats()["give_way"]
-            while h.time < START + (k + 1) * END_PERIOD:
-                h.advance(0.1, each_tick=scene)
-            counts.append(behaviors.stats()["give_way"] - before)
-    return counts, scene.least
-
-
 def test_a_person_turning_near_a_standing_robot_as_before_is_not_given_way_to():
-    without, least = _standing_give_ways(known_walks=False)
+    beside = {"path": along_end_walk, "period": END_PERIOD, "robot": BESIDE_THE_END}
+    without, _, _ = _give_ways_per_pass(known_walks=False, **beside)
     assert all(n >= 1 for n in without), without  # near_distance: on every turn at the end
-    known, least = _standing_give_ways(known_walks=True)
+    known, _, least = _give_ways_per_pass(known_walks=True, **beside)
     assert known[2:] == [0, 0], known  # every earlier walk turned there, clear of the robot
     assert least > 0.2, least
 
