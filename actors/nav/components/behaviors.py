@@ -515,9 +515,10 @@ class Behaviors(MotionActionServer):
 
     def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
         """One step of holding before the band stretch: done when the guard has not said hold for
-        ``release_time`` s; gives up (and lets the robot go through) after ``max_hold`` s, unless a
-        mover holds it then (not an ``unseen`` wait): letting the robot in while a person came back
-        put it in their way; it holds on, and goes on the first verdict that is not a mover's."""
+        ``release_time`` s. After ``max_hold`` s a wait for an unseen person gives up (and lets the
+        robot go through); a hold for a mover goes on until the way has been clear for
+        ``release_time`` like any other: giving up whatever the verdict let the robot in while a
+        person came back, and going on the first clear verdict let it in as one turned round."""
         now = clock.now()
         run.done_amount = now - run.started
         if verdict is not None and verdict.hold:
@@ -529,16 +530,15 @@ class Behaviors(MotionActionServer):
             if pose is not None:  # how long the robot takes to start after a hold: the next drive through's delay
                 self._drive_speed.released(now, float(pose[0]), float(pose[1]))
             return
-        if now > run.deadline and verdict is not None and verdict.hold and not verdict.unseen:
-            if not run.overdue:  # once per hold: why it goes on past max_hold
-                run.overdue = True
-                self.get_logger().info("[%s] hold_passage holds on past max_hold (%.0f s): %s", self.component_name,
-                                       self.config.passage_guard.max_hold, verdict.reason)
-        elif now > run.deadline:
+        if now > run.deadline and verdict.hold and verdict.unseen:
             self._no_hold_until = now + 3.0 * self.config.passage_guard.start_delay + 10.0
             self._counts["passage_hold_given_up"] += 1
-            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason if verdict is not None else ''}")
+            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason}")
             return
+        if now > run.deadline and not run.overdue:  # once per hold: why it goes on past max_hold
+            run.overdue = True
+            self.get_logger().info("[%s] hold_passage holds on past max_hold (%.0f s): %s", self.component_name,
+                                   self.config.passage_guard.max_hold, verdict.reason)
         self._stop_robot()
 
     def _step_give_way(self, run: _Running) -> None:

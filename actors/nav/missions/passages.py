@@ -58,11 +58,11 @@ class PassageGuardConfig:
     measured to drive at lately when lower, never below ``min_speed``), ``start_delay`` (s
     before it moves: the least; the measured delay when longer), ``exit_margin`` (m past the
     stretch it must reach). ``margin`` (m kept
-    from a predicted mover; ``margin_rate`` m more per s of prediction). ``max_hold`` (s): a hold
-    longer than this gives up and lets the robot go (a mover that stays is the Controller's and
-    the give-way's), unless a mover holds it then (in view or out of it: the scan tracker drops
-    a track that stands for a second, so a mover is a person coming by or back): it holds on,
-    and the first verdict that is not a mover's lets the robot go. ``release_time`` (s): a hold
+    from a predicted mover; ``margin_rate`` m more per s of prediction). ``max_hold`` (s): a wait
+    for an unseen person (``unseen_wait``) longer than this gives up and lets the robot go; a
+    hold for a mover (in view or out of it: the scan tracker drops a track that stands for a
+    second, so a mover is a person coming by or back) goes on until the way is clear, and says
+    so once past it. ``release_time`` (s): a hold
     ends once the way has been clear this long (a person turning at the end of their walk is
     tracked slow and heading away for a moment: one clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
     is predicted as earlier walks from where it was went on (it walked out of the scan's view,
