@@ -199,9 +199,8 @@ class DriveSpeed:
             if v >= self.MOVING:
                 self._pieces.append((t, v))
             self._poses = [self._poses[-1]]
-        # The last ``window`` s of driving, however long ago: a robot held for minutes drives
-        # as it did before the hold (pieces dropped by the clock left the nominal speed then).
-        del self._pieces[:-max(1, int(round(self.window / self.span)))]
+        while self._pieces and self._pieces[0][0] < t - self.window:
+            self._pieces.pop(0)
         if self._release is not None:
             rt, rx, ry = self._release
             if t - rt > self.MAX_DELAY:
