@@ -7,8 +7,7 @@
 The point-navigation stack of ``emos.actors.nav.stacks`` (MapServer on the house map, Planner,
 Controller with Pure Pursuit on the LocalMapper's grid, DriveManager) drives the Simulator's
 robot; its DriveManager ranks the recovery behaviors' commands over the Controller's
-(``COMMAND_INPUTS``, twist_mux's priorities); the robot drives at most 0.5 m/s indoors
-(``EMOS_PATROL_MAX_SPEED``). ``EMOS_PATROL_MOVERS=1`` gives the Controller the
+(``COMMAND_INPUTS``, twist_mux's priorities). ``EMOS_PATROL_MOVERS=1`` gives the Controller the
 moving-obstacle tracker instead (``movers=True``: the ArcSampler on CostToGo plans, its arcs
 checked against where the tracked movers will be). A ``WaypointFollower`` (Nav2's
 waypoint follower) sends it from room to room through the Planner's goal topic and saves the
@@ -39,7 +38,7 @@ import attrs
 import numpy as np
 
 from emos import Action, BaseComponent, Launcher, Topic
-from emos.actors.nav import LinearCtrlLimits, RobotConfig, RobotFrames, RobotGeometry, RobotType
+from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
 from emos.actors.nav.components.behaviors import BehaviorsConfig
 from emos.actors.nav.components.keys import TopicsKeys
 from emos.actors.nav.components.waypoints import WaypointFollowerConfig
@@ -95,17 +94,9 @@ MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's s
 # at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
 # more than 5 restarts in 10 s end the run): a measurement of the navigation, not of the supervisor, may raise it.
 HEARTBEAT_TIMEOUT = float(os.environ.get("EMOS_PATROL_HEARTBEAT_TIMEOUT", "2.0"))
-# m/s the robot drives at most (its LinearCtrlLimits.max_vel): indoors among people 0.5, not the base's 1.0. At 1.0 m/s
-# Pure Pursuit took the robot round the corner into the corridor at the person walking back from its far end, on the
-# first lap with nothing remembered (3 of 4 twenty-lap tries on 2026-12-02): seen at 2 m, closing at 1.6 m/s, the
-# person was a tracked mover only when it was too late to give way.
-MAX_SPEED = float(os.environ.get("EMOS_PATROL_MAX_SPEED", "0.5"))
-if not (0.0 < MAX_SPEED <= 2.0):
-    sys.exit(f"patrol: EMOS_PATROL_MAX_SPEED must be in (0, 2] m/s, got {MAX_SPEED}")
 
 my_robot = RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=RobotGeometry.Type.CYLINDER,
-                       geometry_params=np.array([0.2, 0.3]),
-                       ctrl_vx_limits=LinearCtrlLimits(max_vel=MAX_SPEED, max_acc=1.5, max_decel=2.5))
+                       geometry_params=np.array([0.2, 0.3]))
 odom = Topic(name="/odom", msg_type="Odometry")  # the Simulator's true pose in the map frame (no localizer here)
 scan = Topic(name="/scan", msg_type="LaserScan")
 image = Topic(name="/camera/image", msg_type="Image")
