@@ -194,7 +194,15 @@ def test_a_stalled_page_gets_at_most_frames_in_flight_and_no_backlog():
                 hub.push(Image.from_numpy(frame), i)
                 await hub.send_to(client, loop, pool)
                 await asyncio.sleep(0.002)
-            for _ in range(20):
+            # Until the frames in flight are out (the encoding pool is slow on a loaded machine:
+            # 200 ms of waiting sent none beside a full test run; the bound is only for a hang),
+            # then as long again: no more go to a page that confirms nothing.
+            waited = 0
+            while len(sent) < config.frames_in_flight and waited < 2000:
+                await asyncio.sleep(0.01)
+                await hub.send_to(client, loop, pool)
+                waited += 1
+            for _ in range(max(waited, 20)):
                 await asyncio.sleep(0.01)
                 await hub.send_to(client, loop, pool)
             stalled = len(sent)
