@@ -207,8 +207,14 @@ def test_a_stalled_page_gets_at_most_frames_in_flight_and_no_backlog():
                 await hub.send_to(client, loop, pool)
             stalled = len(sent)
             client.ack("/camera")
-            await asyncio.sleep(0.05)
-            await hub.send_to(client, loop, pool)
+            waited = 0
+            while len(sent) <= stalled and waited < 2000:  # the newest frame's encoding (a hang's bound)
+                await asyncio.sleep(0.01)
+                await hub.send_to(client, loop, pool)
+                waited += 1
+            for _ in range(20):
+                await asyncio.sleep(0.01)
+                await hub.send_to(client, loop, pool)
             return stalled, len(sent), hub.encoded_count
 
     stalled, after_ack, encoded = asyncio.run(scenario())
