@@ -21,7 +21,9 @@ moving obstacles in its scan (``controllers.movers.MoverWatch``, the scan tracke
 Controller uses) and, when one is on a collision course (``recovery.GiveWayConfig``), takes the
 robot over on its command input, above the Controller's: it stands short of the person, or backs
 out of a passage / pulls aside when the person heads at it (``recovery.plan_give_way``, planned
-again every step), until no mover has been on a collision course for ``clear_time`` s. Then it
+again every step), until no mover has been on a collision course for ``clear_time`` s. With the
+``static_map``, a mover whose straight line runs into a wall is also judged turning along it,
+either way (``WallFilter.turns``: the tracker's velocity lags a person turning a corner). Then it
 stops publishing and the Controller (and the mission) go on where they were.
 
 Passage guard (``BehaviorsConfig(passage_guard=PassageGuardConfig(enabled=True))`` and the

@@ -62,10 +62,10 @@ class PassageGuardConfig:
     for an unseen person (``unseen_wait``) longer than this gives up and lets the robot go; a
     hold for a mover (in view or out of it: the scan tracker drops a track that stands for a
     second, so a mover is a person coming by or back) goes on until the way is clear, and says
-    so once past it. ``release_time`` (s): a hold
-    ends once the way has been clear this long (a person turning at the end of their walk is
-    tracked slow and heading away for a moment: one clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last seen this recently
-    is predicted as earlier walks from where it was went on (it walked out of the scan's view,
+    so once past it. ``release_time`` (s): a hold ends once the way has been clear this long (a
+    person turning at the end of their walk is tracked slow and heading away for a moment: one
+    clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last
+    seen this recently is predicted as earlier walks from where it was went on (it walked out of the scan's view,
     e.g. behind a wall, and comes back). ``unseen_wait`` (s, 0: off): with nobody in view or seen
     within ``out_of_view`` (the people who walked the band are somewhere out of view), the robot
     waits at the band's edge up to this long for one to come into view before it goes in
