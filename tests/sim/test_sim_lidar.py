@@ -48,6 +48,30 @@ def test_lidar_reports_no_return_as_inf_and_never_sees_its_own_robot(make_world)
     assert np.all(np.isinf(others))
 
 
+@pytest.mark.parametrize("geometry", ["cylinder", "box"])
+def test_a_lidar_in_the_plane_of_its_bodys_top_face_never_sees_its_own_robot(make_world, geometry):
+    """A navigation RobotConfig's body (actors/sim/component/robot_model.py) puts the scan plane
+    on its top face: Bullet reported about half the rays as hits at their start inside the
+    body, ranges of range_min that a consumer drops, so the robot saw with half its beams."""
+    from emos.actors.nav import RobotConfig, RobotGeometry, RobotType
+    from emos.actors.sim.component.robot_model import spec_from_robot_config
+
+    kind, params = ((RobotGeometry.Type.CYLINDER, [0.2, 0.3]) if geometry == "cylinder" else (RobotGeometry.Type.BOX, [0.4, 0.4, 0.3]))
+    spec = spec_from_robot_config(RobotConfig(model_type=RobotType.DIFFERENTIAL_DRIVE, geometry_type=kind,
+                                              geometry_params=np.array(params)))
+    for yaw in (0.0, 0.3, 1.1):
+        world = make_world()
+        world.add_box((2.0, 0.0), (0.4, 0.4))  # near face at 1.8
+        robot = world.add_robot(spec, (0.0, 0.0, yaw))
+        lidar = world.add_sensor(Lidar(robot, LidarConfig(fov_deg=360, beams=360, range_max=5.0, mount_z=spec.lidar_height)))
+        world.step()
+        r = lidar.latest.ranges
+        ahead = int(round((math.pi - yaw) / math.radians(1.0)))  # the beam pointing along world +x
+        assert r[ahead] == pytest.approx(1.8, abs=2e-3)
+        others = np.delete(r, range(ahead - 10, ahead + 11))
+        assert np.all(np.isinf(others)), f"yaw {yaw}: {int(np.sum(np.isfinite(others)))} beams hit, least {np.nanmin(others):.3f} m"
+
+
 def test_lidar_to_cylinder_and_world_points(make_world):
     world = make_world()
     world.add_cylinder((0.0, 2.0), radius=0.3)

@@ -119,6 +119,25 @@ class Lidar(Sensor):
         # A little beyond the box so a surface on its edge is still hit.
         return np.clip(np.minimum(tx, ty) + 0.05, cfg.range_min + 1e-3, cfg.range_max)
 
+    def _past_own_body(self, client: Any, sx: float, sy: float, d: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(hit ids, ranges) of rays that hit the robot's own body, cast again from where they
+        have left it. A lidar mounted at the height of its body's top face (a ``RobotConfig``'s
+        body: the scan plane is its top) started half its rays inside the body, which Bullet
+        reports as hits at the ray's start: ranges of ``range_min``, dropped as invalid. A lidar
+        sees the world, not its own mount."""
+        (x0, y0, _), (x1, y1, _) = client.getAABB(self.robot.body_id)
+        past = float(max(np.hypot(cx - sx, cy - sy) for cx in (x0, x1) for cy in (y0, y1))) + 0.01
+        past = np.minimum(max(past, self.config.range_min), reach)
+        start = np.empty((len(d), 3))
+        end = np.empty((len(d), 3))
+        start[:, :2] = (sx, sy) + d * past[:, None]
+        end[:, :2] = (sx, sy) + d * reach[:, None]
+        start[:, 2] = end[:, 2] = self._z
+        ids, _, fractions, _, _ = zip(*client.rayTestBatch(start, end, numThreads=1))
+        ids_a = np.array(ids)
+        ids_a[ids_a == self.robot.body_id] = -1
+        return ids_a, past + np.array(fractions) * (reach - past)
+
     def read(self, stamp: float) -> ScanReading:
         cfg = self.config
         sx, sy, _ = self.sensor_pose()
@@ -135,9 +154,13 @@ class Lidar(Sensor):
         # numpy arrays go straight in (no tolist); zip(*) splits the result columns in C.
         results = client.rayTestBatch(start, end, numThreads=1)
         ids, _, fractions, _, _ = zip(*results)
-        hit = np.array(ids) >= 0
+        ids_a = np.array(ids)
         frac = np.array(fractions)
         ranges = cfg.range_min + frac * (reach - cfg.range_min)
+        own = ids_a == self.robot.body_id
+        if own.any():
+            ids_a[own], ranges[own] = self._past_own_body(client, sx, sy, d[own], reach[own])
+        hit = ids_a >= 0
         if cfg.noise_std > 0:
             ranges = ranges + self.rng.normal(0.0, cfg.noise_std, n)
             ranges = np.maximum(ranges, cfg.range_min)
