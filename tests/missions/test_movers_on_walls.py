@@ -46,6 +46,20 @@ def test_the_wall_filter_marks_centres_on_the_maps_walls_only(tmp_path):
         WallFilter(nowhere.grid, clearance=-0.1)
 
 
+def test_a_track_whose_hits_lie_on_a_wall_is_left_out_wherever_its_centre_was_put(tmp_path):
+    """A tracker centres a cluster as the front of a round thing, some way behind its hits: for a
+    piece of a thin wall seen flat that is past the wall, where no wall is; its hits are on it."""
+    walls = WallFilter(load_map(_room_map(tmp_path)), clearance=0.1)
+    face = np.c_[np.linspace(4.0, 4.3, 8), np.full(8, 2.9)]  # the shelf's near face, seen from below
+    behind = np.array([[4.15, 3.25]])  # 0.15 m past its back
+    assert not walls.on_walls(behind)[0]
+    assert walls.tracks_on_walls(behind, [face]).tolist() == [True]
+    angles = np.linspace(-2.6, -0.55, 9)  # the side of a person facing a robot below them
+    for centre in ((4.0, 2.5), (4.0, 2.6)):  # 0.18 m and 0.08 m off the shelf
+        hits = np.asarray(centre) + 0.22 * np.c_[np.cos(angles), np.sin(angles)]
+        assert walls.tracks_on_walls(np.array([centre]), [hits]).tolist() == [False], centre
+
+
 def test_a_mover_watch_with_walls_leaves_the_tracks_on_them_out_and_counts_them(tmp_path):
     watch = MoverWatch(walls=WallFilter(load_map(_room_map(tmp_path))))
     plain = MoverWatch()
