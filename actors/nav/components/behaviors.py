@@ -135,6 +135,7 @@ class _Running:
     move: str = ""  # give_way: the yield move of the last step
     move_index: int | None = None  # give_way: its candidate index (kept while nearly as good)
     overdue: bool = False  # hold_passage: past max_hold, holding on for a mover
+    clear_since: float | None = None  # hold_passage: node time the verdicts turned clear (None: holding)
 
 
 class Behaviors(MotionActionServer):
@@ -525,6 +526,12 @@ class Behaviors(MotionActionServer):
         run.done_amount = now - run.started
         if verdict is not None and verdict.hold:
             run.last_threat = now
+            if run.clear_since is not None:  # a clear spell cut short: why (the "into" line said why it began)
+                self.get_logger().info("[%s] hold_passage held again after %.1f s clear: %s", self.component_name,
+                                       now - run.clear_since, verdict.reason)
+            run.clear_since = None
+        elif run.clear_since is None:
+            run.clear_since = now
         if verdict is None or now - run.last_threat >= self.config.passage_guard.release_time:
             self._finish(run, True, f"hold_passage done after {run.done_amount:.1f} s: "
                                     f"{verdict.reason if verdict is not None else 'no plan or pose to judge by'}")
