@@ -29,9 +29,12 @@ def _person_at(t: float) -> np.ndarray:
     return np.array([WALK[0] + (s if s <= span else 2 * span - s), 3.2])
 
 
-def _run(stop_at: float | None, seconds: float = 40.0) -> tuple[dict, list[float], str]:
-    """The person walks from t = 0 (stops for good at ``stop_at``, None: never); the plan from
-    PLAN_FROM. Returns the stats, the times a hold ran and the last behavior result's message."""
+def _run(stop_at: float | None, seconds: float = 40.0, person_at=None, max_hold: float = 10.0,
+         ended: list | None = None) -> tuple[dict, list[float], str]:
+    """The person walks from t = 0 (stops for good at ``stop_at``, None: never), or is where
+    ``person_at(t)`` says (None: out of view); the plan from PLAN_FROM. Returns the stats, the
+    times a hold ran and the last behavior result's message; ``ended`` gets (time, message) of
+    each hold that ended."""
     from emos.actors.nav import RobotConfig, RobotFrames, RobotGeometry, RobotType
     from emos.actors.nav.components.behaviors import Behaviors, BehaviorsConfig
     from emos.actors.nav.components.convert import path_msg
@@ -41,7 +44,7 @@ def _run(stop_at: float | None, seconds: float = 40.0) -> tuple[dict, list[float
                         geometry_params=np.array([0.2, 0.3]))
     behaviors = Behaviors("behaviors", config=BehaviorsConfig(
         robot=robot, loop_rate=10.0, frames=RobotFrames(world="map", odom="map"),
-        passage_guard={"enabled": True, "max_hold": 10.0}))
+        passage_guard={"enabled": True, "max_hold": max_hold}))
     behaviors.inputs(plan=Topic(name="/plan", msg_type="Path"))
     plan = np.array([(2.0, y, math.pi / 2) for y in np.arange(2.2, 3.81, 0.05)])
     held_at: list[float] = []
@@ -51,9 +54,9 @@ def _run(stop_at: float | None, seconds: float = 40.0) -> tuple[dict, list[float
         nonlocal stopped
         if stop_at is not None and h.time >= stop_at:
             stopped = _person_at(stop_at) if stopped is None else stopped
-        person = stopped if stopped is not None else _person_at(h.time)
-        odom, scan = base_messages(ROBOT, 0.0, 0.0, 2 * math.pi,
-                                   [(person[0] - HALF, person[1] - HALF, person[0] + HALF, person[1] + HALF)])
+        person = stopped if stopped is not None else (person_at or _person_at)(h.time)
+        boxes = [] if person is None else [(person[0] - HALF, person[1] - HALF, person[0] + HALF, person[1] + HALF)]
+        odom, scan = base_messages(ROBOT, 0.0, 0.0, 2 * math.pi, boxes)
         odom.header.stamp = scan.header.stamp = M.Time.from_sec(h.time)
         h.feed("/odom", odom)
         h.feed("/scan", scan)
@@ -62,6 +65,10 @@ def _run(stop_at: float | None, seconds: float = 40.0) -> tuple[dict, list[float
         running = behaviors._running
         if running is not None and running.name == "hold_passage" and running.result is None:
             held_at.append(h.time)
+        last = behaviors.last_result
+        if ended is not None and last is not None and last.message.startswith("hold_passage") and \
+                (not ended or ended[-1][1] != last.message):
+            ended.append((h.time, last.message))
 
     with ComponentHarness(behaviors, tick=0.1) as h:
         h.advance(PLAN_FROM + seconds, each_tick=world)
@@ -89,3 +96,49 @@ def test_past_max_hold_a_hold_ends_when_the_way_has_been_clear_for_release_time(
     assert held and held[0] < PLAN_FROM + 2.0
     assert stop + 10.0 <= held[-1] <= stop + 20.0, held[-1]
     assert stats["passage_hold_given_up"] == 0 and message.startswith("hold_passage done") and "no mover" in message, (stats, message)
+
+
+DOOR = WALK[0]  # x of the door the person leaves the view through: where they otherwise turn
+AWAY = 9.0  # s out of view beyond the door each time, then back the same way
+ROUNDS = 2  # walks back and forth past the robot's way (WALK) between the times through the door
+_ROUND = 2 * (WALK[1] - WALK[0]) / SPEED
+_TO_DOOR = (WALK[0] - DOOR) / SPEED
+
+
+def _pacing(t: float, away: float = AWAY) -> np.ndarray | None:
+    """Back and forth past the robot's way ROUNDS times (the first test's walk), then out through
+    the door and AWAY s out of view, and back in: None while out of view."""
+    s = t % (ROUNDS * _ROUND + 2 * _TO_DOOR + away)
+    if s < ROUNDS * _ROUND:
+        return _person_at(s)
+    s -= ROUNDS * _ROUND
+    if s < _TO_DOOR:
+        return np.array([WALK[0] - SPEED * s, 3.2])
+    if s < _TO_DOOR + away:
+        return None
+    return np.array([DOOR + SPEED * (s - _TO_DOOR - away), 3.2])
+
+
+def test_past_max_hold_a_hold_gives_up_just_after_a_person_with_no_known_walk_left_the_view():
+    """A person walks back and forth past the robot's way and out of view through a door for 9 s,
+    over and over: in view they would meet the robot, out of view their walk from the door is not
+    known (the patrol's person on its first lap, at the corridor's corner), so a hold that began
+    while they were out of view or coming would never end. Past ``max_hold`` (3 s here) the hold
+    gives up, and only in the moment the person has just left the view walking away (the most
+    time before they are back): never while they are in view or have been out of it for long."""
+    exits = [(ROUNDS * _ROUND + 2 * _TO_DOOR + AWAY) * k + ROUNDS * _ROUND + _TO_DOOR for k in range(8)]
+    ended: list = []
+    stats, held, _ = _run(stop_at=None, seconds=60.0, person_at=_pacing, max_hold=3.0, ended=ended)
+    given_up = [(t, m) for t, m in ended if m.startswith("hold_passage gave up")]
+    assert given_up and stats["passage_hold_given_up"] == len(given_up), (stats, ended)
+    for t, message in given_up:
+        assert any(0.5 <= t - e <= 2.0 for e in exits), (t, exits, message)
+        assert "just left the view" in message, message
+
+
+def test_past_max_hold_a_person_who_came_back_sooner_than_the_drive_through_is_waited_for():
+    """The same person, out of view for 3 s each time: shorter than the robot takes to drive
+    through (5 s), so the moment they leave is no window and the hold goes on, not given up."""
+    ended: list = []
+    stats, held, _ = _run(stop_at=None, seconds=60.0, person_at=lambda t: _pacing(t, away=3.0), max_hold=3.0, ended=ended)
+    assert stats["passage_hold"] >= 1 and stats["passage_hold_given_up"] == 0, (stats, ended)

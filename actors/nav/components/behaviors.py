@@ -519,9 +519,11 @@ class Behaviors(MotionActionServer):
     def _step_hold(self, run: _Running, verdict: PassageVerdict | None) -> None:
         """One step of holding before the band stretch: done when the guard has not said hold for
         ``release_time`` s. After ``max_hold`` s a wait for an unseen person gives up (and lets the
-        robot go through); a hold for a mover goes on until the way has been clear for
-        ``release_time`` like any other: giving up whatever the verdict let the robot in while a
-        person came back, and going on the first clear verdict let it in as one turned round."""
+        robot go through), and so does one for a mover out of view whose walk from there is not
+        known, the moment it has just left the view walking away (``PassageVerdict.just_left``);
+        any other hold for a mover goes on until the way has been clear for ``release_time``:
+        giving up whatever the verdict let the robot in while a person came back, and going on
+        the first clear verdict let it in as one turned round."""
         now = clock.now()
         run.done_amount = now - run.started
         if verdict is not None and verdict.hold:
@@ -539,10 +541,11 @@ class Behaviors(MotionActionServer):
             if pose is not None:  # how long the robot takes to start after a hold: the next drive through's delay
                 self._drive_speed.released(now, float(pose[0]), float(pose[1]))
             return
-        if now > run.deadline and verdict.hold and verdict.unseen:
+        if now > run.deadline and verdict.hold and (verdict.unseen or verdict.just_left):
             self._no_hold_until = now + 3.0 * self.config.passage_guard.start_delay + 10.0
             self._counts["passage_hold_given_up"] += 1
-            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason}")
+            why = "; it just left the view walking away" if verdict.just_left else ""
+            self._finish(run, False, f"hold_passage gave up after {run.done_amount:.1f} s (max_hold): {verdict.reason}{why}")
             return
         if now > run.deadline and not run.overdue:  # once per hold: why it goes on past max_hold
             run.overdue = True

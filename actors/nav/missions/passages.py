@@ -62,7 +62,10 @@ class PassageGuardConfig:
     for an unseen person (``unseen_wait``) longer than this gives up and lets the robot go; a
     hold for a mover (in view or out of it: the scan tracker drops a track that stands for a
     second, so a mover is a person coming by or back) goes on until the way is clear, and says
-    so once past it. ``release_time`` (s): a hold ends once the way has been clear this long (a
+    so once past it, or until a mover whose walk from there is not known has just walked out of
+    view away from the stretch where the movers before stayed away longer than the drive through
+    takes (``PassageVerdict.just_left``: a person pacing out of view and back leaves no window
+    otherwise, and that is when they are farthest from coming back). ``release_time`` (s): a hold ends once the way has been clear this long (a
     person turning at the end of their walk is tracked slow and heading away for a moment: one
     clear verdict then is not a window). ``out_of_view`` (s): with no mover in view, the one last
     seen this recently is predicted as earlier walks from where it was went on (it walked out of the scan's view,
@@ -107,13 +110,19 @@ class PassageVerdict:
     """``hold``: wait before the stretch now; ``reason`` says why (or why not); ``start``,
     ``end``: the stretch's arc lengths along the path ahead (m; None when no stretch ahead);
     ``unseen``: the stretch is ahead and no mover is known (in view or seen lately): where the
-    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``)."""
+    people who walked the band are is unknown (``PassageGuardConfig.unseen_wait``).
+    ``just_left``: held for a mover that walked out of view less than ``JUST_LEFT`` s ago, away
+    from the stretch, with no earlier walk from there remembered, where every mover that left
+    the view there before stayed out of it longer than the drive through takes
+    (:meth:`MoverMemory.absences`): where it is is unknown, but it is as far from coming back as
+    it will be (a hold past ``max_hold`` lets the robot go then, ``Behaviors._step_hold``)."""
 
     hold: bool
     reason: str
     start: float | None = None
     end: float | None = None
     unseen: bool = False
+    just_left: bool = False
 
 
 SAMPLE_PERIOD = 0.1  # s between the remembered samples of one mover
@@ -129,6 +138,7 @@ MAX_MOVER_SPEED = 1.5  # m/s: a mover farther from the robot's drive than this c
 # LINK_SLACK m of the tracked centre's jitter); faster links took a phantom's walk on as a person's 1.3 m away.
 LINK_SLACK = 0.1  # m
 GHOST_RADIUS = 0.25  # m: the radius of a mover out of view (a person)
+JUST_LEFT = 1.5  # s: a mover out of view no longer than this (past OUT_OF_VIEW_AFTER) has just left it
 OUT_OF_VIEW_AFTER = 0.5  # s: a mover not recorded walking for longer is out of view (or stopped)
 # A walk is a person's (a real sighting) once recorded unbroken for this long and this far from
 # where it began: clutter that a moving robot's scan makes look moving lasts a few scans and
@@ -486,6 +496,20 @@ class MoverMemory:
         self._returns = sorted(out, key=lambda pair: pair[0][0])
         return list(self._returns)
 
+    def absences(self, centre: np.ndarray, velocity: np.ndarray, *, match_distance: float = 0.35,
+                 match_heading: float = math.radians(40.0)) -> list[float]:
+        """Seconds out of view of the movers that left the view near ``centre`` heading like
+        ``velocity`` and came back (:meth:`returns`), most recent first."""
+        c, v = np.asarray(centre, dtype=float), np.asarray(velocity, dtype=float)
+        speed = float(np.hypot(*v))
+        out = []
+        for exit_row, back_row in self.returns()[::-1]:
+            ev = np.asarray(exit_row[3:5])
+            if math.hypot(exit_row[1] - c[0], exit_row[2] - c[1]) <= match_distance and \
+                    float(ev @ v) >= math.cos(match_heading) * float(np.hypot(*ev)) * speed:
+                out.append(float(back_row[0] - exit_row[0]))
+        return out
+
     def predict_return(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
                        match_distance: float = 0.35, match_heading: float = math.radians(40.0)) -> list[np.ndarray]:
         """Predicted centres (len(times), 2) of a mover that walked out of view at ``centre`` with
@@ -665,9 +689,15 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
         if ago > 0 and (not preds or any(np.isnan(p).any() for p in preds)):
             # Out of view and no earlier walk from there recorded over the drive through: where
             # it is is unknown; it walked here less than out_of_view s ago: wait to see it.
+            # Just gone, away from the stretch, where those who left before stayed away longer
+            # than the drive through takes: the longest the way will be clear.
+            middle = pts[(i0 + i1) // 2]
+            away = memory.absences(c, v, match_distance=config.match_distance, match_heading=config.match_heading)
+            just_left = bool(ago <= JUST_LEFT) and float(np.dot(v, c - middle)) > 0.0 and bool(away) and \
+                min(away) - ago >= times[-1]
             return PassageVerdict(True, f"mover last seen {ago:.1f} s ago at ({c[0]:.2f}, {c[1]:.2f}) is out of view and "
                                         f"its walk from there is not known for the {times[-1]:.1f} s through the band stretch "
-                                        f"{start:.2f}-{end:.2f} m ahead", start, end)
+                                        f"{start:.2f}-{end:.2f} m ahead", start, end, just_left=just_left)
         for pred in preds:
             gap = np.hypot(*(pred - robot).T) - robot_radius - r - (config.margin + config.margin_rate * times)
             if (gap < 0).any():
