@@ -29,6 +29,7 @@ import threading
 from typing import Any
 
 from emos.ratelimit import RateLimitedLog
+from emos.transport.zenoh_net import ROUTING_TURNS
 
 log = logging.getLogger("emos.security")
 _PUB_MARK = "/_pub_/"
@@ -73,7 +74,8 @@ class SecurityWatch:
         self._worker = threading.Thread(target=self._work, name="emos-security-watch", daemon=True)
         self._worker.start()
         # Zenoh's thread only queues: the admin-space queries below must not run inside its callback.
-        self._sub = session.liveliness().declare_subscriber(f"{self.root}/**", self._on_token, history=True)
+        with ROUTING_TURNS:
+            self._sub = session.liveliness().declare_subscriber(f"{self.root}/**", self._on_token, history=True)
 
     def _on_token(self, sample: Any) -> None:
         key = str(sample.key_expr)
@@ -89,7 +91,9 @@ class SecurityWatch:
 
     def _admin(self, selector: str) -> list[tuple[str, Any]]:
         out = []
-        for reply in self.session.get(selector, timeout=2.0):
+        with ROUTING_TURNS:  # no declaration of this process while the reply is routed (zenoh_net)
+            replies = list(self.session.get(selector, timeout=2.0))
+        for reply in replies:
             if reply.ok is None:
                 continue
             try:
@@ -159,7 +163,8 @@ class SecurityWatch:
             log.warning("security watch: a check did not end in 30 s; the subscriber is left to the session's close")
             return
         try:
-            self._sub.undeclare()
+            with ROUTING_TURNS:
+                self._sub.undeclare()
         except Exception as exc:  # noqa: BLE001 - the session may be closed already
             log.debug("security watch: undeclaring: %s", exc)
 

@@ -156,6 +156,15 @@ def close_sessions() -> None:
         zenoh_config.unregister_all()
 
 
+# Zenoh (1.10) can deadlock a session when one thread declares or undeclares an entity while
+# another waits for a reply from the admin space (@/...): the declaration holds a routing mutex
+# the reply's delivery needs and waits for the routing RwLock the delivery holds, both threads in
+# Rust, out of pytest-timeout's reach (a suite run hung in declare_advanced_publisher beside a
+# SecurityWatch check of the same session). Our declarations and our admin queries
+# (emos.security.watch) take turns on this lock; nothing else needs it.
+ROUTING_TURNS = threading.RLock()
+
+
 # ------------------------------------------------------------------------------------ endpoints
 def _latched_publisher(zenoh: Any, sess: Any, key: str, depth: int) -> Any:
     """A publisher that keeps its last ``depth`` samples for subscribers that join later
@@ -203,13 +212,14 @@ class ZenohPublisher:
         self._frames = FrameWriter(self.fingerprint, self.publisher_id)
         sess = session(config_path)
         self.transient_local = transient_local
-        # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
-        if transient_local:
-            self._pub = _latched_publisher(zenoh, sess, self.key, depth)
-        else:
-            self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
         token_key = f"{self.key}/{_PUB_MARK}/{encode_name(self.type_name)}/{encode_name(self.publisher_id)}"
-        self._token = sess.liveliness().declare_token(token_key)
+        with ROUTING_TURNS:
+            # RELIABLE + DROP: like a ring, a slow reader never blocks the writer.
+            if transient_local:
+                self._pub = _latched_publisher(zenoh, sess, self.key, depth)
+            else:
+                self._pub = sess.declare_publisher(self.key, congestion_control=zenoh.CongestionControl.DROP)
+            self._token = sess.liveliness().declare_token(token_key)
         self.sent = 0
 
     def publish(self, msg: Any) -> int:
@@ -236,7 +246,8 @@ class ZenohPublisher:
         for thing in (self._token, self._pub):
             if thing is not None:
                 try:
-                    thing.undeclare()
+                    with ROUTING_TURNS:
+                        thing.undeclare()
                 except Exception as exc:  # noqa: BLE001 - the session may be gone already
                     log.debug("topic %s: undeclaring: %s", self.topic, exc)
         self._token = self._pub = None
@@ -273,12 +284,13 @@ class ZenohSubscriber(ArrivalQueue):
         self._publishers: set[str] = set()
         self.transient_local = transient_local
         sess = session(config_path)
-        if transient_local:
-            # The publishers' cached messages arrive as replies, through _on_sample like live
-            # ones: checked and decoded there exactly as live ones.
-            self._sub = _latched_subscriber(sess, self.key, self.queue_size, self._on_sample)
-        else:
-            self._sub = sess.declare_subscriber(self.key, self._on_sample)
+        with ROUTING_TURNS:
+            if transient_local:
+                # The publishers' cached messages arrive as replies, through _on_sample like live
+                # ones: checked and decoded there exactly as live ones.
+                self._sub = _latched_subscriber(sess, self.key, self.queue_size, self._on_sample)
+            else:
+                self._sub = sess.declare_subscriber(self.key, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
         """On a Zenoh thread: check the frame, decode, queue, wake. Nothing raised here may
@@ -323,7 +335,8 @@ class ZenohSubscriber(ArrivalQueue):
         sub, self._sub = self._sub, None
         if sub is not None:
             try:
-                sub.undeclare()
+                with ROUTING_TURNS:
+                    sub.undeclare()
             except Exception as exc:  # noqa: BLE001 - the session may be gone already
                 log.debug("topic %s: undeclaring: %s", self.topic, exc)
 

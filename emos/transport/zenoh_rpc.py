@@ -31,7 +31,7 @@ from emos.msgs import codec
 from emos.msgs.registry import resolve
 from emos.ratelimit import RateLimitedLog
 from emos.transport.context import RunContext
-from emos.transport.zenoh_net import KEY_ROOT, _zenoh, net_group, session
+from emos.transport.zenoh_net import KEY_ROOT, ROUTING_TURNS, _zenoh, net_group, session
 
 log = logging.getLogger("emos.transport.zenoh")
 ENV_NET_SERVICES = "EMOS_NET_SERVICES"
@@ -85,7 +85,8 @@ class QueryBridge:
     def __init__(self, key: str, ops: tuple[str, ...], config_path: str | None = None, label: str = ""):
         self.key, self.ops, self.label = key, ops, label or key
         self._slots = threading.BoundedSemaphore(self.MAX_CONCURRENT)
-        self._queryable = session(config_path).declare_queryable(key, self._on_query)
+        with ROUTING_TURNS:
+            self._queryable = session(config_path).declare_queryable(key, self._on_query)
 
     def _on_query(self, query: Any) -> None:
         if not self._slots.acquire(blocking=False):
@@ -134,7 +135,8 @@ class QueryBridge:
         queryable, self._queryable = self._queryable, None
         if queryable is not None:
             try:
-                queryable.undeclare()
+                with ROUTING_TURNS:
+                    queryable.undeclare()
             except Exception as exc:  # noqa: BLE001 - the session may be gone already
                 log.debug("%s %s: undeclaring: %s", self.what, self.label, exc)
 

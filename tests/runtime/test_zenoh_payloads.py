@@ -429,3 +429,36 @@ def test_zenoh_shared_memory_is_off_unless_the_configuration_file_mentions_it(ne
     finally:
         pub.close()
         sub.close()
+
+
+def test_declarations_wait_their_turn_while_an_admin_query_is_answered(net):
+    """Zenoh 1.10 can deadlock a session when a declaration runs while another thread waits for
+    an admin-space reply (a suite run hung in declare_advanced_publisher beside a SecurityWatch
+    check): declaring and undeclaring take turns with those queries (zenoh_net.ROUTING_TURNS)."""
+    conf, group = net
+    held, release, declared = threading.Event(), threading.Event(), threading.Event()
+
+    def admin_query() -> None:  # what SecurityWatch._admin holds while its reply is routed
+        with zenoh_net.ROUTING_TURNS:
+            held.set()
+            release.wait(10.0)
+
+    def declare() -> None:
+        pub = zenoh_net.ZenohPublisher("/turns", UInt8MultiArray, publisher_id="w", config_path=conf, group=group,
+                                       transient_local=True, depth=1)
+        declared.set()
+        pub.close()
+
+    zenoh_net.session(conf)  # opened before: only the declaration waits
+    query = threading.Thread(target=admin_query)
+    query.start()
+    assert held.wait(10.0)
+    declarer = threading.Thread(target=declare)
+    declarer.start()
+    try:
+        assert not declared.wait(0.5), "declared while an admin query held the turn"
+    finally:
+        release.set()
+        query.join(10.0)
+        declarer.join(10.0)
+    assert declared.is_set()
