@@ -89,6 +89,9 @@ OUT_OF_VIEW = float(os.environ.get("EMOS_PATROL_OUT_OF_VIEW", "15"))
 # s the robot waits at the band's edge for a person to come into view when none is known (PassageGuardConfig.unseen_wait;
 # 20 s here: longer than the house person's 18.2 s walk there and back; docs/missions.md); 0: it goes in at once.
 UNSEEN_WAIT = float(os.environ.get("EMOS_PATROL_UNSEEN_WAIT", "20"))
+# s the people's walks are remembered (PassageGuardConfig.memory: the band where they walk, the walks predicted from;
+# 600 held the robot longer, 434 s at most, and missed 3 waypoints in 6 laps: docs/missions.md).
+MEMORY = float(os.environ.get("EMOS_PATROL_MEMORY", "180"))
 MOVER_PREDICTION_TIME = 0.6  # s of a tracked person's walk the DriveManager's swept check treats as taken
 # s without a status before the supervisor kills a component as hung (the Launcher's 2 s by default). On a machine
 # at load 40-50 a 20-lap run is otherwise ended by restarts (the Simulator restarted puts the robot back at the spawn;
@@ -116,7 +119,7 @@ if PEOPLE_LAYER:
     stack.planner.config.people = attrs.evolve(stack.planner.config.people, weight=PEOPLE_WEIGHT)
 behaviors = stack.behaviors(config=BehaviorsConfig(local_mapper=stack.local_mapper.component_name, max_rotational_vel=1.0,
                                                    give_way=GiveWayConfig(enabled=GIVE_WAY, speed=GIVE_WAY_SPEED),
-                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW,
+                                                   passage_guard=PassageGuardConfig(enabled=PASSAGE_GUARD, out_of_view=OUT_OF_VIEW, memory=MEMORY,
                                                                                    unseen_wait=UNSEEN_WAIT, returns=RETURNS)))
 behaviors.inputs(plan=stack.planner.get_out_topic(TopicsKeys.GLOBAL_PLAN))  # the passage guard looks along the plan
 if GIVE_WAY:
