@@ -232,8 +232,9 @@ class WallFilter:
         last hits (M arrays (K, 2)) mostly are. The tracker puts a cluster's centre behind its
         hits, as if they were the front of a round thing (up to a third of a metre): for a
         piece of a thin wall that is past the wall. A person's hits are on their front, never
-        mostly on a wall. Replayed on a recorded patrol, the hits cut the scans with a mover
-        that was not the person from 19 % to 2.6 % and kept every sighting of the person."""
+        mostly on a wall. Replayed on a recorded patrol (scripts/replay_tracker.py), the hits cut
+        the scans with a mover that was not the person from 20 % to 3 % and kept every sighting
+        of the person."""
         on = self.on_walls(centres)
         for i, pts in enumerate(hits):
             if not on[i] and len(pts):

@@ -496,10 +496,10 @@ class MoverMemory:
         self._returns = sorted(out, key=lambda pair: pair[0][0])
         return list(self._returns)
 
-    def absences(self, centre: np.ndarray, velocity: np.ndarray, *, match_distance: float = 0.35,
-                 match_heading: float = math.radians(40.0)) -> list[float]:
-        """Seconds out of view of the movers that left the view near ``centre`` heading like
-        ``velocity`` and came back (:meth:`returns`), most recent first."""
+    def _returns_like(self, centre: np.ndarray, velocity: np.ndarray, match_distance: float,
+                      match_heading: float) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
+        """The (exit, reappearance) pairs of :meth:`returns`, most recent first, whose exit was
+        within ``match_distance`` of ``centre`` heading within ``match_heading`` of ``velocity``."""
         c, v = np.asarray(centre, dtype=float), np.asarray(velocity, dtype=float)
         speed = float(np.hypot(*v))
         out = []
@@ -507,8 +507,14 @@ class MoverMemory:
             ev = np.asarray(exit_row[3:5])
             if math.hypot(exit_row[1] - c[0], exit_row[2] - c[1]) <= match_distance and \
                     float(ev @ v) >= math.cos(match_heading) * float(np.hypot(*ev)) * speed:
-                out.append(float(back_row[0] - exit_row[0]))
+                out.append((exit_row, back_row))
         return out
+
+    def absences(self, centre: np.ndarray, velocity: np.ndarray, *, match_distance: float = 0.35,
+                 match_heading: float = math.radians(40.0)) -> list[float]:
+        """Seconds out of view of the movers that left the view near ``centre`` heading like
+        ``velocity`` and came back (:meth:`returns`), most recent first."""
+        return [float(back[0] - exit_[0]) for exit_, back in self._returns_like(centre, velocity, match_distance, match_heading)]
 
     def predict_return(self, now: float, centre: np.ndarray, velocity: np.ndarray, times: np.ndarray, *,
                        match_distance: float = 0.35, match_heading: float = math.radians(40.0)) -> list[np.ndarray]:
@@ -525,15 +531,12 @@ class MoverMemory:
         if speed < MIN_SPEED:
             return []
         out: list[np.ndarray] = []
-        for exit_row, back_row in self.returns()[::-1]:
-            if exit_row[0] > now - MATCH_AGE or math.hypot(exit_row[1] - c[0], exit_row[2] - c[1]) > match_distance:
+        for exit_row, back_row in self._returns_like(c, v, match_distance, match_heading):
+            if exit_row[0] > now - MATCH_AGE:
                 continue
             rows = self.samples()
             if not len(rows) or back_row[0] < rows[0, 0] - 1e-9:
                 continue  # the walk back is forgotten already
-            ev = np.asarray(exit_row[3:5])
-            if float(ev @ v) < math.cos(match_heading) * float(np.hypot(*ev)) * speed:
-                continue
             away = back_row[0] - exit_row[0]  # s out of view
             shift = c - np.asarray(exit_row[1:3])
             turn_t, turn_xy = _out_and_back(c, v, np.asarray(back_row[1:3]) + shift, away)
