@@ -111,6 +111,24 @@ def test_memory_forgets_after_its_time():
     assert memory.samples()[-1, 0] < 31.0
 
 
+
+def test_the_band_outlasts_the_walks_for_band_memory():
+    """The walks are forgotten after ``memory`` s, the band they walked after ``band_memory``
+    s (the give-way's yield moves keep out of it), also across a clock that went back."""
+    memory = MoverMemory(memory=10.0, band_memory=60.0)
+    for t in np.arange(0.0, 5.0, 0.1):  # a walk along y = 1
+        memory.observe(float(t), np.array([[float(t), 1.0]]), np.array([[1.0, 0.0]]))
+    memory.observe(30.0, np.array([[0.0, 3.0]]), np.array([[1.0, 0.0]]))  # one sample elsewhere, 25 s later
+    assert np.allclose(memory.band_cells(), [[0.0, 3.0]])
+    lasting = memory.lasting_band_cells(30.0)
+    assert len(lasting) >= 40 and np.allclose(np.sort(np.unique(lasting[:, 1])), [1.0, 3.0])
+    memory.observe(2.0, np.array([[0.0, 3.5]]), np.array([[1.0, 0.0]]))  # the clock went back 28 s
+    assert len(memory.lasting_band_cells(2.0)) == len(lasting) + 1
+    assert np.allclose(memory.lasting_band_cells(62.0)[:, 1], [3.5])  # the walk and the sample went by
+    assert len(memory.lasting_band_cells(200.0)) == 0
+    assert MoverMemory(memory=10.0, band_memory=5.0).band_memory == 10.0  # never shorter than the walks'
+
+
 @pytest.mark.parametrize("path", [LEFT_TO_RIGHT, RIGHT_TO_LEFT], ids=["left_to_right", "right_to_left"])
 def test_held_while_the_person_would_meet_the_robot_and_let_through_when_not(path):
     """Over one period of the person's walk the robot at the band's edge is held at some times

@@ -163,7 +163,7 @@ class Behaviors(MotionActionServer):
         self._spared_at = -math.inf  # node time a give-way was last not started for a mover on a known walk
         self._give_way_time = 0.0  # s spent giving way (node clock)
         self._hold_time = 0.0  # s held before a passage (node clock)
-        self._memory = MoverMemory(self.config.passage_guard.memory)
+        self._memory = MoverMemory(self.config.passage_guard.memory, band_memory=self.config.passage_guard.band_memory)
         self._drive_speed = DriveSpeed()  # how fast the robot really drives (the guard's drive through)
         self._no_hold_until = -math.inf  # node time: after a hold gave up, let the robot go through first
         self._entering = False  # the robot is at the band's edge and the guard lets it in (logged once)
@@ -587,7 +587,7 @@ class Behaviors(MotionActionServer):
         static = pts[~near_movers(pts, local, radii, MOVER_PAD)] if len(pts) else pts
         band = None
         if self.config.passage_guard.enabled:  # where the movers walk: a yield move should not end in it
-            cells = self._memory.band_cells() - pose[:2]
+            cells = self._memory.lasting_band_cells(now) - pose[:2]
             cells = cells[np.hypot(cells[:, 0], cells[:, 1]) < 3.0]
             band = np.c_[c * cells[:, 0] + s * cells[:, 1], -s * cells[:, 0] + c * cells[:, 1]]
         move = R.plan_give_way(self.config.robot, static, local, local_v, radii, cfg, max_omega=self.config.max_rotational_vel,

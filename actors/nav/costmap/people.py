@@ -26,7 +26,7 @@ __all__ = ["WALKED", "PeopleLayerConfig", "band_grid", "people_cost", "walked_po
 
 #: the value of a cell a person's centre was recorded in (OccupancyGrid: 0..100)
 WALKED = 100
-BAND_RESOLUTION = 0.05  # m: the band's cells (MoverMemory.band_cells)
+BAND_RESOLUTION = 0.05  # m: the band's cells (MoverMemory.band_cells, lasting_band_cells)
 
 
 @define(kw_only=True, frozen=True)

@@ -40,6 +40,8 @@ import numpy as np
 
 from emos.config import validators as V
 
+from ..costmap.people import BAND_RESOLUTION
+
 if TYPE_CHECKING:
     from ..controllers.movers import WallFilter
 
@@ -74,7 +76,11 @@ class PassageGuardConfig:
     waits at the band's edge up to this long for one to come into view before it goes in
     (the Behaviors: ``PassageVerdict.unseen``). ``returns``: a mover out of view past the earlier
     walks' records is predicted as movers that left the view there came back
-    (:meth:`MoverMemory.predict_return`) instead of holding the robot until it is seen again. ``memory`` (s a mover's walk is remembered), ``match_distance`` (m) and
+    (:meth:`MoverMemory.predict_return`) instead of holding the robot until it is seen again.
+    ``memory`` (s a mover's walk is remembered), ``band_memory`` (s, at least ``memory``: how
+    long the give-way's yield moves keep out of where movers walked; a walk the guard no longer
+    predicts from is still a way a person may come again, and a robot held for minutes where it
+    cannot see one of the person's walks pulled aside onto it), ``match_distance`` (m) and
     ``match_heading`` (rad): how near and how alike in heading an earlier walk must be to
     predict from it. ``known_walks``: the give-way (``GiveWayConfig``) does not start for a mover
     whose straight line meets the robot while it walks where earlier walks went the same way
@@ -100,6 +106,7 @@ class PassageGuardConfig:
     unseen_wait: float = attrs.field(default=0.0, validator=V.number(ge=0, le=600, finite=True, what="seconds"))
     returns: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
     memory: float = attrs.field(default=180.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
+    band_memory: float = attrs.field(default=900.0, validator=V.number(gt=0, le=86400, finite=True, what="seconds"))
     match_distance: float = attrs.field(default=0.35, validator=V.number(gt=0, le=5, finite=True, what="metres"))
     match_heading: float = attrs.field(default=math.radians(40.0), validator=V.number(gt=0, le=math.pi, finite=True, what="radians"))
     known_walks: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool))
@@ -239,10 +246,14 @@ class DriveSpeed:
 
 class MoverMemory:
     """Where movers walked (world frame) for ``memory`` s: samples (t, x, y, vx, vy) of the
-    moving tracks, at most one per ``SAMPLE_PERIOD`` per mover."""
+    moving tracks, at most one per ``SAMPLE_PERIOD`` per mover; and the cells of the band they
+    walked for ``band_memory`` s (at least ``memory``; :meth:`lasting_band_cells`)."""
 
-    def __init__(self, memory: float = 180.0) -> None:
+    def __init__(self, memory: float = 180.0, band_memory: float | None = None) -> None:
         self.memory = float(memory)
+        self.band_memory = max(self.memory, float(band_memory)) if band_memory is not None else self.memory
+        self._band_seen: dict[tuple[int, int], float] = {}  # band cell (index at BAND_RESOLUTION) -> time last walked
+        self._lasting: np.ndarray | None = None  # _band_seen as rows (cell x, cell y, t), until the next sample
         self._rows: list[tuple[float, float, float, float, float]] = []
         self._array: np.ndarray | None = None
         self._cells: np.ndarray | None = None  # band_cells, until the next sample
@@ -259,7 +270,8 @@ class MoverMemory:
             shift = t - SAMPLE_PERIOD - self._last_t
             self._rows = [(r[0] + shift, *r[1:]) for r in self._rows]
             self._last_t += shift
-            self._array = self._returns = None
+            self._array = self._returns = self._lasting = None
+            self._band_seen = {k: v + shift for k, v in self._band_seen.items()}
             for w in self._walks:
                 w.t0 += shift
                 w.last = (w.last[0] + shift, *w.last[1:])
@@ -278,7 +290,9 @@ class MoverMemory:
         cut = t - self.memory
         if self._rows[0][0] < cut:
             self._rows = [r for r in self._rows if r[0] >= cut]
-        self._array = self._cells = self._returns = None
+        for c in np.round(centres[fast] / BAND_RESOLUTION).astype(np.int64):
+            self._band_seen[(int(c[0]), int(c[1]))] = t
+        self._array = self._cells = self._returns = self._lasting = None
 
     def _follow_walks(self, rows: list[tuple[float, float, float, float, float]]) -> None:
         """Extend each open walk by the nearest new sample it could have walked to
@@ -330,9 +344,22 @@ class MoverMemory:
         person walking a corridor for minutes)."""
         if self._cells is None:
             rows = self.samples()
-            self._cells = (np.unique(np.round(rows[:, 1:3] / 0.05).astype(np.int64), axis=0) * 0.05 if len(rows)
+            self._cells = (np.unique(np.round(rows[:, 1:3] / BAND_RESOLUTION).astype(np.int64), axis=0) * BAND_RESOLUTION if len(rows)
                            else np.zeros((0, 2)))
         return self._cells
+
+    def lasting_band_cells(self, now: float) -> np.ndarray:
+        """(K, 2) centres of the 5 cm cells where movers walked in the last ``band_memory`` s
+        before ``now``: where a yield move should not end (a way people walked is walked again,
+        even once the guard no longer predicts from it)."""
+        if self._lasting is None:  # (cell x, cell y, time last walked), until the next sample
+            self._lasting = np.array([(*k, t) for k, t in self._band_seen.items()], dtype=float).reshape(-1, 3)
+        keep = self._lasting[:, 2] >= float(now) - self.band_memory
+        if not keep.all():
+            self._band_seen = {k: t for k, t in self._band_seen.items() if t >= float(now) - self.band_memory}
+            self._lasting = self._lasting[keep]
+        out: np.ndarray = self._lasting[:, :2] * BAND_RESOLUTION
+        return out
 
     def band_gap(self, points: np.ndarray) -> np.ndarray:
         """(N,) distance from each point (N, 2) to the nearest remembered mover centre (inf: none)."""
