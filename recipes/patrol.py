@@ -142,15 +142,23 @@ class ContactMonitor:
     ``robot_drove_into`` (the robot moved towards the person faster than 5 cm/s just before) or
     ``walked_into_robot`` (the robot was standing or moving away: the person, who walks on
     whatever is in the way, walked into it). The Simulator's own ``collided`` flag is sticky and
-    counts one contact per run whatever happened after; these episodes count them all."""
+    counts one contact per run whatever happened after; these episodes count them all.
+    Each episode's last ``TRACE_BEFORE`` s and next ``TRACE_AFTER`` s of the robot's and the
+    movers' true positions go to ``contacts/contact_K.json`` and a picture on the map beside it."""
+
+    TRACE_BEFORE, TRACE_AFTER = 20.0, 3.0  # s of ground truth kept around each contact
 
     def __init__(self, ctx: object, mover_radius: float = PERSON_RADIUS, period: float = 0.1) -> None:
+        from collections import deque
+
         from emos.core import control as C
 
         self.client = C.ControlClient("sim", ctx, timeout=5.0)
         self.mover_radius, self.period = mover_radius, period
         self.episodes: list[dict] = []
         self.min_gap = float("inf")
+        self._trace: deque = deque(maxlen=int((self.TRACE_BEFORE + self.TRACE_AFTER) / period) + 1)
+        self._pending: list[int] = []  # episodes whose trace is not written yet
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="contact-monitor")
         self._thread.start()
@@ -158,6 +166,29 @@ class ContactMonitor:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5.0)
+        for k in self._pending:
+            self._write_trace(k)
+
+    def _write_trace(self, k: int) -> None:
+        """The trace around episode ``k`` (see the class doc); a failure is reported, the run goes on."""
+        episode, t0 = self.episodes[k], self.episodes[k]["sim_time"]
+        rows = [r for r in self._trace if t0 - self.TRACE_BEFORE <= r["t"] <= t0 + self.TRACE_AFTER]
+        out = os.path.join(OUT_DIR, "contacts", f"contact_{k}")
+        try:
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            with open(out + ".json", "w") as f:
+                json.dump({"episode": episode, "trace": rows}, f)
+            from emos.actors.nav.maps import load_map
+            from emos.tools.plotting import save_tracks_on_map
+
+            tracks = {"robot": [r["robot"][:2] for r in rows]}
+            for name in sorted({m for r in rows for m in r["movers"]}):
+                tracks[name] = [r["movers"][name] for r in rows if name in r["movers"]]
+            save_tracks_on_map(out + ".png", load_map(HOUSE_MAP), f"contact {k} at {t0:.1f} s ({episode['kind']}): "
+                               f"{self.TRACE_BEFORE:g} s before, {self.TRACE_AFTER:g} s after", tracks,
+                               {"robot": episode["robot"][:2], episode["mover_name"]: episode["mover"][:2]})
+        except Exception as exc:  # noqa: BLE001 - a picture must not stop the patrol: reported
+            print(f"[patrol] contact {k}: trace not written to {out}.*: {type(exc).__name__}: {exc}", flush=True)
 
     def _run(self) -> None:
         prev, touching = None, False
@@ -169,6 +200,10 @@ class ContactMonitor:
             if "pose" not in st or not st.get("movers"):
                 continue
             t, pose = float(st["sim_time"]), np.array(st["pose"][:2])
+            self._trace.append({"t": round(t, 2), "robot": [round(float(x), 3) for x in st["pose"]],
+                                "movers": {m["name"]: [round(float(x), 3) for x in m["pose"][:2]] for m in st["movers"]}})
+            while self._pending and t >= self.episodes[self._pending[0]]["sim_time"] + self.TRACE_AFTER:
+                self._write_trace(self._pending.pop(0))
             was_touching, touching = touching, False
             for mover in st["movers"]:
                 mp = np.array(mover["pose"][:2])
@@ -185,6 +220,7 @@ class ContactMonitor:
                                           "robot_speed_toward": round(closing, 3), "robot_speed": round(float(np.linalg.norm(v)), 3),
                                           "kind": "robot_drove_into" if closing > 0.05 else "walked_into_robot"})
                     print(f"[patrol] contact with {mover['name']}: {json.dumps(self.episodes[-1])}", flush=True)
+                    self._pending.append(len(self.episodes) - 1)
             prev = (t, pose)
 
 

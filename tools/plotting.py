@@ -67,3 +67,47 @@ def save_lines(path: str, title: str, xlabel: str, ylabel: str, series: dict[str
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def draw_map(ax: Any, grid: Any) -> None:
+    """An ``OccupancyGridMap`` in world metres: free white, occupied black, unknown grey."""
+    import numpy as np
+
+    img = np.where(grid.data < 0, 0.8, 1.0 - grid.data / 100.0)
+    h, w = grid.data.shape
+    ox, oy, _ = grid.origin
+    ax.imshow(img, cmap="gray", origin="lower", vmin=0, vmax=1,
+              extent=(ox, ox + w * grid.resolution, oy, oy + h * grid.resolution))
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def save_tracks_on_map(path: str, grid: Any, title: str, tracks: dict[str, Any], marks: dict[str, Any] | None = None) -> None:
+    """Named tracks ((N, 2) world points, drawn from faint to solid as time goes on, with an
+    arrow head at the end) and marks ((x, y) points) over a map, cropped to the tracks."""
+    import numpy as np
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 6))
+    draw_map(ax, grid)
+    points = [np.asarray(xy, float).reshape(-1, 2) for xy in tracks.values() if len(xy)]
+    for (label, xy), colour in zip(tracks.items(), ("tab:blue", "tab:red", "tab:green", "tab:purple")):
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if not len(xy):
+            continue
+        ax.scatter(xy[:, 0], xy[:, 1], s=6, c=colour, alpha=np.linspace(0.15, 1.0, len(xy)), label=label)
+        if len(xy) > 1:
+            ax.annotate("", xy=xy[-1], xytext=xy[-2], arrowprops={"arrowstyle": "->", "color": colour})
+    for label, (x, y) in (marks or {}).items():
+        ax.plot([x], [y], "kx", markersize=10)
+        ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, 6))
+    if points:
+        allp = np.concatenate(points)
+        lo, hi = allp.min(axis=0) - 1.0, allp.max(axis=0) + 1.0
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+    ax.set_title(title)
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

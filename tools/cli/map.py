@@ -148,23 +148,15 @@ def build(args: argparse.Namespace) -> Path:
 
 
 def show_map(args: argparse.Namespace) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from emos.actors.nav.maps import load_map
+    from emos.tools.plotting import draw_map, pyplot
 
+    plt = pyplot()
     grid = load_map(args.file)
-    img = np.where(grid.data < 0, 0.8, 1.0 - grid.data / 100.0)
     h, w = grid.data.shape
-    ox, oy, _ = grid.origin
     fig, ax = plt.subplots(figsize=(8, 8 * h / max(w, 1) + 0.5))
-    ax.imshow(img, cmap="gray", origin="lower", vmin=0, vmax=1,
-              extent=(ox, ox + w * grid.resolution, oy, oy + h * grid.resolution))
+    draw_map(ax, grid)
     ax.set_title(f"{Path(args.file).name}: {w} x {h} cells of {grid.resolution} m")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
     out = Path(args.output) if args.output else Path(args.file).with_suffix(".png")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
