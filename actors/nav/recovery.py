@@ -29,7 +29,7 @@ from emos.config import validators as V
 from .controllers.clearance import pose_clearance
 from .robot import RobotConfig
 
-__all__ = ["BehaviorPlan", "GiveWayConfig", "GiveWayMove", "plan_give_way", "plan_spin", "plan_drive_on_heading", "plan_back_up", "plan_wait", "rear_covered", "scan_covers_rear"]
+__all__ = ["BehaviorPlan", "GiveWayConfig", "GiveWayMove", "give_way_times", "plan_give_way", "plan_spin", "plan_drive_on_heading", "plan_back_up", "plan_wait", "rear_covered", "scan_covers_rear"]
 
 POSE_STEP = 0.01  # m between checked poses of a straight drive
 ANGLE_STEP = math.radians(2.0)  # rad between checked poses of a spin
@@ -245,10 +245,23 @@ def _candidates(speed: float, max_omega: float, n: int, dt: float) -> tuple[np.n
     return np.stack(seqs), names
 
 
+def give_way_times(config: GiveWayConfig, dt: float) -> np.ndarray:
+    """The times (s from now) :func:`plan_give_way` rolls its moves out over: ``simulate_ahead_time``,
+    then standing ``hold_time`` at the move's end."""
+    n, n_hold = _give_way_steps(config, dt)
+    return np.arange(n + n_hold) * dt
+
+
+def _give_way_steps(config: GiveWayConfig, dt: float) -> tuple[int, int]:
+    """Poses a yield move is rolled out over (the start included), then steps standing at its end."""
+    return max(2, int(math.ceil(config.simulate_ahead_time / dt)) + 1), (int(math.ceil(config.hold_time / dt)) if config.hold_time > 0 else 0)
+
+
 def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.ndarray, velocities: np.ndarray,
                   radii: np.ndarray, config: GiveWayConfig, *, max_omega: float = 0.5, dt: float = 0.1,
                   margin: float = 0.03, previous: int | None = None, band: np.ndarray | None = None,
-                  band_clearance: float = 0.55) -> GiveWayMove:
+                  band_clearance: float = 0.55, futures: np.ndarray | None = None,
+                  future_radii: np.ndarray | None = None) -> GiveWayMove:
     """The best yield move now, in the robot frame: ``obstacles`` (N, 2) static points (the
     movers' own points left out), the movers' ``centres`` (M, 2) and ``velocities`` (M, 2) in
     the robot frame, ``radii`` (M,). The moves of :func:`_candidates` are rolled out over
@@ -260,14 +273,18 @@ def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.
     the last step) keeps that move while it is nearly as good (``KEEP_BONUS`` m), so the robot
     does not dither between moves. ``band`` (K, 2): where movers walked (robot frame, e.g. the
     passage guard's ``MoverMemory.band_cells``): a move that ends nearer than ``band_clearance``
-    to it is worse by ``BAND_WEIGHT`` x how far in (wait off the people's way, not in it)."""
+    to it is worse by ``BAND_WEIGHT`` x how far in (wait off the people's way, not in it).
+    ``futures`` (P, T, 2), ``future_radii`` (P,): other ways the movers may go, in the robot frame
+    at the times :func:`give_way_times` (e.g. as earlier walks from where one is went on: a
+    person turning at the corner of their walk, where their straight line would not); the gaps
+    to them count as the gaps to the straight lines do."""
     dt = _check_number("give_way", "dt", dt)
     w = _check_number("give_way", "max_omega", max_omega)
     pts = _points(obstacles)
     centres = np.asarray(centres, dtype=float).reshape(-1, 2)
     velocities = np.asarray(velocities, dtype=float).reshape(-1, 2)
     radii = np.asarray(radii, dtype=float).reshape(-1)
-    n = max(2, int(math.ceil(config.simulate_ahead_time / dt)) + 1)
+    n, n_hold = _give_way_steps(config, dt)
     seqs, names = _candidates(config.speed, w, n - 1, dt)
     # Poses after each step (C, n): the start, then the unicycle integrated at mid-step headings.
     v, om = seqs[..., 0], seqs[..., 1]
@@ -285,16 +302,23 @@ def plan_give_way(robot: RobotConfig, obstacles: np.ndarray | None, centres: np.
     moving = np.arange(n)[None, :] < stop_at[:, None]
     vel = np.concatenate([v, np.zeros((len(seqs), 1))], axis=1) * moving
     # Then standing at the move's end for hold_time s while the movers walk on.
-    n_hold = int(math.ceil(config.hold_time / dt)) if config.hold_time > 0 else 0
     if n_hold:
         px, py, pth = (np.concatenate([a, np.repeat(a[:, -1:], n_hold, axis=1)], axis=1) for a in (px, py, pth))
         vel = np.concatenate([vel, np.zeros((len(seqs), n_hold))], axis=1)
     t = np.arange(n + n_hold) * dt
-    if len(centres):  # predicted gaps (C, n + n_hold, M) to every mover at constant velocity
-        dx = centres[None, None, :, 0] + velocities[None, None, :, 0] * t[None, :, None] - px[..., None]
-        dy = centres[None, None, :, 1] + velocities[None, None, :, 1] * t[None, :, None] - py[..., None]
+    # Where every mover will be (T, M, 2): at constant velocity, then each other way given.
+    ahead = centres[None, :, :] + velocities[None, :, :] * t[:, None, None]
+    if futures is not None and len(futures):
+        futures = np.asarray(futures, dtype=float)
+        if futures.ndim != 3 or futures.shape[1:] != (len(t), 2):
+            raise ValueError(f"give_way futures: expected (P, {len(t)}, 2) points at give_way_times, got shape {futures.shape}")
+        ahead = np.concatenate([ahead, futures.transpose(1, 0, 2)], axis=1)
+        radii = np.concatenate([radii, np.asarray(future_radii, dtype=float).reshape(-1)])
+    if ahead.shape[1]:  # predicted gaps (C, n + n_hold, M) to every predicted mover
+        dx = ahead[None, :, :, 0] - px[..., None]
+        dy = ahead[None, :, :, 1] - py[..., None]
         dist = np.hypot(dx, dy)
-        gap = dist - robot.radius - radii[None, None, :]
+        gap = np.nan_to_num(dist - robot.radius - radii[None, None, :], nan=np.inf)  # NaN: a way not known that far
         toward = (vel[..., None] * (np.cos(pth)[..., None] * dx + np.sin(pth)[..., None] * dy)) / np.maximum(dist, 1e-9)
         forbidden = np.any((gap < config.near_distance) & (toward > 0.02), axis=(1, 2))
         least = gap.min(axis=(1, 2))

@@ -12,7 +12,7 @@ import pytest
 
 from emos.actors.nav import RobotConfig, RobotGeometry, RobotType
 from emos.actors.nav.controllers.movers import MoverWatch, approaches
-from emos.actors.nav.recovery import GiveWayConfig, plan_give_way
+from emos.actors.nav.recovery import GiveWayConfig, give_way_times, plan_give_way
 from emos.actors.nav.safety import DriveSafety, SafetyZonesConfig, SweptConfig
 
 pytestmark = pytest.mark.unit
@@ -199,3 +199,22 @@ def test_a_yield_move_ends_off_the_band_where_people_walk():
     assert stand.name == "stand"
     off = plan_give_way(ROBOT, None, [[3.0, 2.0]], [[0.0, -0.6]], [PERSON], cfg, max_omega=1.0, band=band, band_clearance=0.55)
     assert off.name != "stand" and np.any(off.command), off
+
+
+def test_a_yield_move_keeps_clear_of_where_earlier_walks_turned():
+    """A person walking up behind the robot's left passes clear of it on their straight line, so
+    moving on ahead looks best; but earlier walks from there turned at y = 0.3 towards +x, along
+    the robot's way ahead. Given that way (``futures``, from the passage guard's memory in the
+    Behaviors), the robot pulls aside off it (the patrol: a robot moved on towards the corner of
+    the person's walk, and the person turned into it)."""
+    cfg = GiveWayConfig(enabled=True)
+    centre, velocity = np.array([-0.7, -1.5]), np.array([0.0, 0.6])
+    s = 0.6 * give_way_times(cfg, 0.1)  # metres walked at the times the moves are rolled out
+    up = 0.3 - centre[1]
+    turned = np.where((s <= up)[:, None], centre + np.c_[np.zeros_like(s), s], np.c_[centre[0] + s - up, np.full_like(s, 0.3)])
+    straight = plan_give_way(ROBOT, None, [centre], [velocity], [PERSON], cfg, max_omega=1.0)
+    assert straight.name == "move_on"  # the scene: without the turn, moving on ahead is best
+    aside = plan_give_way(ROBOT, None, [centre], [velocity], [PERSON], cfg, max_omega=1.0, futures=turned[None], future_radii=[PERSON])
+    assert aside.name != "move_on" and aside.gap > cfg.personal_space, aside
+    with pytest.raises(ValueError, match="futures"):
+        plan_give_way(ROBOT, None, [centre], [velocity], [PERSON], cfg, futures=turned[None, :10], future_radii=[PERSON])

@@ -590,14 +590,40 @@ class Behaviors(MotionActionServer):
             cells = self._memory.lasting_band_cells(now) - pose[:2]
             cells = cells[np.hypot(cells[:, 0], cells[:, 1]) < 3.0]
             band = np.c_[c * cells[:, 0] + s * cells[:, 1], -s * cells[:, 0] + c * cells[:, 1]]
+        dt = 1.0 / self.config.loop_rate
+        futures, future_radii = self._other_ways(pose, centres, velocities, radii, R.give_way_times(cfg, dt))
         move = R.plan_give_way(self.config.robot, static, local, local_v, radii, cfg, max_omega=self.config.max_rotational_vel,
-                               dt=1.0 / self.config.loop_rate, margin=self.config.safety_margin, previous=run.move_index,
-                               band=band, band_clearance=self.config.passage_guard.band_clearance)
+                               dt=dt, margin=self.config.safety_margin, previous=run.move_index,
+                               band=band, band_clearance=self.config.passage_guard.band_clearance,
+                               futures=futures, future_radii=future_radii)
         if move.name != run.move:
             self.get_logger().info("[%s] give_way: %s (least predicted gap %.2f m)%s", self.component_name, move.name, move.gap,
                                    f": {threat}" if threat else "")
         run.move, run.move_index = move.name, move.index
         self._drive(move.command)
+
+    def _other_ways(self, pose: np.ndarray, centres: np.ndarray, velocities: np.ndarray, radii: np.ndarray,
+                    times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the movers may go other than straight on, in the robot frame at ``times`` s:
+        as earlier walks from where each is went on (the passage guard's memory), or, with none
+        remembered, turning along a wall its straight line runs into (``WallFilter.turns``).
+        (P, len(times), 2) points and (P,) radii; none when neither applies."""
+        ways: list[np.ndarray] = []
+        owners: list[float] = []
+        guard = self.config.passage_guard
+        for centre, velocity, radius in zip(centres, velocities, radii):
+            learned = (self._memory.predict(clock.now(), centre, velocity, times, match_distance=guard.match_distance,
+                                            match_heading=guard.match_heading)[1:] if guard.enabled else [])
+            if not learned and self._movers.walls is not None:
+                learned = self._movers.walls.turns(centre, velocity, float(radius), times)
+            ways.extend(learned)
+            owners.extend([float(radius)] * len(learned))
+        if not ways:
+            return np.zeros((0, len(times), 2)), np.zeros(0)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        rel = np.asarray(ways, dtype=float) - pose[:2]
+        local = np.stack([c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]], axis=-1)
+        return local, np.asarray(owners)
 
     # -- actions (events, fallbacks) ------------------------------------------------------------------
     def spin(self, angle: float = math.pi / 2, time_allowance: float = 30.0) -> bool:
