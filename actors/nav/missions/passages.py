@@ -725,9 +725,10 @@ def check_passage(path: np.ndarray, robot_xy: np.ndarray, memory: MoverMemory, n
             away = memory.absences(c, v, match_distance=config.match_distance, match_heading=config.match_heading)
             just_left = bool(ago <= JUST_LEFT) and float(np.dot(v, c - middle)) > 0.0 and bool(away) and \
                 min(away) - ago >= times[-1]
+            gone = f" (movers that left the view there were out of it {min(away):.1f} s at the least)" if away else ""
             return PassageVerdict(True, f"mover last seen {ago:.1f} s ago at ({c[0]:.2f}, {c[1]:.2f}) is out of view and "
                                         f"its walk from there is not known for the {times[-1]:.1f} s through the band stretch "
-                                        f"{start:.2f}-{end:.2f} m ahead", start, end, just_left=just_left)
+                                        f"{start:.2f}-{end:.2f} m ahead{gone}", start, end, just_left=just_left)
         for pred in preds:
             gap = np.hypot(*(pred - robot).T) - robot_radius - r - (config.margin + config.margin_rate * times)
             if (gap < 0).any():
