@@ -181,9 +181,9 @@ class ContactMonitor:
             from emos.actors.nav.maps import load_map
             from emos.tools.plotting import save_tracks_on_map
 
-            tracks = {"robot": [r["robot"][:2] for r in rows]}
+            tracks = {"robot": [[*r["robot"][:2], r["t"] - t0] for r in rows]}  # times from the contact
             for name in sorted({m for r in rows for m in r["movers"]}):
-                tracks[name] = [r["movers"][name] for r in rows if name in r["movers"]]
+                tracks[name] = [[*r["movers"][name], r["t"] - t0] for r in rows if name in r["movers"]]
             save_tracks_on_map(out + ".png", load_map(HOUSE_MAP), f"contact {k} at {t0:.1f} s ({episode['kind']}): "
                                f"{self.TRACE_BEFORE:g} s before, {self.TRACE_AFTER:g} s after", tracks,
                                {"robot": episode["robot"][:2], episode["mover_name"]: episode["mover"][:2]})

@@ -82,22 +82,29 @@ def draw_map(ax: Any, grid: Any) -> None:
     ax.set_ylabel("y (m)")
 
 
-def save_tracks_on_map(path: str, grid: Any, title: str, tracks: dict[str, Any], marks: dict[str, Any] | None = None) -> None:
-    """Named tracks ((N, 2) world points, drawn from faint to solid as time goes on, with an
-    arrow head at the end) and marks ((x, y) points) over a map, cropped to the tracks."""
+def save_tracks_on_map(path: str, grid: Any, title: str, tracks: dict[str, Any], marks: dict[str, Any] | None = None,
+                       label_every: float = 5.0) -> None:
+    """Named tracks (world points (N, 2), or (N, 3) with a time in s, labelled every
+    ``label_every`` s), drawn from faint to solid as time goes on with an arrow head at the end,
+    and marks ((x, y) points) over a map, cropped to the tracks."""
     import numpy as np
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 6))
     draw_map(ax, grid)
-    points = [np.asarray(xy, float).reshape(-1, 2) for xy in tracks.values() if len(xy)]
-    for (label, xy), colour in zip(tracks.items(), ("tab:blue", "tab:red", "tab:green", "tab:purple")):
-        xy = np.asarray(xy, float).reshape(-1, 2)
-        if not len(xy):
+    points = [np.asarray(xy, float)[:, :2] for xy in tracks.values() if len(xy)]
+    for (label, xyt), colour in zip(tracks.items(), ("tab:blue", "tab:red", "tab:green", "tab:purple")):
+        xyt = np.asarray(xyt, float)
+        if not len(xyt):
             continue
+        xy = xyt[:, :2]
         ax.scatter(xy[:, 0], xy[:, 1], s=6, c=colour, alpha=np.linspace(0.15, 1.0, len(xy)), label=label)
         if len(xy) > 1:
             ax.annotate("", xy=xy[-1], xytext=xy[-2], arrowprops={"arrowstyle": "->", "color": colour})
+        if xyt.shape[1] > 2 and label_every > 0:  # a time label where each label_every s step is crossed
+            steps = np.floor(xyt[:, 2] / label_every)
+            for k in np.flatnonzero(np.diff(steps) != 0) + 1:
+                ax.annotate(f"{xyt[k, 2]:+.0f} s", tuple(xy[k]), fontsize=7, color=colour, textcoords="offset points", xytext=(3, -8))
     for label, (x, y) in (marks or {}).items():
         ax.plot([x], [y], "kx", markersize=10)
         ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, 6))
