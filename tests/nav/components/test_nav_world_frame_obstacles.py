@@ -78,19 +78,26 @@ def _odometry(age_s: float, vx: float, wz: float):
     return msg
 
 
-def test_the_pose_is_carried_forward_over_its_age_with_the_measured_twist():
+def test_the_pose_is_carried_forward_over_its_age_with_the_measured_twist(monkeypatch):
+    from emos.core import clock
+
+    monkeypatch.setattr(clock, "now", lambda: 1000.0)  # the clock stands: the age is the stamp's, not the machine's pace
     pose, velocity = np.array([1.0, 2.0, 0.5]), np.array([2.0, 0.0, 1.0])
     controller = _controller_with_location(None)
-    controller.location = _odometry(0.05, 2.0, 1.0)  # stamped after the (slow) construction, just before use
+    controller.location = _odometry(0.05, 2.0, 1.0)
     got = controller.predicted_pose(pose, velocity)
-    # About 0.05 s of a 2 m/s, 1 rad/s arc (the age grows by the few microseconds in between).
-    assert 0.099 < math.dist(got[:2], pose[:2]) < 0.11 and 0.0495 < got[2] - pose[2] < 0.055
+    # 0.05 s of a 2 m/s, 1 rad/s arc: a chord of 2 * (2 / 1) * sin(0.025) m, 0.05 rad of turn.
+    assert math.dist(got[:2], pose[:2]) == pytest.approx(4.0 * math.sin(0.025), abs=1e-6)
+    assert got[2] - pose[2] == pytest.approx(0.05, abs=1e-6)
     heading = math.atan2(got[1] - pose[1], got[0] - pose[0])
     assert abs(heading - (0.5 + (got[2] - 0.5) / 2)) < 1e-6  # a chord of the arc: half the turn
 
 
 @pytest.mark.parametrize("age, horizon", [(-0.05, 0.2), (0.5, 0.2), (0.05, 0.0)])
-def test_a_pose_of_another_clock_or_too_old_or_prediction_off_is_used_as_it_is(age, horizon):
+def test_a_pose_of_another_clock_or_too_old_or_prediction_off_is_used_as_it_is(age, horizon, monkeypatch):
+    from emos.core import clock
+
+    monkeypatch.setattr(clock, "now", lambda: 1000.0)  # a slow construction must not age a stamp from the future
     pose = np.array([1.0, 2.0, 0.5])
     controller = _controller_with_location(_odometry(age, 2.0, 1.0), pose_prediction=horizon)
     assert controller.predicted_pose(pose, np.array([2.0, 0.0, 1.0])) is pose
