@@ -127,7 +127,7 @@ def test_model_drop_short_answers_every_question_through_the_backup(tmp_path):
     assert summary is not None, proc.stderr[-3000:]
     run = _runs(tmp_path)[0]
     assert proc.returncode == 0, run["problems"]
-    assert run["requests"] >= 20 and run["answered"] >= run["requests"] - 2 and not run["unanswered"]
+    assert run["requests"] >= 12 and run["answered"] >= run["requests"] - 2 and not run["unanswered"]  # 12: the scenario's short floor
     assert run["answer_ms_at_fault"]["n"] >= 1  # a question was in flight when the server dropped
     assert summary["leaks"] == {"shm": 0, "procs": 0, "dirs": 0}
     log = (tmp_path / next(tmp_path.iterdir()).name / "run-1.log").read_text()
